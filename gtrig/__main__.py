@@ -1,0 +1,3 @@
+from gtrig.cli.main import main
+
+main()

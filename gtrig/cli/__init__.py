@@ -1,0 +1,1 @@
+"""The command line: one verb per command, thin wrappers over the library, lazy imports."""

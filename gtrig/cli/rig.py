@@ -1,0 +1,51 @@
+"""``gtrig rig check``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from gtrig.cli.common import console, handle_errors
+
+app = typer.Typer(help="Rig files: validate and summarise.", no_args_is_help=True)
+
+
+@app.command("check")
+@handle_errors
+def check(rig: Path = typer.Argument(..., help="rig.yaml")) -> None:
+    """Validate a rig file and print a summary of it."""
+    import numpy as np
+    from rich.table import Table
+
+    from gtrig import geometry as geo
+    from gtrig.rig import load_rig
+
+    r = load_rig(rig)
+    console.print(f"[bold]{rig}[/bold]: valid rig '{r.world.name}'")
+    t = Table("camera", "resolution", "fx, fy (px)", "position (m)", "tilt down (deg)", "rate (Hz)")
+    for c in r.cameras:
+        T = c.T_world_cam.matrix()
+        tilt = np.degrees(np.arcsin(-T[2, 2]))
+        t.add_row(c.name, f"{c.resolution[0]} x {c.resolution[1]}", f"{c.K[0, 0]:.1f}, {c.K[1, 1]:.1f}",
+                  ", ".join(f"{v:.3f}" for v in c.T_world_cam.xyz), f"{tilt:.1f}", f"{c.rate_hz:g}")
+    if r.cameras:
+        console.print(t)
+    t = Table("scanner", "position (m)", "yaw (deg)", "beams", "fov (deg)", "rate (Hz)")
+    for s in r.laser_scanners:
+        T = s.T_world_scanner.matrix()
+        t.add_row(s.name, ", ".join(f"{v:.3f}" for v in s.T_world_scanner.xyz),
+                  f"{np.degrees(geo.T_to_se2(T)[2]):.1f}", str(s.beams),
+                  f"{np.degrees(abs(s.angle_increment_rad) * s.beams):.1f}", f"{s.rate_hz:g}")
+    if r.laser_scanners:
+        console.print(t)
+    t = Table("marker", "family", "side (mm)", "position on robot (m)")
+    for m in r.robot.markers:
+        t.add_row(str(m.id), m.family.value, f"{m.side_m * 1000:.1f}",
+                  ", ".join(f"{v:.3f}" for v in m.T_robot_marker.xyz))
+    if r.robot.markers:
+        console.print(t)
+    h = r.robot.hull
+    console.print(f"hull: {h.length_m * 1000:.0f} x {h.width_m * 1000:.0f} mm, z {h.z_min_m:.2f}-{h.z_max_m:.2f} m; "
+                  f"{len(r.robot.onboard_scanners)} onboard scanner(s); odometry {r.robot.odometry.rate_hz:g} Hz; "
+                  f"{len(r.survey.reference_points)} survey reference point(s)")

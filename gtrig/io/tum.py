@@ -1,0 +1,98 @@
+"""TUM trajectory files: ``timestamp tx ty tz qx qy qz qw`` per line."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from gtrig.errors import FormatError
+from gtrig.io.atomic import atomic_write_text
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A time-stamped sequence of poses ``T_world_body``.
+
+    Attributes
+    ----------
+    stamps_s : (N,) strictly increasing seconds.
+    xyz : (N, 3) positions, metres.
+    quat_xyzw : (N, 4) unit quaternions.
+    """
+
+    stamps_s: np.ndarray
+    xyz: np.ndarray
+    quat_xyzw: np.ndarray
+
+    def __post_init__(self) -> None:
+        for a in (self.stamps_s, self.xyz, self.quat_xyzw):
+            a.setflags(write=False)
+
+    def __len__(self) -> int:
+        return int(self.stamps_s.size)
+
+    @staticmethod
+    def from_matrices(stamps_s: np.ndarray, T_world_body: np.ndarray) -> Trajectory:
+        T = np.asarray(T_world_body, dtype=float).reshape(-1, 4, 4)
+        q = Rotation.from_matrix(T[:, :3, :3]).as_quat()
+        q[q[:, 3] < 0] *= -1
+        return Trajectory(np.asarray(stamps_s, dtype=float).copy(), T[:, :3, 3].copy(), q)
+
+    def matrices(self) -> np.ndarray:
+        """(N, 4, 4) transforms."""
+        T = np.tile(np.eye(4), (len(self), 1, 1))
+        T[:, :3, :3] = Rotation.from_quat(self.quat_xyzw).as_matrix()
+        T[:, :3, 3] = self.xyz
+        return T
+
+    def yaw_rad(self) -> np.ndarray:
+        """(N,) heading of the body x axis projected on the world x-y plane."""
+        R = Rotation.from_quat(self.quat_xyzw).as_matrix()
+        return np.arctan2(R[:, 1, 0], R[:, 0, 0])
+
+
+def read_tum(path: str | os.PathLike[str]) -> Trajectory:
+    """Read a TUM file; one-line errors name the file and line."""
+    p = Path(path)
+    try:
+        lines = p.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError:
+        raise FormatError(f"{p}: no such file") from None
+    rows = []
+    for i, line in enumerate(lines, 1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        parts = s.replace(",", " ").split()
+        if len(parts) != 8:
+            raise FormatError(f"{p}:{i}: expected 8 values 'timestamp tx ty tz qx qy qz qw', got {len(parts)}")
+        try:
+            rows.append([float(x) for x in parts])
+        except ValueError:
+            raise FormatError(f"{p}:{i}: not a number in {s!r}") from None
+    if not rows:
+        raise FormatError(f"{p}: no poses")
+    a = np.array(rows)
+    if not np.all(np.isfinite(a)):
+        raise FormatError(f"{p}: non-finite values")
+    if np.any(np.diff(a[:, 0]) <= 0):
+        bad = int(np.argmax(np.diff(a[:, 0]) <= 0)) + 1
+        raise FormatError(f"{p}: time stamps do not increase at pose {bad + 1}")
+    q = a[:, 4:8]
+    n = np.linalg.norm(q, axis=1)
+    if np.any(np.abs(n - 1) > 1e-3):
+        raise FormatError(f"{p}: quaternion of pose {int(np.argmax(np.abs(n - 1) > 1e-3)) + 1} is not unit")
+    return Trajectory(a[:, 0].copy(), a[:, 1:4].copy(), q / n[:, None])
+
+
+def write_tum(path: str | os.PathLike[str], traj: Trajectory) -> None:
+    """Write a TUM file atomically (full double precision for positions, 9 digits for quaternions)."""
+    out = [
+        f"{t:.6f} {x:.9f} {y:.9f} {z:.9f} {qx:.12f} {qy:.12f} {qz:.12f} {qw:.12f}"
+        for t, (x, y, z), (qx, qy, qz, qw) in zip(traj.stamps_s, traj.xyz, traj.quat_xyzw, strict=True)
+    ]
+    atomic_write_text(path, "# timestamp tx ty tz qx qy qz qw\n" + "\n".join(out) + "\n")

@@ -1,0 +1,115 @@
+"""Load and save ``rig.yaml``: one-line errors naming the file, line and field path."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import ValidationError
+
+from gtrig.errors import ConfigError
+from gtrig.io.atomic import atomic_write_text
+from gtrig.rig.models import Rig
+
+LineMap = dict[tuple[str | int, ...], int]
+
+
+def _line_map(node: yaml.Node, path: tuple[str | int, ...] = (), out: LineMap | None = None) -> LineMap:
+    """Map every field path of a composed YAML document to its 1-based line."""
+    out = {} if out is None else out
+    out[path] = node.start_mark.line + 1
+    if isinstance(node, yaml.MappingNode):
+        for k, v in node.value:
+            key = k.value
+            out[path + (key,)] = k.start_mark.line + 1
+            _line_map(v, path + (key,), out)
+    elif isinstance(node, yaml.SequenceNode):
+        for i, v in enumerate(node.value):
+            _line_map(v, path + (i,), out)
+    return out
+
+
+def _format_loc(loc: tuple[str | int, ...]) -> str:
+    s = ""
+    for p in loc:
+        s += f"[{p}]" if isinstance(p, int) else (f".{p}" if s else str(p))
+    return s or "(top level)"
+
+
+def _deep_merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for k, v in override.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _deep_merge(out[k], v)
+        else:
+            out[k] = v
+    return out
+
+
+def rig_from_dict(data: Any, source: str = "<rig>", lines: LineMap | None = None) -> Rig:
+    """Validate a parsed rig document; raise :class:`ConfigError` with one line on failure."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: the rig file must be a mapping of sections (world, cameras, ...)")
+    try:
+        return Rig.model_validate(data)
+    except ValidationError as e:
+        err = e.errors()[0]
+        # pydantic appends the union/enum branch to the location; keep only real field names
+        loc = tuple(p for p in err["loc"] if isinstance(p, int) or not str(p).startswith(("function-", "tuple[")))
+        line = None
+        if lines:
+            for n in range(len(loc), -1, -1):
+                if loc[:n] in lines:
+                    line = lines[loc[:n]]
+                    break
+        where = f"{source}:{line}" if line else source
+        msg = err["msg"].removeprefix("Value error, ")
+        if err["type"] == "missing":
+            msg = "missing field"
+        elif err["type"] == "extra_forbidden":
+            msg = "unknown field"
+        more = f" (and {e.error_count() - 1} more)" if e.error_count() > 1 else ""
+        raise ConfigError(f"{where}: {_format_loc(loc)}: {msg}{more}") from None
+
+
+def load_rig(path: str | os.PathLike[str], overrides: dict[str, Any] | None = None) -> Rig:
+    """Read and validate a rig file.
+
+    Parameters
+    ----------
+    path
+        ``rig.yaml``.
+    overrides
+        A partial document deep-merged over the file before validation.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: no such file") from None
+    except (IsADirectoryError, UnicodeDecodeError) as e:
+        raise ConfigError(f"{p}: cannot read the rig file ({type(e).__name__})") from None
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f"{p}:{mark.line + 1}" if mark else str(p)
+        raise ConfigError(f"{where}: not valid YAML: {getattr(e, 'problem', e)}") from None
+    lines = _line_map(node) if node is not None else {}
+    if overrides:
+        data = _deep_merge(data if isinstance(data, dict) else {}, overrides)
+    return rig_from_dict(data, str(p), lines)
+
+
+def rig_to_dict(rig: Rig) -> dict[str, Any]:
+    """A plain document (lists, not tuples), as written to YAML."""
+    return rig.model_dump(mode="json", exclude_none=True)
+
+
+def dump_rig(rig: Rig, path: str | os.PathLike[str]) -> None:
+    """Write a rig file atomically."""
+    text = yaml.safe_dump(rig_to_dict(rig), sort_keys=False, default_flow_style=None, width=120)
+    atomic_write_text(path, text)

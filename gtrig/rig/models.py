@@ -1,0 +1,304 @@
+"""Typed models of ``rig.yaml`` (pydantic v2).
+
+All lengths are metres, angles radians unless a field name says ``_deg``; poses are
+``T_parent_child`` (see :mod:`gtrig.geometry`). Unknown fields are refused, so a typo is an error
+rather than a silently ignored setting. Plausibility bounds catch millimetres given as metres.
+"""
+
+from __future__ import annotations
+
+import math
+from enum import Enum
+from typing import Annotated, Self
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from gtrig import geometry as geo
+
+# Anything larger than this in a room-scale installation is almost surely millimetres.
+MAX_ROOM_EXTENT_M = 100.0
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _check_metres(value: float, limit: float, what: str = "value") -> float:
+    if not math.isfinite(value):
+        raise ValueError(f"{what} must be finite")
+    if abs(value) > limit:
+        raise ValueError(
+            f"{value:g} m is implausible (limit {limit:g} m): millimetres given as metres? "
+            f"write {value / 1000:g}"
+        )
+    return value
+
+
+class Pose(_Strict):
+    """A rigid pose: ``xyz`` in metres and exactly one of ``quat_xyzw`` or ``rpy_deg``."""
+
+    xyz: tuple[float, float, float]
+    quat_xyzw: tuple[float, float, float, float] | None = None
+    rpy_deg: tuple[float, float, float] | None = None
+
+    @field_validator("xyz")
+    @classmethod
+    def _xyz_metres(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        for c in v:
+            _check_metres(c, MAX_ROOM_EXTENT_M, "xyz")
+        return v
+
+    @model_validator(mode="after")
+    def _one_rotation(self) -> Self:
+        if (self.quat_xyzw is None) == (self.rpy_deg is None):
+            raise ValueError("give exactly one of quat_xyzw or rpy_deg")
+        if self.quat_xyzw is not None:
+            n = float(np.linalg.norm(self.quat_xyzw))
+            if not 0.99 < n < 1.01:
+                raise ValueError(f"quat_xyzw must be a unit quaternion (norm {n:.4g})")
+        return self
+
+    def matrix(self) -> geo.Array:
+        """The 4 x 4 transform."""
+        if self.quat_xyzw is not None:
+            q = np.asarray(self.quat_xyzw) / np.linalg.norm(self.quat_xyzw)
+            return geo.T_from_xyz_quat(self.xyz, q)
+        assert self.rpy_deg is not None
+        return geo.T_from_xyz_rpy(self.xyz, np.radians(self.rpy_deg))
+
+    @classmethod
+    def from_matrix(cls, T: geo.Array) -> Pose:
+        """A pose from a 4 x 4 transform, stored as ``xyz`` and ``quat_xyzw``."""
+        t, q = geo.xyz_quat_from_T(T)
+        return cls(
+            xyz=(float(t[0]), float(t[1]), float(t[2])),
+            quat_xyzw=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+        )
+
+
+class Camera(_Strict):
+    """A fixed camera: OpenCV pinhole model with distortion, and its pose in the world."""
+
+    name: str = Field(min_length=1)
+    resolution: tuple[Annotated[int, Field(gt=0, le=20000)], Annotated[int, Field(gt=0, le=20000)]]
+    camera_matrix: tuple[
+        tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]
+    ]
+    dist_coeffs: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    T_world_cam: Pose
+    rate_hz: float = Field(gt=0, le=1000)
+
+    @field_validator("dist_coeffs")
+    @classmethod
+    def _dist_len(cls, v: tuple[float, ...]) -> tuple[float, ...]:
+        if len(v) not in (4, 5, 8, 12, 14):
+            raise ValueError(f"expected 4, 5, 8, 12 or 14 coefficients in OpenCV order, got {len(v)}")
+        return v
+
+    @model_validator(mode="after")
+    def _intrinsics(self) -> Self:
+        K = np.asarray(self.camera_matrix)
+        w, h = self.resolution
+        if K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise ValueError("camera_matrix: focal lengths must be positive")
+        if tuple(K[2]) != (0.0, 0.0, 1.0) or K[1, 0] != 0.0:
+            raise ValueError("camera_matrix: must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]]")
+        if not (0 <= K[0, 2] <= w and 0 <= K[1, 2] <= h):
+            raise ValueError(f"camera_matrix: principal point ({K[0, 2]:g}, {K[1, 2]:g}) outside the image")
+        return self
+
+    @property
+    def K(self) -> geo.Array:
+        return np.asarray(self.camera_matrix, dtype=float)
+
+    @property
+    def dist(self) -> geo.Array:
+        return np.asarray(self.dist_coeffs, dtype=float)
+
+
+class LaserScanner(_Strict):
+    """A 2D laser scanner: beam ``i`` points at ``angle_min_rad + i * angle_increment_rad``
+    in the scanner's x-y plane."""
+
+    name: str = Field(min_length=1)
+    T_world_scanner: Pose
+    angle_min_rad: float = Field(ge=-2 * math.pi, le=2 * math.pi)
+    angle_increment_rad: float
+    beams: int = Field(gt=1, le=100000)
+    range_max_m: float = Field(gt=0)
+    rate_hz: float = Field(gt=0, le=1000)
+    range_sigma_m: float = Field(default=0.01, ge=0)
+
+    @field_validator("angle_increment_rad")
+    @classmethod
+    def _inc(cls, v: float) -> float:
+        if v == 0 or abs(v) > 0.5:
+            raise ValueError(f"{v:g} rad is implausible: degrees given as radians?")
+        return v
+
+    @field_validator("range_max_m")
+    @classmethod
+    def _rmax(cls, v: float) -> float:
+        return _check_metres(v, 500.0, "range_max_m")
+
+    @property
+    def angles_rad(self) -> geo.Array:
+        return self.angle_min_rad + self.angle_increment_rad * np.arange(self.beams)
+
+
+class MarkerFamily(str, Enum):
+    """Square ID marker families."""
+
+    ARTOOLKITPLUS_SIMPLE = "artoolkitplus_simple"
+    APRILTAG_36H11 = "apriltag_36h11"
+    ARUCO_4X4_50 = "aruco_4x4_50"
+    ARUCO_5X5_100 = "aruco_5x5_100"
+    ARUCO_6X6_250 = "aruco_6x6_250"
+    ARUCO_ORIGINAL = "aruco_original"
+
+
+class Marker(_Strict):
+    """A square marker on the robot. ``side_m`` is the black square's side; the marker frame has its
+    origin at the square's centre, x to the right and y up as printed, z out of the paper."""
+
+    family: MarkerFamily = MarkerFamily.ARTOOLKITPLUS_SIMPLE
+    id: int = Field(ge=0)
+    side_m: float = Field(gt=0)
+    T_robot_marker: Pose
+
+    @field_validator("side_m")
+    @classmethod
+    def _side(cls, v: float) -> float:
+        return _check_metres(v, 5.0, "side_m")
+
+
+class Hull(_Strict):
+    """The robot's rectangular hull ("gown") seen by the fixed scanners, in the robot frame."""
+
+    length_m: float = Field(gt=0)
+    width_m: float = Field(gt=0)
+    z_min_m: float = Field(ge=0)
+    z_max_m: float = Field(gt=0)
+    offset_xy_m: tuple[float, float] = (0.0, 0.0)
+
+    @field_validator("length_m", "width_m", "z_max_m")
+    @classmethod
+    def _size(cls, v: float) -> float:
+        return _check_metres(v, 10.0, "size")
+
+    @model_validator(mode="after")
+    def _span(self) -> Self:
+        if self.z_max_m <= self.z_min_m:
+            raise ValueError("z_max_m must be above z_min_m")
+        return self
+
+    def corners_xy(self) -> geo.Array:
+        """The hull outline (4, 2) in the robot frame, counter-clockwise from rear right."""
+        hl, hw = self.length_m / 2, self.width_m / 2
+        ox, oy = self.offset_xy_m
+        return np.array([[-hl, -hw], [hl, -hw], [hl, hw], [-hl, hw]]) + [ox, oy]
+
+
+class Odometry(_Strict):
+    rate_hz: float = Field(default=50.0, gt=0, le=10000)
+
+
+class OnboardScanner(_Strict):
+    name: str = Field(min_length=1)
+    T_robot_scanner: Pose
+    angle_min_rad: float
+    angle_increment_rad: float
+    beams: int = Field(gt=1)
+    range_max_m: float = Field(gt=0)
+    rate_hz: float = Field(gt=0)
+
+    @field_validator("angle_increment_rad")
+    @classmethod
+    def _inc(cls, v: float) -> float:
+        if v == 0 or abs(v) > 0.5:
+            raise ValueError(f"{v:g} rad is implausible: degrees given as radians?")
+        return v
+
+    @property
+    def angles_rad(self) -> geo.Array:
+        return self.angle_min_rad + self.angle_increment_rad * np.arange(self.beams)
+
+
+class Robot(_Strict):
+    hull: Hull
+    markers: tuple[Marker, ...] = ()
+    odometry: Odometry = Odometry()
+    onboard_scanners: tuple[OnboardScanner, ...] = ()
+
+    @model_validator(mode="after")
+    def _unique_markers(self) -> Self:
+        keys = [(m.family, m.id) for m in self.markers]
+        if len(keys) != len(set(keys)):
+            raise ValueError("markers: the same family and id appear twice")
+        return self
+
+
+class ReferencePoint(_Strict):
+    """A surveyed reference point on the floor: ``xy`` in the world frame, ``sigma_m`` its accuracy."""
+
+    name: str = Field(min_length=1)
+    xy: tuple[float, float]
+    sigma_m: float = Field(default=0.002, ge=0)
+
+    @field_validator("xy")
+    @classmethod
+    def _xy(cls, v: tuple[float, float]) -> tuple[float, float]:
+        for c in v:
+            _check_metres(c, MAX_ROOM_EXTENT_M, "xy")
+        return v
+
+
+class Survey(_Strict):
+    reference_points: tuple[ReferencePoint, ...] = ()
+    hand_laser_sigma_m: float = Field(default=0.002, ge=0, le=1.0)
+
+
+class World(_Strict):
+    name: str = "world"
+    description: str = ""
+
+
+class Rig(_Strict):
+    """The whole installation."""
+
+    world: World = World()
+    cameras: tuple[Camera, ...] = ()
+    laser_scanners: tuple[LaserScanner, ...] = ()
+    robot: Robot
+    survey: Survey = Survey()
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> Self:
+        for what, names in (
+            ("cameras", [c.name for c in self.cameras]),
+            ("laser_scanners", [s.name for s in self.laser_scanners]),
+            ("survey.reference_points", [p.name for p in self.survey.reference_points]),
+        ):
+            dup = {n for n in names if names.count(n) > 1}
+            if dup:
+                raise ValueError(f"{what}: duplicate name {sorted(dup)[0]!r}")
+        return self
+
+    def camera(self, name: str) -> Camera:
+        for c in self.cameras:
+            if c.name == name:
+                return c
+        raise KeyError(name)
+
+    def scanner(self, name: str) -> LaserScanner:
+        for s in self.laser_scanners:
+            if s.name == name:
+                return s
+        raise KeyError(name)
+
+    def marker(self, marker_id: int) -> Marker:
+        for m in self.robot.markers:
+            if m.id == marker_id:
+                return m
+        raise KeyError(marker_id)
