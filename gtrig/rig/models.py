@@ -151,6 +151,7 @@ class MarkerFamily(str, Enum):
     """Square ID marker families."""
 
     ARTOOLKITPLUS_SIMPLE = "artoolkitplus_simple"
+    ARTOOLKITPLUS_SIMPLE_THIN = "artoolkitplus_simple_thin"
     APRILTAG_36H11 = "apriltag_36h11"
     ARUCO_4X4_50 = "aruco_4x4_50"
     ARUCO_5X5_100 = "aruco_5x5_100"

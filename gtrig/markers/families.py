@@ -1,0 +1,306 @@
+"""Square ID marker families: printed cell patterns and decoders.
+
+A marker is an ``n x n`` array of square cells: a black border ``b`` cells wide around a
+``d x d`` data grid, so ``n = d + 2 b``. The arrays returned here contain the border and no white
+margin, so the array spans exactly the black square whose side is ``Marker.side_m`` in the rig file.
+Row 0 is the top of the marker as printed, column 0 its left; cell value 1 is white, 0 black.
+
+==========================  ====  ====  ====  ===========  =========================================
+family                        d     b     n   border/side  codes
+==========================  ====  ====  ====  ===========  =========================================
+artoolkitplus_simple          6     3    12   0.25         512 "simple ID" (ARToolKitPlus default)
+artoolkitplus_simple_thin     6     1     8   0.125        the same 512, thin border
+apriltag_36h11                6     1     8   0.125        587, OpenCV ``DICT_APRILTAG_36h11``
+aruco_4x4_50                  4     1     6   1/6          50, OpenCV ``DICT_4X4_50``
+aruco_5x5_100                 5     1     7   1/7          100, OpenCV ``DICT_5X5_100``
+aruco_6x6_250                 6     1     8   0.125        250, OpenCV ``DICT_6X6_250``
+aruco_original                5     1     7   1/7          1024, OpenCV ``DICT_ARUCO_ORIGINAL``
+==========================  ====  ====  ====  ===========  =========================================
+
+(AprilTag's own images add a white ring outside the black border; it is a margin and not part of
+these arrays. The "border/side" column is the border width as a fraction of the black square's side,
+ARToolKitPlus' ``setBorderWidth`` value.)
+
+ARToolKitPlus simple ID
+-----------------------
+ARToolKitPlus (Wagner and Schmalstieg, "ARToolKitPlus for pose tracking on mobile devices", CVWW
+2007; RAWSEEDS deliverable AD2.3, section "ARToolkit") encodes a 9-bit ID in the 6 x 6 data grid:
+the 9 bits are repeated four times to fill the 36 cells and all cells are scrambled with a fixed XOR
+mask. Analysing the official images (``id-markers.tar.gz``, which ``tests/markers`` checks bit for
+bit) gives the layout: with the data cells numbered ``k = 0..35`` in row-major order (top row first,
+left to right),
+
+    white(k) = bit(ID, 8 - k mod 9) XOR MASK(k)
+
+where ``bit(ID, 0)`` is the least significant bit and ``MASK`` is the pattern of ID 0 (white = 1).
+Each ID bit therefore controls four cells, so two codes differ in at least 4 cells (in any
+rotation); the decoder corrects 1 cell.
+
+OpenCV dictionaries
+-------------------
+AprilTag 36h11 and the ArUco dictionaries come from ``cv2.aruco.getPredefinedDictionary``; patterns
+are those of ``cv2.aruco.generateImageMarker`` with a 1-cell border, so IDs agree with OpenCV (and,
+for 36h11, with the AprilTag library). The decoder accepts up to the dictionary's
+``maxCorrectionBits`` wrong cells, except for ``aruco_original``, whose codes can be a single cell
+apart (ID 1023 is even its own 180-degree rotation): it decodes exact patterns only.
+
+In every family a pattern equally close to two different IDs is rejected rather than guessed.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from gtrig.errors import InputError
+from gtrig.rig.models import MarkerFamily
+
+# Pattern of ARToolKitPlus simple ID 0 (= the XOR mask), white = 1, read from the official
+# SimpleStd_000.png / SimpleThin_000.png; rows top to bottom.
+_ARTK_MASK = np.array(
+    [
+        [0, 1, 1, 0, 1, 1],
+        [0, 1, 1, 1, 0, 0],
+        [0, 0, 1, 0, 0, 1],
+        [1, 0, 1, 0, 0, 1],
+        [1, 1, 0, 0, 0, 0],
+        [1, 0, 0, 1, 1, 1],
+    ],
+    dtype=np.uint8,
+)
+
+_OPENCV_DICTS: dict[str, str] = {
+    "apriltag_36h11": "DICT_APRILTAG_36h11",
+    "aruco_4x4_50": "DICT_4X4_50",
+    "aruco_5x5_100": "DICT_5X5_100",
+    "aruco_6x6_250": "DICT_6X6_250",
+    "aruco_original": "DICT_ARUCO_ORIGINAL",
+}
+
+
+@dataclass(frozen=True)
+class FamilySpec:
+    """Geometry and code size of a marker family.
+
+    Attributes
+    ----------
+    family : MarkerFamily
+    data_cells : int
+        ``d``, the side of the data grid in cells.
+    border_cells : int
+        ``b``, the width of the black border in cells.
+    n_ids : int
+        Number of valid IDs, ``0 .. n_ids - 1``.
+    max_correction : int
+        Largest number of wrong data cells the decoder corrects.
+    """
+
+    family: MarkerFamily
+    data_cells: int
+    border_cells: int
+    n_ids: int
+    max_correction: int
+
+    @property
+    def cells(self) -> int:
+        """``n = d + 2 b``, the side of the whole black square in cells."""
+        return self.data_cells + 2 * self.border_cells
+
+    @property
+    def border_fraction(self) -> float:
+        """Border width as a fraction of the marker side (ARToolKitPlus' ``borderWidth``)."""
+        return self.border_cells / self.cells
+
+
+def _family(family: MarkerFamily | str) -> MarkerFamily:
+    try:
+        return MarkerFamily(family)
+    except ValueError:
+        names = ", ".join(f.value for f in MarkerFamily)
+        raise InputError(f"unknown marker family {family!r}; expected one of {names}") from None
+
+
+def _is_artk(family: MarkerFamily) -> bool:
+    return family.value.startswith("artoolkitplus_simple")
+
+
+@functools.cache
+def _opencv_dict(family: MarkerFamily):  # type: ignore[no-untyped-def]
+    import cv2
+
+    return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, _OPENCV_DICTS[family.value]))
+
+
+@functools.cache
+def family_spec(family: MarkerFamily | str) -> FamilySpec:
+    """The :class:`FamilySpec` of ``family`` (a :class:`MarkerFamily` or its string value)."""
+    fam = _family(family)
+    if _is_artk(fam):
+        border = 1 if fam.value.endswith("_thin") else 3
+        return FamilySpec(fam, 6, border, 512, 1)
+    d = _opencv_dict(fam)
+    # ARUCO_ORIGINAL has codes 1 cell apart (in some rotation): correcting would mis-identify.
+    corr = 0 if fam is MarkerFamily.ARUCO_ORIGINAL else int(d.maxCorrectionBits)
+    return FamilySpec(fam, int(d.markerSize), 1, int(d.bytesList.shape[0]), corr)
+
+
+def _artk_data(ids: NDArray[np.int64]) -> NDArray[np.uint8]:
+    """Data grids (K, 6, 6) of ARToolKitPlus simple IDs ``ids`` (K,)."""
+    k = np.arange(36)
+    bits = (ids[:, None] >> (8 - k % 9)[None, :]) & 1
+    return (bits.astype(np.uint8) ^ _ARTK_MASK.ravel()[None, :]).reshape(-1, 6, 6)
+
+
+@functools.cache
+def _codebook(family: MarkerFamily) -> NDArray[np.uint8]:
+    """All data grids of a family, (n_ids, d, d) uint8, white = 1, as printed."""
+    spec = family_spec(family)
+    if _is_artk(family):
+        return _artk_data(np.arange(512))
+    import cv2
+
+    d = _opencv_dict(family)
+    n = spec.cells
+    out = np.empty((spec.n_ids, spec.data_cells, spec.data_cells), np.uint8)
+    for i in range(spec.n_ids):
+        img = cv2.aruco.generateImageMarker(d, i, n, borderBits=1)
+        out[i] = (img[1:-1, 1:-1] > 127).astype(np.uint8)
+    return out
+
+
+def _pack(bits: NDArray[np.uint8]) -> NDArray[np.uint64]:
+    """Pack (..., m) bits (m <= 64) into uint64 words, bit j of the word = bits[..., j]."""
+    m = bits.shape[-1]
+    w = np.left_shift(np.uint64(1), np.arange(m, dtype=np.uint64))
+    return (bits.astype(np.uint64) * w).sum(axis=-1, dtype=np.uint64)
+
+
+_POP8 = np.array([bin(i).count("1") for i in range(256)], dtype=np.uint8)
+
+
+def _popcount(x: NDArray[np.uint64]) -> NDArray[np.int64]:
+    if hasattr(np, "bitwise_count"):
+        return np.bitwise_count(x).astype(np.int64)
+    b = x[..., None].view(np.uint8) if x.ndim else np.atleast_1d(x).view(np.uint8)
+    return _POP8[b.reshape(*x.shape, 8)].sum(-1).astype(np.int64)
+
+
+@functools.cache
+def _packed_rotations(family: MarkerFamily) -> NDArray[np.uint64]:
+    """(n_ids, 4) packed codes; column ``r`` is the code as observed after ``np.rot90(printed, -r)``,
+    so that ``np.rot90(observed, r)`` gives back the printed grid."""
+    book = _codebook(family)
+    rots = np.stack([np.rot90(book, -r, axes=(1, 2)) for r in range(4)], axis=1)
+    return _pack(rots.reshape(book.shape[0], 4, -1))
+
+
+def marker_cells(family: MarkerFamily | str, marker_id: int) -> NDArray[np.uint8]:
+    """The printed pattern of a marker, border included.
+
+    Parameters
+    ----------
+    family : MarkerFamily or str
+    marker_id : int
+        ID in ``0 .. family_spec(family).n_ids - 1``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, n), uint8
+        1 = white, 0 = black; row 0 = top of the marker as printed; ``n = d + 2 b`` (see the module
+        docstring). The array spans the black square exactly (no white margin).
+
+    Raises
+    ------
+    InputError
+        Unknown family or ID out of range.
+    """
+    fam = _family(family)
+    spec = family_spec(fam)
+    if not (0 <= int(marker_id) < spec.n_ids):
+        raise InputError(f"marker id {marker_id} out of range for {fam.value} (0..{spec.n_ids - 1})")
+    out = np.zeros((spec.cells, spec.cells), np.uint8)
+    b = spec.border_cells
+    out[b:-b, b:-b] = _codebook(fam)[int(marker_id)]
+    return out
+
+
+def decode_batch(
+    family: MarkerFamily | str, data: ArrayLike, max_hamming: int | None = None
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Decode many observed data grids at once against all IDs in all four rotations.
+
+    Parameters
+    ----------
+    family : MarkerFamily or str
+    data : array_like, shape (K, d, d)
+        Observed data cells (1 = white), row 0 = the image-side of the first two detected corners.
+    max_hamming : int, optional
+        Largest accepted number of wrong cells; default the family's ``max_correction``.
+
+    Returns
+    -------
+    ids, rotations, hammings : numpy.ndarray, shape (K,), int
+        ``ids[k] = -1`` where no code is within ``max_hamming``. ``np.rot90(data[k], rotations[k])``
+        is the printed grid of ``ids[k]`` (up to ``hammings[k]`` cells).
+    """
+    fam = _family(family)
+    spec = family_spec(fam)
+    obs = np.asarray(data).astype(np.uint8).reshape(-1, spec.data_cells * spec.data_cells)
+    lim = spec.max_correction if max_hamming is None else int(max_hamming)
+    table = _packed_rotations(fam)  # (N, 4)
+    words = _pack(obs)  # (K,)
+    ham = _popcount(words[:, None, None] ^ table[None, :, :])  # (K, N, 4)
+    flat = ham.reshape(ham.shape[0], -1)
+    best = flat.argmin(axis=1)
+    rows = np.arange(flat.shape[0])
+    h = flat[rows, best]
+    ids = best // 4
+    rot = best % 4
+    per_id = ham.min(axis=2)  # (K, N)
+    per_id[rows, ids] = np.iinfo(np.int64).max
+    ambiguous = per_id.min(axis=1) <= h if per_id.shape[1] > 1 else np.zeros_like(h, bool)
+    ids = np.where((h <= lim) & ~ambiguous, ids, -1)
+    return ids.astype(np.int64), rot.astype(np.int64), h.astype(np.int64)
+
+
+def decode_cells(
+    family: MarkerFamily | str, cells: ArrayLike, max_hamming: int | None = None
+) -> tuple[int, int, int] | None:
+    """Decode one observed cell array.
+
+    Parameters
+    ----------
+    family : MarkerFamily or str
+    cells : array_like, shape (n, n) or (d, d)
+        Observed cells (1 = white), either the whole black square with its border or only the data
+        grid. With the border, more than ``n // 4`` white border cells reject the candidate.
+    max_hamming : int, optional
+        Largest accepted number of wrong data cells; default the family's ``max_correction``.
+
+    Returns
+    -------
+    (marker_id, rotation, hamming) or None
+        ``np.rot90(cells, rotation)`` is the printed pattern of ``marker_id`` with ``hamming``
+        data cells wrong; None when no code is close enough.
+    """
+    fam = _family(family)
+    spec = family_spec(fam)
+    c = np.asarray(cells)
+    if c.shape == (spec.cells, spec.cells):
+        b = spec.border_cells
+        border_white = int(c.sum() - c[b:-b, b:-b].sum())
+        if border_white > spec.cells // 4:
+            return None
+        c = c[b:-b, b:-b]
+    elif c.shape != (spec.data_cells, spec.data_cells):
+        raise InputError(
+            f"{fam.value}: expected {spec.cells} x {spec.cells} or {spec.data_cells} x {spec.data_cells} "
+            f"cells, got {' x '.join(map(str, c.shape))}"
+        )
+    ids, rot, ham = decode_batch(fam, c[None], max_hamming)
+    if ids[0] < 0:
+        return None
+    return int(ids[0]), int(rot[0]), int(ham[0])

@@ -1,0 +1,218 @@
+"""``gtrig sim``: write a whole simulated recording, plus its truth, in the real on-disk layout.
+
+The steps read like the recording's table of contents (docs/formats.md). Each step writes its files
+atomically and is recorded in ``.gtrig_sim_state.json`` once complete, so an interrupted run resumes
+where it stopped when called again with the same settings.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from gtrig.errors import InputError
+from gtrig.io.atomic import atomic_open, atomic_write_text
+from gtrig.io.tum import Trajectory, write_tum
+from gtrig.rig.load import dump_rig
+from gtrig.sim.config import SimConfig
+from gtrig.sim.gtroom import VALIDATION_POSES, WORLD_POINT_NAMES, Scene, continuous_path, make_scene
+from gtrig.sim.motion import RobotMotion, static_motion
+
+log = logging.getLogger(__name__)
+
+# One clock for the whole recording (an arbitrary epoch, as real loggers use).
+EPOCH_S = 1_700_000_000.0
+BACKGROUND_T0_S = EPOCH_S
+VALIDATION_T0_S = EPOCH_S + 100.0
+RUN_T0_S = EPOCH_S + 300.0
+STATE_FILE = ".gtrig_sim_state.json"
+
+
+@dataclass(frozen=True)
+class Timeline:
+    """When each sequence happens and how the robot moves in it (true motion, recording clock)."""
+
+    run: RobotMotion
+    run_interval_s: np.ndarray  # (1, 2)
+    validation: RobotMotion
+    validation_intervals_s: np.ndarray  # (26, 2)
+    background_interval_s: np.ndarray  # (1, 2)
+
+
+def make_timeline(scene: Scene, cfg: SimConfig) -> Timeline:
+    duration = cfg.run_duration_s
+    stamps, xyth = continuous_path(duration_s=duration)
+    run = RobotMotion(stamps + RUN_T0_S, xyth, scene.floor)
+    val, intervals = static_motion(VALIDATION_POSES, scene.floor, cfg.static_pose_s)
+    val = RobotMotion(val.stamps_s + VALIDATION_T0_S, val.xytheta, scene.floor)
+    return Timeline(
+        run=run,
+        run_interval_s=np.array([[run.stamps_s[0], run.stamps_s[-1]]]),
+        validation=val,
+        validation_intervals_s=intervals + VALIDATION_T0_S,
+        background_interval_s=np.array([[BACKGROUND_T0_S, BACKGROUND_T0_S + cfg.background_s]]),
+    )
+
+
+def camera_stamps(interval_s: np.ndarray, rate_hz: float, offset_s: float) -> np.ndarray:
+    """Exposure mid-times of a free-running camera inside the given intervals (K, 2)."""
+    out = []
+    for t0, t1 in interval_s:
+        first = np.ceil((t0 - offset_s) * rate_hz) / rate_hz + offset_s
+        out.append(np.arange(first, t1 + 1e-9, 1.0 / rate_hz))
+    return np.concatenate(out)
+
+
+def _csv(path: Path, header: list[str], rows: list[list[object]]) -> None:
+    with atomic_open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(header)
+        w.writerows(rows)
+
+
+# ---------------------------------------------------------------------------------------------- steps
+def _write_rigs_and_truth(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
+    dump_rig(scene.rig_nominal, out / "rig.yaml")
+    dump_rig(scene.rig_true, out / "truth" / "rig.yaml")
+    atomic_write_text(out / "sim_config.yaml", yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
+    run_T = tl.run.T_world_robot_many(tl.run.stamps_s)
+    write_tum(out / "truth" / "run.tum", Trajectory.from_matrices(tl.run.stamps_s, run_T))
+    mid = tl.validation_intervals_s.mean(axis=1)
+    write_tum(out / "truth" / "validation.tum",
+              Trajectory.from_matrices(mid, tl.validation.T_world_robot_many(mid)))
+    _csv(out / "truth" / "validation_poses.csv", ["pose", "x", "y", "theta"],
+         [[i + 1, f"{x:.6f}", f"{y:.6f}", f"{th:.8f}"] for i, (x, y, th) in enumerate(VALIDATION_POSES)])
+    _csv(out / "truth" / "world_points.csv", ["name", "x", "y"],
+         [[n, f"{x:.6f}", f"{y:.6f}"] for n, (x, y) in zip(WORLD_POINT_NAMES, scene.world_points_xy, strict=True)])
+    _csv(out / "truth" / "reference_points.csv", ["name", "x", "y"],
+         [[n, f"{x:.6f}", f"{y:.6f}"] for n, (x, y) in scene.reference_true_xy.items()])
+    _csv(out / "validation" / "poses.csv", ["pose", "start_s", "end_s"],
+         [[i + 1, f"{a:.6f}", f"{b:.6f}"] for i, (a, b) in enumerate(tl.validation_intervals_s)])
+
+
+def _camera_offsets(scene: Scene) -> list[float]:
+    # free-running cameras: each starts at its own phase of the 10 Hz period
+    rng = np.random.default_rng([scene.seed, 7])
+    return [float(rng.uniform(0, 1.0 / c.rate_hz)) for c in scene.rig_true.cameras]
+
+
+def _write_camera_sequence(scene: Scene, motion: RobotMotion, intervals: np.ndarray, folder: Path,
+                           cfg: SimConfig, salt: int) -> None:
+    from gtrig.sim.cameras import render_sequence
+
+    for i, (cam, off) in enumerate(zip(scene.rig_true.cameras, _camera_offsets(scene), strict=True)):
+        stamps = camera_stamps(intervals, cam.rate_hz, off)
+        render_sequence(scene, cam, motion, stamps, folder / "cameras" / cam.name, cfg,
+                        seed=cfg.seed * 1000 + salt * 10 + i)
+
+
+def _step_run_cameras(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
+    _write_camera_sequence(scene, tl.run, tl.run_interval_s, out / "run", cfg, 1)
+
+
+def _step_validation_cameras(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
+    _write_camera_sequence(scene, tl.validation, tl.validation_intervals_s, out / "validation", cfg, 2)
+
+
+def _step_calibration_images(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
+    from gtrig.sim.cameras import write_calibration_sets, write_handheld_set
+
+    write_calibration_sets(scene, out, cfg)
+    write_handheld_set(scene, out, cfg)
+
+
+def _step_lasers(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
+    from gtrig.sim.lasers import write_fixed_scans, write_onboard_scans
+
+    write_fixed_scans(scene, None, tl.background_interval_s, out / "background" / "lasers", cfg, seed=cfg.seed * 10 + 1)
+    write_fixed_scans(scene, tl.validation, tl.validation_intervals_s, out / "validation" / "lasers", cfg,
+                      seed=cfg.seed * 10 + 2)
+    write_fixed_scans(scene, tl.run, tl.run_interval_s, out / "run" / "lasers", cfg, seed=cfg.seed * 10 + 3)
+    write_onboard_scans(scene, tl.validation, tl.validation_intervals_s, out / "validation" / "onboard", cfg,
+                        seed=cfg.seed * 10 + 4)
+    write_onboard_scans(scene, tl.run, tl.run_interval_s, out / "run" / "onboard", cfg, seed=cfg.seed * 10 + 5)
+
+
+def _step_odometry(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
+    from gtrig.sim.odometry import write_odometry
+
+    t0, t1 = tl.run_interval_s[0]
+    write_odometry(scene, tl.run, t0, t1, out / "run" / "odometry.csv", cfg, seed=cfg.seed * 10 + 6)
+
+
+def _step_survey(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
+    from gtrig.sim.survey import write_survey
+
+    mid = tl.validation_intervals_s.mean(axis=1)
+    write_survey(scene, tl.validation.T_world_robot_many(mid), out, cfg, seed=cfg.seed * 10 + 7)
+
+
+Step = Callable[[Scene, Timeline, Path, SimConfig], None]
+STEPS: tuple[tuple[str, Step], ...] = (
+    ("rig and truth", _write_rigs_and_truth),
+    ("survey", _step_survey),
+    ("odometry", _step_odometry),
+    ("laser scans", _step_lasers),
+    ("calibration images", _step_calibration_images),
+    ("validation images", _step_validation_cameras),
+    ("run images", _step_run_cameras),
+)
+
+
+def _config_key(cfg: SimConfig) -> str:
+    # workers change speed, never output
+    doc = cfg.model_dump(mode="json", exclude={"workers"})
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def simulate(
+    cfg: SimConfig, out_dir: str | Path, on_step: Callable[[str, int, int], None] | None = None
+) -> dict[str, float]:
+    """Write a full recording of ``cfg.scenario`` into ``out_dir``; returns seconds per step.
+
+    Parameters
+    ----------
+    cfg : the simulator settings (written to ``sim_config.yaml``).
+    out_dir : the recording folder; created if needed. A folder holding a recording made with other
+        settings is refused rather than mixed.
+    on_step : called as ``on_step(name, index, count)`` before each step (progress display).
+    """
+    if cfg.scenario != "gtroom":
+        raise InputError(f"unknown scenario {cfg.scenario!r}; available: gtroom")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    state_path = out / STATE_FILE
+    key = _config_key(cfg)
+    done: list[str] = []
+    if state_path.exists():
+        state = json.loads(state_path.read_text())
+        if state.get("config") != key:
+            raise InputError(f"{out}: holds a recording simulated with other settings; choose another --out")
+        done = list(state.get("done", []))
+    elif any(out.iterdir()):
+        raise InputError(f"{out}: folder is not empty and holds no simulated recording; choose another --out")
+
+    scene = make_scene(cfg.seed)
+    tl = make_timeline(scene, cfg)
+    timings: dict[str, float] = {}
+    for i, (name, step) in enumerate(STEPS):
+        if on_step:
+            on_step(name, i, len(STEPS))
+        if name in done:
+            log.info("%s: already written, skipped (resumed run)", name)
+            continue
+        t = time.perf_counter()
+        step(scene, tl, out, cfg)
+        timings[name] = time.perf_counter() - t
+        done.append(name)
+        atomic_write_text(state_path, json.dumps({"config": key, "done": done}))
+    return timings

@@ -1,0 +1,119 @@
+"""Marker families: official ARToolKitPlus images, OpenCV dictionaries, decoding with rotations."""
+
+from __future__ import annotations
+
+import re
+import tarfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from gtrig.errors import InputError
+from gtrig.markers.families import decode_batch, decode_cells, family_spec, marker_cells
+from gtrig.rig.models import MarkerFamily
+
+TARBALL = Path(__file__).resolve().parents[3] / "shared/data/artoolkitplus/id-markers.tar.gz"
+
+
+def _official() -> dict[tuple[str, int], np.ndarray]:
+    out = {}
+    with tarfile.open(TARBALL) as t:
+        for m in t.getmembers():
+            mm = re.search(r"simple/(std|thin)-border/Simple(?:Std|Thin)_(\d+)\.png$", m.name)
+            if mm:
+                f = t.extractfile(m)
+                assert f is not None
+                img = cv2.imdecode(np.frombuffer(f.read(), np.uint8), cv2.IMREAD_GRAYSCALE)
+                out[(mm.group(1), int(mm.group(2)))] = (img > 127).astype(np.uint8)
+    return out
+
+
+@pytest.mark.skipif(not TARBALL.exists(), reason="official ARToolKitPlus images not available")
+def test_artoolkitplus_matches_every_official_image() -> None:
+    official = _official()
+    assert len(official) == 1024
+    fams = {"std": MarkerFamily.ARTOOLKITPLUS_SIMPLE, "thin": MarkerFamily.ARTOOLKITPLUS_SIMPLE_THIN}
+    for (border, mid), img in official.items():
+        fam = fams[border]
+        np.testing.assert_array_equal(marker_cells(fam, mid), img, err_msg=f"{border} {mid}")
+        # each official image decodes to its file's ID, in every rotation
+        for r in range(4):
+            obs = np.rot90(img, -r)
+            assert decode_cells(fam, obs) == (mid, r, 0)
+
+
+def test_artoolkitplus_geometry() -> None:
+    std = family_spec(MarkerFamily.ARTOOLKITPLUS_SIMPLE)
+    thin = family_spec("artoolkitplus_simple_thin")
+    assert (std.cells, std.border_fraction) == (12, 0.25)
+    assert (thin.cells, thin.border_fraction) == (8, 0.125)
+    c = marker_cells(MarkerFamily.ARTOOLKITPLUS_SIMPLE, 300)
+    assert c.dtype == np.uint8 and c.shape == (12, 12)
+    assert c[:3].sum() == 0 and c[:, -3:].sum() == 0
+
+
+@pytest.mark.parametrize(
+    ("family", "name"),
+    [
+        (MarkerFamily.APRILTAG_36H11, "DICT_APRILTAG_36h11"),
+        (MarkerFamily.ARUCO_4X4_50, "DICT_4X4_50"),
+        (MarkerFamily.ARUCO_5X5_100, "DICT_5X5_100"),
+        (MarkerFamily.ARUCO_6X6_250, "DICT_6X6_250"),
+        (MarkerFamily.ARUCO_ORIGINAL, "DICT_ARUCO_ORIGINAL"),
+    ],
+)
+def test_opencv_families_match_opencv(family: MarkerFamily, name: str) -> None:
+    d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
+    spec = family_spec(family)
+    assert spec.n_ids == d.bytesList.shape[0]
+    for mid in (0, 1, spec.n_ids // 2, spec.n_ids - 1):
+        cells = marker_cells(family, mid)
+        img = cv2.aruco.generateImageMarker(d, mid, spec.cells * 10, borderBits=1)
+        np.testing.assert_array_equal(cells, (img[5::10, 5::10] > 127).astype(np.uint8))
+        # the same bits as the dictionary's byte list
+        bits = cv2.aruco.Dictionary.getBitsFromByteList(d.bytesList[mid : mid + 1], d.markerSize)
+        np.testing.assert_array_equal(cells[1:-1, 1:-1], bits)
+        # OpenCV's identify agrees
+        ok, idx, _rot = d.identify(cells[1:-1, 1:-1].astype(np.uint8), 0.0)
+        assert ok and idx == mid
+
+
+@pytest.mark.parametrize("family", list(MarkerFamily))
+def test_decode_all_ids_rotations_and_errors(family: MarkerFamily) -> None:
+    spec = family_spec(family)
+    rng = np.random.default_rng(1)
+    ids = np.arange(spec.n_ids)
+    b = spec.border_cells
+    data = np.stack([marker_cells(family, i)[b:-b, b:-b] for i in ids])
+    for r in range(4):
+        obs = np.rot90(data, -r, axes=(1, 2)).copy()
+        # flip max_correction random cells in each
+        k = spec.max_correction
+        for o in obs:
+            flat = o.reshape(-1)
+            idx = rng.choice(flat.size, k, replace=False)
+            flat[idx] ^= 1
+        got, rot, ham = decode_batch(family, obs)
+        np.testing.assert_array_equal(got, ids)
+        assert (ham <= k).all()
+        for o, i, rr, h in zip(obs, got, rot, ham, strict=True):
+            # the returned rotation maps the observation back onto the printed grid
+            assert int((np.rot90(o, rr) != data[i]).sum()) == h
+
+
+def test_decode_rejects_noise_and_bad_input() -> None:
+    fam = MarkerFamily.ARTOOLKITPLUS_SIMPLE
+    rng = np.random.default_rng(0)
+    noise = rng.integers(0, 2, (2000, 6, 6))
+    ids, _, _ = decode_batch(fam, noise)
+    assert (ids >= 0).mean() < 0.01  # random patterns essentially never decode
+    white_border = np.ones((12, 12), np.uint8)
+    assert decode_cells(fam, white_border) is None
+    with pytest.raises(InputError):
+        decode_cells(fam, np.zeros((5, 5)))
+    with pytest.raises(InputError):
+        marker_cells(fam, 512)
+    with pytest.raises(InputError):
+        marker_cells("nope", 1)
