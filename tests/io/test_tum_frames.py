@@ -61,3 +61,22 @@ def test_frame_index_round_trip(tmp_path: Path) -> None:
     (tmp_path / "timestamps.csv").write_text("frame,stamp_s,file\n0,1.0,a.png\n1,0.5,b.png\n")
     with pytest.raises(FormatError, match="do not increase"):
         read_frame_index(tmp_path)
+
+
+def test_video_with_timestamps(tmp_path: Path) -> None:
+    import cv2
+
+    w = cv2.VideoWriter(str(tmp_path / "video.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 10, (64, 48), isColor=False)
+    for i in range(6):
+        w.write(np.full((48, 64), 40 * i, np.uint8))
+    w.release()
+    (tmp_path / "timestamps.csv").write_text("frame,stamp_s,file\n" + "".join(f"{i},{10 + i * 0.1:.1f},\n" for i in range(6)))
+    idx = read_frame_index(tmp_path)
+    assert idx.video is not None and len(idx) == 6
+    frames = list(idx.iter_images())
+    assert [round(t, 1) for t, _ in frames] == [10.0, 10.1, 10.2, 10.3, 10.4, 10.5]
+    assert abs(float(frames[3][1].mean()) - 120) < 3  # MJPG is lossy
+    assert abs(float(idx.read(5).mean()) - 200) < 3
+    (tmp_path / "video.avi").unlink()
+    with pytest.raises(FormatError, match="no video"):
+        read_frame_index(tmp_path)

@@ -1,0 +1,153 @@
+"""Scans of all scanners to foreground points in the world frame, grouped into time frames.
+
+Every scanner is free running at its own phase. A *frame* is one period of the reference scanner (the
+one with the most scans); each scan of the other scanners joins the frame whose reference stamp is
+nearest, and every point keeps its own time offset ``dt_s`` so that the tracker can compensate the
+robot's motion within the frame. The whole recording is converted in one vectorised pass; the tracker
+then walks the frames through ``frame_start``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from gtrig.errors import InputError
+from gtrig.rig.models import LaserScanner
+
+
+@dataclass(frozen=True)
+class FramedPoints:
+    """Foreground points of a whole sequence, in the world frame, sorted by frame.
+
+    Attributes
+    ----------
+    frame_stamps_s : (F,) time of each frame (a reference-scanner stamp), seconds.
+    frame_start : (F + 1,) points of frame ``k`` are ``[frame_start[k], frame_start[k + 1])``.
+    xy_world : (P, 2) foreground points, world frame, metres.
+    scanner_index : (P,) index of the scanner (into ``scanner_xy_world``) that saw each point.
+    dir_world : (P, 2) unit beam direction of each point in the world x-y plane.
+    dt_s : (P,) point stamp minus frame stamp, seconds.
+    scanner_xy_world : (S, 2) scanner origins in the world, metres.
+    sigma_m : (S,) range noise of each scanner, metres.
+    scanner_names : (S,) names.
+    """
+
+    frame_stamps_s: np.ndarray
+    frame_start: np.ndarray
+    xy_world: np.ndarray
+    scanner_index: np.ndarray
+    dir_world: np.ndarray
+    dt_s: np.ndarray
+    scanner_xy_world: np.ndarray
+    sigma_m: np.ndarray
+    scanner_names: tuple[str, ...]
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.frame_stamps_s.size)
+
+    def frame(self, k: int) -> slice:
+        return slice(int(self.frame_start[k]), int(self.frame_start[k + 1]))
+
+
+def beam_dirs_world(scanner: LaserScanner, T_world_scanner: np.ndarray | None = None) -> np.ndarray:
+    """Beam directions (B, 2) of ``scanner`` in the world x-y plane (unnormalised if the scanner is tilted)."""
+    T = scanner.T_world_scanner.matrix() if T_world_scanner is None else T_world_scanner
+    a = scanner.angles_rad
+    d = np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]) @ T[:3, :3].T
+    return d[:, :2]
+
+
+def scan_points_world(ranges_m: np.ndarray, scanner: LaserScanner,
+                      T_world_scanner: np.ndarray | None = None) -> np.ndarray:
+    """All returns of scans ``ranges_m`` (N, B) as world x-y points (N, B, 2); ``nan`` where no return."""
+    T = scanner.T_world_scanner.matrix() if T_world_scanner is None else T_world_scanner
+    d = beam_dirs_world(scanner, T)
+    return T[:2, 3] + np.asarray(ranges_m, dtype=float)[..., None] * d
+
+
+def check_stamps(stamps_s: np.ndarray, what: str) -> None:
+    """Raise :class:`InputError` (one line) unless ``stamps_s`` strictly increase."""
+    st = np.asarray(stamps_s, dtype=float)
+    bad = np.flatnonzero(~(np.diff(st) > 0))
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise InputError(f"{what}: time stamps do not increase at scan {i + 1} "
+                         f"({st[i - 1]:.6f} then {st[i]:.6f} s)")
+
+
+def frame_points(
+    scanners: Sequence[LaserScanner],
+    stamps_s: Sequence[np.ndarray],
+    ranges_m: Sequence[np.ndarray],
+    masks: Sequence[np.ndarray],
+) -> FramedPoints:
+    """Group the foreground returns of every scanner into frames, in the world frame.
+
+    Parameters
+    ----------
+    scanners
+        The scanners, with their (calibrated) ``T_world_scanner``.
+    stamps_s
+        Per scanner, (N_s,) strictly increasing scan stamps, seconds (one clock).
+    ranges_m
+        Per scanner, (N_s, B_s) ranges, metres.
+    masks
+        Per scanner, (N_s, B_s) foreground mask (:func:`gtrig.laser.foreground.foreground_mask`).
+    """
+    if not scanners:
+        raise InputError("no laser scanners in the rig")
+    for s, st, r in zip(scanners, stamps_s, ranges_m, strict=True):
+        if r.shape[1] != s.beams:
+            raise InputError(f"scanner {s.name}: scans have {r.shape[1]} beams, the rig says {s.beams}")
+        check_stamps(st, f"scanner {s.name}")
+    ref = int(np.argmax([len(st) for st in stamps_s]))
+    ref_st = np.asarray(stamps_s[ref], dtype=float)
+    if ref_st.size == 0:
+        raise InputError("no scans in the sequence")
+    half = 0.5 / scanners[ref].rate_hz
+    xy, sid, dirs, dts, fidx = [], [], [], [], []
+    origins = []
+    for i, (s, st, r, m) in enumerate(zip(scanners, stamps_s, ranges_m, masks, strict=True)):
+        T = s.T_world_scanner.matrix()
+        origins.append(T[:2, 3].copy())
+        if len(st) == 0:
+            continue
+        j = np.clip(np.searchsorted(ref_st, st), 1, len(ref_st) - 1)
+        j = np.where(np.abs(ref_st[j - 1] - st) <= np.abs(ref_st[j] - st), j - 1, j)
+        if len(ref_st) == 1:
+            j = np.zeros(len(st), dtype=int)
+        dt = st - ref_st[j]
+        keep_scan = np.abs(dt) <= half * 1.0001
+        mm = m & keep_scan[:, None]
+        n_idx, b_idx = np.nonzero(mm)
+        d = beam_dirs_world(s, T)
+        rr = r[n_idx, b_idx]
+        xy.append(T[:2, 3] + rr[:, None] * d[b_idx])
+        dn = d[b_idx]
+        dirs.append(dn / np.linalg.norm(dn, axis=1, keepdims=True))
+        sid.append(np.full(n_idx.size, i, dtype=np.int32))
+        dts.append(dt[n_idx])
+        fidx.append(j[n_idx])
+    if xy:
+        fi = np.concatenate(fidx)
+        order = np.argsort(fi, kind="stable")
+        xy_a = np.concatenate(xy)[order]
+        sid_a = np.concatenate(sid)[order]
+        dir_a = np.concatenate(dirs)[order]
+        dt_a = np.concatenate(dts)[order]
+        fi = fi[order]
+    else:
+        fi = np.zeros(0, dtype=int)
+        xy_a, dir_a = np.zeros((0, 2)), np.zeros((0, 2))
+        sid_a, dt_a = np.zeros(0, dtype=np.int32), np.zeros(0)
+    start = np.searchsorted(fi, np.arange(len(ref_st) + 1))
+    return FramedPoints(
+        frame_stamps_s=ref_st.copy(), frame_start=start, xy_world=np.ascontiguousarray(xy_a),
+        scanner_index=sid_a, dir_world=np.ascontiguousarray(dir_a), dt_s=dt_a,
+        scanner_xy_world=np.array(origins), sigma_m=np.array([s.range_sigma_m for s in scanners]),
+        scanner_names=tuple(s.name for s in scanners),
+    )
