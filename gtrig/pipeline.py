@@ -42,8 +42,35 @@ class StageContext:
 Stage = Callable[[StageContext], list[AccuracyRow]]
 
 
+def _has_truth(ctx: StageContext) -> bool:
+    return (ctx.rec / "truth").is_dir()
+
+
+def survey(ctx: StageContext) -> list[AccuracyRow]:
+    """World points and validation poses from the hand-laser distances (issue 3)."""
+    from gtrig.survey import compare_to_truth, run_recording_survey
+
+    res = run_recording_survey(ctx.rec, ctx.out / "survey")
+    ctx.products["survey"] = res
+    if not _has_truth(ctx):
+        return []
+    s = compare_to_truth(res, ctx.rec).summary()
+    return [
+        AccuracyRow("survey", "world points, max error", s["world_points_max_mm"], "mm", "<= 2",
+                    s["world_points_max_mm"] <= 2.0),
+        AccuracyRow("survey", "world points, RMS error", s["world_points_rms_mm"], "mm"),
+        AccuracyRow("survey", "validation poses, max position error", s["poses_max_pos_mm"], "mm", "<= 3",
+                    s["poses_max_pos_mm"] <= 3.0),
+        AccuracyRow("survey", "validation poses, max heading error", s["poses_max_theta_deg"], "deg", "<= 0.1",
+                    s["poses_max_theta_deg"] <= 0.1),
+        AccuracyRow("survey", "validation poses, mean NEES / dof", s["poses_mean_nees"] / 3, "", "0.7-1.4"),
+    ]
+
+
 def _stages() -> list[tuple[str, Stage]]:
-    return []
+    return [
+        ("survey", survey),
+    ]
 
 
 @dataclass(frozen=True)

@@ -211,7 +211,8 @@ def _wrong_board_hint(images: Sequence[tuple[Path, np.ndarray]], board: Board) -
         for c, r in tries:
             if c < 2 or r < 2:
                 continue
-            ok, _ = cv2.findChessboardCorners(small, (c, r), flags=cv2.CALIB_CB_ADAPTIVE_THRESH)
+            ok, _ = cv2.findChessboardCorners(small, (c, r), flags=cv2.CALIB_CB_ADAPTIVE_THRESH
+                                              | cv2.CALIB_CB_FAST_CHECK)
             if ok:
                 sq = "; count inner corners, not squares" if (c, r) == (board.cols - 1, board.rows - 1) else ""
                 return f", but a {c}x{r} board is in {p.name}: wrong board size? (--board {c}x{r}x{board.square_m:g}{sq})"
@@ -242,6 +243,11 @@ def detect_folder(folder: str | os.PathLike[str], board: Board,
             if len(misses) < 3:
                 misses.append((p, img))
             log.debug("%s: no %dx%d board", p, board.cols, board.rows)
+            if not found and len(missing) == 3 and len(paths) > 3:
+                # three misses in a row from the start: a wrong board size is likely, say so now
+                hint = _wrong_board_hint(misses, board)
+                if hint:
+                    raise InputError(f"{d}: no {board.cols}x{board.rows} chessboard in the first 3 images" + hint)
         else:
             found.append(Detection(p.name, p, c, size))
     if not found:
@@ -289,7 +295,7 @@ def boards_spec_from_dict(data: Any, source: str = "<boards>") -> BoardsSpec:
     """Parse a boards document (see :func:`read_boards_yaml`)."""
     if not isinstance(data, dict):
         raise FormatError(f"{source}: expected a mapping with board, T_board1_board2, T_world_board")
-    b = data.get("board", data.get("chessboard"))
+    b = data.get("board", data.get("chessboard", data if ("inner_corners" in data or "squares" in data) else None))
     if not isinstance(b, dict):
         raise FormatError(f"{source}: board: missing (inner_corners: [cols, rows], square_m)")
     try:
@@ -313,7 +319,9 @@ def boards_spec_from_dict(data: Any, source: str = "<boards>") -> BoardsSpec:
 def read_boards_yaml(path: str | os.PathLike[str]) -> BoardsSpec:
     """Read ``boards.yaml``::
 
-        board: {inner_corners: [9, 5], square_m: 0.100, origin: corner}
+        inner_corners: [9, 5]        # or squares: [10, 6]; may also sit under a "board:" key
+        square_m: 0.100
+        origin: corner               # optional: corner (first inner corner, default) or centre
         T_board1_board2: {xyz: [1.5, 0, 0], quat_xyzw: [0, 0, 0, 1]}
         T_world_board: {xyz: [...], rpy_deg: [180, 0, 0]}
     """

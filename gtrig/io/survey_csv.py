@@ -75,15 +75,18 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = ()) -> Ta
             header = tuple(f.lower() for f in fields)
             continue
         if len(fields) != len(header):
-            raise FormatError(f"{p}:{lineno}: expected {len(header)} fields ({','.join(header)}), got {len(fields)}")
+            raise FormatError(
+                f"{p}:{lineno}: expected {len(header)} fields ({','.join(header)}), got {len(fields)}"
+            )
         rows.append(fields)
         lines.append(lineno)
     if header is None:
         raise FormatError(f"{p}: empty file, expected a header row")
     missing = [c for c in required if c not in header]
     if missing:
-        raise FormatError(f"{p}: missing column {missing[0]!r} (header: {','.join(header)}; "
-                          f"expected {','.join(required)})")
+        raise FormatError(
+            f"{p}: missing column {missing[0]!r} (header: {','.join(header)}; expected {','.join(required)})"
+        )
     if not rows:
         raise FormatError(f"{p}: no data rows")
     return Table(p, header, tuple(rows), tuple(lines))
@@ -105,8 +108,10 @@ def _metres(t: Table, k: int, col: str, *, positive: bool = False, limit: float 
     if positive and v <= 0:
         raise FormatError(f"{t.path}:{t.lines[k]}: {col} {v:g} must be positive")
     if abs(v) > limit:
-        raise FormatError(f"{t.path}:{t.lines[k]}: {col} {v:g} m is implausible (limit {limit:g} m): "
-                          f"millimetres given as metres? write {v / 1000:g}")
+        raise FormatError(
+            f"{t.path}:{t.lines[k]}: {col} {v:g} m is implausible (limit {limit:g} m): "
+            f"millimetres given as metres? write {v / 1000:g}"
+        )
     return v
 
 
@@ -159,7 +164,7 @@ class NamedPoints:
 
 @dataclass(frozen=True)
 class Distances:
-    """Hand-laser readings: ``distance_m[k]`` from ``a[k]`` to ``b[k]`` with standard deviation ``sigma_m[k]``.
+    """Hand-laser readings: ``distance_m[k]`` from ``a[k]`` to ``b[k]``, standard deviation ``sigma_m[k]``.
 
     For world distances ``a`` is the world point and ``b`` the reference point; for pose distances
     ``group`` is the pose, ``a`` the robot point and ``b`` the world point. ``source`` names the file and
@@ -175,9 +180,14 @@ class Distances:
 
     def subset(self, keep: np.ndarray) -> Distances:
         idx = np.flatnonzero(keep)
-        return Distances(tuple(self.group[i] for i in idx), tuple(self.a[i] for i in idx),
-                         tuple(self.b[i] for i in idx), self.distance_m[idx], self.sigma_m[idx],
-                         tuple(self.source[i] for i in idx))
+        return Distances(
+            tuple(self.group[i] for i in idx),
+            tuple(self.a[i] for i in idx),
+            tuple(self.b[i] for i in idx),
+            self.distance_m[idx],
+            self.sigma_m[idx],
+            tuple(self.source[i] for i in idx),
+        )
 
 
 def read_reference_points(path: str | os.PathLike[str], default_sigma_m: float = 0.002) -> NamedPoints:
@@ -195,7 +205,9 @@ def read_robot_points(path: str | os.PathLike[str]) -> NamedPoints:
     t = read_table(path, ("name", "x", "y"))
     names = _names(t, "name")
     _unique(t, names, "name")
-    xy = np.array([[_metres(t, k, "x", limit=10.0), _metres(t, k, "y", limit=10.0)] for k in range(len(t.rows))])
+    xy = np.array(
+        [[_metres(t, k, "x", limit=10.0), _metres(t, k, "y", limit=10.0)] for k in range(len(t.rows))]
+    )
     sig = np.array([_sigma(t, k, 0.0) for k in range(len(t.rows))])
     return NamedPoints(tuple(names), xy, sig)
 
@@ -211,8 +223,10 @@ def _distance(t: Table, k: int, col: str) -> float:
     if v <= 0:
         raise FormatError(f"{t.path}:{t.lines[k]}: {col} {v:g} must be positive")
     if v > MAX_DISTANCE_M:
-        raise FormatError(f"{t.path}:{t.lines[k]}: {col} {v:g} m is implausible (limit {MAX_DISTANCE_M:g} m): "
-                          f"millimetres given as metres? write {v / 1000:g}")
+        raise FormatError(
+            f"{t.path}:{t.lines[k]}: {col} {v:g} m is implausible (limit {MAX_DISTANCE_M:g} m): "
+            f"millimetres given as metres? write {v / 1000:g}"
+        )
     return v
 
 
@@ -239,8 +253,10 @@ def read_world_distances(path: str | os.PathLike[str], default_sigma_m: float | 
     else:
         wide = [c for c in t.header if c.startswith("d_") and len(c) > 2]
         if not wide:
-            raise FormatError(f"{t.path}: expected columns point,reference,distance[,sigma] "
-                              f"(or point,d_<reference>,...); header: {','.join(t.header)}")
+            raise FormatError(
+                f"{t.path}: expected columns point,reference,distance[,sigma] "
+                f"(or point,d_<reference>,...); header: {','.join(t.header)}"
+            )
         # reference names keep the case written in the file
         with open(t.path, encoding="utf-8-sig") as f:
             raw_header = next(csv.reader(ln for ln in f if ln.strip() and not ln.lstrip().startswith("#")))
@@ -305,8 +321,13 @@ def read_points(path: str | os.PathLike[str], default_sigma_m: float = 0.0) -> P
     return PointsTable(tuple(names), xy, cov)
 
 
-def write_points(path: str | os.PathLike[str], names: Sequence[str], xy: np.ndarray, cov_xy: np.ndarray,
-                 extra: dict[str, Sequence[float]] | None = None) -> None:
+def write_points(
+    path: str | os.PathLike[str],
+    names: Sequence[str],
+    xy: np.ndarray,
+    cov_xy: np.ndarray,
+    extra: dict[str, Sequence[float]] | None = None,
+) -> None:
     """Write ``name,x,y,cov_xx,cov_xy,cov_yy`` (+ ``extra`` columns) atomically, full precision."""
     extra = extra or {}
     buf = io.StringIO()
@@ -314,13 +335,27 @@ def write_points(path: str | os.PathLike[str], names: Sequence[str], xy: np.ndar
     w.writerow(["name", "x", "y", "cov_xx", "cov_xy", "cov_yy", *extra])
     for i, n in enumerate(names):
         c = cov_xy[i]
-        w.writerow([n, f"{xy[i, 0]:.9f}", f"{xy[i, 1]:.9f}", f"{c[0, 0]:.6e}", f"{c[0, 1]:.6e}", f"{c[1, 1]:.6e}",
-                    *(f"{v[i]:.6g}" for v in extra.values())])
+        w.writerow(
+            [
+                n,
+                f"{xy[i, 0]:.9f}",
+                f"{xy[i, 1]:.9f}",
+                f"{c[0, 0]:.6e}",
+                f"{c[0, 1]:.6e}",
+                f"{c[1, 1]:.6e}",
+                *(f"{v[i]:.6g}" for v in extra.values()),
+            ]
+        )
     atomic_write_text(path, buf.getvalue())
 
 
-def write_poses(path: str | os.PathLike[str], names: Sequence[str], xytheta: np.ndarray,
-                cov_xytheta: np.ndarray, extra: dict[str, Sequence[float]] | None = None) -> None:
+def write_poses(
+    path: str | os.PathLike[str],
+    names: Sequence[str],
+    xytheta: np.ndarray,
+    cov_xytheta: np.ndarray,
+    extra: dict[str, Sequence[float]] | None = None,
+) -> None:
     """Write ``pose,x,y,theta`` and the upper triangle of the 3 x 3 covariance atomically."""
     extra = extra or {}
     buf = io.StringIO()
@@ -329,8 +364,16 @@ def write_poses(path: str | os.PathLike[str], names: Sequence[str], xytheta: np.
     iu = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
     for i, n in enumerate(names):
         c = cov_xytheta[i]
-        w.writerow([n, f"{xytheta[i, 0]:.9f}", f"{xytheta[i, 1]:.9f}", f"{xytheta[i, 2]:.9f}",
-                    *(f"{c[a, b]:.6e}" for a, b in iu), *(f"{v[i]:.6g}" for v in extra.values())])
+        w.writerow(
+            [
+                n,
+                f"{xytheta[i, 0]:.9f}",
+                f"{xytheta[i, 1]:.9f}",
+                f"{xytheta[i, 2]:.9f}",
+                *(f"{c[a, b]:.6e}" for a, b in iu),
+                *(f"{v[i]:.6g}" for v in extra.values()),
+            ]
+        )
     atomic_write_text(path, buf.getvalue())
 
 
@@ -364,7 +407,8 @@ def _looks_like_tum(p: Path) -> bool:
                 s = line.strip()
                 if s and not s.startswith("#"):
                     return len(s.replace(",", " ").split()) == 8 and all(
-                        _isfloat(x) for x in s.replace(",", " ").split())
+                        _isfloat(x) for x in s.replace(",", " ").split()
+                    )
     except (FileNotFoundError, UnicodeDecodeError):
         return False
     return False
@@ -378,8 +422,9 @@ def _isfloat(s: str) -> bool:
     return True
 
 
-def read_pose_table(path: str | os.PathLike[str], columns: Sequence[str] | None = None,
-                    method: str | None = None) -> PoseTable:
+def read_pose_table(
+    path: str | os.PathLike[str], columns: Sequence[str] | None = None, method: str | None = None
+) -> PoseTable:
     """Read planar poses from a CSV (``pose`` plus x, y, theta columns) or a TUM file.
 
     Parameters
@@ -411,8 +456,10 @@ def read_pose_table(path: str | os.PathLike[str], columns: Sequence[str] | None 
                 columns = cs
                 break
         else:
-            raise FormatError(f"{p}: no pose columns found (header: {','.join(t.header)}); expected "
-                              "x,y,theta (or th, or val_x,val_y,val_th), or name them with --columns")
+            raise FormatError(
+                f"{p}: no pose columns found (header: {','.join(t.header)}); expected "
+                "x,y,theta (or th, or val_x,val_y,val_th), or name them with --columns"
+            )
     columns = tuple(c.strip().lower() for c in columns)
     if len(columns) != 3:
         raise FormatError(f"{p}: expected three column names for x, y, theta, got {len(columns)}")
@@ -425,10 +472,13 @@ def read_pose_table(path: str | os.PathLike[str], columns: Sequence[str] | None 
         if method is not None:
             keep = [k for k in keep if methods[k] == method]
             if not keep:
-                raise FormatError(f"{p}: no rows with method {method!r} (methods: {', '.join(sorted(set(methods)))})")
+                raise FormatError(
+                    f"{p}: no rows with method {method!r} (methods: {', '.join(sorted(set(methods)))})"
+                )
         elif len(set(methods)) > 1:
-            raise FormatError(f"{p}: rows of several methods ({', '.join(sorted(set(methods)))}); choose one with "
-                              "--method")
+            raise FormatError(
+                f"{p}: rows of several methods ({', '.join(sorted(set(methods)))}); choose one with --method"
+            )
     elif method is not None:
         raise FormatError(f"{p}: --method {method} given but the file has no method column")
     names = [t.rows[k][t.header.index("pose")] for k in keep]
@@ -444,8 +494,13 @@ def read_pose_table(path: str | os.PathLike[str], columns: Sequence[str] | None 
     return PoseTable(tuple(names), xyt, cov)
 
 
-def write_named_xy(path: str | os.PathLike[str], names: Sequence[str], xy: np.ndarray,
-                   header: Sequence[str] = ("name", "x", "y"), sigma_m: np.ndarray | None = None) -> None:
+def write_named_xy(
+    path: str | os.PathLike[str],
+    names: Sequence[str],
+    xy: np.ndarray,
+    header: Sequence[str] = ("name", "x", "y"),
+    sigma_m: np.ndarray | None = None,
+) -> None:
     """Write ``name,x,y[,sigma]`` atomically."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -458,7 +513,9 @@ def write_named_xy(path: str | os.PathLike[str], names: Sequence[str], xy: np.nd
     atomic_write_text(path, buf.getvalue())
 
 
-def write_distances(path: str | os.PathLike[str], header: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
+def write_distances(
+    path: str | os.PathLike[str], header: Sequence[str], rows: Sequence[Sequence[object]]
+) -> None:
     """Write a distance table (``header`` then ``rows``; floats at 0.1 micrometre) atomically."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")

@@ -73,7 +73,9 @@ def build_background(
     r = np.asarray(ranges_m, dtype=float)
     if r.ndim != 2 or r.shape[1] != scanner.beams:
         got = r.shape[1] if r.ndim == 2 else r.shape
-        raise InputError(f"scanner {scanner.name}: static scans have {got} beams, the rig says {scanner.beams}")
+        raise InputError(
+            f"scanner {scanner.name}: static scans have {got} beams, the rig says {scanner.beams}"
+        )
     if r.shape[0] == 0:
         raise InputError(f"scanner {scanner.name}: the static sequence holds no scans")
     valid = np.isfinite(r)

@@ -29,10 +29,14 @@ class FramedPoints:
     xy_world : (P, 2) foreground points, world frame, metres.
     scanner_index : (P,) index of the scanner (into ``scanner_xy_world``) that saw each point.
     dir_world : (P, 2) unit beam direction of each point in the world x-y plane.
-    dt_s : (P,) point stamp minus frame stamp, seconds.
+    dt_s : (P,) firing time of the point's beam minus the frame stamp, seconds.
     scanner_xy_world : (S, 2) scanner origins in the world, metres.
     sigma_m : (S,) range noise of each scanner, metres.
     scanner_names : (S,) names.
+    scan_of_frame : (S, F) index of each scanner's scan in frame ``k`` (-1 when none).
+    ranges_m : per scanner, (N_s, B_s) all ranges, metres (for the free-space test of the global search).
+    masks : per scanner, (N_s, B_s) foreground masks.
+    beam_dirs : per scanner, (B_s, 2) unit beam directions in the world.
     """
 
     frame_stamps_s: np.ndarray
@@ -44,6 +48,10 @@ class FramedPoints:
     scanner_xy_world: np.ndarray
     sigma_m: np.ndarray
     scanner_names: tuple[str, ...]
+    scan_of_frame: np.ndarray
+    ranges_m: tuple[np.ndarray, ...]
+    masks: tuple[np.ndarray, ...]
+    beam_dirs: tuple[np.ndarray, ...]
 
     @property
     def n_frames(self) -> int:
@@ -52,21 +60,46 @@ class FramedPoints:
     def frame(self, k: int) -> slice:
         return slice(int(self.frame_start[k]), int(self.frame_start[k + 1]))
 
+    def free_rays(self, k: int, range_max_m: float = 30.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Beams of frame ``k`` that are not foreground: origins (R, 2), unit directions (R, 2) and the
+        range (R,) up to which each saw free space (``range_max_m`` where there was no return)."""
+        o, d, r = [], [], []
+        for s, idx in enumerate(self.scan_of_frame[:, k]):
+            if idx < 0:
+                continue
+            keep = ~self.masks[s][idx]
+            rr = self.ranges_m[s][idx][keep]
+            o.append(np.broadcast_to(self.scanner_xy_world[s], (rr.size, 2)))
+            d.append(self.beam_dirs[s][keep])
+            r.append(np.where(np.isfinite(rr), rr, range_max_m))
+        if not o:
+            return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
+        return np.concatenate(o), np.concatenate(d), np.concatenate(r)
+
 
 def beam_dirs_world(scanner: LaserScanner, T_world_scanner: np.ndarray | None = None) -> np.ndarray:
-    """Beam directions (B, 2) of ``scanner`` in the world x-y plane (unnormalised if the scanner is tilted)."""
+    """Beam directions (B, 2) of ``scanner`` in the world x-y plane (unnormalised if the scanner is
+    tilted)."""
     T = scanner.T_world_scanner.matrix() if T_world_scanner is None else T_world_scanner
     a = scanner.angles_rad
     d = np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]) @ T[:3, :3].T
     return d[:, :2]
 
 
-def scan_points_world(ranges_m: np.ndarray, scanner: LaserScanner,
-                      T_world_scanner: np.ndarray | None = None) -> np.ndarray:
+def scan_points_world(
+    ranges_m: np.ndarray, scanner: LaserScanner, T_world_scanner: np.ndarray | None = None
+) -> np.ndarray:
     """All returns of scans ``ranges_m`` (N, B) as world x-y points (N, B, 2); ``nan`` where no return."""
     T = scanner.T_world_scanner.matrix() if T_world_scanner is None else T_world_scanner
     d = beam_dirs_world(scanner, T)
     return T[:2, 3] + np.asarray(ranges_m, dtype=float)[..., None] * d
+
+
+def beam_delays_s(scanner: LaserScanner) -> np.ndarray:
+    """Firing time (B,) of each beam after the scan's stamp, seconds: the mirror turns once per period
+    and beam ``i`` fires when it points at its angle (SICK LMS, Hokuyo URG; stamps mark the first beam)."""
+    a = scanner.angles_rad
+    return np.abs(a - a[0]) / (2 * np.pi) / scanner.rate_hz
 
 
 def check_stamps(stamps_s: np.ndarray, what: str) -> None:
@@ -75,8 +108,9 @@ def check_stamps(stamps_s: np.ndarray, what: str) -> None:
     bad = np.flatnonzero(~(np.diff(st) > 0))
     if bad.size:
         i = int(bad[0]) + 1
-        raise InputError(f"{what}: time stamps do not increase at scan {i + 1} "
-                         f"({st[i - 1]:.6f} then {st[i]:.6f} s)")
+        raise InputError(
+            f"{what}: time stamps do not increase at scan {i + 1} ({st[i - 1]:.6f} then {st[i]:.6f} s)"
+        )
 
 
 def frame_points(
@@ -110,10 +144,13 @@ def frame_points(
         raise InputError("no scans in the sequence")
     half = 0.5 / scanners[ref].rate_hz
     xy, sid, dirs, dts, fidx = [], [], [], [], []
-    origins = []
+    origins, all_dirs = [], []
+    scan_of_frame = np.full((len(scanners), len(ref_st)), -1, dtype=np.intp)
     for i, (s, st, r, m) in enumerate(zip(scanners, stamps_s, ranges_m, masks, strict=True)):
         T = s.T_world_scanner.matrix()
         origins.append(T[:2, 3].copy())
+        dd = beam_dirs_world(s, T)
+        all_dirs.append(dd / np.linalg.norm(dd, axis=1, keepdims=True))
         if len(st) == 0:
             continue
         j = np.clip(np.searchsorted(ref_st, st), 1, len(ref_st) - 1)
@@ -122,6 +159,7 @@ def frame_points(
             j = np.zeros(len(st), dtype=int)
         dt = st - ref_st[j]
         keep_scan = np.abs(dt) <= half * 1.0001
+        scan_of_frame[i, j[keep_scan]] = np.flatnonzero(keep_scan)
         mm = m & keep_scan[:, None]
         n_idx, b_idx = np.nonzero(mm)
         d = beam_dirs_world(s, T)
@@ -130,7 +168,7 @@ def frame_points(
         dn = d[b_idx]
         dirs.append(dn / np.linalg.norm(dn, axis=1, keepdims=True))
         sid.append(np.full(n_idx.size, i, dtype=np.int32))
-        dts.append(dt[n_idx])
+        dts.append(dt[n_idx] + beam_delays_s(s)[b_idx])
         fidx.append(j[n_idx])
     if xy:
         fi = np.concatenate(fidx)
@@ -146,8 +184,17 @@ def frame_points(
         sid_a, dt_a = np.zeros(0, dtype=np.int32), np.zeros(0)
     start = np.searchsorted(fi, np.arange(len(ref_st) + 1))
     return FramedPoints(
-        frame_stamps_s=ref_st.copy(), frame_start=start, xy_world=np.ascontiguousarray(xy_a),
-        scanner_index=sid_a, dir_world=np.ascontiguousarray(dir_a), dt_s=dt_a,
-        scanner_xy_world=np.array(origins), sigma_m=np.array([s.range_sigma_m for s in scanners]),
+        frame_stamps_s=ref_st.copy(),
+        frame_start=start,
+        xy_world=np.ascontiguousarray(xy_a),
+        scanner_index=sid_a,
+        dir_world=np.ascontiguousarray(dir_a),
+        dt_s=dt_a,
+        scanner_xy_world=np.array(origins),
+        sigma_m=np.array([s.range_sigma_m for s in scanners]),
         scanner_names=tuple(s.name for s in scanners),
+        scan_of_frame=scan_of_frame,
+        ranges_m=tuple(np.asarray(r, dtype=float) for r in ranges_m),
+        masks=tuple(masks),
+        beam_dirs=tuple(all_dirs),
     )

@@ -60,7 +60,11 @@ def scan(
 ) -> Array:
     """One scan (B,) of ``scanner`` (its true pose ``T_world_scanner``, default the rig's) against
     world segments (S, 2, 2), with Gaussian range noise ``sigma_m`` (default the scanner's)."""
-    T = scanner.T_world_scanner.matrix() if T_world_scanner is None else np.asarray(T_world_scanner, dtype=float)
+    T = (
+        scanner.T_world_scanner.matrix()
+        if T_world_scanner is None
+        else np.asarray(T_world_scanner, dtype=float)
+    )
     a = scanner.angles_rad
     dirs = np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]) @ T[:3, :3].T
     dirs = dirs[:, :2] / np.linalg.norm(dirs[:, :2], axis=1, keepdims=True)
@@ -76,3 +80,44 @@ def person_segments(centre_xy: ArrayLike, radius_m: float = 0.12, n: int = 8) ->
     ang = np.linspace(0, 2 * np.pi, n, endpoint=False)
     pts = np.asarray(centre_xy, dtype=float) + radius_m * np.column_stack([np.cos(ang), np.sin(ang)])
     return rectangle_segments(pts)
+
+
+def room_segments(walls: ArrayLike, boxes: tuple = ()) -> Array:
+    """Static segments (S, 2, 2): walls (4, 2, 2) and the outlines of ``boxes`` (objects with
+    ``corners_xy()``)."""
+    segs = [np.asarray(walls, dtype=float)]
+    segs += [rectangle_segments(b.corners_xy()) for b in boxes]
+    return np.concatenate(segs)
+
+
+def scan_sequence(
+    scanners: tuple[LaserScanner, ...],
+    static_segments: ArrayLike,
+    hull: Hull | None,
+    planar_pose_at: object,
+    stamps_s: list[np.ndarray],
+    rng: np.random.Generator,
+    person_at: object = None,
+) -> list[np.ndarray]:
+    """Scans (N_s, B) of every scanner at its stamps ``stamps_s[s]``.
+
+    ``planar_pose_at(t) -> (3,)`` gives the robot's pose (or None: no robot); ``person_at(t) -> (2,)`` a
+    person's position (or None).
+    """
+    out = []
+    static = np.asarray(static_segments, dtype=float)
+    for s, st in zip(scanners, stamps_s, strict=True):
+        rows = []
+        for t in st:
+            segs = [static]
+            if hull is not None and planar_pose_at is not None:
+                pose = planar_pose_at(t)  # type: ignore[operator]
+                if pose is not None:
+                    segs.append(hull_segments_world(hull, pose))
+            if person_at is not None:
+                pp = person_at(t)  # type: ignore[operator]
+                if pp is not None:
+                    segs.append(person_segments(pp))
+            rows.append(scan(s, np.concatenate(segs), rng))
+        out.append(np.array(rows).reshape(len(st), s.beams))
+    return out

@@ -128,7 +128,8 @@ def layout(family: MarkerFamily | str, marker_id: int, size_mm: float) -> SheetL
     width = cut_side + 2 * (SHEET_MARGIN_MM + CUT_GAP_MM + CUT_LEN_MM)
     label_y = off - quiet + cut_side + CUT_GAP_MM + CUT_LEN_MM + LABEL_HEIGHT_MM + 2.0
     height = label_y + SHEET_MARGIN_MM
-    label = f"{fam.value}  id {int(marker_id)}  black square {size_mm:g} mm  border {spec.border_fraction:.3g}"
+    label = (f"{fam.value}  id {int(marker_id)}  black square {size_mm:g} mm  "
+             f"border {spec.border_fraction:.3g}")
     return SheetLayout(fam, int(marker_id), float(size_mm), cells, width, height, (off, off), quiet,
                        label, (SHEET_MARGIN_MM, label_y))
 

@@ -131,19 +131,19 @@ def cast(
         -1 if none.
     """
     o = np.asarray(origins, dtype=float)
-    shape = o.shape[:-1]
-    dist = np.full(shape, np.inf)
-    index = np.full(shape, -1, dtype=np.intp)
+    d = np.asarray(dirs, dtype=float)
+    shape = np.broadcast_shapes(o.shape[:-1], d.shape[:-1])
+    dist: Array = np.full(shape, np.inf)
+    index: NDArray[np.intp] = np.full(shape, -1, dtype=np.intp)
     n_seg = 0
     if segments is not None:
         segments = np.asarray(segments, dtype=float)
         n_seg = segments.shape[-3]
-        ds, js = cast_segments(o, dirs, segments)
-        dist, index = np.broadcast_to(ds, shape).copy(), np.broadcast_to(js, shape).copy()
+        dist, index = cast_segments(o, d, segments)
     if centres is not None:
         if radii is None:
             raise ValueError("circles need radii")
-        dc, jc = cast_circles(o, dirs, centres, radii)
+        dc, jc = cast_circles(o, d, centres, radii)
         closer = dc < dist
         dist = np.where(closer, dc, dist)
         index = np.where(closer, jc + n_seg, index)

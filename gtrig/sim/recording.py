@@ -133,20 +133,31 @@ def _step_calibration_images(scene: Scene, tl: Timeline, out: Path, cfg: SimConf
 def _step_lasers(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
     from gtrig.sim.lasers import write_fixed_scans, write_onboard_scans
 
-    write_fixed_scans(scene, None, tl.background_interval_s, out / "background" / "lasers", cfg, seed=cfg.seed * 10 + 1)
-    write_fixed_scans(scene, tl.validation, tl.validation_intervals_s, out / "validation" / "lasers", cfg,
-                      seed=cfg.seed * 10 + 2)
-    write_fixed_scans(scene, tl.run, tl.run_interval_s, out / "run" / "lasers", cfg, seed=cfg.seed * 10 + 3)
-    write_onboard_scans(scene, tl.validation, tl.validation_intervals_s, out / "validation" / "onboard", cfg,
-                        seed=cfg.seed * 10 + 4)
-    write_onboard_scans(scene, tl.run, tl.run_interval_s, out / "run" / "onboard", cfg, seed=cfg.seed * 10 + 5)
+    infos = {
+        "background": write_fixed_scans(scene, None, tl.background_interval_s, out / "background" / "lasers",
+                                        cfg, seed=cfg.seed * 10 + 1),
+        "validation": write_fixed_scans(scene, tl.validation, tl.validation_intervals_s,
+                                        out / "validation" / "lasers", cfg, seed=cfg.seed * 10 + 2),
+        "run": write_fixed_scans(scene, tl.run, tl.run_interval_s, out / "run" / "lasers", cfg,
+                                 seed=cfg.seed * 10 + 3),
+        "validation_onboard": write_onboard_scans(scene, tl.validation, tl.validation_intervals_s,
+                                                  out / "validation" / "onboard", cfg, seed=cfg.seed * 10 + 4),
+        "run_onboard": write_onboard_scans(scene, tl.run, tl.run_interval_s, out / "run" / "onboard", cfg,
+                                           seed=cfg.seed * 10 + 5),
+    }
+    # what a real recording would not tell: the scanners' clock offsets, for checking time-sync tools
+    doc = {k: {"clock_offsets_s": dict(v.clock_offsets_s)} for k, v in infos.items()}
+    atomic_write_text(out / "truth" / "laser_clocks.yaml", yaml.safe_dump(doc, sort_keys=True))
 
 
 def _step_odometry(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
     from gtrig.sim.odometry import write_odometry
 
+    import dataclasses
+
     t0, t1 = tl.run_interval_s[0]
-    write_odometry(scene, tl.run, t0, t1, out / "run" / "odometry.csv", cfg, seed=cfg.seed * 10 + 6)
+    errors = write_odometry(scene, tl.run, t0, t1, out / "run" / "odometry.csv", cfg, seed=cfg.seed * 10 + 6)
+    atomic_write_text(out / "truth" / "odometry_errors.yaml", yaml.safe_dump(dataclasses.asdict(errors)))
 
 
 def _step_survey(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:

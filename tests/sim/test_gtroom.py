@@ -101,3 +101,15 @@ def test_same_seed_same_scene() -> None:
     assert a.rig_true == b.rig_true and a.rig_nominal == b.rig_nominal
     assert a.rig_true != c.rig_true
     assert a.rig_true != a.rig_nominal
+
+
+def test_clutter_inside_and_apart(scene) -> None:  # type: ignore[no-untyped-def]
+    room = PolyPath(scene.walls[:, 0])
+    for b in scene.boxes:
+        assert room.contains_points(b.corners_xy()).all(), b.name
+        for s in scene.rig_true.laser_scanners:
+            assert not PolyPath(b.corners_xy()).contains_point(s.T_world_scanner.xyz[:2]), b.name
+    for i, a in enumerate(scene.boxes):
+        for b in scene.boxes[i + 1:]:
+            assert not PolyPath(a.corners_xy()).contains_points(b.corners_xy()).any(), (a.name, b.name)
+            assert not PolyPath(b.corners_xy()).contains_points(a.corners_xy()).any(), (a.name, b.name)

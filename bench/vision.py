@@ -1,0 +1,210 @@
+"""GTvision benchmark: our joint estimate against the seeds' method, side by side, on the simulated GT room.
+
+Levels
+------
+``corners``: synthetic corners (true corners through the true cameras plus Gaussian noise of known
+    covariance), estimated with a "calibrated" rig: the true rig with every camera and marker pose
+    perturbed by the sigmas GTvision is told (RigUncertainty). Static validation intervals of 1 s
+    (10 images per camera), and the continuous run (one instant per camera image).
+``images``: a small recording rendered with :func:`gtrig.vision.synthetic.render_markers` (not the
+    simulator's renderer), detected with the available detector, through :func:`run_recording`; gives
+    throughput including image reading and detection.
+
+Usage: ``python bench/vision.py [--seeds 0 1 2] [--level corners images] [--workers 2]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from gtrig import geometry as geo
+from gtrig.io.frames import write_frame_index
+from gtrig.io.tum import Trajectory
+from gtrig.rig.models import Pose, Rig
+from gtrig.sim.gtroom import VALIDATION_POSES, continuous_path, make_scene
+from gtrig.vision.baseline import as_rigid, seeds_frame_pose
+from gtrig.vision.covariance import PLANAR_INDEX, RigUncertainty, nees, pose_error_xi
+from gtrig.vision.estimate import VisionOptions, estimate_frame
+from gtrig.vision.observations import FrameObservations, VisionModel
+from gtrig.vision.synthetic import CornerNoise, render_markers, synthetic_observations, visible_views
+
+
+def perturbed_rig(rig: Rig, ru: RigUncertainty, rng: np.random.Generator) -> Rig:
+    cams = tuple(c.model_copy(update={"T_world_cam": Pose.from_matrix(
+        geo.T_from_xyz_rpy(rng.normal(0, ru.camera_xyz_m, 3), np.zeros(3)) @ c.T_world_cam.matrix()
+        @ geo.T_from_xyz_rpy(np.zeros(3), rng.normal(0, ru.camera_rot_rad, 3)))}) for c in rig.cameras)
+    mks = tuple(m.model_copy(update={"T_robot_marker": Pose.from_matrix(
+        m.T_robot_marker.matrix() @ geo.T_from_xyz_rpy(rng.normal(0, ru.marker_xyz_m, 3),
+                                                       rng.normal(0, ru.marker_rot_rad, 3)))})
+        for m in rig.robot.markers)
+    return rig.model_copy(update={"cameras": cams, "robot": rig.robot.model_copy(update={"markers": mks})})
+
+
+def _errors(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
+    e = pose_error_xi(as_rigid(T_est), T_true)
+    yaw = abs(float(geo.wrap_angle(geo.T_to_se2(T_est)[2] - geo.T_to_se2(T_true)[2])))
+    return float(np.linalg.norm(e[:2])), yaw
+
+
+def _row(name: str, pos: list[float], yaw: list[float], n_ok: int, n: int, ne: list[float] | None) -> str:
+    p = np.array(pos) * 100
+    ne_s = f"{np.mean(ne):6.2f}" if ne else "     -"
+    return (f"| {name:<28} | {p.mean():6.2f} | {p.max():6.2f} | {np.degrees(np.mean(yaw)):7.3f} | "
+            f"{n_ok:3d}/{n:<3d} | {ne_s} |")
+
+
+HEADER = ("| method                       | mean cm | max cm | |yaw| deg | localized | NEES |\n"
+          "|------------------------------|--------:|-------:|---------:|----------:|-----:|")
+
+
+def bench_corners(seeds: list[int], noise_px: float) -> None:
+    ru = RigUncertainty()
+    noise = CornerNoise(sigma_px=noise_px)
+    acc: dict[str, tuple[list[float], list[float], list[int], list[float]]] = {
+        k: ([], [], [0, 0], []) for k in ("gtvision planar", "gtvision 6-DoF", "seeds")}
+    run_vis = run_ok = 0
+    t_est = 0.0
+    n_est = 0
+    for seed in seeds:
+        scene = make_scene(seed)
+        rng = np.random.default_rng(1000 + seed)
+        model = VisionModel.from_rig(perturbed_rig(scene.rig_true, ru, rng))
+        for k, p in enumerate(VALIDATION_POSES):
+            T = scene.T_world_robot(*p)
+            views = []
+            for f in range(10):  # 1 s at 10 Hz, every camera
+                o = synthetic_observations(scene.rig_true, T, k, rng, noise)
+                views.extend(v.__class__(v.camera, v.marker_id, v.corners_px, v.corner_cov, f) for v in o.views)
+            obs = FrameObservations(float(k), tuple(views))
+            for name, planar in (("gtvision planar", True), ("gtvision 6-DoF", False)):
+                est = estimate_frame(model, obs, VisionOptions(planar=planar, rig_uncertainty=ru))
+                a = acc[name]
+                a[2][1] += 1
+                if est.ok:
+                    a[2][0] += 1
+                    pe, ye = _errors(est.T_world_robot, T)
+                    a[0].append(pe)
+                    a[1].append(ye)
+                    err = pose_error_xi(est.T_world_robot, T)
+                    i = np.array(PLANAR_INDEX) if planar else np.arange(6)
+                    a[3].append(nees(err[i], est.cov_6x6[np.ix_(i, i)]))
+            Ts = seeds_frame_pose(model, obs)
+            a = acc["seeds"]
+            a[2][1] += 1
+            if Ts is not None:
+                a[2][0] += 1
+                pe, ye = _errors(Ts, T)
+                a[0].append(pe)
+                a[1].append(ye)
+        # the run: one instant per camera image, 10 Hz
+        _, xyth = continuous_path(rate_hz=10.0)
+        for i, p in enumerate(xyth[::2]):
+            T = scene.T_world_robot(*p)
+            for cam in scene.rig_true.cameras:
+                o = synthetic_observations(scene.rig_true, T, float(i), rng, noise, cameras=(cam.name,))
+                if not o.views:
+                    continue
+                run_vis += 1
+                t0 = time.process_time()
+                est = estimate_frame(model, o, VisionOptions(planar=True, rig_uncertainty=ru))
+                t_est += time.process_time() - t0
+                n_est += 1
+                run_ok += est.ok
+    print(f"\n### Synthetic corners (sigma {noise_px} px), seeds {seeds}, calibrated-rig emulation "
+          f"(cameras {ru.camera_xyz_m * 1e3:g} mm / {math.degrees(ru.camera_rot_rad):g} deg, markers "
+          f"{ru.marker_xyz_m * 1e3:g} mm / {math.degrees(ru.marker_rot_rad):g} deg)\n")
+    print("Static validation poses (26 per seed), 10 images per camera each:\n")
+    print(HEADER)
+    for name, (pos, yaw, (n_ok, n), ne) in acc.items():
+        print(_row(name, pos, yaw, n_ok, n, ne if ne else None))
+    dof = {"gtvision planar": 3, "gtvision 6-DoF": 6}
+    print("\nNEES / dof: " + ", ".join(f"{k} {np.mean(v[3]) / dof[k]:.2f}" for k, v in acc.items() if v[3]))
+    print(f"\nRun: {run_ok}/{run_vis} camera images with a fully visible marker localized "
+          f"({100 * run_ok / max(run_vis, 1):.2f} %); estimation {1e3 * t_est / max(n_est, 1):.2f} ms CPU "
+          "per image with markers (planar)")
+
+
+def bench_images(seed: int, workers: int, frames: int) -> None:
+    from gtrig.io.tum import read_tum, write_tum
+    from gtrig.vision.report import accuracy
+    from gtrig.vision.sequence import run_recording
+
+    scene = make_scene(seed)
+    rig = scene.rig_true  # rendered with the truth; the estimate uses the same (no calibration error here)
+    rng = np.random.default_rng(seed)
+    with tempfile.TemporaryDirectory() as d:
+        rec = Path(d)
+        Ts = [scene.T_world_robot(*p) for p in VALIDATION_POSES]
+        t_render = time.perf_counter()
+        intervals = [(10.0 * i, 10.0 * i + 1.0) for i in range(len(Ts))]
+        n_img = 0
+        for cam in rig.cameras:
+            folder = rec / "validation" / "cameras" / cam.name
+            folder.mkdir(parents=True)
+            stamps, files = [], []
+            for T, (t0, _) in zip(Ts, intervals, strict=True):
+                seen = any(c == cam.name for c, _, _ in visible_views(rig, T))
+                for f in range(frames):
+                    name = f"{len(files):06d}.png"
+                    img = render_markers(rig, cam.name, T, rng) if seen else \
+                        np.clip(rng.normal(90, 1.5, (768, 1024)), 0, 255).astype(np.uint8)
+                    cv2.imwrite(str(folder / name), img, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+                    stamps.append(t0 + 0.05 + 0.1 * f)
+                    files.append(name)
+                    n_img += 1
+            write_frame_index(folder, np.array(stamps), files)
+        with open(rec / "validation" / "poses.csv", "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["pose", "start_s", "end_s"])
+            w.writerows([i + 1, a, b] for i, (a, b) in enumerate(intervals))
+        write_tum(rec / "validation.tum", Trajectory.from_matrices(
+            np.array([0.5 * (a + b) for a, b in intervals]), np.stack(Ts)))
+        t_render = time.perf_counter() - t_render
+        res = run_recording(rec, rig, "validation", planar=True, workers=workers)
+        acc = accuracy(res, read_tum(rec / "validation.tum"))
+        model = VisionModel.from_rig(rig)
+        seeds_pos, seeds_yaw, seeds_ok = [], [], 0
+        for o, T in zip(res.observations, Ts, strict=True):
+            Tsd = seeds_frame_pose(model, o)
+            if Tsd is not None:
+                seeds_ok += 1
+                pe, ye = _errors(Tsd, T)
+                seeds_pos.append(pe)
+                seeds_yaw.append(ye)
+        print(f"\n### Rendered images (test renderer), seed {seed}, {frames} images per camera per pose, "
+              f"detector {res.detector}, true rig\n")
+        print(HEADER)
+        print(f"| {'gtvision planar':<28} | {100 * acc.pos_err_mean_m:6.2f} | {100 * acc.pos_err_max_m:6.2f} | "
+              f"{math.degrees(acc.yaw_err_mean_rad):7.3f} | {acc.localized:3d}/{acc.instants:<3d} | "
+              f"{acc.nees_mean:6.2f} |")
+        print(_row("seeds (same corners)", seeds_pos, seeds_yaw, seeds_ok, len(Ts), None))
+        t = res.seconds["parallel"]
+        print(f"\nthroughput: {n_img} images of 1024 x 768 in {t:.1f} s with {workers or 'all'} worker(s): "
+              f"{n_img / t:.1f} images/s, reading, detection and estimation included "
+              f"(rendering took {t_render:.0f} s, not counted)")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--level", nargs="+", default=["corners", "images"], choices=["corners", "images"])
+    ap.add_argument("--noise-px", type=float, default=0.08)
+    ap.add_argument("--workers", type=int, default=0)
+    ap.add_argument("--frames", type=int, default=3)
+    a = ap.parse_args()
+    if "corners" in a.level:
+        bench_corners(a.seeds, a.noise_px)
+    if "images" in a.level:
+        bench_images(a.seeds[0], a.workers, a.frames)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,74 @@
+"""``gtrig laser calibrate`` and ``gtrig laser track``: GTlaser (issue 7, docs/laser.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from gtrig.cli.common import console, handle_errors
+
+app = typer.Typer(help="GTlaser: fixed-scanner calibration and hull tracking.", no_args_is_help=True)
+
+
+@app.command("calibrate")
+@handle_errors
+def calibrate(
+    rig: Annotated[Path, typer.Option("--rig", help="rig.yaml with nominal scanner poses")],
+    static: Annotated[Path, typer.Option("--static", help="static sequence: DIR/lasers/<scanner>.csv")],
+    out: Annotated[Path, typer.Option("--out", help="calibrated rig file to write")],
+    object_file: Annotated[
+        Path | None,
+        typer.Option("--object", help="world object outline (YAML corners_xy); "
+                     "default: <recording>/calib/laser_object.yaml"),
+    ] = None,
+) -> None:
+    """Calibrate the fixed scanners' poses from a static sequence and the world-defining object."""
+    from gtrig.laser.recording import calibrate_recording, load_object_outline
+    from gtrig.laser.report import calibration_lines
+    from gtrig.rig import load_rig
+    from gtrig.rig.load import dump_rig
+
+    r = load_rig(rig)
+    obj = load_object_outline(object_file) if object_file is not None else None
+    new, report = calibrate_recording(static.parent, rig=r, static_dir=static, object_corners_world_xy=obj)
+    dump_rig(new, out)
+    for line in calibration_lines(report):
+        console.print(line, highlight=False)
+    console.print(f"wrote {out}")
+
+
+@app.command("track")
+@handle_errors
+def track(
+    rig: Annotated[Path, typer.Option("--rig", help="rig.yaml with calibrated scanner poses")],
+    recording: Annotated[
+        Path, typer.Option("--recording", help="recording folder (background/ and the sequence)")
+    ],
+    out: Annotated[Path, typer.Option("--out", help="TUM trajectory to write (localized frames only)")],
+    covariance: Annotated[
+        Path | None, typer.Option("--covariance", help="covariance CSV, same rows as the TUM file")
+    ] = None,
+    sequence: Annotated[str, typer.Option("--sequence", help="run or validation")] = "run",
+    include_flagged: Annotated[
+        bool, typer.Option("--include-flagged", help="also write degenerate and heading-ambiguous frames")
+    ] = False,
+) -> None:
+    """Track the robot's hull through a sequence and write its poses and covariances."""
+    import time
+
+    from gtrig.laser.recording import load_backgrounds, track_sequence, write_track
+    from gtrig.rig import load_rig
+
+    r = load_rig(rig)
+    t0 = time.perf_counter()
+    bgs = load_backgrounds(recording / "background", r)
+    res = track_sequence(r, recording / sequence, bgs)
+    dt = time.perf_counter() - t0
+    n = write_track(res, out, covariance, include_flagged=include_flagged)
+    c = res.counts()
+    console.print(
+        f"{len(res)} frames in {dt:.1f} s: " + ", ".join(f"{k} {v}" for k, v in c.items()), highlight=False
+    )
+    console.print(f"wrote {n} poses to {out}" + (f" and {covariance}" if covariance else ""))

@@ -1,0 +1,64 @@
+"""``gtrig vision``: GTvision, the robot pose from every marker in every camera."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from gtrig.cli.common import console, err_console, handle_errors
+
+
+@handle_errors
+def command(
+    rig: Path = typer.Option(..., "--rig", help="The calibrated rig (rig.calibrated.yaml)."),
+    recording: Path = typer.Option(..., "--recording", help="The recording folder."),
+    out: Path = typer.Option(..., "--out", help="Output trajectory (TUM, T_world_robot)."),
+    covariance: Path | None = typer.Option(None, "--covariance",
+                                           help="Output CSV: one covariance per pose, row-major."),
+    planar: bool = typer.Option(False, "--planar", help="Floor prior on height, roll and pitch; "
+                                "covariances over x, y, yaw."),
+    sequence: str = typer.Option("run", "--sequence", help="run or validation."),
+    workers: int = typer.Option(0, "--workers", help="Processes (0: one per core)."),
+    detector: str = typer.Option("auto", "--detector", help="auto, gtrig or aruco."),
+    floor_sigma_mm: float = typer.Option(3.0, "--floor-sigma-mm", help="Floor height deviation (planar)."),
+    floor_tilt_deg: float = typer.Option(0.3, "--floor-tilt-deg", help="Floor tilt deviation (planar)."),
+) -> None:
+    """Robot poses from the markers seen by all cameras at each instant, with covariances."""
+    import math
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+    from rich.table import Table
+
+    from gtrig.io.tum import write_tum
+    from gtrig.rig import load_rig
+    from gtrig.vision.estimate import VisionOptions
+    from gtrig.vision.refine import PlanarPrior
+    from gtrig.vision.report import summarize
+    from gtrig.vision.sequence import run_recording, write_covariance_csv
+
+    r = load_rig(rig)
+    opts = VisionOptions(planar=planar, prior=PlanarPrior(0.0, floor_sigma_mm / 1000,
+                                                          math.radians(floor_tilt_deg)))
+    checkpoint = out.with_name(out.name + ".checkpoint.jsonl")
+    with Progress(TextColumn("GTvision"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                  console=err_console, transient=True) as prog:
+        task = prog.add_task("instants", total=None)
+        result = run_recording(recording, r, sequence, planar, workers, options=opts, detector=detector,
+                               checkpoint=checkpoint,
+                               progress=lambda d, n: prog.update(task, completed=d, total=n))
+    write_tum(out, result.trajectory())
+    if covariance is not None:
+        write_covariance_csv(covariance, result)
+    checkpoint.unlink(missing_ok=True)
+    rep = summarize(result)
+    console.print(f"{out}: {rep.localized} of {rep.instants} instants localized ({sequence}, "
+                  f"detector {result.detector}, {result.seconds['total']:.1f} s); residual RMS "
+                  f"{rep.rms_px:.3f} px", highlight=False)
+    t = Table("camera", "images", "with markers", "views used", "rejected", "rms (px)")
+    for c in rep.cameras:
+        t.add_row(c.camera, str(c.images), str(c.images_with_markers), str(c.views_used),
+                  str(c.views_rejected), f"{c.rms_px:.3f}")
+    console.print(t)
+    for reason, n in sorted(rep.failures.items()):
+        console.print(f"not localized: {n} instant(s): {reason}", highlight=False)

@@ -1,0 +1,270 @@
+"""Calibration of the fixed-scanner network from a static sequence (journal paper, section 4.3).
+
+Unknowns: the planar pose ``(x, y, theta)`` of every scanner in the world (height, roll and pitch are
+kept from the rig file). Data: each scanner's background scan (:mod:`gtrig.laser.background`, the
+per-beam median of the empty room, a few millimetres of noise over sqrt(scans)).
+
+All poses are estimated jointly by Gauss-Newton on two kinds of point-to-line residuals, re-associated
+at every iteration with a shrinking gate:
+
+* **Overlap.** A point of scanner ``i`` against the local line through the nearest points of scanner
+  ``j`` (walls and furniture both see), for every ordered pair; lines are taken only where ``j``'s scan
+  is locally straight, and only when the surface faces both scanners (the two sides of a thin heater are
+  different surfaces).
+* **World object.** Points near the outline of the object whose edges define the world frame (the seed's
+  box with the world origin on its edges; ``scene.boxes['calib_object']`` in the simulator), against its
+  known sides in the world: this fixes the network's gauge.
+
+A weak prior at the nominal poses keeps the first iterations well posed. Residual RMS per scanner and
+kind are reported, and the formal standard deviations of each pose (from the final normal equations
+and the residuals' variance).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from gtrig import geometry as geo
+from gtrig.errors import ConvergenceError, InputError
+from gtrig.laser.background import BackgroundModel
+from gtrig.laser.hull_icp import HullModel
+from gtrig.rig.models import LaserScanner, Pose, Rig
+
+_J90 = np.array([[0.0, -1.0], [1.0, 0.0]])
+
+
+@dataclass(frozen=True)
+class ScannerCalibration:
+    """One scanner's calibrated pose and residuals.
+
+    Attributes
+    ----------
+    name : scanner name.
+    xytheta : (3,) calibrated planar pose in the world (m, m, rad).
+    std_xytheta : (3,) formal standard deviations.
+    delta_xytheta : (3,) calibrated minus nominal.
+    n_overlap, rms_overlap_m : overlap residuals of this scanner's points against other scanners.
+    n_object, rms_object_m : residuals against the world object.
+    """
+
+    name: str
+    xytheta: np.ndarray
+    std_xytheta: np.ndarray
+    delta_xytheta: np.ndarray
+    n_overlap: int
+    rms_overlap_m: float
+    n_object: int
+    rms_object_m: float
+
+
+@dataclass(frozen=True)
+class CalibrationReport:
+    """What :func:`calibrate_scanners` found: per scanner, and the iterations it took."""
+
+    scanners: tuple[ScannerCalibration, ...]
+    iterations: int
+    rms_overlap_m: float
+    rms_object_m: float
+
+
+def _scan_geometry(
+    bg: BackgroundModel, scanner: LaserScanner, max_jump_m: float = 0.05, max_bend_m: float = 0.004
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Background points (n, 2) in the scanner's plane, their unit normals (n, 2) where the scan is locally
+    straight (else nan: corners, edges and their mixed pixels), facing the scanner, and the mask (B,) of
+    beams with a background range."""
+    a = scanner.angles_rad
+    r = bg.ranges_m
+    p = np.column_stack([r * np.cos(a), r * np.sin(a)])
+    ok = np.isfinite(r)
+    prev = np.roll(p, 1, axis=0)
+    nxt = np.roll(p, -1, axis=0)
+    ok_n = ok & np.roll(ok, 1) & np.roll(ok, -1)
+    ok_n[0] = ok_n[-1] = False
+    with np.errstate(invalid="ignore"):
+        jump = np.maximum(np.linalg.norm(p - prev, axis=1), np.linalg.norm(nxt - p, axis=1))
+        tan = nxt - prev
+        tan /= np.linalg.norm(tan, axis=1, keepdims=True)
+        n = tan @ _J90.T
+        bend = np.abs(np.einsum("ij,ij->i", p - prev, n))
+        straight = ok_n & (jump < max_jump_m + 0.02 * r) & (bend < max_bend_m + 0.002 * r)
+    n[~straight] = np.nan
+    flip = np.einsum("ij,ij->i", n, -p) < 0
+    n[flip] *= -1
+    return p[ok], n[ok], ok
+
+
+def _to_world(xyt: np.ndarray, p: np.ndarray) -> np.ndarray:
+    c, s = np.cos(xyt[2]), np.sin(xyt[2])
+    return p @ np.array([[c, s], [-s, c]]) + xyt[:2]
+
+
+def calibrate_scanners(
+    scanners: Sequence[LaserScanner],
+    backgrounds: Sequence[BackgroundModel],
+    object_corners_world_xy: np.ndarray,
+    gates_m: Sequence[float] = (0.3, 0.2, 0.12, 0.08, 0.05, 0.03, 0.03, 0.03),
+    iterations_per_gate: int = 3,
+    prior_std_m: float = 0.1,
+    prior_std_rad: float = np.radians(5.0),
+    sigma_point_m: float = 0.003,
+) -> tuple[tuple[LaserScanner, ...], CalibrationReport]:
+    """Estimate the scanners' planar poses in the world from their background scans.
+
+    Parameters
+    ----------
+    scanners
+        The scanners with their nominal ``T_world_scanner`` (the start and the prior).
+    backgrounds
+        Their background models, same order.
+    object_corners_world_xy
+        (K, 2) outline of the world-defining object, counter-clockwise, world frame, metres.
+    gates_m
+        Association gates of the successive rounds, metres.
+    iterations_per_gate
+        Gauss-Newton iterations per gate.
+    prior_std_m, prior_std_rad
+        Standard deviations of the prior at the nominal poses.
+    sigma_point_m
+        Noise of one background point along its normal (for the reported standard deviations' scale).
+
+    Returns
+    -------
+    scanners : the scanners with calibrated ``T_world_scanner``.
+    report : residuals and formal standard deviations.
+
+    Raises
+    ------
+    InputError
+        A background of the wrong beam count, or fewer than two scanners.
+    ConvergenceError
+        No scanner sees the world object.
+    """
+    S = len(scanners)
+    if S != len(backgrounds):
+        raise InputError(f"{S} scanners but {len(backgrounds)} background models")
+    for s, b in zip(scanners, backgrounds, strict=True):
+        if b.beams != s.beams:
+            raise InputError(f"scanner {s.name}: background has {b.beams} beams, the rig says {s.beams}")
+    obj = HullModel.from_corners(np.asarray(object_corners_world_xy, dtype=float))
+    geoms = [_scan_geometry(b, s) for b, s in zip(backgrounds, scanners, strict=True)]
+    nominal = np.array([geo.T_to_se2(s.T_world_scanner.matrix()) for s in scanners])
+    x = nominal.copy()
+    prior = np.tile([1 / prior_std_m**2, 1 / prior_std_m**2, 1 / prior_std_rad**2], S)
+    H = np.diag(prior)
+    it = 0
+    stats: dict[str, list[tuple[int, float]]] = {}
+    for gate in gates_m:
+        for _ in range(iterations_per_gate):
+            it += 1
+            H = np.diag(prior)
+            g = prior * (x - nominal).ravel()
+            stats = {"overlap": [(0, 0.0)] * S, "object": [(0, 0.0)] * S}
+            pw = [_to_world(x[i], geoms[i][0]) for i in range(S)]
+            nw = [
+                geoms[i][1]
+                @ np.array([[np.cos(x[i, 2]), np.sin(x[i, 2])], [-np.sin(x[i, 2]), np.cos(x[i, 2])]])
+                for i in range(S)
+            ]
+            trees = [cKDTree(p) for p in pw]
+            for i in range(S):
+                pi_s = geoms[i][0]
+                dpi = (
+                    pi_s @ np.array([[np.cos(x[i, 2]), np.sin(x[i, 2])], [-np.sin(x[i, 2]), np.cos(x[i, 2])]])
+                ) @ _J90.T  # d p_w / d theta_i
+                ssq, cnt = 0.0, 0
+                for j in range(S):
+                    if j == i:
+                        continue
+                    d, idx = trees[j].query(pw[i], distance_upper_bound=gate + 0.15)
+                    m = np.isfinite(d)
+                    idx = idx[m]
+                    n = nw[j][idx]
+                    m2 = np.isfinite(n[:, 0])
+                    q = pw[j][idx[m2]]
+                    n = n[m2]
+                    sel = np.flatnonzero(m)[m2]
+                    # the surface must face scanner i as well as scanner j
+                    face = np.einsum("ij,ij->i", n, x[i, :2] - q) > 0
+                    sel, q, n = sel[face], q[face], n[face]
+                    r = np.einsum("ij,ij->i", n, pw[i][sel] - q)
+                    ok = np.abs(r) < gate
+                    sel, q, n, r = sel[ok], q[ok], n[ok], r[ok]
+                    if r.size == 0:
+                        continue
+                    dq = (q - x[j, :2]) @ _J90.T
+                    Ji = np.column_stack([n, np.einsum("ij,ij->i", n, dpi[sel])])
+                    Jj = -np.column_stack([n, np.einsum("ij,ij->i", n, dq)])
+                    wgt = 1.0 / (sigma_point_m**2 + (r / 3.0) ** 2 * (np.abs(r) > 3 * sigma_point_m))
+                    bi, bj = slice(3 * i, 3 * i + 3), slice(3 * j, 3 * j + 3)
+                    H[bi, bi] += (Ji * wgt[:, None]).T @ Ji
+                    H[bj, bj] += (Jj * wgt[:, None]).T @ Jj
+                    H[bi, bj] += (Ji * wgt[:, None]).T @ Jj
+                    H[bj, bi] += (Jj * wgt[:, None]).T @ Ji
+                    g[bi] += Ji.T @ (wgt * r)
+                    g[bj] += Jj.T @ (wgt * r)
+                    ssq += float(r @ r)
+                    cnt += r.size
+                stats["overlap"][i] = (cnt, np.sqrt(ssq / cnt) if cnt else float("nan"))
+                # the world object: point-to-line to its known sides, faces visible from scanner i
+                vis = (obj.normals @ x[i, :2] - obj.offsets) > 0
+                sd = pw[i] @ obj.normals.T - obj.offsets
+                a = pw[i] @ obj.tangents.T - np.einsum("ij,ij->i", obj.tangents, obj.corners_xy)
+                over = np.maximum(0.0, np.maximum(-a, a - obj.lengths))
+                d2 = np.where(vis, sd * sd + over * over, np.inf)
+                k = np.argmin(d2, axis=1)
+                rows = np.arange(len(k))
+                m = (d2[rows, k] < gate * gate) & (over[rows, k] < 0.01)
+                if np.any(m):
+                    n = obj.normals[k[m]]
+                    r = sd[rows, k][m]
+                    Ji = np.column_stack([n, np.einsum("ij,ij->i", n, dpi[m])])
+                    wgt = 1.0 / sigma_point_m**2
+                    bi = slice(3 * i, 3 * i + 3)
+                    H[bi, bi] += wgt * Ji.T @ Ji
+                    g[bi] += wgt * Ji.T @ r
+                    stats["object"][i] = (int(m.sum()), float(np.sqrt(np.mean(r * r))))
+            delta = -np.linalg.solve(H, g)
+            x = x + delta.reshape(S, 3)
+    if not any(n for n, _ in stats["object"]):
+        raise ConvergenceError(
+            "no scanner sees the world object: check its outline and the nominal scanner poses"
+        )
+    all_r = [(n, r) for n, r in stats["overlap"] if n]
+    rms_ov = (
+        float(np.sqrt(sum(n * r * r for n, r in all_r) / sum(n for n, _ in all_r))) if all_r else float("nan")
+    )
+    all_o = [(n, r) for n, r in stats["object"] if n]
+    rms_ob = float(np.sqrt(sum(n * r * r for n, r in all_o) / sum(n for n, _ in all_o)))
+    scale = max(1.0, (rms_ov / sigma_point_m) ** 2) if np.isfinite(rms_ov) else 1.0
+    std = np.sqrt(np.diag(np.linalg.inv(H)) * scale).reshape(S, 3)
+    out_scanners = []
+    cal = []
+    for i, s in enumerate(scanners):
+        T = s.T_world_scanner.matrix()
+        T_new = geo.se2_to_T(x[i, 0], x[i, 1], x[i, 2], T[2, 3])
+        # keep the nominal roll and pitch: rotate the nominal about the vertical by the yaw change
+        T_new[:3, :3] = geo.se2_to_T(0, 0, x[i, 2] - nominal[i, 2])[:3, :3] @ T[:3, :3]
+        out_scanners.append(s.model_copy(update={"T_world_scanner": Pose.from_matrix(T_new)}))
+        cal.append(
+            ScannerCalibration(
+                s.name,
+                x[i].copy(),
+                std[i],
+                x[i] - nominal[i],
+                stats["overlap"][i][0],
+                stats["overlap"][i][1],
+                stats["object"][i][0],
+                stats["object"][i][1],
+            )
+        )
+    return tuple(out_scanners), CalibrationReport(tuple(cal), it, rms_ov, rms_ob)
+
+
+def calibrated_rig(rig: Rig, scanners: Sequence[LaserScanner]) -> Rig:
+    """``rig`` with its laser scanners replaced by ``scanners``."""
+    return rig.model_copy(update={"laser_scanners": tuple(scanners)})

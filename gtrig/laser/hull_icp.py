@@ -1,0 +1,336 @@
+"""Point-to-line ICP of the visible sides of the robot's rectangular hull, with covariance and degeneracy.
+
+The model is the hull outline (``rig.robot.hull``): four sides in the robot frame. At each iteration
+every point is assigned to the nearest side *that faces the scanner which saw it* (a scanner cannot
+see the far side of the gown), and the planar pose ``(x, y, theta)`` of the robot in the world is
+updated by one Gauss-Newton step on the signed point-to-line distances, Huber-weighted. Unlike the
+point-to-point ICP of the seeds (journal paper, section 6, model points along the contour), the
+point-to-line residual has no sampling error along a side and converges in two or three iterations.
+
+Covariance. Range noise ``sigma_r`` moves a point along its beam ``u``, hence off the side (normal
+``n``) by ``sigma_r |u . n|``; a model error ``sigma_model`` (gown not quite plane, the laser plane cutting
+a tilted gown) is added in quadrature. ``cov = (J^T W J)^-1``, scaled up by the a-posteriori variance
+factor when the residuals are larger than that noise.
+
+Degeneracy. The fit is flagged, not trusted, when it has few points, when fewer than two sides hold
+enough points (one side leaves the position along it free), or when the covariance is wide in any
+direction (two parallel sides seen, a short stub of the second side).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gtrig.rig.models import Hull
+
+_J90 = np.array([[0.0, -1.0], [1.0, 0.0]])
+
+
+@dataclass(frozen=True)
+class HullModel:
+    """The hull outline in the robot frame, precomputed for the ICP.
+
+    Attributes
+    ----------
+    corners_xy : (4, 2) counter-clockwise corners, robot frame, metres.
+    normals : (4, 2) outward unit normal of side ``k`` (corner ``k`` to ``k + 1``).
+    offsets : (4,) ``normals[k] . corners[k]``: side ``k`` is ``{p : n_k . p = offsets[k]}``.
+    tangents : (4, 2) unit direction of side ``k``.
+    lengths : (4,) side lengths, metres.
+    """
+
+    corners_xy: np.ndarray
+    normals: np.ndarray
+    offsets: np.ndarray
+    tangents: np.ndarray
+    lengths: np.ndarray
+
+    @staticmethod
+    def from_hull(hull: Hull) -> HullModel:
+        return HullModel.from_corners(hull.corners_xy())
+
+    @staticmethod
+    def from_corners(corners_xy: np.ndarray) -> HullModel:
+        c = np.asarray(corners_xy, dtype=float)
+        e = np.roll(c, -1, axis=0) - c
+        lengths = np.linalg.norm(e, axis=1)
+        t = e / lengths[:, None]
+        n = t @ _J90  # (tx, ty) -> (ty, -tx): outward for a counter-clockwise polygon
+        return HullModel(c, n, np.einsum("ij,ij->i", n, c), t, lengths)
+
+    @property
+    def half_diagonal_m(self) -> float:
+        return float(np.max(np.linalg.norm(self.corners_xy - self.corners_xy.mean(axis=0), axis=1)))
+
+    def corners_world(self, xytheta: np.ndarray) -> np.ndarray:
+        """Corners (4, 2) in the world at planar pose ``xytheta``."""
+        c, s = np.cos(xytheta[2]), np.sin(xytheta[2])
+        return self.corners_xy @ np.array([[c, s], [-s, c]]) + xytheta[:2]
+
+
+@dataclass(frozen=True)
+class HullFit:
+    """One hull fit.
+
+    Attributes
+    ----------
+    xytheta : (3,) robot pose in the world: x, y (m), theta (rad).
+    cov_xytheta : (3, 3) its covariance (m^2, m rad, rad^2).
+    n_points : inliers used.
+    side_points : (4,) inliers per hull side.
+    n_sides : sides with at least ``min_side_points`` inliers.
+    rms_m : root-mean-square point-to-line residual of the inliers, metres.
+    chi2_dof : weighted residual sum over degrees of freedom (about 1 when the noise model holds).
+    iterations : Gauss-Newton iterations done.
+    degenerate : the geometry cannot fix the pose; do not trust ``xytheta``.
+    reason : why (empty when not degenerate).
+    """
+
+    xytheta: np.ndarray
+    cov_xytheta: np.ndarray
+    n_points: int
+    side_points: np.ndarray
+    n_sides: int
+    rms_m: float
+    chi2_dof: float
+    iterations: int
+    degenerate: bool
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class IcpSettings:
+    """Settings of :func:`fit_hull`.
+
+    Attributes
+    ----------
+    gate_m : points farther than this from every visible side are ignored.
+    huber_k : Huber threshold in sigmas.
+    sigma_model_m : model error added in quadrature to each point's noise.
+    max_iterations, tol_m, tol_rad : Gauss-Newton stopping rule.
+    min_points, min_side_points : degeneracy thresholds on counts.
+    max_std_m, max_std_rad : degeneracy thresholds on the covariance.
+    prior_std_m, prior_std_rad : a weak prior at the start pose that keeps the normal equations regular.
+    end_margin_m : how far beyond a side's ends a point may still belong to it.
+    """
+
+    gate_m: float = 0.08
+    huber_k: float = 3.0
+    sigma_model_m: float = 0.002
+    max_iterations: int = 6
+    tol_m: float = 1e-4
+    tol_rad: float = 1e-4
+    min_points: int = 6
+    min_side_points: int = 3
+    max_std_m: float = 0.015
+    max_std_rad: float = np.radians(3.0)
+    prior_std_m: float = 2.0
+    prior_std_rad: float = 2.0
+    end_margin_m: float = 0.03
+
+
+@dataclass(frozen=True)
+class HullFitBatch:
+    """Hull fits of K frames at once; field ``f[k]`` is that of :class:`HullFit` for frame ``k``."""
+
+    xytheta: np.ndarray
+    cov_xytheta: np.ndarray
+    n_points: np.ndarray
+    side_points: np.ndarray
+    n_sides: np.ndarray
+    rms_m: np.ndarray
+    chi2_dof: np.ndarray
+    iterations: int
+    degenerate: np.ndarray
+    reasons: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return int(self.xytheta.shape[0])
+
+    def item(self, k: int) -> HullFit:
+        return HullFit(
+            self.xytheta[k].copy(),
+            self.cov_xytheta[k].copy(),
+            int(self.n_points[k]),
+            self.side_points[k].copy(),
+            int(self.n_sides[k]),
+            float(self.rms_m[k]),
+            float(self.chi2_dof[k]),
+            self.iterations,
+            bool(self.degenerate[k]),
+            self.reasons[k],
+        )
+
+
+def fit_hull_batch(
+    model: HullModel,
+    xy_world: np.ndarray,
+    frame_index: np.ndarray,
+    scanner_index: np.ndarray,
+    scanner_xy_world: np.ndarray,
+    dir_world: np.ndarray,
+    sigma_range_m: np.ndarray,
+    init_xytheta: np.ndarray,
+    settings: IcpSettings = IcpSettings(),
+    wide_gate_m: float | None = None,
+) -> HullFitBatch:
+    """Fit the hull independently in K frames at once (vectorised over all their points).
+
+    Parameters
+    ----------
+    model
+        The hull outline.
+    xy_world
+        (M, 2) points of all frames, world frame, metres.
+    frame_index
+        (M,) frame ``0 .. K-1`` of each point.
+    scanner_index
+        (M,) index into ``scanner_xy_world`` and ``sigma_range_m`` of the scanner that saw each point.
+    scanner_xy_world
+        (S, 2) scanner origins, world frame, metres.
+    dir_world
+        (M, 2) unit beam direction of each point (sets the noise along the side's normal).
+    sigma_range_m
+        (S,) range noise per scanner, metres.
+    init_xytheta
+        (K, 3) start poses (predicted poses, or acquisition hypotheses).
+    settings
+        Gates, robust weighting, stopping rule and degeneracy thresholds.
+    wide_gate_m
+        Gate of the first iteration (default ``2 * settings.gate_m``), to pull in from a rough start.
+
+    Returns
+    -------
+    HullFitBatch
+    """
+    st = settings
+    p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
+    fid = np.asarray(frame_index, dtype=np.intp)
+    sid = np.asarray(scanner_index, dtype=np.intp)
+    init = np.asarray(init_xytheta, dtype=float).reshape(-1, 3)
+    K = init.shape[0]
+    M = p.shape[0]
+    pose = init.copy()
+    S = np.asarray(scanner_xy_world, dtype=float)
+    var_r = (np.asarray(sigma_range_m, dtype=float) ** 2)[sid]
+    var_m = st.sigma_model_m**2
+    N, off = model.normals, model.offsets
+    Tn, a0 = model.tangents, np.einsum("ij,ij->i", model.tangents, model.corners_xy)
+    prior = np.array([1 / st.prior_std_m**2, 1 / st.prior_std_m**2, 1 / st.prior_std_rad**2])
+    wide = 2.0 * st.gate_m if wide_gate_m is None else wide_gate_m
+    rows = np.arange(M)
+    H = np.zeros((K, 3, 3))
+    r = np.zeros(M)
+    w = np.zeros(M)
+    k_side = np.zeros(M, dtype=np.intp)
+    inl = np.zeros(M, dtype=bool)
+    it = 0
+    for it in range(1, st.max_iterations + 1):  # noqa: B007
+        gate = wide if it == 1 else st.gate_m
+        P = pose[fid]
+        c, s_ = np.cos(P[:, 2]), np.sin(P[:, 2])
+        qx, qy = p[:, 0] - P[:, 0], p[:, 1] - P[:, 1]
+        pr = np.column_stack([c * qx + s_ * qy, c * qy - s_ * qx])
+        ox, oy = S[sid, 0] - P[:, 0], S[sid, 1] - P[:, 1]
+        orr = np.column_stack([c * ox + s_ * oy, c * oy - s_ * ox])
+        vis = (orr @ N.T - off) > 0
+        sd = pr @ N.T - off
+        a = pr @ Tn.T - a0
+        over = np.maximum(0.0, np.maximum(-a, a - model.lengths))
+        d2 = sd * sd + over * over
+        d2[~vis] = np.inf
+        k_side = np.argmin(d2, axis=1)
+        dmin2 = d2[rows, k_side]
+        inl = (dmin2 < gate * gate) & (over[rows, k_side] <= st.end_margin_m)
+        r = sd[rows, k_side]
+        nk = N[k_side]
+        nwx = c * nk[:, 0] - s_ * nk[:, 1]
+        nwy = s_ * nk[:, 0] + c * nk[:, 1]
+        cosi = dir_world[:, 0] * nwx + dir_world[:, 1] * nwy
+        var = var_r * cosi * cosi + var_m
+        z2 = r * r / var
+        hub = np.where(z2 <= st.huber_k**2, 1.0, st.huber_k / np.sqrt(np.maximum(z2, 1e-24)))
+        w = np.where(inl, hub / var, 0.0)
+        j0, j1, j2 = -nwx, -nwy, nwx * qy - nwy * qx
+        J = (j0, j1, j2)
+        for i in range(3):
+            wi = w * J[i]
+            for j in range(i, 3):
+                H[:, i, j] = np.bincount(fid, wi * J[j], minlength=K)
+                H[:, j, i] = H[:, i, j]
+        g = np.column_stack([np.bincount(fid, w * J[i] * r, minlength=K) for i in range(3)])
+        H[:, [0, 1, 2], [0, 1, 2]] += prior
+        g += prior * (pose - init)
+        delta = -np.linalg.solve(H, g[..., None])[..., 0]
+        pose = pose + delta
+        if (
+            it > 1
+            and np.all(np.hypot(delta[:, 0], delta[:, 1]) < st.tol_m)
+            and np.all(np.abs(delta[:, 2]) < st.tol_rad)
+        ):
+            break
+    n_in = np.bincount(fid, inl, minlength=K).astype(int)
+    side_points = np.zeros((K, 4), dtype=int)
+    np.add.at(side_points, (fid[inl], k_side[inl]), 1)
+    n_sides = np.sum(side_points >= st.min_side_points, axis=1)
+    ssq = np.bincount(fid, np.where(inl, r * r, 0.0), minlength=K)
+    chi2 = np.bincount(fid, w * r * r, minlength=K)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.where(n_in > 0, np.sqrt(ssq / np.maximum(n_in, 1)), np.nan)
+        chi2_dof = np.where(n_in > 0, chi2 / np.maximum(n_in - 3, 1), np.nan)
+    cov = np.linalg.inv(H)
+    inflate = np.where((n_in > 3) & (chi2_dof > 1.0), chi2_dof, 1.0)
+    cov = cov * inflate[:, None, None]
+    std_xy = np.sqrt(np.linalg.eigvalsh(cov[:, :2, :2])[:, -1])
+    std_th = np.sqrt(cov[:, 2, 2])
+    reasons = []
+    bad = (n_in < st.min_points) | (n_sides < 2) | (std_xy > st.max_std_m) | (std_th > st.max_std_rad)
+    for k in range(K):
+        if not bad[k]:
+            reasons.append("")
+        elif n_in[k] < st.min_points:
+            reasons.append(f"few points ({n_in[k]})")
+        elif n_sides[k] < 2:
+            reasons.append("one side seen")
+        elif std_xy[k] > st.max_std_m:
+            reasons.append(f"weak geometry (position std {1000 * std_xy[k]:.0f} mm)")
+        elif std_th[k] > st.max_std_rad:
+            reasons.append(f"weak geometry (yaw std {np.degrees(std_th[k]):.2f} deg)")
+        else:
+            reasons.append("")
+    degenerate = np.array([bool(x) for x in reasons], dtype=bool)
+    return HullFitBatch(pose, cov, n_in, side_points, n_sides, rms, chi2_dof, it, degenerate, tuple(reasons))
+
+
+def fit_hull(
+    model: HullModel,
+    xy_world: np.ndarray,
+    scanner_index: np.ndarray,
+    scanner_xy_world: np.ndarray,
+    dir_world: np.ndarray,
+    sigma_range_m: np.ndarray,
+    init_xytheta: np.ndarray,
+    settings: IcpSettings = IcpSettings(),
+    wide_gate_m: float | None = None,
+) -> HullFit:
+    """Fit the hull to the points of one frame by point-to-line ICP from ``init_xytheta``.
+
+    Parameters are those of :func:`fit_hull_batch` for a single frame: ``xy_world`` (M, 2),
+    ``scanner_index`` (M,), ``scanner_xy_world`` (S, 2), ``dir_world`` (M, 2), ``sigma_range_m`` (S,),
+    ``init_xytheta`` (3,).
+    """
+    p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
+    return fit_hull_batch(
+        model,
+        p,
+        np.zeros(p.shape[0], dtype=np.intp),
+        scanner_index,
+        scanner_xy_world,
+        dir_world,
+        sigma_range_m,
+        np.asarray(init_xytheta, dtype=float)[None],
+        settings,
+        wide_gate_m,
+    ).item(0)

@@ -1,0 +1,409 @@
+"""GTlaser tracking: background subtraction, fusion, hull ICP, (re)acquisition, smoothing.
+
+The loop (journal paper, section 6, with the additions of issue 7):
+
+1. Foreground returns of every scan (:mod:`gtrig.laser.foreground`), all scanners fused into world
+   points grouped by frame (:mod:`gtrig.laser.fuse`), in one vectorised pass.
+2. While tracking, frames are processed in chunks of ``chunk_frames``: each frame starts from the pose
+   predicted with the current velocity, points are compensated for the motion within the frame (the
+   scanners are not synchronised), gated near the predicted outline, and the hull is fitted by
+   point-to-line ICP (:func:`gtrig.laser.hull_icp.fit_hull_batch`, all frames of a chunk at once).
+3. A frame whose fit is degenerate is flagged (``DEGENERATE``); after ``lost_after`` failing frames in a
+   row, or a gap in time, the track is lost and the global search (:mod:`gtrig.laser.acquire`) runs on
+   each frame until the hull is found again.
+4. The rectangle looks the same turned by pi: a new track takes the heading nearest the previous track's
+   if that is recent, else the direction of motion decides once the robot has moved (``forward_motion``);
+   a track that never moves and has no recent predecessor stays ``AMBIGUOUS``.
+5. Each track is smoothed by a Rauch-Tung-Striebel smoother with a constant-velocity model, using each
+   frame's ICP covariance as its measurement noise (degenerate frames only constrain the directions
+   their points fix). The smoothed covariance is reported per pose.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gtrig.geometry import wrap_angle
+from gtrig.laser.acquire import acquire
+from gtrig.laser.fuse import FramedPoints
+from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull_batch
+
+log = logging.getLogger(__name__)
+
+OK = 0
+DEGENERATE = 1
+LOST = 2
+AMBIGUOUS = 3
+STATUS_NAMES = {OK: "ok", DEGENERATE: "degenerate", LOST: "lost", AMBIGUOUS: "ambiguous"}
+
+
+@dataclass(frozen=True)
+class TrackSettings:
+    """Settings of :func:`track_frames`.
+
+    Attributes
+    ----------
+    icp : the hull ICP's settings.
+    chunk_frames : frames fitted together from one prediction.
+    max_gap_s : a longer gap between frames ends the track.
+    lost_after : failing frames in a row after which the track is lost.
+    max_rms_m : a fit with a larger residual RMS is a failure.
+    max_jump_m, max_jump_rad : a fit farther than this from its prediction is a failure.
+    prior_max_gap_s : a previous track at most this old sets the heading of a new one.
+    reacquire_gap_s, reacquire_radius_m : a track lost for at most this long is searched for within this
+        radius of its last pose, and near its heading.
+    forward_motion : the robot drives forwards, so the direction of motion resolves the pi symmetry.
+    min_motion_m : displacement needed to use the direction of motion.
+    smooth : run the RTS smoother on each track.
+    accel_std_mps2, ang_accel_std_radps2 : white-acceleration process noise of the smoother.
+    floor_std_m, floor_std_rad : added in quadrature to the smoothed covariance: errors that smoothing
+        cannot average out because they persist over many frames (the laser plane cutting a tilted gown,
+        reflectivity bias, scanner calibration).
+    """
+
+    icp: IcpSettings = field(default_factory=IcpSettings)
+    chunk_frames: int = 16
+    max_gap_s: float = 0.25
+    lost_after: int = 8
+    max_rms_m: float = 0.03
+    max_jump_m: float = 0.06
+    max_jump_rad: float = np.radians(5.0)
+    prior_max_gap_s: float = 2.0
+    reacquire_gap_s: float = 0.5
+    reacquire_radius_m: float = 1.0
+    forward_motion: bool = True
+    min_motion_m: float = 0.05
+    smooth: bool = True
+    accel_std_mps2: float = 0.07
+    ang_accel_std_radps2: float = 0.07
+    floor_std_m: float = 0.001
+    floor_std_rad: float = np.radians(0.05)
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    """Per-frame GTlaser output.
+
+    Attributes
+    ----------
+    stamps_s : (F,) frame times, seconds.
+    xytheta : (F, 3) robot pose in the world (x, y m; theta rad, wrapped); ``nan`` where ``LOST``.
+    cov_xytheta : (F, 3, 3) covariance of ``xytheta``; ``nan`` where ``LOST``.
+    status : (F,) ``OK``, ``DEGENERATE``, ``LOST`` or ``AMBIGUOUS``.
+    raw_xytheta : (F, 3) the per-frame ICP poses before smoothing.
+    raw_cov_xytheta : (F, 3, 3) their covariances.
+    n_points : (F,) inliers of the frame's fit.
+    n_sides : (F,) hull sides holding enough inliers.
+    rms_m : (F,) point-to-line residual RMS.
+    track_id : (F,) which continuous track a frame belongs to (-1 where lost).
+    reasons : (F,) why a frame is not ``OK`` (empty when it is).
+    """
+
+    stamps_s: np.ndarray
+    xytheta: np.ndarray
+    cov_xytheta: np.ndarray
+    status: np.ndarray
+    raw_xytheta: np.ndarray
+    raw_cov_xytheta: np.ndarray
+    n_points: np.ndarray
+    n_sides: np.ndarray
+    rms_m: np.ndarray
+    track_id: np.ndarray
+    reasons: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return int(self.stamps_s.size)
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.status == OK
+
+    def counts(self) -> dict[str, int]:
+        return {name: int(np.sum(self.status == code)) for code, name in STATUS_NAMES.items()}
+
+
+def _velocity(stamps: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Least-squares velocity (3,) of a few poses (n, 3) at ``stamps`` (n,)."""
+    if len(stamps) < 2:
+        return np.zeros(3)
+    t = stamps - stamps.mean()
+    den = float(t @ t)
+    if den <= 0:
+        return np.zeros(3)
+    return (t @ (poses - poses.mean(axis=0))) / den
+
+
+def _twin(xytheta: np.ndarray, cov: np.ndarray, centre_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pose whose hull outline coincides with that of ``xytheta`` turned by pi, and its covariance."""
+    th = xytheta[2]
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    out = np.r_[xytheta[:2] + 2 * R @ centre_r, th + np.pi]
+    J = np.eye(3)
+    J[:2, 2] = 2 * np.array([[0.0, -1.0], [1.0, 0.0]]) @ R @ centre_r
+    return out, J @ cov @ J.T
+
+
+def rts_smooth(
+    stamps_s: np.ndarray,
+    z_xytheta: np.ndarray,
+    R_z: np.ndarray,
+    accel_std_mps2: float,
+    ang_accel_std_radps2: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rauch-Tung-Striebel smoothing of planar poses with a constant-velocity model.
+
+    Parameters
+    ----------
+    stamps_s
+        (n,) increasing times, seconds.
+    z_xytheta
+        (n, 3) measured poses (theta continuous, unwrapped); rows of ``nan`` are not measured.
+    R_z
+        (n, 3, 3) measurement covariances.
+    accel_std_mps2, ang_accel_std_radps2
+        Spectral densities (as standard deviations) of the white linear and angular acceleration.
+
+    Returns
+    -------
+    xytheta : (n, 3) smoothed poses.
+    cov_xytheta : (n, 3, 3) their covariances.
+    """
+    n = len(stamps_s)
+    qd = np.array([accel_std_mps2**2, accel_std_mps2**2, ang_accel_std_radps2**2])
+    dt = np.r_[0.0, np.diff(stamps_s)]
+    F = np.tile(np.eye(6), (n, 1, 1))
+    F[:, [0, 1, 2], [3, 4, 5]] = dt[:, None]
+    Q = np.zeros((n, 6, 6))
+    Q[:, [0, 1, 2], [0, 1, 2]] = qd * dt[:, None] ** 3 / 3
+    Q[:, [0, 1, 2], [3, 4, 5]] = Q[:, [3, 4, 5], [0, 1, 2]] = qd * dt[:, None] ** 2 / 2
+    Q[:, [3, 4, 5], [3, 4, 5]] = qd * dt[:, None]
+    meas = np.isfinite(z_xytheta[:, 0])
+    xf = np.zeros((n, 6))
+    Pf = np.zeros((n, 6, 6))
+    xp = np.zeros((n, 6))
+    Pp = np.zeros((n, 6, 6))
+    first = int(np.flatnonzero(meas)[0])
+    x = np.r_[z_xytheta[first], 0.0, 0.0, 0.0]
+    P = np.zeros((6, 6))
+    P[:3, :3] = R_z[first]
+    P[3:, 3:] = np.eye(3)
+    for k in range(n):
+        if k > 0:
+            Fk = F[k]
+            x = Fk @ x
+            P = Fk @ P @ Fk.T + Q[k]
+        xp[k], Pp[k] = x, P
+        if meas[k]:
+            Kg = P[:, :3] @ np.linalg.inv(P[:3, :3] + R_z[k])
+            x = x + Kg @ (z_xytheta[k] - x[:3])
+            P = P - Kg @ P[:3, :]
+            P = 0.5 * (P + P.T)
+        xf[k], Pf[k] = x, P
+    # smoother gains C_k = Pf_k F_{k+1}^T Pp_{k+1}^-1, all at once
+    C = np.zeros((n, 6, 6))
+    if n > 1:
+        C[:-1] = Pf[:-1] @ np.swapaxes(F[1:], 1, 2) @ np.linalg.inv(Pp[1:])
+    xs = xf.copy()
+    Ps = Pf.copy()
+    for k in range(n - 2, -1, -1):
+        Ck = C[k]
+        xs[k] = xf[k] + Ck @ (xs[k + 1] - xp[k + 1])
+        Ps[k] = Pf[k] + Ck @ (Ps[k + 1] - Pp[k + 1]) @ Ck.T
+    return xs[:, :3], Ps[:, :3, :3]
+
+
+def track_frames(
+    fp: FramedPoints,
+    model: HullModel,
+    settings: TrackSettings = TrackSettings(),
+) -> TrackResult:
+    """Track the hull through the frames of ``fp``.
+
+    Parameters
+    ----------
+    fp
+        Foreground points of the sequence, in the world, by frame (:func:`gtrig.laser.fuse.frame_points`).
+    model
+        The hull outline (:meth:`HullModel.from_hull`).
+    settings
+        Tracking settings.
+
+    Returns
+    -------
+    TrackResult
+    """
+    st = settings
+    F = fp.n_frames
+    stamps = fp.frame_stamps_s
+    raw = np.full((F, 3), np.nan)
+    raw_cov = np.full((F, 3, 3), np.nan)
+    status = np.full(F, LOST, dtype=np.int8)
+    n_points = np.zeros(F, dtype=int)
+    n_sides = np.zeros(F, dtype=int)
+    rms = np.full(F, np.nan)
+    track_id = np.full(F, -1, dtype=int)
+    reasons = [""] * F
+    centre_r = model.corners_xy.mean(axis=0)
+    tracks: list[tuple[int, bool]] = []  # (first frame, heading ambiguous)
+
+    last_ok: list[int] = []  # frames of the current track fitted OK, for the velocity
+    tracking = False
+    fails = 0
+    last_pose_frame = -1  # last OK frame of any track
+    k = 0
+    while k < F:
+        if not tracking:
+            sl = fp.frame(k)
+            prior, radius = None, None
+            if last_pose_frame >= 0 and stamps[k] - stamps[last_pose_frame] <= st.prior_max_gap_s:
+                prior = raw[last_pose_frame]
+                if stamps[k] - stamps[last_pose_frame] <= st.reacquire_gap_s:
+                    radius = st.reacquire_radius_m
+            acq = None
+            if sl.stop - sl.start >= st.icp.min_points:
+                acq = acquire(
+                    model,
+                    fp.xy_world[sl],
+                    fp.scanner_index[sl],
+                    fp.scanner_xy_world,
+                    fp.dir_world[sl],
+                    fp.sigma_m,
+                    st.icp,
+                    prior_xytheta=prior,
+                    search_radius_m=radius,
+                    free_rays=fp.free_rays(k),
+                )
+            if acq is None or acq.fit.rms_m > st.max_rms_m:
+                reasons[k] = "hull not found"
+                k += 1
+                continue
+            f = acq.fit
+            pose = f.xytheta.copy()
+            if prior is not None:
+                pose[2] = prior[2] + wrap_angle(pose[2] - prior[2])  # continuous heading
+            tracks.append((k, acq.ambiguous))
+            raw[k], raw_cov[k] = pose, f.cov_xytheta
+            status[k], n_points[k], n_sides[k], rms[k] = OK, f.n_points, f.n_sides, f.rms_m
+            track_id[k] = len(tracks) - 1
+            last_ok, fails, tracking, last_pose_frame = [k], 0, True, k
+            log.debug(
+                "hull acquired at frame %d (%.3f s)%s", k, stamps[k], " (heading ambiguous)" * acq.ambiguous
+            )
+            k += 1
+            continue
+
+        end = min(F, k + st.chunk_frames)
+        gaps = np.flatnonzero(np.diff(stamps[k - 1 : end]) > st.max_gap_s)
+        if gaps.size:
+            end = k + int(gaps[0])
+        if end <= k:
+            tracking = False
+            continue
+        ref = last_ok[-1]
+        recent = [j for j in last_ok[-10:] if stamps[ref] - stamps[j] <= 0.2]
+        vel = _velocity(stamps[recent], raw[recent])
+        pred = raw[ref] + (stamps[k:end] - stamps[ref])[:, None] * vel
+        sl = slice(int(fp.frame_start[k]), int(fp.frame_start[end]))
+        fid = np.repeat(np.arange(end - k), np.diff(fp.frame_start[k : end + 1]))
+        xy = fp.xy_world[sl]
+        dt = fp.dt_s[sl]
+        # motion within the frame: bring each point back to the frame time
+        pc = pred[fid]
+        xy = xy - dt[:, None] * (
+            vel[:2] + vel[2] * np.column_stack([-(xy[:, 1] - pc[:, 1]), xy[:, 0] - pc[:, 0]])
+        )
+        # gate: only points near the predicted outline
+        near = (
+            np.hypot(xy[:, 0] - pc[:, 0], xy[:, 1] - pc[:, 1])
+            < model.half_diagonal_m + np.hypot(*model.corners_xy.mean(axis=0)) + 2 * st.icp.gate_m
+        )
+        fits = fit_hull_batch(
+            model,
+            xy[near],
+            fid[near],
+            fp.scanner_index[sl][near],
+            fp.scanner_xy_world,
+            fp.dir_world[sl][near],
+            fp.sigma_m,
+            pred,
+            st.icp,
+        )
+        for i in range(end - k):
+            j = k + i
+            pose = fits.xytheta[i]
+            jump = np.hypot(*(pose[:2] - pred[i, :2]))
+            n_points[j], n_sides[j], rms[j] = fits.n_points[i], fits.n_sides[i], fits.rms_m[i]
+            bad = ""
+            if fits.n_points[i] < st.icp.min_points:
+                bad = f"few points ({fits.n_points[i]})"
+            elif not fits.rms_m[i] <= st.max_rms_m:
+                bad = f"residual {1000 * fits.rms_m[i]:.0f} mm"
+            elif jump > st.max_jump_m or abs(pose[2] - pred[i, 2]) > max(
+                st.max_jump_rad, 4.0 * np.sqrt(fits.cov_xytheta[i, 2, 2])
+            ):
+                bad = f"jump of {1000 * jump:.0f} mm from the prediction"
+            if bad:
+                reasons[j] = bad
+                fails += 1
+            elif fits.degenerate[i]:
+                raw[j], raw_cov[j] = pose, fits.cov_xytheta[i]
+                status[j], reasons[j] = DEGENERATE, fits.reasons[i]
+                track_id[j] = len(tracks) - 1
+                fails += 1
+            else:
+                raw[j], raw_cov[j] = pose, fits.cov_xytheta[i]
+                status[j] = OK
+                track_id[j] = len(tracks) - 1
+                last_ok.append(j)
+                last_pose_frame = j
+                fails = 0
+            if fails >= st.lost_after:
+                tracking = False
+                log.debug("track lost at frame %d (%.3f s): %s", j, stamps[j], reasons[j])
+                end = j + 1
+                break
+        k = end
+
+    # heading of each track: the pi symmetry
+    for tid, (_first, ambiguous) in enumerate(tracks):
+        idx = np.flatnonzero(track_id == tid)
+        if not ambiguous:
+            continue
+        okk = idx[status[idx] == OK]
+        resolved = False
+        if st.forward_motion and okk.size >= 2:
+            d = raw[okk[-1], :2] - raw[okk[0], :2]
+            if np.hypot(*d) >= st.min_motion_m:
+                heading = np.array([np.cos(raw[okk[0], 2]), np.sin(raw[okk[0], 2])])
+                resolved = True
+                if d @ heading < 0:
+                    for j in idx:
+                        raw[j], raw_cov[j] = _twin(raw[j], raw_cov[j], centre_r)
+        if not resolved:
+            status[idx[status[idx] == OK]] = AMBIGUOUS
+            for j in idx:
+                reasons[j] = reasons[j] or "heading ambiguous (pi symmetry, no motion, no recent pose)"
+
+    xytheta = raw.copy()
+    cov = raw_cov.copy()
+    if st.smooth:
+        for tid in range(len(tracks)):
+            idx = np.flatnonzero(track_id == tid)
+            if idx.size < 2:
+                continue
+            z = raw[idx].copy()
+            z[:, 2] = np.unwrap(z[:, 2])
+            xs, Ps = rts_smooth(stamps[idx], z, raw_cov[idx], st.accel_std_mps2, st.ang_accel_std_radps2)
+            xytheta[idx], cov[idx] = (
+                xs,
+                Ps + np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2]),
+            )
+    xytheta[:, 2] = wrap_angle(xytheta[:, 2])
+    raw_w = raw.copy()
+    raw_w[:, 2] = wrap_angle(raw_w[:, 2])
+    return TrackResult(
+        stamps.copy(), xytheta, cov, status, raw_w, raw_cov, n_points, n_sides, rms, track_id, tuple(reasons)
+    )

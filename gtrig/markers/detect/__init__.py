@@ -1,0 +1,290 @@
+"""High-accuracy square-marker detector.
+
+Pipeline (see issue 5 and the RAWSEEDS vision GT system):
+
+1. candidates (:mod:`.candidates`): closure-normalised image, one threshold, connected components
+   with morphological tests (size, solidity, Euler number, hole fraction), a four-vertex convex
+   polygon refined into a robust quadrilateral by Huber line fits to the contour;
+2. edges (:mod:`.edges`): a blurred-step model ``a + b Phi(d / sigma)`` fitted by Gauss-Newton to all
+   the pixels of a band around each edge (two passes: the second with the band and end exclusion
+   sized from the first pass's blur), in undistorted coordinates when a camera is given;
+3. corners: intersections of adjacent lines, with 2 x 2 covariances propagated from the line fits;
+4. late rejection of implausible fits (contrast, residual, blur, corner displacement);
+5. decoding (:mod:`.decode`) of the cells sampled through the refined corners' homography, border
+   check, and corners reordered as printed (top-left, top-right, bottom-right, bottom-left).
+
+Corners are in OpenCV's pixel convention (pixel centres at integer coordinates) of the raw image.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from gtrig.errors import InputError
+from gtrig.markers.detect.camera import Undistorter
+from gtrig.markers.detect.candidates import CandidateParams, find_candidates
+from gtrig.markers.detect.decode import sample_cells
+from gtrig.markers.detect.edges import fit_edges, gather_band, intersect_corners
+from gtrig.markers.families import decode_batch, family_spec
+from gtrig.rig.models import MarkerFamily
+
+__all__ = ["Detection", "DetectorParams", "MarkerDetector", "detect_markers"]
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One decoded marker.
+
+    Attributes
+    ----------
+    id : int
+    corners_px : (4, 2) float
+        Raw-image pixels (OpenCV convention), top-left, top-right, bottom-right, bottom-left as printed.
+    corner_cov : (4, 2, 2) float
+        Covariance of each corner, px^2.
+    hamming : int
+        Data cells that disagreed with the code.
+    blur_px : float
+        Mean fitted edge blur sigma, pixels.
+    """
+
+    id: int
+    corners_px: NDArray[np.float64]
+    corner_cov: NDArray[np.float64]
+    hamming: int = 0
+    blur_px: float = float("nan")
+
+    def to_json(self) -> dict[str, object]:
+        """The ``detections`` entry of ``det.json``."""
+        return {
+            "id": self.id,
+            "corners": [[float(u), float(v)] for u, v in self.corners_px],
+            "corner_cov": [[[float(c) for c in row] for row in m] for m in self.corner_cov],
+            "hamming": self.hamming,
+            "blur_px": float(self.blur_px),
+        }
+
+
+@dataclass(frozen=True)
+class DetectorParams:
+    """Detector settings.
+
+    candidates : :class:`CandidateParams`.
+    band_px : half-width of the edge band beyond ``3 sigma`` (pixels).
+    max_blur_px : edges blurrier than this are rejected.
+    min_contrast : smallest accepted white - black difference (grey levels).
+    max_rel_rms : largest accepted residual RMS / contrast of an edge fit.
+    max_corner_shift_px : largest move of a corner from the candidate stage to the refined fit.
+    max_hamming : decoder tolerance (default: the family's).
+    """
+
+    candidates: CandidateParams = field(default_factory=CandidateParams)
+    band_px: float = 1.5
+    max_blur_px: float = 5.0
+    min_contrast: float = 12.0
+    max_rel_rms: float = 0.25
+    max_corner_shift_px: float = 4.0
+    max_hamming: int | None = None
+
+
+class MarkerDetector:
+    """Detector for one family (and optionally one camera; the undistortion maps are cached).
+
+    Parameters
+    ----------
+    family : MarkerFamily or str
+    camera_matrix, dist_coeffs : optional camera model (OpenCV); with them edges are fitted in
+        undistorted coordinates, corners still reported in raw pixels.
+    params : DetectorParams
+    """
+
+    def __init__(
+        self,
+        family: MarkerFamily | str,
+        camera_matrix: NDArray[np.float64] | None = None,
+        dist_coeffs: NDArray[np.float64] | None = None,
+        params: DetectorParams | None = None,
+    ) -> None:
+        self.spec = family_spec(family)
+        self.params = params or DetectorParams()
+        self.K = None if camera_matrix is None else np.asarray(camera_matrix, float)
+        self.dist = np.zeros(5) if dist_coeffs is None else np.asarray(dist_coeffs, float)
+        self._undist: Undistorter | None = None
+        # hole area of a marker <= its data area
+        inner = (self.spec.data_cells / self.spec.cells) ** 2
+        self._hole_frac = min(0.9, inner + 0.1)
+
+    def _undistorter(self, shape: tuple[int, int]) -> Undistorter | None:
+        if self.K is None or not np.any(self.dist):
+            return None
+        if self._undist is None or self._undist.shape != shape:
+            self._undist = Undistorter(self.K, self.dist, shape)
+        return self._undist
+
+    def _border_mask(self) -> NDArray[np.bool_]:
+        n, bc = self.spec.cells, self.spec.border_cells
+        m = np.ones((n, n), bool)
+        m[bc:-bc, bc:-bc] = False
+        return m
+
+    def _bits(self, v: NDArray[np.float64]) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
+        """Cells (Q, n, n) thresholded midway between the border (black, median) and the ring of
+        paper outside (white, median) sampled with them, ``v`` (Q, n + 2, n + 2); and the contrast."""
+        ring = np.concatenate([v[:, 0, :], v[:, -1, :], v[:, 1:-1, 0], v[:, 1:-1, -1]], axis=1)
+        inner = v[:, 1:-1, 1:-1]
+        black = np.median(inner[:, self._border_mask()], axis=1)
+        white = np.median(ring, axis=1)
+        thr = 0.5 * (black + white)
+        return (inner > thr[:, None, None]).astype(np.uint8), white - black
+
+    def _predecode(self, gray: NDArray[np.uint8], Q: NDArray[np.float64], und: Undistorter | None
+                   ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        """Keep candidates whose cells, sampled through the initial quad, are close to a code.
+
+        Returns the kept quads and their (id, rotation, hamming) against the initial quad.
+
+        The threshold is midway between the border (black) and the outer ring (white paper); the
+        tolerance is two cells more than the final decoder's, so this only removes clutter early.
+        """
+        n = self.spec.cells
+        bc = self.spec.border_cells
+        v = sample_cells(gray, Q, n, und, ring=1)
+        bits, contrast = self._bits(v)
+        bmask = self._border_mask()
+        tol = self.spec.max_correction + 2 if self.params.max_hamming is None else self.params.max_hamming + 2
+        ids, rot, ham = decode_batch(self.spec.family, bits[:, bc:-bc, bc:-bc], tol)
+        border_white = bits[:, bmask].sum(axis=1)
+        keep = (ids >= 0) & (border_white <= n // 2) & (contrast >= self.params.min_contrast)
+        return Q[keep], ids[keep], rot[keep], ham[keep]
+
+    def detect(self, image: NDArray[np.uint8]) -> list[Detection]:
+        """Detect and decode markers in a grayscale (H, W) or BGR (H, W, 3) 8-bit image."""
+        gray = _to_gray(image)
+        p = self.params
+        quads = find_candidates(gray, p.candidates, self._hole_frac)
+        if not quads:
+            return []
+        und = self._undistorter(gray.shape)
+        Q0 = np.array(quads)  # (Q, 4, 2) raw
+        Q = Q0 if und is None else und.to_undistorted(Q0.reshape(-1, 2)).reshape(-1, 4, 2)
+        n = self.spec.cells
+        Q, pre_id, pre_rot, pre_ham = self._predecode(gray, Q, und)
+        if not len(Q):
+            return []
+        side = np.linalg.norm(Q - np.roll(Q, -1, axis=1), axis=2)  # (Q, 4)
+        cell = np.repeat(side.mean(axis=1) / n, 4)
+        border = cell * self.spec.border_cells
+        p0 = Q.reshape(-1, 2)
+        p1 = np.roll(Q, -1, axis=1).reshape(-1, 2)
+        L = side.ravel()
+        sigma = np.full(len(p0), 1.0)
+        fit = None
+        for _pass in range(2):
+            w = 3.0 * sigma + p.band_px
+            w_in = np.maximum(1.0, np.minimum(w, border - 1.5 * sigma))
+            w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
+            excl = np.minimum(np.maximum(3.0 * sigma + 1.0, 0.08 * L), 0.3 * L)
+            samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
+            fit = fit_edges(samples, p0, p1, sigma)
+            sigma = np.clip(fit.sigma, 0.3, p.max_blur_px)
+            lines = fit.lines()
+            # next pass: end points = the fitted line's points nearest to the previous ends
+            nvec = lines[:, :2]
+            p0 = p0 - (np.einsum("ij,ij->i", nvec, p0) - lines[:, 2])[:, None] * nvec
+            p1 = p1 - (np.einsum("ij,ij->i", nvec, p1) - lines[:, 2])[:, None] * nvec
+        assert fit is not None
+        corners, cov = intersect_corners(fit, len(Q))
+        # late rejection
+        ok_e = (fit.ok & (fit.b >= p.min_contrast) & (fit.rms <= p.max_rel_rms * np.abs(fit.b))
+                & (fit.sigma <= p.max_blur_px) & (fit.sigma >= 0.06))
+        ok = ok_e.reshape(-1, 4).all(axis=1)
+        shift = np.linalg.norm(corners - Q, axis=2).max(axis=1)
+        ok &= np.all(np.isfinite(corners.reshape(len(Q), -1)), axis=1) & (shift <= p.max_corner_shift_px)
+        ok &= np.all(np.isfinite(cov.reshape(len(Q), -1)), axis=1)
+        if not ok.any():
+            return []
+        idx = np.flatnonzero(ok)
+        corners, cov = corners[idx], cov[idx]
+        blur = fit.sigma.reshape(-1, 4)[idx].mean(axis=1)
+        vals, sub = sample_cells(gray, corners, n, und, ring=1, return_samples=True)
+        bits, _ = self._bits(vals)
+        sub = sub[:, 1:-1, 1:-1]
+        thr = 0.5 * (vals[:, 1:-1, 1:-1].max(axis=(1, 2)) + vals[:, 1:-1, 1:-1].min(axis=(1, 2)))
+        thr = thr[:, None, None]
+        # cells must be uniform: printed patterns are aligned with the grid, clutter rarely is
+        split = ((sub > thr[..., None]) != bits[..., None].astype(bool)).sum(axis=3) >= 3
+        cell_px = np.sqrt(np.array([_area(c) for c in corners])) / n
+        mixed = split.sum(axis=(1, 2))
+        bc = self.spec.border_cells
+        border_white = bits.sum(axis=(1, 2)) - bits[:, bc:-bc, bc:-bc].sum(axis=(1, 2))
+        ids, rot, ham = decode_batch(self.spec.family, bits[:, bc:-bc, bc:-bc], p.max_hamming)
+        good = (ids >= 0) & (border_white <= max(0, n // 4 - 1))
+        fine = cell_px >= np.maximum(4.0, 3.0 * blur)  # cells resolved: their insides must be uniform
+        good &= ~fine | (mixed <= max(1, n * n // 20))
+        # small, blurred markers: the cells read better through the candidate quad (its corners lie
+        # inside the square, away from the blurred border); accept that reading when it is strict
+        strict = self.spec.max_correction if p.max_hamming is None else p.max_hamming
+        fallback = ~good & (pre_ham[idx] <= strict) & ~fine
+        ids = np.where(fallback, pre_id[idx], ids)
+        rot = np.where(fallback, pre_rot[idx], rot)
+        ham = np.where(fallback, pre_ham[idx], ham)
+        good |= fallback
+        if und is not None:
+            raw = und.to_raw(corners.reshape(-1, 2)).reshape(-1, 4, 2)
+            Jd = und.jacobian_to_raw(corners.reshape(-1, 2)).reshape(-1, 4, 2, 2)
+            cov = Jd @ cov @ np.swapaxes(Jd, -1, -2)
+            corners = raw
+        out = []
+        for k in np.flatnonzero(good):
+            order = (np.arange(4) + rot[k]) % 4
+            out.append(Detection(int(ids[k]), corners[k][order].copy(), cov[k][order].copy(), int(ham[k]),
+                                 float(blur[k])))
+        return _dedupe(out)
+
+
+def _dedupe(dets: list[Detection]) -> list[Detection]:
+    """Drop detections whose centre lies within another detection of the same ID (keeps the larger)."""
+    if len(dets) < 2:
+        return dets
+    dets = sorted(dets, key=lambda d: -_area(d.corners_px))
+    keep: list[Detection] = []
+    for d in dets:
+        c = d.corners_px.mean(axis=0)
+        near = [k for k in keep if k.id == d.id]
+        if any(np.linalg.norm(k.corners_px.mean(axis=0) - c) < 0.25 * np.sqrt(_area(k.corners_px))
+               for k in near):
+            continue
+        keep.append(d)
+    return keep
+
+
+def _area(q: NDArray[np.float64]) -> float:
+    x, y = q[:, 0], q[:, 1]
+    return 0.5 * abs(float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)))
+
+
+def _to_gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    import cv2
+
+    img = np.asarray(image)
+    if img.dtype != np.uint8:
+        raise InputError(f"expected an 8-bit image, got {img.dtype}")
+    if img.ndim == 3 and img.shape[2] in (3, 4):
+        return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY if img.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
+    if img.ndim != 2:
+        raise InputError(f"expected a grayscale or colour image, got shape {img.shape}")
+    return np.ascontiguousarray(img)
+
+
+def detect_markers(
+    image: NDArray[np.uint8],
+    family: MarkerFamily | str,
+    camera_matrix: NDArray[np.float64] | None = None,
+    dist_coeffs: NDArray[np.float64] | None = None,
+    params: DetectorParams | None = None,
+) -> list[Detection]:
+    """Detect markers of ``family`` in ``image``; see :class:`MarkerDetector`."""
+    return MarkerDetector(family, camera_matrix, dist_coeffs, params).detect(image)

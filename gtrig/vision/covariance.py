@@ -1,0 +1,69 @@
+"""Covariance of a GTvision pose, and the tools to check it (NEES).
+
+The pose covariance is over the world-frame perturbation ``xi = (dt, dphi)`` of
+:mod:`gtrig.vision.projection`: ``cov_6x6`` rows and columns are x, y, z (m) and the rotation vector's
+x, y, z components about the world axes (rad). Its planar marginal ``cov_3x3`` is over x, y, yaw
+(to first order yaw is the rotation about world z).
+
+Two sources add up:
+
+* the corners' noise: ``inv(J^T W J)`` with the detector's corner covariances (and the floor prior in
+  planar mode);
+* the rig's uncertainty, which does not average out over corners: each camera's pose (from the network
+  calibration) and each marker's pose on the robot. :func:`gtrig.vision.refine.refine_pose` estimates
+  a small correction for each camera and marker in view, with these sigmas as Gaussian priors, and
+  marginalises them out; to first order this equals "considering" them (Bierman, *Factorization
+  Methods for Discrete Sequential Estimation*, 1977, ch. VI) but also weighs the cameras by how well
+  they are known.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+PLANAR_INDEX = (0, 1, 5)
+
+
+@dataclass(frozen=True)
+class RigUncertainty:
+    """One-sigma uncertainty of the rig's camera and marker poses (isotropic per block).
+
+    Attributes
+    ----------
+    camera_xyz_m, camera_rot_rad : each camera's position and orientation in the world.
+    marker_xyz_m, marker_rot_rad : each marker's position and orientation on the robot.
+    """
+
+    camera_xyz_m: float = 0.002
+    camera_rot_rad: float = math.radians(0.02)
+    marker_xyz_m: float = 0.0005
+    marker_rot_rad: float = math.radians(0.05)
+
+    @staticmethod
+    def none() -> RigUncertainty:
+        return RigUncertainty(0.0, 0.0, 0.0, 0.0)
+
+
+def planar_covariance(cov_6x6: np.ndarray) -> np.ndarray:
+    """The x, y, yaw marginal (3, 3) of a ``cov_6x6``."""
+    i = np.array(PLANAR_INDEX)
+    return np.asarray(cov_6x6)[np.ix_(i, i)]
+
+
+def pose_error_xi(T_est: np.ndarray, T_true: np.ndarray) -> np.ndarray:
+    """The estimate's error (6,) in the covariance's parametrisation: ``t_est - t_true`` and
+    ``Log(R_est R_true^T)`` (world axes)."""
+    dt = T_est[:3, 3] - T_true[:3, 3]
+    dphi = Rotation.from_matrix(T_est[:3, :3] @ T_true[:3, :3].T).as_rotvec()
+    return np.r_[dt, dphi]
+
+
+def nees(err: np.ndarray, cov: np.ndarray) -> float:
+    """Normalised estimation error squared ``err^T inv(cov) err``; its mean over estimates should be
+    the dimension of ``err`` when the covariances are right."""
+    err = np.asarray(err, dtype=float)
+    return float(err @ np.linalg.solve(cov, err))

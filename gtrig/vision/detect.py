@@ -1,0 +1,116 @@
+"""Marker detection for GTvision: the markers package's detector when available, else OpenCV ArUco.
+
+Both return :class:`~gtrig.vision.observations.MarkerView` lists for one image of one camera. The
+ArUco path is also the seeds'-method baseline's corner source ("corners from OpenCV's ArUco subpixel
+refinement", issue 6): ARToolKitPlus "simple ID" markers are read by ArUco through a custom dictionary
+built from :func:`gtrig.markers.families.marker_cells` with ``markerBorderBits`` = the family's border.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from gtrig.errors import InputError
+from gtrig.rig.models import MarkerFamily, Rig
+from gtrig.vision.observations import CameraGeometry, MarkerView, views_from_detections
+
+log = logging.getLogger(__name__)
+
+#: Corner sigma assumed for ArUco's subpixel corners, which come without a covariance, px.
+ARUCO_SIGMA_PX = 0.5
+
+DetectFn = Callable[[np.ndarray, CameraGeometry], list[MarkerView]]
+
+
+@dataclass(frozen=True)
+class _ArucoCorner:
+    id: int
+    corners_px: np.ndarray
+    corner_cov: np.ndarray | None = None
+
+
+class ArucoDetector:
+    """OpenCV's ArUco detector with ``CORNER_REFINE_SUBPIX`` for the rig's markers (one family).
+
+    Parameters
+    ----------
+    rig : the rig (its markers' family and IDs).
+    sigma_px : the corner sigma written into each view's covariance.
+    """
+
+    name = "opencv-aruco-subpix"
+
+    def __init__(self, rig: Rig, sigma_px: float = ARUCO_SIGMA_PX) -> None:
+        from gtrig.markers.families import family_spec, marker_cells
+
+        fams = {m.family for m in rig.robot.markers}
+        if len(fams) != 1:
+            raise InputError("the ArUco fallback handles one marker family per rig")
+        fam = fams.pop()
+        spec = family_spec(fam)
+        self.ids = sorted(m.id for m in rig.robot.markers)
+        b = spec.border_cells
+        bits = [marker_cells(fam, i)[b:-b, b:-b].astype(np.uint8) for i in self.ids]
+        d = spec.data_cells
+        dictionary = cv2.aruco.Dictionary(np.zeros((0, 1, 4), np.uint8), d, 0)
+        rows = [cv2.aruco.Dictionary.getByteListFromBits(x) for x in bits]
+        dictionary.bytesList = np.concatenate(rows, axis=0)
+        dictionary.maxCorrectionBits = 1 if fam in (MarkerFamily.ARTOOLKITPLUS_SIMPLE,
+                                                    MarkerFamily.ARTOOLKITPLUS_SIMPLE_THIN) else 0
+        params = cv2.aruco.DetectorParameters()
+        params.markerBorderBits = b
+        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        self._detector = cv2.aruco.ArucoDetector(dictionary, params)
+        self.sigma_px = float(sigma_px)
+
+    def __call__(self, image: np.ndarray, camera: CameraGeometry) -> list[MarkerView]:
+        corners, ids, _ = self._detector.detectMarkers(image)
+        if ids is None:
+            return []
+        cov = np.tile(np.eye(2) * self.sigma_px**2, (4, 1, 1))
+        dets = [_ArucoCorner(self.ids[int(i)], np.asarray(c, float).reshape(4, 2), cov)
+                for c, i in zip(corners, ids.ravel(), strict=True)]
+        return views_from_detections(camera.name, dets, set(self.ids))
+
+
+class GtrigDetector:
+    """The markers package's detector (issue 5), adapted to :class:`MarkerView` lists."""
+
+    name = "gtrig-markers"
+
+    def __init__(self, rig: Rig, impl: Callable[..., list]) -> None:  # type: ignore[type-arg]
+        fams = {m.family for m in rig.robot.markers}
+        if len(fams) != 1:
+            raise InputError("GTvision handles one marker family per rig")
+        self.family = fams.pop()
+        self.ids = {m.id for m in rig.robot.markers}
+        self._impl = impl
+
+    def __call__(self, image: np.ndarray, camera: CameraGeometry) -> list[MarkerView]:
+        dets = self._impl(image, self.family, camera_matrix=camera.K, dist_coeffs=camera.dist)
+        return views_from_detections(camera.name, dets, self.ids)
+
+
+def make_detector(rig: Rig, which: str = "auto") -> ArucoDetector | GtrigDetector:
+    """The detector to use: ``"gtrig"`` (the markers package), ``"aruco"``, or ``"auto"`` (the markers
+    package if it provides ``gtrig.markers.detect.detect_markers``, else ArUco, with a warning)."""
+    if which in ("auto", "gtrig"):
+        try:
+            mod = importlib.import_module("gtrig.markers.detect")
+            impl = mod.detect_markers
+        except (ModuleNotFoundError, AttributeError):
+            if which == "gtrig":
+                raise InputError("the markers package's detector (gtrig.markers.detect) "
+                                 "is not available") from None
+            log.warning("gtrig.markers.detect is not available: falling back to OpenCV ArUco corners")
+            return ArucoDetector(rig)
+        return GtrigDetector(rig, impl)
+    if which == "aruco":
+        return ArucoDetector(rig)
+    raise InputError(f"unknown detector {which!r}; choose auto, gtrig or aruco")

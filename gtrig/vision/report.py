@@ -1,0 +1,142 @@
+"""What a GTvision run did (poses localized, coverage per camera, residuals, failures by reason) and,
+on a simulated recording, how accurate it is against the truth."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from gtrig import geometry as geo
+from gtrig.io.tum import Trajectory
+from gtrig.rig.models import Rig
+from gtrig.vision.covariance import PLANAR_INDEX, nees, pose_error_xi
+from gtrig.vision.sequence import VisionResult
+
+
+@dataclass(frozen=True)
+class CameraCoverage:
+    """Per camera: images read, images with at least one marker, views used in localized poses,
+    views rejected as outliers, and the RMS reprojection error of its used views (px)."""
+
+    camera: str
+    images: int
+    images_with_markers: int
+    views_used: int
+    views_rejected: int
+    rms_px: float
+
+
+@dataclass(frozen=True)
+class VisionReport:
+    """Summary of a :class:`~gtrig.vision.sequence.VisionResult`."""
+
+    instants: int
+    localized: int
+    failures: dict[str, int]
+    cameras: tuple[CameraCoverage, ...]
+    rms_px: float
+    median_views: float
+    fused_cameras: dict[int, int]
+
+
+def summarize(result: VisionResult) -> VisionReport:
+    """Poses localized, coverage per camera, residuals and failures by reason."""
+    ok = result.localized()
+    fail = Counter(e.status.value for e in result.estimates if not e.ok)
+    cams = []
+    for name in sorted(result.images_per_camera):
+        with_m = len({(o.stamp_s, v.frame) for o in result.observations for v in o.views if v.camera == name})
+        used = [r for e in ok for (c, _), r in zip(e.views, e.view_rms_px, strict=True) if c == name]
+        rej = sum(1 for e in result.estimates for c, _ in e.rejected if c == name)
+        rms = float(np.sqrt(np.mean(np.square(used)))) if used else math.nan
+        cams.append(CameraCoverage(name, result.images_per_camera[name], int(with_m), len(used), rej, rms))
+    all_r = [r for e in ok for r in e.view_rms_px]
+    fused = Counter(len({c for c, _ in e.views}) for e in ok)
+    return VisionReport(len(result.estimates), len(ok), dict(fail), tuple(cams),
+                        float(np.sqrt(np.mean(np.square(all_r)))) if all_r else math.nan,
+                        float(np.median([len(e.views) for e in ok])) if ok else 0.0,
+                        dict(sorted(fused.items())))
+
+
+def interpolate_truth(truth: Trajectory, stamps_s: np.ndarray) -> np.ndarray:
+    """Truth poses (M, 4, 4) at ``stamps_s``: linear in position, slerp in rotation, clamped."""
+    t = np.clip(np.asarray(stamps_s, dtype=float), truth.stamps_s[0], truth.stamps_s[-1])
+    xyz = np.column_stack([np.interp(t, truth.stamps_s, truth.xyz[:, k]) for k in range(3)])
+    R = Slerp(truth.stamps_s, Rotation.from_quat(truth.quat_xyzw))(t).as_matrix()
+    T = np.tile(np.eye(4), (len(t), 1, 1))
+    T[:, :3, :3] = R
+    T[:, :3, 3] = xyz
+    return T
+
+
+@dataclass(frozen=True)
+class VisionAccuracy:
+    """GTvision against the truth.
+
+    Attributes
+    ----------
+    instants, localized : counts over the sequence's instants.
+    pos_err_mean_m, pos_err_max_m : horizontal position error of the localized poses, metres.
+    yaw_err_mean_rad : mean absolute yaw error, radians.
+    nees_mean : mean NEES of the localized poses, with ``nees_dof`` degrees of freedom (3 planar, else 6).
+    frames_visible : camera images in which at least one marker is fully visible (truth).
+    frames_visible_localized : those of them whose instant was localized.
+    """
+
+    instants: int
+    localized: int
+    pos_err_mean_m: float
+    pos_err_max_m: float
+    yaw_err_mean_rad: float
+    nees_mean: float
+    nees_dof: int
+    frames_visible: int
+    frames_visible_localized: int
+
+    @property
+    def visible_localized_fraction(self) -> float:
+        return self.frames_visible_localized / self.frames_visible if self.frames_visible else math.nan
+
+
+def accuracy(result: VisionResult, truth: Trajectory, rig_true: Rig | None = None,
+             frame_stamps: dict[str, np.ndarray] | None = None) -> VisionAccuracy:
+    """Errors of the localized poses against ``truth`` (``truth/run.tum`` or ``truth/validation.tum``).
+
+    With ``rig_true`` and the per-camera image stamps (``frame_stamps``), also counts the images in which
+    a marker is fully visible at the true pose and how many of them were localized (run acceptance).
+    """
+    from gtrig.vision.synthetic import visible_views
+
+    ok = result.localized()
+    dof = 3 if result.planar else 6
+    pos, yaw, ne = [], [], []
+    if ok:
+        Tt = interpolate_truth(truth, np.array([e.stamp_s for e in ok]))
+        for e, T in zip(ok, Tt, strict=True):
+            assert e.T_world_robot is not None and e.cov_6x6 is not None
+            err = pose_error_xi(e.T_world_robot, T)
+            pos.append(float(np.linalg.norm(err[:2])))
+            yaw.append(abs(float(geo.wrap_angle(geo.T_to_se2(e.T_world_robot)[2] - geo.T_to_se2(T)[2]))))
+            if result.planar:
+                i = np.array(PLANAR_INDEX)
+                ne.append(nees(err[i], e.cov_6x6[np.ix_(i, i)]))
+            else:
+                ne.append(nees(err, e.cov_6x6))
+    n_vis = n_vis_ok = 0
+    if rig_true is not None and frame_stamps is not None:
+        ok_frames = {f for o, e in zip(result.observations, result.estimates, strict=True) if e.ok
+                     for f in o.frames}
+        for cam, stamps in frame_stamps.items():
+            Tt = interpolate_truth(truth, stamps)
+            for i, T in enumerate(Tt):
+                if any(c == cam for c, _, _ in visible_views(rig_true, T)):
+                    n_vis += 1
+                    n_vis_ok += (cam, i) in ok_frames
+    nan = math.nan
+    return VisionAccuracy(len(result.estimates), len(ok), float(np.mean(pos)) if pos else nan,
+                          float(np.max(pos)) if pos else nan, float(np.mean(yaw)) if yaw else nan,
+                          float(np.mean(ne)) if ne else nan, dof, n_vis, n_vis_ok)

@@ -1,0 +1,423 @@
+"""GTvision over a whole recording: frames grouped into instants, detected and estimated in parallel
+processes, checkpointed, then flips left ambiguous resolved in time order.
+
+Instants
+--------
+* ``run``: the images of all cameras whose time stamps agree within ``sync_tol_s`` form one instant
+  (free-running cameras rarely agree, so an instant is then one camera's frame; GTvision never mixes
+  images of a moving robot taken at different times).
+* ``validation``: the robot stands still during each interval of ``validation/poses.csv``, so all the
+  images of all cameras inside one interval are one instant, stamped at the interval's middle (the
+  stamps of ``truth/validation.tum``).
+
+Determinism: each instant is estimated independently of the others in the parallel pass, so the
+output does not depend on the number of workers or on the order chunks finish; the only sequential
+step (the previous pose breaking a flip) runs afterwards, in time order, in the main process.
+
+Resuming: every finished chunk of instants is appended to a checkpoint file (JSON lines; floats are
+written with ``repr``, so a resumed run's output is bit-identical). A checkpoint written with other
+settings, another rig or other frames is refused.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import logging
+import math
+import os
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gtrig.errors import FormatError, InputError
+from gtrig.io.frames import FrameIndex, read_frame_index
+from gtrig.io.tum import Trajectory
+from gtrig.rig.load import rig_to_dict
+from gtrig.rig.models import Rig
+from gtrig.vision.estimate import FrameEstimate, Status, VisionOptions, estimate_frame
+from gtrig.vision.init import PreviousPose
+from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_VERSION = 1
+SEQUENCES = ("run", "validation")
+
+
+@dataclass(frozen=True)
+class Instant:
+    """The images that make one instant: ``stamp_s`` and ``(camera, row in its frame index)``."""
+
+    stamp_s: float
+    images: tuple[tuple[str, int], ...]
+
+
+@dataclass(frozen=True)
+class VisionResult:
+    """GTvision's output for one sequence.
+
+    Attributes
+    ----------
+    sequence : "run" or "validation"
+    estimates : one per instant, in time order (failed ones included, with their reason)
+    observations : the detections of each instant (same order)
+    images_per_camera : number of images read per camera
+    detector : which corner detector was used
+    seconds : wall time of the parallel pass and of the whole run
+    """
+
+    sequence: str
+    estimates: tuple[FrameEstimate, ...]
+    observations: tuple[FrameObservations, ...] = field(repr=False)
+    images_per_camera: dict[str, int]
+    detector: str
+    planar: bool
+    seconds: dict[str, float]
+
+    def localized(self) -> tuple[FrameEstimate, ...]:
+        return tuple(e for e in self.estimates if e.ok)
+
+    def trajectory(self) -> Trajectory:
+        """The localized poses as ``T_world_robot`` (TUM)."""
+        ok = self.localized()
+        if not ok:
+            return Trajectory(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)))
+        return Trajectory.from_matrices(np.array([e.stamp_s for e in ok]),
+                                        np.stack([e.T_world_robot for e in ok]))  # type: ignore[misc]
+
+    def covariances(self) -> np.ndarray:
+        """(M, 6, 6), or (M, 3, 3) over x, y, yaw when planar, for the localized poses."""
+        from gtrig.vision.covariance import planar_covariance
+
+        ok = self.localized()
+        covs = [e.cov_6x6 for e in ok]
+        if self.planar:
+            return np.stack([planar_covariance(c) for c in covs]) if covs else np.zeros((0, 3, 3))
+        return np.stack(covs) if covs else np.zeros((0, 6, 6))  # type: ignore[arg-type]
+
+
+# ------------------------------------------------------------------------------------------ instants
+def camera_indices(rec_dir: Path, sequence: str, rig: Rig) -> dict[str, FrameIndex]:
+    """The frame index of every rig camera that has a folder in ``REC/<sequence>/cameras``."""
+    folder = rec_dir / sequence / "cameras"
+    if not folder.is_dir():
+        raise InputError(f"{folder}: no such folder (the recording has no {sequence} images)")
+    out = {}
+    for cam in rig.cameras:
+        if (folder / cam.name).is_dir():
+            out[cam.name] = read_frame_index(folder / cam.name)
+    extra = sorted(p.name for p in folder.iterdir() if p.is_dir() and p.name not in out)
+    if extra:
+        log.warning("%s: folders %s are not cameras of the rig; ignored", folder, ", ".join(extra))
+    if not out:
+        raise InputError(f"{folder}: none of the rig's cameras ({', '.join(c.name for c in rig.cameras)}) "
+                         "has a folder here")
+    return out
+
+
+def read_static_intervals(path: Path) -> np.ndarray:
+    """``validation/poses.csv`` (pose,start_s,end_s) as (K, 2) seconds."""
+    if not path.is_file():
+        raise FormatError(f"{path}: no such file (the validation sequence needs its static intervals)")
+    rows = []
+    with open(path, newline="", encoding="utf-8") as f:
+        r = csv.reader(f)
+        header = next(r, None)
+        if header is None or [h.strip() for h in header[:3]] != ["pose", "start_s", "end_s"]:
+            raise FormatError(f"{path}:1: header must be 'pose,start_s,end_s'")
+        for line, row in enumerate(r, 2):
+            if not row or row[0].startswith("#"):
+                continue
+            try:
+                rows.append((float(row[1]), float(row[2])))
+            except (ValueError, IndexError):
+                raise FormatError(f"{path}:{line}: expected 'pose,start_s,end_s'") from None
+    return np.array(rows).reshape(-1, 2)
+
+
+def make_instants(indices: dict[str, FrameIndex], sequence: str, sync_tol_s: float = 0.005,
+                  intervals_s: np.ndarray | None = None) -> list[Instant]:
+    """Group the images of all cameras into instants (see the module docstring)."""
+    if sequence == "validation":
+        if intervals_s is None:
+            raise InputError("the validation sequence needs its static intervals")
+        out = []
+        for t0, t1 in intervals_s:
+            imgs = []
+            for name in sorted(indices):
+                st = indices[name].stamps_s
+                imgs.extend((name, int(i)) for i in np.flatnonzero((st >= t0) & (st <= t1)))
+            out.append(Instant(float(0.5 * (t0 + t1)), tuple(imgs)))
+        return out
+    allf = sorted((float(ix.stamps_s[i]), name, i) for name, ix in indices.items() for i in range(len(ix)))
+    out = []
+    group: list[tuple[float, str, int]] = []
+    for t, name, i in allf:
+        if group and (t - group[0][0] > sync_tol_s or any(g[1] == name for g in group)):
+            out.append(Instant(float(np.mean([g[0] for g in group])), tuple((g[1], g[2]) for g in group)))
+            group = []
+        group.append((t, name, i))
+    if group:
+        out.append(Instant(float(np.mean([g[0] for g in group])), tuple((g[1], g[2]) for g in group)))
+    return out
+
+
+# ---------------------------------------------------------------------------------- (de)serialising
+def _arr(a: np.ndarray | None) -> Any:
+    return None if a is None else np.asarray(a, dtype=float).tolist()
+
+
+def _est_to_json(e: FrameEstimate) -> dict[str, Any]:
+    return {"stamp_s": e.stamp_s, "status": e.status.value, "reason": e.reason,
+            "T": _arr(e.T_world_robot), "cov": _arr(e.cov_6x6), "views": [list(v) for v in e.views],
+            "rejected": [list(v) for v in e.rejected], "rms_px": e.rms_px, "view_rms_px": list(e.view_rms_px),
+            "chi2": e.chi2, "dof": e.dof,
+            "flip_margin": e.flip_margin, "alternatives": [_arr(a) for a in e.alternatives]}
+
+
+def _est_from_json(d: dict[str, Any]) -> FrameEstimate:
+    def arr(x: Any) -> np.ndarray | None:
+        return None if x is None else np.array(x, dtype=float)
+
+    return FrameEstimate(d["stamp_s"], Status(d["status"]), d["reason"], arr(d["T"]), arr(d["cov"]),
+                         tuple((str(a), int(b)) for a, b in d["views"]),
+                         tuple((str(a), int(b)) for a, b in d["rejected"]), d["rms_px"],
+                         tuple(d["view_rms_px"]), d["chi2"], d["dof"],
+                         d["flip_margin"], tuple(np.array(a) for a in d["alternatives"]))
+
+
+def _obs_to_json(o: FrameObservations) -> dict[str, Any]:
+    return {"stamp_s": o.stamp_s, "cameras": list(o.cameras), "frames": [list(f) for f in o.frames],
+            "views": [[v.camera, v.marker_id, _arr(v.corners_px), _arr(v.corner_cov), v.frame]
+                      for v in o.views]}
+
+
+def _obs_from_json(d: dict[str, Any]) -> FrameObservations:
+    views = tuple(MarkerView(c, int(m), np.array(uv), np.array(cov), int(f))
+                  for c, m, uv, cov, f in d["views"])
+    return FrameObservations(d["stamp_s"], views, tuple(d["cameras"]),
+                             tuple((str(a), int(b)) for a, b in d["frames"]))
+
+
+# --------------------------------------------------------------------------------------- the workers
+_W: dict[str, Any] = {}
+
+
+def _worker_init(rig_doc: dict[str, Any], detector: str, options: VisionOptions,
+                 paths: dict[str, list[str]], folders: dict[str, str]) -> None:
+    import cv2
+
+    from gtrig.rig.load import rig_from_dict
+    from gtrig.vision.detect import make_detector
+
+    cv2.setNumThreads(1)
+    rig = rig_from_dict(rig_doc)
+    _W.update(model=VisionModel.from_rig(rig), detect=make_detector(rig, detector), options=options,
+              paths=paths, folders=folders)
+
+
+def _process_chunk(chunk_id: int, instants: Sequence[Instant]) -> tuple[int, list[dict[str, Any]]]:
+    import cv2
+
+    model: VisionModel = _W["model"]
+    out = []
+    for ins in instants:
+        views: list[MarkerView] = []
+        for cam, i in ins.images:
+            path = _W["paths"][cam][i]
+            img = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+            if img is None:
+                raise FormatError(f"{path}: cannot read the image")
+            views.extend(replace(v, frame=i) for v in _W["detect"](img, model.cameras[cam]))
+        obs = FrameObservations(ins.stamp_s, tuple(views), tuple(sorted({c for c, _ in ins.images})),
+                                tuple(ins.images))
+        est = estimate_frame(model, obs, _W["options"])
+        out.append({"obs": _obs_to_json(obs), "est": _est_to_json(est)})
+    return chunk_id, out
+
+
+# ----------------------------------------------------------------------------------------- the runner
+def _key(rig: Rig, sequence: str, options: VisionOptions, detector: str, instants: list[Instant],
+         paths: dict[str, list[str]]) -> str:
+    doc = {"v": CHECKPOINT_VERSION, "rig": rig_to_dict(rig), "sequence": sequence,
+           "options": json.loads(json.dumps(asdict(options), default=str)), "detector": detector,
+           "instants": [[i.stamp_s, [list(x) for x in i.images]] for i in instants], "paths": paths}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:20]
+
+
+def _load_checkpoint(path: Path, key: str) -> dict[int, list[dict[str, Any]]]:
+    if not path.is_file():
+        return {}
+    done: dict[int, list[dict[str, Any]]] = {}
+    with open(path, encoding="utf-8") as f:
+        first = f.readline()
+        try:
+            head = json.loads(first)
+        except json.JSONDecodeError:
+            head = {}
+        if head.get("key") != key:
+            raise InputError(f"{path}: checkpoint of another run (other rig, settings or frames); "
+                             "delete it or choose another output")
+        for line in f:
+            try:
+                d = json.loads(line)
+            except json.JSONDecodeError:
+                break  # a line cut by the interruption: recompute that chunk
+            done[int(d["chunk"])] = d["items"]
+    return done
+
+
+def _resolve_flips(model: VisionModel, obs: list[FrameObservations], ests: list[FrameEstimate],
+                   options: VisionOptions) -> list[FrameEstimate]:
+    """Re-estimate ambiguous instants with the previous localized pose, in time order."""
+    last: FrameEstimate | None = None
+    out = []
+    for o, e in zip(obs, ests, strict=True):
+        if e.status is Status.AMBIGUOUS and last is not None and \
+                o.stamp_s - last.stamp_s <= options.previous_max_gap_s:
+            assert last.T_world_robot is not None
+            e = estimate_frame(model, o, options, PreviousPose(last.T_world_robot))
+            if e.ok:
+                e = replace(e, reason="flip resolved by the previous pose")
+        if e.ok:
+            last = e
+        out.append(e)
+    return out
+
+
+def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "validation",
+                  planar: bool = True, workers: int = 0, *, options: VisionOptions | None = None,
+                  detector: str = "auto",
+                  checkpoint: str | os.PathLike[str] | None = None,
+                  progress: Callable[[int, int], None] | None = None, chunk_size: int = 16,
+                  sync_tol_s: float = 0.005) -> VisionResult:
+    """GTvision over one sequence of a recording.
+
+    Parameters
+    ----------
+    rec_dir : the recording folder (docs/formats.md).
+    rig : the calibrated rig (cameras and markers); never the truth.
+    sequence : "validation" (one pose per static interval) or "run" (one pose per instant).
+    planar : use the floor prior (``options.planar`` is overridden by this).
+    workers : processes; 0 = one per core, 1 = in this process.
+    options : estimation settings (default :class:`VisionOptions`).
+    detector : "auto", "gtrig" or "aruco" (see :func:`gtrig.vision.detect.make_detector`).
+    checkpoint : file to resume from and append to; None: no checkpoint.
+    progress : called as ``progress(done_instants, total_instants)``.
+    """
+    from gtrig.vision.detect import make_detector
+
+    t_start = time.perf_counter()
+    if sequence not in SEQUENCES:
+        raise InputError(f"unknown sequence {sequence!r}; choose run or validation")
+    rec = Path(rec_dir)
+    opts = options or VisionOptions()
+    opts = replace(opts, planar=planar)
+    model = VisionModel.from_rig(rig)
+    det_name = make_detector(rig, detector).name
+    indices = camera_indices(rec, sequence, rig)
+    intervals = read_static_intervals(rec / "validation" / "poses.csv") if sequence == "validation" else None
+    instants = make_instants(indices, sequence, sync_tol_s, intervals)
+    paths = {name: [str(ix.path(i)) for i in range(len(ix))] for name, ix in indices.items()}
+    if any(ix.video is not None for ix in indices.values()):
+        raise InputError("GTvision reads image files; extract the frames of video.* first")
+    chunks = [instants[i:i + chunk_size] for i in range(0, len(instants), chunk_size)]
+    key = _key(rig, sequence, opts, det_name, instants, paths)
+    ck = Path(checkpoint) if checkpoint is not None else None
+    done = _load_checkpoint(ck, key) if ck is not None else {}
+    if done:
+        log.info("resuming: %d of %d chunks already in %s", len(done), len(chunks), ck)
+    ckf = None
+    if ck is not None:
+        ck.parent.mkdir(parents=True, exist_ok=True)
+        ckf = open(ck, "w" if not done else "a", encoding="utf-8")  # noqa: SIM115
+        if not done:
+            ckf.write(json.dumps({"key": key, "version": CHECKPOINT_VERSION}) + "\n")
+        else:  # rewrite cleanly (drops a torn last line)
+            ckf.close()
+            ckf = open(ck, "w", encoding="utf-8")  # noqa: SIM115
+            ckf.write(json.dumps({"key": key, "version": CHECKPOINT_VERSION}) + "\n")
+            for cid in sorted(done):
+                ckf.write(json.dumps({"chunk": cid, "items": done[cid]}) + "\n")
+            ckf.flush()
+    todo = [i for i in range(len(chunks)) if i not in done]
+    n_done = sum(len(chunks[i]) for i in done)
+    if progress:
+        progress(n_done, len(instants))
+    t_par = time.perf_counter()
+    init_args = (rig_to_dict(rig), detector, opts, paths, {})
+    try:
+        nproc = workers if workers > 0 else (os.cpu_count() or 1)
+        if nproc == 1 or len(todo) <= 1:
+            _worker_init(*init_args)
+            results = (_process_chunk(i, chunks[i]) for i in todo)
+            for cid, items in results:
+                done[cid] = items
+                n_done += len(items)
+                if ckf:
+                    ckf.write(json.dumps({"chunk": cid, "items": items}) + "\n")
+                    ckf.flush()
+                if progress:
+                    progress(n_done, len(instants))
+        else:
+            with ProcessPoolExecutor(max_workers=nproc, initializer=_worker_init, initargs=init_args) as ex:
+                futs = [ex.submit(_process_chunk, i, chunks[i]) for i in todo]
+                from concurrent.futures import as_completed
+
+                for fut in as_completed(futs):
+                    cid, items = fut.result()
+                    done[cid] = items
+                    n_done += len(items)
+                    if ckf:
+                        ckf.write(json.dumps({"chunk": cid, "items": items}) + "\n")
+                        ckf.flush()
+                    if progress:
+                        progress(n_done, len(instants))
+    finally:
+        if ckf:
+            ckf.close()
+    t_par = time.perf_counter() - t_par
+    items = [it for cid in range(len(chunks)) for it in done[cid]]
+    obs = [_obs_from_json(it["obs"]) for it in items]
+    ests = [_est_from_json(it["est"]) for it in items]
+    ests = _resolve_flips(model, obs, ests, opts)
+    for e in ests:
+        if not e.ok:
+            log.info("t=%.6f not localized: %s: %s", e.stamp_s, e.status.value, e.reason)
+    counts = {name: len(ix) for name, ix in indices.items()}
+    return VisionResult(sequence, tuple(ests), tuple(obs), counts, det_name, planar,
+                        {"parallel": t_par, "total": time.perf_counter() - t_start})
+
+
+def write_covariance_csv(path: str | os.PathLike[str], result: VisionResult) -> None:
+    """One row per localized pose: ``stamp_s`` and the covariance row-major (6 x 6 over x, y, z, rx, ry,
+    rz; or 3 x 3 over x, y, yaw when planar), metres and radians, atomically."""
+    from gtrig.io.atomic import atomic_open
+
+    ok = result.localized()
+    covs = result.covariances()
+    names = ("x", "y", "yaw") if result.planar else ("x", "y", "z", "rx", "ry", "rz")
+    header = ["stamp_s"] + [f"c_{a}_{b}" for a in names for b in names]
+    with atomic_open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(header)
+        for e, c in zip(ok, covs, strict=True):
+            w.writerow([f"{e.stamp_s:.6f}"] + [repr(float(v)) for v in c.ravel()])
+
+
+def read_covariance_csv(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
+    """``(stamps_s (M,), cov (M, k, k))`` from :func:`write_covariance_csv`."""
+    with open(path, newline="", encoding="utf-8") as f:
+        r = csv.reader(f)
+        header = next(r)
+        k = int(round(math.sqrt(len(header) - 1)))
+        rows = [[float(x) for x in row] for row in r if row]
+    a = np.array(rows).reshape(-1, 1 + k * k)
+    return a[:, 0], a[:, 1:].reshape(-1, k, k)

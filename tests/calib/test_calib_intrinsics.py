@@ -1,0 +1,76 @@
+"""Detection and intrinsic calibration on rendered images."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from gtrig.calib import synth
+from gtrig.calib.chessboard import Board, detect_corners, detect_folder, parse_board, read_grey
+from gtrig.calib.intrinsics import calibrate_intrinsics
+from gtrig.errors import InputError
+
+from .conftest import BOARD, DIST, K, SIZE
+
+
+def test_subpixel_corners_match_the_projection() -> None:
+    rng = np.random.default_rng(5)
+    T = synth.random_intrinsic_views(rng, K, DIST, SIZE, BOARD, 1, depth_m=(0.5, 0.6))[0]
+    img = synth.render_board_view(K, DIST, SIZE, T, BOARD, rng=rng, supersample=2)
+    c = detect_corners(img, BOARD)
+    truth = synth.project_board(K, DIST, T, BOARD)
+    d = min(c - truth, c[::-1] - truth, key=lambda e: np.abs(e).max())  # up to the grid's half turn
+    assert np.sqrt(np.mean(np.sum(d**2, axis=1))) < 0.15  # rendering with 2 x 2 supersamples aliases a little
+
+
+def test_intrinsics_recover_the_camera(sweep_dir) -> None:
+    res = calibrate_intrinsics(sweep_dir, BOARD)
+    cam = res.camera
+    assert cam.rms_px < 0.2
+    assert cam.image_size == SIZE
+    est = cam.camera_matrix[[0, 1, 0, 1], [0, 1, 2, 2]]
+    err = est - K[[0, 1, 0, 1], [0, 1, 2, 2]]
+    std = np.array([cam.extra["std"][k] for k in ("fx", "fy", "cx", "cy")])
+    assert np.all(np.abs(err) < np.maximum(4 * std, 0.5)) and np.all(np.abs(err) < 2.5), (err, std)
+    assert abs(cam.dist_coeffs[0] - DIST[0]) < 0.03
+    assert res.rejected == {"blank.jpg": "no board found"}
+    assert set(cam.extra["std"]) >= {"fx", "fy", "cx", "cy", "k1"}
+    assert len(res.per_image_rms_px) == 12
+
+
+def test_outlier_image_is_rejected_and_named(sweep_dir, tmp_path) -> None:
+    det = detect_folder(sweep_dir, BOARD)
+    views = list(det.found)
+    bad = views[2]
+    # a bad detection: corners off by 1 px at random
+    bent = bad.corners_px + np.random.default_rng(0).normal(0, 1.0, bad.corners_px.shape)
+    from dataclasses import replace
+
+    from gtrig.calib.intrinsics import calibrate_views
+
+    views[2] = replace(bad, corners_px=bent)
+    res = calibrate_views(views, BOARD, det.image_size)
+    assert bad.file in res.rejected and bad.file not in res.per_image_rms_px
+    assert any(bad.file in w for w in res.warnings)
+
+
+def test_one_line_errors(sweep_dir, tmp_path) -> None:
+    with pytest.raises(InputError, match="wrong board size") as e:
+        calibrate_intrinsics(sweep_dir, Board(10, 6, 0.03))  # squares given instead of inner corners
+    assert "\n" not in str(e.value)
+    few = tmp_path / "few"
+    few.mkdir()
+    for n in ("000.png", "001.png"):
+        (few / n).write_bytes((sweep_dir / n).read_bytes())
+    with pytest.raises(InputError, match="too few views"):
+        calibrate_intrinsics(few, BOARD)
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    (mixed / "a.png").write_bytes((sweep_dir / "000.png").read_bytes())
+    cv2.imwrite(str(mixed / "b.png"), cv2.resize(read_grey(sweep_dir / "001.png"), (320, 240)))
+    with pytest.raises(InputError, match="mixed resolutions"):
+        calibrate_intrinsics(mixed, BOARD)
+    with pytest.raises(InputError, match="COLSxROWSxSQUARE"):
+        parse_board("9x5")
+    assert parse_board("9x6x0.025") == Board(9, 6, 0.025)

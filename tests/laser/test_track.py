@@ -1,0 +1,122 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gtrig.errors import GtrigError
+from gtrig.geometry import wrap_angle
+from gtrig.io.scans import ScanLog, write_scans
+from gtrig.laser import synth
+from gtrig.laser.background import build_background
+from gtrig.laser.foreground import foreground_mask, foreground_threshold
+from gtrig.laser.fuse import frame_points
+from gtrig.laser.hull_icp import HullModel
+from gtrig.laser.recording import load_backgrounds, track_recording, write_track
+from gtrig.laser.track import OK, track_frames
+from gtrig.rig.load import dump_rig
+from gtrig.rig.models import Rig, Robot
+
+
+def _pose_at(t):
+    # integrate the arc exactly: x' = v cos th, y' = v sin th with th = 0.3 + 0.15 t
+    v, w, th0 = 0.3, 0.15, 0.3
+    return np.array(
+        [
+            -1.0 + v / w * (np.sin(th0 + w * t) - np.sin(th0)),
+            -0.5 - v / w * (np.cos(th0 + w * t) - np.cos(th0)),
+            th0 + w * t,
+        ]
+    )
+
+
+@pytest.fixture(scope="module")
+def sequence(room):
+    rng = np.random.default_rng(3)
+    scs = room["scanners"]
+    bst = [np.arange(0, 1.0, 1 / 75) + 0.002 * i for i in range(4)]
+    bg = synth.scan_sequence(
+        scs, room["static"], None, None, bst, rng, person_at=lambda t: np.array([-2 + 2 * t, 1.5])
+    )
+    st = [np.arange(0, 2.0, 1 / 75) + 0.0031 * i for i in range(4)]
+    run = synth.scan_sequence(
+        scs, room["static"], room["hull"], _pose_at, st, rng, person_at=lambda t: np.array([1.5, -2.0 + t])
+    )
+    return bst, bg, st, run
+
+
+def test_tracks_synthetic_sequence(room, sequence):
+    bst, bg, st, run = sequence
+    scs = room["scanners"]
+    models = [build_background(b, s) for b, s in zip(bg, scs, strict=True)]
+    masks = [foreground_mask(r, foreground_threshold(m)) for r, m in zip(run, models, strict=True)]
+    fp = frame_points(scs, st, run, masks)
+    res = track_frames(fp, HullModel.from_hull(room["hull"]))
+    ok = res.status == OK
+    assert ok.mean() > 0.95
+    truth = np.array([_pose_at(t) for t in res.stamps_s])
+    e = np.hypot(*(res.xytheta[ok, :2] - truth[ok, :2]).T)
+    ey = np.abs(wrap_angle(res.xytheta[ok, 2] - truth[ok, 2]))
+    # heading resolved from the direction of motion, millimetre accuracy
+    assert e.mean() < 0.004 and e.max() < 0.02
+    assert np.degrees(ey.mean()) < 0.3
+
+
+def _write_recording(root, room, sequence, beams_override=None, shuffle=False, drop_bg=None):
+    bst, bg, st, run = sequence
+    rig = Rig(laser_scanners=room["scanners"], robot=Robot(hull=room["hull"]))
+    dump_rig(rig, root / "rig.yaml")
+    for s, b_st, b, r_st, r in zip(room["scanners"], bst, bg, st, run, strict=True):
+        if s.name != drop_bg:
+            write_scans(root / "background" / "lasers" / f"{s.name}.csv", ScanLog(b_st, b))
+        rr = r if beams_override is None else r[:, :beams_override]
+        rs = r_st.copy()
+        if shuffle:
+            rs[10], rs[11] = rs[11], rs[10]
+        write_scans(root / "run" / "lasers" / f"{s.name}.csv", ScanLog(rs, rr))
+    return rig
+
+
+def test_track_recording_writes_tum_and_covariance(tmp_path, room, sequence):
+    rig = _write_recording(tmp_path, room, sequence)
+    res = track_recording(tmp_path, "run", rig=rig, out_tum=tmp_path / "gt.tum", out_cov=tmp_path / "cov.csv")
+    lines = (tmp_path / "gt.tum").read_text().splitlines()
+    cov = (tmp_path / "cov.csv").read_text().splitlines()
+    assert len(lines) - 1 == len(cov) - 1 == int(res.ok.sum())
+    assert cov[0].startswith("timestamp,x,y,theta,cov_xx")
+
+
+def _one_line(e: BaseException) -> str:
+    msg = str(e)
+    assert "\n" not in msg
+    return msg
+
+
+def test_error_beam_count(tmp_path, room, sequence):
+    rig = _write_recording(tmp_path, room, sequence, beams_override=170)
+    with pytest.raises(GtrigError) as e:
+        track_recording(tmp_path, "run", rig=rig)
+    assert "beams" in _one_line(e.value) and "180" in str(e.value)
+
+
+def test_error_non_monotonic_stamps(tmp_path, room, sequence):
+    rig = _write_recording(tmp_path, room, sequence, shuffle=True)
+    with pytest.raises(GtrigError) as e:
+        track_recording(tmp_path, "run", rig=rig)
+    assert "increase" in _one_line(e.value)
+
+
+def test_error_scanner_without_background(tmp_path, room, sequence):
+    rig = _write_recording(tmp_path, room, sequence, drop_bg="c")
+    with pytest.raises(GtrigError) as e:
+        load_backgrounds(tmp_path / "background", rig)
+    assert "scanner c" in _one_line(e.value) and "background" in str(e.value)
+
+
+def test_write_track_refuses_empty(tmp_path, room, sequence):
+    bst, bg, st, run = sequence
+    scs = room["scanners"]
+    masks = [np.zeros_like(r, dtype=bool) for r in run]
+    res = track_frames(frame_points(scs, st, run, masks), HullModel.from_hull(room["hull"]))
+    assert not res.ok.any()
+    with pytest.raises(GtrigError):
+        write_track(res, tmp_path / "x.tum")

@@ -1,0 +1,102 @@
+"""Printable markers: physical size, formats, and the round trip PNG -> detector -> ID."""
+
+from __future__ import annotations
+
+import json
+import re
+import struct
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from gtrig.cli.main import app
+from gtrig.markers.detect import MarkerDetector
+from gtrig.markers.generate import layout, png_resolution, to_pdf, to_png_image
+from gtrig.rig.models import MarkerFamily
+
+runner = CliRunner()
+
+
+def _phys(png: bytes) -> int:
+    i = png.index(b"pHYs")
+    ppx, ppy, unit = struct.unpack(">IIB", png[i + 4 : i + 13])
+    assert ppx == ppy and unit == 1
+    return ppx
+
+
+@pytest.mark.parametrize("family", list(MarkerFamily))
+def test_png_round_trip_every_family(family: MarkerFamily) -> None:
+    lay = layout(family, 3, 80.0)
+    img, ppm, k = to_png_image(lay, dpi=100)
+    n = lay.cells.shape[0]
+    assert abs(n * k / ppm * 1000 - 80.0) <= 0.5 / ppm * 1000 + 1e-9
+    # as a camera would see it: smaller, blurred, noisy
+    small = cv2.resize(img, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA)
+    small = cv2.GaussianBlur(small, (0, 0), 0.8)
+    small = np.clip(small + np.random.default_rng(0).normal(0, 3, small.shape), 0, 255).astype(np.uint8)
+    dets = MarkerDetector(family).detect(small)
+    assert [d.id for d in dets] == [3]
+    # corners: the black square starts at the marker's pixel offset (pixel edges at -0.5)
+    x0 = round(lay.marker_xy_mm[0] * ppm / 1000)
+    y0 = round(lay.marker_xy_mm[1] * ppm / 1000)
+    tl = (np.array([x0, y0]) - 0.5) * 0.5 - 0.25  # half-size image: u' = (u + 0.5) / 2 - 0.5
+    br = (np.array([x0, y0]) + n * k - 0.5) * 0.5 - 0.25
+    np.testing.assert_allclose(dets[0].corners_px[0], tl, atol=0.1)
+    np.testing.assert_allclose(dets[0].corners_px[2], br, atol=0.1)
+
+
+def test_cli_make_formats(tmp_path: Path) -> None:
+    for suffix in ("png", "svg", "pdf"):
+        out = tmp_path / f"m.{suffix}"
+        r = runner.invoke(app, ["markers", "make", "--family", "artoolkitplus_simple", "--id", "14",
+                                "--size-mm", "100", "--out", str(out), "--dpi", "150"])
+        assert r.exit_code == 0, r.output
+    png = (tmp_path / "m.png").read_bytes()
+    ppm = _phys(png)
+    k, ppm2 = png_resolution(100.0, 12, 150)
+    assert ppm == ppm2 and 150 <= ppm * 0.0254 < 160
+    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert img.shape[1] == pytest.approx(layout("artoolkitplus_simple", 14, 100).width_mm * ppm / 1000, abs=1)
+    svg = (tmp_path / "m.svg").read_text()
+    lay = layout("artoolkitplus_simple", 14, 100)
+    assert f'width="{lay.width_mm:.4f}mm"' in svg and "id 14" in svg
+    pdf = (tmp_path / "m.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF-1.4") and pdf.rstrip().endswith(b"%%EOF")
+    box = re.search(rb"/MediaBox \[0 0 ([\d.]+) ([\d.]+)\]", pdf)
+    assert box and float(box.group(1)) == pytest.approx(lay.width_mm * 72 / 25.4, abs=1e-3)
+    # the cross-reference table points at the objects
+    xref = int(pdf[pdf.rindex(b"startxref") + 9 :].split()[0])
+    offsets = [int(line[:10]) for line in pdf[xref:].split(b"\n")[3:8]]
+    for i, off in enumerate(offsets, start=1):
+        assert pdf[off:].startswith(b"%d 0 obj" % i)
+    # the content stream has one black run per row segment of the pattern
+    assert pdf.count(b" re\n") == len(lay.black_runs_mm())
+    assert to_pdf(lay) == pdf
+
+
+def test_cli_errors_and_detect(tmp_path: Path) -> None:
+    r = runner.invoke(app, ["markers", "make", "--family", "aruco_4x4_50", "--id", "50", "--size-mm", "50",
+                            "--out", str(tmp_path / "x.png")])
+    assert r.exit_code == 2 and "out of range" in r.output
+    r = runner.invoke(app, ["markers", "make", "--family", "aruco_4x4_50", "--id", "5", "--size-mm", "50",
+                            "--out", str(tmp_path / "x.jpg")])
+    assert r.exit_code == 2 and "unknown output format" in r.output
+    lay = layout("apriltag_36h11", 9, 40.0)
+    img, _, _ = to_png_image(lay, dpi=100)
+    cv2.imwrite(str(tmp_path / "a.png"), img)
+    out = tmp_path / "det.json"
+    r = runner.invoke(app, ["markers", "detect", str(tmp_path), "--family", "apriltag_36h11",
+                            "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(out.read_text())
+    (im,) = doc["images"]
+    assert im["file"].endswith("a.png")
+    (d,) = im["detections"]
+    assert d["id"] == 9 and np.array(d["corners"]).shape == (4, 2)
+    assert np.array(d["corner_cov"]).shape == (4, 2, 2)
+    r = runner.invoke(app, ["markers", "detect", str(tmp_path / "none.png"), "--family", "apriltag_36h11",
+                            "--out", str(out)])
+    assert r.exit_code == 2

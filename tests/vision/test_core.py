@@ -1,0 +1,174 @@
+"""GTvision's estimation core on synthetic corners: Jacobians, IPPE, flips, accuracy and NEES."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gtrig import geometry as geo
+from gtrig.rig.models import Pose
+from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
+from gtrig.vision.covariance import RigUncertainty, nees, planar_covariance, pose_error_xi
+from gtrig.vision.estimate import Status, VisionOptions, estimate_frame
+from gtrig.vision.init import PreviousPose, ippe_view
+from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel, stack_corners
+from gtrig.vision.projection import camera_pose_jacobian, marker_pose_jacobian, project_pose
+from gtrig.vision.refine import apply_step
+from gtrig.vision.synthetic import CornerNoise, synthetic_observations
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return make_scene(0)
+
+
+def _obs(scene, k, rng, **kw):
+    T = scene.T_world_robot(*VALIDATION_POSES[k])
+    return T, synthetic_observations(scene.rig_true, T, float(k), rng, **kw)
+
+
+def test_jacobians_match_finite_differences(scene):
+    rng = np.random.default_rng(0)
+    T, obs = _obs(scene, 3, rng)
+    model = VisionModel.from_rig(scene.rig_true)
+    sc = stack_corners(model, obs.views)
+    uv0, _, J = project_pose(sc, T)
+    h = 1e-6
+    for i in range(6):
+        d = np.zeros(6)
+        d[i] = h
+        uv1, _, _ = project_pose(sc, apply_step(T, d), jacobian=False)
+        np.testing.assert_allclose((uv1 - uv0) / h, J[:, :, i], rtol=1e-4, atol=1e-2)
+    # camera perturbation: moving the camera by xi is the same as moving the world by its inverse
+    Jc = camera_pose_jacobian(sc, T)
+    assert Jc.shape == J.shape and np.all(np.isfinite(Jc))
+    np.testing.assert_allclose(Jc[:, :, :3], -J[:, :, :3], rtol=1e-9, atol=1e-9)
+    Jm = marker_pose_jacobian(sc, T)
+    # a marker translation in robot axes equals a robot translation rotated into the world
+    np.testing.assert_allclose(Jm[:, :, :3], J[:, :, :3] @ T[:3, :3], rtol=1e-9, atol=1e-9)
+
+
+def test_ippe_returns_both_solutions_and_the_true_one(scene):
+    rng = np.random.default_rng(1)
+    T, obs = _obs(scene, 0, rng, noise=CornerNoise(sigma_px=0.0))
+    model = VisionModel.from_rig(scene.rig_true)
+    for v in obs.views:
+        s = ippe_view(model, v)
+        assert s.T_world_robot.shape == (2, 4, 4)
+        errs = [geo.pose_error(Tc, T) for Tc in s.T_world_robot]
+        best = min(errs)
+        assert best[0] < 1e-6 and best[1] < 1e-6
+
+
+@pytest.mark.parametrize("planar", [False, True])
+def test_accuracy_and_nees_on_synthetic_corners(scene, planar):
+    rng = np.random.default_rng(2)
+    model = VisionModel.from_rig(scene.rig_true)
+    opts = VisionOptions(planar=planar, rig_uncertainty=RigUncertainty.none())
+    pos, n6, n3 = [], [], []
+    for _rep in range(3):
+        for k in range(0, 26, 2):
+            T, obs = _obs(scene, k, rng)
+            est = estimate_frame(model, obs, opts)
+            assert est.ok, est.reason
+            e = pose_error_xi(est.T_world_robot, T)
+            pos.append(np.linalg.norm(e[:2]))
+            n6.append(nees(e, est.cov_6x6))
+            n3.append(nees(e[[0, 1, 5]], planar_covariance(est.cov_6x6)))
+    assert np.mean(pos) < 0.002 and np.max(pos) < 0.006
+    # 117 draws: the mean of a chi-square(6) has sd 0.32 here
+    assert 6 * 0.75 < np.mean(n6) < 6 * 1.3
+    assert 3 * 0.7 < np.mean(n3) < 3 * 1.35
+
+
+def test_rig_uncertainty_keeps_covariances_consistent(scene):
+    """Cameras and markers off by their stated sigmas: the covariance must grow to cover the error."""
+    rng = np.random.default_rng(3)
+    ru = RigUncertainty()
+    n_all, n_naive = [], []
+    for trial in range(4):
+        rig = scene.rig_true
+        cams = tuple(c.model_copy(update={"T_world_cam": Pose.from_matrix(
+            geo.T_from_xyz_rpy(rng.normal(0, ru.camera_xyz_m, 3), np.zeros(3)) @ c.T_world_cam.matrix()
+            @ geo.T_from_xyz_rpy(np.zeros(3), rng.normal(0, ru.camera_rot_rad, 3)))}) for c in rig.cameras)
+        mks = tuple(m.model_copy(update={"T_robot_marker": Pose.from_matrix(
+            m.T_robot_marker.matrix() @ geo.T_from_xyz_rpy(rng.normal(0, ru.marker_xyz_m, 3),
+                                                           rng.normal(0, ru.marker_rot_rad, 3)))})
+            for m in rig.robot.markers)
+        robot = rig.robot.model_copy(update={"markers": mks})
+        rig_est = rig.model_copy(update={"cameras": cams, "robot": robot})
+        model = VisionModel.from_rig(rig_est)
+        for k in range(trial, 26, 4):
+            T, obs = _obs(scene, k, rng)
+            e1 = estimate_frame(model, obs, VisionOptions(planar=False, rig_uncertainty=ru))
+            assert e1.ok, e1.reason
+            n_all.append(nees(pose_error_xi(e1.T_world_robot, T), e1.cov_6x6))
+            e0 = estimate_frame(model, obs, VisionOptions(planar=False, rig_uncertainty=RigUncertainty.none(),
+                                                          frame_alpha=0.0))
+            n_naive.append(nees(pose_error_xi(e0.T_world_robot, T), e0.cov_6x6))
+    assert 0.5 * 6 < np.mean(n_all) < 2 * 6
+    assert np.mean(n_naive) > 3 * np.mean(n_all)  # corner noise alone would be far too confident
+
+
+def _frontal_rig(scene):
+    """One camera looking straight down from 4 m at a single marker: the classic flip case."""
+    cam = scene.rig_true.cameras[0]
+    T_wc = geo.look_at([0.0, 0.0, 4.0], [0.0, 0.0, 0.0], up=(0.0, 1.0, 0.0))
+    cam = cam.model_copy(update={"T_world_cam": Pose.from_matrix(T_wc), "dist_coeffs": (0.0,) * 5})
+    m = scene.rig_true.robot.markers[0].model_copy(update={
+        "T_robot_marker": Pose(xyz=(0.0, 0.0, 0.62), rpy_deg=(0, 0, 0))})
+    return scene.rig_true.model_copy(update={
+        "cameras": (cam,), "robot": scene.rig_true.robot.model_copy(update={"markers": (m,)})})
+
+
+def test_flip_reported_ambiguous_then_broken_by_floor_prior_or_previous_pose(scene):
+    rig = _frontal_rig(scene)
+    model = VisionModel.from_rig(rig)
+    rng = np.random.default_rng(4)
+    T = geo.T_from_xyz_rpy([0.4, -0.02, 0.0], np.radians([0.3, -0.2, 30.0]))
+    free = VisionOptions(planar=False, rig_uncertainty=RigUncertainty.none())
+    planar = VisionOptions(planar=True, rig_uncertainty=RigUncertainty.none())
+    n_amb = n_prev_ok = n_planar_ok = 0
+    for _ in range(12):
+        obs = synthetic_observations(rig, T, 0.0, rng, noise=CornerNoise(sigma_px=0.2))
+        assert len(obs.views) == 1
+        e = estimate_frame(model, obs, free)
+        if e.status is Status.AMBIGUOUS:
+            n_amb += 1
+            rot_err = sorted(geo.pose_error(a, T)[1] for a in e.alternatives)
+            assert len(rot_err) >= 2 and rot_err[-1] > math.radians(8)  # a real flip, not noise
+            e2 = estimate_frame(model, obs, free, PreviousPose(T, 0.05, math.radians(3.0)))
+            picked = geo.pose_error(e2.T_world_robot, T)[1]
+            n_prev_ok += e2.ok and picked == pytest.approx(rot_err[0], abs=1e-3)
+        e3 = estimate_frame(model, obs, planar)
+        n_planar_ok += e3.ok and geo.pose_error(e3.T_world_robot, T)[1] < math.radians(1.0)
+    assert n_amb >= 6  # without the floor, a lone near-frontal marker is ambiguous, and gtrig says so
+    assert n_prev_ok == n_amb
+    assert n_planar_ok == 12
+
+
+def test_outlier_view_rejected_and_failures_have_reasons(scene):
+    rng = np.random.default_rng(5)
+    model = VisionModel.from_rig(scene.rig_true)
+    opts = VisionOptions(planar=True, rig_uncertainty=RigUncertainty.none())
+    T, obs = _obs(scene, 3, rng)
+    assert len(obs.views) >= 3
+    bad = obs.views[1]
+    views = list(obs.views)
+    views[1] = MarkerView(bad.camera, bad.marker_id, bad.corners_px + [[4.0, -3.0], [0, 0], [0, 0], [0, 0]],
+                          bad.corner_cov)
+    est = estimate_frame(model, FrameObservations(obs.stamp_s, tuple(views)), opts)
+    assert est.ok
+    assert est.rejected == ((bad.camera, bad.marker_id),)
+    assert geo.pose_error(est.T_world_robot, T)[0] < 0.005
+
+    none = estimate_frame(model, FrameObservations(1.0, ()), opts)
+    assert none.status is Status.NO_MARKER and none.T_world_robot is None and "no marker" in none.reason
+
+    # every corner 20 x noisier than its covariance says: refused, not silently kept
+    loud = tuple(MarkerView(v.camera, v.marker_id, v.corners_px + rng.normal(0, 2.0, (4, 2)), v.corner_cov)
+                 for v in obs.views)
+    est = estimate_frame(model, FrameObservations(2.0, loud), opts)
+    assert est.status is Status.INCONSISTENT and "chi2" in est.reason
