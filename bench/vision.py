@@ -20,6 +20,7 @@ import csv
 import math
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -82,7 +83,7 @@ def bench_corners(seeds: list[int], noise_px: float) -> None:
             views = []
             for f in range(10):  # 1 s at 10 Hz, every camera
                 o = synthetic_observations(scene.rig_true, T, k, rng, noise)
-                views.extend(v.__class__(v.camera, v.marker_id, v.corners_px, v.corner_cov, f) for v in o.views)
+                views.extend(replace(v, frame=f) for v in o.views)
             obs = FrameObservations(float(k), tuple(views))
             for name, planar in (("gtvision planar", True), ("gtvision 6-DoF", False)):
                 est = estimate_frame(model, obs, VisionOptions(planar=planar, rig_uncertainty=ru))
@@ -182,7 +183,8 @@ def bench_images(seed: int, workers: int, frames: int) -> None:
         print(f"\n### Rendered images (test renderer), seed {seed}, {frames} images per camera per pose, "
               f"detector {res.detector}, true rig\n")
         print(HEADER)
-        print(f"| {'gtvision planar':<28} | {100 * acc.pos_err_mean_m:6.2f} | {100 * acc.pos_err_max_m:6.2f} | "
+        print(f"| {'gtvision planar':<28} | {100 * acc.pos_err_mean_m:6.2f} | "
+              f"{100 * acc.pos_err_max_m:6.2f} | "
               f"{math.degrees(acc.yaw_err_mean_rad):7.3f} | {acc.localized:3d}/{acc.instants:<3d} | "
               f"{acc.nees_mean:6.2f} |")
         print(_row("seeds (same corners)", seeds_pos, seeds_yaw, seeds_ok, len(Ts), None))

@@ -20,7 +20,9 @@ from gtrig.calib.se3avg import PoseMean, mean_pose
 from gtrig.errors import ConvergenceError, InputError
 
 
-def board_pose(K: np.ndarray, dist: np.ndarray, corners_px: np.ndarray, board: Board) -> tuple[np.ndarray, float]:
+def board_pose(
+    K: np.ndarray, dist: np.ndarray, corners_px: np.ndarray, board: Board
+) -> tuple[np.ndarray, float]:
     """Pose ``T_cam_board`` (4, 4) of a detected board and its reprojection RMS (pixels)."""
     P = board.object_points()
     uv = np.asarray(corners_px, dtype=np.float64).reshape(-1, 1, 2)
@@ -46,8 +48,9 @@ def pose_distance(T_a: np.ndarray, T_b: np.ndarray, metres_per_rad: float = 1.0)
     return dr * metres_per_rad + dt
 
 
-def oriented_board_pose(K: np.ndarray, dist: np.ndarray, corners_px: np.ndarray, board: Board,
-                        T_cam_board_expected: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+def oriented_board_pose(
+    K: np.ndarray, dist: np.ndarray, corners_px: np.ndarray, board: Board, T_cam_board_expected: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Resolve the half-turn ambiguity of a grid against an expected pose.
 
     Returns the corners in the order consistent with ``T_cam_board_expected``, the pose and its RMS.
@@ -60,9 +63,14 @@ def oriented_board_pose(K: np.ndarray, dist: np.ndarray, corners_px: np.ndarray,
     return np.asarray(corners_px), T0, e0
 
 
-def anchor_camera(K: np.ndarray, dist: np.ndarray, views: Sequence[np.ndarray], board: Board,
-                  T_world_board: np.ndarray, T_world_cam_nominal: np.ndarray | None = None
-                  ) -> tuple[PoseMean, list[np.ndarray]]:
+def anchor_camera(
+    K: np.ndarray,
+    dist: np.ndarray,
+    views: Sequence[np.ndarray],
+    board: Board,
+    T_world_board: np.ndarray,
+    T_world_cam_nominal: np.ndarray | None = None,
+) -> tuple[PoseMean, list[np.ndarray]]:
     """``T_world_cam`` from views of a board at a known world pose.
 
     Parameters
@@ -80,8 +88,9 @@ def anchor_camera(K: np.ndarray, dist: np.ndarray, views: Sequence[np.ndarray], 
     Ts, ordered = [], []
     for c in views:
         if T_world_cam_nominal is not None:
-            c, T_cam_board, _ = oriented_board_pose(K, dist, c, board,
-                                                    geo.inv_T(T_world_cam_nominal) @ T_world_board)
+            c, T_cam_board, _ = oriented_board_pose(
+                K, dist, c, board, geo.inv_T(T_world_cam_nominal) @ T_world_board
+            )
         else:
             T_cam_board, _ = board_pose(K, dist, c, board)
         Ts.append(T_world_board @ geo.inv_T(T_cam_board))

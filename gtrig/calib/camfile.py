@@ -93,7 +93,9 @@ def cam_from_dict(d: Any, source: str = "<cam>") -> CameraIntrinsics:
     except (TypeError, ValueError):
         raise FormatError(f"{source}: camera_matrix and dist_coeffs must be numbers") from None
     if K.shape != (3, 3) or K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
-        raise FormatError(f"{source}: camera_matrix: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]], fx, fy > 0")
+        raise FormatError(
+            f"{source}: camera_matrix: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]], fx, fy > 0"
+        )
     if dist.size not in (4, 5, 8, 12, 14):
         raise FormatError(f"{source}: dist_coeffs: expected 4, 5, 8, 12 or 14 coefficients, got {dist.size}")
     if w <= 0 or h <= 0:

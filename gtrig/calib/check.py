@@ -62,8 +62,9 @@ def read_check_poses(path: str | os.PathLike[str]) -> list[tuple[str, str, np.nd
     return out
 
 
-def check_rig(rig: Rig, images_dir: str | os.PathLike[str], poses_csv: str | os.PathLike[str],
-              board: Board) -> list[CheckRow]:
+def check_rig(
+    rig: Rig, images_dir: str | os.PathLike[str], poses_csv: str | os.PathLike[str], board: Board
+) -> list[CheckRow]:
     """Locate the board in every listed image and compare with its surveyed pose."""
     root = Path(images_dir)
     out = []

@@ -54,7 +54,9 @@ class Board:
         if self.cols < 2 or self.rows < 2:
             raise InputError(f"board {self.cols}x{self.rows}: needs at least 2 x 2 inner corners")
         if not 0.0 < self.square_m < 2.0:
-            raise InputError(f"board square {self.square_m:g} m is implausible (millimetres given as metres?)")
+            raise InputError(
+                f"board square {self.square_m:g} m is implausible (millimetres given as metres?)"
+            )
         if self.origin not in ("corner", "centre"):
             raise InputError(f"board origin {self.origin!r}: expected 'corner' or 'centre'")
 
@@ -83,7 +85,9 @@ def parse_board(spec: str, origin: str = "corner") -> Board:
     """``"9x5x0.100"`` (inner corners along x, along y, square side in metres) to a :class:`Board`."""
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*[xX]\s*([0-9.eE+-]+)\s*", spec)
     if not m:
-        raise InputError(f"--board {spec!r}: expected COLSxROWSxSQUARE, e.g. 9x5x0.100 (inner corners, metres)")
+        raise InputError(
+            f"--board {spec!r}: expected COLSxROWSxSQUARE, e.g. 9x5x0.100 (inner corners, metres)"
+        )
     try:
         square = float(m.group(3))
     except ValueError:
@@ -120,8 +124,12 @@ def read_grey(path: str | os.PathLike[str]) -> np.ndarray:
 
 def _subpix_window(corners: np.ndarray, board: Board) -> int:
     g = corners.reshape(board.rows, board.cols, 2)
-    d = np.concatenate([np.linalg.norm(np.diff(g, axis=1), axis=2).ravel(),
-                        np.linalg.norm(np.diff(g, axis=0), axis=2).ravel()])
+    d = np.concatenate(
+        [
+            np.linalg.norm(np.diff(g, axis=1), axis=2).ravel(),
+            np.linalg.norm(np.diff(g, axis=0), axis=2).ravel(),
+        ]
+    )
     return int(np.clip(0.35 * float(np.min(d)), 2, 15))
 
 
@@ -152,13 +160,18 @@ def detect_corners(img: np.ndarray, board: Board, *, refine: bool = True) -> np.
     """
     h, w = img.shape[:2]
     scale = min(1.0, DETECT_MAX_SIDE_PX / max(h, w))
-    small = cv2.resize(img, (round(w * scale), round(h * scale)), interpolation=cv2.INTER_AREA) if scale < 1 else img
+    small = (
+        cv2.resize(img, (round(w * scale), round(h * scale)), interpolation=cv2.INTER_AREA)
+        if scale < 1
+        else img
+    )
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
     found, corners = cv2.findChessboardCorners(small, board.pattern_size, flags=flags)
     sb = False
     if not found:
-        found, corners = cv2.findChessboardCornersSB(small, board.pattern_size,
-                                                     flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY)
+        found, corners = cv2.findChessboardCornersSB(
+            small, board.pattern_size, flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+        )
         sb = True
     if not found or corners is None or len(corners) != board.n_corners:
         return None
@@ -195,15 +208,23 @@ class FolderDetections:
 def _check_size(p: Path, img: np.ndarray, size: tuple[int, int] | None, first: str) -> tuple[int, int]:
     s = (int(img.shape[1]), int(img.shape[0]))
     if size is not None and s != size:
-        raise InputError(f"{p}: mixed resolutions: {s[0]} x {s[1]} but {first} is {size[0]} x {size[1]} "
-                         f"(one camera per folder, one resolution)")
+        raise InputError(
+            f"{p}: mixed resolutions: {s[0]} x {s[1]} but {first} is {size[0]} x {size[1]} "
+            f"(one camera per folder, one resolution)"
+        )
     return s
 
 
 def _wrong_board_hint(images: Sequence[tuple[Path, np.ndarray]], board: Board) -> str:
     """Look for a board of another size in a few images, to turn 'nothing found' into a useful hint."""
-    tries = [(board.cols - 1, board.rows - 1), (board.cols + 1, board.rows + 1), (board.cols - 1, board.rows),
-             (board.cols, board.rows - 1), (board.cols + 1, board.rows), (board.cols, board.rows + 1)]
+    tries = [
+        (board.cols - 1, board.rows - 1),
+        (board.cols + 1, board.rows + 1),
+        (board.cols - 1, board.rows),
+        (board.cols, board.rows - 1),
+        (board.cols + 1, board.rows),
+        (board.cols, board.rows + 1),
+    ]
     for p, img in images[:3]:
         h, w = img.shape[:2]
         scale = min(1.0, 800 / max(h, w))
@@ -211,16 +232,21 @@ def _wrong_board_hint(images: Sequence[tuple[Path, np.ndarray]], board: Board) -
         for c, r in tries:
             if c < 2 or r < 2:
                 continue
-            ok, _ = cv2.findChessboardCorners(small, (c, r), flags=cv2.CALIB_CB_ADAPTIVE_THRESH
-                                              | cv2.CALIB_CB_FAST_CHECK)
+            ok, _ = cv2.findChessboardCorners(
+                small, (c, r), flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_FAST_CHECK
+            )
             if ok:
-                sq = "; count inner corners, not squares" if (c, r) == (board.cols - 1, board.rows - 1) else ""
-                return f", but a {c}x{r} board is in {p.name}: wrong board size? (--board {c}x{r}x{board.square_m:g}{sq})"
+                sq = (
+                    "; count inner corners, not squares" if (c, r) == (board.cols - 1, board.rows - 1) else ""
+                )
+                return (f", but a {c}x{r} board is in {p.name}: wrong board size? "
+                        f"(--board {c}x{r}x{board.square_m:g}{sq})")
     return ""
 
 
-def detect_folder(folder: str | os.PathLike[str], board: Board,
-                  files: Sequence[Path] | None = None) -> FolderDetections:
+def detect_folder(
+    folder: str | os.PathLike[str], board: Board, files: Sequence[Path] | None = None
+) -> FolderDetections:
     """Detect ``board`` in every image of ``folder`` (or in ``files``).
 
     Raises
@@ -247,12 +273,16 @@ def detect_folder(folder: str | os.PathLike[str], board: Board,
                 # three misses in a row from the start: a wrong board size is likely, say so now
                 hint = _wrong_board_hint(misses, board)
                 if hint:
-                    raise InputError(f"{d}: no {board.cols}x{board.rows} chessboard in the first 3 images" + hint)
+                    raise InputError(
+                        f"{d}: no {board.cols}x{board.rows} chessboard in the first 3 images" + hint
+                    )
         else:
             found.append(Detection(p.name, p, c, size))
     if not found:
-        raise InputError(f"{d}: no {board.cols}x{board.rows} chessboard found in any of {len(paths)} image(s)"
-                         + _wrong_board_hint(misses, board))
+        raise InputError(
+            f"{d}: no {board.cols}x{board.rows} chessboard found in any of {len(paths)} image(s)"
+            + _wrong_board_hint(misses, board)
+        )
     assert size is not None
     return FolderDetections(d, size, tuple(found), tuple(missing))
 
@@ -287,15 +317,19 @@ def _pose_from_yaml(v: Any, where: str) -> np.ndarray:
     try:
         return Pose.model_validate(v).matrix()
     except ValidationError as e:
-        raise FormatError(f"{where}: expected a pose {{xyz, quat_xyzw | rpy_deg}} or a 4 x 4 matrix "
-                          f"({e.errors()[0]['msg']})") from None
+        raise FormatError(
+            f"{where}: expected a pose {{xyz, quat_xyzw | rpy_deg}} or a 4 x 4 matrix "
+            f"({e.errors()[0]['msg']})"
+        ) from None
 
 
 def boards_spec_from_dict(data: Any, source: str = "<boards>") -> BoardsSpec:
     """Parse a boards document (see :func:`read_boards_yaml`)."""
     if not isinstance(data, dict):
         raise FormatError(f"{source}: expected a mapping with board, T_board1_board2, T_world_board")
-    b = data.get("board", data.get("chessboard", data if ("inner_corners" in data or "squares" in data) else None))
+    b = data.get(
+        "board", data.get("chessboard", data if ("inner_corners" in data or "squares" in data) else None)
+    )
     if not isinstance(b, dict):
         raise FormatError(f"{source}: board: missing (inner_corners: [cols, rows], square_m)")
     try:
@@ -313,17 +347,19 @@ def boards_spec_from_dict(data: Any, source: str = "<boards>") -> BoardsSpec:
         raise FormatError(f"{source}: T_board1_board2: missing field")
     T12 = _pose_from_yaml(data["T_board1_board2"], f"{source}: T_board1_board2")
     Twb = data.get("T_world_board")
-    return BoardsSpec(board, T12, None if Twb is None else _pose_from_yaml(Twb, f"{source}: T_world_board"), source)
+    return BoardsSpec(
+        board, T12, None if Twb is None else _pose_from_yaml(Twb, f"{source}: T_world_board"), source
+    )
 
 
 def read_boards_yaml(path: str | os.PathLike[str]) -> BoardsSpec:
     """Read ``boards.yaml``::
 
-        inner_corners: [9, 5]        # or squares: [10, 6]; may also sit under a "board:" key
-        square_m: 0.100
-        origin: corner               # optional: corner (first inner corner, default) or centre
-        T_board1_board2: {xyz: [1.5, 0, 0], quat_xyzw: [0, 0, 0, 1]}
-        T_world_board: {xyz: [...], rpy_deg: [180, 0, 0]}
+    inner_corners: [9, 5]        # or squares: [10, 6]; may also sit under a "board:" key
+    square_m: 0.100
+    origin: corner               # optional: corner (first inner corner, default) or centre
+    T_board1_board2: {xyz: [1.5, 0, 0], quat_xyzw: [0, 0, 0, 1]}
+    T_world_board: {xyz: [...], rpy_deg: [180, 0, 0]}
     """
     p = Path(path)
     try:

@@ -78,8 +78,9 @@ def coverage_fraction(views: Sequence[np.ndarray], image_size: tuple[int, int], 
     return float(mask.mean())
 
 
-def _run(obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int], flags: int,
-         K0: np.ndarray | None) -> tuple:
+def _run(
+    obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int], flags: int, K0: np.ndarray | None
+) -> tuple:
     crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
     try:
         return cv2.calibrateCameraExtended(obj, img, size, K0, None, flags=flags, criteria=crit)
@@ -87,16 +88,24 @@ def _run(obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int], fl
         raise ConvergenceError(f"OpenCV calibration failed: {str(e).splitlines()[-1].strip()}") from None
 
 
-def calibrate_views(views: Sequence[Detection], board: Board, image_size: tuple[int, int], *,
-                    estimate_k3: bool = False, min_reject_px: float = 0.15,
-                    camera_matrix_guess: np.ndarray | None = None,
-                    rejected: dict[str, str] | None = None) -> IntrinsicsResult:
+def calibrate_views(
+    views: Sequence[Detection],
+    board: Board,
+    image_size: tuple[int, int],
+    *,
+    estimate_k3: bool = False,
+    min_reject_px: float = 0.15,
+    camera_matrix_guess: np.ndarray | None = None,
+    rejected: dict[str, str] | None = None,
+) -> IntrinsicsResult:
     """Calibrate from detections already made (see :func:`calibrate_intrinsics`)."""
     rejected = dict(rejected or {})
     views = list(views)
     if len(views) < MIN_VIEWS:
-        raise InputError(f"too few views: {len(views)} image(s) with a board, need at least {MIN_VIEWS} "
-                         f"(tilted in different directions)")
+        raise InputError(
+            f"too few views: {len(views)} image(s) with a board, need at least {MIN_VIEWS} "
+            f"(tilted in different directions)"
+        )
     flags = 0 if estimate_k3 else cv2.CALIB_FIX_K3
     K0 = None
     if camera_matrix_guess is not None:
@@ -126,13 +135,17 @@ def calibrate_views(views: Sequence[Detection], board: Board, image_size: tuple[
     cover = coverage_fraction([v.corners_px for v in views], image_size, board)
     n_rej = len(warnings)
     if cover < COVERAGE_WARN:
-        warnings.append(f"poor coverage: the boards cover {100 * cover:.0f} % of the image; "
-                        "add views with the board near the image edges and corners")
+        warnings.append(
+            f"poor coverage: the boards cover {100 * cover:.0f} % of the image; "
+            "add views with the board near the image edges and corners"
+        )
     normals = Ts[:, :3, 2]
     spread = float(np.degrees(np.max(np.arccos(np.clip(normals @ normals.T, -1, 1)))))
     if np.sum(tilt > TILT_WARN_DEG) < 2 or spread < TILT_WARN_DEG:
-        warnings.append(f"poor view variety: tilts {tilt.min():.0f}-{tilt.max():.0f} deg, normals spread "
-                        f"{spread:.0f} deg; tilt the board by 20-45 deg in different directions")
+        warnings.append(
+            f"poor view variety: tilts {tilt.min():.0f}-{tilt.max():.0f} deg, normals spread "
+            f"{spread:.0f} deg; tilt the board by 20-45 deg in different directions"
+        )
     for w_ in warnings[n_rej:]:
         log.warning(w_)
     dist = np.asarray(dist, dtype=float).ravel()[:5]
@@ -154,8 +167,13 @@ def calibrate_views(views: Sequence[Detection], board: Board, image_size: tuple[
     return IntrinsicsResult(cam, tuple(views), Ts, per, rejected, cover, tilt, tuple(warnings))
 
 
-def calibrate_intrinsics(images: str | os.PathLike[str] | Sequence[Path], board: Board, *,
-                         estimate_k3: bool = False, min_reject_px: float = 0.15) -> IntrinsicsResult:
+def calibrate_intrinsics(
+    images: str | os.PathLike[str] | Sequence[Path],
+    board: Board,
+    *,
+    estimate_k3: bool = False,
+    min_reject_px: float = 0.15,
+) -> IntrinsicsResult:
     """Calibrate one camera from a folder (or a list) of chessboard images.
 
     Parameters
@@ -183,17 +201,33 @@ def calibrate_intrinsics(images: str | os.PathLike[str] | Sequence[Path], board:
     for m in det.missing:
         log.warning("%s: no %dx%d board found, image skipped", m, board.cols, board.rows)
     if len(det.found) < MIN_VIEWS:
-        raise InputError(f"{det.folder}: too few views: a {board.cols}x{board.rows} board was found in "
-                         f"{len(det.found)} of {len(det.found) + len(det.missing)} image(s), need {MIN_VIEWS}")
-    res = calibrate_views(det.found, board, det.image_size, estimate_k3=estimate_k3,
-                          min_reject_px=min_reject_px, rejected=rejected)
+        raise InputError(
+            f"{det.folder}: too few views: a {board.cols}x{board.rows} board was found in "
+            f"{len(det.found)} of {len(det.found) + len(det.missing)} image(s), need {MIN_VIEWS}"
+        )
+    res = calibrate_views(
+        det.found,
+        board,
+        det.image_size,
+        estimate_k3=estimate_k3,
+        min_reject_px=min_reject_px,
+        rejected=rejected,
+    )
     if det.missing:
         msg = f"no board in {len(det.missing)} image(s): {', '.join(det.missing[:5])}" + (
-            " ..." if len(det.missing) > 5 else "")
+            " ..." if len(det.missing) > 5 else ""
+        )
         cam = res.camera
         extra = dict(cam.extra)
         extra["warnings"] = [msg, *extra["warnings"]]
-        res = IntrinsicsResult(CameraIntrinsics(cam.image_size, cam.camera_matrix, cam.dist_coeffs, cam.rms_px,
-                                                extra), res.views, res.T_cam_board, res.per_image_rms_px,
-                               res.rejected, res.coverage, res.tilt_deg, (msg, *res.warnings))
+        res = IntrinsicsResult(
+            CameraIntrinsics(cam.image_size, cam.camera_matrix, cam.dist_coeffs, cam.rms_px, extra),
+            res.views,
+            res.T_cam_board,
+            res.per_image_rms_px,
+            res.rejected,
+            res.coverage,
+            res.tilt_deg,
+            (msg, *res.warnings),
+        )
     return res

@@ -156,24 +156,37 @@ class NetworkResult:
             t, q = geo.xyz_quat_from_T(c.T_world_cam)
             dch, rch = geo.pose_error(self.chain[n], c.T_world_cam) if n in self.chain else (np.nan, np.nan)
             cams[n] = {
-                "xyz": [float(v) for v in t], "quat_xyzw": [float(v) for v in q],
+                "xyz": [float(v) for v in t],
+                "quat_xyzw": [float(v) for v in q],
                 "sigma_pos_mm": [float(v * 1000) for v in c.sigma_pos_m],
                 "sigma_rot_deg": [float(np.degrees(v)) for v in c.sigma_rot_rad],
-                "rms_px": float(c.rms_px), "n_points": int(c.n_points),
+                "rms_px": float(c.rms_px),
+                "n_points": int(c.n_points),
                 "chain_path": self.chain_path.get(n, []),
-                "chain_minus_joint_mm": float(dch * 1000), "chain_minus_joint_deg": float(np.degrees(rch)),
+                "chain_minus_joint_mm": float(dch * 1000),
+                "chain_minus_joint_deg": float(np.degrees(rch)),
             }
         t12, q12 = geo.xyz_quat_from_T(self.T_board1_board2)
         return {
             "cameras": cams,
-            "pairs": {p: {"rms_px": float(self.rms_px_pair[p]), "views": int(e.n),
-                          "edge_spread_mm": float(e.trans_rms_m * 1000),
-                          "edge_spread_deg": float(np.degrees(e.rot_rms_rad))} for p, e in self.edges.items()},
+            "pairs": {
+                p: {
+                    "rms_px": float(self.rms_px_pair[p]),
+                    "views": int(e.n),
+                    "edge_spread_mm": float(e.trans_rms_m * 1000),
+                    "edge_spread_deg": float(np.degrees(e.rot_rms_rad)),
+                }
+                for p, e in self.edges.items()
+            },
             "world_board_rms_px": {k: float(v) for k, v in self.rms_px_world.items()},
-            "T_board1_board2": {"xyz": [float(v) for v in t12], "quat_xyzw": [float(v) for v in q12],
-                                "sigma_mm": [float(v * 1000) for v in self.T_board1_board2_sigma[3:]],
-                                "sigma_deg": [float(np.degrees(v)) for v in self.T_board1_board2_sigma[:3]]},
-            "rms_px": float(self.rms_px), "sigma_px": float(self.sigma_px),
+            "T_board1_board2": {
+                "xyz": [float(v) for v in t12],
+                "quat_xyzw": [float(v) for v in q12],
+                "sigma_mm": [float(v * 1000) for v in self.T_board1_board2_sigma[3:]],
+                "sigma_deg": [float(np.degrees(v)) for v in self.T_board1_board2_sigma[:3]],
+            },
+            "rms_px": float(self.rms_px),
+            "sigma_px": float(self.sigma_px),
             "warnings": list(self.warnings),
         }
 
@@ -224,8 +237,9 @@ def _exp_apply(R0: np.ndarray, t0: np.ndarray, p: np.ndarray) -> tuple[np.ndarra
     return R, t0 + p[:, 3:]
 
 
-def _levenberg_marquardt(fun: Any, jac: Any, n_par: int, n_obs: int, huber_px: float, warnings: list[str],
-                         max_iter: int = 50) -> tuple[np.ndarray, np.ndarray, int]:
+def _levenberg_marquardt(
+    fun: Any, jac: Any, n_par: int, n_obs: int, huber_px: float, warnings: list[str], max_iter: int = 50
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Minimise the Huber cost of ``fun`` (2 pixel residuals per corner, then prior rows) by
     Levenberg-Marquardt on the iteratively reweighted normal equations (Huber weights per corner).
 
@@ -233,19 +247,19 @@ def _levenberg_marquardt(fun: Any, jac: Any, n_par: int, n_obs: int, huber_px: f
     """
 
     def weights(r: np.ndarray) -> tuple[np.ndarray, float]:
-        e = np.sqrt(r[: 2 * n_obs: 2] ** 2 + r[1: 2 * n_obs: 2] ** 2)
+        e = np.sqrt(r[: 2 * n_obs : 2] ** 2 + r[1 : 2 * n_obs : 2] ** 2)
         w = np.where(e <= huber_px, 1.0, huber_px / np.maximum(e, 1e-300))
         rho = np.where(e <= huber_px, e**2, 2 * huber_px * e - huber_px**2)
         wr = np.ones(len(r))
         wr[: 2 * n_obs] = np.repeat(w, 2)
-        return wr, float(np.sum(rho) + np.sum(r[2 * n_obs:] ** 2))
+        return wr, float(np.sum(rho) + np.sum(r[2 * n_obs :] ** 2))
 
     x = np.zeros(n_par)
     r = fun(x)
     wr, cost = weights(r)
     lam = 1e-4
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (it is returned)
         J = jac(x)
         JW = J.multiply(wr[:, None]).tocsr() if hasattr(J, "multiply") else J * wr[:, None]
         A = np.asarray((J.T @ JW).todense()) if hasattr(J, "todense") else J.T @ JW
@@ -279,9 +293,14 @@ def _levenberg_marquardt(fun: Any, jac: Any, n_par: int, n_obs: int, huber_px: f
     return x, A, it
 
 
-def calibrate_network(prob: NetworkProblem, *, prior_T12_sigma_m: float = 0.01,
-                      prior_T12_sigma_deg: float = 1.0, huber_px: float = 0.5,
-                      estimate_T12: bool = True) -> NetworkResult:
+def calibrate_network(
+    prob: NetworkProblem,
+    *,
+    prior_T12_sigma_m: float = 0.01,
+    prior_T12_sigma_deg: float = 1.0,
+    huber_px: float = 0.5,
+    estimate_T12: bool = True,
+) -> NetworkResult:
     """Calibrate the extrinsics of a camera network (see the module docstring for the method).
 
     Raises
@@ -307,15 +326,18 @@ def calibrate_network(prob: NetworkProblem, *, prior_T12_sigma_m: float = 0.01,
     by_cam: dict[str, list[WorldView]] = {}
     for wv in prob.world_views:
         if wv.camera not in prob.cameras or wv.camera not in prob.T_world_cam_nominal:
-            raise InputError(f"world board view {wv.name}: camera {wv.camera!r} has no intrinsics or is not in the rig")
+            raise InputError(
+                f"world board view {wv.name}: camera {wv.camera!r} has no intrinsics or is not in the rig"
+            )
         by_cam.setdefault(wv.camera, []).append(wv)
     for cam, vs in by_cam.items():
         ci = prob.cameras[cam]
         Ts = []
         for wv in vs:
             expected = geo.inv_T(prob.T_world_cam_nominal[cam]) @ wv.T_world_board
-            corners, T_cam_board, _ = oriented_board_pose(ci.camera_matrix, ci.dist_coeffs, wv.corners, board,
-                                                          expected)
+            corners, T_cam_board, _ = oriented_board_pose(
+                ci.camera_matrix, ci.dist_coeffs, wv.corners, board, expected
+            )
             world_views.append(WorldView(cam, wv.name, corners, wv.T_world_board))
             Ts.append(wv.T_world_board @ geo.inv_T(T_cam_board))
         anchors[cam] = mean_pose(np.array(Ts))
@@ -337,7 +359,9 @@ def calibrate_network(prob: NetworkProblem, *, prior_T12_sigma_m: float = 0.01,
     paths = _graph_order(sorted(anchors), pair_cams)
     unreached = [n for n in names if n not in paths and any(n in pc for pc in pair_cams.values())]
     if unreached:
-        raise InputError(f"camera {unreached[0]}: no chain of pairs links it to a camera that sees the world board")
+        raise InputError(
+            f"camera {unreached[0]}: no chain of pairs links it to a camera that sees the world board"
+        )
     chain: dict[str, np.ndarray] = {}
     for cam, path in sorted(paths.items(), key=lambda kv: len(kv[1])):
         if len(path) == 1:
@@ -354,8 +378,10 @@ def calibrate_network(prob: NetworkProblem, *, prior_T12_sigma_m: float = 0.01,
     for n in cams:
         dt, dr = geo.pose_error(chain[n], prob.T_world_cam_nominal[n])
         if dt > 0.5 or dr > np.radians(20):
-            warnings.append(f"camera {n}: calibrated pose is {dt:.2f} m / {np.degrees(dr):.1f} deg from the "
-                            "nominal one; check the rig file and the pair folder names")
+            warnings.append(
+                f"camera {n}: calibrated pose is {dt:.2f} m / {np.degrees(dr):.1f} deg from the "
+                "nominal one; check the rig file and the pair folder names"
+            )
     for w in warnings:
         log.warning(w)
 
@@ -403,11 +429,11 @@ def calibrate_network(prob: NetworkProblem, *, prior_T12_sigma_m: float = 0.01,
 
     def unpack(x: np.ndarray) -> tuple:
         pc = x[: 6 * nC].reshape(nC, 6)
-        pb = x[6 * nC: 6 * nC + 6 * nB].reshape(nB, 6)
+        pb = x[6 * nC : 6 * nC + 6 * nB].reshape(nB, 6)
         Rc, tc = _exp_apply(R0c, t0c, pc)
         Rb, tb = _exp_apply(R0b, t0b, pb) if nB else (np.zeros((0, 3, 3)), np.zeros((0, 3)))
         if n_T12:
-            p12 = x[6 * nC + 6 * nB:].reshape(1, 6)
+            p12 = x[6 * nC + 6 * nB :].reshape(1, 6)
             R12, t12 = _exp_apply(T12_0[None, :3, :3], T12_0[None, :3, 3], p12)
             return Rc, tc, Rb, tb, R12[0], t12[0], p12[0]
         return Rc, tc, Rb, tb, T12_0[:3, :3], T12_0[:3, 3], np.zeros(6)
@@ -438,7 +464,7 @@ def calibrate_network(prob: NetworkProblem, *, prior_T12_sigma_m: float = 0.01,
     def fun(x: np.ndarray) -> np.ndarray:
         r = (project_all(x) - uv_a).ravel()
         if n_T12:
-            p12 = x[6 * nC + 6 * nB:]
+            p12 = x[6 * nC + 6 * nB :]
             r = np.concatenate([r, p12[:3] / sig_r, p12[3:] / prior_T12_sigma_m])
         return r
 
@@ -464,7 +490,9 @@ def calibrate_network(prob: NetworkProblem, *, prior_T12_sigma_m: float = 0.01,
         r0 = np.arange(nObs) * 2
         blocks = []
         # camera: Xc = Rc^T (Xw - tc), Rc = Exp(w) Rc0 -> dXc/dw = Rc^T [Xw - tc]x ; dXc/dv = -Rc^T
-        blocks.append((6 * cam_a, np.concatenate([A @ skew(Xw - tc[cam_a]), -A], axis=2), np.ones(nObs, bool)))
+        blocks.append(
+            (6 * cam_a, np.concatenate([A @ skew(Xw - tc[cam_a]), -A], axis=2), np.ones(nObs, bool))
+        )
         # board: Xw = Rb X1 + tb -> dXw/dw = -[Rb X1]x ; dXw/dv = I
         m = brd_a >= 0
         RbX = np.einsum("nij,nj->ni", Rbo, X1)
@@ -472,7 +500,9 @@ def calibrate_network(prob: NetworkProblem, *, prior_T12_sigma_m: float = 0.01,
         if n_T12:
             B = A @ Rbo
             R12X = X_a @ R12.T
-            blocks.append((np.full(nObs, 6 * nC + 6 * nB), np.concatenate([-B @ skew(R12X), B], axis=2), u12_a))
+            blocks.append(
+                (np.full(nObs, 6 * nC + 6 * nB), np.concatenate([-B @ skew(R12X), B], axis=2), u12_a)
+            )
         for col0, D, sel in blocks:
             idx = np.nonzero(sel)[0]
             for k in range(6):
@@ -484,8 +514,10 @@ def calibrate_network(prob: NetworkProblem, *, prior_T12_sigma_m: float = 0.01,
             rows_.append(2 * nObs + np.arange(6))
             cols_.append(6 * nC + 6 * nB + np.arange(6))
             vals_.append(np.r_[np.full(3, 1.0 / sig_r), np.full(3, 1.0 / prior_T12_sigma_m)])
-        return csr_matrix((np.concatenate(vals_), (np.concatenate(rows_), np.concatenate(cols_))),
-                          shape=(2 * nObs + (6 if n_T12 else 0), n_par))
+        return csr_matrix(
+            (np.concatenate(vals_), (np.concatenate(rows_), np.concatenate(cols_))),
+            shape=(2 * nObs + (6 if n_T12 else 0), n_par),
+        )
 
     x, A, n_iter = _levenberg_marquardt(fun, jac, n_par, nObs, huber_px, warnings)
     res = project_all(x) - uv_a
@@ -495,28 +527,48 @@ def calibrate_network(prob: NetworkProblem, *, prior_T12_sigma_m: float = 0.01,
     try:
         cov = np.linalg.inv(A) * sigma2
     except np.linalg.LinAlgError:
-        raise ConvergenceError("network bundle adjustment: the problem is singular (a camera or board "
-                               "pose not constrained)") from None
+        raise ConvergenceError(
+            "network bundle adjustment: the problem is singular (a camera or board pose not constrained)"
+        ) from None
     Rc, tc, _, _, R12, t12, _ = unpack(x)
     joint: dict[str, CameraPose] = {}
     for n in cams:
         i = ci_of[n]
-        C = cov[6 * i: 6 * i + 6, 6 * i: 6 * i + 6]
+        C = cov[6 * i : 6 * i + 6, 6 * i : 6 * i + 6]
         sel = cam_a == i
         sd = np.sqrt(np.clip(np.diag(C), 0, None))
-        joint[n] = CameraPose(geo.make_T(Rc[i], tc[i]), C, sd[3:], sd[:3],
-                              float(np.sqrt(np.mean(e2[sel]))), int(sel.sum()))
+        joint[n] = CameraPose(
+            geo.make_T(Rc[i], tc[i]), C, sd[3:], sd[:3], float(np.sqrt(np.mean(e2[sel]))), int(sel.sum())
+        )
     keys = np.array(obs_key)
     rms_pair = {p: float(np.sqrt(np.mean(e2[keys == f"pair:{p}"]))) for p in edges}
     rms_world = {c: float(np.sqrt(np.mean(e2[keys == f"world:{c}"]))) for c in by_cam}
     if n_T12:
-        s12 = np.sqrt(np.clip(np.diag(cov)[6 * nC + 6 * nB:], 0, None))
+        s12 = np.sqrt(np.clip(np.diag(cov)[6 * nC + 6 * nB :], 0, None))
     else:
         s12 = np.zeros(6)
     T12 = geo.make_T(R12, t12)
     d12, r12 = geo.pose_error(T12, T12_0)
-    log.info("network BA: %d corners, %d parameters, RMS %.3f px; T_board1_board2 moved %.1f mm / %.3f deg "
-             "from nominal", nObs, n_par, float(np.sqrt(np.mean(e2))), d12 * 1000, np.degrees(r12))
-    return NetworkResult(joint, {n: chain[n] for n in cams}, {n: paths[n] for n in cams}, edges, T12, s12,
-                         rms_pair, rms_world, float(np.sqrt(np.mean(e2))), float(np.sqrt(sigma2)),
-                         n_iter, tuple(warnings))
+    log.info(
+        "network BA: %d corners, %d parameters, RMS %.3f px; T_board1_board2 moved %.1f mm / %.3f deg "
+        "from nominal",
+        nObs,
+        n_par,
+        float(np.sqrt(np.mean(e2))),
+        d12 * 1000,
+        np.degrees(r12),
+    )
+    return NetworkResult(
+        joint,
+        {n: chain[n] for n in cams},
+        {n: paths[n] for n in cams},
+        edges,
+        T12,
+        s12,
+        rms_pair,
+        rms_world,
+        float(np.sqrt(np.mean(e2))),
+        float(np.sqrt(sigma2)),
+        n_iter,
+        tuple(warnings),
+    )

@@ -19,9 +19,15 @@ def _figure():  # noqa: ANN202
     return plt
 
 
-def plot_coverage(views: Sequence[np.ndarray], image_size: tuple[int, int], path: str | os.PathLike[str],
-                  per_image_rms_px: Mapping[str, float] | None = None, names: Sequence[str] = (),
-                  rejected: Sequence[np.ndarray] = (), title: str = "") -> None:
+def plot_coverage(
+    views: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    path: str | os.PathLike[str],
+    per_image_rms_px: Mapping[str, float] | None = None,
+    names: Sequence[str] = (),
+    rejected: Sequence[np.ndarray] = (),
+    title: str = "",
+) -> None:
     """Where the corners fell in the image (one colour per view, rejected views as red crosses), and the
     per-image reprojection RMS; written atomically as PNG."""
     plt = _figure()
@@ -57,7 +63,9 @@ def plot_coverage(views: Sequence[np.ndarray], image_size: tuple[int, int], path
     plt.close(fig)
 
 
-def plot_overlay(before: np.ndarray, after: np.ndarray, path: str | os.PathLike[str], title: str = "") -> None:
+def plot_overlay(
+    before: np.ndarray, after: np.ndarray, path: str | os.PathLike[str], title: str = ""
+) -> None:
     """The seeds' direct image comparison: before in red, after in green (yellow where they agree)."""
     plt = _figure()
     rgb = np.zeros(before.shape[:2] + (3,))

@@ -33,18 +33,23 @@ log = logging.getLogger(__name__)
 def split_pair_name(name: str, cameras: Sequence[str]) -> tuple[str, str]:
     """``"camA-camB"`` into two rig camera names (names may themselves contain ``-``)."""
     for i, ch in enumerate(name):
-        if ch == "-" and name[:i] in cameras and name[i + 1:] in cameras:
-            return name[:i], name[i + 1:]
-    raise InputError(f"pairs/{name}: the folder name must be <camA>-<camB> with two rig cameras "
-                     f"({', '.join(cameras)})")
+        if ch == "-" and name[:i] in cameras and name[i + 1 :] in cameras:
+            return name[:i], name[i + 1 :]
+    raise InputError(
+        f"pairs/{name}: the folder name must be <camA>-<camB> with two rig cameras ({', '.join(cameras)})"
+    )
 
 
 def _image_map(folder: Path) -> dict[str, Path]:
     return {p.stem: p for p in list_images(folder)}
 
 
-def load_pair_views(pairs_dir: str | os.PathLike[str], board: Board, cameras: Sequence[str],
-                    image_sizes: Mapping[str, tuple[int, int]] | None = None) -> list[PairView]:
+def load_pair_views(
+    pairs_dir: str | os.PathLike[str],
+    board: Board,
+    cameras: Sequence[str],
+    image_sizes: Mapping[str, tuple[int, int]] | None = None,
+) -> list[PairView]:
     """Detect the double board in every pair folder.
 
     Raises
@@ -67,33 +72,44 @@ def load_pair_views(pairs_dir: str | os.PathLike[str], board: Board, cameras: Se
         if only_a or only_b:
             cam, other, name = (a, b, ma[only_a[0]].name) if only_a else (b, a, mb[only_b[0]].name)
             more = len(only_a) + len(only_b) - 1
-            raise InputError(f"{d}: pair names do not match: {cam}/{name} has no partner in {other}/"
-                             + (f" (and {more} more)" if more else ""))
+            raise InputError(
+                f"{d}: pair names do not match: {cam}/{name} has no partner in {other}/"
+                + (f" (and {more} more)" if more else "")
+            )
         n_ok = 0
         for stem in sorted(ma):
             ia, ib = read_grey(ma[stem]), read_grey(mb[stem])
             for c, img, p in ((a, ia, ma[stem]), (b, ib, mb[stem])):
                 if image_sizes and c in image_sizes and (img.shape[1], img.shape[0]) != tuple(image_sizes[c]):
                     w, h = image_sizes[c]
-                    raise InputError(f"{p}: mixed resolutions: {img.shape[1]} x {img.shape[0]}, but camera {c} "
-                                     f"is {w} x {h}")
+                    raise InputError(
+                        f"{p}: mixed resolutions: {img.shape[1]} x {img.shape[0]}, but camera {c} "
+                        f"is {w} x {h}"
+                    )
             ca, cb = detect_corners(ia, board), detect_corners(ib, board)
             if ca is None or cb is None:
-                log.warning("%s: board %s not found in %s, instant skipped", d.name,
-                            "1" if ca is None else "2", ma[stem].name if ca is None else mb[stem].name)
+                log.warning(
+                    "%s: board %s not found in %s, instant skipped",
+                    d.name,
+                    "1" if ca is None else "2",
+                    ma[stem].name if ca is None else mb[stem].name,
+                )
                 continue
             out.append(PairView(a, b, ma[stem].name, ca, cb))
             n_ok += 1
         if n_ok == 0:
-            raise InputError(f"{d}: board 1 in {a} and board 2 in {b} were found together in none of "
-                             f"{len(ma)} image pair(s)")
+            raise InputError(
+                f"{d}: board 1 in {a} and board 2 in {b} were found together in none of "
+                f"{len(ma)} image pair(s)"
+            )
     if not out:
         raise InputError(f"{root}: no pair folders (<camA>-<camB>/<camA>/, <camB>/)")
     return out
 
 
-def load_world_views(world_dir: str | os.PathLike[str], board: Board, cameras: Sequence[str],
-                     T_world_board: np.ndarray) -> list[WorldView]:
+def load_world_views(
+    world_dir: str | os.PathLike[str], board: Board, cameras: Sequence[str], T_world_board: np.ndarray
+) -> list[WorldView]:
     """Detect the world board in ``world_dir/<cam>/*``; images without a board are skipped (warning)."""
     root = Path(world_dir)
     if not root.is_dir():
@@ -113,8 +129,9 @@ def load_world_views(world_dir: str | os.PathLike[str], board: Board, cameras: S
     return out
 
 
-def load_intrinsics(source: str | os.PathLike[str], cameras: Sequence[str], board: Board
-                    ) -> dict[str, CameraIntrinsics | IntrinsicsResult]:
+def load_intrinsics(
+    source: str | os.PathLike[str], cameras: Sequence[str], board: Board
+) -> dict[str, CameraIntrinsics | IntrinsicsResult]:
     """Intrinsics per camera from ``source``: ``<cam>.yaml`` files (from ``gtrig calib intrinsics``) or
     ``<cam>/`` image folders (calibrated here). Cameras with neither are left out."""
     root = Path(source)
@@ -136,8 +153,9 @@ def _cam(x: CameraIntrinsics | IntrinsicsResult) -> CameraIntrinsics:
     return x.camera if isinstance(x, IntrinsicsResult) else x
 
 
-def calibrated_rig(rig: Rig, intrinsics: Mapping[str, CameraIntrinsics | IntrinsicsResult],
-                   network: NetworkResult | None) -> Rig:
+def calibrated_rig(
+    rig: Rig, intrinsics: Mapping[str, CameraIntrinsics | IntrinsicsResult], network: NetworkResult | None
+) -> Rig:
     """The rig with each camera's intrinsics and (jointly estimated) ``T_world_cam`` replaced."""
     cams = []
     for c in rig.cameras:
@@ -145,8 +163,10 @@ def calibrated_rig(rig: Rig, intrinsics: Mapping[str, CameraIntrinsics | Intrins
         if c.name in intrinsics:
             ci = _cam(intrinsics[c.name])
             if tuple(ci.image_size) != tuple(c.resolution):
-                raise InputError(f"camera {c.name}: intrinsics are for {ci.image_size[0]} x {ci.image_size[1]} "
-                                 f"images but the rig says {c.resolution[0]} x {c.resolution[1]}")
+                raise InputError(
+                    f"camera {c.name}: intrinsics are for {ci.image_size[0]} x {ci.image_size[1]} "
+                    f"images but the rig says {c.resolution[0]} x {c.resolution[1]}"
+                )
             K = np.asarray(ci.camera_matrix, dtype=float)
             upd["camera_matrix"] = tuple(tuple(float(v) for v in row) for row in K)
             upd["dist_coeffs"] = tuple(float(v) for v in np.asarray(ci.dist_coeffs).ravel())
@@ -177,51 +197,86 @@ class CalibrationReport:
         for n, x in self.intrinsics.items():
             c = _cam(x)
             std = c.extra.get("std", {})
-            intr[n] = {"fx": float(c.camera_matrix[0, 0]), "fy": float(c.camera_matrix[1, 1]),
-                       "cx": float(c.camera_matrix[0, 2]), "cy": float(c.camera_matrix[1, 2]),
-                       "rms_px": float(c.rms_px), "std": std,
-                       "rejected": c.extra.get("rejected", {}), "warnings": c.extra.get("warnings", [])}
+            intr[n] = {
+                "fx": float(c.camera_matrix[0, 0]),
+                "fy": float(c.camera_matrix[1, 1]),
+                "cx": float(c.camera_matrix[0, 2]),
+                "cy": float(c.camera_matrix[1, 2]),
+                "rms_px": float(c.rms_px),
+                "std": std,
+                "rejected": c.extra.get("rejected", {}),
+                "warnings": c.extra.get("warnings", []),
+            }
         return {"intrinsics": intr, "network": self.network.to_dict(), "truth": self.truth}
 
     def to_markdown(self) -> str:
         """A human-readable report: intrinsics, joint vs chain, uncertainties, residuals, truth."""
-        L = ["# Camera calibration report", "", "## Intrinsics", "",
-             "| camera | fx | fy | cx | cy | k1 | k2 | RMS (px) | views | rejected |", "|---" * 10 + "|"]
+        L = [
+            "# Camera calibration report",
+            "",
+            "## Intrinsics",
+            "",
+            "| camera | fx | fy | cx | cy | k1 | k2 | RMS (px) | views | rejected |",
+            "|---" * 10 + "|",
+        ]
         for n, x in sorted(self.intrinsics.items()):
             c = _cam(x)
             K, d = c.camera_matrix, c.dist_coeffs
-            L.append(f"| {n} | {K[0, 0]:.2f} | {K[1, 1]:.2f} | {K[0, 2]:.2f} | {K[1, 2]:.2f} | {d[0]:.4f} | "
-                     f"{d[1]:.4f} | {c.rms_px:.3f} | {c.extra.get('views_used', '')} | "
-                     f"{len(c.extra.get('rejected', {}))} |")
+            L.append(
+                f"| {n} | {K[0, 0]:.2f} | {K[1, 1]:.2f} | {K[0, 2]:.2f} | {K[1, 2]:.2f} | {d[0]:.4f} | "
+                f"{d[1]:.4f} | {c.rms_px:.3f} | {c.extra.get('views_used', '')} | "
+                f"{len(c.extra.get('rejected', {}))} |"
+            )
         net = self.network
-        L += ["", "## Camera poses: joint bundle adjustment vs chain (the seeds' method)", "",
-              "| camera | chain path | x, y, z (m) | sigma pos (mm) | sigma rot (deg) | RMS (px) | "
-              "chain - joint (mm / deg) |", "|---" * 7 + "|"]
+        L += [
+            "",
+            "## Camera poses: joint bundle adjustment vs chain (the seeds' method)",
+            "",
+            "| camera | chain path | x, y, z (m) | sigma pos (mm) | sigma rot (deg) | RMS (px) | "
+            "chain - joint (mm / deg) |",
+            "|---" * 7 + "|",
+        ]
         for n, c in sorted(net.joint.items()):
             dch, rch = geo.pose_error(net.chain[n], c.T_world_cam)
-            L.append(f"| {n} | {' > '.join(net.chain_path[n])} | "
-                     f"{', '.join(f'{v:.4f}' for v in c.T_world_cam[:3, 3])} | "
-                     f"{', '.join(f'{v * 1000:.2f}' for v in c.sigma_pos_m)} | "
-                     f"{', '.join(f'{np.degrees(v):.4f}' for v in c.sigma_rot_rad)} | {c.rms_px:.3f} | "
-                     f"{dch * 1000:.2f} / {np.degrees(rch):.4f} |")
+            L.append(
+                f"| {n} | {' > '.join(net.chain_path[n])} | "
+                f"{', '.join(f'{v:.4f}' for v in c.T_world_cam[:3, 3])} | "
+                f"{', '.join(f'{v * 1000:.2f}' for v in c.sigma_pos_m)} | "
+                f"{', '.join(f'{np.degrees(v):.4f}' for v in c.sigma_rot_rad)} | {c.rms_px:.3f} | "
+                f"{dch * 1000:.2f} / {np.degrees(rch):.4f} |"
+            )
         L += ["", "| pair | views | RMS (px) | edge spread (mm / deg) |", "|---" * 4 + "|"]
         for p, e in sorted(net.edges.items()):
-            L.append(f"| {p} | {e.n} | {net.rms_px_pair[p]:.3f} | {e.trans_rms_m * 1000:.2f} / "
-                     f"{np.degrees(e.rot_rms_rad):.4f} |")
+            L.append(
+                f"| {p} | {e.n} | {net.rms_px_pair[p]:.3f} | {e.trans_rms_m * 1000:.2f} / "
+                f"{np.degrees(e.rot_rms_rad):.4f} |"
+            )
         for c, v in sorted(net.rms_px_world.items()):
             L.append(f"| world board in {c} | | {v:.3f} | |")
         d12 = net.to_dict()["T_board1_board2"]
-        L += ["", f"Double board: T_board1_board2 = {', '.join(f'{v:.4f}' for v in d12['xyz'])} m "
-                  f"(sigma {', '.join(f'{v:.2f}' for v in d12['sigma_mm'])} mm). "
-                  f"Overall RMS {net.rms_px:.3f} px, residual sigma {net.sigma_px:.3f} px per axis."]
+        L += [
+            "",
+            f"Double board: T_board1_board2 = {', '.join(f'{v:.4f}' for v in d12['xyz'])} m "
+            f"(sigma {', '.join(f'{v:.2f}' for v in d12['sigma_mm'])} mm). "
+            f"Overall RMS {net.rms_px:.3f} px, residual sigma {net.sigma_px:.3f} px per axis.",
+        ]
         if self.truth:
-            L += ["", "## Against truth (simulation)", "",
-                  "| camera | joint (mm / deg) | chain (mm / deg) | fx, fy, cx, cy error (px) |", "|---" * 4 + "|"]
+            L += [
+                "",
+                "## Against truth (simulation)",
+                "",
+                "| camera | joint (mm / deg) | chain (mm / deg) | fx, fy, cx, cy error (px) |",
+                "|---" * 4 + "|",
+            ]
             for n, t in sorted(self.truth.items()):
-                L.append(f"| {n} | {t['joint_mm']:.2f} / {t['joint_deg']:.4f} | {t['chain_mm']:.2f} / "
-                         f"{t['chain_deg']:.4f} | {t.get('dfx_px', np.nan):.2f}, {t.get('dfy_px', np.nan):.2f}, "
-                         f"{t.get('dcx_px', np.nan):.2f}, {t.get('dcy_px', np.nan):.2f} |")
-        warns = list(net.warnings) + [w for x in self.intrinsics.values() for w in _cam(x).extra.get("warnings", [])]
+                L.append(
+                    f"| {n} | {t['joint_mm']:.2f} / {t['joint_deg']:.4f} | {t['chain_mm']:.2f} / "
+                    f"{t['chain_deg']:.4f} | {t.get('dfx_px', np.nan):.2f}, {t.get('dfy_px', np.nan):.2f}, "
+                    f"{t.get('dcx_px', np.nan):.2f}, {t.get('dcy_px', np.nan):.2f} |"
+                )
+        warns = list(net.warnings) + [
+            w for x in self.intrinsics.values() for w in _cam(x).extra.get("warnings", [])
+        ]
         if warns:
             L += ["", "## Warnings", ""] + [f"- {w}" for w in warns]
         return "\n".join(L) + "\n"
@@ -230,8 +285,9 @@ class CalibrationReport:
         """Write ``calibration_report.md`` and ``calibration_report.yaml`` into ``folder`` (atomically)."""
         d = Path(folder)
         atomic_write_text(d / "calibration_report.md", self.to_markdown())
-        atomic_write_text(d / "calibration_report.yaml",
-                          yaml.safe_dump(_plain(self.to_dict()), sort_keys=False, width=120))
+        atomic_write_text(
+            d / "calibration_report.yaml", yaml.safe_dump(_plain(self.to_dict()), sort_keys=False, width=120)
+        )
 
 
 def _plain(x: Any) -> Any:
@@ -261,14 +317,19 @@ def compare_with_truth(rig_cal: Rig, rig_true: Rig, network: NetworkResult) -> d
             dc, rc = geo.pose_error(network.chain[c.name], T)
             row |= {"chain_mm": dc * 1000, "chain_deg": float(np.degrees(rc))}
         dK = c.K - t.K
-        row |= {"dfx_px": float(dK[0, 0]), "dfy_px": float(dK[1, 1]), "dcx_px": float(dK[0, 2]),
-                "dcy_px": float(dK[1, 2])}
+        row |= {
+            "dfx_px": float(dK[0, 0]),
+            "dfy_px": float(dK[1, 1]),
+            "dcx_px": float(dK[0, 2]),
+            "dcy_px": float(dK[1, 2]),
+        }
         out[c.name] = row
     return out
 
 
-def calibrate_recording(rec_dir: str | os.PathLike[str], *, estimate_k3: bool = False,
-                        write_report: bool = False) -> tuple[Rig, CalibrationReport]:
+def calibrate_recording(
+    rec_dir: str | os.PathLike[str], *, estimate_k3: bool = False, write_report: bool = False
+) -> tuple[Rig, CalibrationReport]:
     """Calibrate every camera of a recording: intrinsics from ``calib/intrinsics``, then the network.
 
     Parameters
@@ -298,8 +359,14 @@ def calibrate_recording(rec_dir: str | os.PathLike[str], *, estimate_k3: bool = 
     if spec.T_world_board is None:
         raise InputError(f"{spec.source}: T_world_board: missing field (the world board's pose)")
     world = load_world_views(rec / "calib" / "world_board", spec.board, names, spec.T_world_board)
-    prob = NetworkProblem(spec.board, spec.T_board1_board2, {n: _cam(x) for n, x in intr.items()},
-                          {c.name: c.T_world_cam.matrix() for c in rig.cameras}, pairs, world)
+    prob = NetworkProblem(
+        spec.board,
+        spec.T_board1_board2,
+        {n: _cam(x) for n, x in intr.items()},
+        {c.name: c.T_world_cam.matrix() for c in rig.cameras},
+        pairs,
+        world,
+    )
     net = calibrate_network(prob)
     rig_cal = calibrated_rig(rig, intr, net)
     truth: dict[str, dict[str, float]] = {}

@@ -33,8 +33,9 @@ def chordal_mean_rotation(R: ArrayLike, weights: ArrayLike | None = None) -> geo
     return Rotation.from_quat(vec[:, -1]).as_matrix()
 
 
-def mean_rotation(R: ArrayLike, weights: ArrayLike | None = None, *, tol_rad: float = 1e-12,
-                  max_iter: int = 50) -> geo.Array:
+def mean_rotation(
+    R: ArrayLike, weights: ArrayLike | None = None, *, tol_rad: float = 1e-12, max_iter: int = 50
+) -> geo.Array:
     """Geodesic L2 (Karcher) mean of rotations ``R`` (N, 3, 3) with optional weights (N,); (3, 3)."""
     Rs = np.asarray(R, dtype=float).reshape(-1, 3, 3)
     w = np.ones(len(Rs)) if weights is None else np.asarray(weights, dtype=float).ravel()

@@ -40,7 +40,9 @@ def image_shift_px(before: np.ndarray, after: np.ndarray, smooth_px: float = 1.0
     """Largest displacement (pixels) over the image of the homography that maps ``before`` onto
     ``after`` (ECC registration)."""
     if before.shape != after.shape:
-        raise InputError(f"before and after images differ in size: {before.shape[::-1]} vs {after.shape[::-1]}")
+        raise InputError(
+            f"before and after images differ in size: {before.shape[::-1]} vs {after.shape[::-1]}"
+        )
     a = cv2.GaussianBlur(before.astype(np.float32), (0, 0), smooth_px)
     b = cv2.GaussianBlur(after.astype(np.float32), (0, 0), smooth_px)
     H = np.eye(3, dtype=np.float32)
@@ -67,11 +69,15 @@ class BoardShift:
     reproj_px: float
 
 
-def board_shift(K: np.ndarray, dist: np.ndarray, before: np.ndarray, after: np.ndarray, board: Board) -> BoardShift:
+def board_shift(
+    K: np.ndarray, dist: np.ndarray, before: np.ndarray, after: np.ndarray, board: Board
+) -> BoardShift:
     """Locate the board in both images and measure how much it moved relative to the camera."""
     cb, ca = detect_corners(before, board), detect_corners(after, board)
     if cb is None or ca is None:
-        raise InputError(f"no {board.cols}x{board.rows} chessboard in the {'before' if cb is None else 'after'} image")
+        raise InputError(
+            f"no {board.cols}x{board.rows} chessboard in the {'before' if cb is None else 'after'} image"
+        )
     if np.median(np.linalg.norm(cb - ca, axis=1)) > np.median(np.linalg.norm(cb - ca[::-1], axis=1)):
         ca = ca[::-1].copy()  # same physical corners (half-turn ambiguity of the grid)
     Tb, _ = board_pose(K, dist, cb, board)
@@ -79,8 +85,11 @@ def board_shift(K: np.ndarray, dist: np.ndarray, before: np.ndarray, after: np.n
     P = board.object_points()
     d = geo.transform_points(Ta, P) - geo.transform_points(Tb, P)
     _, rot = geo.pose_error(Ta, Tb)
-    return BoardShift(float(np.max(np.linalg.norm(d, axis=1)) * 1000), float(np.degrees(rot)),
-                      float(np.median(np.linalg.norm(ca - cb, axis=1))))
+    return BoardShift(
+        float(np.max(np.linalg.norm(d, axis=1)) * 1000),
+        float(np.degrees(rot)),
+        float(np.median(np.linalg.norm(ca - cb, axis=1))),
+    )
 
 
 @dataclass(frozen=True)
@@ -94,10 +103,16 @@ class SteadyResult:
     moved: bool
 
 
-def check_steady(before_dir: str | os.PathLike[str], after_dir: str | os.PathLike[str],
-                 cameras: dict[str, tuple[np.ndarray, np.ndarray]], board: Board | None, *,
-                 shift_px: float = SHIFT_PX, move_mm: float = MOVE_MM, turn_deg: float = TURN_DEG
-                 ) -> list[SteadyResult]:
+def check_steady(
+    before_dir: str | os.PathLike[str],
+    after_dir: str | os.PathLike[str],
+    cameras: dict[str, tuple[np.ndarray, np.ndarray]],
+    board: Board | None,
+    *,
+    shift_px: float = SHIFT_PX,
+    move_mm: float = MOVE_MM,
+    turn_deg: float = TURN_DEG,
+) -> list[SteadyResult]:
     """Compare ``before_dir/<cam>/<n>`` with ``after_dir/<cam>/<n>`` for every camera present in both.
 
     Parameters
@@ -128,8 +143,12 @@ def check_steady(before_dir: str | os.PathLike[str], after_dir: str | os.PathLik
             moved = s > shift_px or (bs is not None and (bs.move_mm > move_mm or bs.turn_deg > turn_deg))
             out.append(SteadyResult(cam, bm[stem].name, s, bs, moved))
             if moved:
-                log.warning("camera %s moved: image shift %.2f px%s", cam, s,
-                            "" if bs is None else f", board moved {bs.move_mm:.2f} mm / {bs.turn_deg:.3f} deg")
+                log.warning(
+                    "camera %s moved: image shift %.2f px%s",
+                    cam,
+                    s,
+                    "" if bs is None else f", board moved {bs.move_mm:.2f} mm / {bs.turn_deg:.3f} deg",
+                )
     if not out:
         raise InputError(f"{b_root} and {a_root}: no camera folder in common with the rig")
     return out

@@ -29,8 +29,14 @@ def project_board(K: np.ndarray, dist: np.ndarray, T_cam_board: np.ndarray, boar
 def in_image(uv: np.ndarray, size: tuple[int, int], margin_px: float = 20.0) -> bool:
     """True if all points are at least ``margin_px`` inside the image."""
     w, h = size
-    return bool(np.all((uv[:, 0] > margin_px) & (uv[:, 0] < w - 1 - margin_px)
-                       & (uv[:, 1] > margin_px) & (uv[:, 1] < h - 1 - margin_px)))
+    return bool(
+        np.all(
+            (uv[:, 0] > margin_px)
+            & (uv[:, 0] < w - 1 - margin_px)
+            & (uv[:, 1] > margin_px)
+            & (uv[:, 1] < h - 1 - margin_px)
+        )
+    )
 
 
 def board_outline_points(board: Board, margin_squares: float = 1.5) -> np.ndarray:
@@ -42,9 +48,16 @@ def board_outline_points(board: Board, margin_squares: float = 1.5) -> np.ndarra
     return np.array([[lo[0], lo[1], 0], [hi[0], lo[1], 0], [hi[0], hi[1], 0], [lo[0], hi[1], 0]])
 
 
-def random_intrinsic_views(rng: np.random.Generator, K: np.ndarray, dist: np.ndarray, size: tuple[int, int],
-                           board: Board, n: int, depth_m: tuple[float, float] = (1.5, 3.5),
-                           max_tilt_deg: float = 40.0) -> list[np.ndarray]:
+def random_intrinsic_views(
+    rng: np.random.Generator,
+    K: np.ndarray,
+    dist: np.ndarray,
+    size: tuple[int, int],
+    board: Board,
+    n: int,
+    depth_m: tuple[float, float] = (1.5, 3.5),
+    max_tilt_deg: float = 40.0,
+) -> list[np.ndarray]:
     """``n`` board poses ``T_cam_board`` spread over the image, tilted up to ``max_tilt_deg``, all
     corners and the sheet's outline inside the image."""
     out: list[np.ndarray] = []
@@ -70,8 +83,9 @@ def random_intrinsic_views(rng: np.random.Generator, K: np.ndarray, dist: np.nda
     return out
 
 
-def checker_texture(board: Board, margin_squares: float = 1.0, dark: float = 25.0,
-                    light: float = 225.0) -> Texture:
+def checker_texture(
+    board: Board, margin_squares: float = 1.0, dark: float = 25.0, light: float = 225.0
+) -> Texture:
     """Texture of a printed chessboard in its board frame (NaN outside the sheet)."""
     s = board.square_m
     P = board.object_points()
@@ -82,15 +96,24 @@ def checker_texture(board: Board, margin_squares: float = 1.0, dark: float = 25.
         j = np.floor((y - y0) / s)
         inside = (i >= -1) & (i <= board.cols - 1) & (j >= -1) & (j <= board.rows - 1)
         v = np.where(((i + j) % 2 == 0) & inside, dark, light)
-        sheet = ((x - x0 >= -s * (1 + margin_squares)) & (x - x0 <= s * (board.cols + margin_squares))
-                 & (y - y0 >= -s * (1 + margin_squares)) & (y - y0 <= s * (board.rows + margin_squares)))
+        sheet = (
+            (x - x0 >= -s * (1 + margin_squares))
+            & (x - x0 <= s * (board.cols + margin_squares))
+            & (y - y0 >= -s * (1 + margin_squares))
+            & (y - y0 <= s * (board.rows + margin_squares))
+        )
         return np.where(sheet, v, np.nan)
 
     return tex
 
 
-def noise_texture(rng: np.random.Generator, extent_m: float = 20.0, cell_m: float = 0.03,
-                  mean: float = 120.0, amp: float = 50.0) -> Texture:
+def noise_texture(
+    rng: np.random.Generator,
+    extent_m: float = 20.0,
+    cell_m: float = 0.03,
+    mean: float = 120.0,
+    amp: float = 50.0,
+) -> Texture:
     """A smooth random texture (bilinear value noise) over ``[-extent, extent]^2`` metres."""
     n = int(2 * extent_m / cell_m) + 2
     grid = rng.normal(0, 1, (n, n)).astype(np.float32)
@@ -139,10 +162,20 @@ def _ray_grid(K: np.ndarray, dist: np.ndarray, size: tuple[int, int], ss: int) -
     return _RAY_CACHE[key]
 
 
-def render(K: np.ndarray, dist: np.ndarray, size: tuple[int, int], T_world_cam: np.ndarray,
-           planes: Sequence[Plane], *, background: float = 90.0, supersample: int = 3,
-           blur_sigma_px: float = 0.5, noise_sigma: float = 2.0, rng: np.random.Generator | None = None,
-           roi: tuple[int, int, int, int] | None = None) -> np.ndarray:
+def render(
+    K: np.ndarray,
+    dist: np.ndarray,
+    size: tuple[int, int],
+    T_world_cam: np.ndarray,
+    planes: Sequence[Plane],
+    *,
+    background: float = 90.0,
+    supersample: int = 3,
+    blur_sigma_px: float = 0.5,
+    noise_sigma: float = 2.0,
+    rng: np.random.Generator | None = None,
+    roi: tuple[int, int, int, int] | None = None,
+) -> np.ndarray:
     """Render an 8-bit grey image (h, w) of textured planes seen by a camera at ``T_world_cam``.
 
     ``roi = (x0, y0, x1, y1)`` (pixels) limits the ray casting to a window; the rest is ``background``.
@@ -155,7 +188,7 @@ def render(K: np.ndarray, dist: np.ndarray, size: tuple[int, int], T_world_cam: 
     x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w, x1), min(h, y1)
     full = np.full((h, w), background)
     if x1 > x0 and y1 > y0:
-        xy = _ray_grid(K, dist, size, ss)[y0 * ss:y1 * ss, x0 * ss:x1 * ss]
+        xy = _ray_grid(K, dist, size, ss)[y0 * ss : y1 * ss, x0 * ss : x1 * ss]
         rays_c = np.concatenate([xy, np.ones(xy.shape[:2] + (1,))], axis=-1)
         img = np.full(xy.shape[:2], background)
         depth = np.full(xy.shape[:2], np.inf)
@@ -181,20 +214,46 @@ def render(K: np.ndarray, dist: np.ndarray, size: tuple[int, int], T_world_cam: 
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
 
-def render_board_view(K: np.ndarray, dist: np.ndarray, size: tuple[int, int], T_cam_board: np.ndarray,
-                      board: Board, rng: np.random.Generator | None = None, **kw: float) -> np.ndarray:
+def render_board_view(
+    K: np.ndarray,
+    dist: np.ndarray,
+    size: tuple[int, int],
+    T_cam_board: np.ndarray,
+    board: Board,
+    rng: np.random.Generator | None = None,
+    **kw: float,
+) -> np.ndarray:
     """One chessboard on a plain background, the board at ``T_cam_board``."""
     sheet = geo.project_points(geo.transform_points(T_cam_board, board_outline_points(board, 1.1)), K, dist)
     lo = np.floor(sheet.min(axis=0)).astype(int) - 4
     hi = np.ceil(sheet.max(axis=0)).astype(int) + 5
-    return render(K, dist, size, np.eye(4), [Plane(T_cam_board, checker_texture(board))], rng=rng,
-                  roi=(int(lo[0]), int(lo[1]), int(hi[0]), int(hi[1])), **kw)  # type: ignore[arg-type]
+    return render(
+        K,
+        dist,
+        size,
+        np.eye(4),
+        [Plane(T_cam_board, checker_texture(board))],
+        rng=rng,
+        roi=(int(lo[0]), int(lo[1]), int(hi[0]), int(hi[1])),
+        **kw,
+    )  # type: ignore[arg-type]
 
 
-def sample_double_board(rng: np.random.Generator, T_world_camA: np.ndarray, T_world_camB: np.ndarray,
-                        KA: np.ndarray, distA: np.ndarray, sizeA: tuple[int, int], KB: np.ndarray,
-                        distB: np.ndarray, sizeB: tuple[int, int], board: Board, T_board1_board2: np.ndarray,
-                        height_m: tuple[float, float] = (0.6, 1.4), max_tries: int = 20000) -> np.ndarray:
+def sample_double_board(
+    rng: np.random.Generator,
+    T_world_camA: np.ndarray,
+    T_world_camB: np.ndarray,
+    KA: np.ndarray,
+    distA: np.ndarray,
+    sizeA: tuple[int, int],
+    KB: np.ndarray,
+    distB: np.ndarray,
+    sizeB: tuple[int, int],
+    board: Board,
+    T_board1_board2: np.ndarray,
+    height_m: tuple[float, float] = (0.6, 1.4),
+    max_tries: int = 20000,
+) -> np.ndarray:
     """A pose ``T_world_board1`` of the double board, held so that board 1 is whole in camera A and
     board 2 whole in camera B, facing the cameras, tilted at random (rejection sampling)."""
     P = board.object_points()
@@ -229,10 +288,21 @@ def sample_double_board(rng: np.random.Generator, T_world_camA: np.ndarray, T_wo
     raise RuntimeError("no double-board pose found with board 1 in camera A and board 2 in camera B")
 
 
-def synthetic_network(rig_true, rig_nominal, board: Board, T12_true: np.ndarray, T12_nominal: np.ndarray,
-                      T_world_board: np.ndarray, pairs: Sequence[tuple[str, str]], world_cams: Sequence[str],
-                      n_pair_views: int, noise_px: float, rng: np.random.Generator,
-                      n_world_views: int = 2, intrinsics=None):  # noqa: ANN001, ANN201
+def synthetic_network(
+    rig_true,
+    rig_nominal,
+    board: Board,
+    T12_true: np.ndarray,
+    T12_nominal: np.ndarray,
+    T_world_board: np.ndarray,
+    pairs: Sequence[tuple[str, str]],
+    world_cams: Sequence[str],
+    n_pair_views: int,
+    noise_px: float,
+    rng: np.random.Generator,
+    n_world_views: int = 2,
+    intrinsics=None,
+):  # noqa: ANN001, ANN201
     """A :class:`gtrig.calib.network.NetworkProblem` of projected corners plus Gaussian noise.
 
     ``rig_true`` (cameras and their true poses) makes the observations; ``rig_nominal`` gives the
@@ -248,11 +318,15 @@ def synthetic_network(rig_true, rig_nominal, board: Board, T12_true: np.ndarray,
         ca, cb = cams[a], cams[b]
         Ta, Tb = ca.T_world_cam.matrix(), cb.T_world_cam.matrix()
         for i in range(n_pair_views):
-            T = sample_double_board(rng, Ta, Tb, ca.K, ca.dist, ca.resolution, cb.K, cb.dist, cb.resolution,
-                                    board, T12_true)
-            ua = project_board(ca.K, ca.dist, geo.inv_T(Ta) @ T, board) + rng.normal(0, noise_px, (board.n_corners, 2))
+            T = sample_double_board(
+                rng, Ta, Tb, ca.K, ca.dist, ca.resolution, cb.K, cb.dist, cb.resolution, board, T12_true
+            )
+            ua = project_board(ca.K, ca.dist, geo.inv_T(Ta) @ T, board) + rng.normal(
+                0, noise_px, (board.n_corners, 2)
+            )
             ub = project_board(cb.K, cb.dist, geo.inv_T(Tb) @ T @ T12_true, board) + rng.normal(
-                0, noise_px, (board.n_corners, 2))
+                0, noise_px, (board.n_corners, 2)
+            )
             if rng.random() < 0.5:
                 ua = ua[::-1].copy()  # the detector's half-turn ambiguity
             pv.append(PairView(a, b, f"{i:06d}.png", ua, ub))

@@ -16,7 +16,9 @@ BOARD_HELP = "Chessboard as COLSxROWSxSQUARE: inner corners and square side in m
 @app.command("intrinsics")
 @handle_errors
 def intrinsics(
-    images: Path = typer.Option(..., "--images", help="Folder of one camera's chessboard images (JPEG, PNG...)."),
+    images: Path = typer.Option(
+        ..., "--images", help="Folder of one camera's chessboard images (JPEG, PNG...)."
+    ),
     board: str = typer.Option(..., "--board", help=BOARD_HELP),
     out: Path = typer.Option(..., "--out", help="cam.yaml to write."),
     k3: bool = typer.Option(False, "--k3", help="Also estimate the 6th-order radial term k3."),
@@ -32,13 +34,23 @@ def intrinsics(
     res = calibrate_intrinsics(images, b, estimate_k3=k3)
     write_cam_yaml(out, res.camera)
     fig = figure or out.with_name(out.stem + "_coverage.png")
-    plot_coverage([v.corners_px for v in res.views], res.camera.image_size, fig, res.per_image_rms_px,
-                  [v.file for v in res.views], title=f"{images.name}: coverage {100 * res.coverage:.0f} %")
+    plot_coverage(
+        [v.corners_px for v in res.views],
+        res.camera.image_size,
+        fig,
+        res.per_image_rms_px,
+        [v.file for v in res.views],
+        title=f"{images.name}: coverage {100 * res.coverage:.0f} %",
+    )
     K, d, std = res.camera.camera_matrix, res.camera.dist_coeffs, res.std
     console.print(f"[bold]{out}[/bold]: {len(res.views)} views, RMS {res.camera.rms_px:.3f} px")
-    console.print(f"  fx {K[0, 0]:.2f} ± {std.get('fx', 0):.2f}  fy {K[1, 1]:.2f} ± {std.get('fy', 0):.2f}  "
-                  f"cx {K[0, 2]:.2f} ± {std.get('cx', 0):.2f}  cy {K[1, 2]:.2f} ± {std.get('cy', 0):.2f} px")
-    console.print(f"  dist {', '.join(f'{v:.5f}' for v in d)}; coverage {100 * res.coverage:.0f} %; figure {fig}")
+    console.print(
+        f"  fx {K[0, 0]:.2f} ± {std.get('fx', 0):.2f}  fy {K[1, 1]:.2f} ± {std.get('fy', 0):.2f}  "
+        f"cx {K[0, 2]:.2f} ± {std.get('cx', 0):.2f}  cy {K[1, 2]:.2f} ± {std.get('cy', 0):.2f} px"
+    )
+    console.print(
+        f"  dist {', '.join(f'{v:.5f}' for v in d)}; coverage {100 * res.coverage:.0f} %; figure {fig}"
+    )
     for w in res.warnings:
         err_console.print(f"[yellow]warning:[/yellow] {w}")
 
@@ -59,11 +71,15 @@ def _report(rig_cal: object, report: object, out: Path) -> None:
 def network(
     rig: Path = typer.Option(..., "--rig", help="The nominal rig.yaml (camera names, believed poses)."),
     pairs: Path = typer.Option(..., "--pairs", help="Folder of <camA>-<camB>/<camA|camB>/<n>.png."),
-    world_board: Path = typer.Option(..., "--world-board", help="Folder of <cam>/<n>.png of the world board."),
+    world_board: Path = typer.Option(
+        ..., "--world-board", help="Folder of <cam>/<n>.png of the world board."
+    ),
     boards: Path = typer.Option(..., "--boards", help="boards.yaml: board, T_board1_board2, T_world_board."),
-    intrinsics_dir: Path = typer.Option(None, "--intrinsics",
-                                        help="Folder of <cam>.yaml, or of <cam>/ image sweeps to calibrate; "
-                                             "default: the rig's intrinsics."),
+    intrinsics_dir: Path = typer.Option(
+        None,
+        "--intrinsics",
+        help="Folder of <cam>.yaml, or of <cam>/ image sweeps to calibrate; default: the rig's intrinsics.",
+    ),
     out: Path = typer.Option(..., "--out", help="Calibrated rig.yaml to write (report next to it)."),
 ) -> None:
     """Calibrate the camera network: pairs chained from the world board, then a joint bundle adjustment."""
@@ -92,8 +108,9 @@ def network(
     cams = {n: _cam(x) for n, x in intr.items()}
     pv = load_pair_views(pairs, spec.board, names, {n: c.image_size for n, c in cams.items()})
     wv = load_world_views(world_board, spec.board, names, spec.T_world_board)
-    prob = NetworkProblem(spec.board, spec.T_board1_board2, cams,
-                          {c.name: c.T_world_cam.matrix() for c in r.cameras}, pv, wv)
+    prob = NetworkProblem(
+        spec.board, spec.T_board1_board2, cams, {c.name: c.T_world_cam.matrix() for c in r.cameras}, pv, wv
+    )
     net = calibrate_network(prob)
     _report(calibrated_rig(r, intr, net), CalibrationReport(intr, net), out)
 
@@ -116,7 +133,9 @@ def recording(
 @handle_errors
 def check(
     rig: Path = typer.Option(..., "--rig", help="Calibrated rig.yaml."),
-    images: Path = typer.Option(..., "--images", help="Folder of <camera>/<image> of the board on the table."),
+    images: Path = typer.Option(
+        ..., "--images", help="Folder of <camera>/<image> of the board on the table."
+    ),
     truth: Path = typer.Option(..., "--truth", help="CSV camera,image,x,y,z[,yaw_deg] of the board origin."),
     board: str = typer.Option("9x5x0.100", "--board", help=BOARD_HELP),
     tol_mm: float = typer.Option(10.0, "--tol-mm", help="Flag errors larger than this (mm)."),
@@ -130,18 +149,28 @@ def check(
     from gtrig.rig import load_rig
 
     rows = check_rig(load_rig(rig), images, truth, parse_board(board))
-    t = Table("camera", "image", "x, y, z est (m)", "dx, dy, dz (mm)", "|d| (mm)", "yaw err (deg)", "RMS (px)")
+    t = Table(
+        "camera", "image", "x, y, z est (m)", "dx, dy, dz (mm)", "|d| (mm)", "yaw err (deg)", "RMS (px)"
+    )
     bad = 0
     for r in rows:
         n = float(np.linalg.norm(r.err_mm))
         bad += n > tol_mm
-        t.add_row(r.camera, r.image, ", ".join(f"{v:.4f}" for v in r.xyz_est),
-                  ", ".join(f"{v:+.1f}" for v in r.err_mm), f"[{'red' if n > tol_mm else 'green'}]{n:.1f}",
-                  f"{r.yaw_err_deg:+.3f}", f"{r.reproj_px:.3f}")
+        t.add_row(
+            r.camera,
+            r.image,
+            ", ".join(f"{v:.4f}" for v in r.xyz_est),
+            ", ".join(f"{v:+.1f}" for v in r.err_mm),
+            f"[{'red' if n > tol_mm else 'green'}]{n:.1f}",
+            f"{r.yaw_err_deg:+.3f}",
+            f"{r.reproj_px:.3f}",
+        )
     console.print(t)
     e = np.array([r.err_mm for r in rows])
-    console.print(f"{len(rows)} board(s): RMS error {np.sqrt(np.mean(np.sum(e**2, axis=1))):.1f} mm, max "
-                  f"{np.max(np.linalg.norm(e, axis=1)):.1f} mm; {bad} above {tol_mm:g} mm")
+    console.print(
+        f"{len(rows)} board(s): RMS error {np.sqrt(np.mean(np.sum(e**2, axis=1))):.1f} mm, max "
+        f"{np.max(np.linalg.norm(e, axis=1)):.1f} mm; {bad} above {tol_mm:g} mm"
+    )
     if bad:
         raise typer.Exit(1)
 
@@ -152,7 +181,9 @@ def steady(
     before: Path = typer.Option(..., "--before", help="Folder of <cam>/<n>.png taken before."),
     after: Path = typer.Option(..., "--after", help="Folder of <cam>/<n>.png taken after (same names)."),
     rig: Path = typer.Option(..., "--rig", help="Calibrated rig.yaml (intrinsics for re-localisation)."),
-    board: str = typer.Option("9x5x0.100", "--board", help=BOARD_HELP + " Use 'none' for image comparison only."),
+    board: str = typer.Option(
+        "9x5x0.100", "--board", help=BOARD_HELP + " Use 'none' for image comparison only."
+    ),
     shift_px: float = typer.Option(0.3, "--shift-px", help="Image shift threshold (px)."),
     move_mm: float = typer.Option(0.8, "--move-mm", help="Board displacement threshold (mm)."),
     turn_deg: float = typer.Option(0.02, "--turn-deg", help="Board rotation threshold (deg)."),
@@ -167,21 +198,36 @@ def steady(
 
     r = load_rig(rig)
     b = None if board.lower() == "none" else parse_board(board)
-    res = check_steady(before, after, {c.name: (c.K, c.dist) for c in r.cameras}, b, shift_px=shift_px,
-                       move_mm=move_mm, turn_deg=turn_deg)
+    res = check_steady(
+        before,
+        after,
+        {c.name: (c.K, c.dist) for c in r.cameras},
+        b,
+        shift_px=shift_px,
+        move_mm=move_mm,
+        turn_deg=turn_deg,
+    )
     t = Table("camera", "image", "image shift (px)", "board moved (mm)", "board turned (deg)", "verdict")
     for s in res:
-        t.add_row(s.camera, s.image, f"{s.shift_px:.3f}", "-" if s.board is None else f"{s.board.move_mm:.2f}",
-                  "-" if s.board is None else f"{s.board.turn_deg:.4f}",
-                  "[red]MOVED[/red]" if s.moved else "[green]steady[/green]")
+        t.add_row(
+            s.camera,
+            s.image,
+            f"{s.shift_px:.3f}",
+            "-" if s.board is None else f"{s.board.move_mm:.2f}",
+            "-" if s.board is None else f"{s.board.turn_deg:.4f}",
+            "[red]MOVED[/red]" if s.moved else "[green]steady[/green]",
+        )
         if figures is not None:
             from gtrig.calib.chessboard import read_grey
             from gtrig.calib.plots import plot_overlay
 
             stem = Path(s.image).stem
-            plot_overlay(read_grey(next((before / s.camera).glob(stem + ".*"))),
-                         read_grey(next((after / s.camera).glob(stem + ".*"))),
-                         figures / f"steady_{s.camera}_{stem}.png", f"{s.camera}: shift {s.shift_px:.2f} px")
+            plot_overlay(
+                read_grey(next((before / s.camera).glob(stem + ".*"))),
+                read_grey(next((after / s.camera).glob(stem + ".*"))),
+                figures / f"steady_{s.camera}_{stem}.png",
+                f"{s.camera}: shift {s.shift_px:.2f} px",
+            )
     console.print(t)
     moved = sorted({s.camera for s in res if s.moved})
     console.print(f"moved: {', '.join(moved)}" if moved else "all cameras steady")

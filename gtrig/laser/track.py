@@ -215,6 +215,32 @@ def rts_smooth(
     return xs[:, :3], Ps[:, :3, :3]
 
 
+def _resolve_heading(
+    tid: int,
+    track_id: np.ndarray,
+    status: np.ndarray,
+    raw: np.ndarray,
+    raw_cov: np.ndarray,
+    centre_r: np.ndarray,
+    min_motion_m: float,
+) -> bool:
+    """Resolve the pi symmetry of track ``tid`` from its forward motion (the robot drives forwards):
+    turn all its poses by pi if it moved backwards. Returns whether the motion sufficed."""
+    idx = np.flatnonzero(track_id == tid)
+    okk = idx[status[idx] == OK]
+    if okk.size < 2:
+        return False
+    # motion along the current heading, summed over the track (robust to turns)
+    dp = np.diff(raw[okk, :2], axis=0)
+    forward = float(np.sum(dp[:, 0] * np.cos(raw[okk[:-1], 2]) + dp[:, 1] * np.sin(raw[okk[:-1], 2])))
+    if abs(forward) < min_motion_m:
+        return False
+    if forward < 0:
+        for j in idx:
+            raw[j], raw_cov[j] = _twin(raw[j], raw_cov[j], centre_r)
+    return True
+
+
 def track_frames(
     fp: FramedPoints,
     model: HullModel,
@@ -247,7 +273,7 @@ def track_frames(
     track_id = np.full(F, -1, dtype=int)
     reasons = [""] * F
     centre_r = model.corners_xy.mean(axis=0)
-    tracks: list[tuple[int, bool]] = []  # (first frame, heading ambiguous)
+    tracks: list[list[int | bool]] = []  # [first frame, heading ambiguous]
 
     last_ok: list[int] = []  # frames of the current track fitted OK, for the velocity
     tracking = False
@@ -257,9 +283,10 @@ def track_frames(
     while k < F:
         if not tracking:
             sl = fp.frame(k)
-            prior, radius = None, None
+            prior, radius, inherited = None, None, False
             if last_pose_frame >= 0 and stamps[k] - stamps[last_pose_frame] <= st.prior_max_gap_s:
                 prior = raw[last_pose_frame]
+                inherited = bool(tracks[track_id[last_pose_frame]][1])  # the prior's own heading unresolved
                 if stamps[k] - stamps[last_pose_frame] <= st.reacquire_gap_s:
                     radius = st.reacquire_radius_m
             acq = None
@@ -284,7 +311,7 @@ def track_frames(
             pose = f.xytheta.copy()
             if prior is not None:
                 pose[2] = prior[2] + wrap_angle(pose[2] - prior[2])  # continuous heading
-            tracks.append((k, acq.ambiguous))
+            tracks.append([k, acq.ambiguous or inherited])
             raw[k], raw_cov[k] = pose, f.cov_xytheta
             status[k], n_points[k], n_sides[k], rms[k] = OK, f.n_points, f.n_sides, f.rms_m
             track_id[k] = len(tracks) - 1
@@ -365,24 +392,16 @@ def track_frames(
                 log.debug("track lost at frame %d (%.3f s): %s", j, stamps[j], reasons[j])
                 end = j + 1
                 break
+        # resolve the pi symmetry as soon as the robot has moved, before a later track inherits it
+        tid = len(tracks) - 1
+        if st.forward_motion and tracks[tid][1]:
+            if _resolve_heading(tid, track_id, status, raw, raw_cov, centre_r, st.min_motion_m):
+                tracks[tid][1] = False
         k = end
 
-    # heading of each track: the pi symmetry
     for tid, (_first, ambiguous) in enumerate(tracks):
         idx = np.flatnonzero(track_id == tid)
-        if not ambiguous:
-            continue
-        okk = idx[status[idx] == OK]
-        resolved = False
-        if st.forward_motion and okk.size >= 2:
-            d = raw[okk[-1], :2] - raw[okk[0], :2]
-            if np.hypot(*d) >= st.min_motion_m:
-                heading = np.array([np.cos(raw[okk[0], 2]), np.sin(raw[okk[0], 2])])
-                resolved = True
-                if d @ heading < 0:
-                    for j in idx:
-                        raw[j], raw_cov[j] = _twin(raw[j], raw_cov[j], centre_r)
-        if not resolved:
+        if ambiguous:
             status[idx[status[idx] == OK]] = AMBIGUOUS
             for j in idx:
                 reasons[j] = reasons[j] or "heading ambiguous (pi symmetry, no motion, no recent pose)"

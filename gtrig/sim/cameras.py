@@ -59,7 +59,6 @@ log = logging.getLogger(__name__)
 LEVELS_PER_RADIANCE = 210.0  # grey level of a perfect white under the room's average light
 BACKGROUND_SUPERSAMPLE = 2  # the static background is rendered once per camera
 HANDHELD_SIZE = (1600, 1200)
-MAX_SUBEXPOSURES = 4
 ROI_MARGIN_PX = 4
 
 
@@ -155,17 +154,23 @@ def _robot_box_points(scene: Scene, T_world_robot: np.ndarray) -> np.ndarray:
     return geo.transform_points(T_world_robot, pts)
 
 
-def _occluders(scene: Scene, view: CameraView, ccfg: CameraSimConfig, robot_centre: np.ndarray) -> list[Face]:
-    """Clutter faces nearer to the camera than the robot: painted over it."""
+def _occluders(scene: Scene, view: CameraView, ccfg: CameraSimConfig, robot_centre: np.ndarray,
+               roi: tuple[int, int, int, int]) -> list[Face]:
+    """Clutter faces nearer to the camera than the robot and overlapping ``roi``: painted over it."""
     eye = view.T_world_cam[:3, 3]
     d_robot = float(np.linalg.norm(robot_centre - eye))
     out = []
     for f in room_faces(scene, ccfg.sunlight):
         if f.name == "floor" or f.name.startswith("wall"):
             continue
-        c = geo.transform_points(f.T_world_face, np.c_[f.outline_xy, np.zeros(len(f.outline_xy))]).mean(axis=0)
-        if np.linalg.norm(c - eye) < d_robot - 0.3:
-            out.append(f)
+        outline = geo.transform_points(f.T_world_face, np.c_[f.outline_xy, np.zeros(len(f.outline_xy))])
+        if np.linalg.norm(outline.mean(axis=0) - eye) >= d_robot - 0.3:
+            continue
+        uv = view.cam.project(view.T_world_cam, outline)
+        if np.all(np.isfinite(uv)) and (uv[:, 0].max() < roi[0] or uv[:, 0].min() > roi[2]
+                                        or uv[:, 1].max() < roi[1] or uv[:, 1].min() > roi[3]):
+            continue
+        out.append(f)
     return out
 
 
@@ -200,48 +205,67 @@ def robot_layer(scene: Scene, view: CameraView, T_world_robot: np.ndarray, roi: 
     return lay
 
 
+def motion_kernel(dx: float, dy: float, samples: int = 64) -> np.ndarray | None:
+    """Normalised line kernel for a uniform image motion ``(dx, dy)`` px during the exposure,
+    centred (the average position is the mid-exposure one); None below 0.3 px."""
+    length = math.hypot(dx, dy)
+    if length < 0.3:
+        return None
+    r = int(math.ceil(max(abs(dx), abs(dy)) / 2)) + 1
+    k = np.zeros((2 * r + 1, 2 * r + 1), np.float32)
+    t = (np.arange(samples) + 0.5) / samples - 0.5
+    x, y = r + t * dx, r + t * dy
+    ix, iy = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - ix, y - iy
+    for ox, oy, wgt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy),
+                        (1, 1, fx * fy)):
+        np.add.at(k, (iy + oy, ix + ox), wgt)
+    return k / k.sum()
+
+
 def render_robot_frame(scene: Scene, view: CameraView, motion: RobotMotion, t_s: float,
                        ccfg: CameraSimConfig, rng: np.random.Generator,
                        focus_inv_depth: float | None = None) -> np.ndarray:
     """One 8-bit image of the robot moving along ``motion``, exposed around ``t_s`` (mid-exposure).
 
-    Motion blur: the robot layer is averaged over sub-exposures spread over ``ccfg.exposure_s``, as
-    many as needed to keep successive positions within half a pixel (at most 8).
+    Motion blur: the robot layer rendered at mid-exposure is smeared along the image motion of the
+    robot's top centre over ``ccfg.exposure_s`` (a line kernel; rotation during the 8 ms exposure moves
+    the plate's corners by at most a pixel more than its centre, so one kernel is a fair model).
     """
     img = view.background.copy()
-    half = 0.5 * ccfg.exposure_s if ccfg.motion_blur else 0.0
-    T0 = motion.T_world_robot(t_s - half)
-    T1 = motion.T_world_robot(t_s + half)
-    p0, p1 = _robot_box_points(scene, T0), _robot_box_points(scene, T1)
-    uv0 = view.cam.project(view.T_world_cam, p0)
-    uv1 = view.cam.project(view.T_world_cam, p1)
-    if np.all(np.isfinite(uv0)) and np.all(np.isfinite(uv1)):
-        move = float(np.max(np.linalg.norm(uv1 - uv0, axis=1)))
-        n = int(np.clip(math.ceil(move / 0.75), 1, MAX_SUBEXPOSURES)) if half > 0 else 1
-        centre = 0.5 * (p0.mean(axis=0) + p1.mean(axis=0))
-        depth = float((geo.inv_T(view.T_world_cam) @ np.r_[centre, 1.0])[2])
-        sigma = float(_sigma(1.0 / depth, ccfg, focus_inv_depth)) if ccfg.defocus_sigma_px > 0 else 0.0
-        roi = _roi_of(view, np.vstack([p0, p1]), ROI_MARGIN_PX + 3 * sigma)
-        if roi is not None:
-            light = float(floor_illumination(scene, centre[None, :2], ccfg.sunlight)[0])
-            occ = _occluders(scene, view, ccfg, centre)
-            times = [t_s] if n == 1 else list(t_s + half * (2 * (np.arange(n) + 0.5) / n - 1))
-            # the sub-exposures antialias too: keep about s^2 samples per pixel in all
-            s_mark = max(1, int(ccfg.supersample / math.sqrt(n) + 0.5))
-            s_body = 1 if n > 1 else min(2, s_mark)
-            acc_c = acc_a = None
-            for t in times:
-                lay = robot_layer(scene, view, motion.T_world_robot(t), roi, s_body, s_mark, light, occ)
-                acc_c = lay.colour if acc_c is None else acc_c + lay.colour
-                acc_a = lay.alpha if acc_a is None else acc_a + lay.alpha
-            assert acc_c is not None and acc_a is not None
-            layer = Layer(acc_c / n, acc_a / n, roi)
-            composite(img, layer, sigma, view.gain)
-            sd = view.noise_sd.copy()
-            x0, y0, x1, y1 = roi
-            sd[y0:y1, x0:x1] = noise_sd(img[y0:y1, x0:x1], ccfg.noise_sigma)
-            return add_sensor_noise(img, ccfg.noise_sigma, rng, sd)
-    return add_sensor_noise(img, ccfg.noise_sigma, rng, view.noise_sd)
+    T_mid = motion.T_world_robot(t_s)
+    pts = _robot_box_points(scene, T_mid)
+    if not np.all(np.isfinite(view.cam.project(view.T_world_cam, pts))):
+        return add_sensor_noise(img, ccfg.noise_sigma, rng, view.noise_sd)
+    kernel = None
+    if ccfg.motion_blur:
+        half = 0.5 * ccfg.exposure_s
+        top = np.array([[0.0, 0.0, gtroom.ROBOT_TOP_M]])
+        ends = [geo.transform_points(motion.T_world_robot(t_s + d), top)[0] for d in (-half, half)]
+        uv = view.cam.project(view.T_world_cam, np.array(ends))
+        if np.all(np.isfinite(uv)):
+            kernel = motion_kernel(*(uv[1] - uv[0]))
+    centre = pts.mean(axis=0)
+    depth = float((geo.inv_T(view.T_world_cam) @ np.r_[centre, 1.0])[2])
+    sigma = float(_sigma(1.0 / depth, ccfg, focus_inv_depth)) if ccfg.defocus_sigma_px > 0 else 0.0
+    extra = 0 if kernel is None else kernel.shape[0] // 2
+    roi = _roi_of(view, pts, ROI_MARGIN_PX + 3 * sigma + extra)
+    if roi is None:
+        return add_sensor_noise(img, ccfg.noise_sigma, rng, view.noise_sd)
+    light = float(floor_illumination(scene, centre[None, :2], ccfg.sunlight)[0])
+    occ = _occluders(scene, view, ccfg, centre, roi)
+    s_mark = ccfg.supersample
+    layer = robot_layer(scene, view, T_mid, roi, min(2, s_mark), s_mark, light, occ)
+    if kernel is not None:
+        import cv2
+
+        layer = Layer(cv2.filter2D(layer.colour, -1, kernel, borderType=cv2.BORDER_CONSTANT),
+                      cv2.filter2D(layer.alpha, -1, kernel, borderType=cv2.BORDER_CONSTANT), roi)
+    composite(img, layer, sigma, view.gain)
+    sd = view.noise_sd.copy()
+    x0, y0, x1, y1 = roi
+    sd[y0:y1, x0:x1] = noise_sd(img[y0:y1, x0:x1], ccfg.noise_sigma)
+    return add_sensor_noise(img, ccfg.noise_sigma, rng, sd)
 
 
 def render_faces_frame(view: CameraView, faces: list[Face], ccfg: CameraSimConfig, rng: np.random.Generator,
@@ -282,8 +306,17 @@ def _parallel_map(fn: Callable[[Any, Any], Any], shared: Any, jobs: list[Any], w
     if n == 1:
         return [fn(shared, j) for j in jobs]
     chunk = max(1, len(jobs) // (n * 8))
-    with ProcessPoolExecutor(n, initializer=_init_worker, initargs=(fn, shared)) as ex:
-        return list(ex.map(_call, jobs, chunksize=chunk))
+    import cv2
+
+    # OpenCV's worker threads do not survive fork(): a forked child whose parent had a busy OpenCV
+    # thread pool can hang in its first parallel call. Quiesce the pool while forking.
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        with ProcessPoolExecutor(n, initializer=_init_worker, initargs=(fn, shared)) as ex:
+            return list(ex.map(_call, jobs, chunksize=chunk))
+    finally:
+        cv2.setNumThreads(threads)
 
 
 def _frame_rng(seed: int, cam_index: int, frame: int, salt: int = 0) -> np.random.Generator:
@@ -355,6 +388,7 @@ def render_sequence(scene: Scene, rig_true_camera: Camera, motion: RobotMotion, 
     ci = _cam_index(scene, rig_true_camera.name)
     stamps_s = np.asarray(stamps_s, float)
     shared = _SeqShared(scene, rig_true_camera, motion, folder, cfg.camera, int(seed), ci)
+    _cached_view(scene, rig_true_camera, cfg.camera)  # once, before forking: workers inherit it
     _parallel_map(_seq_frame, shared, list(enumerate(stamps_s.tolist())), cfg.workers)
     written = jittered_stamps(stamps_s, cfg.camera.stamp_jitter_s, int(seed), ci)
     write_frame_index(folder, written, [f"{k:06d}.png" for k in range(stamps_s.size)])
@@ -535,13 +569,16 @@ def write_calibration_sets(scene: Scene, rec_dir: str | os.PathLike[str], cfg: S
         names = []
         for k in range(cfg.n_world_board_views):
             name = f"{k:06d}.png"
-            jobs.append((c, [scene.T_world_board], str(rec / "calib" / "world_board" / c.name / name), ci, serial))
+            path = rec / "calib" / "world_board" / c.name / name
+            jobs.append((c, [scene.T_world_board], str(path), ci, serial))
             serial += 1
             names.append(name)
         truth["world_board"][c.name] = {"images": names,
                                         "T_cam_board": _pose_dict(geo.inv_T(Twc) @ scene.T_world_board)}
     if not truth["world_board"]:
         log.warning("no camera sees the whole world board")
+    for c in cams:
+        _cached_view(scene, c, cfg.camera)  # once, before forking: workers inherit them
     _parallel_map(_still_frame, _StillShared(scene, cfg.camera, cfg.seed), jobs, cfg.workers)
 
     cols, rows = gtroom.CHESSBOARD_SQUARES
@@ -603,9 +640,11 @@ def sample_handheld_poses(scene: Scene, T_world_robot: np.ndarray, cam: PinholeC
             az = 2 * math.pi * (len(poses) + rng.uniform(0, 1)) / n
             el = math.radians(rng.uniform(35, 72))
             dist = rng.uniform(1.0, 2.0)
-            eye = top + dist * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+            eye = top + dist * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az),
+                                         math.sin(el)])
             target = top + np.r_[rng.normal(0, 0.12, 2), 0.0]
-            T = geo.look_at(eye, target) @ geo.T_from_xyz_rpy([0, 0, 0], [0, 0, math.radians(rng.normal(0, 12))])
+            roll = geo.T_from_xyz_rpy([0, 0, 0], [0, 0, math.radians(rng.normal(0, 12))])
+            T = geo.look_at(eye, target) @ roll
             seen = _markers_in_view(scene, cam, T, T_world_robot)
             if len(seen) >= 2:
                 poses.append(T)

@@ -38,7 +38,7 @@ SUN_SOFT_M = 0.06  # penumbra (sun disc 0.5 deg over ~4 m, plus the diffusing wi
 # ------------------------------------------------------------------------------------------ helpers
 def _frame_on_wall(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Face frame of a vertical wall from floor point a to b (world xy): x along the wall, y up,
-    z the inward normal (the room is on the left of a->b for counter-clockwise walls)."""
+    z = x cross y, which points into the room when the room is on the right of a->b."""
     ex = np.r_[b - a, 0.0]
     ex /= np.linalg.norm(ex)
     ey = np.array([0.0, 0.0, 1.0])
@@ -46,7 +46,8 @@ def _frame_on_wall(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return geo.make_T(np.column_stack([ex, ey, ez]), np.r_[a, 0.0])
 
 
-def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int], scale_px: float, amp: float) -> np.ndarray:
+def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int], scale_px: float,
+                  amp: float) -> np.ndarray:
     import cv2
 
     n = rng.standard_normal(shape).astype(np.float32)
@@ -148,8 +149,8 @@ def room_faces(scene: Scene, sunlight: bool = True) -> tuple[Face, ...]:
     ccw = _poly_area(walls[:, 0]) > 0
     win, _ = sun_geometry(scene)
     for k, (a, b) in enumerate(walls):
-        if not ccw:
-            a, b = b, a
+        if ccw:
+            a, b = b, a  # walk clockwise so that the frame's z (x cross up) points into the room
         T = _frame_on_wall(a, b)
         length = float(np.linalg.norm(b - a))
         wt = 0.02
@@ -162,14 +163,14 @@ def room_faces(scene: Scene, sunlight: bool = True) -> tuple[Face, ...]:
         alb = 0.70 + 0.08 * (Y / ROOM_HEIGHT_M) + _smooth_noise(rng, (nyw, nxw), 3, 0.015)
         alb = np.where(Y < 0.10, 0.25, alb)  # skirting board
         if k == WINDOW_WALL:
-            f = X / length if ccw else 1 - X / length
+            f = 1 - X / length if ccw else X / length
             inwin = (f > WINDOW_SPAN[0]) & (f < WINDOW_SPAN[1]) & (Y > WINDOW_Z[0]) & (Y < WINDOW_Z[1])
             alb = np.where(inwin, 1.6, alb)  # the bright sky through the glass
         if k == (WINDOW_WALL + 2) % 4:
             door = (np.abs(X - 0.5 * length) < 0.45) & (Y < 2.1)
             alb = np.where(door, 0.50, alb)
-        faces.append(Face(T, np.array([[0, 0], [length, 0], [length, ROOM_HEIGHT_M], [0, ROOM_HEIGHT_M]], float),
-                          alb.astype(np.float32), Aw, name=f"wall{k}"))
+        outline = np.array([[0, 0], [length, 0], [length, ROOM_HEIGHT_M], [0, ROOM_HEIGHT_M]], float)
+        faces.append(Face(T, outline, alb.astype(np.float32), Aw, name=f"wall{k}"))
     for box in scene.boxes:
         faces.extend(box_faces(box, rng))
     out = tuple(faces)

@@ -80,30 +80,34 @@ class ArucoDetector:
 
 
 class GtrigDetector:
-    """The markers package's detector (issue 5), adapted to :class:`MarkerView` lists."""
+    """The markers package's detector (issue 5: ``gtrig.markers.detect.MarkerDetector(family, K, dist)``
+    and its ``detect(image)``), adapted to :class:`MarkerView` lists."""
 
     name = "gtrig-markers"
 
-    def __init__(self, rig: Rig, impl: Callable[..., list]) -> None:  # type: ignore[type-arg]
+    def __init__(self, rig: Rig, detector_class: type) -> None:
         fams = {m.family for m in rig.robot.markers}
         if len(fams) != 1:
             raise InputError("GTvision handles one marker family per rig")
         self.family = fams.pop()
         self.ids = {m.id for m in rig.robot.markers}
-        self._impl = impl
+        self._cls = detector_class
+        self._per_camera: dict[str, object] = {}  # one detector per camera (its undistortion set up once)
 
     def __call__(self, image: np.ndarray, camera: CameraGeometry) -> list[MarkerView]:
-        dets = self._impl(image, self.family, camera_matrix=camera.K, dist_coeffs=camera.dist)
-        return views_from_detections(camera.name, dets, self.ids)
+        det = self._per_camera.get(camera.name)
+        if det is None:
+            det = self._per_camera[camera.name] = self._cls(self.family, camera.K, camera.dist)
+        return views_from_detections(camera.name, det.detect(image), self.ids)  # type: ignore[attr-defined]
 
 
 def make_detector(rig: Rig, which: str = "auto") -> ArucoDetector | GtrigDetector:
     """The detector to use: ``"gtrig"`` (the markers package), ``"aruco"``, or ``"auto"`` (the markers
-    package if it provides ``gtrig.markers.detect.detect_markers``, else ArUco, with a warning)."""
+    package if it provides ``gtrig.markers.detect.MarkerDetector``, else ArUco, with a warning)."""
     if which in ("auto", "gtrig"):
         try:
             mod = importlib.import_module("gtrig.markers.detect")
-            impl = mod.detect_markers
+            impl = mod.MarkerDetector
         except (ModuleNotFoundError, AttributeError):
             if which == "gtrig":
                 raise InputError("the markers package's detector (gtrig.markers.detect) "

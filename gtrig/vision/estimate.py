@@ -128,7 +128,9 @@ def _fit(model: VisionModel, views: list[MarkerView], opts: VisionOptions,
     sc = stack_corners(model, views)
     init = initial_pose(model, views, sc, opts.planar_prior, previous, opts.init, opts.refine,
                         opts.rig_uncertainty)
-    fit = refine_pose(sc, init.best.fit.T_world_robot, opts.planar_prior, opts.refine, opts.rig_uncertainty)
+    fit = init.best.fit
+    if not fit.converged:  # candidates get a few iterations only: finish the job
+        fit = refine_pose(sc, fit.T_world_robot, opts.planar_prior, opts.refine, opts.rig_uncertainty)
     return sc, init, fit
 
 

@@ -11,7 +11,7 @@ from gtrig.calib.chessboard import Board, detect_corners, detect_folder, parse_b
 from gtrig.calib.intrinsics import calibrate_intrinsics
 from gtrig.errors import InputError
 
-from .conftest import BOARD, DIST, K, SIZE
+from .conftest import BOARD, DIST, SIZE, K
 
 
 def test_subpixel_corners_match_the_projection() -> None:

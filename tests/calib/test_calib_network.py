@@ -19,9 +19,19 @@ PAIRS = [("cam0", "cam1"), ("cam1", "cam2"), ("cam2", "cam3")]
 @pytest.fixture(scope="module")
 def solved():
     sc = make_scene(3)
-    prob = synth.synthetic_network(sc.rig_true, sc.rig_nominal, BOARD, sc.T_board1_board2_true,
-                                   sc.T_board1_board2_nominal, sc.T_world_board, PAIRS, ["cam1"], 5, 0.05,
-                                   np.random.default_rng(3))
+    prob = synth.synthetic_network(
+        sc.rig_true,
+        sc.rig_nominal,
+        BOARD,
+        sc.T_board1_board2_true,
+        sc.T_board1_board2_nominal,
+        sc.T_world_board,
+        PAIRS,
+        ["cam1"],
+        5,
+        0.05,
+        np.random.default_rng(3),
+    )
     return sc, prob, calibrate_network(prob)
 
 

@@ -33,8 +33,13 @@ def test_mean_pose_is_rigid_unlike_the_elementwise_mean() -> None:
 
 def test_cam_yaml_round_trip(tmp_path) -> None:
     K = np.array([[1500.5, 0, 511.2], [0, 1499.8, 383.9], [0, 0, 1]])
-    cam = CameraIntrinsics((1024, 768), K, np.array([-0.12, 0.1, 1e-4, -2e-4, 0]), 0.05,
-                           {"std": {"fx": 0.3}, "per_image_rms_px": {"a.png": 0.04}, "rejected": {"b.png": "outlier"}})
+    cam = CameraIntrinsics(
+        (1024, 768),
+        K,
+        np.array([-0.12, 0.1, 1e-4, -2e-4, 0]),
+        0.05,
+        {"std": {"fx": 0.3}, "per_image_rms_px": {"a.png": 0.04}, "rejected": {"b.png": "outlier"}},
+    )
     write_cam_yaml(tmp_path / "cam.yaml", cam)
     back = read_cam_yaml(tmp_path / "cam.yaml")
     assert back.image_size == (1024, 768)

@@ -51,7 +51,8 @@ def test_sequence_same_bytes_any_worker_count(scene, tmp_path):
     w1 = render_sequence(scene, cam, motion, stamps, tmp_path / "a", cfg1, seed=5)
     w2 = render_sequence(scene, cam, motion, stamps, tmp_path / "b", cfg2, seed=5)
     for k in range(3):
-        assert (tmp_path / "a" / f"{k:06d}.png").read_bytes() == (tmp_path / "b" / f"{k:06d}.png").read_bytes()
+        name = f"{k:06d}.png"
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
     idx = read_frame_index(tmp_path / "a")
     np.testing.assert_allclose(idx.stamps_s, w1, atol=1e-6)
     np.testing.assert_array_equal(w1, w2)
@@ -84,8 +85,8 @@ def test_calibration_sets(scene, tmp_path):
     checks = [(scene.rig_true.cameras[2], tmp_path / "calib" / "intrinsics" / "cam2" / "000001.png",
                Pose(**truth["intrinsics"]["cam2"][1]["T_cam_board"]).matrix())]
     entry = truth["pairs"]["cam1-cam2"][0]
-    checks.append((scene.rig_true.cameras[2], tmp_path / "calib" / "pairs" / "cam1-cam2" / "cam2" / "000000.png",
-                   Pose(**entry["T_cam2_board2"]).matrix()))
+    pair_img = tmp_path / "calib" / "pairs" / "cam1-cam2" / "cam2" / "000000.png"
+    checks.append((scene.rig_true.cameras[2], pair_img, Pose(**entry["T_cam2_board2"]).matrix()))
     for cam, path, T_cam_board in checks:
         g = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
         ok, found = cv2.findChessboardCorners(g, (9, 5))
