@@ -13,7 +13,6 @@ import logging
 import math
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,6 +24,7 @@ from gtrig import geometry as geo
 from gtrig.io.atomic import atomic_write_bytes, atomic_write_text
 from gtrig.io.frames import write_frame_index
 from gtrig.io.tum import Trajectory, write_tum
+from gtrig.parallel import process_pool
 from gtrig.rig.models import Camera, Pose
 from gtrig.sim import gtroom
 from gtrig.sim.config import CameraSimConfig, SimConfig
@@ -306,17 +306,8 @@ def _parallel_map(fn: Callable[[Any, Any], Any], shared: Any, jobs: list[Any], w
     if n == 1:
         return [fn(shared, j) for j in jobs]
     chunk = max(1, len(jobs) // (n * 8))
-    import cv2
-
-    # OpenCV's worker threads do not survive fork(): a forked child whose parent had a busy OpenCV
-    # thread pool can hang in its first parallel call. Quiesce the pool while forking.
-    threads = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        with ProcessPoolExecutor(n, initializer=_init_worker, initargs=(fn, shared)) as ex:
-            return list(ex.map(_call, jobs, chunksize=chunk))
-    finally:
-        cv2.setNumThreads(threads)
+    with process_pool(n, _init_worker, (fn, shared)) as ex:
+        return list(ex.map(_call, jobs, chunksize=chunk))
 
 
 def _frame_rng(seed: int, cam_index: int, frame: int, salt: int = 0) -> np.random.Generator:

@@ -155,7 +155,7 @@ def clutter() -> tuple[Box, ...]:
         ("box_b", 2.4, -2.0, (0.6, 0.6, 0.6), -0.2, 0.3),
         ("heater_e", 0.5, -2.15, (1.2, 0.12, 0.6), 0.0, 0.9),
         ("heater_w", 0.0, 2.85, (1.0, 0.12, 0.6), 0.0, 0.9),
-        ("calib_object", -0.8, -2.0, (0.4, 0.3, 0.5), 0.0, 0.7),
+        ("calib_object", -0.8, -1.9, (1.2, 0.6, 0.5), 0.0, 0.7),
     ):
         c = _band_xy(u, v)
         boxes.append(Box(name, (float(c[0]), float(c[1])), size, BAND_DIR_RAD + yaw_off, refl))

@@ -29,7 +29,6 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -39,6 +38,7 @@ import numpy as np
 from gtrig.errors import FormatError, InputError
 from gtrig.io.frames import FrameIndex, read_frame_index
 from gtrig.io.tum import Trajectory
+from gtrig.parallel import process_pool
 from gtrig.rig.load import rig_to_dict
 from gtrig.rig.models import Rig
 from gtrig.vision.estimate import FrameEstimate, Status, VisionOptions, estimate_frame
@@ -367,7 +367,7 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
                 if progress:
                     progress(n_done, len(instants))
         else:
-            with ProcessPoolExecutor(max_workers=nproc, initializer=_worker_init, initargs=init_args) as ex:
+            with process_pool(nproc, _worker_init, init_args) as ex:
                 futs = [ex.submit(_process_chunk, i, chunks[i]) for i in todo]
                 from concurrent.futures import as_completed
 
