@@ -122,13 +122,14 @@ def gtlaser(ctx: StageContext) -> list[AccuracyRow]:
 def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     """Robot poses from all markers in all cameras, on the calibrated rig (issue 6)."""
     from gtrig.io.tum import read_tum, write_tum
-    from gtrig.rig import load_rig
+    from gtrig.rig import Rig, load_rig
     from gtrig.vision import report as vision_report
     from gtrig.vision.covariance import RigUncertainty
     from gtrig.vision.estimate import VisionOptions
     from gtrig.vision.sequence import run_recording, write_covariance_csv
 
-    rig = ctx.products.get("rig_cameras") or load_rig(ctx.rec / "rig.yaml")
+    cal = ctx.products.get("rig_cameras")
+    rig = cal if isinstance(cal, Rig) else load_rig(ctx.rec / "rig.yaml")
     # The markers' poses on the robot are still the hand-measured ones (marker-to-robot calibration is
     # not built yet), so they carry hand-placement uncertainty; the cameras carry calibration's.
     options = VisionOptions(rig_uncertainty=RigUncertainty(

@@ -14,7 +14,6 @@ import numpy as np
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_open
 
-
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv", ".mov")
 
 

@@ -8,7 +8,7 @@ rather than a silently ignored setting. Plausibility bounds catch millimetres gi
 from __future__ import annotations
 
 import math
-from enum import Enum
+from enum import StrEnum
 from typing import Annotated, Self
 
 import numpy as np
@@ -147,7 +147,7 @@ class LaserScanner(_Strict):
         return self.angle_min_rad + self.angle_increment_rad * np.arange(self.beams)
 
 
-class MarkerFamily(str, Enum):
+class MarkerFamily(StrEnum):
     """Square ID marker families."""
 
     ARTOOLKITPLUS_SIMPLE = "artoolkitplus_simple"

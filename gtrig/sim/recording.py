@@ -151,9 +151,9 @@ def _step_lasers(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
 
 
 def _step_odometry(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
-    from gtrig.sim.odometry import write_odometry
-
     import dataclasses
+
+    from gtrig.sim.odometry import write_odometry
 
     t0, t1 = tl.run_interval_s[0]
     errors = write_odometry(scene, tl.run, t0, t1, out / "run" / "odometry.csv", cfg, seed=cfg.seed * 10 + 6)

@@ -70,7 +70,8 @@ def test_video_with_timestamps(tmp_path: Path) -> None:
     for i in range(6):
         w.write(np.full((48, 64), 40 * i, np.uint8))
     w.release()
-    (tmp_path / "timestamps.csv").write_text("frame,stamp_s,file\n" + "".join(f"{i},{10 + i * 0.1:.1f},\n" for i in range(6)))
+    rows = "".join(f"{i},{10 + i * 0.1:.1f},\n" for i in range(6))
+    (tmp_path / "timestamps.csv").write_text("frame,stamp_s,file\n" + rows)
     idx = read_frame_index(tmp_path)
     assert idx.video is not None and len(idx) == 6
     frames = list(idx.iter_images())

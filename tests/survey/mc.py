@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from gtrig.sim.gtroom import REFERENCE_SIGMA_M
-
 from gtrig import geometry as geo
 from gtrig.io.survey_csv import Distances, NamedPoints
-from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
+from gtrig.sim.gtroom import REFERENCE_SIGMA_M, VALIDATION_POSES, make_scene
 from gtrig.sim.survey import SimulatedSurvey, simulate_survey
 from gtrig.survey import multistart as ms
 
