@@ -353,33 +353,28 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
         progress(n_done, len(instants))
     t_par = time.perf_counter()
     init_args = (rig_to_dict(rig), detector, opts, paths, {})
+    def record(cid: int, items: Any) -> None:
+        nonlocal n_done
+        done[cid] = items
+        n_done += len(items)
+        if ckf:  # one line per finished chunk: an interrupted run resumes from here
+            ckf.write(json.dumps({"chunk": cid, "items": items}) + "\n")
+            ckf.flush()
+        if progress:
+            progress(n_done, len(instants))
+
     try:
         nproc = workers if workers > 0 else (os.cpu_count() or 1)
         if nproc == 1 or len(todo) <= 1:
             _worker_init(*init_args)
-            results = (_process_chunk(i, chunks[i]) for i in todo)
-            for cid, items in results:
-                done[cid] = items
-                n_done += len(items)
-                if ckf:
-                    ckf.write(json.dumps({"chunk": cid, "items": items}) + "\n")
-                    ckf.flush()
-                if progress:
-                    progress(n_done, len(instants))
+            for i in todo:
+                record(*_process_chunk(i, chunks[i]))
         else:
-            with process_pool(nproc, _worker_init, init_args) as ex:
-                futs = [ex.submit(_process_chunk, i, chunks[i]) for i in todo]
-                from concurrent.futures import as_completed
+            from concurrent.futures import as_completed
 
-                for fut in as_completed(futs):
-                    cid, items = fut.result()
-                    done[cid] = items
-                    n_done += len(items)
-                    if ckf:
-                        ckf.write(json.dumps({"chunk": cid, "items": items}) + "\n")
-                        ckf.flush()
-                    if progress:
-                        progress(n_done, len(instants))
+            with process_pool(nproc, _worker_init, init_args) as ex:
+                for fut in as_completed([ex.submit(_process_chunk, i, chunks[i]) for i in todo]):
+                    record(*fut.result())
     finally:
         if ckf:
             ckf.close()
