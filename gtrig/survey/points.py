@@ -29,7 +29,7 @@ from gtrig.errors import ConvergenceError, InputError
 from gtrig.io.survey_csv import Distances, NamedPoints, PointsTable
 from gtrig.survey import multistart as ms
 from gtrig.survey.nls import solve_blocks
-from gtrig.survey.robust import BadReading, residual_test
+from gtrig.survey.robust import BadReading, residual_test, triage
 
 log = logging.getLogger(__name__)
 
@@ -219,24 +219,13 @@ def estimate_world_points(
                 float(t.w[t.worst]),
                 distances.source[k],
             )
-            if on_outlier == "keep":
-                msg = f"kept: {bad.describe()}"
-                log.warning(msg)
-                warnings.append(msg)
+            unidentifiable = (
+                f"point {n}: readings disagree (chi2 {t.chi2:.1f}, {t.dof} dof, p {t.p_value:.1e}) "
+                f"but with {rows.size} readings the bad one cannot be told apart; remeasure "
+                f"({distances.source[rows[0]]})"
+            )
+            if not triage(bad, t, on_outlier, len(excluded[n]), max_exclusions, unidentifiable, warnings, log):
                 continue
-            if on_outlier == "refuse":
-                raise InputError(f"{bad.describe()}; check it, or rerun with --on-outlier exclude")
-            if not t.identifiable:
-                raise InputError(
-                    f"point {n}: readings disagree (chi2 {t.chi2:.1f}, {t.dof} dof, p {t.p_value:.1e}) "
-                    f"but with {rows.size} readings the bad one cannot be told apart; remeasure "
-                    f"({distances.source[rows[0]]})"
-                )
-            if len(excluded[n]) >= max_exclusions:
-                raise InputError(
-                    f"point {n}: still failing the residual test after excluding "
-                    f"{len(excluded[n])} reading(s): {bad.describe()}"
-                )
             rest = np.setdiff1d(rows, [k])
             if len(set(ref_idx_all[rest].tolist())) < 2:
                 raise InputError(f"{bad.describe()}; excluding it would leave too few readings")

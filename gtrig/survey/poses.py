@@ -29,7 +29,7 @@ from gtrig.io.survey_csv import Distances, NamedPoints, PoseTable
 from gtrig.survey import multistart as ms
 from gtrig.survey.nls import solve_blocks
 from gtrig.survey.points import ON_AMBIGUITY, ON_OUTLIER, circle_intersections
-from gtrig.survey.robust import BadReading, residual_test
+from gtrig.survey.robust import BadReading, residual_test, triage
 
 log = logging.getLogger(__name__)
 
@@ -249,23 +249,13 @@ def estimate_poses(
                 float(t.w[t.worst]),
                 distances.source[k],
             )
-            if on_outlier == "keep":
-                msg = f"kept: {bad.describe()}"
-                log.warning(msg)
-                warnings.append(msg)
+            unidentifiable = (
+                f"pose {n}: readings disagree (chi2 {t.chi2:.1f}, {t.dof} dof) but the bad one "
+                f"cannot be told apart; remeasure ({distances.source[r[0]]})"
+            )
+            if not triage(bad, t, on_outlier, len(excluded[n]), max_exclusions, unidentifiable, warnings, log,
+                          room_to_exclude=r.size - 1 >= 3):
                 continue
-            if on_outlier == "refuse":
-                raise InputError(f"{bad.describe()}; check it, or rerun with --on-outlier exclude")
-            if not t.identifiable:
-                raise InputError(
-                    f"pose {n}: readings disagree (chi2 {t.chi2:.1f}, {t.dof} dof) but the bad one "
-                    f"cannot be told apart; remeasure ({distances.source[r[0]]})"
-                )
-            if len(excluded[n]) >= max_exclusions or r.size - 1 < 3:
-                raise InputError(
-                    f"pose {n}: still failing the residual test after excluding "
-                    f"{len(excluded[n])} reading(s): {bad.describe()}"
-                )
             active[k] = False
             excluded[n].append(bad)
             msg = f"excluded: {bad.describe()}"

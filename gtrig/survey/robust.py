@@ -17,10 +17,13 @@ global test ``chi2 = r^T Sigma^-1 r`` exceeds its ``1 - alpha`` quantile with ``
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
+
+from gtrig.errors import InputError
 
 
 @dataclass(frozen=True)
@@ -112,3 +115,37 @@ def residual_test(
     corr[worst] = 0.0
     identifiable = bool(np.all(np.abs(corr[ok]) < 0.999))
     return ResidualTest(chi2, dof, p, w, err, worst, identifiable)
+
+
+def triage(
+    bad: BadReading,
+    test: ResidualTest,
+    on_outlier: str,
+    n_excluded: int,
+    max_exclusions: int,
+    unidentifiable_msg: str,
+    warnings: list[str],
+    log: logging.Logger,
+    room_to_exclude: bool = True,
+) -> bool:
+    """What to do with the worst reading of a failed residual test, by ``on_outlier``.
+
+    Returns True when the reading is to be excluded, False when it is kept (with a warning); raises
+    :class:`InputError` when refused, when the bad reading cannot be told apart (``unidentifiable_msg``)
+    or when ``max_exclusions`` are spent (or there is no ``room_to_exclude``).
+    """
+    if on_outlier == "keep":
+        msg = f"kept: {bad.describe()}"
+        log.warning(msg)
+        warnings.append(msg)
+        return False
+    if on_outlier == "refuse":
+        raise InputError(f"{bad.describe()}; check it, or rerun with --on-outlier exclude")
+    if not test.identifiable:
+        raise InputError(unidentifiable_msg)
+    if n_excluded >= max_exclusions or not room_to_exclude:
+        raise InputError(
+            f"{bad.kind} {bad.item}: still failing the residual test after excluding "
+            f"{n_excluded} reading(s): {bad.describe()}"
+        )
+    return True
