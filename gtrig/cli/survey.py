@@ -23,7 +23,8 @@ _SIGMA = typer.Option(None, "--sigma", help="Hand-laser sigma (m) for rows witho
 def points(
     reference: Path = typer.Option(..., "--reference", help="REF.csv: name,x,y[,sigma] (world frame, m)."),
     distances: Path = typer.Option(
-        ..., "--distances", help="D.csv: point,reference,distance[,sigma] (or point,d_<ref>,... wide)."
+        ..., "--distances", help="D.csv: point,reference,distance[,sigma] (or point,d_<ref>,... wide); reference may name "
+        "another world point (network readings)."
     ),
     out: Path = typer.Option(..., "--out", help="POINTS.csv: name,x,y,cov_xx,cov_xy,cov_yy,..."),
     sigma: float | None = _SIGMA,
@@ -36,7 +37,7 @@ def points(
         None, "--plot", help="Figure of the points with 3-sigma ellipses (x10)."
     ),
 ) -> None:
-    """World points by trilateration from distances to the reference points."""
+    """World points by trilateration from distances to the reference points (and to each other)."""
     from gtrig.io.survey_csv import read_reference_points, read_world_distances, write_points
     from gtrig.survey.points import estimate_world_points
 

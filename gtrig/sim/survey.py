@@ -33,18 +33,24 @@ class SurveySimConfig:
     ----------
     axis_length_m : distance of the x and y axis ends from the robot origin.
     world_points_per_pose : readings per robot point (nearest world points first); None: all.
+    network_max_m : also read the distance between every two world points closer than this whose line
+        of sight misses the clutter (a surveyor's network, :mod:`gtrig.survey.network`); None: only the
+        readings to the reference points, as the seeds did.
     """
 
     axis_length_m: float = 0.5
     world_points_per_pose: int | None = None
+    network_max_m: float | None = 6.0
 
 
 @dataclass(frozen=True)
 class SimulatedSurvey:
     """A survey in memory (the content of the four CSVs), arrays in the world frame, metres.
 
-    ``world_d`` (W, R) distances from every world point to every reference point; ``pose_d`` (P, A, W)
-    from every robot point of every pose to every world point (nan where not measured).
+    ``world_d`` (W, R) distances from every world point to every reference point; ``network_pairs``
+    (K, 2) indices of world points read from each other, ``network_d`` (K,) those distances;
+    ``pose_d`` (P, A, W) from every robot point of every pose to every world point (nan where not
+    measured).
     """
 
     reference_names: tuple[str, ...]
@@ -52,6 +58,8 @@ class SimulatedSurvey:
     reference_sigma_m: np.ndarray
     world_names: tuple[str, ...]
     world_d: np.ndarray
+    network_pairs: np.ndarray
+    network_d: np.ndarray
     robot_names: tuple[str, ...]
     robot_xy: np.ndarray
     pose_names: tuple[str, ...]
@@ -62,6 +70,28 @@ class SimulatedSurvey:
 def robot_points(axis_length_m: float = 0.5) -> tuple[tuple[str, ...], np.ndarray]:
     """Names and robot-frame coordinates (3, 2) of the origin and the ends of the x and y axes."""
     return ("O", "X", "Y"), np.array([[0.0, 0.0], [axis_length_m, 0.0], [0.0, axis_length_m]])
+
+
+def _segments_cross(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(K, E) whether segments p-q (K, 2) cross segments a-b (E, 2)."""
+
+    def orient(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+        d1, d2 = v - u, w - u
+        return np.sign(d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0])
+
+    P, Q, A, B = p[:, None], q[:, None], a[None], b[None]
+    return (orient(P, Q, A) != orient(P, Q, B)) & (orient(A, B, P) != orient(A, B, Q))
+
+
+def network_pairs(scene: Scene, max_m: float) -> np.ndarray:
+    """Pairs (K, 2) of world points closer than ``max_m`` whose line of sight misses every clutter box."""
+    W = np.asarray(scene.world_points_xy, dtype=float)
+    i, j = np.triu_indices(len(W), 1)
+    keep = np.linalg.norm(W[i] - W[j], axis=1) < max_m
+    for box in scene.boxes:
+        c = box.corners_xy()
+        keep &= ~_segments_cross(W[i], W[j], c, np.roll(c, -1, axis=0)).any(axis=1)
+    return np.column_stack([i[keep], j[keep]])
 
 
 def simulate_survey(
@@ -87,6 +117,8 @@ def simulate_survey(
     W = np.asarray(scene.world_points_xy, dtype=float)
     world_d = np.linalg.norm(W[:, None, :] - R_true[None], axis=2)
     world_d = world_d + rng.normal(0.0, sigma, world_d.shape)
+    pairs = network_pairs(scene, cfg.network_max_m) if cfg.network_max_m else np.empty((0, 2), dtype=int)
+    net_d = np.linalg.norm(W[pairs[:, 0]] - W[pairs[:, 1]], axis=1) + rng.normal(0.0, sigma, len(pairs))
     qnames, Q = robot_points(cfg.axis_length_m)
     T = np.asarray(T_world_robot, dtype=float).reshape(-1, 4, 4)
     q3 = np.column_stack([Q, np.zeros(len(Q)), np.ones(len(Q))])
@@ -105,6 +137,8 @@ def simulate_survey(
         reference_sigma_m=np.array([r.sigma_m for r in refs], dtype=float),
         world_names=names,
         world_d=world_d,
+        network_pairs=pairs,
+        network_d=net_d,
         robot_names=qnames,
         robot_xy=Q,
         pose_names=tuple(str(i + 1) for i in range(T.shape[0])),
@@ -129,6 +163,10 @@ def write_simulated_survey(sv: SimulatedSurvey, rec_dir: str | os.PathLike[str])
             (w, r, float(sv.world_d[i, j]), float(sv.sigma_m))
             for i, w in enumerate(sv.world_names)
             for j, r in enumerate(sv.reference_names)
+        ]
+        + [
+            (sv.world_names[i], sv.world_names[j], float(d), float(sv.sigma_m))
+            for (i, j), d in zip(sv.network_pairs, sv.network_d, strict=True)
         ],
     )
     write_named_xy(out / "robot_points.csv", sv.robot_names, sv.robot_xy)

@@ -15,12 +15,16 @@ reference errors correlate the estimates; :attr:`WorldPointsResult.cov_joint` ca
 Every point is solved from every pairwise intersection of its circles (and, with ``multistart``, from
 rings of starts up to 2 m away); distinct minima are reported and a second minimum that fits nearly as
 well (mirror solution about collinear references) is refused or flagged, never silently dropped.
+
+Readings between two world points (the ``reference`` column naming a world point) make the survey a
+network: the trilateration above gives the starts, the ambiguity check and the per-point triage, then
+:func:`gtrig.survey.network.adjust_network` adjusts all points and reference points together.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import combinations
 
 import numpy as np
@@ -28,6 +32,7 @@ import numpy as np
 from gtrig.errors import ConvergenceError, InputError
 from gtrig.io.survey_csv import Distances, NamedPoints, PointsTable
 from gtrig.survey import multistart as ms
+from gtrig.survey.network import NetworkResult, adjust_network
 from gtrig.survey.nls import solve_blocks
 from gtrig.survey.robust import BadReading, residual_test, triage
 
@@ -82,6 +87,8 @@ class WorldPointsResult:
     points : per-point details.
     excluded : all excluded readings.
     warnings : messages also sent to the log.
+    network : the network adjustment, when the readings include some between world points (then
+        ``xy`` and the covariances are its result, and each point's chi2 is that of its trilateration).
     """
 
     names: tuple[str, ...]
@@ -91,6 +98,7 @@ class WorldPointsResult:
     points: tuple[PointEstimate, ...]
     excluded: tuple[BadReading, ...]
     warnings: tuple[str, ...]
+    network: NetworkResult | None = None
 
     def as_table(self) -> PointsTable:
         return PointsTable(self.names, self.xy, self.cov_xy)
@@ -131,34 +139,44 @@ def _batched_model(d: np.ndarray, R: np.ndarray, w_inv_sigma: np.ndarray) -> ms.
     return model
 
 
-def _group(references: NamedPoints, distances: Distances) -> tuple[list[str], list[np.ndarray], np.ndarray]:
+def _group(
+    references: NamedPoints, distances: Distances
+) -> tuple[list[str], list[np.ndarray], np.ndarray, np.ndarray]:
+    """World point names, rows per point, reference index per row (-1 for a reading to a world point)
+    and the mask of the readings between world points."""
     ref_index = references.index()
-    ref_idx = np.empty(len(distances.a), dtype=int)
-    for k, (p, b) in enumerate(zip(distances.a, distances.b, strict=True)):
-        if b not in ref_index:
-            raise InputError(
-                f"{distances.source[k]}: unknown reference point {b!r} for point {p!r} "
-                f"(reference points: {', '.join(references.names)})"
-            )
-        if p in ref_index:
-            raise InputError(
-                f"{distances.source[k]}: {p!r} is a reference point, not a world point to survey"
-            )
-        ref_idx[k] = ref_index[b]
     names: list[str] = []
     for p in distances.a:
         if p not in names:
             names.append(p)
-    rows = [np.flatnonzero(np.array(distances.a) == n) for n in names]
-    return names, rows, ref_idx
+    ref_idx = np.full(len(distances.a), -1, dtype=int)
+    for k, (p, b) in enumerate(zip(distances.a, distances.b, strict=True)):
+        if p in ref_index:
+            raise InputError(
+                f"{distances.source[k]}: {p!r} is a reference point, not a world point to survey"
+            )
+        if b in ref_index:
+            ref_idx[k] = ref_index[b]
+        elif b == p:
+            raise InputError(f"{distances.source[k]}: a reading from point {p!r} to itself")
+        elif b not in names:
+            raise InputError(
+                f"{distances.source[k]}: unknown reference point {b!r} for point {p!r} "
+                f"(reference points: {', '.join(references.names)}; a reading to another world point "
+                "needs that point's own readings too)"
+            )
+    network = ref_idx < 0
+    rows = [np.flatnonzero((np.array(distances.a) == n) & ~network) for n in names]
+    return names, rows, ref_idx, network
 
 
 def _check_counts(name: str, rows: np.ndarray, ref_idx: np.ndarray, distances: Distances) -> None:
     n_ref = len(set(ref_idx[rows].tolist()))
     if rows.size < 2 or n_ref < 2:
+        where = distances.source[rows[0]] if rows.size else distances.source[distances.a.index(name)]
         raise InputError(
             f"point {name}: {rows.size} distance(s) to {n_ref} reference point(s), at least 2 "
-            f"reference points needed for its 2 unknowns ({distances.source[rows[0]]})"
+            f"reference points needed for its 2 unknowns ({where})"
         )
 
 
@@ -178,7 +196,8 @@ def estimate_world_points(
     Parameters
     ----------
     references : reference points, world frame, with their sigma per coordinate (metres).
-    distances : world distances (``a`` = world point, ``b`` = reference point, ``sigma_m`` = hand laser).
+    distances : world distances (``a`` = world point, ``b`` = reference point or another world point,
+        ``sigma_m`` = hand laser).
     multistart : also start from rings 0.1 to 2 m around the solution and report the basin.
     on_ambiguity : "refuse" (raise :class:`ConvergenceError`) or "warn" when a second minimum fits
         within ``ambiguity_chi2`` of the best.
@@ -194,10 +213,10 @@ def estimate_world_points(
         raise InputError(f"on_ambiguity must be one of {', '.join(ON_AMBIGUITY)}, got {on_ambiguity!r}")
     if on_outlier not in ON_OUTLIER:
         raise InputError(f"on_outlier must be one of {', '.join(ON_OUTLIER)}, got {on_outlier!r}")
-    names, rows_all, ref_idx_all = _group(references, distances)
+    names, rows_all, ref_idx_all, network = _group(references, distances)
     for n, rows in zip(names, rows_all, strict=True):
         _check_counts(n, rows, ref_idx_all, distances)
-    active = np.ones(len(distances.a), dtype=bool)
+    active = ~network
     excluded: dict[str, list[BadReading]] = {n: [] for n in names}
     warnings: list[str] = []
     while True:
@@ -284,14 +303,21 @@ def estimate_world_points(
             )
         )
     all_excl = tuple(b for n in names for b in excluded[n])
+    xy, cov, cov_joint = np.array(fit["xy"]), np.array(fit["cov"]), fit["cov_joint"]
+    net = None
+    if network.any():
+        # the trilateration above gave the starts, the ambiguity check and the per-point triage;
+        # the network adjusts all points together with every reading left
+        net = adjust_network(
+            names, xy, references, distances.subset(active | network), alpha=alpha, on_outlier=on_outlier,
+            max_exclusions=max_exclusions, warnings=warnings, log=log,
+        )
+        xy, cov_joint = net.xy, net.cov_joint
+        cov = np.array([cov_joint[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] for i in range(len(names))])
+        points = [replace(p, xy=xy[i], cov_xy=cov[i]) for i, p in enumerate(points)]
+        all_excl = all_excl + net.excluded
     return WorldPointsResult(
-        tuple(names),
-        np.array(fit["xy"]),
-        np.array(fit["cov"]),
-        fit["cov_joint"],
-        tuple(points),
-        all_excl,
-        tuple(warnings),
+        tuple(names), xy, cov, cov_joint, tuple(points), all_excl, tuple(warnings), net
     )
 
 

@@ -32,9 +32,10 @@ class BadReading:
 
     Attributes
     ----------
-    kind : "point" (world point to reference) or "pose" (robot point to world point).
+    kind : "point" (world point to reference), "network" (world point to world point) or "pose" (robot
+        point to world point).
     item : the world point or the pose.
-    a, b : reference (for a point) or robot point and world point (for a pose).
+    a, b : reference or other world point (for a point), or robot point and world point (for a pose).
     distance_m : the reading, metres.
     residual_m : reading minus the distance predicted by the fit that includes it, metres.
     error_m : estimated gross error of the reading (its residual against a fit without it), metres.
@@ -55,6 +56,8 @@ class BadReading:
     def describe(self) -> str:
         if self.kind == "point":
             what = f"point {self.item}, reference {self.a}"
+        elif self.kind == "network":
+            what = f"point {self.item} to world point {self.a}"
         else:
             what = f"pose {self.item}, robot point {self.a} to world point {self.b}"
         return (

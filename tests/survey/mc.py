@@ -7,7 +7,7 @@ import numpy as np
 from gtrig import geometry as geo
 from gtrig.io.survey_csv import Distances, NamedPoints
 from gtrig.sim.gtroom import REFERENCE_SIGMA_M, VALIDATION_POSES, make_scene
-from gtrig.sim.survey import SimulatedSurvey, simulate_survey
+from gtrig.sim.survey import SimulatedSurvey, SurveySimConfig, simulate_survey
 from gtrig.survey import multistart as ms
 
 
@@ -27,6 +27,10 @@ def to_inputs(sv: SimulatedSurvey) -> tuple[NamedPoints, Distances, NamedPoints,
             a.append(w)
             b.append(r)
             d.append(sv.world_d[i, j])
+    for (i, j), dist in zip(sv.network_pairs, sv.network_d, strict=True):
+        a.append(sv.world_names[i])
+        b.append(sv.world_names[j])
+        d.append(dist)
     n = len(d)
     wd = Distances(
         ("",) * n, tuple(a), tuple(b), np.array(d), np.full(n, sv.sigma_m), tuple(f"w:{k}" for k in range(n))
@@ -47,12 +51,17 @@ def to_inputs(sv: SimulatedSurvey) -> tuple[NamedPoints, Distances, NamedPoints,
     return ref, wd, NamedPoints(sv.robot_names, sv.robot_xy, np.zeros(len(sv.robot_names))), pd
 
 
+SEEDS_DESIGN = SurveySimConfig(network_max_m=None)  # readings to the reference points only, as AD2.3
+
+
 def vectorised_trials(
     sc, T, n_trials: int, seed: int, pose_cov_readings: list[np.ndarray], ref_sigma: float | None = None
 ):
     """Run ``n_trials`` surveys at once: the same weighted least squares as the library, solved for all
     trials together with :func:`gtrig.survey.multistart.batched_lm` (one problem per trial).
 
+    The surveys follow the seeds' design (:data:`SEEDS_DESIGN`: no readings between world points), whose
+    points are independent trilaterations that vectorise across trials.
     ``pose_cov_readings`` are the readings' covariances of every pose (from one library run); they
     depend on the geometry only, so they are the same for all trials to first order.
     Returns world points (S, W, 2) and poses (S, P, 3).
@@ -68,7 +77,7 @@ def vectorised_trials(
             k: (v[0] + rng.normal(0, ref_sigma), v[1] + rng.normal(0, ref_sigma)) if k != "O" else v
             for k, v in nominal.items()
         }
-        svs.append(simulate_survey(sc, T, rng, reference_true_xy=ref_true))
+        svs.append(simulate_survey(sc, T, rng, SEEDS_DESIGN, reference_true_xy=ref_true))
     R = svs[0].reference_nominal_xy
     var = svs[0].sigma_m ** 2 + svs[0].reference_sigma_m ** 2
     Wt = sc.world_points_xy

@@ -13,12 +13,14 @@ from gtrig import geometry as geo
 from gtrig.cli.main import app
 from gtrig.errors import ConvergenceError, FormatError, InputError
 from gtrig.io.survey_csv import Distances, NamedPoints, read_reference_points, read_world_distances
+from gtrig.sim.gtroom import REFERENCE_SIGMA_M
 from gtrig.sim.survey import simulate_survey, write_survey
 from gtrig.survey import compare_to_truth, run_recording_survey, run_survey
+from gtrig.survey.network import adjust_network
 from gtrig.survey.points import estimate_world_points
 from gtrig.survey.poses import _pose_cov
 
-from .mc import scene_and_poses, to_inputs, vectorised_trials
+from .mc import SEEDS_DESIGN, scene_and_poses, to_inputs, vectorised_trials
 
 REF = Path("/work/shared/reference")
 if not REF.is_dir():
@@ -178,7 +180,7 @@ def test_accuracy_experiment_10mm_10mm_1deg() -> None:
 def test_covariance_consistent_monte_carlo() -> None:
     """Mean NEES over 200 trials within [0.7, 1.4] x dof, for world points (2) and poses (3)."""
     sc, T, truth = scene_and_poses(0)
-    sv = simulate_survey(sc, T, np.random.default_rng(99))
+    sv = simulate_survey(sc, T, np.random.default_rng(99), SEEDS_DESIGN)
     res = run_survey(*to_inputs(sv), multistart=False, on_outlier="keep")
     A, N = 3, 16
     ctx = dict(
@@ -202,6 +204,54 @@ def test_covariance_consistent_monte_carlo() -> None:
     nees_p = np.einsum("spi,pij,spj->sp", ep, np.linalg.inv(res.poses.cov_xytheta), ep).mean()
     assert 0.7 * 2 <= nees_w <= 1.4 * 2, nees_w
     assert 0.7 * 3 <= nees_p <= 1.4 * 3, nees_p
+
+
+def test_network_monte_carlo_accuracy_and_consistency() -> None:
+    """Readings between world points: 200 surveys with fresh reference and hand-laser errors.
+
+    The network's covariance is consistent (mean NEES within [0.7, 1.4] x 2) and the world points are
+    about 1.6x more accurate than with the seeds' readings to the four reference points only.
+    """
+    sc, T, _ = scene_and_poses(0)
+    nominal = {r.name: r.xy for r in sc.rig_nominal.survey.reference_points}
+    rng = np.random.default_rng(7)
+    errs, nees, errs_seeds = [], [], []
+    for _ in range(200):
+        ref_true = {
+            k: (v[0] + rng.normal(0, REFERENCE_SIGMA_M), v[1] + rng.normal(0, REFERENCE_SIGMA_M)) if k != "O" else v
+            for k, v in nominal.items()
+        }
+        sv = simulate_survey(sc, T[:1], rng, reference_true_xy=ref_true)
+        ref, wd, _, _ = to_inputs(sv)
+        names = list(sv.world_names)
+        net = adjust_network(names, sc.world_points_xy + 0.01, ref, wd, on_outlier="keep", warnings=[])
+        e = net.xy - sc.world_points_xy
+        errs.append(np.linalg.norm(e, axis=1))
+        nees.append(e.ravel() @ np.linalg.solve(net.cov_joint, e.ravel()) / len(names))
+        seeds_only = wd.subset(np.isin(np.array(wd.b), ref.names))
+        net0 = adjust_network(names, sc.world_points_xy, ref, seeds_only, on_outlier="keep", warnings=[])
+        errs_seeds.append(np.linalg.norm(net0.xy - sc.world_points_xy, axis=1))
+    assert len(sv.network_pairs) >= 20
+    assert 0.7 * 2 <= np.mean(nees) <= 1.4 * 2, np.mean(nees)
+    rms, rms_seeds = np.sqrt(np.mean(np.square(errs))), np.sqrt(np.mean(np.square(errs_seeds)))
+    assert rms < rms_seeds / 1.4, (rms, rms_seeds)
+    assert np.median(np.max(errs, axis=1)) < 0.002
+
+
+def test_network_bad_reading_is_named() -> None:
+    sc, T, _ = scene_and_poses(0)
+    sv = simulate_survey(sc, T[:1], np.random.default_rng(3))
+    ref, wd, _, _ = to_inputs(sv)
+    k = len(wd.a) - 5  # a reading between two world points
+    assert wd.b[k] not in ref.names
+    d = wd.distance_m.copy()
+    d[k] += 0.03
+    bad = Distances(wd.group, wd.a, wd.b, d, wd.sigma_m, wd.source)
+    r = estimate_world_points(ref, bad, multistart=False)
+    assert [(b.kind, b.item, b.a) for b in r.excluded] == [("network", wd.a[k], wd.b[k])]
+    assert np.abs(r.xy - sc.world_points_xy).max() < 0.004
+    with pytest.raises(InputError, match=f"point {wd.a[k]} to world point {wd.b[k]}"):
+        estimate_world_points(ref, bad, multistart=False, on_outlier="refuse")
 
 
 @pytest.mark.parametrize(
