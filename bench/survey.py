@@ -16,27 +16,9 @@ import time
 
 import numpy as np
 
-from gtrig.io.survey_csv import Distances, NamedPoints
 from gtrig.sim.gtroom import REFERENCE_SIGMA_M, make_scene
-from gtrig.sim.survey import SimulatedSurvey, simulate_survey
+from gtrig.sim.survey import as_inputs, simulate_survey
 from gtrig.survey.network import adjust_network
-
-
-def world_inputs(sv: SimulatedSurvey) -> tuple[NamedPoints, Distances]:
-    """Reference points and every world reading of a simulated survey, as the CSV readers give them."""
-    a, b, d = [], [], []
-    for i, w in enumerate(sv.world_names):
-        for j, r in enumerate(sv.reference_names):
-            a.append(w)
-            b.append(r)
-            d.append(sv.world_d[i, j])
-    for (i, j), dist in zip(sv.network_pairs, sv.network_d, strict=True):
-        a.append(sv.world_names[i])
-        b.append(sv.world_names[j])
-        d.append(dist)
-    n = len(d)
-    ref = NamedPoints(sv.reference_names, sv.reference_nominal_xy, sv.reference_sigma_m)
-    return ref, Distances(("",) * n, tuple(a), tuple(b), np.array(d), np.full(n, sv.sigma_m), ("",) * n)
 
 
 def main() -> None:
@@ -58,7 +40,7 @@ def main() -> None:
             for k, v in nominal.items()
         }
         sv = simulate_survey(sc, T, rng, reference_true_xy=ref_true)
-        ref, wd = world_inputs(sv)
+        ref, wd, _, _ = as_inputs(sv)
         names = list(sv.world_names)
         for design, readings in (("seeds", wd.subset(np.isin(np.array(wd.b), ref.names))), ("network", wd)):
             t0 = time.perf_counter()

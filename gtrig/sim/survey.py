@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gtrig.io.survey_csv import write_distances, write_named_xy
+from gtrig.io.survey_csv import Distances, NamedPoints, write_distances, write_named_xy
 from gtrig.sim.gtroom import WORLD_POINT_NAMES, Scene
 
 
@@ -128,9 +128,7 @@ def simulate_survey(
         far = np.argsort(pose_d, axis=2)[..., cfg.world_points_per_pose :]
         np.put_along_axis(pose_d, far, np.nan, axis=2)
     pose_d = pose_d + rng.normal(0.0, sigma, pose_d.shape)
-    names = (
-        WORLD_POINT_NAMES if len(W) == len(WORLD_POINT_NAMES) else tuple(str(i + 1) for i in range(len(W)))
-    )
+    names = WORLD_POINT_NAMES if len(W) == len(WORLD_POINT_NAMES) else tuple(str(i + 1) for i in range(len(W)))
     return SimulatedSurvey(
         reference_names=rnames,
         reference_nominal_xy=np.array([r.xy for r in refs], dtype=float),
@@ -145,6 +143,35 @@ def simulate_survey(
         pose_d=pose_d,
         sigma_m=sigma,
     )
+
+
+def as_inputs(sv: SimulatedSurvey) -> tuple[NamedPoints, Distances, NamedPoints, Distances]:
+    """The four survey tables in memory, as the CSV readers return them: reference points, world
+    distances (to the reference points, then between world points), robot points, pose distances."""
+    a = [w for w in sv.world_names for _ in sv.reference_names]
+    b = [r for _ in sv.world_names for r in sv.reference_names]
+    d = list(sv.world_d.ravel())
+    for (i, j), dist in zip(sv.network_pairs, sv.network_d, strict=True):
+        a.append(sv.world_names[i])
+        b.append(sv.world_names[j])
+        d.append(dist)
+    n = len(d)
+    wd = Distances(
+        ("",) * n, tuple(a), tuple(b), np.array(d), np.full(n, sv.sigma_m), tuple(f"w:{k}" for k in range(n))
+    )
+    p, q, w = np.nonzero(np.isfinite(sv.pose_d))
+    m = p.size
+    pd = Distances(
+        tuple(sv.pose_names[i] for i in p),
+        tuple(sv.robot_names[i] for i in q),
+        tuple(sv.world_names[i] for i in w),
+        sv.pose_d[p, q, w],
+        np.full(m, sv.sigma_m),
+        tuple(f"p:{k}" for k in range(m)),
+    )
+    ref = NamedPoints(sv.reference_names, sv.reference_nominal_xy, sv.reference_sigma_m)
+    robot = NamedPoints(sv.robot_names, sv.robot_xy, np.zeros(len(sv.robot_names)))
+    return ref, wd, robot, pd
 
 
 def write_simulated_survey(sv: SimulatedSurvey, rec_dir: str | os.PathLike[str]) -> None:
@@ -176,9 +203,7 @@ def write_simulated_survey(sv: SimulatedSurvey, rec_dir: str | os.PathLike[str])
             for w, wn in enumerate(sv.world_names):
                 if np.isfinite(sv.pose_d[p, a, w]):
                     rows.append((pn, an, wn, float(sv.pose_d[p, a, w]), float(sv.sigma_m)))
-    write_distances(
-        out / "pose_distances.csv", ("pose", "robot_point", "world_point", "distance", "sigma"), rows
-    )
+    write_distances(out / "pose_distances.csv", ("pose", "robot_point", "world_point", "distance", "sigma"), rows)
 
 
 def write_survey(

@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from gtrig import geometry as geo
-from gtrig.io.survey_csv import Distances, NamedPoints
 from gtrig.sim.gtroom import REFERENCE_SIGMA_M, VALIDATION_POSES, make_scene
-from gtrig.sim.survey import SimulatedSurvey, SurveySimConfig, simulate_survey
+from gtrig.sim.survey import SurveySimConfig, as_inputs, simulate_survey
 from gtrig.survey import multistart as ms
 
 
@@ -18,37 +17,7 @@ def scene_and_poses(seed: int = 0):
     return sc, T, truth
 
 
-def to_inputs(sv: SimulatedSurvey) -> tuple[NamedPoints, Distances, NamedPoints, Distances]:
-    """The four survey tables in memory, as the CSV readers would return them."""
-    ref = NamedPoints(sv.reference_names, sv.reference_nominal_xy, sv.reference_sigma_m)
-    a, b, d = [], [], []
-    for i, w in enumerate(sv.world_names):
-        for j, r in enumerate(sv.reference_names):
-            a.append(w)
-            b.append(r)
-            d.append(sv.world_d[i, j])
-    for (i, j), dist in zip(sv.network_pairs, sv.network_d, strict=True):
-        a.append(sv.world_names[i])
-        b.append(sv.world_names[j])
-        d.append(dist)
-    n = len(d)
-    wd = Distances(
-        ("",) * n, tuple(a), tuple(b), np.array(d), np.full(n, sv.sigma_m), tuple(f"w:{k}" for k in range(n))
-    )
-    g, a, b, d = [], [], [], []
-    for p, pn in enumerate(sv.pose_names):
-        for q, qn in enumerate(sv.robot_names):
-            for w, wn in enumerate(sv.world_names):
-                if np.isfinite(sv.pose_d[p, q, w]):
-                    g.append(pn)
-                    a.append(qn)
-                    b.append(wn)
-                    d.append(sv.pose_d[p, q, w])
-    n = len(d)
-    pd = Distances(
-        tuple(g), tuple(a), tuple(b), np.array(d), np.full(n, sv.sigma_m), tuple(f"p:{k}" for k in range(n))
-    )
-    return ref, wd, NamedPoints(sv.robot_names, sv.robot_xy, np.zeros(len(sv.robot_names))), pd
+to_inputs = as_inputs  # the four survey tables in memory
 
 
 SEEDS_DESIGN = SurveySimConfig(network_max_m=None)  # readings to the reference points only, as AD2.3
