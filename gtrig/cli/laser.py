@@ -20,12 +20,17 @@ def calibrate(
     out: Annotated[Path, typer.Option("--out", help="calibrated rig file to write")],
     object_file: Annotated[
         Path | None,
-        typer.Option("--object", help="world object outline (YAML corners_xy); "
+        typer.Option("--object", help="world object outline(s) (YAML corners_xy, or objects: [...]); "
                      "default: <recording>/calib/laser_object.yaml"),
     ] = None,
 ) -> None:
     """Calibrate the fixed scanners' poses from a static sequence and the world-defining object."""
-    from gtrig.laser.recording import calibrate_recording, load_object_outline
+    from gtrig.laser.recording import (
+        calibrate_recording,
+        calibration_cov_path,
+        load_object_outline,
+        write_calibration_cov,
+    )
     from gtrig.laser.report import calibration_lines
     from gtrig.rig import load_rig
     from gtrig.rig.load import dump_rig
@@ -34,9 +39,11 @@ def calibrate(
     obj = load_object_outline(object_file) if object_file is not None else None
     new, report = calibrate_recording(static.parent, rig=r, static_dir=static, object_corners_world_xy=obj)
     dump_rig(new, out)
+    cov_path = calibration_cov_path(out)
+    write_calibration_cov(cov_path, new, report)
     for line in calibration_lines(report):
         console.print(line, highlight=False)
-    console.print(f"wrote {out}")
+    console.print(f"wrote {out} and {cov_path} (calibration covariance)")
 
 
 @app.command("track")
@@ -54,17 +61,33 @@ def track(
     include_flagged: Annotated[
         bool, typer.Option("--include-flagged", help="also write degenerate and heading-ambiguous frames")
     ] = False,
+    calibration_cov: Annotated[
+        Path | None,
+        typer.Option("--calibration-cov", help="scanners' calibration covariance "
+                     "(default: <rig stem>.laser_cov.yaml next to --rig, when present)"),
+    ] = None,
 ) -> None:
     """Track the robot's hull through a sequence and write its poses and covariances."""
     import time
 
-    from gtrig.laser.recording import load_backgrounds, track_sequence, write_track
+    from gtrig.laser.recording import (
+        calibration_cov_path,
+        load_backgrounds,
+        read_calibration_cov,
+        track_sequence,
+        write_track,
+    )
     from gtrig.rig import load_rig
 
     r = load_rig(rig)
+    if calibration_cov is None and calibration_cov_path(rig).is_file():
+        calibration_cov = calibration_cov_path(rig)
+    cov_cal = read_calibration_cov(calibration_cov, r) if calibration_cov is not None else None
+    if cov_cal is None:
+        console.print("no calibration covariance: pose covariances leave out the scanners' calibration")
     t0 = time.perf_counter()
     bgs = load_backgrounds(recording / "background", r)
-    res = track_sequence(r, recording / sequence, bgs)
+    res = track_sequence(r, recording / sequence, bgs, scanner_cov=cov_cal)
     dt = time.perf_counter() - t0
     n = write_track(res, out, covariance, include_flagged=include_flagged)
     c = res.counts()

@@ -1,4 +1,4 @@
-"""``gtrig markers make | detect``."""
+"""``gtrig markers make | detect | calibrate-robot``."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import typer
 from gtrig.cli.common import console, handle_errors
 from gtrig.rig.models import MarkerFamily
 
-app = typer.Typer(help="Square ID markers: printable sheets and high-accuracy detection.",
+app = typer.Typer(help="Square ID markers: printable sheets, high-accuracy detection, calibration on the robot.",
                   no_args_is_help=True)
 
 
@@ -97,3 +97,124 @@ def detect(
     doc = {"family": family.value, "camera": None if camera is None else str(camera), "images": images}
     atomic_write_text(out, json.dumps(doc, indent=1) + "\n")
     console.print(f"{out}: {n_det} detection(s) in {len(files)} image(s)", highlight=False)
+
+
+def _parse_sides(items: list[str], family: MarkerFamily) -> list:
+    """``--side-mm ID=MM[,ID=MM...]`` (repeatable) as calibration targets."""
+    from gtrig.errors import InputError
+    from gtrig.markers.robotcal import MarkerSpec
+
+    specs = {}
+    for item in items:
+        for tok in item.split(","):
+            tok = tok.strip()
+            if not tok:
+                continue
+            try:
+                mid, mm = tok.split("=")
+                specs[int(mid)] = MarkerSpec(int(mid), float(mm) / 1000.0, family)
+            except ValueError:
+                raise InputError(f"--side-mm {tok!r}: expected ID=MM, e.g. 14=160") from None
+            if specs[int(mid)].side_m <= 0:
+                raise InputError(f"--side-mm {tok!r}: the side must be positive")
+    return list(specs.values())
+
+
+@app.command("calibrate-robot")
+@handle_errors
+def calibrate_robot(
+    images: Annotated[Path, typer.Option("--images", help="Folder of hand-held images of the standing robot.")],
+    camera: Annotated[Path, typer.Option("--camera", help="cam.yaml of the hand-held camera.")],
+    out: Annotated[Path, typer.Option("--out", help="Output markers.yaml (poses and 6 x 6 covariances).")],
+    anchor: Annotated[int, typer.Option("--anchor", help="ID of the marker whose pose on the robot is measured.")]
+    = 14,
+    anchor_pose: Annotated[str | None, typer.Option(
+        "--anchor-pose", help="Its measured T_robot_marker: 'x,y,z,roll,pitch,yaw' (m, deg; R = Rz Ry Rx) or a "
+        "YAML file with xyz and quat_xyzw or rpy_deg. Default: the pose in --rig.")] = None,
+    rig: Annotated[Path | None, typer.Option(
+        "--rig", help="rig.yaml: the markers to calibrate (family, ID, side) and the default anchor pose.")] = None,
+    rig_out: Annotated[Path | None, typer.Option(
+        "--rig-out", help="Write --rig with the calibrated marker poses to this file.")] = None,
+    side_mm: Annotated[list[str] | None, typer.Option(
+        "--side-mm", help="Without --rig: the markers to calibrate, ID=MM[,ID=MM...] (black-square side).")] = None,
+    family: Annotated[MarkerFamily, typer.Option("--family", help="Without --rig: the markers' family.")]
+    = MarkerFamily.ARTOOLKITPLUS_SIMPLE,
+    anchor_sigma_mm: Annotated[float, typer.Option(
+        "--anchor-sigma-mm", help="One-sigma error of the anchor's measured position, per axis, mm.")] = 0.0,
+    anchor_sigma_deg: Annotated[float, typer.Option(
+        "--anchor-sigma-deg", help="One-sigma error of the anchor's measured orientation, per axis, deg.")] = 0.0,
+) -> None:
+    """Calibrate the markers' poses on the robot from hand-held images, anchored on one measured marker."""
+    import math
+
+    import numpy as np
+
+    from gtrig.calib.camfile import read_cam_yaml
+    from gtrig.errors import InputError
+    from gtrig.markers import robotcal as rc
+    from gtrig.rig import dump_rig, load_rig
+
+    if rig_out is not None and rig is None:
+        raise InputError("--rig-out needs --rig (the rig to update)")
+    if anchor_sigma_mm < 0 or anchor_sigma_deg < 0:
+        raise InputError("--anchor-sigma-mm and --anchor-sigma-deg must not be negative")
+    the_rig = load_rig(rig) if rig is not None else None
+    if the_rig is not None:
+        if side_mm:
+            raise InputError("give either --rig or --side-mm, not both (the rig has the markers' sides)")
+        specs = rc.specs_from_rig(the_rig)
+    elif side_mm:
+        specs = _parse_sides(side_mm, family)
+    else:
+        raise InputError("which markers? give --rig rig.yaml or --side-mm ID=MM,...")
+    if anchor_pose is not None:
+        T_anchor = rc.parse_anchor_pose(anchor_pose)
+    elif the_rig is not None:
+        try:
+            T_anchor = the_rig.marker(anchor).T_robot_marker.matrix()
+        except KeyError:
+            raise InputError(f"{rig}: marker {anchor} (the anchor) is not in robot.markers") from None
+    else:
+        raise InputError("--anchor-pose is needed without --rig")
+    cam = read_cam_yaml(camera)
+    cov = None
+    if anchor_sigma_mm > 0 or anchor_sigma_deg > 0:
+        cov = np.diag([(anchor_sigma_mm / 1000) ** 2] * 3 + [math.radians(anchor_sigma_deg) ** 2] * 3)
+    cal = rc.calibrate_robot_markers(images, cam, specs, anchor, T_anchor, cov)
+    rc.write_markers_yaml(out, cal, specs)
+    if the_rig is not None and rig_out is not None:
+        dump_rig(rc.apply_to_rig(the_rig, cal), rig_out)
+    _print_calibration(cal)
+    console.print(f"{out}: {len(cal.T_robot_marker)} marker(s), anchor {anchor}"
+                  + (f"; {rig_out}: rig with the calibrated markers" if rig_out is not None else ""),
+                  highlight=False)
+
+
+def _print_calibration(cal) -> None:  # noqa: ANN001 (RobotCalibration, imported lazily)
+    import math
+
+    from gtrig import geometry as geo
+
+    console.print(f"markers on the robot, anchor {cal.anchor}: {cal.images_used} of {cal.images_total} images "
+                  f"used, corner RMS {cal.rms_px:.3f} px", highlight=False)
+    console.print(f"{'id':>5} {'x mm':>9} {'y mm':>9} {'z mm':>9} {'roll':>8} {'pitch':>8} {'yaw':>8} "
+                  f"{'sd mm':>7} {'sd deg':>7} {'views':>5}  path", highlight=False)
+    for mid, T in cal.T_robot_marker.items():
+        rpy = [math.degrees(a) for a in geo.rpy_from_T(T)]
+        s_m, s_r = cal.sigma(mid)
+        path = "anchor" if mid == cal.anchor else " > ".join(str(x) for x in cal.paths.get(mid, ()))
+        x, y, z = (1000 * v for v in T[:3, 3])
+        console.print(f"{mid:>5} {x:9.2f} {y:9.2f} {z:9.2f} {rpy[0]:8.3f} {rpy[1]:8.3f} {rpy[2]:8.3f} "
+                      f"{1000 * s_m:7.3f} {math.degrees(s_r):7.4f} {cal.n_views.get(mid, 0):5d}  {path}",
+                      highlight=False)
+    for im, why in cal.rejected_images.items():
+        console.print(f"rejected image {im}: {why}", highlight=False)
+    for (im, mid), why in cal.rejected_views.items():
+        console.print(f"rejected marker {mid} in {im}: {why}", highlight=False)
+    for a, b in cal.rejected_pairs:
+        console.print(f"rejected pair {a}-{b}: its relative pose disagrees with the other pairs", highlight=False)
+    for mid, why in cal.uncalibrated.items():
+        console.print(f"not calibrated: marker {mid}: {why}", highlight=False)
+    if cal.bridged_pairs:
+        console.print("never seen together (bridged): "
+                      + ", ".join(f"{a}-{b}" for a, b in cal.bridged_pairs), highlight=False)

@@ -63,12 +63,18 @@ class ScannerCalibration:
 
 @dataclass(frozen=True)
 class CalibrationReport:
-    """What :func:`calibrate_scanners` found: per scanner, and the iterations it took."""
+    """What :func:`calibrate_scanners` found: per scanner, and the iterations it took.
+
+    ``cov_xytheta`` (3 S, 3 S) is the joint covariance of the scanners' planar poses (scanner ``s`` owns
+    rows ``3 s .. 3 s + 2``: x, y m, theta rad, world frame), for
+    :func:`gtrig.laser.track.track_frames` to propagate into the robot poses.
+    """
 
     scanners: tuple[ScannerCalibration, ...]
     iterations: int
     rms_overlap_m: float
     rms_object_m: float
+    cov_xytheta: np.ndarray
 
 
 def _scan_geometry(
@@ -98,6 +104,28 @@ def _scan_geometry(
     return p[ok], n[ok], ok
 
 
+def object_outlines(objects: np.ndarray | Sequence[np.ndarray]) -> list[np.ndarray]:
+    """One outline (K, 2) or several as a list of counter-clockwise (K_j, 2) arrays (world, metres).
+
+    Raises
+    ------
+    InputError
+        An outline that is not (K >= 3, 2).
+    """
+    arr = objects if isinstance(objects, np.ndarray) else None
+    outlines = [arr] if arr is not None and arr.ndim == 2 else list(objects)
+    out = []
+    for c in outlines:
+        c = np.asarray(c, dtype=float)
+        if c.ndim != 2 or c.shape[1] != 2 or c.shape[0] < 3:
+            raise InputError(f"an object outline must be (K >= 3, 2), got shape {c.shape}")
+        area = 0.5 * np.sum(c[:, 0] * np.roll(c[:, 1], -1) - np.roll(c[:, 0], -1) * c[:, 1])
+        out.append(c if area > 0 else c[::-1].copy())
+    if not out:
+        raise InputError("no world object outline given")
+    return out
+
+
 def _to_world(xyt: np.ndarray, p: np.ndarray) -> np.ndarray:
     c, s = np.cos(xyt[2]), np.sin(xyt[2])
     return p @ np.array([[c, s], [-s, c]]) + xyt[:2]
@@ -106,7 +134,7 @@ def _to_world(xyt: np.ndarray, p: np.ndarray) -> np.ndarray:
 def calibrate_scanners(
     scanners: Sequence[LaserScanner],
     backgrounds: Sequence[BackgroundModel],
-    object_corners_world_xy: np.ndarray,
+    object_corners_world_xy: np.ndarray | Sequence[np.ndarray],
     gates_m: Sequence[float] = (0.3, 0.2, 0.12, 0.08, 0.05, 0.03, 0.03, 0.03),
     iterations_per_gate: int = 3,
     prior_std_m: float = 0.1,
@@ -122,7 +150,8 @@ def calibrate_scanners(
     backgrounds
         Their background models, same order.
     object_corners_world_xy
-        (K, 2) outline of the world-defining object, counter-clockwise, world frame, metres.
+        (K, 2) outline of the world-defining object, or a sequence of outlines (K_j, 2) of several
+        objects whose poses in the world are known (surveyed), world frame, metres.
     gates_m
         Association gates of the successive rounds, metres.
     iterations_per_gate
@@ -150,7 +179,7 @@ def calibrate_scanners(
     for s, b in zip(scanners, backgrounds, strict=True):
         if b.beams != s.beams:
             raise InputError(f"scanner {s.name}: background has {b.beams} beams, the rig says {s.beams}")
-    obj = HullModel.from_corners(np.asarray(object_corners_world_xy, dtype=float))
+    objs = [HullModel.from_corners(c) for c in object_outlines(object_corners_world_xy)]
     geoms = [_scan_geometry(b, s) for b, s in zip(backgrounds, scanners, strict=True)]
     nominal = np.array([geo.T_to_se2(s.T_world_scanner.matrix()) for s in scanners])
     x = nominal.copy()
@@ -210,16 +239,19 @@ def calibrate_scanners(
                     ssq += float(r @ r)
                     cnt += r.size
                 stats["overlap"][i] = (cnt, np.sqrt(ssq / cnt) if cnt else float("nan"))
-                # the world object: point-to-line to its known sides, faces visible from scanner i
-                vis = (obj.normals @ x[i, :2] - obj.offsets) > 0
-                sd = pw[i] @ obj.normals.T - obj.offsets
-                a = pw[i] @ obj.tangents.T - np.einsum("ij,ij->i", obj.tangents, obj.corners_xy)
-                over = np.maximum(0.0, np.maximum(-a, a - obj.lengths))
-                d2 = np.where(vis, sd * sd + over * over, np.inf)
-                k = np.argmin(d2, axis=1)
-                rows = np.arange(len(k))
-                m = (d2[rows, k] < gate * gate) & (over[rows, k] < 0.01)
-                if np.any(m):
+                # the world objects: point-to-line to their known sides, faces visible from scanner i
+                n_ob, ssq_ob = 0, 0.0
+                for obj in objs:
+                    vis = (obj.normals @ x[i, :2] - obj.offsets) > 0
+                    sd = pw[i] @ obj.normals.T - obj.offsets
+                    a = pw[i] @ obj.tangents.T - np.einsum("ij,ij->i", obj.tangents, obj.corners_xy)
+                    over = np.maximum(0.0, np.maximum(-a, a - obj.lengths))
+                    d2 = np.where(vis, sd * sd + over * over, np.inf)
+                    k = np.argmin(d2, axis=1)
+                    rows = np.arange(len(k))
+                    m = (d2[rows, k] < gate * gate) & (over[rows, k] < 0.01)
+                    if not np.any(m):
+                        continue
                     n = obj.normals[k[m]]
                     r = sd[rows, k][m]
                     Ji = np.column_stack([n, np.einsum("ij,ij->i", n, dpi[m])])
@@ -227,7 +259,10 @@ def calibrate_scanners(
                     bi = slice(3 * i, 3 * i + 3)
                     H[bi, bi] += wgt * Ji.T @ Ji
                     g[bi] += wgt * Ji.T @ r
-                    stats["object"][i] = (int(m.sum()), float(np.sqrt(np.mean(r * r))))
+                    n_ob += int(m.sum())
+                    ssq_ob += float(r @ r)
+                if n_ob:
+                    stats["object"][i] = (n_ob, float(np.sqrt(ssq_ob / n_ob)))
             delta = -np.linalg.solve(H, g)
             x = x + delta.reshape(S, 3)
     if not any(n for n, _ in stats["object"]):
@@ -241,7 +276,9 @@ def calibrate_scanners(
     all_o = [(n, r) for n, r in stats["object"] if n]
     rms_ob = float(np.sqrt(sum(n * r * r for n, r in all_o) / sum(n for n, _ in all_o)))
     scale = max(1.0, (rms_ov / sigma_point_m) ** 2) if np.isfinite(rms_ov) else 1.0
-    std = np.sqrt(np.diag(np.linalg.inv(H)) * scale).reshape(S, 3)
+    cov = np.linalg.inv(H) * scale
+    cov = 0.5 * (cov + cov.T)
+    std = np.sqrt(np.diag(cov)).reshape(S, 3)
     out_scanners = []
     cal = []
     for i, s in enumerate(scanners):
@@ -262,7 +299,7 @@ def calibrate_scanners(
                 stats["object"][i][1],
             )
         )
-    return tuple(out_scanners), CalibrationReport(tuple(cal), it, rms_ov, rms_ob)
+    return tuple(out_scanners), CalibrationReport(tuple(cal), it, rms_ov, rms_ob, cov)
 
 
 def calibrated_rig(rig: Rig, scanners: Sequence[LaserScanner]) -> Rig:

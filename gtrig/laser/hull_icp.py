@@ -118,7 +118,7 @@ class IcpSettings:
 
     gate_m: float = 0.08
     huber_k: float = 3.0
-    sigma_model_m: float = 0.002
+    sigma_model_m: float = 0.006
     max_iterations: int = 6
     tol_m: float = 1e-4
     tol_rad: float = 1e-4
@@ -162,6 +162,77 @@ class HullFitBatch:
             bool(self.degenerate[k]),
             self.reasons[k],
         )
+
+
+@dataclass(frozen=True)
+class _Linearisation:
+    """Point-to-line residuals of M points at given poses: assigned side (M,), inlier mask (M,), signed
+    residual (M,) metres, weight (M,) 1/m^2 (0 for outliers), Jacobian rows ``J`` (3 arrays (M,)) with
+    respect to the robot pose, and each point's side normal in the world ``nw`` (M, 2)."""
+
+    side: np.ndarray
+    inlier: np.ndarray
+    r: np.ndarray
+    w: np.ndarray
+    J: tuple[np.ndarray, np.ndarray, np.ndarray]
+    nw: np.ndarray
+
+
+def _linearise(
+    model: HullModel,
+    p: np.ndarray,
+    fid: np.ndarray,
+    sid: np.ndarray,
+    S: np.ndarray,
+    dir_world: np.ndarray,
+    var_r: np.ndarray,
+    pose: np.ndarray,
+    gate: float,
+    st: IcpSettings,
+) -> _Linearisation:
+    """Assign each point (M, 2, world) to the nearest hull side facing its scanner at ``pose[fid]`` (K, 3)
+    and linearise its residual; ``var_r`` (M,) is each point's range variance."""
+    N, off = model.normals, model.offsets
+    Tn, a0 = model.tangents, np.einsum("ij,ij->i", model.tangents, model.corners_xy)
+    rows = np.arange(p.shape[0])
+    P = pose[fid]
+    c, s_ = np.cos(P[:, 2]), np.sin(P[:, 2])
+    qx, qy = p[:, 0] - P[:, 0], p[:, 1] - P[:, 1]
+    pr = np.column_stack([c * qx + s_ * qy, c * qy - s_ * qx])
+    ox, oy = S[sid, 0] - P[:, 0], S[sid, 1] - P[:, 1]
+    orr = np.column_stack([c * ox + s_ * oy, c * oy - s_ * ox])
+    vis = (orr @ N.T - off) > 0
+    sd = pr @ N.T - off
+    a = pr @ Tn.T - a0
+    over = np.maximum(0.0, np.maximum(-a, a - model.lengths))
+    d2 = sd * sd + over * over
+    d2[~vis] = np.inf
+    k_side = np.argmin(d2, axis=1)
+    inl = (d2[rows, k_side] < gate * gate) & (over[rows, k_side] <= st.end_margin_m)
+    r = sd[rows, k_side]
+    nk = N[k_side]
+    nwx = c * nk[:, 0] - s_ * nk[:, 1]
+    nwy = s_ * nk[:, 0] + c * nk[:, 1]
+    cosi = dir_world[:, 0] * nwx + dir_world[:, 1] * nwy
+    # the model error keeps grazing beams from dominating: their weight would otherwise hinge on the
+    # very yaw being estimated (through cos i) and bias it
+    var = var_r * cosi * cosi + st.sigma_model_m**2
+    z2 = r * r / var
+    hub = np.where(z2 <= st.huber_k**2, 1.0, st.huber_k / np.sqrt(np.maximum(z2, 1e-24)))
+    w = np.where(inl, hub / var, 0.0)
+    J = (-nwx, -nwy, nwx * qy - nwy * qx)
+    return _Linearisation(k_side, inl, r, w, J, np.column_stack([nwx, nwy]))
+
+
+def _normal_matrix(fid: np.ndarray, w: np.ndarray, J: tuple[np.ndarray, ...], K: int) -> np.ndarray:
+    """Per-frame ``sum w J^T J`` (K, 3, 3), accumulated with ``bincount`` over the frame index (M,)."""
+    H = np.zeros((K, 3, 3))
+    for i in range(3):
+        wi = w * J[i]
+        for j in range(i, 3):
+            H[:, i, j] = np.bincount(fid, wi * J[j], minlength=K)
+            H[:, j, i] = H[:, i, j]
+    return H
 
 
 def fit_hull_batch(
@@ -215,12 +286,8 @@ def fit_hull_batch(
     pose = init.copy()
     S = np.asarray(scanner_xy_world, dtype=float)
     var_r = (np.asarray(sigma_range_m, dtype=float) ** 2)[sid]
-    var_m = st.sigma_model_m**2
-    N, off = model.normals, model.offsets
-    Tn, a0 = model.tangents, np.einsum("ij,ij->i", model.tangents, model.corners_xy)
     prior = np.array([1 / st.prior_std_m**2, 1 / st.prior_std_m**2, 1 / st.prior_std_rad**2])
     wide = 2.0 * st.gate_m if wide_gate_m is None else wide_gate_m
-    rows = np.arange(M)
     H = np.zeros((K, 3, 3))
     r = np.zeros(M)
     w = np.zeros(M)
@@ -228,38 +295,9 @@ def fit_hull_batch(
     inl = np.zeros(M, dtype=bool)
     it = 0
     for it in range(1, st.max_iterations + 1):  # noqa: B007
-        gate = wide if it == 1 else st.gate_m
-        P = pose[fid]
-        c, s_ = np.cos(P[:, 2]), np.sin(P[:, 2])
-        qx, qy = p[:, 0] - P[:, 0], p[:, 1] - P[:, 1]
-        pr = np.column_stack([c * qx + s_ * qy, c * qy - s_ * qx])
-        ox, oy = S[sid, 0] - P[:, 0], S[sid, 1] - P[:, 1]
-        orr = np.column_stack([c * ox + s_ * oy, c * oy - s_ * ox])
-        vis = (orr @ N.T - off) > 0
-        sd = pr @ N.T - off
-        a = pr @ Tn.T - a0
-        over = np.maximum(0.0, np.maximum(-a, a - model.lengths))
-        d2 = sd * sd + over * over
-        d2[~vis] = np.inf
-        k_side = np.argmin(d2, axis=1)
-        dmin2 = d2[rows, k_side]
-        inl = (dmin2 < gate * gate) & (over[rows, k_side] <= st.end_margin_m)
-        r = sd[rows, k_side]
-        nk = N[k_side]
-        nwx = c * nk[:, 0] - s_ * nk[:, 1]
-        nwy = s_ * nk[:, 0] + c * nk[:, 1]
-        cosi = dir_world[:, 0] * nwx + dir_world[:, 1] * nwy
-        var = var_r * cosi * cosi + var_m
-        z2 = r * r / var
-        hub = np.where(z2 <= st.huber_k**2, 1.0, st.huber_k / np.sqrt(np.maximum(z2, 1e-24)))
-        w = np.where(inl, hub / var, 0.0)
-        j0, j1, j2 = -nwx, -nwy, nwx * qy - nwy * qx
-        J = (j0, j1, j2)
-        for i in range(3):
-            wi = w * J[i]
-            for j in range(i, 3):
-                H[:, i, j] = np.bincount(fid, wi * J[j], minlength=K)
-                H[:, j, i] = H[:, i, j]
+        lin = _linearise(model, p, fid, sid, S, dir_world, var_r, pose, wide if it == 1 else st.gate_m, st)
+        k_side, inl, r, w, J = lin.side, lin.inlier, lin.r, lin.w, lin.J
+        H = _normal_matrix(fid, w, J, K)
         g = np.column_stack([np.bincount(fid, w * J[i] * r, minlength=K) for i in range(3)])
         H[:, [0, 1, 2], [0, 1, 2]] += prior
         g += prior * (pose - init)
@@ -302,6 +340,61 @@ def fit_hull_batch(
             reasons.append("")
     degenerate = np.array([bool(x) for x in reasons], dtype=bool)
     return HullFitBatch(pose, cov, n_in, side_points, n_sides, rms, chi2_dof, it, degenerate, tuple(reasons))
+
+
+def scanner_sensitivity(
+    model: HullModel,
+    xy_world: np.ndarray,
+    frame_index: np.ndarray,
+    scanner_index: np.ndarray,
+    scanner_xy_world: np.ndarray,
+    dir_world: np.ndarray,
+    sigma_range_m: np.ndarray,
+    xytheta: np.ndarray,
+    settings: IcpSettings = IcpSettings(),
+) -> np.ndarray:
+    """How the fitted robot poses move with the scanners' calibrated poses, to first order.
+
+    A scanner ``s`` moved by ``dc_s = (dx, dy, dphi)`` (world frame, about its own origin ``t_s``) moves
+    each of its points by ``(dx, dy) + dphi * J90 (p - t_s)``; the least-squares pose then moves by
+    ``-H^-1 sum_i w_i J_i^T (dr_i / dc_s)``, with the assignments and weights of the fit at ``xytheta``.
+    The scanners' calibration errors are common to all frames, so this propagates the calibration
+    covariance into each pose (:func:`gtrig.laser.track.track_frames`): ``A Sigma_cal A^T``.
+
+    Parameters
+    ----------
+    model, xy_world, frame_index, scanner_index, scanner_xy_world, dir_world, sigma_range_m
+        As in :func:`fit_hull_batch`; M points of K frames, S scanners.
+    xytheta
+        (K, 3) the fitted poses (x, y m; theta rad).
+    settings
+        The fit's settings (gate, weights).
+
+    Returns
+    -------
+    (K, 3, 3 S) ``d xytheta_k / d (x_s, y_s, theta_s)``, scanner blocks in scanner order; zero for
+    frames without points.
+    """
+    st = settings
+    p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
+    fid = np.asarray(frame_index, dtype=np.intp)
+    sid = np.asarray(scanner_index, dtype=np.intp)
+    pose = np.asarray(xytheta, dtype=float).reshape(-1, 3)
+    S = np.asarray(scanner_xy_world, dtype=float)
+    K, n_s = pose.shape[0], S.shape[0]
+    var_r = (np.asarray(sigma_range_m, dtype=float) ** 2)[sid]
+    lin = _linearise(model, p, fid, sid, S, dir_world, var_r, pose, st.gate_m, st)
+    H = _normal_matrix(fid, lin.w, lin.J, K)
+    H[:, [0, 1, 2], [0, 1, 2]] += [1 / st.prior_std_m**2, 1 / st.prior_std_m**2, 1 / st.prior_std_rad**2]
+    lever = p - S[sid]
+    Jc = (lin.nw[:, 0], lin.nw[:, 1], lin.nw[:, 1] * lever[:, 0] - lin.nw[:, 0] * lever[:, 1])
+    cell = fid * n_s + sid
+    B = np.zeros((K, 3, n_s, 3))
+    for i in range(3):
+        wi = lin.w * lin.J[i]
+        for j in range(3):
+            B[:, i, :, j] = np.bincount(cell, wi * Jc[j], minlength=K * n_s).reshape(K, n_s)
+    return -np.linalg.solve(H, B.reshape(K, 3, 3 * n_s))
 
 
 def fit_hull(

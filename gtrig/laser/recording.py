@@ -19,7 +19,7 @@ from gtrig.io.atomic import atomic_open
 from gtrig.io.scans import ScanLog, read_scans
 from gtrig.io.tum import Trajectory, write_tum
 from gtrig.laser.background import BackgroundModel, build_background
-from gtrig.laser.calibrate import CalibrationReport, calibrate_scanners, calibrated_rig
+from gtrig.laser.calibrate import CalibrationReport, calibrate_scanners, calibrated_rig, object_outlines
 from gtrig.laser.foreground import foreground_mask, foreground_threshold
 from gtrig.laser.fuse import frame_points
 from gtrig.laser.hull_icp import HullModel
@@ -63,24 +63,31 @@ def load_backgrounds(static_dir: str | os.PathLike[str], rig: Rig) -> list[Backg
     return [build_background(logs[s.name].ranges_m, s) for s in rig.laser_scanners]
 
 
-def load_object_outline(path: str | os.PathLike[str]) -> np.ndarray:
-    """The world-defining object's outline from YAML ``corners_xy: [[x, y], ...]`` (world, metres, in
-    order around the object); returned counter-clockwise, (K, 2)."""
+def load_object_outline(path: str | os.PathLike[str]) -> list[np.ndarray]:
+    """The world-defining objects' outlines from YAML, world frame, metres, corners in order around each
+    object: ``corners_xy: [[x, y], ...]`` for one object, or ``objects: [{corners_xy: ...}, ...]`` for
+    several (their poses surveyed in the world). Returned counter-clockwise, each (K_j, 2)."""
     p = Path(path)
     try:
         doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-        c = np.asarray(doc["corners_xy"], dtype=float)
+        entries = doc["objects"] if "objects" in doc else [doc]
+        outlines = [np.asarray(e["corners_xy"], dtype=float) for e in entries]
     except FileNotFoundError:
         raise InputError(f"{p}: no such file") from None
     except (yaml.YAMLError, KeyError, TypeError, ValueError):
-        raise FormatError(f"{p}: expected 'corners_xy: [[x, y], ...]' (world frame, metres)") from None
-    if c.ndim != 2 or c.shape[1] != 2 or c.shape[0] < 3:
-        raise FormatError(f"{p}: corners_xy needs at least 3 [x, y] pairs")
-    area = 0.5 * np.sum(c[:, 0] * np.roll(c[:, 1], -1) - np.roll(c[:, 0], -1) * c[:, 1])
-    return c if area > 0 else c[::-1].copy()
+        raise FormatError(
+            f"{p}: expected 'corners_xy: [[x, y], ...]' or 'objects: [{{corners_xy: ...}}, ...]' "
+            "(world frame, metres)"
+        ) from None
+    for c in outlines:
+        if c.ndim != 2 or c.shape[1] != 2 or c.shape[0] < 3:
+            raise FormatError(f"{p}: corners_xy needs at least 3 [x, y] pairs")
+    if not outlines:
+        raise FormatError(f"{p}: no object")
+    return object_outlines(outlines)
 
 
-def _object_for_recording(rec: Path) -> np.ndarray:
+def _object_for_recording(rec: Path) -> list[np.ndarray]:
     p = rec / OBJECT_FILE
     if p.is_file():
         return load_object_outline(p)
@@ -88,12 +95,10 @@ def _object_for_recording(rec: Path) -> np.ndarray:
     if cfg.is_file():
         scenario = (yaml.safe_load(cfg.read_text(encoding="utf-8")) or {}).get("scenario", "gtroom")
         if scenario == "gtroom":
-            # the simulated GT room's calibration object stands at a fixed, known place (seed-independent)
+            # the simulated GT room's calibration objects stand at fixed, known places (seed-independent)
             from gtrig.sim.gtroom import clutter
 
-            for b in clutter():
-                if b.name == "calib_object":
-                    return b.corners_xy()
+            return [b.corners_xy() for b in clutter() if b.name.startswith("calib_object")]
     raise InputError(f"{rec}: no {OBJECT_FILE} (the outline of the object that defines the world frame)")
 
 
@@ -101,7 +106,7 @@ def calibrate_recording(
     rec_dir: str | os.PathLike[str],
     rig: Rig | None = None,
     static_dir: str | os.PathLike[str] | None = None,
-    object_corners_world_xy: np.ndarray | None = None,
+    object_corners_world_xy: np.ndarray | list[np.ndarray] | None = None,
 ) -> tuple[Rig, CalibrationReport]:
     """Calibrate the fixed scanners of a recording.
 
@@ -114,8 +119,8 @@ def calibrate_recording(
     static_dir
         The static sequence (default ``rec_dir/background``).
     object_corners_world_xy
-        (K, 2) the world object's outline (default ``rec_dir/calib/laser_object.yaml``, or the simulated
-        GT room's ``calib_object``).
+        (K, 2) the world object's outline, or a list of outlines (default
+        ``rec_dir/calib/laser_object.yaml``, or the simulated GT room's ``calib_object*`` boxes).
 
     Returns
     -------
@@ -130,13 +135,59 @@ def calibrate_recording(
     return calibrated_rig(rig, scanners), report
 
 
+def calibration_cov_path(rig_path: str | os.PathLike[str]) -> Path:
+    """Where ``gtrig laser calibrate`` writes the scanners' calibration covariance: next to the calibrated
+    rig file, ``<stem>.laser_cov.yaml``."""
+    p = Path(rig_path)
+    return p.with_name(p.stem + ".laser_cov.yaml")
+
+
+def write_calibration_cov(path: str | os.PathLike[str], rig: Rig, report: CalibrationReport) -> None:
+    """Write ``scanners: [names]`` and ``cov_xytheta`` (3 S x 3 S rows; x, y m, theta rad, world frame)."""
+    doc = {
+        "scanners": [s.name for s in rig.laser_scanners],
+        "units": "x, y in m, theta in rad per scanner, world frame",
+        "cov_xytheta": [[float(v) for v in row] for row in report.cov_xytheta],
+    }
+    with atomic_open(path, "w") as f:
+        yaml.safe_dump(doc, f, sort_keys=False)
+
+
+def read_calibration_cov(path: str | os.PathLike[str], rig: Rig) -> np.ndarray:
+    """The (3 S, 3 S) calibration covariance written by :func:`write_calibration_cov`, checked against the
+    rig's scanners (same names, same order).
+
+    Raises
+    ------
+    FormatError
+        Unreadable file, scanners that differ from the rig's, or a matrix of the wrong shape.
+    """
+    p = Path(path)
+    try:
+        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+        names = [str(n) for n in doc["scanners"]]
+        cov = np.asarray(doc["cov_xytheta"], dtype=float)
+    except FileNotFoundError:
+        raise InputError(f"{p}: no such file") from None
+    except (yaml.YAMLError, KeyError, TypeError, ValueError):
+        raise FormatError(f"{p}: expected 'scanners: [...]' and 'cov_xytheta: [[...], ...]'") from None
+    want = [s.name for s in rig.laser_scanners]
+    if names != want:
+        raise FormatError(f"{p}: scanners {names} differ from the rig's {want}")
+    if cov.shape != (3 * len(want), 3 * len(want)):
+        raise FormatError(f"{p}: cov_xytheta is {cov.shape}, expected {(3 * len(want), 3 * len(want))}")
+    return cov
+
+
 def track_sequence(
     rig: Rig,
     seq_dir: str | os.PathLike[str],
     backgrounds: list[BackgroundModel],
     settings: TrackSettings | None = None,
+    scanner_cov: np.ndarray | None = None,
 ) -> TrackResult:
-    """Track the hull through ``seq_dir/lasers/<scanner>.csv`` with the given background models."""
+    """Track the hull through ``seq_dir/lasers/<scanner>.csv`` with the given background models;
+    ``scanner_cov`` (3 S, 3 S) is the scanners' calibration covariance, propagated into each pose."""
     if not rig.laser_scanners:
         raise InputError("the rig has no laser scanners")
     logs = read_scanner_logs(Path(seq_dir) / "lasers", rig, "sequence")
@@ -146,7 +197,7 @@ def track_sequence(
         for s, b in zip(scs, backgrounds, strict=True)
     ]
     fp = frame_points(scs, [logs[s.name].stamps_s for s in scs], [logs[s.name].ranges_m for s in scs], masks)
-    return track_frames(fp, HullModel.from_hull(rig.robot.hull), settings or TrackSettings())
+    return track_frames(fp, HullModel.from_hull(rig.robot.hull), settings or TrackSettings(), scanner_cov)
 
 
 def track_recording(
@@ -156,6 +207,7 @@ def track_recording(
     out_tum: str | os.PathLike[str] | None = None,
     out_cov: str | os.PathLike[str] | None = None,
     settings: TrackSettings | None = None,
+    scanner_cov: np.ndarray | None = None,
 ) -> TrackResult:
     """Run GTlaser on one sequence of a recording.
 
@@ -171,14 +223,18 @@ def track_recording(
         Where to write the poses (TUM, ``OK`` frames only) and their covariances (CSV, same rows).
     settings
         Tracking settings.
+    scanner_cov
+        (3 S, 3 S) the scanners' calibration covariance (``CalibrationReport.cov_xytheta``), propagated into
+        each pose's covariance; when ``rig`` is ``None`` the recording's own calibration provides it.
     """
     rec = Path(rec_dir)
     if sequence not in ("run", "validation"):
         raise InputError(f"sequence must be 'run' or 'validation', got {sequence!r}")
     if rig is None:
-        rig, _ = calibrate_recording(rec)
+        rig, report = calibrate_recording(rec)
+        scanner_cov = report.cov_xytheta if scanner_cov is None else scanner_cov
     bgs = load_backgrounds(rec / "background", rig)
-    res = track_sequence(rig, rec / sequence, bgs, settings)
+    res = track_sequence(rig, rec / sequence, bgs, settings, scanner_cov)
     if out_tum is not None:
         write_track(res, out_tum, out_cov)
     return res
@@ -220,6 +276,9 @@ def write_track(
 __all__ = [
     "OK",
     "calibrate_recording",
+    "calibration_cov_path",
+    "read_calibration_cov",
+    "write_calibration_cov",
     "load_backgrounds",
     "track_recording",
     "track_sequence",

@@ -29,7 +29,7 @@ import numpy as np
 from gtrig.geometry import wrap_angle
 from gtrig.laser.acquire import acquire
 from gtrig.laser.fuse import FramedPoints
-from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull_batch
+from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull_batch, scanner_sensitivity
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +61,7 @@ class TrackSettings:
     accel_std_mps2, ang_accel_std_radps2 : white-acceleration process noise of the smoother.
     floor_std_m, floor_std_rad : added in quadrature to the smoothed covariance: errors that smoothing
         cannot average out because they persist over many frames (the laser plane cutting a tilted gown,
-        reflectivity bias, scanner calibration).
+        reflectivity bias). The scanners' calibration is propagated separately (``scanner_cov``).
     """
 
     icp: IcpSettings = field(default_factory=IcpSettings)
@@ -79,8 +79,8 @@ class TrackSettings:
     smooth: bool = True
     accel_std_mps2: float = 0.07
     ang_accel_std_radps2: float = 0.07
-    floor_std_m: float = 0.001
-    floor_std_rad: float = np.radians(0.05)
+    floor_std_m: float = 0.0005
+    floor_std_rad: float = np.radians(0.02)
 
 
 @dataclass(frozen=True)
@@ -100,6 +100,8 @@ class TrackResult:
     rms_m : (F,) point-to-line residual RMS.
     track_id : (F,) which continuous track a frame belongs to (-1 where lost).
     reasons : (F,) why a frame is not ``OK`` (empty when it is).
+    cov_calibration : (F, 3, 3) the part of ``cov_xytheta`` due to the scanners' calibration (zero when
+        no calibration covariance was given).
     """
 
     stamps_s: np.ndarray
@@ -113,6 +115,7 @@ class TrackResult:
     rms_m: np.ndarray
     track_id: np.ndarray
     reasons: tuple[str, ...]
+    cov_calibration: np.ndarray
 
     def __len__(self) -> int:
         return int(self.stamps_s.size)
@@ -241,10 +244,41 @@ def _resolve_heading(
     return True
 
 
+def calibration_covariance(
+    fp: FramedPoints, model: HullModel, xytheta: np.ndarray, scanner_cov: np.ndarray, icp: IcpSettings
+) -> np.ndarray:
+    """Covariance (F, 3, 3) that the scanners' calibration covariance ``scanner_cov`` (3 S, 3 S; scanner
+    ``s`` owns rows ``3 s .. 3 s + 2``: x, y m, theta rad, world frame) induces on each pose ``xytheta``
+    (F, 3; ``nan`` rows get ``nan``), through :func:`gtrig.laser.hull_icp.scanner_sensitivity`."""
+    F = fp.n_frames
+    out = np.full((F, 3, 3), np.nan)
+    have = np.isfinite(xytheta[:, 0])
+    counts = np.diff(fp.frame_start)
+    pt = np.repeat(have, counts)
+    if not have.any():
+        return out
+    # frame index among the localized frames, for every point of a localized frame
+    fid = np.repeat(np.cumsum(have) - 1, counts)[pt]
+    A = scanner_sensitivity(
+        model,
+        fp.xy_world[pt],
+        fid,
+        fp.scanner_index[pt],
+        fp.scanner_xy_world,
+        fp.dir_world[pt],
+        fp.sigma_m,
+        xytheta[have],
+        icp,
+    )
+    out[have] = A @ np.asarray(scanner_cov, dtype=float) @ np.swapaxes(A, 1, 2)
+    return out
+
+
 def track_frames(
     fp: FramedPoints,
     model: HullModel,
     settings: TrackSettings = TrackSettings(),
+    scanner_cov: np.ndarray | None = None,
 ) -> TrackResult:
     """Track the hull through the frames of ``fp``.
 
@@ -256,6 +290,10 @@ def track_frames(
         The hull outline (:meth:`HullModel.from_hull`).
     settings
         Tracking settings.
+    scanner_cov
+        (3 S, 3 S) covariance of the scanners' calibrated planar poses (``CalibrationReport.cov_xytheta``),
+        scanners in ``fp``'s order. Its effect on each pose is added to the reported covariance *after*
+        smoothing: a calibration error is common to every frame, so smoothing cannot average it out.
 
     Returns
     -------
@@ -420,9 +458,14 @@ def track_frames(
                 xs,
                 Ps + np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2]),
             )
+    cov_cal = np.zeros((F, 3, 3))
+    if scanner_cov is not None:
+        cov_cal = calibration_covariance(fp, model, raw, scanner_cov, st.icp)
+        cov = cov + cov_cal
     xytheta[:, 2] = wrap_angle(xytheta[:, 2])
     raw_w = raw.copy()
     raw_w[:, 2] = wrap_angle(raw_w[:, 2])
     return TrackResult(
-        stamps.copy(), xytheta, cov, status, raw_w, raw_cov, n_points, n_sides, rms, track_id, tuple(reasons)
+        stamps.copy(), xytheta, cov, status, raw_w, raw_cov, n_points, n_sides, rms, track_id, tuple(reasons),
+        cov_cal,
     )

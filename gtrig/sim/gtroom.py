@@ -77,6 +77,7 @@ MARKER_LAYOUT = (
     (89, 0.156, -0.200, -0.125, 180.0),
     (200, 0.156, 0.045, 0.125, -90.0),
 )
+DIMA_MARKER_ID = 14  # the marker all others are referred to (AD2.3, "Robot-frame")
 MARKER_LIFT_M = 0.018  # marker 14 sits 18 mm above the robot frame's published origin plane
 
 # Camera chain along the band of validation poses (see docs/simulator.md for the design).
@@ -156,6 +157,10 @@ def clutter() -> tuple[Box, ...]:
         ("heater_e", 0.5, -2.15, (1.2, 0.12, 0.6), 0.0, 0.9),
         ("heater_w", 0.0, 2.85, (1.0, 0.12, 0.6), 0.0, 0.9),
         ("calib_object", -0.8, -1.9, (1.2, 0.6, 0.5), 0.0, 0.7),
+        # a second object of known shape and surveyed pose across the band: the two scanners at the far
+        # corners see each object 4-5 m away, so one object alone fixes the world's yaw to only about
+        # 0.05 deg; two objects 3.9 m apart fix it by their positions as well as their faces
+        ("calib_object_b", 0.6, 1.95, (1.2, 0.6, 0.5), 0.0, 0.7),
     ):
         c = _band_xy(u, v)
         boxes.append(Box(name, (float(c[0]), float(c[1])), size, BAND_DIR_RAD + yaw_off, refl))
@@ -200,12 +205,16 @@ def _scanners(rng: np.random.Generator) -> tuple[LaserScanner, ...]:
 def _markers(rng: np.random.Generator | None) -> tuple[Marker, ...]:
     out = []
     for mid, side, x, y, yaw in MARKER_LAYOUT:
-        T = geo.T_from_xyz_rpy([x, y, ROBOT_TOP_M + (0.0 if mid != 14 else 0.0)], [0, 0, np.radians(yaw)])
+        T = geo.T_from_xyz_rpy([x, y, ROBOT_TOP_M], [0, 0, np.radians(yaw)])
         if rng is not None:
-            # hand placement: about 1.5 mm and 0.5 deg in the plate, a sheet's warp out of it
+            # hand placement: about 1.5 mm and 0.5 deg in the plate, a sheet's warp out of it; the
+            # dima-marker is set square against the dima's edge and its offset measured with a caliper
+            # ("a marker in a simple-to-measure pose with respect to the robot-frame", AD2.3), so its
+            # placement error is a fifth of that (0.3 mm, 0.1 deg)
+            k = 0.2 if mid == DIMA_MARKER_ID else 1.0
             T = T @ geo.T_from_xyz_rpy(
-                [rng.normal(0, 0.0015), rng.normal(0, 0.0015), rng.normal(0, 0.0003)],
-                np.radians([rng.normal(0, 0.1), rng.normal(0, 0.1), rng.normal(0, 0.5)]),
+                k * np.array([rng.normal(0, 0.0015), rng.normal(0, 0.0015), rng.normal(0, 0.0003)]),
+                k * np.radians([rng.normal(0, 0.1), rng.normal(0, 0.1), rng.normal(0, 0.5)]),
             )
         out.append(Marker(family=MarkerFamily.ARTOOLKITPLUS_SIMPLE, id=mid, side_m=side,
                           T_robot_marker=Pose.from_matrix(T)))

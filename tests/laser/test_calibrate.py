@@ -36,3 +36,22 @@ def test_recovers_scanner_poses_from_static_scans(room):
         assert r.n_overlap > 50
     assert rep.rms_overlap_m < 0.003
     assert sum(r.n_object for r in rep.scanners) > 10
+
+
+def test_two_objects_and_covariance(room):
+    """Several known objects are accepted; the joint covariance is symmetric, (3 S, 3 S), and matches the
+    reported standard deviations."""
+    rng = np.random.default_rng(7)
+    scs = room["scanners"]
+    second = synth.rectangle_segments([[-3.0, 1.9], [-2.4, 1.9], [-2.4, 2.3], [-3.0, 2.3]])
+    static = np.concatenate([room["static"], second])
+    bgs = [build_background(np.array([synth.scan(s, static, rng) for _ in range(60)]), s) for s in scs]
+    cal, rep = calibrate_scanners(scs, bgs, [room["box"][:, 0], second[:, 0]])
+    S = len(scs)
+    assert rep.cov_xytheta.shape == (3 * S, 3 * S)
+    assert np.allclose(rep.cov_xytheta, rep.cov_xytheta.T)
+    std = np.sqrt(np.diag(rep.cov_xytheta)).reshape(S, 3)
+    assert np.allclose(std, np.array([r.std_xytheta for r in rep.scanners]))
+    for c, t in zip(cal, scs, strict=True):
+        a, b = geo.T_to_se2(c.T_world_scanner.matrix()), geo.T_to_se2(t.T_world_scanner.matrix())
+        assert np.hypot(*(a[:2] - b[:2])) < 0.003

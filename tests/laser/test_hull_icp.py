@@ -4,7 +4,7 @@ import numpy as np
 
 from gtrig.laser import synth
 from gtrig.laser.fuse import beam_dirs_world
-from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull
+from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull, scanner_sensitivity
 
 
 def _points(room, pose, rng, sigma=None, scanners=None):
@@ -63,3 +63,25 @@ def test_one_visible_side_is_flagged(room, scanner_factory):
     f = fit_hull(model, P, I, S, D, sig, truth + [0.02, 0.0, 0.0])
     assert f.degenerate and "one side" in f.reason
     assert f.n_sides == 1
+
+
+def test_scanner_sensitivity_matches_refit(room):
+    """The first-order effect of a scanner's pose error on the fitted pose equals a refit."""
+    model = HullModel.from_hull(room["hull"])
+    truth = np.array([0.3, -0.2, 0.6])
+    P, I, S, D, sig = _points(room, truth, None)
+    settings = IcpSettings()
+    A = scanner_sensitivity(model, P, np.zeros(len(P), dtype=int), I, S, D, sig, truth[None], settings)[0]
+    assert A.shape == (3, 3 * len(S))
+    # every scanner moved by the same translation moves the hull by it
+    common = np.tile([0.002, -0.001, 0.0], len(S))
+    assert np.allclose(A @ common, [0.002, -0.001, 0.0], atol=1e-5)
+    for s, dc in ((0, [0.002, 0.0, 0.0]), (1, [0.0, 0.0, np.radians(0.05)])):
+        m = I == s
+        Q = P.copy()
+        lever = Q[m] - S[s]
+        Q[m] += np.asarray(dc[:2]) + dc[2] * np.column_stack([-lever[:, 1], lever[:, 0]])
+        f = fit_hull(model, Q, I, S, D, sig, truth, settings)
+        delta = np.zeros(3 * len(S))
+        delta[3 * s : 3 * s + 3] = dc
+        assert np.allclose(f.xytheta - truth, A @ delta, atol=2e-5)

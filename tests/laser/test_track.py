@@ -59,6 +59,14 @@ def test_tracks_synthetic_sequence(room, sequence):
     # heading resolved from the direction of motion, millimetre accuracy
     assert e.mean() < 0.004 and e.max() < 0.02
     assert np.degrees(ey.mean()) < 0.3
+    # a calibration covariance of the scanners is added to every pose's, after smoothing
+    cal = np.diag(np.tile([1e-6, 1e-6, np.radians(0.02) ** 2], len(scs)))
+    res_c = track_frames(fp, HullModel.from_hull(room["hull"]), scanner_cov=cal)
+    assert np.allclose(res_c.xytheta[ok], res.xytheta[ok])
+    added = res_c.cov_xytheta[ok] - res.cov_xytheta[ok]
+    assert np.allclose(added, res_c.cov_calibration[ok])
+    # four scanners with independent errors: more than a quarter of one scanner's (plus the yaw lever)
+    assert np.all((added[:, 0, 0] > 0.2e-6) & (added[:, 0, 0] < 3e-6))
 
 
 def _write_recording(root, room, sequence, beams_override=None, shuffle=False, drop_bg=None):
