@@ -6,12 +6,16 @@ Pipeline (see issue 5 and the RAWSEEDS vision GT system):
    with morphological tests (size, solidity, Euler number, hole fraction), a four-vertex convex
    polygon refined into a robust quadrilateral by Huber line fits to the contour;
 2. edges (:mod:`.edges`): a blurred-step model ``a + b Phi(d / sigma)`` fitted by Gauss-Newton to all
-   the pixels of a band around each edge (two passes: the second with the band and end exclusion
-   sized from the first pass's blur), in undistorted coordinates when a camera is given;
+   the pixels of a band around each edge, in undistorted coordinates when a camera is given. The
+   first pass fits plain steps in a band kept inside the black border and away from the ends; the
+   next passes add the modelled light of the other edges and of the data cells decoded in the
+   candidate stage (:func:`.edges.marker_context`), so the band may reach the corners and the cells
+   (this removes a bias of up to 0.35 px on 20 px markers at blur 1 px);
 3. corners: intersections of adjacent lines, with 2 x 2 covariances propagated from the line fits;
 4. late rejection of implausible fits (contrast, residual, blur, corner displacement);
-5. decoding (:mod:`.decode`) of the cells sampled through the refined corners' homography, border
-   check, and corners reordered as printed (top-left, top-right, bottom-right, bottom-left).
+5. decoding (:mod:`.decode`) of the cells through the refined corners' homography, solved from the
+   blur model (:func:`.decode.unblur_cells`), border check, and corners reordered as printed
+   (top-left, top-right, bottom-right, bottom-left).
 
 Corners are in OpenCV's pixel convention (pixel centres at integer coordinates) of the raw image.
 """
@@ -26,9 +30,9 @@ from numpy.typing import NDArray
 from gtrig.errors import InputError
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
-from gtrig.markers.detect.decode import sample_cells
-from gtrig.markers.detect.edges import fit_edges, gather_band, intersect_corners
-from gtrig.markers.families import decode_batch, family_spec
+from gtrig.markers.detect.decode import sample_cells, unblur_cells
+from gtrig.markers.detect.edges import fit_edges, gather_band, intersect_corners, marker_context
+from gtrig.markers.families import decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily
 
 __all__ = ["Detection", "DetectorParams", "MarkerDetector", "detect_markers"]
@@ -79,6 +83,12 @@ class DetectorParams:
     max_rel_rms : largest accepted residual RMS / contrast of an edge fit.
     max_corner_shift_px : largest move of a corner from the candidate stage to the refined fit.
     max_hamming : decoder tolerance (default: the family's).
+    passes : edge-fit passes; the first fits plain steps, the next ones hold the modelled light of the
+        marker's corners and data cells fixed (:func:`.edges.marker_context`), which two more passes
+        make self-consistent (two passes in all leave 0.06 px RMS where three give 0.04 px).
+    iterations : Levenberg-Marquardt iterations per pass (at most).
+    unblur : read the data cells by solving the blur model (:func:`.decode.unblur_cells`) instead of
+        thresholding each cell.
     """
 
     candidates: CandidateParams = field(default_factory=CandidateParams)
@@ -88,6 +98,10 @@ class DetectorParams:
     max_rel_rms: float = 0.25
     max_corner_shift_px: float = 4.0
     max_hamming: int | None = None
+    passes: int = 3
+    iterations: int = 10
+
+    unblur: bool = True
 
 
 class MarkerDetector:
@@ -141,10 +155,12 @@ class MarkerDetector:
         return (inner > thr[:, None, None]).astype(np.uint8), white - black
 
     def _predecode(self, gray: NDArray[np.uint8], Q: NDArray[np.float64], und: Undistorter | None
-                   ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+                   ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
+                              NDArray[np.uint8]]:
         """Keep candidates whose cells, sampled through the initial quad, are close to a code.
 
-        Returns the kept quads and their (id, rotation, hamming) against the initial quad.
+        Returns the kept quads, their (id, rotation, hamming) against the initial quad and their cells
+        as read (Q, n, n) in the quad's orientation.
 
         The threshold is midway between the border (black) and the outer ring (white paper); the
         tolerance is two cells more than the final decoder's, so this only removes clutter early.
@@ -158,7 +174,17 @@ class MarkerDetector:
         ids, rot, ham = decode_batch(self.spec.family, bits[:, bc:-bc, bc:-bc], tol)
         border_white = bits[:, bmask].sum(axis=1)
         keep = (ids >= 0) & (border_white <= n // 2) & (contrast >= self.params.min_contrast)
-        return Q[keep], ids[keep], rot[keep], ham[keep]
+        return Q[keep], ids[keep], rot[keep], ham[keep], bits[keep]
+
+    def _white_cells(self, ids: NDArray[np.int64], bits: NDArray[np.uint8]) -> NDArray[np.float64]:
+        """The code's cells (Q, n, n), 1 = white, turned to the quads' orientation: of the four
+        rotations of the printed pattern, the one closest to the cells as read."""
+        out = np.empty(bits.shape, np.float64)
+        for k, (mid, b) in enumerate(zip(ids, bits, strict=True)):
+            cells = marker_cells(self.spec.family, int(mid))
+            rots = [np.rot90(cells, r) for r in range(4)]
+            out[k] = rots[int(np.argmin([np.count_nonzero(r != b) for r in rots]))]
+        return out
 
     def detect(self, image: NDArray[np.uint8]) -> list[Detection]:
         """Detect and decode markers in a grayscale (H, W) or BGR (H, W, 3) 8-bit image."""
@@ -171,25 +197,41 @@ class MarkerDetector:
         Q0 = np.array(quads)  # (Q, 4, 2) raw
         Q = Q0 if und is None else und.to_undistorted(Q0.reshape(-1, 2)).reshape(-1, 4, 2)
         n = self.spec.cells
-        Q, pre_id, pre_rot, pre_ham = self._predecode(gray, Q, und)
+        Q, pre_id, pre_rot, pre_ham, pre_bits = self._predecode(gray, Q, und)
         if not len(Q):
             return []
         side = np.linalg.norm(Q - np.roll(Q, -1, axis=1), axis=2)  # (Q, 4)
         cell = np.repeat(side.mean(axis=1) / n, 4)
         border = cell * self.spec.border_cells
+        white = self._white_cells(pre_id, pre_bits)
         p0 = Q.reshape(-1, 2)
         p1 = np.roll(Q, -1, axis=1).reshape(-1, 2)
         L = side.ravel()
         sigma = np.full(len(p0), 1.0)
         fit = None
-        for _pass in range(2):
+        for _pass in range(p.passes):
             w = 3.0 * sigma + p.band_px
-            w_in = np.maximum(1.0, np.minimum(w, border - 1.5 * sigma))
-            w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
-            excl = np.minimum(np.maximum(3.0 * sigma + 1.0, 0.08 * L), 0.3 * L)
+            if fit is None:
+                # plain step model: keep the band inside the black border and away from the ends
+                w_in = np.maximum(1.0, np.minimum(w, border - 1.5 * sigma))
+                w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
+                excl = np.minimum(np.maximum(3.0 * sigma + 1.0, 0.08 * L), 0.3 * L)
+            else:
+                # the corners and the data cells are modelled: the band may reach into them
+                w_in = np.maximum(1.0, np.minimum(w, border + 0.5 * cell))
+                w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
+                excl = np.minimum(sigma, 0.3 * L)
             samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
-            fit = fit_edges(samples, p0, p1, sigma)
-            sigma = np.clip(fit.sigma, 0.3, p.max_blur_px)
+            if fit is None:
+                fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations)
+            else:
+                corners, _ = intersect_corners(fit, len(Q))
+                extra = marker_context(samples, fit, corners, white)
+                fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, extra=extra, init=fit)
+            # the blur is about the same on the four edges of a marker: the next pass starts from
+            # their median, which recovers an edge whose plain-step fit collapsed to a sharp step
+            # (white cells one border-width inside pull sigma to 0 on small markers)
+            sigma = np.repeat(np.median(np.clip(fit.sigma, 0.3, p.max_blur_px).reshape(-1, 4), axis=1), 4)
             lines = fit.lines()
             # next pass: end points = the fitted line's points nearest to the previous ends
             nvec = lines[:, :2]
@@ -220,7 +262,14 @@ class MarkerDetector:
         mixed = split.sum(axis=(1, 2))
         bc = self.spec.border_cells
         border_white = bits.sum(axis=(1, 2)) - bits[:, bc:-bc, bc:-bc].sum(axis=(1, 2))
-        ids, rot, ham = decode_batch(self.spec.family, bits[:, bc:-bc, bc:-bc], p.max_hamming)
+        data = bits[:, bc:-bc, bc:-bc]
+        if p.unblur:
+            # cells solved through the blur model: isolated white cells of small markers peak below
+            # the midway threshold and would flip when read one by one
+            ab = fit.a.reshape(-1, 4)[idx].mean(axis=1), fit.b.reshape(-1, 4)[idx].mean(axis=1)
+            wls = unblur_cells(gray, corners, n, bc, np.clip(blur, 0.3, p.max_blur_px), ab[0], ab[1], und)
+            data = (wls > 0.5).astype(np.uint8)
+        ids, rot, ham = decode_batch(self.spec.family, data, p.max_hamming)
         good = (ids >= 0) & (border_white <= max(0, n // 4 - 1))
         fine = cell_px >= np.maximum(4.0, 3.0 * blur)  # cells resolved: their insides must be uniform
         good &= ~fine | (mixed <= max(1, n * n // 20))

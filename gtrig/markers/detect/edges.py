@@ -151,6 +151,8 @@ def fit_edges(
     p1: NDArray[np.float64],
     sigma0: NDArray[np.float64],
     iterations: int = 10,
+    extra: NDArray[np.float64] | None = None,
+    init: EdgeFit | None = None,
 ) -> EdgeFit:
     """Fit the blurred-step model to every edge (see the module docstring).
 
@@ -161,6 +163,12 @@ def fit_edges(
     sigma0 : (E,) initial blur, pixels.
     iterations : largest number of Levenberg-Marquardt iterations (vectorised over all edges; stops
         when no line moves by more than 1e-4 px).
+    extra : (N,) optional known part of the profile, in units of the contrast ``b``, added to
+        ``Phi(d / sigma)`` and held fixed (see :func:`marker_context`): the blurred light of the
+        marker's other edges and of its white data cells, which the straight-step model lacks.
+    init : a previous fit of the same edges to start from (its levels, shading and line, the line
+        moved to the new reference points; the blur starts from ``sigma0``); without it the levels
+        come from the band means.
     """
     E = len(p0)
     t = p1 - p0
@@ -185,6 +193,11 @@ def fit_edges(
     b = sum_out / np.maximum(n_out, 1) - a
     ls = np.log(np.maximum(sigma0, 0.3))
     P = np.stack([theta, rho, a, b, ls, np.zeros(E), np.zeros(E)], axis=1)  # (E, 7)
+    if init is not None:
+        n_old = np.column_stack([np.cos(init.theta), np.sin(init.theta)])
+        rho_old = init.rho + np.einsum("ij,ij->i", n_old, init.mid - mid)
+        P = np.column_stack([init.theta, rho_old, init.a, init.b, ls, init.shade])
+    ext = np.zeros(N) if extra is None else np.asarray(extra, np.float64)
     lam = np.full(E, 1e-3)
     has = cnt > 8
     present, first = np.unique(e, return_index=True)
@@ -200,7 +213,7 @@ def fit_edges(
         d = X0 * c + X1 * s - Pe[:, 1]
         sg = np.exp(Pe[:, 4])
         z = d / sg
-        Phi = ndtr(z)
+        Phi = ndtr(z) + ext
         bb = Pe[:, 3]
         base = Pe[:, 2] + bb * Phi
         u = X1 * c - X0 * s  # along the edge; du/dtheta = -(d + rho)
@@ -294,3 +307,86 @@ def intersect_corners(fit: EdgeFit, n_quads: int) -> tuple[NDArray[np.float64], 
     J2 = np.stack([Ainv[..., :, 1] * np.einsum("qci,qci->qc", t2, m2 - x)[..., None], Ainv[..., :, 1]], -1)
     cov = J1 @ C[:, prev] @ np.swapaxes(J1, -1, -2) + J2 @ C @ np.swapaxes(J2, -1, -2)
     return x, cov
+
+
+def quad_homographies(quads: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Homographies (Q, 3, 3) from fit coordinates to marker units: corner ``k`` of each quad (Q, 4, 2)
+    goes to (0, 0), (1, 0), (1, 1), (0, 1) in turn (the convention of :func:`.decode.sample_cells`).
+
+    Solved as the 8 x 8 linear system of the direct linear transform with ``h33 = 1``, batched.
+    """
+    Q = len(quads)
+    dst = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    x, y = quads[..., 0], quads[..., 1]  # (Q, 4)
+    u, v = np.broadcast_to(dst[:, 0], (Q, 4)), np.broadcast_to(dst[:, 1], (Q, 4))
+    z, o = np.zeros((Q, 4)), np.ones((Q, 4))
+    A = np.concatenate([np.stack([x, y, o, z, z, z, -u * x, -u * y], -1),
+                        np.stack([z, z, z, x, y, o, -v * x, -v * y], -1)], axis=1)  # (Q, 8, 8)
+    rhs = np.concatenate([u, v], axis=1)
+    with np.errstate(all="ignore"):
+        h = np.linalg.solve(A, rhs[..., None])[..., 0]
+    return np.concatenate([h, np.ones((Q, 1))], axis=1).reshape(Q, 3, 3)
+
+
+def marker_context(
+    samples: EdgeSamples,
+    fit: EdgeFit,
+    corners: NDArray[np.float64],
+    white: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """The part of each band pixel's blurred profile that one straight step does not explain.
+
+    A marker is a black square holding white data cells; blurred by a Gaussian of ``sigma`` pixels
+    its reflectance is ``1 - S + R`` with ``S`` the blurred square and ``R`` the blurred white cells.
+    Close to the middle of an edge this is ``Phi(d / sigma)``; near the corners the other edges, and
+    on small or blurred markers the white cells one border-width inside (2.5 px at 20 px side for
+    AprilTag 36h11), add light that biases a plain step fit by up to 0.35 px at blur 1 px. This
+    returns ``1 - S + R - Phi(d / sigma)`` at the current estimate, for :func:`fit_edges` to hold
+    fixed while it moves the line (the detector re-evaluates it between passes).
+
+    Every cell is a square in marker units mapped by the quad's homography; locally the blur is a
+    Gaussian in marker units whose marginal widths along the grid axes are ``sigma`` times the norms
+    of the rows of d(marker)/d(pixel), and the blurred cell is taken as the product of the two 1-D
+    blurred boxes (exact for a half-plane, a close approximation at cell corners under shear). The
+    sum over cells is then the bilinear form ``Y^T W X`` of the per-row and per-column box profiles.
+
+    Parameters
+    ----------
+    samples : band pixels (fit coordinates) of the edges of ``Q`` quads, edges ``4q .. 4q+3``.
+    fit : current fits of those edges.
+    corners : (Q, 4, 2) current corners (intersections of the fitted lines), clockwise on screen.
+    white : (Q, n, n) 1 for white cells, in the quads' orientation (cell (0, 0) at corner 0, cell
+        (0, n-1) at corner 1).
+
+    Returns
+    -------
+    (N,) float, in units of the edge contrast.
+    """
+    n = white.shape[1]
+    Hm = quad_homographies(corners)
+    e = samples.edge
+    q = e // 4
+    xy = samples.xy
+    out = np.zeros(len(e))
+    k = np.arange(n + 1, dtype=np.float64)
+    for qq in np.unique(q):
+        sel = q == qq
+        H = Hm[qq]
+        x, y = xy[sel, 0], xy[sel, 1]
+        w3 = H[2, 0] * x + H[2, 1] * y + H[2, 2]
+        mx = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w3
+        my = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w3
+        sg = fit.sigma[e[sel]]
+        # marginal blur in cell units: sigma times |grad m| (d m / d pixel = (H_row - m H_3) / w3)
+        sx = sg * np.hypot(H[0, 0] - mx * H[2, 0], H[0, 1] - mx * H[2, 1]) / np.abs(w3) * n
+        sy = sg * np.hypot(H[1, 0] - my * H[2, 0], H[1, 1] - my * H[2, 1]) / np.abs(w3) * n
+        Fx = ndtr((mx[:, None] * n - k) / sx[:, None])  # (N, n + 1): past the k-th grid line
+        Fy = ndtr((my[:, None] * n - k) / sy[:, None])
+        X = Fx[:, :-1] - Fx[:, 1:]
+        Y = Fy[:, :-1] - Fy[:, 1:]
+        S = (Fx[:, 0] - Fx[:, -1]) * (Fy[:, 0] - Fy[:, -1])
+        R = np.einsum("pi,ij,pj->p", Y, white[qq], X)
+        th = fit.theta[e[sel]]
+        d = (np.cos(th) * (x - fit.mid[e[sel], 0]) + np.sin(th) * (y - fit.mid[e[sel], 1]) - fit.rho[e[sel]])
+        out[sel] = 1.0 - S + R - ndtr(d / sg)
+    return out
