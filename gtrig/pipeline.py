@@ -13,9 +13,13 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from gtrig.errors import GtrigError
 from gtrig.io.recording import recording_dir
+
+if TYPE_CHECKING:
+    from gtrig.rig import Rig
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +52,22 @@ def _has_truth(ctx: StageContext) -> bool:
     return (ctx.rec / "truth").is_dir()
 
 
+def _rig(ctx: StageContext) -> Rig:
+    """The rig as calibrated so far (the recording's nominal rig before any calibration stage)."""
+    from gtrig.rig import Rig, load_rig
+
+    rig = ctx.products.get("rig")
+    return rig if isinstance(rig, Rig) else load_rig(ctx.rec / "rig.yaml")
+
+
+def _calibrated(ctx: StageContext, rig: Rig) -> None:
+    """Hand on a rig with one more part calibrated, and write it as ``out/rig.calibrated.yaml``."""
+    from gtrig.rig.load import dump_rig
+
+    ctx.products["rig"] = rig
+    dump_rig(rig, ctx.out / "rig.calibrated.yaml")
+
+
 def survey(ctx: StageContext) -> list[AccuracyRow]:
     """World points and validation poses from the hand-laser distances (issue 3)."""
     from gtrig.survey import compare_to_truth, run_recording_survey
@@ -72,12 +92,10 @@ def survey(ctx: StageContext) -> list[AccuracyRow]:
 def camera_calibration(ctx: StageContext) -> list[AccuracyRow]:
     """Intrinsics, then the joint network calibration anchored on the world board (issue 4)."""
     from gtrig.calib.recording import calibrate_recording
-    from gtrig.rig.load import dump_rig
 
     rig, report = calibrate_recording(ctx.rec)
-    dump_rig(rig, ctx.out / "rig.calibrated.yaml")
+    _calibrated(ctx, _rig(ctx).model_copy(update={"cameras": rig.cameras}))
     report.write(ctx.out / "calibration")
-    ctx.products["rig_cameras"] = rig
     if not report.truth:
         return []
     t = report.truth
@@ -97,15 +115,38 @@ def camera_calibration(ctx: StageContext) -> list[AccuracyRow]:
     return rows
 
 
+def marker_calibration(ctx: StageContext) -> list[AccuracyRow]:
+    """The markers' poses on the robot from the hand-held images, anchored on the dima-marker (issue 5)."""
+    from gtrig.markers.robotcal import calibrate_markers, marker_errors, specs_from_rig, write_markers_yaml
+    from gtrig.rig import load_rig
+
+    rig = _rig(ctx)
+    rig2, cal = calibrate_markers(ctx.rec, rig)
+    write_markers_yaml(ctx.out / "markers.yaml", cal, specs_from_rig(rig))
+    _calibrated(ctx, rig2)
+    ctx.products["marker_calibration"] = cal
+    if not _has_truth(ctx):
+        return []
+    err = marker_errors(cal, load_rig(ctx.rec / "truth" / "rig.yaml"))
+    pos_mm = max(e[0] for e in err.values()) * 1000
+    rot_deg = math.degrees(max(e[1] for e in err.values()))
+    return [
+        AccuracyRow("markers", "on the robot, worst position error", pos_mm, "mm", "<= 1", pos_mm <= 1),
+        AccuracyRow("markers", "on the robot, worst orientation error", rot_deg, "deg", "<= 0.1", rot_deg <= 0.1),
+    ]
+
+
 def gtlaser(ctx: StageContext) -> list[AccuracyRow]:
     """Fixed-scanner calibration, then hull tracking over the continuous run (issue 7)."""
     from gtrig.io.tum import read_tum
     from gtrig.laser import report as laser_report
     from gtrig.laser.recording import calibrate_recording, track_recording
 
-    rig, _ = calibrate_recording(ctx.rec)
+    rig_scanners, report = calibrate_recording(ctx.rec)
+    rig = _rig(ctx).model_copy(update={"laser_scanners": rig_scanners.laser_scanners})
+    _calibrated(ctx, rig)
     res = track_recording(ctx.rec, sequence="run", rig=rig, out_tum=ctx.out / "gt_laser.tum",
-                          out_cov=ctx.out / "gt_laser_cov.csv")
+                          out_cov=ctx.out / "gt_laser_cov.csv", scanner_cov=report.cov_xytheta)
     if not _has_truth(ctx):
         return []
     acc = laser_report.accuracy(res, read_tum(ctx.rec / "truth" / "run.tum"))
@@ -122,14 +163,12 @@ def gtlaser(ctx: StageContext) -> list[AccuracyRow]:
 def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     """Robot poses from all markers in all cameras, on the calibrated rig (issue 6)."""
     from gtrig.io.tum import read_tum, write_tum
-    from gtrig.rig import Rig, load_rig
     from gtrig.vision import report as vision_report
     from gtrig.vision.covariance import RigUncertainty
     from gtrig.vision.estimate import VisionOptions
     from gtrig.vision.sequence import run_recording, write_covariance_csv
 
-    cal = ctx.products.get("rig_cameras")
-    rig = cal if isinstance(cal, Rig) else load_rig(ctx.rec / "rig.yaml")
+    rig = _rig(ctx)
     # The markers' poses on the robot are still the hand-measured ones (marker-to-robot calibration is
     # not built yet), so they carry hand-placement uncertainty; the cameras carry calibration's.
     options = VisionOptions(rig_uncertainty=RigUncertainty(
@@ -162,6 +201,7 @@ def _stages() -> list[tuple[str, Stage]]:
     return [
         ("survey", survey),
         ("camera calibration", camera_calibration),
+        ("marker calibration", marker_calibration),
         ("GTlaser", gtlaser),
         ("GTvision", gtvision),
     ]

@@ -165,14 +165,14 @@ def analyse(
         d[:, angle_index] = (d[:, angle_index] + np.pi) % (2 * np.pi) - np.pi
     to_best = np.max(np.abs(d), axis=1) < tol
     radius = 0.0
-    for r in radii:
-        if np.all(to_best[: ring.shape[0]][rad <= r]):
-            radius = r
+    for ring_r in radii:
+        if np.all(to_best[: ring.shape[0]][rad <= ring_r]):
+            radius = ring_r
         else:
             break
     # a start that stopped on a slope (gradient not ~0) did not find a minimum: leave it out
-    r, J = model(X)
-    grad = np.linalg.norm((np.swapaxes(J, 1, 2) @ r[..., None])[..., 0], axis=1)
+    res, J = model(X)
+    grad = np.linalg.norm((np.swapaxes(J, 1, 2) @ res[..., None])[..., 0], axis=1)
     stationary = np.isfinite(cost) & (grad < 1e-4 * (1.0 + np.sqrt(cost)))
     keep = ~to_best & stationary
     others = cluster(X[keep], cost[keep], tol, angle_index)

@@ -8,13 +8,14 @@ from __future__ import annotations
 import io
 import os
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from gtrig.io.atomic import atomic_write_bytes
 
 
-def _figure(**kw: object):  # type: ignore[no-untyped-def]
+def _figure(**kw: Any) -> tuple[Any, Any]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -23,7 +24,7 @@ def _figure(**kw: object):  # type: ignore[no-untyped-def]
     return plt.subplots(**kw)
 
 
-def save(fig, path: str | os.PathLike[str]) -> None:  # type: ignore[no-untyped-def]
+def save(fig: Any, path: str | os.PathLike[str]) -> None:
     """Save a figure atomically (format from the suffix) and close it."""
     import matplotlib.pyplot as plt
 

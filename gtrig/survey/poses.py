@@ -223,18 +223,18 @@ def estimate_poses(
     warnings: list[str] = []
     x_prev: dict[str, np.ndarray] = {}
     while True:
-        rows = [np.flatnonzero((groups == n) & active) for n in names]
+        pose_rows = [np.flatnonzero((groups == n) & active) for n in names]
         x0 = []
-        for n, r in zip(names, rows, strict=True):
+        for n, r in zip(names, pose_rows, strict=True):
             if n in x_prev:
                 x0.append(x_prev[n])
             else:
                 x0.append(_initial_guess(n, r, ctx, init_map.get(n), grid_step_m))
-        fit = _fit(rows, np.array(x0), ctx)
+        fit = _fit(pose_rows, np.array(x0), ctx)
         x_prev = {n: fit["x"][i] for i, n in enumerate(names)}
         changed = False
         for i, n in enumerate(names):
-            t, r = fit["tests"][i], rows[i]
+            t, r = fit["tests"][i], pose_rows[i]
             if t.dof <= 0 or t.p_value >= alpha:
                 continue
             k = r[t.worst] if t.worst >= 0 else r[0]
@@ -270,7 +270,7 @@ def estimate_poses(
         x, t, res = fit["x"][i], fit["tests"][i], fit["residuals"][i]
         basin = None
         if multistart:
-            extra = _global_starts(wxy[np.unique(wi[rows[i]])], grid_step_m)
+            extra = _global_starts(wxy[np.unique(wi[pose_rows[i]])], grid_step_m)
             if n in init_map:
                 extra = np.vstack([extra, init_map[n]])
             basin = ms.analyse(
@@ -298,7 +298,7 @@ def estimate_poses(
                 n,
                 x,
                 fit["cov"][i],
-                int(rows[i].size),
+                int(pose_rows[i].size),
                 t.chi2,
                 t.dof,
                 t.p_value,

@@ -7,6 +7,7 @@ import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -83,16 +84,16 @@ def run_survey(
     world_distances: Distances,
     robot_points: NamedPoints,
     pose_distances: Distances,
-    **kwargs: object,
+    **kwargs: Any,
 ) -> SurveyResult:
     """World points, then validation poses with the world points' joint covariance propagated.
 
     ``kwargs`` (``multistart``, ``on_ambiguity``, ``on_outlier``, ``alpha``) go to both estimators.
     """
-    pts = estimate_world_points(references, world_distances, **kwargs)  # type: ignore[arg-type]
+    pts = estimate_world_points(references, world_distances, **kwargs)
     poses = estimate_poses(
         (pts.names, pts.xy, pts.cov_xy), robot_points, pose_distances, cov_world_joint=pts.cov_joint, **kwargs
-    )  # type: ignore[arg-type]
+    )
     return SurveyResult(pts, poses)
 
 
