@@ -232,4 +232,27 @@ def run(rec: str | Path, out: str | Path, on_stage: Callable[[str], None] | None
             log.warning("%s: %s", name, e)
             skipped[name] = str(e)
         seconds[name] = time.perf_counter() - t
+    if rows:
+        write_accuracy_csv(ctx.out / "accuracy.csv", rows)
     return PipelineResult(tuple(rows), seconds, skipped)
+
+
+def write_accuracy_csv(path: Path, rows: list[AccuracyRow]) -> None:
+    """``stage,metric,value,unit,target,ok``: the accuracy table, one measured figure a row."""
+    from gtrig.io.atomic import atomic_write_text
+
+    def cell(v: object) -> str:
+        return f'"{v}"' if "," in str(v) else str(v)
+
+    lines = ["stage,metric,value,unit,target,ok"]
+    lines += [",".join(cell(v) for v in (r.stage, r.metric, f"{r.value:.6g}", r.unit, r.target,
+                                         "" if r.ok is None else int(r.ok))) for r in rows]
+    atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+def read_accuracy_csv(path: Path) -> dict[tuple[str, str], float]:
+    """{(stage, metric): value} from :func:`write_accuracy_csv`."""
+    import csv
+
+    with open(path, newline="") as f:
+        return {(r["stage"], r["metric"]): float(r["value"]) for r in csv.DictReader(f)}

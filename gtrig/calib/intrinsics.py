@@ -33,6 +33,10 @@ log = logging.getLogger(__name__)
 MIN_VIEWS = 3
 COVERAGE_WARN = 0.5  # fraction of the image
 TILT_WARN_DEG = 15.0  # at least two views tilted more than this, and this much spread
+# A principal point this uncertain (1 sigma, px) turns the camera by about sigma / f rad and cannot
+# promise the 0.5 px the network needs; with a narrow lens it is tied to the tangential distortion and
+# only many views pin it (docs/calibration.md, "Measured on the simulator").
+PP_SIGMA_WARN_PX = 0.25
 STD_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 
 
@@ -146,10 +150,16 @@ def calibrate_views(
             f"poor view variety: tilts {tilt.min():.0f}-{tilt.max():.0f} deg, normals spread "
             f"{spread:.0f} deg; tilt the board by 20-45 deg in different directions"
         )
+    std = {n: float(s) for n, s in zip(STD_NAMES, np.asarray(std_int, dtype=float).ravel(), strict=False)}
+    if max(std.get("cx", 0.0), std.get("cy", 0.0)) > PP_SIGMA_WARN_PX:
+        warnings.append(
+            f"imprecise principal point: sigma cx {std['cx']:.2f} px, cy {std['cy']:.2f} px from "
+            f"{len(views)} views; add views (a video sweep gives a hundred) with the board near the image "
+            "corners"
+        )
     for w_ in warnings[n_rej:]:
         log.warning(w_)
     dist = np.asarray(dist, dtype=float).ravel()[:5]
-    std = {n: float(s) for n, s in zip(STD_NAMES, np.asarray(std_int, dtype=float).ravel(), strict=False)}
     if not estimate_k3:
         std["k3"] = 0.0
     per = {v.file: float(x) for v, x in zip(views, np.asarray(per_view).ravel(), strict=True)}

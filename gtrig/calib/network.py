@@ -9,21 +9,34 @@ Method
 2. **Chain.** From the world-anchored camera(s) (:func:`gtrig.calib.anchor.anchor_camera`), breadth-first
    over the pair graph: ``T_world_B = T_world_A @ T_A_B``. Errors add up along the chain, and the
    nominal double-board transform biases every edge.
-3. **Joint bundle adjustment.** Unknowns: every ``T_world_cam``, the double board's ``T_b1_b2`` and the
-   pose ``T_world_b1`` of the double board at every instant; the world board's pose is fixed (it defines
-   the world frame). Residuals: the reprojection error of every corner in pixels, plus a weak prior on
-   ``T_b1_b2`` around its nominal value (``prior_T12_sigma_m``, ``prior_T12_sigma_deg``). Solved by
-   Levenberg-Marquardt on iteratively reweighted normal equations (Huber loss per corner, ``huber_px``)
-   with an analytic sparse Jacobian (a corner depends on one camera, one board pose and perhaps
-   ``T_b1_b2``). ``scipy.optimize.least_squares`` was tried first: with ``tr_solver="lsmr"`` it stalled
-   on this problem's conditioning (RMS 0.13 px after 100 evaluations where the optimum is 0.069 px),
-   and ``"exact"`` needs a dense SVD per iteration (seconds each on a loaded 2-core machine); it reaches
-   the same optimum as this solver.
+3. **Joint bundle adjustment.** Unknowns: every ``T_world_cam``, every camera's lens (fx, fy, cx, cy,
+   k1, k2, p1, p2, and k3 if asked), the double board's ``T_b1_b2``, the pose ``T_world_b1`` of the
+   double board at every instant and the pose ``T_cam_board`` of the board in every view of the
+   intrinsic sweeps; the world board's pose is fixed (it defines the world frame). Residuals: the
+   reprojection error of every corner in pixels (sweeps, pairs, world board), plus a weak prior on
+   ``T_b1_b2`` around its nominal value (``prior_T12_sigma_m``, ``prior_T12_sigma_deg``). The sweep views
+   themselves, rather than the single-camera solution as a prior, tie each lens: that keeps every
+   correlation between its parameters (the principal point and the tangential terms are strongly
+   correlated, and ``calibrateCameraExtended`` reports only standard deviations). A camera without
+   sweep views takes its lens's stated standard deviations (``extra["std"]`` of a ``cam.yaml``) as a
+   prior, or holds it. The pairs and the world board then add what they know about the lenses: on the
+   seeds' simulated rooms the focal lengths' standard deviation halves, the principal points' drops by
+   a third.
+   Solved by Levenberg-Marquardt on iteratively reweighted normal equations (Huber loss per corner,
+   ``huber_px``) with an analytic sparse Jacobian (a corner depends on one camera, its lens, one board
+   pose and perhaps ``T_b1_b2``); the board poses, 6-blocks that no corner shares, are eliminated by the
+   Schur complement, so a step costs a solve in the cameras' and lenses' few parameters however many
+   views there are. ``scipy.optimize.least_squares`` was tried first: with ``tr_solver="lsmr"`` it
+   stalled on this problem's conditioning (RMS 0.13 px after 100 evaluations where the optimum is
+   0.069 px), and ``"exact"`` needs a dense SVD per iteration; it reaches the same optimum as this
+   solver.
    Poses are perturbed as ``R = Exp(w) R0, t = t0 + v``, so ``w`` and ``v`` are in the world frame (for a
-   camera, ``v`` moves its optical centre in world metres).
+   camera, ``v`` moves its optical centre in world metres; for a sweep board, the camera frame).
 4. **Uncertainty.** ``Cov = s^2 (J^T J)^-1`` at the optimum, ``s^2`` the residual variance per degree of
    freedom (Triggs et al., "Bundle adjustment: a modern synthesis", 2000, section 9). The 6 x 6 block of
-   a camera is ``[w (rad), v (m)]`` in world axes.
+   a camera is ``[w (rad), v (m)]`` in world axes; it is marginal over the lenses, so it includes the
+   intrinsics' uncertainty (a principal point off by 0.5 px turns a camera of f = 1500 px by 0.02 deg).
+   The block with the lenses held (``sigma_*_fixed_intrinsics``) is kept for comparison.
 """
 
 from __future__ import annotations
@@ -74,6 +87,17 @@ class WorldView:
 
 
 @dataclass(frozen=True)
+class SweepView:
+    """One view of a camera's intrinsic sweep: corners (N, 2) in pixels and, if known, the board's pose
+    ``T_cam_board`` (4, 4) from the single-camera calibration (initial value; PnP when None)."""
+
+    camera: str
+    name: str
+    corners: np.ndarray
+    T_cam_board: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
 class NetworkProblem:
     """Everything the network calibration needs.
 
@@ -81,10 +105,13 @@ class NetworkProblem:
     ----------
     board : the chessboard geometry (both boards of the double board and the world board).
     T_board1_board2 : (4, 4) nominal double-board transform.
-    cameras : {name: intrinsics} (held fixed here).
+    cameras : {name: intrinsics}: the initial values of the lenses (and, through ``extra["std"]``, their
+        prior when a camera has no sweep views).
     T_world_cam_nominal : {name: (4, 4)} the believed poses (tape measure): only to resolve the grid's
         half-turn ambiguity and to sanity-check the result, never as a constraint.
     pair_views, world_views : the observations.
+    sweep_views : the intrinsic sweeps' views, so that the bundle adjustment refines each lens from all
+        of its images (empty: lenses refined from their stated standard deviations, or held).
     """
 
     board: Board
@@ -93,20 +120,32 @@ class NetworkProblem:
     T_world_cam_nominal: Mapping[str, np.ndarray]
     pair_views: Sequence[PairView]
     world_views: Sequence[WorldView]
+    sweep_views: Sequence[SweepView] = ()
 
 
 @dataclass(frozen=True)
 class CameraPose:
-    """One camera's estimated pose.
+    """One camera's estimated pose, and its lens when refined in the bundle adjustment.
 
     Attributes
     ----------
     T_world_cam : (4, 4).
-    cov : (6, 6) covariance of ``[w (rad), v (m)]`` in world axes (see module docstring).
+    cov : (6, 6) covariance of ``[w (rad), v (m)]`` in world axes (see module docstring), marginal over
+        every other unknown, the camera's intrinsics included when they were refined.
     sigma_pos_m : (3,) standard deviation of the optical centre in world x, y, z (metres).
     sigma_rot_rad : (3,) standard deviation of the rotation about world x, y, z (radians).
-    rms_px : reprojection RMS of every corner this camera saw (pixels).
-    n_points : number of corners this camera saw.
+    rms_px : reprojection RMS of the network's corners (pairs, world board) this camera saw (pixels).
+    n_points : number of those corners.
+    intrinsics : the lens used for the final pose: refined in the bundle adjustment (``extra["std"]``
+        then holds its standard deviations from the joint covariance), or as given.
+    cov_pose_intrinsics : (6 + k, 6 + k) joint covariance of ``[w, v]`` and the k refined intrinsics
+        (``INTRINSICS_NAMES`` order: px for fx, fy, cx, cy; unitless for the distortion); (6, 6) when the
+        intrinsics were held.
+    sigma_pos_m_fixed_intrinsics, sigma_rot_rad_fixed_intrinsics : (3,) the same standard deviations with
+        the intrinsics held at their estimates (what the report showed before intrinsics were refined).
+    rms_px_sweep : reprojection RMS of this camera's intrinsic sweep in the bundle adjustment (NaN when
+        its sweep views were not part of it).
+    n_sweep_views : sweep views in the bundle adjustment.
     """
 
     T_world_cam: np.ndarray
@@ -115,6 +154,12 @@ class CameraPose:
     sigma_rot_rad: np.ndarray
     rms_px: float
     n_points: int
+    intrinsics: CameraIntrinsics | None = None
+    cov_pose_intrinsics: np.ndarray | None = None
+    sigma_pos_m_fixed_intrinsics: np.ndarray | None = None
+    sigma_rot_rad_fixed_intrinsics: np.ndarray | None = None
+    rms_px_sweep: float = float("nan")
+    n_sweep_views: int = 0
 
 
 @dataclass(frozen=True)
@@ -131,7 +176,8 @@ class NetworkResult:
     T_board1_board2_sigma : (6,) its standard deviations ([w rad, v m]).
     rms_px_pair : {pair: RMS over both cameras' corners}.
     rms_px_world : {camera: RMS of its world-board corners}.
-    rms_px : RMS over all corners; sigma_px : the residual standard deviation per degree of freedom.
+    rms_px : RMS over the network's corners (pairs and world board; sweeps excluded);
+    sigma_px : the residual standard deviation per degree of freedom (all corners).
     n_iterations : function evaluations of the solver.
     warnings : human-readable warnings.
     """
@@ -162,6 +208,29 @@ class NetworkResult:
                 "sigma_rot_deg": [float(np.degrees(v)) for v in c.sigma_rot_rad],
                 "rms_px": float(c.rms_px),
                 "n_points": int(c.n_points),
+                **(
+                    {}
+                    if c.sigma_rot_rad_fixed_intrinsics is None
+                    else {
+                        "sigma_pos_mm_intrinsics_held": [float(v * 1000) for v in c.sigma_pos_m_fixed_intrinsics],
+                        "sigma_rot_deg_intrinsics_held": [
+                            float(np.degrees(v)) for v in c.sigma_rot_rad_fixed_intrinsics
+                        ],
+                    }
+                ),
+                **(
+                    {}
+                    if c.intrinsics is None or not c.intrinsics.extra.get("refined_in_network")
+                    else {
+                        "intrinsics": {
+                            "camera_matrix": np.asarray(c.intrinsics.camera_matrix).tolist(),
+                            "dist_coeffs": np.asarray(c.intrinsics.dist_coeffs).tolist(),
+                            "std": dict(c.intrinsics.extra.get("std", {})),
+                            "sweep_rms_px": float(c.rms_px_sweep),
+                            "sweep_views": int(c.n_sweep_views),
+                        }
+                    }
+                ),
                 "chain_path": self.chain_path.get(n, []),
                 "chain_minus_joint_mm": float(dch * 1000),
                 "chain_minus_joint_deg": float(np.degrees(rch)),
@@ -237,14 +306,109 @@ def _exp_apply(R0: np.ndarray, t0: np.ndarray, p: np.ndarray) -> tuple[np.ndarra
     return R, t0 + p[:, 3:]
 
 
+INTRINSICS_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrices (..., 3, 3) of vectors (..., 3)."""
+    S_ = np.zeros(v.shape[:-1] + (3, 3))
+    S_[..., 0, 1], S_[..., 0, 2], S_[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    S_[..., 1, 0], S_[..., 2, 0], S_[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return S_
+
+
+def _intrinsics_vector(ci: CameraIntrinsics, n_i: int) -> np.ndarray:
+    """``[fx, fy, cx, cy, k1, k2, p1, p2(, k3)]`` (n_i,) of a lens (px; distortion unitless)."""
+    K = np.asarray(ci.camera_matrix, dtype=float)
+    d = np.zeros(5)
+    dc = np.asarray(ci.dist_coeffs, dtype=float).ravel()
+    d[: min(5, dc.size)] = dc[:5]
+    return np.r_[K[0, 0], K[1, 1], K[0, 2], K[1, 2], d[: n_i - 4]]
+
+
+def _apply_intrinsics(ci: CameraIntrinsics, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The lens ``ci`` with its first ``len(q)`` parameters replaced: (K (3, 3), dist (>= 5,)). The skew and
+    any higher-order distortion terms stay as given."""
+    K = np.asarray(ci.camera_matrix, dtype=float).copy()
+    K[0, 0], K[1, 1], K[0, 2], K[1, 2] = q[:4]
+    dc = np.asarray(ci.dist_coeffs, dtype=float).ravel()
+    d = np.zeros(max(dc.size, 5))
+    d[: dc.size] = dc
+    d[: len(q) - 4] = q[4:]
+    return K, d
+
+
+def _prior_std(ci: CameraIntrinsics, n_i: int) -> np.ndarray | None:
+    """The stated standard deviations (n_i,) of a lens (``extra["std"]`` of a ``cam.yaml``), or None when
+    some are missing or not positive (the lens is then held)."""
+    std = ci.extra.get("std") if isinstance(ci.extra, dict) else None
+    if not isinstance(std, dict):
+        return None
+    try:
+        sd = np.array([float(std[k]) for k in INTRINSICS_NAMES[:n_i]])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return sd if np.all(np.isfinite(sd)) and np.all(sd > 0) else None
+
+
+def _intrinsics_jacobian(Xc: np.ndarray, K: np.ndarray, dist: np.ndarray, n_i: int) -> np.ndarray:
+    """d(u, v) / d[fx, fy, cx, cy, k1, k2, p1, p2(, k3)] (n, 2, n_i) of camera-frame points Xc (n, 3)
+    under OpenCV's model (as :func:`gtrig.geometry.project_points`; the skew held)."""
+    d = np.zeros(8)
+    dc = np.asarray(dist, dtype=float).ravel()
+    d[: min(8, dc.size)] = dc[:8]
+    k1, k2, p1, p2, k3, k4, k5, k6 = d
+    x, y = Xc[:, 0] / Xc[:, 2], Xc[:, 1] / Xc[:, 2]
+    r2 = x * x + y * y
+    den = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / den
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    fx, s, fy = K[0, 0], K[0, 1], K[1, 1]
+    J = np.zeros((len(Xc), 2, n_i))
+    J[:, 0, 0] = xd
+    J[:, 1, 1] = yd
+    J[:, 0, 2] = 1.0
+    J[:, 1, 3] = 1.0
+    # d(xd, yd) / d(k1, k2, p1, p2, k3)
+    dxy = [
+        (x * r2 / den, y * r2 / den),
+        (x * r2**2 / den, y * r2**2 / den),
+        (2 * x * y, r2 + 2 * y * y),
+        (r2 + 2 * x * x, 2 * x * y),
+        (x * r2**3 / den, y * r2**3 / den),
+    ]
+    for k, (dx, dy) in enumerate(dxy[: n_i - 4]):
+        J[:, 0, 4 + k] = fx * dx + s * dy
+        J[:, 1, 4 + k] = fy * dy
+    return J
+
+
 def _levenberg_marquardt(
-    fun: Any, jac: Any, n_par: int, n_obs: int, huber_px: float, warnings: list[str], max_iter: int = 50
-) -> tuple[np.ndarray, np.ndarray, int]:
+    fun: Any,
+    jac: Any,
+    n_par: int,
+    n_obs: int,
+    huber_px: float,
+    warnings: list[str],
+    local: tuple[int, int] = (0, 0),
+    max_iter: int = 50,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Minimise the Huber cost of ``fun`` (2 pixel residuals per corner, then prior rows) by
     Levenberg-Marquardt on the iteratively reweighted normal equations (Huber weights per corner).
 
-    Returns the parameters, the weighted normal matrix ``J^T W J`` at the optimum and the iterations.
+    The parameters ``local[0]:local[1]`` are 6-blocks that no residual row shares (one board pose each):
+    they are eliminated by the Schur complement, so that a step costs a solve in the few global
+    parameters (cameras, lenses, the double board) whatever the number of views.
+
+    Returns the parameters (n_par,), the Schur complement ``S`` of ``J^T W J`` on the global parameters
+    at the optimum (whose inverse is their block of ``(J^T W J)^-1``), the global parameters' indices
+    (rows of ``S``) and the iterations.
     """
+    l0, l1 = local
+    nL = (l1 - l0) // 6
+    glob = np.r_[0:l0, l1:n_par].astype(int)
+    loc = np.arange(l0, l1)
 
     def weights(r: np.ndarray) -> tuple[np.ndarray, float]:
         e = np.sqrt(r[: 2 * n_obs : 2] ** 2 + r[1 : 2 * n_obs : 2] ** 2)
@@ -254,25 +418,44 @@ def _levenberg_marquardt(
         wr[: 2 * n_obs] = np.repeat(w, 2)
         return wr, float(np.sum(rho) + np.sum(r[2 * n_obs :] ** 2))
 
+    def normal(x: np.ndarray, r: np.ndarray, wr: np.ndarray) -> tuple:
+        J = csr_matrix(jac(x))
+        JW = csr_matrix(J.multiply(wr[:, None]))
+        A = csr_matrix(J.T @ JW)
+        g = JW.T @ r
+        Agg = A[glob][:, glob].toarray()
+        Agl = A[glob][:, loc].toarray().reshape(len(glob), nL, 6)
+        Bll = np.zeros((nL, 6, 6))
+        coo = A[loc][:, loc].tocoo()
+        Bll[coo.row // 6, coo.row % 6, coo.col % 6] = coo.data
+        return Agg, Agl, Bll, g[glob], g[loc].reshape(nL, 6)
+
+    def schur(Agg: np.ndarray, Agl: np.ndarray, Bll: np.ndarray, lam: float) -> tuple:
+        dg = np.sqrt(np.maximum(np.diag(Agg), 1e-30))
+        dl = np.sqrt(np.maximum(np.einsum("bii->bi", Bll), 1e-30))
+        Binv = np.linalg.inv(Bll + lam * np.einsum("bi,ij->bij", dl**2, np.eye(6)))
+        AB = np.einsum("gbi,bij->gbj", Agl, Binv)
+        S = Agg + lam * np.diag(dg**2) - np.einsum("gbj,hbj->gh", AB, Agl)
+        return S, AB, Binv
+
     x = np.zeros(n_par)
     r = fun(x)
     wr, cost = weights(r)
     lam = 1e-4
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 (it is returned)
-        J = jac(x)
-        JW = J.multiply(wr[:, None]).tocsr() if hasattr(J, "multiply") else J * wr[:, None]
-        A = np.asarray((J.T @ JW).todense()) if hasattr(J, "todense") else J.T @ JW
-        g = JW.T @ r
-        d = np.sqrt(np.maximum(np.diag(A), 1e-30))
+        Agg, Agl, Bll, gg, gl = normal(x, r, wr)
         improved = False
         for _ in range(20):
-            M = A + lam * np.diag(d**2)
             try:
-                step = -np.linalg.solve(M, g)
+                S, AB, Binv = schur(Agg, Agl, Bll, lam)
+                sg = -np.linalg.solve(S, gg - np.einsum("gbj,bj->g", AB, gl))
             except np.linalg.LinAlgError:
                 lam *= 10
                 continue
+            sl = -np.einsum("bij,bj->bi", Binv, gl + np.einsum("gbi,g->bi", Agl, sg))
+            step = np.zeros(n_par)
+            step[glob], step[loc] = sg, sl.ravel()
             r_new = fun(x + step)
             wr_new, cost_new = weights(r_new)
             if cost_new <= cost:
@@ -287,10 +470,14 @@ def _levenberg_marquardt(
     else:
         warnings.append(f"network bundle adjustment stopped after {max_iter} iterations")
         log.warning(warnings[-1])
-    J = jac(x)
-    JW = J.multiply(wr[:, None]).tocsr() if hasattr(J, "multiply") else J * wr[:, None]
-    A = np.asarray((J.T @ JW).todense()) if hasattr(J, "todense") else J.T @ JW
-    return x, A, it
+    Agg, Agl, Bll, _, _ = normal(x, r, wr)
+    try:
+        S = schur(Agg, Agl, Bll, 0.0)[0]
+    except np.linalg.LinAlgError:
+        raise ConvergenceError(
+            "network bundle adjustment: the problem is singular (a board pose not constrained)"
+        ) from None
+    return x, S, glob, it
 
 
 def calibrate_network(
@@ -300,8 +487,22 @@ def calibrate_network(
     prior_T12_sigma_deg: float = 1.0,
     huber_px: float = 0.5,
     estimate_T12: bool = True,
+    refine_intrinsics: bool = True,
+    estimate_k3: bool = False,
 ) -> NetworkResult:
     """Calibrate the extrinsics of a camera network (see the module docstring for the method).
+
+    Parameters
+    ----------
+    prob : the observations and initial values.
+    prior_T12_sigma_m, prior_T12_sigma_deg : the prior on the double board's transform around its nominal
+        value (metres, degrees).
+    huber_px : the Huber loss's threshold on a corner's reprojection error (pixels).
+    estimate_T12 : estimate the double board's transform (else held at its nominal value).
+    refine_intrinsics : refine each camera's lens in the bundle adjustment: from its sweep views when
+        ``prob.sweep_views`` has some, else from its stated standard deviations as a prior; a lens with
+        neither is held.
+    estimate_k3 : also refine k3 (else held at its given value, 0 for the seeds' model).
 
     Raises
     ------
@@ -387,173 +588,264 @@ def calibrate_network(
 
     # 4. joint bundle adjustment
     ci_of = {n: i for i, n in enumerate(cams)}
-    nC, nB = len(cams), len(pair_views)
+    n_i = 9 if estimate_k3 else 8
+    sweeps = [sv for sv in prob.sweep_views if sv.camera in ci_of] if refine_intrinsics else []
+    with_sweep = {sv.camera for sv in sweeps}
+    prior_sd: dict[str, np.ndarray] = {}
+    if refine_intrinsics:
+        for n in cams:
+            sd = None if n in with_sweep else _prior_std(prob.cameras[n], n_i)
+            if sd is not None:
+                prior_sd[n] = sd
+    refined = [n for n in cams if n in with_sweep or n in prior_sd]
+    ri_of = {n: k for k, n in enumerate(refined)}
+    nC, nB, nS, nR = len(cams), len(pair_views), len(sweeps), len(refined)
     R0c = np.array([chain[n][:3, :3] for n in cams])
     t0c = np.array([chain[n][:3, 3] for n in cams])
     Tb0 = np.array([chain[v.cam_a] @ T for v, T in zip(pair_views, T_A_b1, strict=True)]).reshape(-1, 4, 4)
-    R0b, t0b = Tb0[:, :3, :3], Tb0[:, :3, 3]
+    Ts0 = np.array(
+        [
+            sv.T_cam_board
+            if sv.T_cam_board is not None
+            else board_pose(prob.cameras[sv.camera].camera_matrix, prob.cameras[sv.camera].dist_coeffs,
+                            sv.corners, board)[0]
+            for sv in sweeps
+        ]
+    ).reshape(-1, 4, 4)
     T12_0 = prob.T_board1_board2
+    q0 = np.array([_intrinsics_vector(prob.cameras[n], n_i) for n in refined]).reshape(nR, n_i)
     n_T12 = 6 if estimate_T12 else 0
-    n_par = 6 * nC + 6 * nB + n_T12
+    off_b = 6 * nC
+    off_s = off_b + 6 * nB
+    off_12 = off_s + 6 * nS
+    off_i = off_12 + n_T12
+    n_par = off_i + n_i * nR
 
-    # observations, one row per corner
-    cam_i, brd_i, use12, fixed_i, uv = [], [], [], [], []
-    fixed_T = [wv.T_world_board for wv in world_views]
+    # observations, one row per corner; kind 0: world board (fixed), 1: double board, 2: sweep board
+    cam_i, kind_i, brd_i, use12, uv = [], [], [], [], []
     obs_key: list[str] = []
+
+    def add(cam: str, kind: int, b: int, u12: bool, corners: np.ndarray, key: str) -> None:
+        cam_i.append(np.full(len(P), ci_of[cam]))
+        kind_i.append(np.full(len(P), kind))
+        brd_i.append(np.full(len(P), b))
+        use12.append(np.full(len(P), u12))
+        uv.append(np.asarray(corners, dtype=float).reshape(-1, 2))
+        obs_key.extend([key] * len(P))
+
     for k, wv in enumerate(world_views):
-        cam_i.append(np.full(len(P), ci_of[wv.camera]))
-        brd_i.append(np.full(len(P), -1))
-        fixed_i.append(np.full(len(P), k))
-        use12.append(np.zeros(len(P), bool))
-        uv.append(wv.corners)
-        obs_key += [f"world:{wv.camera}"] * len(P)
+        add(wv.camera, 0, k, False, wv.corners, f"world:{wv.camera}")
     for b, v in enumerate(pair_views):
-        for cam, corners, u12 in ((v.cam_a, v.corners_a, False), (v.cam_b, v.corners_b, True)):
-            cam_i.append(np.full(len(P), ci_of[cam]))
-            brd_i.append(np.full(len(P), b))
-            fixed_i.append(np.full(len(P), -1))
-            use12.append(np.full(len(P), u12))
-            uv.append(corners)
-            obs_key += [f"pair:{v.pair}"] * len(P)
+        add(v.cam_a, 1, b, False, v.corners_a, f"pair:{v.pair}")
+        add(v.cam_b, 1, b, True, v.corners_b, f"pair:{v.pair}")
+    for s, sv in enumerate(sweeps):
+        add(sv.camera, 2, s, False, sv.corners, f"sweep:{sv.camera}")
     cam_a = np.concatenate(cam_i)
+    kind_a = np.concatenate(kind_i)
     brd_a = np.concatenate(brd_i)
-    fix_a = np.concatenate(fixed_i)
     u12_a = np.concatenate(use12)
-    uv_a = np.concatenate(uv).astype(float)
+    uv_a = np.concatenate(uv)
     X_a = np.tile(P, (len(cam_i), 1))
-    Rf = np.array([T[:3, :3] for T in fixed_T]).reshape(-1, 3, 3)
-    tf = np.array([T[:3, 3] for T in fixed_T]).reshape(-1, 3)
+    m_world, m_pair, m_sw = kind_a == 0, kind_a == 1, kind_a == 2
+    Rf = np.array([wv.T_world_board[:3, :3] for wv in world_views]).reshape(-1, 3, 3)
+    tf = np.array([wv.T_world_board[:3, 3] for wv in world_views]).reshape(-1, 3)
     nObs = len(cam_a)
-    Ks = {ci_of[n]: (prob.cameras[n].camera_matrix, prob.cameras[n].dist_coeffs) for n in cams}
+    sel_cam = [cam_a == i for i in range(nC)]
     sig_r = np.radians(prior_T12_sigma_deg)
+    prior_rows = np.concatenate([prior_sd[n] for n in refined if n in prior_sd]) if prior_sd else np.zeros(0)
+    prior_cols = (
+        np.concatenate([off_i + n_i * ri_of[n] + np.arange(n_i) for n in refined if n in prior_sd])
+        if prior_sd
+        else np.zeros(0, int)
+    )
+    # the board parameter block of each row: a double-board instant or a sweep view (none for the world)
+    col_board = np.where(m_pair, off_b + 6 * brd_a, off_s + 6 * brd_a)
 
     def unpack(x: np.ndarray) -> tuple:
-        pc = x[: 6 * nC].reshape(nC, 6)
-        pb = x[6 * nC : 6 * nC + 6 * nB].reshape(nB, 6)
-        Rc, tc = _exp_apply(R0c, t0c, pc)
-        Rb, tb = _exp_apply(R0b, t0b, pb) if nB else (np.zeros((0, 3, 3)), np.zeros((0, 3)))
+        Rc, tc = _exp_apply(R0c, t0c, x[:off_b].reshape(nC, 6))
+        Rb, tb = _exp_apply(R0b_, t0b_, x[off_b:off_s].reshape(nB, 6)) if nB else (R0b_, t0b_)
+        Rs, ts = _exp_apply(Ts0[:, :3, :3], Ts0[:, :3, 3], x[off_s:off_12].reshape(nS, 6)) if nS else (
+            Ts0[:, :3, :3], Ts0[:, :3, 3])
         if n_T12:
-            p12 = x[6 * nC + 6 * nB :].reshape(1, 6)
-            R12, t12 = _exp_apply(T12_0[None, :3, :3], T12_0[None, :3, 3], p12)
-            return Rc, tc, Rb, tb, R12[0], t12[0], p12[0]
-        return Rc, tc, Rb, tb, T12_0[:3, :3], T12_0[:3, 3], np.zeros(6)
+            R12, t12 = _exp_apply(T12_0[None, :3, :3], T12_0[None, :3, 3], x[off_12:off_i].reshape(1, 6))
+            R12, t12 = R12[0], t12[0]
+        else:
+            R12, t12 = T12_0[:3, :3], T12_0[:3, 3]
+        q = q0 + x[off_i:].reshape(nR, n_i)
+        return Rc, tc, Rb, tb, Rs, ts, R12, t12, q
+
+    R0b_, t0b_ = Tb0[:, :3, :3], Tb0[:, :3, 3]
+    eye_rows = np.broadcast_to(np.eye(3), (int(m_sw.sum()), 3, 3))
+
+    def lens(q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        out = []
+        for n in cams:
+            ci = prob.cameras[n]
+            out.append(_apply_intrinsics(ci, q[ri_of[n]]) if n in ri_of else (ci.camera_matrix, ci.dist_coeffs))
+        return out
 
     def geometry(x: np.ndarray) -> tuple:
-        Rc, tc, Rb, tb, R12, t12, _ = unpack(x)
+        """Per row: the board's pose (in the world, or in the camera for a sweep view), the camera's pose
+        (identity for a sweep view), the board point in the world and in the camera, and the lenses."""
+        Rc, tc, Rb, tb, Rs, ts, R12, t12, q = unpack(x)
         X1 = np.where(u12_a[:, None], X_a @ R12.T + t12, X_a)
         Rbo = np.empty((nObs, 3, 3))
         tbo = np.empty((nObs, 3))
-        m = brd_a >= 0
-        if nB:
-            Rbo[m], tbo[m] = Rb[brd_a[m]], tb[brd_a[m]]
-        Rbo[~m], tbo[~m] = Rf[fix_a[~m]], tf[fix_a[~m]]
+        Rbo[m_world], tbo[m_world] = Rf[brd_a[m_world]], tf[brd_a[m_world]]
+        Rbo[m_pair], tbo[m_pair] = Rb[brd_a[m_pair]], tb[brd_a[m_pair]]
+        Rbo[m_sw], tbo[m_sw] = Rs[brd_a[m_sw]], ts[brd_a[m_sw]]
+        Rcr, tcr = Rc[cam_a], tc[cam_a]
+        Rcr[m_sw], tcr[m_sw] = eye_rows, 0.0
         Xw = np.einsum("nij,nj->ni", Rbo, X1) + tbo
-        Xc = np.einsum("nji,nj->ni", Rc[cam_a], Xw - tc[cam_a])
-        return Rc, tc, Rbo, R12, X1, Xw, Xc
+        Xc = np.einsum("nji,nj->ni", Rcr, Xw - tcr)
+        return Rcr, tcr, Rbo, R12, X1, Xw, Xc, lens(q)
 
-    def project(Xc: np.ndarray) -> np.ndarray:
+    def project(Xc: np.ndarray, lz: list) -> np.ndarray:
         out = np.empty((len(Xc), 2))
-        for c, (K, d) in Ks.items():
-            sel = cam_a == c
-            out[sel] = geo.project_points(Xc[sel], K, d)
+        for c, (K, d) in enumerate(lz):
+            out[sel_cam[c]] = geo.project_points(Xc[sel_cam[c]], K, d)
         return out
 
     def project_all(x: np.ndarray) -> np.ndarray:
-        return project(geometry(x)[-1])
+        g = geometry(x)
+        return project(g[6], g[7])
 
     def fun(x: np.ndarray) -> np.ndarray:
-        r = (project_all(x) - uv_a).ravel()
+        r = [(project_all(x) - uv_a).ravel()]
         if n_T12:
-            p12 = x[6 * nC + 6 * nB :]
-            r = np.concatenate([r, p12[:3] / sig_r, p12[3:] / prior_T12_sigma_m])
-        return r
+            p12 = x[off_12:off_i]
+            r += [p12[:3] / sig_r, p12[3:] / prior_T12_sigma_m]
+        if prior_sd:
+            r.append(x[prior_cols] / prior_rows)
+        return np.concatenate(r)
 
-    def skew(v: np.ndarray) -> np.ndarray:
-        S_ = np.zeros(v.shape[:-1] + (3, 3))
-        S_[..., 0, 1], S_[..., 0, 2], S_[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-        S_[..., 1, 0], S_[..., 2, 0], S_[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-        return S_
-
-    def jac(x: np.ndarray) -> np.ndarray:
-        """Analytic chain rule through the poses (first order in the perturbations, Exp(w) ~ I + [w]x),
-        central differences for the projection's derivative with respect to the camera-frame point."""
-        Rc, tc, Rbo, R12, X1, Xw, Xc = geometry(x)
+    def jac(x: np.ndarray) -> csr_matrix:
+        """Analytic chain rule through the poses (first order in the perturbations, Exp(w) ~ I + [w]x) and
+        the lens; central differences for the projection's derivative with respect to the camera-frame
+        point."""
+        Rcr, tcr, Rbo, R12, X1, Xw, Xc, lz = geometry(x)
         h = 1e-6 * np.maximum(np.abs(Xc[:, 2:3]), 1e-3)
         dP = np.empty((nObs, 2, 3))
         for k in range(3):
             e = np.zeros(3)
             e[k] = 1.0
-            dP[:, :, k] = (project(Xc + h * e) - project(Xc - h * e)) / (2 * h)
-        RcT = np.transpose(Rc[cam_a], (0, 2, 1))
-        A = dP @ RcT  # d uv / d Xw  (n, 2, 3)
-        rows_, cols_, vals_ = [], [], []
-        r0 = np.arange(nObs) * 2
+            dP[:, :, k] = (project(Xc + h * e, lz) - project(Xc - h * e, lz)) / (2 * h)
+        A = dP @ np.transpose(Rcr, (0, 2, 1))  # d uv / d Xw  (n, 2, 3)
         blocks = []
         # camera: Xc = Rc^T (Xw - tc), Rc = Exp(w) Rc0 -> dXc/dw = Rc^T [Xw - tc]x ; dXc/dv = -Rc^T
-        blocks.append(
-            (6 * cam_a, np.concatenate([A @ skew(Xw - tc[cam_a]), -A], axis=2), np.ones(nObs, bool))
-        )
-        # board: Xw = Rb X1 + tb -> dXw/dw = -[Rb X1]x ; dXw/dv = I
-        m = brd_a >= 0
+        blocks.append((6 * cam_a, np.concatenate([A @ _skew(Xw - tcr), -A], axis=2), ~m_sw))
+        # board: Xw = Rb X1 + tb -> dXw/dw = -[Rb X1]x ; dXw/dv = I (a sweep board: Xw is Xc)
         RbX = np.einsum("nij,nj->ni", Rbo, X1)
-        blocks.append((6 * nC + 6 * np.maximum(brd_a, 0), np.concatenate([-A @ skew(RbX), A], axis=2), m))
+        blocks.append((col_board, np.concatenate([-A @ _skew(RbX), A], axis=2), ~m_world))
         if n_T12:
             B = A @ Rbo
-            R12X = X_a @ R12.T
-            blocks.append(
-                (np.full(nObs, 6 * nC + 6 * nB), np.concatenate([-B @ skew(R12X), B], axis=2), u12_a)
-            )
-        for col0, D, sel in blocks:
+            blocks.append((np.full(nObs, off_12), np.concatenate([-B @ _skew(X_a @ R12.T), B], axis=2), u12_a))
+        if nR:
+            D = np.zeros((nObs, 2, n_i))
+            col_i = np.zeros(nObs, int)
+            has = np.zeros(nObs, bool)
+            for n in refined:
+                c = ci_of[n]
+                K, d = lz[c]
+                D[sel_cam[c]] = _intrinsics_jacobian(Xc[sel_cam[c]], K, d, n_i)
+                col_i[sel_cam[c]] = off_i + n_i * ri_of[n]
+                has |= sel_cam[c]
+            blocks.append((col_i, D, has))
+        rows_, cols_, vals_ = [], [], []
+        r0 = np.arange(nObs) * 2
+        for col0, Db, sel in blocks:
             idx = np.nonzero(sel)[0]
-            for k in range(6):
+            for k in range(Db.shape[2]):
                 for ax in (0, 1):
                     rows_.append(r0[idx] + ax)
                     cols_.append(col0[idx] + k)
-                    vals_.append(D[idx, ax, k])
+                    vals_.append(Db[idx, ax, k])
+        n_rows = 2 * nObs
         if n_T12:
-            rows_.append(2 * nObs + np.arange(6))
-            cols_.append(6 * nC + 6 * nB + np.arange(6))
+            rows_.append(n_rows + np.arange(6))
+            cols_.append(off_12 + np.arange(6))
             vals_.append(np.r_[np.full(3, 1.0 / sig_r), np.full(3, 1.0 / prior_T12_sigma_m)])
+            n_rows += 6
+        if prior_sd:
+            rows_.append(n_rows + np.arange(len(prior_rows)))
+            cols_.append(prior_cols)
+            vals_.append(1.0 / prior_rows)
+            n_rows += len(prior_rows)
         return csr_matrix(
-            (np.concatenate(vals_), (np.concatenate(rows_), np.concatenate(cols_))),
-            shape=(2 * nObs + (6 if n_T12 else 0), n_par),
+            (np.concatenate(vals_), (np.concatenate(rows_), np.concatenate(cols_))), shape=(n_rows, n_par)
         )
 
-    x, A, n_iter = _levenberg_marquardt(fun, jac, n_par, nObs, huber_px, warnings)
+    x, S, glob, n_iter = _levenberg_marquardt(
+        fun, jac, n_par, nObs, huber_px, warnings, local=(off_b, off_12)
+    )
     res = project_all(x) - uv_a
     e2 = np.sum(res**2, axis=1)
     dof = max(2 * nObs - n_par, 1)
     sigma2 = float(np.sum(e2) / dof)
+    # rows of S: the cameras' 6 * nC parameters, then T_b1_b2's n_T12, then the lenses' n_i * nR
+    n_held = 6 * nC + n_T12
     try:
-        cov = np.linalg.inv(A) * sigma2
+        cov = np.linalg.inv(S) * sigma2
+        # the same with the lenses held at their estimates: what the poses' uncertainty would be if the
+        # intrinsics were exact (shows how much of it the intrinsics contribute)
+        cov_fixed = np.linalg.inv(S[:n_held, :n_held]) * sigma2 if nR else cov
     except np.linalg.LinAlgError:
         raise ConvergenceError(
             "network bundle adjustment: the problem is singular (a camera or board pose not constrained)"
         ) from None
-    Rc, tc, _, _, R12, t12, _ = unpack(x)
+    pos = np.full(n_par, -1)
+    pos[glob] = np.arange(len(glob))
+    Rc, tc, _, _, _, _, R12, t12, q = unpack(x)
+    keys = np.array(obs_key)
     joint: dict[str, CameraPose] = {}
     for n in cams:
         i = ci_of[n]
-        C = cov[6 * i : 6 * i + 6, 6 * i : 6 * i + 6]
-        sel = cam_a == i
+        idx = pos[np.r_[6 * i : 6 * i + 6]]
+        if n in ri_of:
+            idx = np.r_[idx, pos[off_i + n_i * ri_of[n] + np.arange(n_i)]]
+        C_full = cov[np.ix_(idx, idx)]
+        C = C_full[:6, :6]
         sd = np.sqrt(np.clip(np.diag(C), 0, None))
+        sd_fix = np.sqrt(np.clip(np.diag(cov_fixed[6 * i : 6 * i + 6, 6 * i : 6 * i + 6]), 0, None))
+        net_rows = sel_cam[i] & ~m_sw
+        sw_rows = sel_cam[i] & m_sw
+        ci = prob.cameras[n]
+        if n in ri_of:
+            K, d = _apply_intrinsics(ci, q[ri_of[n]])
+            sd_q = np.sqrt(np.clip(np.diag(C_full[6:, 6:]), 0, None))
+            std = {k: float(v) for k, v in zip(INTRINSICS_NAMES, sd_q, strict=False)}
+            rms_sw = float(np.sqrt(np.mean(e2[sw_rows]))) if sw_rows.any() else float("nan")
+            extra = dict(ci.extra) | {"std": std, "refined_in_network": True}
+            intr = CameraIntrinsics(ci.image_size, K, d, rms_sw if sw_rows.any() else ci.rms_px, extra)
+        else:
+            intr, rms_sw = ci, float("nan")
         joint[n] = CameraPose(
-            geo.make_T(Rc[i], tc[i]), C, sd[3:], sd[:3], float(np.sqrt(np.mean(e2[sel]))), int(sel.sum())
+            geo.make_T(Rc[i], tc[i]),
+            C,
+            sd[3:],
+            sd[:3],
+            float(np.sqrt(np.mean(e2[net_rows]))),
+            int(net_rows.sum()),
+            intrinsics=intr,
+            cov_pose_intrinsics=C_full,
+            sigma_pos_m_fixed_intrinsics=sd_fix[3:],
+            sigma_rot_rad_fixed_intrinsics=sd_fix[:3],
+            rms_px_sweep=rms_sw,
+            n_sweep_views=int(sum(sv.camera == n for sv in sweeps)),
         )
-    keys = np.array(obs_key)
     rms_pair = {p: float(np.sqrt(np.mean(e2[keys == f"pair:{p}"]))) for p in edges}
     rms_world = {c: float(np.sqrt(np.mean(e2[keys == f"world:{c}"]))) for c in by_cam}
-    if n_T12:
-        s12 = np.sqrt(np.clip(np.diag(cov)[6 * nC + 6 * nB :], 0, None))
-    else:
-        s12 = np.zeros(6)
+    s12 = np.sqrt(np.clip(np.diag(cov)[pos[off_12:off_i]], 0, None)) if n_T12 else np.zeros(6)
     T12 = geo.make_T(R12, t12)
     d12, r12 = geo.pose_error(T12, T12_0)
+    net = ~m_sw
     log.info(
-        "network BA: %d corners, %d parameters, RMS %.3f px; T_board1_board2 moved %.1f mm / %.3f deg "
-        "from nominal",
+        "network BA: %d corners (%d of sweeps), %d parameters (intrinsics of %d cameras), RMS %.3f px; "
+        "T_board1_board2 moved %.1f mm / %.3f deg from nominal",
         nObs,
+        int(m_sw.sum()),
         n_par,
+        nR,
         float(np.sqrt(np.mean(e2))),
         d12 * 1000,
         np.degrees(r12),
@@ -567,7 +859,7 @@ def calibrate_network(
         s12,
         rms_pair,
         rms_world,
-        float(np.sqrt(np.mean(e2))),
+        float(np.sqrt(np.mean(e2[net]))),
         float(np.sqrt(sigma2)),
         n_iter,
         tuple(warnings),

@@ -21,7 +21,14 @@ from gtrig import geometry as geo
 from gtrig.calib.camfile import CameraIntrinsics, read_cam_yaml
 from gtrig.calib.chessboard import Board, BoardsSpec, detect_corners, list_images, read_boards_yaml, read_grey
 from gtrig.calib.intrinsics import IntrinsicsResult, calibrate_intrinsics
-from gtrig.calib.network import NetworkProblem, NetworkResult, PairView, WorldView, calibrate_network
+from gtrig.calib.network import (
+    NetworkProblem,
+    NetworkResult,
+    PairView,
+    SweepView,
+    WorldView,
+    calibrate_network,
+)
 from gtrig.errors import InputError
 from gtrig.io.atomic import atomic_write_text
 from gtrig.rig.load import load_rig
@@ -130,7 +137,7 @@ def load_world_views(
 
 
 def load_intrinsics(
-    source: str | os.PathLike[str], cameras: Sequence[str], board: Board
+    source: str | os.PathLike[str], cameras: Sequence[str], board: Board, *, estimate_k3: bool = False
 ) -> dict[str, CameraIntrinsics | IntrinsicsResult]:
     """Intrinsics per camera from ``source``: ``<cam>.yaml`` files (from ``gtrig calib intrinsics``) or
     ``<cam>/`` image folders (calibrated here). Cameras with neither are left out."""
@@ -143,7 +150,7 @@ def load_intrinsics(
         if f.is_file():
             out[c] = read_cam_yaml(f)
         elif (root / c).is_dir():
-            out[c] = calibrate_intrinsics(root / c, board)
+            out[c] = calibrate_intrinsics(root / c, board, estimate_k3=estimate_k3)
     if not out:
         raise InputError(f"{root}: no <cam>.yaml and no <cam>/ image folder for any of {', '.join(cameras)}")
     return out
@@ -153,15 +160,27 @@ def _cam(x: CameraIntrinsics | IntrinsicsResult) -> CameraIntrinsics:
     return x.camera if isinstance(x, IntrinsicsResult) else x
 
 
+def sweep_views(intrinsics: Mapping[str, CameraIntrinsics | IntrinsicsResult]) -> list[SweepView]:
+    """The views used by each single-camera calibration, with their board poses, for the network's
+    bundle adjustment to refine the lenses from (cameras calibrated from a ``cam.yaml`` have none)."""
+    out: list[SweepView] = []
+    for n, x in sorted(intrinsics.items()):
+        if isinstance(x, IntrinsicsResult):
+            out += [SweepView(n, v.file, v.corners_px, T) for v, T in zip(x.views, x.T_cam_board, strict=True)]
+    return out
+
+
 def calibrated_rig(
     rig: Rig, intrinsics: Mapping[str, CameraIntrinsics | IntrinsicsResult], network: NetworkResult | None
 ) -> Rig:
-    """The rig with each camera's intrinsics and (jointly estimated) ``T_world_cam`` replaced."""
+    """The rig with each camera's intrinsics and (jointly estimated) ``T_world_cam`` replaced; the lenses
+    refined by the network's bundle adjustment take precedence over the single-camera ones."""
     cams = []
     for c in rig.cameras:
         upd: dict[str, Any] = {}
-        if c.name in intrinsics:
-            ci = _cam(intrinsics[c.name])
+        refined = network.joint[c.name].intrinsics if network is not None and c.name in network.joint else None
+        if refined is not None or c.name in intrinsics:
+            ci = refined if refined is not None else _cam(intrinsics[c.name])
             if tuple(ci.image_size) != tuple(c.resolution):
                 raise InputError(
                     f"camera {c.name}: intrinsics are for {ci.image_size[0]} x {ci.image_size[1]} "
@@ -228,9 +247,27 @@ class CalibrationReport:
                 f"{len(c.extra.get('rejected', {}))} |"
             )
         net = self.network
+        refined = {n: j for n, j in sorted(net.joint.items()) if j.intrinsics is not None}
+        if any(j.intrinsics.extra.get("refined_in_network") for j in refined.values()):
+            L += [
+                "",
+                "## Intrinsics refined in the network bundle adjustment (sweeps, pairs, world board)",
+                "",
+                "| camera | fx | fy | cx | cy | sigma fx, fy, cx, cy (px) | sweep RMS in the BA (px) |",
+                "|---" * 7 + "|",
+            ]
+            for n, j in refined.items():
+                K, sd = j.intrinsics.camera_matrix, j.intrinsics.extra.get("std", {})
+                L.append(
+                    f"| {n} | {K[0, 0]:.2f} | {K[1, 1]:.2f} | {K[0, 2]:.2f} | {K[1, 2]:.2f} | "
+                    f"{', '.join(f'{sd.get(k, np.nan):.2f}' for k in ('fx', 'fy', 'cx', 'cy'))} | "
+                    f"{j.rms_px_sweep:.3f} |"
+                )
         L += [
             "",
             "## Camera poses: joint bundle adjustment vs chain (the seeds' method)",
+            "",
+            "Sigmas include the intrinsics' uncertainty; in brackets, the rotation's with the lenses held.",
             "",
             "| camera | chain path | x, y, z (m) | sigma pos (mm) | sigma rot (deg) | RMS (px) | "
             "chain - joint (mm / deg) |",
@@ -242,7 +279,13 @@ class CalibrationReport:
                 f"| {n} | {' > '.join(net.chain_path[n])} | "
                 f"{', '.join(f'{v:.4f}' for v in c.T_world_cam[:3, 3])} | "
                 f"{', '.join(f'{v * 1000:.2f}' for v in c.sigma_pos_m)} | "
-                f"{', '.join(f'{np.degrees(v):.4f}' for v in c.sigma_rot_rad)} | {c.rms_px:.3f} | "
+                f"{', '.join(f'{np.degrees(v):.4f}' for v in c.sigma_rot_rad)}"
+                + (
+                    ""
+                    if c.sigma_rot_rad_fixed_intrinsics is None
+                    else f" ({', '.join(f'{np.degrees(v):.4f}' for v in c.sigma_rot_rad_fixed_intrinsics)})"
+                )
+                + f" | {c.rms_px:.3f} | "
                 f"{dch * 1000:.2f} / {np.degrees(rch):.4f} |"
             )
         L += ["", "| pair | views | RMS (px) | edge spread (mm / deg) |", "|---" * 4 + "|"]
@@ -302,8 +345,14 @@ def _plain(x: Any) -> Any:
     return x
 
 
-def compare_with_truth(rig_cal: Rig, rig_true: Rig, network: NetworkResult) -> dict[str, dict[str, float]]:
-    """Per camera: joint and chain pose errors (mm, deg) and intrinsics errors (px) against the truth."""
+def compare_with_truth(
+    rig_cal: Rig,
+    rig_true: Rig,
+    network: NetworkResult,
+    intrinsics: Mapping[str, CameraIntrinsics | IntrinsicsResult] | None = None,
+) -> dict[str, dict[str, float]]:
+    """Per camera: joint and chain pose errors (mm, deg), the calibrated rig's intrinsics errors
+    (``dfx_px`` ...) and, given ``intrinsics``, the single-camera calibration's (``sweep_dfx_px`` ...)."""
     out: dict[str, dict[str, float]] = {}
     for c in rig_cal.cameras:
         try:
@@ -323,6 +372,14 @@ def compare_with_truth(rig_cal: Rig, rig_true: Rig, network: NetworkResult) -> d
             "dcx_px": float(dK[0, 2]),
             "dcy_px": float(dK[1, 2]),
         }
+        if intrinsics is not None and c.name in intrinsics:
+            dK0 = _cam(intrinsics[c.name]).camera_matrix - t.K
+            row |= {
+                "sweep_dfx_px": float(dK0[0, 0]),
+                "sweep_dfy_px": float(dK0[1, 1]),
+                "sweep_dcx_px": float(dK0[0, 2]),
+                "sweep_dcy_px": float(dK0[1, 2]),
+            }
         out[c.name] = row
     return out
 
@@ -349,7 +406,7 @@ def calibrate_recording(
     rig = load_rig(rec / "rig.yaml")
     spec: BoardsSpec = read_boards_yaml(rec / "calib" / "boards.yaml")
     names = [c.name for c in rig.cameras]
-    intr = load_intrinsics(rec / "calib" / "intrinsics", names, spec.board)
+    intr = load_intrinsics(rec / "calib" / "intrinsics", names, spec.board, estimate_k3=estimate_k3)
     for c in rig.cameras:
         if c.name not in intr:
             log.warning("camera %s: no intrinsic sweep, keeping the rig's intrinsics", c.name)
@@ -366,12 +423,13 @@ def calibrate_recording(
         {c.name: c.T_world_cam.matrix() for c in rig.cameras},
         pairs,
         world,
+        sweep_views(intr),
     )
-    net = calibrate_network(prob)
+    net = calibrate_network(prob, estimate_k3=estimate_k3)
     rig_cal = calibrated_rig(rig, intr, net)
     truth: dict[str, dict[str, float]] = {}
     if (rec / "truth" / "rig.yaml").is_file():
-        truth = compare_with_truth(rig_cal, load_rig(rec / "truth" / "rig.yaml"), net)
+        truth = compare_with_truth(rig_cal, load_rig(rec / "truth" / "rig.yaml"), net, intr)
     report = CalibrationReport(intr, net, truth)
     if write_report:
         report.write(rec / "calib")

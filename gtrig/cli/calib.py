@@ -93,6 +93,7 @@ def network(
         load_intrinsics,
         load_pair_views,
         load_world_views,
+        sweep_views,
     )
     from gtrig.errors import InputError
     from gtrig.rig import load_rig
@@ -109,7 +110,13 @@ def network(
     pv = load_pair_views(pairs, spec.board, names, {n: c.image_size for n, c in cams.items()})
     wv = load_world_views(world_board, spec.board, names, spec.T_world_board)
     prob = NetworkProblem(
-        spec.board, spec.T_board1_board2, cams, {c.name: c.T_world_cam.matrix() for c in r.cameras}, pv, wv
+        spec.board,
+        spec.T_board1_board2,
+        cams,
+        {c.name: c.T_world_cam.matrix() for c in r.cameras},
+        pv,
+        wv,
+        sweep_views(intr),  # image sweeps given: the bundle adjustment refines the lenses from them
     )
     net = calibrate_network(prob)
     _report(calibrated_rig(r, intr, net), CalibrationReport(intr, net), out)

@@ -37,8 +37,10 @@ class SimConfig(_Cfg):
     run_duration_s: float | None = Field(default=None, gt=0, description="None: the whole path")
     static_pose_s: float = Field(default=1.0, gt=0, description="time the robot stands at each validation pose")
     background_s: float = Field(default=4.0, gt=0)
-    n_intrinsic_views: int = Field(default=20, ge=3)
-    n_pair_views: int = Field(default=12, ge=2)
+    # a minute of sweep video at 2 Hz with the board carried over the whole image: with fewer views the
+    # principal point stays uncertain to about 0.5 px (docs/calibration.md measures 20 against 120)
+    n_intrinsic_views: int = Field(default=120, ge=3)
+    n_pair_views: int = Field(default=24, ge=2)
     n_world_board_views: int = Field(default=3, ge=1)
     n_handheld_views: int = Field(default=30, ge=2)
     workers: int = Field(default=0, ge=0, description="processes; 0 = one per core")

@@ -74,3 +74,16 @@ def test_one_line_errors(sweep_dir, tmp_path) -> None:
     with pytest.raises(InputError, match="COLSxROWSxSQUARE"):
         parse_board("9x5")
     assert parse_board("9x6x0.025") == Board(9, 6, 0.025)
+
+
+def test_imprecise_principal_point_is_warned_about(sweep_dir) -> None:
+    from gtrig.calib.intrinsics import PP_SIGMA_WARN_PX, calibrate_views
+
+    det = detect_folder(sweep_dir, BOARD)
+    for views in (det.found[:4], det.found):
+        res = calibrate_views(views, BOARD, det.image_size)
+        sd = max(res.std["cx"], res.std["cy"])
+        warned = any("imprecise principal point" in w for w in res.warnings)
+        assert warned == (sd > PP_SIGMA_WARN_PX), (len(views), sd, res.warnings)
+    # four views leave the principal point to within pixels, not tenths
+    assert any("imprecise principal point" in w for w in calibrate_views(det.found[:4], BOARD, det.image_size).warnings)

@@ -1,0 +1,46 @@
+"""`gtrig demo --quick`: every stage runs on a small simulated recording and meets its accuracy there."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from typer.testing import CliRunner
+
+from gtrig import pipeline
+from gtrig.cli.main import app
+from gtrig.rig import load_rig
+
+
+def test_demo_quick_runs_every_stage_against_truth(tmp_path: Path) -> None:
+    out = tmp_path / "demo"
+    r = CliRunner().invoke(app, ["demo", "--quick", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "skipped" not in r.output
+    res = out / "results"
+    for name in ("rig.calibrated.yaml", "markers.yaml", "gt_laser.tum", "gt_laser_cov.csv",
+                 "gt_vision_validation.tum", "gt_vision_run.tum", "survey/world_points.csv", "accuracy.csv"):
+        assert (res / name).is_file(), name
+
+    # the calibrated rig carries every calibrated part, not the operator's nominal values
+    nominal, cal = load_rig(out / "recording" / "rig.yaml"), load_rig(res / "rig.calibrated.yaml")
+    for part in ("cameras", "laser_scanners"):
+        a = np.array([x.T_world_cam.matrix() if part == "cameras" else x.T_world_scanner.matrix()
+                      for x in getattr(nominal, part)])
+        b = np.array([x.T_world_cam.matrix() if part == "cameras" else x.T_world_scanner.matrix()
+                      for x in getattr(cal, part)])
+        assert np.abs(a - b).max() > 1e-3, part
+    assert any(not np.allclose(m.T_robot_marker.matrix(), cal.marker(m.id).T_robot_marker.matrix())
+               for m in nominal.robot.markers)
+
+    rows = pipeline.read_accuracy_csv(res / "accuracy.csv")
+    assert rows[("survey", "world points, max error")] < 3.0  # mm
+    assert rows[("survey", "validation poses, max position error")] < 3.0
+    assert rows[("calibration", "cameras, worst position error")] < 5.0
+    assert rows[("markers", "on the robot, worst position error")] < 1.0
+    assert rows[("markers", "on the robot, worst orientation error")] < 0.1
+    assert rows[("GTlaser", "run, mean position error")] < 5.0
+    assert rows[("GTlaser", "run, mean |yaw| error")] < 0.1
+    assert rows[("GTlaser", "run, OK frames off by > 5 cm")] == 0
+    assert rows[("GTvision", "validation, mean position error")] < 1.0  # cm
+    assert rows[("GTvision", "run, mean position error")] < 1.0
