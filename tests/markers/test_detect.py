@@ -166,3 +166,46 @@ def test_printed_marker_seen_in_perspective(family: MarkerFamily) -> None:
     dets = MarkerDetector(family).detect(img)
     assert [d.id for d in dets] == [5]
     assert np.abs(dets[0].corners_px - out).max() < 0.15
+
+
+def test_dark_mask_equals_thresholded_ratio() -> None:
+    """The 8-bit dark mask of the candidate stage is exactly ``closure_normalised < threshold``."""
+    from gtrig.markers.detect.candidates import closure_normalised, dark_mask
+
+    rng = np.random.default_rng(4)
+    img, _ = render(SHAPE, [], background=clutter_background(SHAPE, rng, n_shapes=40), gain=90.0, gradient=0.6,
+                    noise=3.0, rng=rng, ss=2)
+    for thr in (0.45, 0.6, 0.8):
+        ref = closure_normalised(img, 300.0, 4) < thr
+        assert np.array_equal(dark_mask(img, 300.0, 4, thr) > 0, ref)
+
+
+def test_band_pixels_match_a_brute_force_selection() -> None:
+    """The scan-line band of :func:`gather_band` holds exactly the pixels of the image whose (s, d)
+    lie in the band, for edges in every direction, partly outside the image and on pixel centres."""
+    from gtrig.markers.detect.edges import gather_band
+
+    rng = np.random.default_rng(6)
+    h, w = 90, 120
+    gray = rng.integers(0, 256, (h, w)).astype(np.uint8)
+    gy, gx = np.mgrid[0:h, 0:w]
+    for trial in range(40):
+        E = 6
+        p0 = rng.uniform(-15, 135, (E, 2))
+        p1 = p0 + rng.normal(0, 40, (E, 2))
+        w_in, w_out, excl = rng.uniform(0.5, 8, E), rng.uniform(0.5, 8, E), rng.uniform(0, 10, E)
+        if trial % 4 == 0:  # axis-aligned edges and integer bounds
+            p1[:, trial // 4 % 2] = p0[:, trial // 4 % 2]
+            p0, p1, w_in, w_out, excl = (np.round(z) for z in (p0, p1, w_in, w_out, excl))
+        got = gather_band(gray, p0, p1, w_in, w_out, excl)
+        assert np.all(np.diff(got.edge) >= 0)
+        for e in range(E):
+            t = (p1[e] - p0[e]) / np.linalg.norm(p1[e] - p0[e])
+            s = (gx - p0[e, 0]) * t[0] + (gy - p0[e, 1]) * t[1]
+            d = (gx - p0[e, 0]) * t[1] - (gy - p0[e, 1]) * t[0]
+            L = np.linalg.norm(p1[e] - p0[e])
+            sel = (d >= -w_in[e]) & (d <= w_out[e]) & (s >= excl[e]) & (s <= L - excl[e])
+            want = set(zip(gx[sel].tolist(), gy[sel].tolist(), strict=True))
+            mine = got.xy[got.edge == e].astype(int)
+            assert set(map(tuple, mine.tolist())) == want
+            np.testing.assert_array_equal(got.val[got.edge == e], gray[mine[:, 1], mine[:, 0]])

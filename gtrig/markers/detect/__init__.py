@@ -87,6 +87,10 @@ class DetectorParams:
         marker's corners and data cells fixed (:func:`.edges.marker_context`), which two more passes
         make self-consistent (two passes in all leave 0.06 px RMS where three give 0.04 px).
     iterations : Levenberg-Marquardt iterations per pass (at most).
+    tol : each edge stops iterating once a step moves its line by less than this (pixels). 1e-3 px
+        instead of 1e-4 px saves a sixth of the iterations and moves the bench's corner RMS by less
+        than 0.001 px; capping the warm-started passes at 3 iterations instead costs accuracy
+        (0.078 px RMS at blur 1 px against 0.074 px).
     unblur : read the data cells by solving the blur model (:func:`.decode.unblur_cells`) instead of
         thresholding each cell.
     """
@@ -100,6 +104,7 @@ class DetectorParams:
     max_hamming: int | None = None
     passes: int = 3
     iterations: int = 10
+    tol: float = 1e-3
 
     unblur: bool = True
 
@@ -223,11 +228,12 @@ class MarkerDetector:
                 excl = np.minimum(sigma, 0.3 * L)
             samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
             if fit is None:
-                fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations)
+                fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, tol=p.tol)
             else:
                 corners, _ = intersect_corners(fit, len(Q))
                 extra = marker_context(samples, fit, corners, white)
-                fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, extra=extra, init=fit)
+                fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, extra=extra, init=fit,
+                                tol=p.tol)
             # the blur is about the same on the four edges of a marker: the next pass starts from
             # their median, which recovers an edge whose plain-step fit collapsed to a sharp step
             # (white cells one border-width inside pull sigma to 0 on small markers)

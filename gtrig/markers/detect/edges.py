@@ -37,6 +37,8 @@ from scipy.special import ndtr
 from gtrig.markers.detect.camera import Undistorter
 
 _INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
+# sign flips of the rows of rho and log sigma, stored negated in fit_edges' Jacobian
+_SIGNS = np.outer(*2 * [np.array([1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0])])
 
 
 @dataclass(frozen=True)
@@ -101,48 +103,109 @@ def gather_band(
     at both ends. With ``undist`` the band is selected in undistorted coordinates (raw pixels mapped
     through ``undist.map_x/map_y``) and the returned coordinates are undistorted.
     """
-    h, w = gray.shape
-    xs, vals, eds = [], [], []
+    p0 = np.asarray(p0, np.float64)
+    p1 = np.asarray(p1, np.float64)
+    E = len(p0)
+    t = p1 - p0
+    L = np.hypot(t[:, 0], t[:, 1])
+    t = t / L[:, None]
+    n = np.column_stack([t[:, 1], -t[:, 0]])
+    if undist is None:
+        ix, iy, edge = _band_pixels_raw(gray.shape, p0, t, n, L, w_in, w_out, end_excl)
+        px, py = ix.astype(np.float64), iy.astype(np.float64)
+    else:
+        ix, iy, edge = _band_boxes_undistorted(gray.shape, p0, p1, t, n, w_in, w_out, undist)
+        px = undist.map_x[iy, ix].astype(np.float64)
+        py = undist.map_y[iy, ix].astype(np.float64)
+    # the exact band test (the pixel sets above are supersets)
+    rx, ry = px - p0[edge, 0], py - p0[edge, 1]
+    s = rx * t[edge, 0] + ry * t[edge, 1]
+    d = rx * n[edge, 0] + ry * n[edge, 1]
+    sel = (d >= -w_in[edge]) & (d <= w_out[edge]) & (s >= end_excl[edge]) & (s <= (L - end_excl)[edge])
+    edge = edge[sel]
+    starts = np.full(E, -1, np.int64)
+    u, first = np.unique(edge, return_index=True)
+    starts[u] = first
+    return EdgeSamples(np.column_stack([px[sel], py[sel]]), gray[iy[sel], ix[sel]].astype(np.float64), edge,
+                       starts)
+
+
+def _band_pixels_raw(
+    shape: tuple[int, ...], a: NDArray[np.float64], t: NDArray[np.float64], n: NDArray[np.float64],
+    L: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64],
+    end_excl: NDArray[np.float64],
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.int64]]:
+    """Integer pixels (x, y) and edge index, sorted by edge, of the bands of all edges at once.
+
+    Each band is a parallelogram ``s in [excl, L - excl]``, ``d in [-w_in, w_out]`` (``s`` along
+    ``t``, ``d`` along ``n`` from ``a``). It is scanned along the edge's major axis: for every
+    integer coordinate there the band is an interval of the other one, so the pixels are generated
+    by two ``np.repeat`` expansions instead of testing every pixel of each edge's bounding box (a
+    45 deg edge's box holds several times its band). The intervals are widened by a small margin;
+    :func:`gather_band` applies the exact test.
+    """
+    E = len(a)
+    h, w = shape[:2]
+    # coordinates with the edge's major axis first ("u") and the other second ("v")
+    swap = np.abs(t[:, 1]) > np.abs(t[:, 0])
+    sw = swap[:, None]
+    A, T, Nn = (np.where(sw, z[:, ::-1], z) for z in (a, t, n))
+    size_u, size_v = np.where(swap, h, w), np.where(swap, w, h)
+    s_lo, s_hi = end_excl, L - end_excl
+    d_lo, d_hi = -np.asarray(w_in, np.float64), np.asarray(w_out, np.float64)
+    cu = np.stack([A[:, 0] + s * T[:, 0] + d * Nn[:, 0] for s in (s_lo, s_hi) for d in (d_lo, d_hi)])
+    u0 = np.maximum(np.ceil(cu.min(axis=0) - 1e-6), 0).astype(np.int64)
+    u1 = np.minimum(np.floor(cu.max(axis=0) + 1e-6), size_u - 1).astype(np.int64)
+    ncol = np.where(s_hi >= s_lo, np.maximum(u1 - u0 + 1, 0), 0)
+    ecol = np.repeat(np.arange(E), ncol)
+    col = np.arange(len(ecol)) - np.repeat(np.cumsum(ncol) - ncol, ncol) + u0[ecol]
+    # the interval of v at each column from both constraints (|Nn_v| = |T_u| >= 1/sqrt 2)
+    du = col - A[ecol, 0]
+    Tv, Nv = T[ecol, 1], Nn[ecol, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ds = np.stack([(s_lo[ecol] - du * T[ecol, 0]) / Tv, (s_hi[ecol] - du * T[ecol, 0]) / Tv])
+        ds = np.where(np.abs(Tv) < 1e-9, np.array([[-np.inf], [np.inf]]), ds)
+    dd = np.stack([(d_lo[ecol] - du * Nn[ecol, 0]) / Nv, (d_hi[ecol] - du * Nn[ecol, 0]) / Nv])
+    lo = np.maximum(ds.min(axis=0), dd.min(axis=0)) + A[ecol, 1]
+    hi = np.minimum(ds.max(axis=0), dd.max(axis=0)) + A[ecol, 1]
+    v0 = np.maximum(np.ceil(lo - 1e-6), 0).astype(np.int64)
+    v1 = np.minimum(np.floor(hi + 1e-6), size_v[ecol] - 1).astype(np.int64)
+    nrow = np.maximum(v1 - v0 + 1, 0)
+    k = np.repeat(np.arange(len(col)), nrow)
+    vv = np.arange(len(k)) - np.repeat(np.cumsum(nrow) - nrow, nrow) + v0[k]
+    uu = col[k]
+    edge = ecol[k]
+    sk = swap[edge]
+    return np.where(sk, vv, uu), np.where(sk, uu, vv), edge
+
+
+def _band_boxes_undistorted(
+    shape: tuple[int, ...], p0: NDArray[np.float64], p1: NDArray[np.float64], t: NDArray[np.float64],
+    n: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64], undist: Undistorter,
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.int64]]:
+    """Raw pixels (x, y) and edge index of each edge's band's bounding box in the raw image (the
+    band is straight only in undistorted coordinates, so its raw outline is bounded by a box)."""
+    h, w = shape[:2]
+    xs, ys, eds = [], [], []
     for e in range(len(p0)):
-        a, b = p0[e], p1[e]
-        t = b - a
-        L = float(np.hypot(*t))
-        t = t / L
-        n = np.array([t[1], -t[0]])
+        a, b, te, ne = p0[e], p1[e], t[e], n[e]
         ext = max(w_in[e], w_out[e])
-        box = np.array([a - ext * (n + t), a + ext * (n - t), b - ext * (n - t), b + ext * (n + t)])
-        if undist is not None:
-            box = undist.to_raw(box)
+        box = undist.to_raw(np.array([a - ext * (ne + te), a + ext * (ne - te), b - ext * (ne - te),
+                                      b + ext * (ne + te)]))
         x0 = max(int(np.floor(box[:, 0].min())) - 1, 0)
         x1 = min(int(np.ceil(box[:, 0].max())) + 2, w)
         y0 = max(int(np.floor(box[:, 1].min())) - 1, 0)
         y1 = min(int(np.ceil(box[:, 1].max())) + 2, h)
         if x1 <= x0 or y1 <= y0:
             continue
-        if undist is None:
-            gy, gx = np.mgrid[y0:y1, x0:x1]
-            px = gx.ravel().astype(np.float64)
-            py = gy.ravel().astype(np.float64)
-        else:
-            px = undist.map_x[y0:y1, x0:x1].ravel().astype(np.float64)
-            py = undist.map_y[y0:y1, x0:x1].ravel().astype(np.float64)
-        rx, ry = px - a[0], py - a[1]
-        s = rx * t[0] + ry * t[1]
-        d = rx * n[0] + ry * n[1]
-        sel = (d >= -w_in[e]) & (d <= w_out[e]) & (s >= end_excl[e]) & (s <= L - end_excl[e])
-        if not sel.any():
-            continue
-        xs.append(np.column_stack([px[sel], py[sel]]))
-        vals.append(gray[y0:y1, x0:x1].ravel()[sel].astype(np.float64))
-        eds.append(np.full(int(sel.sum()), e, np.int64))
+        gy, gx = np.mgrid[y0:y1, x0:x1]
+        xs.append(gx.ravel())
+        ys.append(gy.ravel())
+        eds.append(np.full(gx.size, e, np.int64))
     if not xs:
-        z = np.zeros((0,))
-        return EdgeSamples(np.zeros((0, 2)), z, z.astype(np.int64), np.full(len(p0), -1, np.int64))
-    edge = np.concatenate(eds)
-    starts = np.full(len(p0), -1, np.int64)
-    u, first = np.unique(edge, return_index=True)
-    starts[u] = first
-    return EdgeSamples(np.concatenate(xs), np.concatenate(vals), edge, starts)
+        z = np.zeros(0, np.intp)
+        return z, z, np.zeros(0, np.int64)
+    return np.concatenate(xs), np.concatenate(ys), np.concatenate(eds)
 
 
 def fit_edges(
@@ -153,22 +216,25 @@ def fit_edges(
     iterations: int = 10,
     extra: NDArray[np.float64] | None = None,
     init: EdgeFit | None = None,
+    tol: float = 1e-4,
 ) -> EdgeFit:
     """Fit the blurred-step model to every edge (see the module docstring).
 
     Parameters
     ----------
-    samples : band pixels from :func:`gather_band`.
+    samples : band pixels from :func:`gather_band` (sorted by edge).
     p0, p1 : (E, 2) initial edge end points (fit coordinates); the initial line passes through them.
     sigma0 : (E,) initial blur, pixels.
-    iterations : largest number of Levenberg-Marquardt iterations (vectorised over all edges; stops
-        when no line moves by more than 1e-4 px).
+    iterations : largest number of Levenberg-Marquardt iterations per edge.
     extra : (N,) optional known part of the profile, in units of the contrast ``b``, added to
         ``Phi(d / sigma)`` and held fixed (see :func:`marker_context`): the blurred light of the
         marker's other edges and of its white data cells, which the straight-step model lacks.
     init : a previous fit of the same edges to start from (its levels, shading and line, the line
         moved to the new reference points; the blur starts from ``sigma0``); without it the levels
         come from the band means.
+    tol : an edge stops iterating once a step moves its line by less than this (pixels, the
+        angle step weighted by the square root of the edge's pixel count, about its half length);
+        the others go on, so well-conditioned edges do not pay for slow ones.
     """
     E = len(p0)
     t = p1 - p0
@@ -182,89 +248,111 @@ def fit_edges(
     v = samples.val
     N = len(v)
     cnt = np.bincount(e, minlength=E).astype(np.float64)
-    # initial levels: mean of the inner and outer halves of the band
-    d0 = X[:, 0] * n[e, 0] + X[:, 1] * n[e, 1]
-    inner = d0 < 0
-    sum_in = np.bincount(e, weights=v * inner, minlength=E)
-    n_in = np.bincount(e, weights=inner.astype(float), minlength=E)
-    sum_out = np.bincount(e, weights=v * ~inner, minlength=E)
-    n_out = cnt - n_in
-    a = sum_in / np.maximum(n_in, 1)
-    b = sum_out / np.maximum(n_out, 1) - a
     ls = np.log(np.maximum(sigma0, 0.3))
-    P = np.stack([theta, rho, a, b, ls, np.zeros(E), np.zeros(E)], axis=1)  # (E, 7)
     if init is not None:
         n_old = np.column_stack([np.cos(init.theta), np.sin(init.theta)])
         rho_old = init.rho + np.einsum("ij,ij->i", n_old, init.mid - mid)
         P = np.column_stack([init.theta, rho_old, init.a, init.b, ls, init.shade])
+    else:
+        # initial levels: mean of the inner and outer halves of the band
+        inner = (X[:, 0] * n[e, 0] + X[:, 1] * n[e, 1]) < 0
+        sum_in = np.bincount(e, weights=v * inner, minlength=E)
+        n_in = np.bincount(e, weights=inner.astype(float), minlength=E)
+        sum_out = np.bincount(e, weights=v * ~inner, minlength=E)
+        a = sum_in / np.maximum(n_in, 1)
+        b = sum_out / np.maximum(cnt - n_in, 1) - a
+        P = np.stack([theta, rho, a, b, ls, np.zeros(E), np.zeros(E)], axis=1)  # (E, 7)
     ext = np.zeros(N) if extra is None else np.asarray(extra, np.float64)
-    lam = np.full(E, 1e-3)
-    has = cnt > 8
-    present, first = np.unique(e, return_index=True)
     NP = 7
-    X0 = np.ascontiguousarray(X[:, 0])
-    X1 = np.ascontiguousarray(X[:, 1])
-    iu, ju = np.triu_indices(NP)
-
-    def model(P: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Predicted intensities (N,) and the Jacobian transposed (7, N)."""
-        Pe = P[e]
-        c, s = np.cos(Pe[:, 0]), np.sin(Pe[:, 0])
-        d = X0 * c + X1 * s - Pe[:, 1]
-        sg = np.exp(Pe[:, 4])
-        z = d / sg
-        Phi = ndtr(z) + ext
-        bb = Pe[:, 3]
-        base = Pe[:, 2] + bb * Phi
-        u = X1 * c - X0 * s  # along the edge; du/dtheta = -(d + rho)
-        f = 1.0 + Pe[:, 5] * d + Pe[:, 6] * u
-        pred = base * f
-        g = bb * np.exp(-0.5 * z * z) * (_INV_SQRT_2PI / sg)
-        dd = g * f + base * Pe[:, 5]  # d pred / d d
-        J = np.empty((NP, N))
-        J[0] = dd * u - base * Pe[:, 6] * (d + Pe[:, 1])
-        J[1] = -dd
-        J[2] = f
-        J[3] = Phi * f
-        J[4] = -g * d * f
-        J[5] = base * d
-        J[6] = base * u
-        return pred, J
-
-    def normal_eq(J: NDArray[np.float64], r: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-        """Per-edge J^T J (E, 7, 7), J^T r (E, 7) and r^T r (E,) by segmented sums."""
-        M = np.concatenate([J[iu] * J[ju], J * r, (r * r)[None]], axis=0)
-        prod = np.zeros((M.shape[0], E))
-        if N:
-            prod[:, present] = np.add.reduceat(M, first, axis=1)
-        prod = prod.T
-        JTJ = np.empty((E, NP, NP))
-        JTJ[:, iu, ju] = prod[:, : len(iu)]
-        JTJ[:, ju, iu] = prod[:, : len(iu)]
-        return JTJ, prod[:, len(iu) : len(iu) + NP], prod[:, -1]
-
-    pred, J = model(P)
-    r = v - pred
-    JTJ, JTr, cur = normal_eq(J, r)
+    has = cnt > 8
+    lam = np.full(E, 1e-3)
+    JTJ = np.tile(np.eye(NP), (E, 1, 1))
+    JTr = np.zeros((E, NP))
+    cur = np.zeros(E)
     eye = np.eye(NP)
+    wt = np.sqrt(cnt)
+
+    def compact(act: NDArray[np.int64]) -> tuple[NDArray[np.float64], ...]:
+        """The samples of the edges ``act`` (ascending), contiguous per edge, and the bounds of each edge."""
+        keep = np.zeros(E, bool)
+        keep[act] = True
+        m = keep[e]
+        return (np.ascontiguousarray(X[m, 0]), np.ascontiguousarray(X[m, 1]), v[m], ext[m],
+                np.concatenate([[0], np.cumsum(cnt[act].astype(np.int64))]))
+
+    def normal_eq(Pa: NDArray[np.float64], arrs: tuple[NDArray[np.float64], ...]
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Per-edge J^T J (A, 7, 7), J^T r (A, 7) and r^T r (A,) of the edges whose samples are
+        ``arrs`` (from :func:`compact`) at parameters ``Pa`` (A, 7)."""
+        X0, X1, va, exa, bnd = arrs
+        cnt_a = np.diff(bnd)
+        th, rho, a, b, ls, ca, cu = Pa.T
+        isg = np.exp(-ls)
+        # per-edge factors (trigonometry, exponentials) computed per edge and gathered per pixel in one
+        # call; in-place products below keep the temporaries few (this function is most of the time)
+        c, s, rho_, a_, b_, isg_, ca_, cu_, gk = np.repeat(
+            np.stack([np.cos(th), np.sin(th), rho, a, b, isg, ca, cu, b * isg * _INV_SQRT_2PI]), cnt_a, axis=1)
+        Jr = np.empty((NP + 1, len(va)))
+        dm = X0 * c
+        dm += X1 * s  # distance from the reference point across the edge, d + rho
+        d = dm - rho_
+        u = X1 * c
+        u -= X0 * s  # along the edge; du/dtheta = -(d + rho)
+        z = d * isg_
+        Phi = ndtr(z)
+        Phi += exa
+        base = b_ * Phi
+        base += a_
+        f = Jr[2]
+        np.multiply(ca_, d, out=f)
+        f += cu_ * u
+        f += 1.0
+        g = z * z
+        g *= -0.5
+        np.exp(g, out=g)
+        g *= gk  # b phi(z) / sigma
+        dd = Jr[1]  # d pred / d d; the Jacobian row of rho is its negative (signs fixed in G below)
+        np.multiply(g, f, out=dd)
+        dd += base * ca_
+        np.multiply(dd, u, out=Jr[0])
+        dm *= cu_
+        dm *= base
+        Jr[0] -= dm
+        np.multiply(Phi, f, out=Jr[3])
+        np.multiply(g, d, out=Jr[4])  # negated row of log sigma
+        Jr[4] *= f
+        np.multiply(base, d, out=Jr[5])
+        np.multiply(base, u, out=Jr[6])
+        np.multiply(base, f, out=Jr[7])
+        np.subtract(va, Jr[7], out=Jr[7])  # residual
+        # [J; r] [J; r]^T per edge holds J^T J, J^T r and r^T r at once (segments are contiguous)
+        G = np.empty((len(Pa), NP + 1, NP + 1))
+        for k in range(len(Pa)):
+            blk = Jr[:, bnd[k] : bnd[k + 1]]
+            G[k] = blk @ blk.T
+        G *= _SIGNS
+        return G[:, :NP, :NP], G[:, :NP, NP], G[:, NP, NP]
+
+    act = np.flatnonzero(has)
+    arrs = compact(act)
+    if len(act):
+        JTJ[act], JTr[act], cur[act] = normal_eq(P[act], arrs)
     for _ in range(iterations):
-        A = JTJ + lam[:, None, None] * (JTJ * eye + 1e-9 * eye)
-        A[~has] = eye
-        delta = np.linalg.solve(A, JTr[..., None])[..., 0]
-        delta[~has] = 0.0
-        Pn = P + delta
-        Pn[:, 4] = np.clip(Pn[:, 4], np.log(0.05), np.log(20.0))
-        pred_n, J_n = model(Pn)
-        r_n = v - pred_n
-        JTJ_n, JTr_n, new = normal_eq(J_n, r_n)
-        better = new <= cur
-        P = np.where(better[:, None], Pn, P)
-        cur = np.where(better, new, cur)
-        JTJ = np.where(better[:, None, None], JTJ_n, JTJ)
-        JTr = np.where(better[:, None], JTr_n, JTr)
-        lam = np.where(better, lam * 0.3, lam * 10.0)
-        if np.all(np.abs(delta[:, 1]) + np.abs(delta[:, 0]) * np.sqrt(cnt) < 1e-4):
+        if not len(act):
             break
+        A = JTJ[act] + lam[act, None, None] * (JTJ[act] * eye + 1e-9 * eye)
+        delta = np.linalg.solve(A, JTr[act][..., None])[..., 0]
+        Pn = P[act] + delta
+        Pn[:, 4] = np.clip(Pn[:, 4], np.log(0.05), np.log(20.0))
+        JTJ_n, JTr_n, new = normal_eq(Pn, arrs)
+        better = new <= cur[act]
+        upd = act[better]
+        P[upd], cur[upd], JTJ[upd], JTr[upd] = Pn[better], new[better], JTJ_n[better], JTr_n[better]
+        lam[act] = np.where(better, lam[act] * 0.3, lam[act] * 10.0)
+        done = np.abs(delta[:, 1]) + np.abs(delta[:, 0]) * wt[act] < tol
+        if done.any():
+            act = act[~done]
+            arrs = compact(act)
     dof = np.maximum(cnt - NP, 1)
     s2 = cur / dof
     JTJ[~has] = eye
@@ -328,6 +416,18 @@ def quad_homographies(quads: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.concatenate([h, np.ones((Q, 1))], axis=1).reshape(Q, 3, 3)
 
 
+def _ndtr_saturated(z: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``ndtr(z)``, evaluated only where it is not 0 or 1 to double precision (|z| < 9).
+
+    Most of the grid lines of a marker are many blur widths from a given band pixel; skipping them
+    makes :func:`marker_context` 2-3 times faster on markers of 35 px and more.
+    """
+    out = (z > 0).astype(np.float64)
+    m = np.abs(z) < 9.0
+    out[m] = ndtr(z[m])
+    return out
+
+
 def marker_context(
     samples: EdgeSamples,
     fit: EdgeFit,
@@ -366,27 +466,30 @@ def marker_context(
     Hm = quad_homographies(corners)
     e = samples.edge
     q = e // 4
-    xy = samples.xy
-    out = np.zeros(len(e))
+    x, y = samples.xy[:, 0], samples.xy[:, 1]
+    # every pixel through its quad's homography at once (the nine entries gathered per pixel)
+    H = Hm.reshape(-1, 9)[q].T
+    w3 = H[6] * x + H[7] * y + H[8]
+    mx = (H[0] * x + H[1] * y + H[2]) / w3
+    my = (H[3] * x + H[4] * y + H[5]) / w3
+    sg = fit.sigma[e]
+    # marginal blur in cell units: sigma times |grad m| (d m / d pixel = (H_row - m H_3) / w3)
+    scale = sg / np.abs(w3) * n
+    sx = scale * np.hypot(H[0] - mx * H[6], H[1] - mx * H[7])
+    sy = scale * np.hypot(H[3] - my * H[6], H[4] - my * H[7])
     k = np.arange(n + 1, dtype=np.float64)
-    for qq in np.unique(q):
-        sel = q == qq
-        H = Hm[qq]
-        x, y = xy[sel, 0], xy[sel, 1]
-        w3 = H[2, 0] * x + H[2, 1] * y + H[2, 2]
-        mx = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w3
-        my = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w3
-        sg = fit.sigma[e[sel]]
-        # marginal blur in cell units: sigma times |grad m| (d m / d pixel = (H_row - m H_3) / w3)
-        sx = sg * np.hypot(H[0, 0] - mx * H[2, 0], H[0, 1] - mx * H[2, 1]) / np.abs(w3) * n
-        sy = sg * np.hypot(H[1, 0] - my * H[2, 0], H[1, 1] - my * H[2, 1]) / np.abs(w3) * n
-        Fx = ndtr((mx[:, None] * n - k) / sx[:, None])  # (N, n + 1): past the k-th grid line
-        Fy = ndtr((my[:, None] * n - k) / sy[:, None])
-        X = Fx[:, :-1] - Fx[:, 1:]
-        Y = Fy[:, :-1] - Fy[:, 1:]
-        S = (Fx[:, 0] - Fx[:, -1]) * (Fy[:, 0] - Fy[:, -1])
-        R = np.einsum("pi,ij,pj->p", Y, white[qq], X)
-        th = fit.theta[e[sel]]
-        d = (np.cos(th) * (x - fit.mid[e[sel], 0]) + np.sin(th) * (y - fit.mid[e[sel], 1]) - fit.rho[e[sel]])
-        out[sel] = 1.0 - S + R - ndtr(d / sg)
-    return out
+    Fx = _ndtr_saturated((mx[:, None] * n - k) / sx[:, None])  # (N, n + 1): past the k-th grid line
+    Fy = _ndtr_saturated((my[:, None] * n - k) / sy[:, None])
+    X = Fx[:, :-1] - Fx[:, 1:]
+    Y = Fy[:, :-1] - Fy[:, 1:]
+    S = (Fx[:, 0] - Fx[:, -1]) * (Fy[:, 0] - Fy[:, -1])
+    # the bilinear form Y^T W X, one matrix product per quad (pixels are grouped by quad)
+    R = np.empty(len(e))
+    bnd = np.searchsorted(q, np.arange(len(white) + 1))
+    for qq in range(len(white)):
+        s0, s1 = bnd[qq], bnd[qq + 1]
+        if s1 > s0:
+            R[s0:s1] = np.einsum("pj,pj->p", Y[s0:s1] @ white[qq], X[s0:s1])
+    th = fit.theta[e]
+    d = np.cos(th) * (x - fit.mid[e, 0]) + np.sin(th) * (y - fit.mid[e, 1]) - fit.rho[e]
+    return 1.0 - S + R - ndtr(d / sg)
