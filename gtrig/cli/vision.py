@@ -23,6 +23,12 @@ def command(
     detector: str = typer.Option("auto", "--detector", help="auto, gtrig or aruco."),
     floor_sigma_mm: float = typer.Option(3.0, "--floor-sigma-mm", help="Floor height deviation (planar)."),
     floor_tilt_deg: float = typer.Option(0.3, "--floor-tilt-deg", help="Floor tilt deviation (planar)."),
+    camera_sigma_mm: float = typer.Option(3.0, "--camera-sigma-mm", help="Camera position sigma (rig)."),
+    camera_sigma_deg: float = typer.Option(0.05, "--camera-sigma-deg", help="Camera orientation sigma (rig)."),
+    marker_sigma_mm: float = typer.Option(2.0, "--marker-sigma-mm",
+                                          help="Marker position sigma on the robot (hand-measured: 2)."),
+    marker_sigma_deg: float = typer.Option(0.5, "--marker-sigma-deg",
+                                           help="Marker orientation sigma on the robot (hand-measured: 0.5)."),
 ) -> None:
     """Robot poses from the markers seen by all cameras at each instant, with covariances."""
     import math
@@ -32,14 +38,17 @@ def command(
 
     from gtrig.io.tum import write_tum
     from gtrig.rig import load_rig
+    from gtrig.vision.covariance import RigUncertainty
     from gtrig.vision.estimate import VisionOptions
     from gtrig.vision.refine import PlanarPrior
     from gtrig.vision.report import summarize
     from gtrig.vision.sequence import run_recording, write_covariance_csv
 
     r = load_rig(rig)
+    ru = RigUncertainty(camera_sigma_mm / 1000, math.radians(camera_sigma_deg), marker_sigma_mm / 1000,
+                        math.radians(marker_sigma_deg))
     opts = VisionOptions(planar=planar, prior=PlanarPrior(0.0, floor_sigma_mm / 1000,
-                                                          math.radians(floor_tilt_deg)))
+                                                          math.radians(floor_tilt_deg)), rig_uncertainty=ru)
     checkpoint = out.with_name(out.name + ".checkpoint.jsonl")
     with Progress(TextColumn("GTvision"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                   console=err_console, transient=True) as prog:
@@ -54,7 +63,8 @@ def command(
     rep = summarize(result)
     console.print(f"{out}: {rep.localized} of {rep.instants} instants localized ({sequence}, "
                   f"detector {result.detector}, {result.seconds['total']:.1f} s); residual RMS "
-                  f"{rep.rms_px:.3f} px", highlight=False)
+                  f"{rep.rms_px:.3f} px; corner variance factors "
+                  f"{', '.join(f'{c} {f:.3g}' for c, f in result.corner_scale) or 'none'}", highlight=False)
     t = Table("camera", "images", "with markers", "views used", "rejected", "rms (px)")
     for c in rep.cameras:
         t.add_row(c.camera, str(c.images), str(c.images_with_markers), str(c.views_used),

@@ -48,6 +48,15 @@ class RigUncertainty:
         return RigUncertainty(0.0, 0.0, 0.0, 0.0)
 
 
+#: The rig as it stands before marker-to-robot calibration: cameras from the network calibration
+#: (3 mm / 0.05 deg, deliberately above its measured 1 mm / 0.025 deg: the calibration's own error
+#: estimate is not validated yet) and markers placed and measured by hand on the robot (2 mm / 0.5 deg:
+#: a printed sheet glued to a plate, its pose taken with a ruler and a square). Once the markers are
+#: calibrated (gtrig.markers.robotcal), their sigmas come from that calibration.
+UNCALIBRATED_MARKERS = RigUncertainty(camera_xyz_m=0.003, camera_rot_rad=math.radians(0.05),
+                                      marker_xyz_m=0.002, marker_rot_rad=math.radians(0.5))
+
+
 def planar_covariance(cov_6x6: np.ndarray) -> np.ndarray:
     """The x, y, yaw marginal (3, 3) of a ``cov_6x6``."""
     i = np.array(PLANAR_INDEX)

@@ -78,6 +78,11 @@ class RefineResult:
     converged : bool
     min_depth_m : float
         Smallest depth of a corner in its camera (negative: behind a camera, an invalid pose).
+    redundancy : (N,) float
+        Each corner's share of the redundancy, ``2 - tr(w_i A_i H^-1 A_i^T)`` over its two whitened
+        rows (Foerstner's redundancy numbers; they sum to ``2 N`` minus the parameters the corners
+        determine); they share a fit's chi-square among its cameras for the corner-noise estimate
+        (:mod:`gtrig.vision.noise`).
     """
 
     T_world_robot: np.ndarray
@@ -92,6 +97,7 @@ class RefineResult:
     iterations: int
     converged: bool
     min_depth_m: float
+    redundancy: np.ndarray
 
 
 def huber_weights(e: np.ndarray, k: float) -> np.ndarray:
@@ -274,11 +280,16 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
         cost += float(rp @ rp)
     chi2 = float(np.sum(e * e) + np.sum((sinfo * eta) ** 2))
     try:
-        cov = np.linalg.inv(H)[:6, :6]
+        Hinv = np.linalg.inv(H)
+        cov = Hinv[:6, :6]
+        # leverage of each whitened row, robust weight included: diag(w A H^-1 A^T)
+        lev = np.repeat(w, 2) * np.einsum("ij,ij->i", A @ Hinv, A)
+        red = 2.0 - lev.reshape(N, 2).sum(axis=1)
     except np.linalg.LinAlgError:
         cov = np.full((6, 6), np.nan)
+        red = np.full(N, np.nan)
     return RefineResult(T, cov, Jw, w, r, e, chi2, cost, dof, it, converged,
-                        float(np.min(z)) if z.size else 0.0)
+                        float(np.min(z)) if z.size else 0.0, red)
 
 
 def whitened_cost(sc: StackedCorners, T: np.ndarray) -> float:

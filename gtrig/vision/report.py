@@ -4,8 +4,10 @@ on a simulated recording, how accurate it is against the truth."""
 from __future__ import annotations
 
 import math
+import os
 from collections import Counter
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -100,6 +102,24 @@ class VisionAccuracy:
     @property
     def visible_localized_fraction(self) -> float:
         return self.frames_visible_localized / self.frames_visible if self.frames_visible else math.nan
+
+
+def accuracy_on_recording(result: VisionResult, rec_dir: str | os.PathLike[str]) -> VisionAccuracy:
+    """:func:`accuracy` of a simulated recording's sequence against its truth (``truth/<sequence>.tum``,
+    ``truth/rig.yaml``) and, for the run, the images in which a marker is fully visible at the true pose.
+
+    Evaluation only: the truth is read here, never by the estimator.
+    """
+    from gtrig.io.frames import read_frame_index
+    from gtrig.io.tum import read_tum
+    from gtrig.rig import load_rig
+
+    rec = Path(rec_dir)
+    truth = read_tum(rec / "truth" / f"{result.sequence}.tum")
+    if result.sequence != "run":
+        return accuracy(result, truth)
+    stamps = {c: read_frame_index(rec / "run" / "cameras" / c).stamps_s for c in result.images_per_camera}
+    return accuracy(result, truth, load_rig(rec / "truth" / "rig.yaml"), stamps)
 
 
 def accuracy(result: VisionResult, truth: Trajectory, rig_true: Rig | None = None,

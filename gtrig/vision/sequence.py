@@ -1,5 +1,6 @@
-"""GTvision over a whole recording: frames grouped into instants, detected and estimated in parallel
-processes, checkpointed, then flips left ambiguous resolved in time order.
+"""GTvision over a whole recording: frames grouped into instants, markers detected in parallel
+processes (checkpointed), the corner noise calibrated on the sequence's residuals, every instant
+estimated in parallel, then flips left ambiguous resolved in time order.
 
 Instants
 --------
@@ -10,13 +11,18 @@ Instants
   images of all cameras inside one interval are one instant, stamped at the interval's middle (the
   stamps of ``truth/validation.tum``).
 
-Determinism: each instant is estimated independently of the others in the parallel pass, so the
-output does not depend on the number of workers or on the order chunks finish; the only sequential
-step (the previous pose breaking a flip) runs afterwards, in time order, in the main process.
+Corner noise: the detector's corner covariances are scaled by a variance factor per camera,
+estimated from the residuals of (a sample of) this sequence's instants, iterated with the estimates
+(:func:`calibrate_noise`, :mod:`gtrig.vision.noise`); only then are instants tested for consistency.
 
-Resuming: every finished chunk of instants is appended to a checkpoint file (JSON lines; floats are
-written with ``repr``, so a resumed run's output is bit-identical). A checkpoint written with other
-settings, another rig or other frames is refused.
+Determinism: each instant is detected and estimated independently of the others, so the output does
+not depend on the number of workers or on the order chunks finish; the noise factors are a sum over
+a fixed sample, and the only sequential step (the previous pose breaking a flip) runs afterwards, in
+time order, in the main process.
+
+Resuming: every finished chunk of detections (the expensive part) is appended to a checkpoint file
+(JSON lines; floats are written with ``repr``, so a resumed run's output is bit-identical). A
+checkpoint written with other settings, another rig or other frames is refused.
 """
 
 from __future__ import annotations
@@ -47,7 +53,7 @@ from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel
 
 log = logging.getLogger(__name__)
 
-CHECKPOINT_VERSION = 1
+CHECKPOINT_VERSION = 3
 SEQUENCES = ("run", "validation")
 
 
@@ -70,7 +76,10 @@ class VisionResult:
     observations : the detections of each instant (same order)
     images_per_camera : number of images read per camera
     detector : which corner detector was used
-    seconds : wall time of the parallel pass and of the whole run
+    seconds : wall time of the parallel pass (images read, detection), of the corner-noise
+        calibration, of the estimation, and of the whole run
+    corner_scale : ((camera, variance factor), ...) applied to the detector's corner covariances
+        (estimated from this sequence's residuals unless given in the options; () = none)
     """
 
     sequence: str
@@ -80,6 +89,7 @@ class VisionResult:
     detector: str
     planar: bool
     seconds: dict[str, float]
+    corner_scale: tuple[tuple[str, float], ...] = ()
 
     def localized(self) -> tuple[FrameEstimate, ...]:
         return tuple(e for e in self.estimates if e.ok)
@@ -174,25 +184,6 @@ def _arr(a: np.ndarray | None) -> Any:
     return None if a is None else np.asarray(a, dtype=float).tolist()
 
 
-def _est_to_json(e: FrameEstimate) -> dict[str, Any]:
-    return {"stamp_s": e.stamp_s, "status": e.status.value, "reason": e.reason,
-            "T": _arr(e.T_world_robot), "cov": _arr(e.cov_6x6), "views": [list(v) for v in e.views],
-            "rejected": [list(v) for v in e.rejected], "rms_px": e.rms_px, "view_rms_px": list(e.view_rms_px),
-            "chi2": e.chi2, "dof": e.dof,
-            "flip_margin": e.flip_margin, "alternatives": [_arr(a) for a in e.alternatives]}
-
-
-def _est_from_json(d: dict[str, Any]) -> FrameEstimate:
-    def arr(x: Any) -> np.ndarray | None:
-        return None if x is None else np.array(x, dtype=float)
-
-    return FrameEstimate(d["stamp_s"], Status(d["status"]), d["reason"], arr(d["T"]), arr(d["cov"]),
-                         tuple((str(a), int(b)) for a, b in d["views"]),
-                         tuple((str(a), int(b)) for a, b in d["rejected"]), d["rms_px"],
-                         tuple(d["view_rms_px"]), d["chi2"], d["dof"],
-                         d["flip_margin"], tuple(np.array(a) for a in d["alternatives"]))
-
-
 def _obs_to_json(o: FrameObservations) -> dict[str, Any]:
     return {"stamp_s": o.stamp_s, "cameras": list(o.cameras), "frames": [list(f) for f in o.frames],
             "views": [[v.camera, v.marker_id, _arr(v.corners_px), _arr(v.corner_cov), v.frame]
@@ -216,8 +207,10 @@ def _worker_init(rig_doc: dict[str, Any], detector: str, options: VisionOptions,
 
     from gtrig.rig.load import rig_from_dict
     from gtrig.vision.detect import make_detector
+    from gtrig.vision.noise import limit_blas_threads
 
     cv2.setNumThreads(1)
+    limit_blas_threads(1)
     rig = rig_from_dict(rig_doc)
     _W.update(model=VisionModel.from_rig(rig), detect=make_detector(rig, detector), options=options,
               paths=paths, folders=folders)
@@ -238,9 +231,67 @@ def _process_chunk(chunk_id: int, instants: Sequence[Instant]) -> tuple[int, lis
             views.extend(replace(v, frame=i) for v in _W["detect"](img, model.cameras[cam]))
         obs = FrameObservations(ins.stamp_s, tuple(views), tuple(sorted({c for c, _ in ins.images})),
                                 tuple(ins.images))
-        est = estimate_frame(model, obs, _W["options"])
-        out.append({"obs": _obs_to_json(obs), "est": _est_to_json(est)})
+        out.append({"obs": _obs_to_json(obs)})
     return chunk_id, out
+
+
+def _estimate_chunk(chunk_id: int, obs: Sequence[FrameObservations], options: VisionOptions
+                    ) -> tuple[int, list[FrameEstimate]]:
+    return chunk_id, [estimate_frame(_W["model"], o, options) for o in obs]
+
+
+def _estimate_all(model: VisionModel, obs: list[FrameObservations], options: VisionOptions, nproc: int,
+                  chunk_size: int, init_args: tuple[Any, ...]) -> list[FrameEstimate]:
+    """Every instant estimated again from its detections (no image read), in parallel chunks."""
+    chunks = [obs[i:i + chunk_size] for i in range(0, len(obs), chunk_size)]
+    out: dict[int, list[FrameEstimate]] = {}
+    if nproc == 1 or len(chunks) <= 1:
+        for i, c in enumerate(chunks):
+            out[i] = [estimate_frame(model, o, options) for o in c]
+    else:
+        with process_pool(nproc, _worker_init, init_args) as ex:
+            for fut in [ex.submit(_estimate_chunk, i, c, options) for i, c in enumerate(chunks)]:
+                cid, ests = fut.result()
+                out[cid] = ests
+    return [e for i in range(len(chunks)) for e in out[i]]
+
+
+def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, cameras: Sequence[str],
+                    estimate: Callable[[VisionOptions, list[FrameObservations]], list[FrameEstimate]],
+                    max_rounds: int = 1, tol: float = 0.05, sample: int = 300
+                    ) -> tuple[VisionOptions, list[tuple[tuple[str, float], ...]]]:
+    """Variance factors of the corner covariances from the residuals of the sequence's instants
+    (:mod:`gtrig.vision.noise`; one step by default, see there why).
+
+    The factors are estimated on at most ``sample`` instants with detections, evenly spread over the
+    sequence (their redundancy, thousands of corners, pins a factor to a few per cent; estimating every
+    instant at every round would cost more than the detection). ``estimate(opts, observations)``
+    estimates a list of instants. With ``max_rounds`` > 1 the factors are re-estimated with the new
+    ones until none moves by more than ``tol`` (relative). Returns the options with the final factors and the history of
+    factors (one entry per round).
+    """
+    from gtrig.vision.noise import estimate_corner_scale, scale_change
+
+    with_views = [i for i, o in enumerate(obs) if o.views]
+    if len(with_views) > sample:
+        with_views = [with_views[int(k)] for k in np.linspace(0, len(with_views) - 1, sample).round()]
+    sub = [obs[i] for i in with_views]
+    history: list[tuple[tuple[str, float], ...]] = []
+    if not sub:
+        return options, history
+    ests = estimate(options, sub)
+    for k in range(max_rounds):
+        fits = [e.noise for e in ests if e.status in (Status.OK, Status.INCONSISTENT)]
+        scale = estimate_corner_scale(fits, cameras, dict(options.corner_scale))
+        if not scale:
+            break
+        history.append(scale)
+        done = scale_change(options.corner_scale, scale) <= tol or k == max_rounds - 1
+        options = replace(options, corner_scale=scale)
+        if done:
+            break
+        ests = estimate(options, sub)
+    return options, history
 
 
 # ----------------------------------------------------------------------------------------- the runner
@@ -297,7 +348,7 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
                   detector: str = "auto",
                   checkpoint: str | os.PathLike[str] | None = None,
                   progress: Callable[[int, int], None] | None = None, chunk_size: int = 16,
-                  sync_tol_s: float = 0.005) -> VisionResult:
+                  sync_tol_s: float = 0.005, estimate_noise: bool = True) -> VisionResult:
     """GTvision over one sequence of a recording.
 
     Parameters
@@ -311,6 +362,9 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     detector : "auto", "gtrig" or "aruco" (see :func:`gtrig.vision.detect.make_detector`).
     checkpoint : file to resume from and append to; None: no checkpoint.
     progress : called as ``progress(done_instants, total_instants)``.
+    estimate_noise : estimate the corner covariances' variance factor per camera from this sequence's
+        residuals and estimate every instant again with it (:func:`calibrate_noise`); ignored when
+        ``options.corner_scale`` is given (those factors are used as they are).
     """
     from gtrig.vision.detect import make_detector
 
@@ -363,8 +417,8 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
         if progress:
             progress(n_done, len(instants))
 
+    nproc = workers if workers > 0 else (os.cpu_count() or 1)
     try:
-        nproc = workers if workers > 0 else (os.cpu_count() or 1)
         if nproc == 1 or len(todo) <= 1:
             _worker_init(*init_args)
             for i in todo:
@@ -381,14 +435,27 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     t_par = time.perf_counter() - t_par
     items = [it for cid in range(len(chunks)) for it in done[cid]]
     obs = [_obs_from_json(it["obs"]) for it in items]
-    ests = [_est_from_json(it["est"]) for it in items]
+    t_noise = time.perf_counter()
+    if estimate_noise and not opts.corner_scale:
+        opts, history = calibrate_noise(obs, opts, sorted(indices),
+                                        lambda o, x: _estimate_all(model, x, o, nproc, chunk_size, init_args))
+        for k, sc in enumerate(history):
+            log.info("corner noise, round %d: variance factors %s", k + 1,
+                     ", ".join(f"{c} {f:.3g}" for c, f in sc))
+    t_noise = time.perf_counter() - t_noise
+    t_est = time.perf_counter()
+    ests = _estimate_all(model, obs, opts, nproc, chunk_size, init_args)
     ests = _resolve_flips(model, obs, ests, opts)
-    for e in ests:
+    t_est = time.perf_counter() - t_est
+    for e in ests:  # an empty view is the common case in a run: not worth a line each
         if not e.ok:
-            log.info("t=%.6f not localized: %s: %s", e.stamp_s, e.status.value, e.reason)
+            log.log(logging.DEBUG if e.status is Status.NO_MARKER else logging.INFO,
+                    "t=%.6f not localized: %s: %s", e.stamp_s, e.status.value, e.reason)
     counts = {name: len(ix) for name, ix in indices.items()}
     return VisionResult(sequence, tuple(ests), tuple(obs), counts, det_name, planar,
-                        {"parallel": t_par, "total": time.perf_counter() - t_start})
+                        {"parallel": t_par, "noise": t_noise, "estimate": t_est,
+                         "total": time.perf_counter() - t_start},
+                        opts.corner_scale)
 
 
 def write_covariance_csv(path: str | os.PathLike[str], result: VisionResult) -> None:

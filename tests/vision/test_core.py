@@ -66,7 +66,7 @@ def test_ippe_returns_both_solutions_and_the_true_one(scene):
 def test_accuracy_and_nees_on_synthetic_corners(scene, planar):
     rng = np.random.default_rng(2)
     model = VisionModel.from_rig(scene.rig_true)
-    opts = VisionOptions(planar=planar, rig_uncertainty=RigUncertainty.none())
+    opts = VisionOptions(planar=planar, corner_floor_px=0.0, rig_uncertainty=RigUncertainty.none())
     pos, n6, n3 = [], [], []
     for _rep in range(3):
         for k in range(0, 26, 2):
@@ -102,11 +102,11 @@ def test_rig_uncertainty_keeps_covariances_consistent(scene):
         model = VisionModel.from_rig(rig_est)
         for k in range(trial, 26, 4):
             T, obs = _obs(scene, k, rng)
-            e1 = estimate_frame(model, obs, VisionOptions(planar=False, rig_uncertainty=ru))
+            e1 = estimate_frame(model, obs, VisionOptions(planar=False, corner_floor_px=0.0, rig_uncertainty=ru))
             assert e1.ok, e1.reason
             n_all.append(nees(pose_error_xi(e1.T_world_robot, T), e1.cov_6x6))
-            e0 = estimate_frame(model, obs, VisionOptions(planar=False, rig_uncertainty=RigUncertainty.none(),
-                                                          frame_alpha=0.0))
+            e0 = estimate_frame(model, obs, VisionOptions(planar=False, corner_floor_px=0.0,
+                                                          rig_uncertainty=RigUncertainty.none(), frame_alpha=0.0))
             n_naive.append(nees(pose_error_xi(e0.T_world_robot, T), e0.cov_6x6))
     assert 0.5 * 6 < np.mean(n_all) < 2 * 6
     assert np.mean(n_naive) > 3 * np.mean(n_all)  # corner noise alone would be far too confident
@@ -128,8 +128,8 @@ def test_flip_reported_ambiguous_then_broken_by_floor_prior_or_previous_pose(sce
     model = VisionModel.from_rig(rig)
     rng = np.random.default_rng(4)
     T = geo.T_from_xyz_rpy([0.4, -0.02, 0.0], np.radians([0.3, -0.2, 30.0]))
-    free = VisionOptions(planar=False, rig_uncertainty=RigUncertainty.none())
-    planar = VisionOptions(planar=True, rig_uncertainty=RigUncertainty.none())
+    free = VisionOptions(planar=False, corner_floor_px=0.0, rig_uncertainty=RigUncertainty.none())
+    planar = VisionOptions(planar=True, corner_floor_px=0.0, rig_uncertainty=RigUncertainty.none())
     n_amb = n_prev_ok = n_planar_ok = 0
     for _ in range(12):
         obs = synthetic_observations(rig, T, 0.0, rng, noise=CornerNoise(sigma_px=0.2))
@@ -152,7 +152,7 @@ def test_flip_reported_ambiguous_then_broken_by_floor_prior_or_previous_pose(sce
 def test_outlier_view_rejected_and_failures_have_reasons(scene):
     rng = np.random.default_rng(5)
     model = VisionModel.from_rig(scene.rig_true)
-    opts = VisionOptions(planar=True, rig_uncertainty=RigUncertainty.none())
+    opts = VisionOptions(planar=True, corner_floor_px=0.0, rig_uncertainty=RigUncertainty.none())
     T, obs = _obs(scene, 3, rng)
     assert len(obs.views) >= 3
     bad = obs.views[1]
