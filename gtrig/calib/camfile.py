@@ -19,6 +19,7 @@ import yaml
 
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_write_text
+from gtrig.io.yamlfile import load_yaml
 
 
 @dataclass(frozen=True)
@@ -108,10 +109,4 @@ def cam_from_dict(d: Any, source: str = "<cam>") -> CameraIntrinsics:
 def read_cam_yaml(path: str | os.PathLike[str]) -> CameraIntrinsics:
     """Read ``cam.yaml`` (also the hand-held camera's ``handheld/camera.yaml``)."""
     p = Path(path)
-    try:
-        d = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FormatError(f"{p}: no such file") from None
-    except yaml.YAMLError as e:
-        raise FormatError(f"{p}: not valid YAML ({getattr(e, 'problem', e)})") from None
-    return cam_from_dict(d, str(p))
+    return cam_from_dict(load_yaml(p), str(p))

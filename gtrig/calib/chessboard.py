@@ -28,10 +28,10 @@ from typing import Any
 
 import cv2
 import numpy as np
-import yaml
 
 from gtrig import geometry as geo
 from gtrig.errors import FormatError, InputError
+from gtrig.io.yamlfile import load_yaml
 
 log = logging.getLogger(__name__)
 
@@ -362,10 +362,4 @@ def read_boards_yaml(path: str | os.PathLike[str]) -> BoardsSpec:
     T_world_board: {xyz: [...], rpy_deg: [180, 0, 0]}
     """
     p = Path(path)
-    try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{p}: no such file") from None
-    except yaml.YAMLError as e:
-        raise FormatError(f"{p}: not valid YAML ({getattr(e, 'problem', e)})") from None
-    return boards_spec_from_dict(data, str(p))
+    return boards_spec_from_dict(load_yaml(p), str(p))

@@ -36,6 +36,7 @@ import yaml
 from gtrig import geometry as geo
 from gtrig.errors import FormatError, InputError
 from gtrig.io.atomic import atomic_write_text
+from gtrig.io.yamlfile import load_yaml
 from gtrig.markers.robotcal.calibrate import RobotCalibration
 from gtrig.markers.robotcal.observe import Array, MarkerSpec
 from gtrig.rig.models import Marker, MarkerFamily, Pose, Rig
@@ -59,10 +60,7 @@ def parse_anchor_pose(text: str) -> Array:
     p = Path(s)
     if not p.is_file():
         raise InputError(f"--anchor-pose {text!r}: neither x,y,z,roll,pitch,yaw (m, deg) nor a YAML file")
-    try:
-        d = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except yaml.YAMLError as e:
-        raise FormatError(f"{p}: not valid YAML ({getattr(e, 'problem', e)})") from None
+    d = load_yaml(p)
     if isinstance(d, dict) and "T_robot_marker" in d:
         d = d["T_robot_marker"]
     try:
@@ -128,12 +126,7 @@ def write_markers_yaml(path: str | os.PathLike[str], cal: RobotCalibration, spec
 def read_markers_yaml(path: str | os.PathLike[str]) -> tuple[list[Marker], dict[int, Array]]:
     """The calibrated markers of ``markers.yaml`` as rig markers, and their covariances {ID: (6, 6)}."""
     p = Path(path)
-    try:
-        d = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FormatError(f"{p}: no such file") from None
-    except yaml.YAMLError as e:
-        raise FormatError(f"{p}: not valid YAML ({getattr(e, 'problem', e)})") from None
+    d = load_yaml(p)
     if not isinstance(d, dict) or not isinstance(d.get("markers"), list):
         raise FormatError(f"{p}: markers: expected a list of calibrated markers")
     markers, cov = [], {}
