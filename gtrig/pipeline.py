@@ -179,7 +179,9 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     options = VisionOptions(rig_uncertainty=rig_sigma)
     rows: list[AccuracyRow] = []
     for seq in ("validation", "run"):
-        res = run_recording(ctx.rec, rig, sequence=seq, planar=True, options=options)
+        # the detections are checkpointed, so an interrupted demo resumes instead of detecting again
+        res = run_recording(ctx.rec, rig, sequence=seq, planar=True, options=options,
+                            checkpoint=ctx.out / f"gt_vision_{seq}.checkpoint")
         write_tum(ctx.out / f"gt_vision_{seq}.tum", res.trajectory())
         write_covariance_csv(ctx.out / f"gt_vision_{seq}_cov.csv", res)
         if not _has_truth(ctx):
