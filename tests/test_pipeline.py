@@ -37,8 +37,9 @@ def test_demo_quick_runs_every_stage_against_truth(tmp_path: Path) -> None:
     assert rows[("survey", "world points, max error")] < 3.0  # mm
     assert rows[("survey", "validation poses, max position error")] < 3.0
     assert rows[("calibration", "cameras, worst position error")] < 5.0
+    assert rows[("markers", "relative to the dima-marker, worst position error")] < 0.2
+    assert rows[("markers", "relative to the dima-marker, worst orientation error")] < 0.02
     assert rows[("markers", "on the robot, worst position error")] < 1.0
-    assert rows[("markers", "on the robot, worst orientation error")] < 0.1
     assert rows[("GTlaser", "run, mean position error")] < 5.0
     assert rows[("GTlaser", "run, mean |yaw| error")] < 0.1
     assert rows[("GTlaser", "run, OK frames off by > 5 cm")] == 0

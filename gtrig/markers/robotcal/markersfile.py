@@ -154,7 +154,16 @@ def apply_to_rig(rig: Rig, cal: RobotCalibration) -> Rig:
     return rig.model_copy(update={"robot": robot})
 
 
-def marker_errors(cal: RobotCalibration, truth: Rig) -> dict[int, tuple[float, float]]:
-    """{ID: (position error m, rotation error rad)} of the calibrated markers against a true rig."""
+def marker_errors(cal: RobotCalibration, truth: Rig, relative: bool = False) -> dict[int, tuple[float, float]]:
+    """{ID: (position error m, rotation error rad)} of the calibrated markers against a true rig.
+
+    With ``relative``, the errors of the poses relative to the anchor, ``T_anchor_marker`` (the anchor
+    left out): what the calibration measured, without the error of the anchor's given pose.
+    """
     true = {m.id: m.T_robot_marker.matrix() for m in truth.robot.markers}
-    return {m: geo.pose_error(T, true[m]) for m, T in cal.T_robot_marker.items() if m in true}
+    est = {m: T for m, T in cal.T_robot_marker.items() if m in true}
+    if relative:
+        a = cal.anchor
+        return {m: geo.pose_error(np.linalg.inv(est[a]) @ T, np.linalg.inv(true[a]) @ true[m])
+                for m, T in est.items() if m != a}
+    return {m: geo.pose_error(T, true[m]) for m, T in est.items()}
