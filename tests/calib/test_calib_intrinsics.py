@@ -39,6 +39,18 @@ def test_intrinsics_recover_the_camera(sweep_dir) -> None:
     assert len(res.per_image_rms_px) == 12
 
 
+def test_jpeg_set_gives_the_png_solution(sweep_dir, tmp_path) -> None:
+    """Ordinary camera output: the same views saved as JPEG (quality 90, colour) calibrate alike."""
+    for f in sorted(sweep_dir.glob("*.png")):
+        grey = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+        cv2.imwrite(str(tmp_path / (f.stem + ".jpg")), cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR),
+                    [cv2.IMWRITE_JPEG_QUALITY, 90])
+    png = calibrate_intrinsics(sweep_dir, BOARD).camera
+    jpg = calibrate_intrinsics(tmp_path, BOARD).camera
+    assert jpg.rms_px < 0.3
+    assert np.abs(jpg.camera_matrix - png.camera_matrix).max() < 1.0
+
+
 def test_outlier_image_is_rejected_and_named(sweep_dir, tmp_path) -> None:
     det = detect_folder(sweep_dir, BOARD)
     views = list(det.found)
