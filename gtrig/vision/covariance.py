@@ -57,6 +57,36 @@ UNCALIBRATED_MARKERS = RigUncertainty(camera_xyz_m=0.003, camera_rot_rad=math.ra
                                       marker_xyz_m=0.002, marker_rot_rad=math.radians(0.5))
 
 
+def anchor_frame_covariance(T_robot_anchor: np.ndarray, cov_anchor_6x6: np.ndarray) -> np.ndarray:
+    """Covariance (6, 6) of the robot frame's own error caused by the anchor marker's measured pose.
+
+    Every marker calibrated relative to the anchor (:mod:`gtrig.markers.robotcal`) inherits the error
+    ``E = exp(eps)`` of the anchor's measured pose ``T_robot_anchor`` (``eps`` over (dt, dphi) in the
+    anchor's axes, covariance ``cov_anchor_6x6``). The estimated robot frame is then the true one moved
+    by ``F = T_robot_anchor E^-1 T_robot_anchor^-1``, the same at every instant: a common error that
+    no averaging over markers or instants removes. Its twist in robot axes is ``-Ad(T_robot_anchor) eps``.
+
+    Returns the covariance of ``F``'s twist over (dt, dphi), robot axes, m and rad.
+    """
+    T = np.asarray(T_robot_anchor, dtype=float)
+    R, t = T[:3, :3], T[:3, 3]
+    tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
+    Ad = np.block([[R, tx @ R], [np.zeros((3, 3)), R]])
+    return Ad @ np.asarray(cov_anchor_6x6, dtype=float) @ Ad.T
+
+
+def add_robot_frame_covariance(T_world_robot: np.ndarray, cov_6x6: np.ndarray, cov_frame_6x6: np.ndarray
+                               ) -> np.ndarray:
+    """A pose covariance (world axes) plus a robot-frame error of covariance ``cov_frame_6x6`` (robot axes).
+
+    With ``T_est = T_true exp(xi_F)``, the world-frame error is ``(R dt_F, R dphi_F)``; the two errors are
+    independent, so the covariances add.
+    """
+    R = np.asarray(T_world_robot, dtype=float)[:3, :3]
+    B = np.kron(np.eye(2), R)
+    return np.asarray(cov_6x6, dtype=float) + B @ np.asarray(cov_frame_6x6, dtype=float) @ B.T
+
+
 def planar_covariance(cov_6x6: np.ndarray) -> np.ndarray:
     """The x, y, yaw marginal (3, 3) of a ``cov_6x6``."""
     i = np.array(PLANAR_INDEX)

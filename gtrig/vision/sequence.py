@@ -458,6 +458,20 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
                         opts.corner_scale)
 
 
+def with_robot_frame_uncertainty(result: VisionResult, cov_frame_6x6: np.ndarray) -> VisionResult:
+    """A new result whose pose covariances include a common error of the robot frame itself
+    (``cov_frame_6x6`` over (dt, dphi) in robot axes, e.g. from
+    :func:`gtrig.vision.covariance.anchor_frame_covariance`); the poses are unchanged."""
+    from gtrig.vision.covariance import add_robot_frame_covariance
+
+    ests = tuple(
+        replace(e, cov_6x6=add_robot_frame_covariance(e.T_world_robot, e.cov_6x6, cov_frame_6x6))
+        if e.cov_6x6 is not None and e.T_world_robot is not None else e
+        for e in result.estimates
+    )
+    return replace(result, estimates=ests)
+
+
 def write_covariance_csv(path: str | os.PathLike[str], result: VisionResult) -> None:
     """One row per localized pose: ``stamp_s`` and the covariance row-major (6 x 6 over x, y, z, rx, ry,
     rz; or 3 x 3 over x, y, yaw when planar), metres and radians, atomically."""

@@ -172,3 +172,32 @@ def test_outlier_view_rejected_and_failures_have_reasons(scene):
                  for v in obs.views)
     est = estimate_frame(model, FrameObservations(2.0, loud), opts)
     assert est.status is Status.INCONSISTENT and "chi2" in est.reason
+
+
+def test_anchor_frame_covariance_matches_sampled_robot_frame_errors() -> None:
+    """The robot frame's error from the anchor's measured pose: sampled against the first-order covariance."""
+    from scipy.spatial.transform import Rotation
+
+    from gtrig.vision.covariance import add_robot_frame_covariance, anchor_frame_covariance, pose_error_xi
+
+    rng = np.random.default_rng(4)
+    T_ra = np.eye(4)
+    T_ra[:3, :3] = Rotation.from_euler("z", 90, degrees=True).as_matrix()
+    T_ra[:3, 3] = [-0.143, 0.098, 0.62]
+    sig = np.r_[0.0003, 0.0003, 0.0001, np.radians([0.05, 0.05, 0.2])]
+    T_wr = np.eye(4)
+    T_wr[:3, :3] = Rotation.from_euler("z", 40, degrees=True).as_matrix()
+    T_wr[:3, 3] = [1.0, 2.0, 0.0]
+    xs = []
+    for _ in range(4000):
+        eps = rng.normal(0, sig)
+        E = np.eye(4)
+        E[:3, :3] = Rotation.from_rotvec(eps[3:]).as_matrix()
+        E[:3, 3] = eps[:3]
+        F = T_ra @ np.linalg.inv(E) @ np.linalg.inv(T_ra)
+        xs.append(pose_error_xi(T_wr @ F, T_wr))
+    C_mc = np.cov(np.array(xs).T)
+    C = add_robot_frame_covariance(T_wr, np.zeros((6, 6)), anchor_frame_covariance(T_ra, np.diag(sig**2)))
+    d = np.sqrt(np.diag(C))
+    assert np.allclose(C_mc / np.outer(d, d), C / np.outer(d, d), atol=0.08)
+    assert np.allclose(np.sqrt(np.diag(C_mc)), d, rtol=0.08)
