@@ -171,6 +171,7 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     import numpy as np
 
     from gtrig.io.tum import write_tum
+    from gtrig.markers.robotcal import RobotCalibration
     from gtrig.vision import report as vision_report
     from gtrig.vision.covariance import UNCALIBRATED_MARKERS, RigUncertainty, anchor_frame_covariance
     from gtrig.vision.estimate import VisionOptions
@@ -179,7 +180,7 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     rig = _rig(ctx)
     rig_sigma, cov_frame = UNCALIBRATED_MARKERS, None
     cal = ctx.products.get("marker_calibration")
-    if cal is not None:
+    if isinstance(cal, RobotCalibration):
         # Calibrated markers are known to a few hundredths of a millimetre relative to the dima-marker,
         # but each keeps a per-view error budget of 0.5 mm / 0.1 deg: with tighter priors the fit
         # refuses a fifth of the moving frames as inconsistent (their residuals are heavier-tailed
