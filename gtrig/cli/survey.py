@@ -23,8 +23,10 @@ _SIGMA = typer.Option(None, "--sigma", help="Hand-laser sigma (m) for rows witho
 def points(
     reference: Path = typer.Option(..., "--reference", help="REF.csv: name,x,y[,sigma] (world frame, m)."),
     distances: Path = typer.Option(
-        ..., "--distances", help="D.csv: point,reference,distance[,sigma] (or point,d_<ref>,... wide); reference may name "
-        "another world point (network readings)."
+        ...,
+        "--distances",
+        help="D.csv: point,reference,distance[,sigma] (or point,d_<ref>,... wide); reference may name "
+        "another world point (network readings).",
     ),
     out: Path = typer.Option(..., "--out", help="POINTS.csv: name,x,y,cov_xx,cov_xy,cov_yy,..."),
     sigma: float | None = _SIGMA,
