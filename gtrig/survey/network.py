@@ -26,7 +26,7 @@ from scipy.optimize import least_squares
 
 from gtrig.errors import ConvergenceError, InputError
 from gtrig.io.survey_csv import Distances, NamedPoints
-from gtrig.survey.robust import BadReading, ResidualTest, residual_test, triage
+from gtrig.survey.robust import BadReading, ResidualTest, record_exclusion, residual_test, triage
 
 
 @dataclass(frozen=True)
@@ -49,6 +49,13 @@ class NetworkResult:
     test: ResidualTest
     active: np.ndarray
     excluded: tuple[BadReading, ...]
+
+    @property
+    def cov_xy(self) -> np.ndarray:
+        """(N, 2, 2) marginal covariance of every world point, m^2."""
+        n = self.xy.shape[0]
+        i = np.arange(n)
+        return self.cov_joint.reshape(n, 2, n, 2)[i, :, i]
 
 
 @dataclass(frozen=True)
@@ -197,10 +204,7 @@ def adjust_network(
         per_point[readings.a[k]] += 1
         if readings.b[k] in per_point:
             per_point[readings.b[k]] += 1
-        excluded.append(bad)
-        msg = f"excluded: {bad.describe()}"
-        log.warning(msg)
-        warnings.append(msg)
+        record_exclusion(bad, excluded, warnings, log)
     P, R = prob.unpack(res.x)
     n2 = 2 * len(names)
     return NetworkResult(P, C[:n2, :n2], R, test, active, tuple(excluded))

@@ -34,7 +34,7 @@ from gtrig.io.survey_csv import Distances, NamedPoints, PointsTable
 from gtrig.survey import multistart as ms
 from gtrig.survey.network import NetworkResult, adjust_network
 from gtrig.survey.nls import solve_blocks
-from gtrig.survey.robust import BadReading, residual_test, triage
+from gtrig.survey.robust import BadReading, record_exclusion, residual_test, triage
 
 log = logging.getLogger(__name__)
 
@@ -249,10 +249,7 @@ def estimate_world_points(
             if len(set(ref_idx_all[rest].tolist())) < 2:
                 raise InputError(f"{bad.describe()}; excluding it would leave too few readings")
             active[k] = False
-            excluded[n].append(bad)
-            msg = f"excluded: {bad.describe()}"
-            log.warning(msg)
-            warnings.append(msg)
+            record_exclusion(bad, excluded[n], warnings, log)
             changed = True
         if not changed:
             break
@@ -312,8 +309,7 @@ def estimate_world_points(
             names, xy, references, distances.subset(active | network), alpha=alpha, on_outlier=on_outlier,
             max_exclusions=max_exclusions, warnings=warnings, log=log,
         )
-        xy, cov_joint = net.xy, net.cov_joint
-        cov = np.array([cov_joint[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] for i in range(len(names))])
+        xy, cov, cov_joint = net.xy, net.cov_xy, net.cov_joint
         points = [replace(p, xy=xy[i], cov_xy=cov[i]) for i, p in enumerate(points)]
         all_excl = all_excl + net.excluded
     return WorldPointsResult(

@@ -29,7 +29,7 @@ from gtrig.io.survey_csv import Distances, NamedPoints, PoseTable
 from gtrig.survey import multistart as ms
 from gtrig.survey.nls import solve_blocks
 from gtrig.survey.points import ON_AMBIGUITY, ON_OUTLIER, circle_intersections
-from gtrig.survey.robust import BadReading, residual_test, triage
+from gtrig.survey.robust import BadReading, record_exclusion, residual_test, triage
 
 log = logging.getLogger(__name__)
 
@@ -257,10 +257,7 @@ def estimate_poses(
                           room_to_exclude=r.size - 1 >= 3):
                 continue
             active[k] = False
-            excluded[n].append(bad)
-            msg = f"excluded: {bad.describe()}"
-            log.warning(msg)
-            warnings.append(msg)
+            record_exclusion(bad, excluded[n], warnings, log)
             changed = True
         if not changed:
             break

@@ -152,3 +152,11 @@ def triage(
             f"{n_excluded} reading(s): {bad.describe()}"
         )
     return True
+
+
+def record_exclusion(bad: BadReading, excluded: list[BadReading], warnings: list[str], log: logging.Logger) -> None:
+    """Add ``bad`` to ``excluded`` and say so in ``warnings`` and the log (after :func:`triage` said yes)."""
+    excluded.append(bad)
+    msg = f"excluded: {bad.describe()}"
+    log.warning(msg)
+    warnings.append(msg)
