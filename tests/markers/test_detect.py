@@ -209,3 +209,39 @@ def test_band_pixels_match_a_brute_force_selection() -> None:
             mine = got.xy[got.edge == e].astype(int)
             assert set(map(tuple, mine.tolist())) == want
             np.testing.assert_array_equal(got.val[got.edge == e], gray[mine[:, 1], mine[:, 0]])
+
+
+@pytest.mark.parametrize("blur", [0.0, 0.5])
+def test_over_exposed_markers_are_not_shrunk(blur: float) -> None:
+    """White paper at 2.3x the clip level: clipped pixels are censored and the clipped edges fitted with
+    the pixel-integrated step. Treated as real values the clipped profile shrinks every marker (its
+    corners move inwards by 0.3-0.7 px on these images)."""
+    import gtrig.markers.detect.edges as edges
+
+    fam = MarkerFamily.ARTOOLKITPLUS_SIMPLE
+    rng = np.random.default_rng(5 + int(10 * blur))
+    markers = [(fam, 14 + 9 * i, homography_from_pose(80, (120 + 240 * i, 180), 10 + 15 * i, 50 * i, 20 + 40 * i))
+               for i in range(2)]
+    img, truths = render(SHAPE, markers, blur_px=blur, noise=3.0, gain=600.0, rng=rng)
+    assert np.mean(img == 255) > 0.3  # the test is about clipping: most of the image is
+    dets = MarkerDetector(fam).detect(img)
+
+    def inward_and_rms(ds: list) -> tuple[float, float]:
+        inward, sq = [], []
+        for d, t in _match(ds, truths):
+            r = d.corners_px - t.corners_px
+            out = t.corners_px - t.corners_px.mean(axis=0)
+            inward.append(-np.mean(np.sum(r * out / np.linalg.norm(out, axis=1)[:, None], axis=1)))
+            sq.append(np.sum(r**2, axis=1))
+        return float(np.mean(inward)), float(np.sqrt(np.mean(sq)))
+
+    inward, rms = inward_and_rms(dets)
+    assert rms < 0.1 and abs(inward) < 0.05
+    # the same images with clipping ignored: a bias of a few tenths of a pixel, all inwards
+    saved = edges.CLIP_LOW, edges.CLIP_HIGH
+    try:
+        edges.CLIP_LOW, edges.CLIP_HIGH = -1.0, 1e9
+        inward_plain, _ = inward_and_rms(MarkerDetector(fam).detect(img))
+    finally:
+        edges.CLIP_LOW, edges.CLIP_HIGH = saved
+    assert inward_plain > 0.2

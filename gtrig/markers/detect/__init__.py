@@ -31,7 +31,7 @@ from gtrig.errors import InputError
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
 from gtrig.markers.detect.decode import sample_cells, unblur_cells
-from gtrig.markers.detect.edges import fit_edges, gather_band, intersect_corners, marker_context
+from gtrig.markers.detect.edges import CLIP_HIGH, fit_edges, gather_band, intersect_corners, marker_context
 from gtrig.markers.families import decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily
 
@@ -273,6 +273,9 @@ class MarkerDetector:
             # cells solved through the blur model: isolated white cells of small markers peak below
             # the midway threshold and would flip when read one by one
             ab = fit.a.reshape(-1, 4)[idx].mean(axis=1), fit.b.reshape(-1, 4)[idx].mean(axis=1)
+            # an over-exposed white level lies beyond 255 (edges.py censors clipped pixels): the cells
+            # are read against the contrast the image can show
+            ab = ab[0], np.minimum(ab[1], CLIP_HIGH + 0.5 - ab[0])
             wls = unblur_cells(gray, corners, n, bc, np.clip(blur, 0.3, p.max_blur_px), ab[0], ab[1], und)
             data = (wls > 0.5).astype(np.uint8)
         ids, rot, ham = decode_batch(self.spec.family, data, p.max_hamming)
