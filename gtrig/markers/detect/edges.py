@@ -445,7 +445,8 @@ def fit_edges(
     with np.errstate(all="ignore"):
         cov = np.linalg.pinv(JTJ)[:, :2, :2] * s2[:, None, None]
     ok = has & np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(cov.reshape(E, -1)), axis=1)
-    return EdgeFit(P[:, 0], P[:, 1], mid, P[:, 2], P[:, 3], np.where(slow, np.sqrt(np.exp(2 * P[:, 4]) + PIXEL_VAR), np.exp(P[:, 4])), P[:, 5:7], cov, np.sqrt(s2),
+    sigma = np.where(slow, np.sqrt(np.exp(2 * P[:, 4]) + PIXEL_VAR), np.exp(P[:, 4]))  # effective blur
+    return EdgeFit(P[:, 0], P[:, 1], mid, P[:, 2], P[:, 3], sigma, P[:, 5:7], cov, np.sqrt(s2),
                    cnt.astype(np.int64), ok)
 
 
