@@ -340,6 +340,9 @@ def fit_edges(
             else np.zeros(E, bool))
     if slow.any():
         P[slow, 4] = np.log(np.sqrt(np.maximum(np.exp(2 * P[slow, 4]) - PIXEL_VAR, 0.05**2)))
+        # start the white level above the clip: from there the clipped pixels agree and the ramp's
+        # pixels pull it down smoothly; from the clip level the hinge can hold it (a local minimum)
+        P[slow, 3] = np.maximum(P[slow, 3], 2.0 * (CLIP_HIGH - P[slow, 2]))
 
     def compact(act: NDArray[np.int64]) -> tuple[Any, ...]:
         """The samples of the edges ``act`` (ascending), contiguous per edge, the bounds of each edge,
