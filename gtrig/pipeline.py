@@ -95,6 +95,7 @@ def camera_calibration(ctx: StageContext) -> list[AccuracyRow]:
 
     rig, report = calibrate_recording(ctx.rec)
     _calibrated(ctx, _rig(ctx).model_copy(update={"cameras": rig.cameras}))
+    ctx.products["camera_calibration"] = report
     report.write(ctx.out / "calibration")
     if not report.truth:
         return []
@@ -170,6 +171,7 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     """Robot poses from all markers in all cameras, on the calibrated rig (issue 6)."""
     import numpy as np
 
+    from gtrig.calib.recording import CalibrationReport
     from gtrig.io.tum import write_tum
     from gtrig.markers.robotcal import RobotCalibration
     from gtrig.vision import report as vision_report
@@ -181,14 +183,23 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     rig_sigma, cov_frame = UNCALIBRATED_MARKERS, None
     cal = ctx.products.get("marker_calibration")
     if isinstance(cal, RobotCalibration):
-        # Calibrated markers are known to a few hundredths of a millimetre relative to the dima-marker,
-        # but each keeps a per-view error budget of 0.5 mm / 0.1 deg: with tighter priors the fit
-        # refuses a fifth of the moving frames as inconsistent (their residuals are heavier-tailed
-        # than the calibrated corner noise). The dima-marker's own pose on the robot (set square
-        # against the dima, offset measured with a caliper: 0.3 mm, 0.1 deg about z) is an error
-        # common to all markers, added to every pose below. Cameras as calibrated (about 1 mm / 0.02 deg).
-        rig_sigma = RigUncertainty(camera_xyz_m=0.002, camera_rot_rad=math.radians(0.03),
-                                   marker_xyz_m=0.0005, marker_rot_rad=math.radians(0.1))
+        # Each camera and marker in view gets a pose nuisance with the sigma its calibration reported
+        # (the largest over cameras, and over markers relative to the dima-marker). The dima-marker's own
+        # pose on the robot (set square against the dima, offset measured with a caliper: 0.3 mm,
+        # 0.1 deg about z) is an error common to all markers, added to every pose below.
+        cam_xyz, cam_rot = rig_sigma.camera_xyz_m, rig_sigma.camera_rot_rad
+        report = ctx.products.get("camera_calibration")
+        if isinstance(report, CalibrationReport):
+            cam_xyz = max(float(np.max(p.sigma_pos_m)) for p in report.network.joint.values())
+            cam_rot = max(float(np.max(p.sigma_rot_rad)) for p in report.network.joint.values())
+        # per axis: RobotCalibration.sigma is the root of the trace over the three axes
+        sig_m = [tuple(v / math.sqrt(3) for v in cal.sigma(i)) for i in cal.T_robot_marker if i != cal.anchor]
+        sig_m = sig_m or [(0.0, 0.0)]
+        rig_sigma = RigUncertainty(camera_xyz_m=cam_xyz, camera_rot_rad=cam_rot,
+                                   marker_xyz_m=max(p for p, _ in sig_m), marker_rot_rad=max(r for _, r in sig_m))
+        log.info("GTvision rig uncertainty: cameras %.2f mm / %.3f deg, markers %.3f mm / %.4f deg",
+                 1e3 * cam_xyz, math.degrees(cam_rot), 1e3 * rig_sigma.marker_xyz_m,
+                 math.degrees(rig_sigma.marker_rot_rad))
         sig = np.r_[0.0003, 0.0003, 0.00006, np.radians([0.02, 0.02, 0.1])]
         cov_frame = anchor_frame_covariance(rig.marker(cal.anchor).T_robot_marker.matrix(), np.diag(sig**2))
     options = VisionOptions(rig_uncertainty=rig_sigma)

@@ -88,6 +88,9 @@ class Camera(_Strict):
     dist_coeffs: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
     T_world_cam: Pose
     rate_hz: float = Field(gt=0, le=1000)
+    #: standard deviation of the image time stamps about the true mid-exposure instants (trigger and
+    #: transfer jitter), seconds; GTvision adds the motion it hides to every moving pose's covariance
+    stamp_sigma_s: float = Field(default=0.0, ge=0, le=1.0)
 
     @field_validator("dist_coeffs")
     @classmethod

@@ -23,6 +23,7 @@ from gtrig.errors import InputError
 from gtrig.io.atomic import atomic_open, atomic_write_text
 from gtrig.io.tum import Trajectory, write_tum
 from gtrig.rig.load import dump_rig
+from gtrig.rig.models import Rig
 from gtrig.sim.config import SimConfig
 from gtrig.sim.gtroom import VALIDATION_POSES, WORLD_POINT_NAMES, Scene, continuous_path, make_scene
 from gtrig.sim.motion import RobotMotion, static_motion
@@ -80,9 +81,15 @@ def _csv(path: Path, header: list[str], rows: list[list[object]]) -> None:
 
 
 # ---------------------------------------------------------------------------------------------- steps
+def _with_stamp_sigma(rig: Rig, cfg: SimConfig) -> Rig:
+    cams = tuple(c.model_copy(update={"stamp_sigma_s": cfg.camera.stamp_jitter_s}) for c in rig.cameras)
+    return rig.model_copy(update={"cameras": cams})
+
+
 def _write_rigs_and_truth(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
-    dump_rig(scene.rig_nominal, out / "rig.yaml")
-    dump_rig(scene.rig_true, out / "truth" / "rig.yaml")
+    # the lab knows its cameras' time-stamp jitter (datasheet, or a sync test): the rig says it
+    dump_rig(_with_stamp_sigma(scene.rig_nominal, cfg), out / "rig.yaml")
+    dump_rig(_with_stamp_sigma(scene.rig_true, cfg), out / "truth" / "rig.yaml")
     atomic_write_text(out / "sim_config.yaml", yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
     run_T = tl.run.T_world_robot_many(tl.run.stamps_s)
     write_tum(out / "truth" / "run.tum", Trajectory.from_matrices(tl.run.stamps_s, run_T))

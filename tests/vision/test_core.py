@@ -106,8 +106,10 @@ def test_rig_uncertainty_keeps_covariances_consistent(scene):
             assert e1.ok, e1.reason
             n_all.append(nees(pose_error_xi(e1.T_world_robot, T), e1.cov_6x6))
             e0 = estimate_frame(model, obs, VisionOptions(planar=False, corner_floor_px=0.0,
-                                                          rig_uncertainty=RigUncertainty.none(), frame_alpha=0.0))
-            n_naive.append(nees(pose_error_xi(e0.T_world_robot, T), e0.cov_6x6))
+                                                          rig_uncertainty=RigUncertainty.none(),
+                                                          max_variance_factor=math.inf))
+            # corner noise alone: the fit's covariance before the frame's own variance factor
+            n_naive.append(nees(pose_error_xi(e0.T_world_robot, T), e0.cov_6x6 / max(1.0, e0.variance_factor)))
     assert 0.5 * 6 < np.mean(n_all) < 2 * 6
     assert np.mean(n_naive) > 3 * np.mean(n_all)  # corner noise alone would be far too confident
 
@@ -167,11 +169,17 @@ def test_outlier_view_rejected_and_failures_have_reasons(scene):
     none = estimate_frame(model, FrameObservations(1.0, ()), opts)
     assert none.status is Status.NO_MARKER and none.T_world_robot is None and "no marker" in none.reason
 
-    # every corner 20 x noisier than its covariance says: refused, not silently kept
-    loud = tuple(MarkerView(v.camera, v.marker_id, v.corners_px + rng.normal(0, 2.0, (4, 2)), v.corner_cov)
-                 for v in obs.views)
-    est = estimate_frame(model, FrameObservations(2.0, loud), opts)
-    assert est.status is Status.INCONSISTENT and "chi2" in est.reason
+    # every corner several times noisier than its covariance says: kept, its covariance scaled by the
+    # frame's variance factor; far beyond the limit: refused, not silently kept
+    def noisier(sd: float) -> FrameObservations:
+        return FrameObservations(2.0, tuple(MarkerView(v.camera, v.marker_id, v.corners_px + rng.normal(0, sd, (4, 2)),
+                                                       v.corner_cov) for v in obs.views))
+
+    est = estimate_frame(model, noisier(1.0), opts)
+    assert est.ok and 4 < est.variance_factor < opts.max_variance_factor
+    est = estimate_frame(model, noisier(6.0), opts)
+    assert est.status is Status.INCONSISTENT and "variance factor" in est.reason
+    assert est.variance_factor > opts.max_variance_factor
 
 
 def test_anchor_frame_covariance_matches_sampled_robot_frame_errors() -> None:

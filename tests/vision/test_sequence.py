@@ -116,3 +116,45 @@ def test_cli_writes_tum_and_covariance(rec, tmp_path):
     r = CliRunner().invoke(app, ["vision", "--rig", str(path / "rig.calibrated.yaml"), "--recording",
                                  str(tmp_path / "nowhere"), "--out", str(out)])
     assert r.exit_code == 2 and "error" in r.output
+
+
+def test_pose_velocities_recover_a_constant_twist():
+    from scipy.spatial.transform import Rotation
+
+    from gtrig.vision.sequence import pose_velocities
+
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.08, 0.12, 12))
+    t[6:] += 1.0  # a gap: poses on both sides use one-sided differences there
+    v, w = np.array([0.3, -0.1, 0.01]), np.array([0.0, 0.02, 0.5])
+    T = np.tile(np.eye(4), (len(t), 1, 1))
+    T[:, :3, 3] = np.outer(t, v) + [1.0, 2.0, 0.0]
+    T[:, :3, :3] = Rotation.from_rotvec(np.outer(t, w)).as_matrix() @ Rotation.from_euler("z", 0.3).as_matrix()
+    vel = pose_velocities(t, T)
+    assert np.allclose(vel[:, :3], v, atol=1e-12)
+    assert np.allclose(vel[:, 3:], w, atol=1e-9)
+    assert np.all(pose_velocities(t[:1], T[:1]) == 0)
+
+
+def test_timing_uncertainty_adds_the_hidden_motion():
+    from dataclasses import replace
+
+    from gtrig.vision.estimate import FrameEstimate, Status
+    from gtrig.vision.sequence import VisionResult, with_timing_uncertainty
+
+    def est(k: float) -> FrameEstimate:
+        T = np.eye(4)
+        T[0, 3] = 0.3 * k * 0.1  # 0.3 m/s along x, a frame every 0.1 s
+        return FrameEstimate(k * 0.1, Status.OK, T_world_robot=T, cov_6x6=np.eye(6) * 1e-6, views=(("cam0", 3),))
+
+    res = VisionResult("run", tuple(est(k) for k in range(5)), (), {"cam0": 5}, "gtrig", True, {})
+    out = with_timing_uncertainty(res, {"cam0": 0.002})
+    for e in out.estimates:
+        extra = e.cov_6x6 - np.eye(6) * 1e-6
+        assert extra[0, 0] == pytest.approx((0.3 * 0.002) ** 2)
+        assert np.count_nonzero(np.abs(extra) > 1e-15) == 1
+    assert res.estimates[0].cov_6x6[0, 0] == 1e-6  # the input is not changed
+    # a static sequence and a camera without jitter are left alone
+    static = replace(res, sequence="validation")
+    assert with_timing_uncertainty(static, {"cam0": 0.002}) is static
+    assert with_timing_uncertainty(res, {"cam0": 0.0}) is res
