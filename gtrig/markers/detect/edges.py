@@ -58,6 +58,10 @@ CLIP_LOW, CLIP_HIGH = 0.5, 254.5
 PIXEL_VAR = 1.0 / 12.0
 #: iteration limit of edges with clipped pixels, in multiples of the normal one
 CLIPPED_ITER_FACTOR = 4
+#: largest white level of a clipped edge, in multiples of the visible contrast: when only the foot of a
+#: ramp is below the clip (a motion-blurred edge, whose ramp is linear), contrast and blur trade off and
+#: the fit runs to a white level of thousands with a blur of a pixel, which spoils the decoding
+MAX_CLIPPED_WHITE = 4.0
 #: share of an edge's band pixels clipped above which the edge is fitted as clipped
 CLIPPED_EDGE_SHARE = 0.1
 # sign flips of the rows of rho and log sigma, stored negated in fit_edges' Jacobian
@@ -432,6 +436,9 @@ def fit_edges(
         delta = np.linalg.solve(A, JTr[act][..., None])[..., 0]
         Pn = P[act] + delta
         Pn[:, 4] = np.clip(Pn[:, 4], np.log(0.05), np.log(20.0))
+        if slow.any():  # see MAX_CLIPPED_WHITE
+            s_act = slow[act]
+            Pn[s_act, 3] = np.minimum(Pn[s_act, 3], MAX_CLIPPED_WHITE * (CLIP_HIGH - Pn[s_act, 2]))
         JTJ_n, JTr_n, new = normal_eq(Pn, arrs)
         better = new <= cur[act]
         upd = act[better]
