@@ -213,7 +213,7 @@ def test_band_pixels_match_a_brute_force_selection() -> None:
 
 @pytest.mark.parametrize("blur", [0.0, 0.5])
 def test_over_exposed_markers_are_not_shrunk(blur: float) -> None:
-    """White paper at 2.3x the clip level: clipped pixels are censored and the clipped edges fitted with
+    """White paper at 2.1x the clip level: clipped pixels are censored and the clipped edges fitted with
     the pixel-integrated step. Treated as real values the clipped profile shrinks every marker (its
     corners move inwards by 0.3-0.7 px on these images)."""
     import gtrig.markers.detect.edges as edges

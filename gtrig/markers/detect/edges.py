@@ -32,9 +32,9 @@ the ramp, and its uncertainty goes into the line's covariance. Only one side of 
 seen, so the symmetry argument above no longer holds and the profile's shape must be right: on
 edges with clipped pixels the Gaussian ``Phi(d / sigma)`` is replaced by the step blurred by the
 optics and integrated over the square pixel (:func:`pixel_step`), which takes four evaluations of
-``Phi`` instead of one. On simulated over-exposed markers (white at 1.5-2.3 x the clip level) this
-takes the corner error from 0.2-1.2 px (plain fit) to 0.02 px at blur 0 and 0.04-0.09 px at blur
-0.5 px.
+``Phi`` instead of one. On simulated over-exposed markers (white at 1.4-2.1 x the clip level) this
+takes the corner error from 0.2-1.2 px (plain fit) to 0.012-0.017 px at blur 0, 0.04-0.08 px at
+blur 0.5 px and 0.06-0.13 px at blur 1 px.
 
 Coordinates are "fit coordinates": raw pixels, or undistorted pixels when a camera model is given
 (edges are straight only after undistortion). Pixel centres are at integer coordinates.
