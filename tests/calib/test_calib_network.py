@@ -16,22 +16,17 @@ BOARD = Board(9, 5, 0.1)
 PAIRS = [("cam0", "cam1"), ("cam1", "cam2"), ("cam2", "cam3")]
 
 
+def _network(sc, n_pair_views: int, noise_px: float, rng: np.random.Generator, **kw):
+    """The simulated room's network: true and nominal rig and boards, PAIRS, anchored on cam1."""
+    return synth.synthetic_network(sc.rig_true, sc.rig_nominal, BOARD, sc.T_board1_board2_true,
+                                   sc.T_board1_board2_nominal, sc.T_world_board, PAIRS, ["cam1"], n_pair_views,
+                                   noise_px, rng, **kw)
+
+
 @pytest.fixture(scope="module")
 def solved():
     sc = make_scene(3)
-    prob = synth.synthetic_network(
-        sc.rig_true,
-        sc.rig_nominal,
-        BOARD,
-        sc.T_board1_board2_true,
-        sc.T_board1_board2_nominal,
-        sc.T_world_board,
-        PAIRS,
-        ["cam1"],
-        5,
-        0.05,
-        np.random.default_rng(3),
-    )
+    prob = _network(sc, 5, 0.05, np.random.default_rng(3))
     return sc, prob, calibrate_network(prob)
 
 
@@ -113,20 +108,7 @@ def solved_with_sweeps():
         ):
             u = synth.project_board(c.K, c.dist, T, BOARD) + rng.normal(0, noise, (BOARD.n_corners, 2))
             sweeps.append(SweepView(c.name, f"{k:06d}.png", u))
-    prob = synth.synthetic_network(
-        sc.rig_true,
-        sc.rig_nominal,
-        BOARD,
-        sc.T_board1_board2_true,
-        sc.T_board1_board2_nominal,
-        sc.T_world_board,
-        PAIRS,
-        ["cam1"],
-        6,
-        noise,
-        rng,
-        intrinsics=wrong,
-    )
+    prob = _network(sc, 6, noise, rng, intrinsics=wrong)
     prob = replace(prob, sweep_views=sweeps)
     return sc, prob, calibrate_network(prob), calibrate_network(prob, refine_intrinsics=False)
 
