@@ -171,38 +171,24 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     """Robot poses from all markers in all cameras, on the calibrated rig (issue 6)."""
     import numpy as np
 
-    from gtrig.calib.recording import CalibrationReport
     from gtrig.io.tum import write_tum
     from gtrig.markers.robotcal import RobotCalibration
     from gtrig.vision import report as vision_report
-    from gtrig.vision.covariance import UNCALIBRATED_MARKERS, RigUncertainty, anchor_frame_covariance
+    from gtrig.vision.covariance import UNCALIBRATED_MARKERS, anchor_frame_covariance
     from gtrig.vision.estimate import VisionOptions
     from gtrig.vision.sequence import run_recording, with_robot_frame_uncertainty, write_covariance_csv
 
     rig = _rig(ctx)
-    rig_sigma, cov_frame = UNCALIBRATED_MARKERS, None
+    cov_frame = None
     cal = ctx.products.get("marker_calibration")
     if isinstance(cal, RobotCalibration):
-        # Each camera and marker in view gets a pose nuisance with the sigma its calibration reported
-        # (the largest over cameras, and over markers relative to the dima-marker). The dima-marker's own
-        # pose on the robot (set square against the dima, offset measured with a caliper: 0.3 mm,
-        # 0.1 deg about z) is an error common to all markers, added to every pose below.
-        cam_xyz, cam_rot = rig_sigma.camera_xyz_m, rig_sigma.camera_rot_rad
-        report = ctx.products.get("camera_calibration")
-        if isinstance(report, CalibrationReport):
-            cam_xyz = max(float(np.max(p.sigma_pos_m)) for p in report.network.joint.values())
-            cam_rot = max(float(np.max(p.sigma_rot_rad)) for p in report.network.joint.values())
-        # per axis: RobotCalibration.sigma is the root of the trace over the three axes
-        sig_m = [tuple(v / math.sqrt(3) for v in cal.sigma(i)) for i in cal.T_robot_marker if i != cal.anchor]
-        sig_m = sig_m or [(0.0, 0.0)]
-        rig_sigma = RigUncertainty(camera_xyz_m=cam_xyz, camera_rot_rad=cam_rot,
-                                   marker_xyz_m=max(p for p, _ in sig_m), marker_rot_rad=max(r for _, r in sig_m))
-        log.info("GTvision rig uncertainty: cameras %.2f mm / %.3f deg, markers %.3f mm / %.4f deg",
-                 1e3 * cam_xyz, math.degrees(cam_rot), 1e3 * rig_sigma.marker_xyz_m,
-                 math.degrees(rig_sigma.marker_rot_rad))
+        # The dima-marker's own pose on the robot (set square against the dima, offset measured with a
+        # caliper: 0.3 mm, 0.1 deg about z) is an error common to all markers, added to every pose below.
         sig = np.r_[0.0003, 0.0003, 0.00006, np.radians([0.02, 0.02, 0.1])]
         cov_frame = anchor_frame_covariance(rig.marker(cal.anchor).T_robot_marker.matrix(), np.diag(sig**2))
-    options = VisionOptions(rig_uncertainty=rig_sigma)
+    # each calibrated camera and marker in view gets a pose nuisance with the covariance its calibration
+    # wrote into the rig (pose_cov); the others the sigmas of hand measurements
+    options = VisionOptions(rig_uncertainty=UNCALIBRATED_MARKERS)
     rows: list[AccuracyRow] = []
     for seq in ("validation", "run"):
         # the detections are checkpointed, so an interrupted demo resumes instead of detecting again

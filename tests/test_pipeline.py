@@ -32,6 +32,9 @@ def test_demo_quick_runs_every_stage_against_truth(tmp_path: Path) -> None:
         assert np.abs(a - b).max() > 1e-3, part
     assert any(not np.allclose(m.T_robot_marker.matrix(), cal.marker(m.id).T_robot_marker.matrix())
                for m in nominal.robot.markers)
+    # with the covariances of their calibrations, which GTvision uses
+    assert all(c.pose_cov is not None and np.asarray(c.pose_cov)[0, 0] > 0 for c in cal.cameras)
+    assert all(m.pose_cov is not None for m in cal.robot.markers)
 
     rows = pipeline.read_accuracy_csv(res / "accuracy.csv")
     assert rows[("survey", "world points, max error")] < 3.0  # mm

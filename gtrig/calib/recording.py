@@ -32,7 +32,7 @@ from gtrig.calib.network import (
 from gtrig.errors import InputError
 from gtrig.io.atomic import atomic_write_text
 from gtrig.rig.load import load_rig
-from gtrig.rig.models import Pose, Rig
+from gtrig.rig.models import Pose, Rig, pose_cov_rows
 
 log = logging.getLogger(__name__)
 
@@ -173,8 +173,9 @@ def sweep_views(intrinsics: Mapping[str, CameraIntrinsics | IntrinsicsResult]) -
 def calibrated_rig(
     rig: Rig, intrinsics: Mapping[str, CameraIntrinsics | IntrinsicsResult], network: NetworkResult | None
 ) -> Rig:
-    """The rig with each camera's intrinsics and (jointly estimated) ``T_world_cam`` replaced; the lenses
-    refined by the network's bundle adjustment take precedence over the single-camera ones."""
+    """The rig with each camera's intrinsics and (jointly estimated) ``T_world_cam`` and their joint
+    ``pose_cov`` replaced; the lenses refined by the network's bundle adjustment take precedence over the
+    single-camera ones."""
     cams = []
     for c in rig.cameras:
         upd: dict[str, Any] = {}
@@ -191,6 +192,11 @@ def calibrated_rig(
             upd["dist_coeffs"] = tuple(float(v) for v in np.asarray(ci.dist_coeffs).ravel())
         if network is not None and c.name in network.joint:
             upd["T_world_cam"] = Pose.from_matrix(network.joint[c.name].T_world_cam)
+            # the network's blocks are [w, v, lens]; the rig's pose_cov is [v, w, lens] (centre first)
+            cp = network.joint[c.name]
+            C = cp.cov_pose_intrinsics if cp.cov_pose_intrinsics is not None else cp.cov
+            order = np.r_[3:6, 0:3, 6:C.shape[0]]
+            upd["pose_cov"] = pose_cov_rows(C[np.ix_(order, order)])
         cams.append(c.model_copy(update=upd))
     return rig.model_copy(update={"cameras": tuple(cams)})
 

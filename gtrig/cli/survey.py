@@ -1,5 +1,5 @@
 # ruff: noqa: B008  (typer.Option in defaults is the Typer idiom, as in the other CLI modules)
-"""``gtrig survey points|poses|predict``: the hand-laser survey (GTvalidation)."""
+"""``gtrig survey points|poses|adjust|predict``: the hand-laser survey (GTvalidation)."""
 
 from __future__ import annotations
 
@@ -147,6 +147,55 @@ def poses(
         )
     console.print(t)
     console.print(f"{len(r.names)} poses written to {out}; {len(r.excluded)} reading(s) excluded")
+
+
+@app.command("adjust")
+@handle_errors
+def adjust(
+    reference: Path = typer.Option(..., "--reference", help="REF.csv: name,x,y[,sigma] (world frame, m)."),
+    distances: Path = typer.Option(..., "--distances", help="World-point readings, as for 'survey points'."),
+    robot_points: Path = typer.Option(..., "--robot-points", help="RP.csv: name,x,y[,sigma] (robot frame, m)."),
+    pose_distances: Path = typer.Option(
+        ..., "--pose-distances", help="PD.csv: pose,robot_point,world_point,distance[,sigma]."
+    ),
+    out_points: Path = typer.Option(..., "--out-points", help="POINTS.csv of the joint adjustment."),
+    out_poses: Path = typer.Option(..., "--out-poses", help="POSES.csv of the joint adjustment."),
+    sigma: float | None = _SIGMA,
+    reference_sigma: float = typer.Option(
+        0.002, "--reference-sigma", help="Reference sigma (m) if REF.csv has none."
+    ),
+    on_ambiguity: str = _AMBIG,
+    on_outlier: str = _OUTLIER,
+) -> None:
+    """World points and validation poses adjusted together from every reading (a free-station network):
+    'survey points' then 'survey poses', then one least squares over all of them."""
+    import numpy as np
+
+    from gtrig.io.survey_csv import (
+        read_pose_distances,
+        read_reference_points,
+        read_robot_points,
+        read_world_distances,
+        write_points,
+        write_poses,
+    )
+    from gtrig.survey import run_survey
+
+    s = 0.002 if sigma is None else sigma
+    r = run_survey(read_reference_points(reference, reference_sigma), read_world_distances(distances, s),
+                   read_robot_points(robot_points), read_pose_distances(pose_distances, s),
+                   on_ambiguity=on_ambiguity, on_outlier=on_outlier)
+    write_points(out_points, r.points.names, r.points.xy, r.points.cov_xy)
+    write_poses(out_poses, r.poses.names, r.poses.xytheta, r.poses.cov_xytheta)
+    sd_w = 1000 * np.sqrt(r.points.cov_xy[:, [0, 1], [0, 1]])
+    sd_p = np.sqrt(r.poses.cov_xytheta[:, [0, 1, 2], [0, 1, 2]])
+    jt = r.joint
+    test = f"; chi2 {jt.test.chi2:.1f} over {jt.test.dof} dof" if jt is not None else ""
+    console.print(
+        f"{len(r.points.names)} world points (sigma up to {sd_w.max():.2f} mm) to {out_points}, "
+        f"{len(r.poses.names)} poses (sigma up to {1000 * sd_p[:, :2].max():.2f} mm, "
+        f"{np.degrees(sd_p[:, 2].max()):.3f} deg) to {out_poses}{test}; "
+        f"{len(r.points.excluded) + len(r.poses.excluded)} reading(s) excluded", highlight=False)
 
 
 @app.command("predict")

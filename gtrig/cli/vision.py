@@ -23,12 +23,16 @@ def command(
     detector: str = typer.Option("auto", "--detector", help="auto, gtrig or aruco."),
     floor_sigma_mm: float = typer.Option(3.0, "--floor-sigma-mm", help="Floor height deviation (planar)."),
     floor_tilt_deg: float = typer.Option(0.3, "--floor-tilt-deg", help="Floor tilt deviation (planar)."),
-    camera_sigma_mm: float = typer.Option(3.0, "--camera-sigma-mm", help="Camera position sigma (rig)."),
-    camera_sigma_deg: float = typer.Option(0.05, "--camera-sigma-deg", help="Camera orientation sigma (rig)."),
+    camera_sigma_mm: float = typer.Option(3.0, "--camera-sigma-mm",
+                                          help="Camera position sigma, for cameras without pose_cov in the rig."),
+    camera_sigma_deg: float = typer.Option(0.05, "--camera-sigma-deg",
+                                           help="Camera orientation sigma, for cameras without pose_cov."),
     marker_sigma_mm: float = typer.Option(2.0, "--marker-sigma-mm",
-                                          help="Marker position sigma on the robot (hand-measured: 2)."),
+                                          help="Marker position sigma on the robot, for markers without "
+                                          "pose_cov (hand-measured: 2)."),
     marker_sigma_deg: float = typer.Option(0.5, "--marker-sigma-deg",
-                                           help="Marker orientation sigma on the robot (hand-measured: 0.5)."),
+                                           help="Marker orientation sigma, for markers without pose_cov "
+                                           "(hand-measured: 0.5)."),
 ) -> None:
     """Robot poses from the markers seen by all cameras at each instant, with covariances."""
     import math

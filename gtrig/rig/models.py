@@ -16,6 +16,34 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from gtrig import geometry as geo
 
+PoseCov = tuple[tuple[float, ...], ...]
+
+#: the lens parameters a camera's ``pose_cov`` may continue with, in this order
+LENS_PARAMETERS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+
+
+def _check_pose_cov(v: PoseCov | None, sizes: range) -> PoseCov | None:
+    """A pose covariance must be square of an allowed size, symmetric and positive semi-definite."""
+    if v is None:
+        return v
+    C = np.asarray(v, dtype=float) if all(len(r) == len(v) for r in v) else np.zeros((0, 1))
+    if C.ndim != 2 or C.shape[0] != C.shape[1] or C.shape[0] not in sizes or not np.all(np.isfinite(C)):
+        n = f"{sizes.start} x {sizes.start}" if len(sizes) == 1 else f"n x n, n from {sizes.start} to {sizes.stop - 1}"
+        raise ValueError(f"pose_cov must be a finite {n} matrix (rows of numbers)")
+    scale = max(float(np.max(np.abs(np.diag(C)))), 1e-300)
+    if np.max(np.abs(C - C.T)) > 1e-6 * scale:
+        raise ValueError("pose_cov must be symmetric")
+    if float(np.min(np.linalg.eigvalsh(0.5 * (C + C.T)))) < -1e-9 * scale:
+        raise ValueError("pose_cov must be positive semi-definite")
+    return v
+
+
+def pose_cov_rows(C: geo.Array) -> PoseCov:
+    """A square array as the nested tuples a ``pose_cov`` field holds (symmetrised)."""
+    C = 0.5 * (np.asarray(C, dtype=float) + np.asarray(C, dtype=float).T)
+    return tuple(tuple(float(x) for x in row) for row in C)
+
+
 # Anything larger than this in a room-scale installation is almost surely millimetres.
 MAX_ROOM_EXTENT_M = 100.0
 
@@ -91,6 +119,18 @@ class Camera(_Strict):
     #: standard deviation of the image time stamps about the true mid-exposure instants (trigger and
     #: transfer jitter), seconds; GTvision adds the motion it hides to every moving pose's covariance
     stamp_sigma_s: float = Field(default=0.0, ge=0, le=1.0)
+    #: covariance of ``T_world_cam`` as calibrated: the optical centre's move (world x, y, z, m), then
+    #: the rotation ``R_world_cam <- Exp(dphi) R_world_cam`` (about world x, y, z, rad), optionally
+    #: followed by the first n lens parameters of :data:`LENS_PARAMETERS` (px, unitless), jointly:
+    #: (6 + n) x (6 + n). Written by the network calibration; GTvision weighs the cameras with it. The
+    #: pose and lens errors of a calibration are strongly correlated (a principal point off by a
+    #: fraction of a pixel is mostly undone by a turn of the camera), which the joint matrix keeps.
+    pose_cov: PoseCov | None = None
+
+    @field_validator("pose_cov")
+    @classmethod
+    def _pose_cov(cls, v: PoseCov | None) -> PoseCov | None:
+        return _check_pose_cov(v, range(6, 6 + len(LENS_PARAMETERS) + 1))
 
     @field_validator("dist_coeffs")
     @classmethod
@@ -170,6 +210,16 @@ class Marker(_Strict):
     id: int = Field(ge=0)
     side_m: float = Field(gt=0)
     T_robot_marker: Pose
+    #: covariance (6 x 6) of ``T_robot_marker`` relative to the robot frame as the anchor marker realises
+    #: it: the centre's move (robot x, y, z, m), then the rotation about robot x, y, z (rad), as
+    #: :func:`gtrig.vision.covariance.pose_error_xi`; written by the marker-to-robot calibration. The
+    #: anchor's own placement error, common to all markers, is not part of it.
+    pose_cov: PoseCov | None = None
+
+    @field_validator("pose_cov")
+    @classmethod
+    def _pose_cov(cls, v: PoseCov | None) -> PoseCov | None:
+        return _check_pose_cov(v, range(6, 7))
 
     @field_validator("side_m")
     @classmethod

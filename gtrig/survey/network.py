@@ -164,7 +164,7 @@ def adjust_network(
         C = np.linalg.inv(J.T @ J)
         C = 0.5 * (C + C.T)
         r = -prob.resid(res.x)
-        test = residual_test(r, np.eye(r.size), J, C)
+        test = residual_test(r, None, J, C)
         if test.dof <= 0 or test.p_value >= alpha or test.worst < 0:
             break
         K = prob.d.size

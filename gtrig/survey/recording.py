@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -24,18 +24,26 @@ from gtrig.io.survey_csv import (
     write_points,
     write_poses,
 )
+from gtrig.survey.joint import JointResult, adjust_jointly
 from gtrig.survey.points import WorldPointsResult, estimate_world_points
 from gtrig.survey.poses import PosesResult, estimate_poses
+from gtrig.survey.robust import BadReading
 
 log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class SurveyResult:
-    """World points and validation poses of one recording."""
+    """World points and validation poses of one recording.
+
+    With the joint adjustment (``joint``), ``points`` and ``poses`` hold its coordinates and covariances
+    (and its exclusions and warnings added); their per-point and per-pose details (basins, chi-square)
+    are those of the two stages it started from.
+    """
 
     points: WorldPointsResult
     poses: PosesResult
+    joint: JointResult | None = None
 
 
 @dataclass(frozen=True)
@@ -84,17 +92,41 @@ def run_survey(
     world_distances: Distances,
     robot_points: NamedPoints,
     pose_distances: Distances,
+    joint: bool = True,
     **kwargs: Any,
 ) -> SurveyResult:
-    """World points, then validation poses with the world points' joint covariance propagated.
+    """World points, then validation poses with the world points' joint covariance propagated, then
+    (``joint``) all of them adjusted together from every reading (:mod:`gtrig.survey.joint`).
 
-    ``kwargs`` (``multistart``, ``on_ambiguity``, ``on_outlier``, ``alpha``) go to both estimators.
+    ``kwargs`` (``multistart``, ``on_ambiguity``, ``on_outlier``, ``alpha``) go to the estimators.
     """
     pts = estimate_world_points(references, world_distances, **kwargs)
     poses = estimate_poses(
         (pts.names, pts.xy, pts.cov_xy), robot_points, pose_distances, cov_world_joint=pts.cov_joint, **kwargs
     )
-    return SurveyResult(pts, poses)
+    if not joint or pose_distances.distance_m.size == 0:
+        return SurveyResult(pts, poses)
+    warnings: list[str] = []
+    jr = adjust_jointly(
+        list(pts.names), pts.xy, references, world_distances, list(poses.names), poses.xytheta, robot_points,
+        pose_distances, world_active=_kept(world_distances, pts.excluded),
+        pose_active=_kept(pose_distances, poses.excluded), warnings=warnings,
+        **{k: v for k, v in kwargs.items() if k in ("alpha", "on_outlier")},
+    )
+    on_poses = tuple(b for b in jr.excluded if b.kind == "pose")
+    on_points = tuple(b for b in jr.excluded if b.kind != "pose")
+    pts = replace(pts, xy=jr.points_xy, cov_xy=jr.points_cov_xy, cov_joint=jr.points_cov_joint,
+                  excluded=pts.excluded + on_points, warnings=pts.warnings + tuple(warnings))
+    poses = replace(poses, xytheta=jr.poses_xytheta, cov_xytheta=jr.poses_cov,
+                    excluded=poses.excluded + on_poses, warnings=poses.warnings + tuple(warnings))
+    return SurveyResult(pts, poses, jr)
+
+
+def _kept(readings: Distances, excluded: tuple[BadReading, ...]) -> np.ndarray:
+    """(K,) readings not among ``excluded`` (matched by file and line, ends and value)."""
+    bad = {(b.source, b.distance_m) for b in excluded}
+    return np.array([(readings.source[k], float(readings.distance_m[k])) not in bad
+                     for k in range(readings.distance_m.size)], dtype=bool)
 
 
 def run_recording_survey(

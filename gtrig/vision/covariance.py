@@ -11,7 +11,8 @@ Two sources add up:
   planar mode);
 * the rig's uncertainty, which does not average out over corners: each camera's pose (from the network
   calibration) and each marker's pose on the robot. :func:`gtrig.vision.refine.refine_pose` estimates
-  a small correction for each camera and marker in view, with these sigmas as Gaussian priors, and
+  a small correction for each camera and marker in view, with their covariances (:class:`RigUncertainty`)
+  as Gaussian priors, and
   marginalises them out; to first order this equals "considering" them (Bierman, *Factorization
   Methods for Discrete Sequential Estimation*, 1977, ch. VI) but also weighs the cameras by how well
   they are known.
@@ -20,32 +21,75 @@ Two sources add up:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+if TYPE_CHECKING:
+    from gtrig.rig.models import Rig
 
 PLANAR_INDEX = (0, 1, 5)
 
 
 @dataclass(frozen=True)
 class RigUncertainty:
-    """One-sigma uncertainty of the rig's camera and marker poses (isotropic per block).
+    """Uncertainty of the rig's camera and marker poses.
+
+    A camera or marker with its own covariance (``camera_cov``, ``marker_cov``: the ``pose_cov`` its
+    calibration wrote into the rig) gets that; the others get the isotropic sigmas.
 
     Attributes
     ----------
-    camera_xyz_m, camera_rot_rad : each camera's position and orientation in the world.
-    marker_xyz_m, marker_rot_rad : each marker's position and orientation on the robot.
+    camera_xyz_m, camera_rot_rad : one-sigma position and orientation of a camera in the world.
+    marker_xyz_m, marker_rot_rad : one-sigma position and orientation of a marker on the robot.
+    camera_cov : {camera name: (6 + n, 6 + n)} over the centre's move and the rotation, world axes (m,
+        rad), then the first n lens parameters (``gtrig.rig.models.LENS_PARAMETERS``), jointly.
+    marker_cov : {marker ID: (6, 6)} over the centre's move and the rotation, robot axes (m, rad); an
+        all-zero matrix (the anchor marker) means no nuisance at all.
     """
 
     camera_xyz_m: float = 0.002
     camera_rot_rad: float = math.radians(0.02)
     marker_xyz_m: float = 0.0005
     marker_rot_rad: float = math.radians(0.05)
+    camera_cov: Mapping[str, np.ndarray] = field(default_factory=dict)
+    marker_cov: Mapping[int, np.ndarray] = field(default_factory=dict)
 
     @staticmethod
     def none() -> RigUncertainty:
         return RigUncertainty(0.0, 0.0, 0.0, 0.0)
+
+    def with_rig(self, rig: Rig) -> RigUncertainty:
+        """These sigmas, with the full covariance of every camera and marker whose ``pose_cov`` the rig
+        holds (calibrated ones) unless this one already has its own; an uncertainty of exactly zero
+        stays zero (no nuisance at all)."""
+        if not (self.camera_xyz_m or self.camera_rot_rad or self.marker_xyz_m or self.marker_rot_rad):
+            return self
+        cams = {c.name: np.asarray(c.pose_cov, float) for c in rig.cameras if c.pose_cov is not None}
+        marks = {m.id: np.asarray(m.pose_cov, float) for m in rig.robot.markers if m.pose_cov is not None}
+        return replace(self, camera_cov={**cams, **self.camera_cov}, marker_cov={**marks, **self.marker_cov})
+
+    def sqrt_information(self, kind: str, key: str | int) -> np.ndarray | None:
+        """``S`` (k, k) with ``S^T S`` the inverse covariance of camera (``kind="camera"``) or marker
+        ``key`` (k = 6, or 6 + n for a camera whose lens is included), or None when it has no
+        uncertainty (then no nuisance is added for it)."""
+        cov = self.camera_cov.get(str(key)) if kind == "camera" else self.marker_cov.get(int(key))
+        if cov is None:
+            s_t, s_r = ((self.camera_xyz_m, self.camera_rot_rad) if kind == "camera"
+                        else (self.marker_xyz_m, self.marker_rot_rad))
+            if s_t <= 0 and s_r <= 0:
+                return None
+            return np.diag([1.0 / max(s_t, 1e-12)] * 3 + [1.0 / max(s_r, 1e-12)] * 3)
+        cov = 0.5 * (cov + cov.T)
+        d = np.diag(cov)
+        if not np.any(d > 0):
+            return None
+        # a floor well below any real calibration keeps a near-singular block invertible
+        L = np.linalg.cholesky(cov + np.diag(np.full(cov.shape[0], 1e-9**2)))
+        return np.linalg.inv(L)
 
 
 #: The rig as it stands before marker-to-robot calibration: cameras from the network calibration

@@ -77,6 +77,27 @@ def project_cam(sc: StackedCorners, p_cam: np.ndarray, jacobian: bool = True
     return uv, Jd @ Jn
 
 
+def lens_jacobian(sc: StackedCorners, T_world_robot: np.ndarray, n: int = 9) -> np.ndarray:
+    """d uv / d (lens parameters) (N, 2, n) for each corner's own camera: the first ``n`` of fx, fy, cx,
+    cy, k1, k2, p1, p2, k3 (:data:`gtrig.rig.models.LENS_PARAMETERS`), at the robot pose given."""
+    R, t = T_world_robot[:3, :3], T_world_robot[:3, 3]
+    p_c = np.einsum("nij,nj->ni", sc.R_cw, sc.p_robot @ R.T + t) + sc.t_cw
+    x, y = p_c[:, 0] / p_c[:, 2], p_c[:, 1] / p_c[:, 2]
+    k1, k2, p1, p2, k3, k4, k5, k6 = sc.dist.T
+    r2 = x * x + y * y
+    b = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    rad = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / b
+    xd = x * rad + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * rad + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    one, zero = np.ones_like(x), np.zeros_like(x)
+    # each parameter's effect on the distorted normalised point (dxd, dyd), then on the pixel
+    d_norm = [(x * r2 / b, y * r2 / b), (x * r2**2 / b, y * r2**2 / b), (2 * x * y, r2 + 2 * y * y),
+              (r2 + 2 * x * x, 2 * x * y), (x * r2**3 / b, y * r2**3 / b)]
+    cols = [(xd, zero), (zero, yd), (one, zero), (zero, one)]
+    cols += [(sc.fx * dx + sc.skew * dy, sc.fy * dy) for dx, dy in d_norm]
+    return np.stack([np.column_stack(c) for c in cols[:n]], axis=2)
+
+
 def project_pose(sc: StackedCorners, T_world_robot: np.ndarray, jacobian: bool = True
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Project the corners of ``sc`` for the robot at ``T_world_robot``.

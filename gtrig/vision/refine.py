@@ -19,10 +19,18 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from gtrig.vision.covariance import RigUncertainty
 from gtrig.vision.observations import StackedCorners
-from gtrig.vision.projection import camera_pose_jacobian, marker_pose_jacobian, project_pose, skew, whiten
+from gtrig.vision.projection import (
+    camera_pose_jacobian,
+    lens_jacobian,
+    marker_pose_jacobian,
+    project_pose,
+    skew,
+    whiten,
+)
 
 
 @dataclass(frozen=True)
@@ -100,6 +108,10 @@ class RefineResult:
     redundancy: np.ndarray
 
 
+def _sq(v: np.ndarray) -> float:
+    return float(v @ v)
+
+
 def huber_weights(e: np.ndarray, k: float) -> np.ndarray:
     """IRLS weights of the Huber loss for residual norms ``e`` (whitened)."""
     return np.where(e <= k, 1.0, k / np.maximum(e, 1e-300))
@@ -155,29 +167,39 @@ def evaluate(sc: StackedCorners, T: np.ndarray, prior: PlanarPrior | None, k: fl
 def _nuisance_blocks(sc: StackedCorners, T: np.ndarray, rig: RigUncertainty | None
                      ) -> tuple[np.ndarray, np.ndarray]:
     """Whitened Jacobian (2N, P) of the corners in the rig's nuisance parameters and their prior's
-    square-root information (P,): one 6-block per camera in view, then one per marker in view."""
-    if rig is None:
-        return np.zeros((2 * sc.uv.shape[0], 0)), np.zeros(0)
+    square-root information (P, P), block diagonal: one block per camera in view (its pose, and its
+    lens when its covariance covers the lens), then one per marker in view (none for a camera or
+    marker known exactly)."""
     n = sc.uv.shape[0]
-    cols, sinfo = [], []
-    for has, sig_t, sig_r, group, jac in (
-        (rig.camera_xyz_m > 0 or rig.camera_rot_rad > 0, rig.camera_xyz_m, rig.camera_rot_rad, sc.cam,
-         camera_pose_jacobian),
-        (rig.marker_xyz_m > 0 or rig.marker_rot_rad > 0, rig.marker_xyz_m, rig.marker_rot_rad, sc.marker,
-         marker_pose_jacobian),
-    ):
-        if not has:
-            continue
-        B = whiten(sc, jac(sc, T))  # (N, 2, 6)
+    if rig is None:
+        return np.zeros((2 * n, 0)), np.zeros((0, 0))
+    cols, sqrt_info = [], []
+    for kind, group in (("camera", sc.cam), ("marker", sc.marker)):
+        blocks = []
         for g in np.unique(group):
-            blk = np.zeros((n, 2, 6))
-            m = group == g
-            blk[m] = B[m]
-            cols.append(blk.reshape(2 * n, 6))
-            sinfo.extend([1.0 / max(sig_t, 1e-12)] * 3 + [1.0 / max(sig_r, 1e-12)] * 3)
+            key = sc.camera_names[g] if kind == "camera" else int(g)
+            S = rig.sqrt_information(kind, key)
+            if S is not None:
+                blocks.append((group == g, S))
+        if not blocks:
+            continue
+        if kind == "camera":
+            n_lens = max(S.shape[0] for _, S in blocks) - 6
+            J = camera_pose_jacobian(sc, T)
+            if n_lens > 0:
+                J = np.concatenate([J, lens_jacobian(sc, T, n_lens)], axis=2)
+        else:
+            J = marker_pose_jacobian(sc, T)
+        B = whiten(sc, J)  # (N, 2, 6 + lens)
+        for m, S in blocks:
+            k = S.shape[0]
+            blk = np.zeros((n, 2, k))
+            blk[m] = B[m, :, :k]
+            cols.append(blk.reshape(2 * n, k))
+            sqrt_info.append(S)
     if not cols:
-        return np.zeros((2 * n, 0)), np.zeros(0)
-    return np.hstack(cols), np.asarray(sinfo)
+        return np.zeros((2 * n, 0)), np.zeros((0, 0))
+    return np.hstack(cols), block_diag(*sqrt_info)
 
 
 def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = None,
@@ -198,7 +220,8 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
     k = options.huber_k
     T = np.asarray(T0, dtype=float).copy()
     N = sc.uv.shape[0]
-    Bn, sinfo = _nuisance_blocks(sc, T, rig)
+    Bn, S_eta = _nuisance_blocks(sc, T, rig)
+    Lam = S_eta.T @ S_eta
     P = 6 + Bn.shape[1]
     eta = np.zeros(P - 6)
 
@@ -207,7 +230,7 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
         rw = whiten(sc, uv - sc.uv).reshape(-1) + Bn @ etax
         e = np.linalg.norm(rw.reshape(N, 2), axis=1)
         e = np.where(z > 0, e, 1e6)
-        c = huber_cost(e, k) + float(np.sum((sinfo * etax) ** 2))
+        c = huber_cost(e, k) + _sq(S_eta @ etax)
         if prior is not None:
             rp, _ = prior_residuals(Tx, prior)
             c += float(rp @ rp)
@@ -228,8 +251,8 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
         H = A.T @ (A * ww[:, None])
         g = A.T @ (rw * ww)
         if P > 6:
-            H[6:, 6:] += np.diag(sinfo**2)
-            g[6:] += sinfo**2 * eta
+            H[6:, 6:] += Lam
+            g[6:] += Lam @ eta
         if prior is not None:
             rp, Jp = prior_residuals(T, prior)
             H[:6, :6] += Jp.T @ Jp
@@ -269,16 +292,16 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
     A = np.hstack([Jw.reshape(-1, 6), Bn])
     H = A.T @ (A * np.repeat(w, 2)[:, None])
     if P > 6:
-        H[6:, 6:] += np.diag(sinfo**2)
+        H[6:, 6:] += Lam
     dof = 2 * N - 6
     if prior is not None:
         rp, Jp = prior_residuals(T, prior)
         H[:6, :6] += Jp.T @ Jp
         dof += 3
-    cost = huber_cost(e, k) + float(np.sum((sinfo * eta) ** 2))
+    cost = huber_cost(e, k) + _sq(S_eta @ eta)
     if prior is not None:
         cost += float(rp @ rp)
-    chi2 = float(np.sum(e * e) + np.sum((sinfo * eta) ** 2))
+    chi2 = float(np.sum(e * e)) + _sq(S_eta @ eta)
     try:
         Hinv = np.linalg.inv(H)
         cov = Hinv[:6, :6]

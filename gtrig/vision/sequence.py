@@ -22,7 +22,9 @@ time order, in the main process.
 
 Resuming: every finished chunk of detections (the expensive part) is appended to a checkpoint file
 (JSON lines; floats are written with ``repr``, so a resumed run's output is bit-identical). A
-checkpoint written with other settings, another rig or other frames is refused.
+checkpoint of other images, another detector, other lenses or other markers is refused; one written
+before the camera or marker poses were calibrated again, or with other estimator settings, is reused
+(detection does not depend on them).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -53,7 +55,7 @@ from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel
 
 log = logging.getLogger(__name__)
 
-CHECKPOINT_VERSION = 3
+CHECKPOINT_VERSION = 4
 SEQUENCES = ("run", "validation")
 
 
@@ -295,11 +297,22 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
 
 
 # ----------------------------------------------------------------------------------------- the runner
-def _key(rig: Rig, sequence: str, options: VisionOptions, detector: str, instants: list[Instant],
-         paths: dict[str, list[str]]) -> str:
-    doc = {"v": CHECKPOINT_VERSION, "rig": rig_to_dict(rig), "sequence": sequence,
-           "options": json.loads(json.dumps(asdict(options), default=str)), "detector": detector,
-           "instants": [[i.stamp_s, [list(x) for x in i.images]] for i in instants], "paths": paths}
+def _key(rig: Rig, sequence: str, detector: str, instants: list[Instant], paths: dict[str, list[str]]) -> str:
+    """What the checkpointed detections depend on: the images, the detector, the lenses and the markers'
+    families and sizes; not the poses nor the estimator's options, so a re-estimation with a newly
+    calibrated rig or other settings reuses them."""
+    doc_rig = rig_to_dict(rig)
+    for c in doc_rig["cameras"]:
+        for k in ("T_world_cam", "pose_cov", "stamp_sigma_s"):
+            c.pop(k, None)
+        # a calibration repeated on another machine differs in the last digits (threaded BLAS), which
+        # does not change a detection
+        c["camera_matrix"] = [[float(f"{v:.9g}") for v in row] for row in c["camera_matrix"]]
+        c["dist_coeffs"] = [float(f"{v:.9g}") for v in c["dist_coeffs"]]
+    markers = [{k: m[k] for k in ("family", "id", "side_m")} for m in doc_rig["robot"]["markers"]]
+    doc = {"v": CHECKPOINT_VERSION, "cameras": doc_rig["cameras"], "markers": markers, "sequence": sequence,
+           "detector": detector, "instants": [[i.stamp_s, [list(x) for x in i.images]] for i in instants],
+           "paths": paths}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:20]
 
 
@@ -314,7 +327,7 @@ def _load_checkpoint(path: Path, key: str) -> dict[int, list[dict[str, Any]]]:
         except json.JSONDecodeError:
             head = {}
         if head.get("key") != key:
-            raise InputError(f"{path}: checkpoint of another run (other rig, settings or frames); "
+            raise InputError(f"{path}: checkpoint of another run (other images, detector, lenses or markers); "
                              "delete it or choose another output")
         for line in f:
             try:
@@ -378,7 +391,8 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
         raise InputError(f"unknown sequence {sequence!r}; choose run or validation")
     rec = Path(rec_dir)
     opts = options or VisionOptions()
-    opts = replace(opts, planar=planar)
+    # the cameras' and markers' own calibrated covariances, where the rig holds them
+    opts = replace(opts, planar=planar, rig_uncertainty=opts.rig_uncertainty.with_rig(rig))
     model = VisionModel.from_rig(rig)
     det_name = make_detector(rig, detector).name
     indices = camera_indices(rec, sequence, rig)
@@ -388,7 +402,7 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     if any(ix.video is not None for ix in indices.values()):
         raise InputError("GTvision reads image files; extract the frames of video.* first")
     chunks = [instants[i:i + chunk_size] for i in range(0, len(instants), chunk_size)]
-    key = _key(rig, sequence, opts, det_name, instants, paths)
+    key = _key(rig, sequence, det_name, instants, paths)
     ck = Path(checkpoint) if checkpoint is not None else None
     done = _load_checkpoint(ck, key) if ck is not None else {}
     if done:

@@ -92,6 +92,9 @@ def test_library_accuracy(handheld: Path, views: tuple) -> None:
     assert cal.images_used == 8 and not cal.rejected_images and not cal.uncalibrated
     new = rc.apply_to_rig(load_rig(handheld / "rig.yaml"), cal)
     assert np.allclose(new.marker(3).T_robot_marker.matrix(), cal.T_robot_marker[3], atol=1e-9)
+    # the rig carries what the images measured, relative to the anchor: GTvision weighs markers by it
+    assert np.allclose(np.asarray(new.marker(3).pose_cov), cal.cov_relative[3]) and cal.cov_relative[3][0, 0] > 0
+    assert not np.any(np.asarray(new.marker(ANCHOR).pose_cov))
 
 
 def test_wrong_view_is_rejected_and_named(handheld: Path, views: tuple) -> None:

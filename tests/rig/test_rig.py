@@ -13,6 +13,7 @@ from gtrig import geometry as geo
 from gtrig.errors import ConfigError
 from gtrig.rig import dump_rig, load_rig
 from gtrig.rig.load import rig_to_dict
+from gtrig.rig.models import pose_cov_rows
 from gtrig.sim.gtroom import make_scene
 
 
@@ -34,6 +35,18 @@ def test_round_trip(tmp_path: Path) -> None:
     assert again == rig
     for a, b in zip(rig.cameras, again.cameras, strict=True):
         np.testing.assert_allclose(a.T_world_cam.matrix(), b.T_world_cam.matrix(), atol=1e-12)
+
+
+def test_pose_covariances_round_trip(tmp_path: Path) -> None:
+    rig = make_scene(3).rig_true
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(6, 6)) * 1e-3
+    cam = rig.cameras[0].model_copy(update={"pose_cov": pose_cov_rows(A @ A.T)})
+    rig = rig.model_copy(update={"cameras": (cam,) + rig.cameras[1:]})
+    dump_rig(rig, tmp_path / "rig.yaml")
+    again = load_rig(tmp_path / "rig.yaml")
+    assert again.cameras[0].pose_cov is not None and again.cameras[1].pose_cov is None
+    np.testing.assert_allclose(np.asarray(again.cameras[0].pose_cov), A @ A.T, rtol=1e-12, atol=0)
 
 
 def test_rpy_and_quaternion_poses_agree(tmp_path: Path, rig_doc: dict[str, Any]) -> None:
@@ -86,6 +99,13 @@ INVALID = [
     ("duplicate camera name", ("cameras", 1, "name"), "cam0", ["cameras", "duplicate name 'cam0'"]),
     ("negative focal length", ("cameras", 0, "camera_matrix"), [[-1500, 0, 512], [0, 1500, 384], [0, 0, 1]],
      ["cameras[0]", "focal lengths"]),
+    ("pose covariance 5 x 5", ("cameras", 0, "pose_cov"), [[1e-6] * 5] * 5, ["cameras[0].pose_cov"]),
+    ("pose covariance not symmetric", ("robot", "markers", 0, "pose_cov"),
+     [[1e-6 if i == j else (1e-8 if i < j else 0.0) for j in range(6)] for i in range(6)],
+     ["robot.markers[0].pose_cov", "symmetric"]),
+    ("pose covariance negative", ("cameras", 1, "pose_cov"),
+     [[(-1e-6 if i == 2 else 1e-6) if i == j else 0.0 for j in range(6)] for i in range(6)],
+     ["cameras[1].pose_cov", "positive semi-definite"]),
 ]
 
 

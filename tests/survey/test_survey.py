@@ -181,7 +181,7 @@ def test_covariance_consistent_monte_carlo() -> None:
     """Mean NEES over 200 trials within [0.7, 1.4] x dof, for world points (2) and poses (3)."""
     sc, T, truth = scene_and_poses(0)
     sv = simulate_survey(sc, T, np.random.default_rng(99), SEEDS_DESIGN)
-    res = run_survey(*to_inputs(sv), multistart=False, on_outlier="keep")
+    res = run_survey(*to_inputs(sv), multistart=False, on_outlier="keep", joint=False)
     A, N = 3, 16
     ctx = dict(
         wxy=res.points.xy,
@@ -195,7 +195,7 @@ def test_covariance_consistent_monte_carlo() -> None:
     covs = [_pose_cov(res.poses.xytheta[p], np.arange(A * N), ctx) for p in range(T.shape[0])]
     W, P, svs = vectorised_trials(sc, T, 200, 5, covs)
     # the vectorised solver is the library's estimator: same answers on one trial
-    r0 = run_survey(*to_inputs(svs[0]), multistart=False, on_outlier="keep")
+    r0 = run_survey(*to_inputs(svs[0]), multistart=False, on_outlier="keep", joint=False)
     assert np.abs(r0.points.xy - W[0]).max() < 1e-6 and np.abs(r0.poses.xytheta - P[0]).max() < 1e-4
     e = W - sc.world_points_xy
     nees_w = np.einsum("spi,pij,spj->sp", e, np.linalg.inv(res.points.cov_xy), e).mean()

@@ -58,6 +58,8 @@ class RobotCalibration:
     cov : {ID: (6, 6)} covariance over (dt, dphi): ``t_est - t_true`` and ``Log(R_est R_true^T)``, robot
         axes, m and rad (as :func:`gtrig.vision.covariance.pose_error_xi`); it includes the anchor's own
         uncertainty when one was given, fully correlated between markers (not represented here).
+    cov_relative : {ID: (6, 6)} the same without the anchor's own uncertainty: what the images measured,
+        the marker relative to the robot frame as the anchor realises it (zero for the anchor).
     n_views : {ID: images in which the marker's corners were used}.
     paths : {ID: chain of markers from the anchor used to start it}; length 2 means seen with the anchor,
         longer means bridged through other markers.
@@ -90,6 +92,7 @@ class RobotCalibration:
     images_used: int
     rms_px: float
     variance_factor: float
+    cov_relative: dict[int, Array] = field(default_factory=dict)
 
     def sigma(self, marker_id: int) -> tuple[float, float]:
         """One-sigma position (m, the RMS over axes times sqrt 3) and rotation (rad) uncertainty."""
@@ -195,6 +198,8 @@ def calibrate_from_views(views: Sequence[View], markers: Sequence[MarkerSpec], a
     Ta = out_T[anchor]
     Ca = np.zeros((6, 6)) if anchor_cov is None else np.asarray(anchor_cov, float)
     cov[anchor] = Ca.copy()
+    cov_rel = {m: c.copy() for m, c in cov.items()}
+    cov_rel[anchor] = np.zeros((6, 6))
     if anchor_cov is not None:
         for m in calibrated:
             A = _anchor_propagation(Ta, out_T[m])
@@ -210,7 +215,8 @@ def calibrate_from_views(views: Sequence[View], markers: Sequence[MarkerSpec], a
         rejected_images=dict(sorted(rejected_images.items())), rejected_views=dict(sorted(rejected_views.items())),
         rejected_pairs=graph.rejected_edges, uncalibrated=dict(sorted(uncal.items())),
         unknown_ids=dict(unknown_ids or {}), images_total=images_total, images_used=len(result.images),
-        rms_px=rms, variance_factor=result.variance_factor)
+        rms_px=rms, variance_factor=result.variance_factor,
+        cov_relative={m: cov_rel[m] for m in out_T})
 
 
 def _drop_single(views: list[View]) -> list[View]:

@@ -39,7 +39,7 @@ from gtrig.io.atomic import atomic_write_text
 from gtrig.io.yamlfile import load_yaml
 from gtrig.markers.robotcal.calibrate import RobotCalibration
 from gtrig.markers.robotcal.observe import Array, MarkerSpec
-from gtrig.rig.models import Marker, MarkerFamily, Pose, Rig
+from gtrig.rig.models import Marker, MarkerFamily, Pose, Rig, pose_cov_rows
 
 
 def parse_anchor_pose(text: str) -> Array:
@@ -145,11 +145,18 @@ def read_markers_yaml(path: str | os.PathLike[str]) -> tuple[list[Marker], dict[
 
 
 def apply_to_rig(rig: Rig, cal: RobotCalibration) -> Rig:
-    """``rig`` with the calibrated markers' ``T_robot_marker`` replaced (others unchanged)."""
+    """``rig`` with the calibrated markers' ``T_robot_marker`` and ``pose_cov`` replaced (others
+    unchanged)."""
     new = []
     for m in rig.robot.markers:
         T = cal.T_robot_marker.get(m.id)
-        new.append(m if T is None else m.model_copy(update={"T_robot_marker": Pose.from_matrix(T)}))
+        if T is None:
+            new.append(m)
+            continue
+        upd: dict[str, object] = {"T_robot_marker": Pose.from_matrix(T)}
+        if m.id in cal.cov_relative:
+            upd["pose_cov"] = pose_cov_rows(cal.cov_relative[m.id])
+        new.append(m.model_copy(update=upd))
     robot = rig.robot.model_copy(update={"markers": tuple(new)})
     return rig.model_copy(update={"robot": robot})
 
