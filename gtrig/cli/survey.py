@@ -16,6 +16,7 @@ _OUTLIER = typer.Option(
     "exclude", "--on-outlier", help="exclude (with a warning), refuse, or keep a bad reading."
 )
 _SIGMA = typer.Option(None, "--sigma", help="Hand-laser sigma (m) for rows without one [default 0.002].")
+_REF_SIGMA = typer.Option(0.002, "--reference-sigma", help="Reference sigma (m) if REF.csv has none.")
 
 
 @app.command("points")
@@ -30,9 +31,7 @@ def points(
     ),
     out: Path = typer.Option(..., "--out", help="POINTS.csv: name,x,y,cov_xx,cov_xy,cov_yy,..."),
     sigma: float | None = _SIGMA,
-    reference_sigma: float = typer.Option(
-        0.002, "--reference-sigma", help="Reference sigma (m) if REF.csv has none."
-    ),
+    reference_sigma: float = _REF_SIGMA,
     on_ambiguity: str = _AMBIG,
     on_outlier: str = _OUTLIER,
     plot: Path | None = typer.Option(
@@ -161,9 +160,7 @@ def adjust(
     out_points: Path = typer.Option(..., "--out-points", help="POINTS.csv of the joint adjustment."),
     out_poses: Path = typer.Option(..., "--out-poses", help="POSES.csv of the joint adjustment."),
     sigma: float | None = _SIGMA,
-    reference_sigma: float = typer.Option(
-        0.002, "--reference-sigma", help="Reference sigma (m) if REF.csv has none."
-    ),
+    reference_sigma: float = _REF_SIGMA,
     on_ambiguity: str = _AMBIG,
     on_outlier: str = _OUTLIER,
 ) -> None:

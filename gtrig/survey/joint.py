@@ -28,6 +28,7 @@ from scipy.optimize import least_squares
 
 from gtrig.errors import ConvergenceError, InputError
 from gtrig.io.survey_csv import Distances, NamedPoints
+from gtrig.survey.network import point_blocks
 from gtrig.survey.robust import BadReading, ResidualTest, record_exclusion, residual_test, triage
 
 
@@ -60,9 +61,7 @@ class JointResult:
     @property
     def points_cov_xy(self) -> np.ndarray:
         """(N, 2, 2) marginal covariance of every world point."""
-        n = self.points_xy.shape[0]
-        i = np.arange(n)
-        return self.points_cov_joint.reshape(n, 2, n, 2)[i, :, i]
+        return point_blocks(self.points_cov_joint)
 
 
 @dataclass(frozen=True)

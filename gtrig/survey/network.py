@@ -53,9 +53,14 @@ class NetworkResult:
     @property
     def cov_xy(self) -> np.ndarray:
         """(N, 2, 2) marginal covariance of every world point, m^2."""
-        n = self.xy.shape[0]
-        i = np.arange(n)
-        return self.cov_joint.reshape(n, 2, n, 2)[i, :, i]
+        return point_blocks(self.cov_joint)
+
+
+def point_blocks(cov_joint: np.ndarray) -> np.ndarray:
+    """The (N, 2, 2) diagonal blocks of a (2N, 2N) covariance over (x1, y1, x2, y2, ...)."""
+    n = cov_joint.shape[0] // 2
+    i = np.arange(n)
+    return cov_joint.reshape(n, 2, n, 2)[i, :, i]
 
 
 @dataclass(frozen=True)

@@ -121,3 +121,31 @@ def test_whitened_residual_test_equals_the_general_one() -> None:
     np.testing.assert_allclose(b.w, a.w, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(b.error_m, a.error_m, rtol=1e-9, atol=1e-12)
     assert abs(a.chi2 - b.chi2) < 1e-9 and a.dof == b.dof
+
+
+def test_cli_adjust_writes_both_tables(tmp_path) -> None:
+    from typer.testing import CliRunner
+
+    from gtrig.cli.main import app
+    from gtrig.io.survey_csv import read_points, read_pose_table
+    from gtrig.sim.survey import write_survey
+
+    sc, T, truth = scene_and_poses(0)
+    write_survey(sc, T[:8], tmp_path, None, seed=0)
+    sv = tmp_path / "survey"
+    out_w, out_p = tmp_path / "points.csv", tmp_path / "poses.csv"
+    r = CliRunner().invoke(app, [
+        "survey", "adjust", "--reference", str(sv / "reference_points.csv"), "--distances",
+        str(sv / "world_distances.csv"), "--robot-points", str(sv / "robot_points.csv"), "--pose-distances",
+        str(sv / "pose_distances.csv"), "--sigma", "0.00075", "--out-points", str(out_w), "--out-poses", str(out_p)])
+    assert r.exit_code == 0, r.output
+    assert "16 world points" in r.output and "8 poses" in r.output
+    w, p = read_points(out_w), read_pose_table(out_p)
+    assert np.abs(w.xy - sc.world_points_xy).max() < 0.002
+    assert np.hypot(*(p.xytheta[:, :2] - truth[:8, :2]).T).max() < 0.002
+    # a user mistake is one line and a non-zero exit
+    r = CliRunner().invoke(app, [
+        "survey", "adjust", "--reference", str(sv / "reference_points.csv"), "--distances",
+        str(sv / "world_distances.csv"), "--robot-points", str(tmp_path / "missing.csv"), "--pose-distances",
+        str(sv / "pose_distances.csv"), "--out-points", str(out_w), "--out-poses", str(out_p)])
+    assert r.exit_code != 0 and "missing.csv" in r.output and "Traceback" not in r.output
