@@ -57,6 +57,9 @@ class RigUncertainty:
     marker_rot_rad: float = math.radians(0.05)
     camera_cov: Mapping[str, np.ndarray] = field(default_factory=dict)
     marker_cov: Mapping[int, np.ndarray] = field(default_factory=dict)
+    # square-root informations already computed (every frame asks for the same few)
+    _sqrt_info: dict[tuple[str, str | int], np.ndarray | None] = field(
+        default_factory=dict, compare=False, repr=False)
 
     @staticmethod
     def none() -> RigUncertainty:
@@ -70,12 +73,18 @@ class RigUncertainty:
             return self
         cams = {c.name: np.asarray(c.pose_cov, float) for c in rig.cameras if c.pose_cov is not None}
         marks = {m.id: np.asarray(m.pose_cov, float) for m in rig.robot.markers if m.pose_cov is not None}
-        return replace(self, camera_cov={**cams, **self.camera_cov}, marker_cov={**marks, **self.marker_cov})
+        return replace(self, camera_cov={**cams, **self.camera_cov}, marker_cov={**marks, **self.marker_cov},
+                       _sqrt_info={})
 
     def sqrt_information(self, kind: str, key: str | int) -> np.ndarray | None:
         """``S`` (k, k) with ``S^T S`` the inverse covariance of camera (``kind="camera"``) or marker
         ``key`` (k = 6, or 6 + n for a camera whose lens is included), or None when it has no
         uncertainty (then no nuisance is added for it)."""
+        if (kind, key) not in self._sqrt_info:
+            self._sqrt_info[(kind, key)] = self._sqrt_information(kind, key)
+        return self._sqrt_info[(kind, key)]
+
+    def _sqrt_information(self, kind: str, key: str | int) -> np.ndarray | None:
         cov = self.camera_cov.get(str(key)) if kind == "camera" else self.marker_cov.get(int(key))
         if cov is None:
             s_t, s_r = ((self.camera_xyz_m, self.camera_rot_rad) if kind == "camera"

@@ -104,11 +104,13 @@ class VisionAccuracy:
         return self.frames_visible_localized / self.frames_visible if self.frames_visible else math.nan
 
 
-def accuracy_on_recording(result: VisionResult, rec_dir: str | os.PathLike[str]) -> VisionAccuracy:
+def accuracy_on_recording(result: VisionResult, rec_dir: str | os.PathLike[str],
+                          T_true_robot_frame: np.ndarray | None = None) -> VisionAccuracy:
     """:func:`accuracy` of a simulated recording's sequence against its truth (``truth/<sequence>.tum``,
     ``truth/rig.yaml``) and, for the run, the images in which a marker is fully visible at the true pose.
 
-    Evaluation only: the truth is read here, never by the estimator.
+    Evaluation only: the truth is read here, never by the estimator. ``T_true_robot_frame`` as in
+    :func:`accuracy`.
     """
     from gtrig.io.frames import read_frame_index
     from gtrig.io.tum import read_tum
@@ -117,17 +119,21 @@ def accuracy_on_recording(result: VisionResult, rec_dir: str | os.PathLike[str])
     rec = Path(rec_dir)
     truth = read_tum(rec / "truth" / f"{result.sequence}.tum")
     if result.sequence != "run":
-        return accuracy(result, truth)
+        return accuracy(result, truth, T_true_robot_frame=T_true_robot_frame)
     stamps = {c: read_frame_index(rec / "run" / "cameras" / c).stamps_s for c in result.images_per_camera}
-    return accuracy(result, truth, load_rig(rec / "truth" / "rig.yaml"), stamps)
+    return accuracy(result, truth, load_rig(rec / "truth" / "rig.yaml"), stamps, T_true_robot_frame)
 
 
 def accuracy(result: VisionResult, truth: Trajectory, rig_true: Rig | None = None,
-             frame_stamps: dict[str, np.ndarray] | None = None) -> VisionAccuracy:
+             frame_stamps: dict[str, np.ndarray] | None = None,
+             T_true_robot_frame: np.ndarray | None = None) -> VisionAccuracy:
     """Errors of the localized poses against ``truth`` (``truth/run.tum`` or ``truth/validation.tum``).
 
     With ``rig_true`` and the per-camera image stamps (``frame_stamps``), also counts the images in which
     a marker is fully visible at the true pose and how many of them were localized (run acceptance).
+    ``T_true_robot_frame`` (4, 4): compare with the robot frame the markers realise rather than the true
+    one, ``T_true @ T_true_robot_frame``; for markers calibrated relative to an anchor whose given pose is
+    ``A`` and true pose ``A_true`` that is ``A_true @ inv(A)`` (the anchor's own error taken out).
     """
     from gtrig.vision.synthetic import visible_views
 
@@ -136,6 +142,8 @@ def accuracy(result: VisionResult, truth: Trajectory, rig_true: Rig | None = Non
     pos, yaw, ne = [], [], []
     if ok:
         Tt = interpolate_truth(truth, np.array([e.stamp_s for e in ok]))
+        if T_true_robot_frame is not None:
+            Tt = Tt @ np.asarray(T_true_robot_frame, dtype=float)
         for e, T in zip(ok, Tt, strict=True):
             assert e.T_world_robot is not None and e.cov_6x6 is not None
             err = pose_error_xi(e.T_world_robot, T)
