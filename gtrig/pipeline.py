@@ -175,7 +175,7 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     from gtrig.markers.robotcal import RobotCalibration
     from gtrig.rig import load_rig
     from gtrig.vision import report as vision_report
-    from gtrig.vision.covariance import UNCALIBRATED_MARKERS, anchor_frame_covariance
+    from gtrig.vision.covariance import ANCHOR_PLACEMENT_SIGMA, UNCALIBRATED_MARKERS, anchor_frame_covariance
     from gtrig.vision.estimate import VisionOptions
     from gtrig.vision.sequence import run_recording, with_robot_frame_uncertainty, write_covariance_csv
 
@@ -185,7 +185,7 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     if isinstance(cal, RobotCalibration):
         # The dima-marker's own pose on the robot (set square against the dima, offset measured with a
         # caliper: 0.3 mm, 0.1 deg about z) is an error common to all markers, added to every pose below.
-        sig = np.r_[0.0003, 0.0003, 0.00006, np.radians([0.02, 0.02, 0.1])]
+        sig = np.asarray(ANCHOR_PLACEMENT_SIGMA)
         cov_frame = anchor_frame_covariance(rig.marker(cal.anchor).T_robot_marker.matrix(), np.diag(sig**2))
     # each calibrated camera and marker in view gets a pose nuisance with the covariance its calibration
     # wrote into the rig (pose_cov); the others the sigmas of hand measurements

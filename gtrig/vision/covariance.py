@@ -110,6 +110,12 @@ UNCALIBRATED_MARKERS = RigUncertainty(camera_xyz_m=0.003, camera_rot_rad=math.ra
                                       marker_xyz_m=0.002, marker_rot_rad=math.radians(0.5))
 
 
+#: One-sigma error of the anchor marker's pose on the robot when it is set square against the dima and
+#: its offset measured with a caliper (dt x, y, z in m, then rotations about x, y, z in rad, anchor axes):
+#: what ``gtrig.pipeline`` assumes for the dima-marker, and what the simulator draws.
+ANCHOR_PLACEMENT_SIGMA = (0.0003, 0.0003, 0.00006, math.radians(0.02), math.radians(0.02), math.radians(0.1))
+
+
 def anchor_frame_covariance(T_robot_anchor: np.ndarray, cov_anchor_6x6: np.ndarray) -> np.ndarray:
     """Covariance (6, 6) of the robot frame's own error caused by the anchor marker's measured pose.
 
