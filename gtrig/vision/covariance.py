@@ -60,6 +60,7 @@ class RigUncertainty:
     # square-root informations already computed (every frame asks for the same few)
     _sqrt_info: dict[tuple[str, str | int], np.ndarray | None] = field(
         default_factory=dict, compare=False, repr=False)
+    _derived: dict[str, RigUncertainty] = field(default_factory=dict, compare=False, repr=False)
 
     @staticmethod
     def none() -> RigUncertainty:
@@ -74,7 +75,16 @@ class RigUncertainty:
         cams = {c.name: np.asarray(c.pose_cov, float) for c in rig.cameras if c.pose_cov is not None}
         marks = {m.id: np.asarray(m.pose_cov, float) for m in rig.robot.markers if m.pose_cov is not None}
         return replace(self, camera_cov={**cams, **self.camera_cov}, marker_cov={**marks, **self.marker_cov},
-                       _sqrt_info={})
+                       _sqrt_info={}, _derived={})
+
+    def without_lenses(self) -> RigUncertainty:
+        """The same with each camera's covariance cut to its pose (the lens's part marginalised): a
+        cheaper model for ranking candidate poses, whose costs barely depend on it."""
+        if "without_lenses" not in self._derived:
+            self._derived["without_lenses"] = replace(
+                self, camera_cov={k: np.asarray(v)[:6, :6] for k, v in self.camera_cov.items()}, _sqrt_info={},
+                _derived={})
+        return self._derived["without_lenses"]
 
     def sqrt_information(self, kind: str, key: str | int) -> np.ndarray | None:
         """``S`` (k, k) with ``S^T S`` the inverse covariance of camera (``kind="camera"``) or marker

@@ -165,11 +165,11 @@ class FrameEstimate:
 def _fit(model: VisionModel, views: list[MarkerView], opts: VisionOptions,
          previous: PreviousPose | None):
     sc = stack_corners(model, views)
-    init = initial_pose(model, views, sc, opts.planar_prior, previous, opts.init, opts.refine,
-                        opts.rig_uncertainty)
-    fit = init.best.fit
-    if not fit.converged:  # candidates get a few iterations only: finish the job
-        fit = refine_pose(sc, fit.T_world_robot, opts.planar_prior, opts.refine, opts.rig_uncertainty)
+    # candidates are ranked with the cameras' pose uncertainty only; the lenses' (eight more nuisance
+    # parameters per camera) enter the one fit that gives the pose and its covariance
+    ru = opts.rig_uncertainty
+    init = initial_pose(model, views, sc, opts.planar_prior, previous, opts.init, opts.refine, ru.without_lenses())
+    fit = refine_pose(sc, init.best.fit.T_world_robot, opts.planar_prior, opts.refine, ru)
     return sc, init, fit
 
 
