@@ -130,7 +130,7 @@ def _kept(readings: Distances, excluded: tuple[BadReading, ...]) -> np.ndarray:
 
 
 def run_recording_survey(
-    rec_dir: str | os.PathLike[str], out_dir: str | os.PathLike[str] | None = None, **kwargs: object
+    rec_dir: str | os.PathLike[str], out_dir: str | os.PathLike[str] | None = None, **kwargs: Any
 ) -> SurveyResult:
     """Read ``rec_dir/survey/*.csv`` (sigma default: the rig's hand-laser sigma), estimate world points and
     validation poses; with ``out_dir`` write ``world_points.csv`` and ``validation_poses.csv`` there."""
