@@ -225,8 +225,11 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
     P = 6 + Bn.shape[1]
     eta = np.zeros(P - 6)
 
-    def cost_at(Tx: np.ndarray, etax: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        uv, z, _ = project_pose(sc, Tx, jacobian=False)
+    def cost_at(Tx: np.ndarray, etax: np.ndarray
+                ) -> tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray | None]]:
+        """Robust cost at ``Tx`` and the projection with its Jacobian (reused when the step is taken)."""
+        proj = project_pose(sc, Tx)
+        uv, z, _ = proj
         rw = whiten(sc, uv - sc.uv).reshape(-1) + Bn @ etax
         e = np.linalg.norm(rw.reshape(N, 2), axis=1)
         e = np.where(z > 0, e, 1e6)
@@ -234,15 +237,15 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
         if prior is not None:
             rp, _ = prior_residuals(Tx, prior)
             c += float(rp @ rp)
-        return c, rw, e
+        return c, proj
 
-    cost, _, _ = cost_at(T, eta)
+    cost, proj = cost_at(T, eta)
     converged = False
     it = 0
     lam = 0.0
     dx = np.zeros(P)
     for it in range(1, options.max_iter + 1):  # noqa: B007
-        uv, z, J = project_pose(sc, T)
+        uv, z, J = proj
         assert J is not None
         rw = whiten(sc, uv - sc.uv).reshape(-1) + Bn @ eta
         A = np.hstack([whiten(sc, J).reshape(-1, 6), Bn])
@@ -266,9 +269,9 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
                 lam = max(lam * 10, 1e-6)
                 continue
             T_new = apply_step(T, dx[:6])
-            c_new, _, _ = cost_at(T_new, eta + dx[6:])
+            c_new, proj_new = cost_at(T_new, eta + dx[6:])
             if c_new <= cost * (1 + 1e-12) + 1e-12:
-                T, eta, cost = T_new, eta + dx[6:], c_new
+                T, eta, cost, proj = T_new, eta + dx[6:], c_new, proj_new
                 lam = lam / 10 if lam > 1e-9 else 0.0
                 step_ok = True
                 break
@@ -282,8 +285,9 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
     # re-orthonormalise (many small rotations accumulate rounding)
     U, _, Vt = np.linalg.svd(T[:3, :3])
     T[:3, :3] = U @ Vt
-    uv, z, J = project_pose(sc, T)
-    assert J is not None
+    uv, z, J_final = project_pose(sc, T)
+    assert J_final is not None
+    J = J_final
     r = uv - sc.uv
     rw = whiten(sc, r).reshape(-1) + Bn @ eta
     Jw = whiten(sc, J)
