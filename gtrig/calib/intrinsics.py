@@ -86,10 +86,17 @@ def _run(
     obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int], flags: int, K0: np.ndarray | None
 ) -> tuple:
     crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    # OpenCV's threads sum the views' normal equations in whatever order they finish: the lens then
+    # differs in the ninth digit from run to run, which changes every later output and invalidates
+    # GTvision's detection checkpoints; one thread costs nothing measurable here (7.5 s either way)
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
     try:
         return cv2.calibrateCameraExtended(obj, img, size, K0, None, flags=flags, criteria=crit)
     except cv2.error as e:
         raise ConvergenceError(f"OpenCV calibration failed: {str(e).splitlines()[-1].strip()}") from None
+    finally:
+        cv2.setNumThreads(threads)
 
 
 def calibrate_views(
