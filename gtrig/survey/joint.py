@@ -42,6 +42,8 @@ class JointResult:
     points_cov_joint : (2N, 2N) their covariance (x1, y1, x2, y2, ...), m^2.
     poses_xytheta : (P, 3) robot frame in the world (m, m, rad in [-pi, pi)).
     poses_cov : (P, 3, 3) covariance of each pose (m^2, m rad, rad^2), marginal over everything else.
+    poses_cov_joint : (3P, 3P) the poses' joint covariance (x1, y1, theta1, x2, ...): they share the
+        world points, so their errors are correlated.
     reference_xy : (M, 2) adjusted reference points.
     test : global chi-square and w-test over every reading and prior.
     world_active, pose_active : (K,), (L,) readings used, in the order given.
@@ -52,6 +54,7 @@ class JointResult:
     points_cov_joint: np.ndarray
     poses_xytheta: np.ndarray
     poses_cov: np.ndarray
+    poses_cov_joint: np.ndarray
     reference_xy: np.ndarray
     test: ResidualTest
     world_active: np.ndarray
@@ -266,8 +269,11 @@ def adjust_jointly(
     X[:, 2] = (X[:, 2] + np.pi) % (2 * np.pi) - np.pi
     n2 = 2 * len(world_names)
     c0 = n2 + 2 * prob.free.size
-    pose_cov = np.array([C[c0 + 3 * i: c0 + 3 * i + 3, c0 + 3 * i: c0 + 3 * i + 3] for i in range(len(pose_names))])
-    return JointResult(P, C[:n2, :n2], X, pose_cov.reshape(-1, 3, 3), R, test, wact, pact, tuple(excluded))
+    n3 = 3 * len(pose_names)
+    cov_joint = C[c0:c0 + n3, c0:c0 + n3]
+    pose_cov = np.array([cov_joint[3 * i:3 * i + 3, 3 * i:3 * i + 3] for i in range(len(pose_names))])
+    return JointResult(P, C[:n2, :n2], X, pose_cov.reshape(-1, 3, 3), cov_joint, R, test, wact, pact,
+                       tuple(excluded))
 
 
 def _prior_message(test: ResidualTest, prob: _Problem, references: NamedPoints, pose_names: list[str],

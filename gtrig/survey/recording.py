@@ -45,6 +45,17 @@ class SurveyResult:
     poses: PosesResult
     joint: JointResult | None = None
 
+    def poses_cov_joint(self) -> np.ndarray:
+        """(3P, 3P) joint covariance of the validation poses: the joint adjustment's, or the per-pose
+        blocks alone when it did not run."""
+        if self.joint is not None:
+            return self.joint.poses_cov_joint
+        P = len(self.poses.names)
+        C = np.zeros((3 * P, 3 * P))
+        for i in range(P):
+            C[3 * i:3 * i + 3, 3 * i:3 * i + 3] = self.poses.cov_xytheta[i]
+        return C
+
 
 @dataclass(frozen=True)
 class SurveyAccuracy:
