@@ -15,11 +15,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
+from gtrig import geometry as geo
 from gtrig.errors import GtrigError
 from gtrig.io.recording import recording_dir
 
 if TYPE_CHECKING:
     from gtrig.rig import Rig
+    from gtrig.vision.sequence import VisionResult
 
 log = logging.getLogger(__name__)
 
@@ -124,6 +128,8 @@ def marker_calibration(ctx: StageContext) -> list[AccuracyRow]:
     rig = _rig(ctx)
     rig2, cal = calibrate_markers(ctx.rec, rig)
     write_markers_yaml(ctx.out / "markers.yaml", cal, specs_from_rig(rig))
+    # every marker now hangs on the dima-marker's hand-measured pose: its error is common to all
+    rig2 = _with_frame_cov(rig2, _hand_frame_covariance(rig2, cal.anchor))
     _calibrated(ctx, rig2)
     ctx.products["marker_calibration"] = cal
     if not _has_truth(ctx):
@@ -167,45 +173,156 @@ def gtlaser(ctx: StageContext) -> list[AccuracyRow]:
     ]
 
 
+def _validation_vision(ctx: StageContext, rig: Rig) -> VisionResult:
+    """GTvision over the validation stops with ``rig``, planar, the rig's calibrated covariances; the
+    detections checkpointed, so an interrupted demo resumes instead of detecting again."""
+    from gtrig.vision.covariance import UNCALIBRATED_MARKERS
+    from gtrig.vision.estimate import VisionOptions
+    from gtrig.vision.sequence import run_recording
+
+    # each calibrated camera and marker in view gets a pose nuisance with the covariance its calibration
+    # wrote into the rig (pose_cov); the others the sigmas of hand measurements
+    return run_recording(ctx.rec, rig, sequence="validation", planar=True,
+                         options=VisionOptions(rig_uncertainty=UNCALIBRATED_MARKERS),
+                         checkpoint=ctx.out / "gt_vision_validation.checkpoint", stale_checkpoint="restart")
+
+
+def _with_frame_cov(rig: Rig, cov_6x6: np.ndarray | None) -> Rig:
+    """``rig`` whose ``robot.markers_frame_cov`` is ``cov_6x6`` (None: no common frame error)."""
+    from gtrig.rig.models import pose_cov_rows
+
+    cov = None if cov_6x6 is None else pose_cov_rows(cov_6x6)
+    return rig.model_copy(update={"robot": rig.robot.model_copy(update={"markers_frame_cov": cov})})
+
+
+def _without_frame_cov(rig: Rig) -> Rig:
+    """GTvision's own covariances: without the markers' common frame error."""
+    return _with_frame_cov(rig, None)
+
+
+def _hand_frame_covariance(rig: Rig, anchor: int) -> np.ndarray:
+    """The robot frame's common error (6, 6, robot axes) from the anchor's hand-measured pose (set square
+    against the dima, offset measured with a caliper: 0.3 mm, 0.1 deg about z)."""
+    from gtrig.vision.covariance import ANCHOR_PLACEMENT_SIGMA, anchor_frame_covariance
+
+    sig = np.asarray(ANCHOR_PLACEMENT_SIGMA)
+    return anchor_frame_covariance(rig.marker(anchor).T_robot_marker.matrix(), np.diag(sig**2))
+
+
+def robot_frame(ctx: StageContext) -> list[AccuracyRow]:
+    """The markers' robot frame tied to the surveyed one at the validation stops (gtrig.vision.robot_frame):
+    the anchor's hand-measured pose replaced by what the survey and GTvision measured."""
+    from gtrig.io.survey_csv import read_table
+    from gtrig.markers.robotcal import RobotCalibration
+    from gtrig.rig import load_rig
+    from gtrig.survey import SurveyResult
+    from gtrig.vision.covariance import planar_covariance
+    from gtrig.vision.robot_frame import fit_frame_offset, frame_error_covariance, rig_in_surveyed_frame
+
+    cal = ctx.products.get("marker_calibration")
+    sv = ctx.products.get("survey")
+    if not isinstance(cal, RobotCalibration) or not isinstance(sv, SurveyResult):
+        raise GtrigError("needs the marker calibration and the survey's validation poses")
+    rig = _rig(ctx)
+    if rig.robot.markers_frame_cov is None:
+        raise GtrigError("the rig gives no covariance of the markers' frame (robot.markers_frame_cov)")
+    cov_hand = np.asarray(rig.robot.markers_frame_cov, float)
+    # GTvision's own covariances: the frame error is what the stops are about to measure
+    val = _validation_vision(ctx, _without_frame_cov(rig))
+    ctx.products["vision_validation"] = val
+    names = list(read_table(ctx.rec / "validation" / "poses.csv", ("pose", "start_s", "end_s")).column("pose"))
+    if len(names) != len(val.estimates):
+        raise GtrigError(f"{len(names)} validation stops but {len(val.estimates)} GTvision instants")
+    missing = [n for n in names if n not in sv.poses.names]
+    if missing:
+        raise GtrigError(f"validation stop(s) {', '.join(missing)} not in the survey")
+    iv = [sv.poses.names.index(n) for n in names]
+    rows_cov = np.concatenate([np.arange(3 * i, 3 * i + 3) for i in iv])
+    nan3 = np.full(3, np.nan)
+    V = np.array([geo.T_to_se2(e.T_world_robot) if e.ok and e.T_world_robot is not None else nan3
+                  for e in val.estimates])
+    Cv = np.array([planar_covariance(e.cov_6x6) if e.ok and e.cov_6x6 is not None else np.full((3, 3), np.nan)
+                   for e in val.estimates])
+    fit = fit_frame_offset(names, V, Cv, sv.poses.xytheta[iv], sv.poses_cov_joint()[np.ix_(rows_cov, rows_cov)])
+    ctx.products["frame_fit"] = fit
+    rig2 = _with_frame_cov(rig_in_surveyed_frame(rig, fit.T_markers_surveyed),
+                           frame_error_covariance(fit.cov_d, cov_hand))
+    ctx.products["hand_frame_cov"] = cov_hand
+    _calibrated(ctx, rig2)
+    log.info("robot frame from %d stops: offset %.2f mm, %.2f mm, %.4f deg (sigma %.2f mm, %.2f mm, %.4f deg), "
+             "chi2 %.1f over %d dof", int(fit.used.sum()), *(1000 * fit.d_xytheta[:2]),
+             math.degrees(fit.d_xytheta[2]), *(1000 * np.sqrt(np.diag(fit.cov_d)[:2])),
+             math.degrees(math.sqrt(fit.cov_d[2, 2])), fit.chi2, fit.dof)
+    if not _has_truth(ctx):
+        return []
+    truth = load_rig(ctx.rec / "truth" / "rig.yaml")
+    A_true = truth.marker(cal.anchor).T_robot_marker.matrix()
+    # the frame the markers realised is the true one moved by A_given A_true^-1: what D should be
+    D_true = geo.T_to_se2(rig.marker(cal.anchor).T_robot_marker.matrix() @ np.linalg.inv(A_true))
+    e = fit.d_xytheta - D_true
+    e[2] = float(geo.wrap_angle(e[2]))
+    nees = float(e @ np.linalg.solve(fit.cov_d, e))
+    true_m = {m.id: m.T_robot_marker.matrix() for m in truth.robot.markers}
+    err = [geo.pose_error(m.T_robot_marker.matrix(), true_m[m.id]) for m in rig2.robot.markers
+           if m.id in true_m and m.id in cal.T_robot_marker]
+    pos_mm = max(p for p, _ in err) * 1000
+    rot_deg = math.degrees(max(r for _, r in err))
+    return [
+        AccuracyRow("robot frame", "offset from the survey, position error", float(np.hypot(*e[:2])) * 1000, "mm"),
+        AccuracyRow("robot frame", "offset from the survey, yaw error", abs(math.degrees(e[2])), "deg"),
+        AccuracyRow("robot frame", "offset from the survey, NEES / dof", nees / 3, "", "0.5-2"),
+        AccuracyRow("markers", "on the robot, surveyed frame, worst position error", pos_mm, "mm", "<= 1",
+                    pos_mm <= 1),
+        AccuracyRow("markers", "on the robot, surveyed frame, worst orientation error", rot_deg, "deg", "<= 0.1",
+                    rot_deg <= 0.1),
+    ]
+
+
 def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     """Robot poses from all markers in all cameras, on the calibrated rig (issue 6)."""
-    import numpy as np
-
     from gtrig.io.tum import write_tum
     from gtrig.markers.robotcal import RobotCalibration
     from gtrig.rig import load_rig
     from gtrig.vision import report as vision_report
-    from gtrig.vision.covariance import ANCHOR_PLACEMENT_SIGMA, UNCALIBRATED_MARKERS, anchor_frame_covariance
+    from gtrig.vision.covariance import UNCALIBRATED_MARKERS
     from gtrig.vision.estimate import VisionOptions
-    from gtrig.vision.sequence import run_recording, with_robot_frame_uncertainty, write_covariance_csv
+    from gtrig.vision.robot_frame import FrameFit, frame_error_covariance, in_surveyed_frame
+    from gtrig.vision.sequence import VisionResult, run_recording, with_robot_frame_uncertainty, write_covariance_csv
 
     rig = _rig(ctx)
-    cov_frame = None
     cal = ctx.products.get("marker_calibration")
-    if isinstance(cal, RobotCalibration):
-        # The dima-marker's own pose on the robot (set square against the dima, offset measured with a
-        # caliper: 0.3 mm, 0.1 deg about z) is an error common to all markers, added to every pose below.
-        sig = np.asarray(ANCHOR_PLACEMENT_SIGMA)
-        cov_frame = anchor_frame_covariance(rig.marker(cal.anchor).T_robot_marker.matrix(), np.diag(sig**2))
-    # each calibrated camera and marker in view gets a pose nuisance with the covariance its calibration
-    # wrote into the rig (pose_cov); the others the sigmas of hand measurements
-    options = VisionOptions(rig_uncertainty=UNCALIBRATED_MARKERS)
+    fit = ctx.products.get("frame_fit")
+    fit = fit if isinstance(fit, FrameFit) else None
     rows: list[AccuracyRow] = []
     for seq in ("validation", "run"):
-        # the detections are checkpointed, so an interrupted demo resumes instead of detecting again
-        res = run_recording(ctx.rec, rig, sequence=seq, planar=True, options=options,
-                            checkpoint=ctx.out / f"gt_vision_{seq}.checkpoint")
-        res_own = res
-        if cov_frame is not None:
-            res = with_robot_frame_uncertainty(res, cov_frame)
+        static = seq == "validation"
+        res_eval = res_own = None
+        if static and fit is not None:
+            # the stops measured the frame: the file gets the offset of every stop, the accuracy rows
+            # check each stop corrected with the offset fitted from the other stops
+            val, cov_hand = ctx.products["vision_validation"], ctx.products["hand_frame_cov"]
+            assert isinstance(val, VisionResult) and isinstance(cov_hand, np.ndarray)
+            n = len(val.estimates)
+            res = in_surveyed_frame(val, [fit.T_markers_surveyed] * n,
+                                    [frame_error_covariance(fit.cov_d, cov_hand)] * n)
+            res_eval = in_surveyed_frame(val, [geo.se2_to_T(*d) for d in fit.loo_d],
+                                         [frame_error_covariance(c, cov_hand) for c in fit.loo_cov])
+        elif static:
+            frame = rig.robot.markers_frame_cov
+            res_own = _validation_vision(ctx, _without_frame_cov(rig))
+            res = res_own if frame is None else with_robot_frame_uncertainty(res_own, np.asarray(frame, float))
+        else:
+            # the rig's markers_frame_cov (the survey's offset, or the hand's) enters every pose
+            res = run_recording(ctx.rec, rig, sequence=seq, planar=True,
+                                options=VisionOptions(rig_uncertainty=UNCALIBRATED_MARKERS),
+                                checkpoint=ctx.out / f"gt_vision_{seq}.checkpoint", stale_checkpoint="restart")
         write_tum(ctx.out / f"gt_vision_{seq}.tum", res.trajectory())
         write_covariance_csv(ctx.out / f"gt_vision_{seq}_cov.csv", res)
         if not _has_truth(ctx):
             continue
-        acc = vision_report.accuracy_on_recording(res, ctx.rec)
+        acc = vision_report.accuracy_on_recording(res_eval or res, ctx.rec)
         mean_cm, max_cm = acc.pos_err_mean_m * 100, acc.pos_err_max_m * 100
         yaw = math.degrees(acc.yaw_err_mean_rad)
-        static = seq == "validation"
         rows += [
             AccuracyRow("GTvision", f"{seq}, poses localized", acc.localized, f"of {acc.instants}",
                         "all" if static else "", acc.localized == acc.instants if static else None),
@@ -215,7 +332,7 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
             AccuracyRow("GTvision", f"{seq}, mean NEES / dof", acc.nees_mean / acc.nees_dof, "", "0.5-2",
                         0.5 <= acc.nees_mean / acc.nees_dof <= 2),
         ]
-        if static and isinstance(cal, RobotCalibration):
+        if res_own is not None and isinstance(cal, RobotCalibration):
             # the dima-marker's given pose against its true one: one error shared by every pose, so one
             # recording's NEES follows that one draw (a correct covariance gives 0.3-2.3 in nine of ten);
             # without it, what GTvision itself estimated
@@ -236,6 +353,7 @@ def _stages() -> list[tuple[str, Stage]]:
         ("survey", survey),
         ("camera calibration", camera_calibration),
         ("marker calibration", marker_calibration),
+        ("robot frame", robot_frame),
         ("GTlaser", gtlaser),
         ("GTvision", gtvision),
     ]

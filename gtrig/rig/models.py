@@ -282,8 +282,18 @@ class OnboardScanner(_Strict):
 class Robot(_Strict):
     hull: Hull
     markers: tuple[Marker, ...] = ()
+    #: covariance (6 x 6) of the error common to every marker: how far the robot frame the markers
+    #: realise may be from the robot frame itself (the anchor's measured pose, or what the survey of the
+    #: validation stops left of it; ``gtrig.vision.robot_frame``), over (dt, dphi) in robot axes, m and
+    #: rad. GTvision adds it to every pose's covariance; none: nothing is added.
+    markers_frame_cov: PoseCov | None = None
     odometry: Odometry = Odometry()
     onboard_scanners: tuple[OnboardScanner, ...] = ()
+
+    @field_validator("markers_frame_cov")
+    @classmethod
+    def _frame_cov(cls, v: PoseCov | None) -> PoseCov | None:
+        return _check_pose_cov(v, range(6, 7))
 
     @model_validator(mode="after")
     def _unique_markers(self) -> Self:

@@ -77,6 +77,22 @@ class RigUncertainty:
         return replace(self, camera_cov={**cams, **self.camera_cov}, marker_cov={**marks, **self.marker_cov},
                        _sqrt_info={}, _derived={})
 
+    def with_camera_timing(self, extra: Mapping[str, np.ndarray]) -> RigUncertainty:
+        """The same with ``extra[c]`` (6, 6) added to camera ``c``'s pose block: an image's exposure time
+        known only to ``sigma_t`` makes a moving robot look as if the camera had moved (see
+        :func:`timing_camera_covariance`), a nuisance of that camera alone."""
+        if not extra:
+            return self
+        cams = dict(self.camera_cov)
+        for name, E in extra.items():
+            base = cams.get(name)
+            if base is None:
+                base = np.diag([self.camera_xyz_m**2] * 3 + [self.camera_rot_rad**2] * 3)
+            C = np.array(base, dtype=float)
+            C[:6, :6] += np.asarray(E, dtype=float)
+            cams[name] = C
+        return replace(self, camera_cov=cams, _sqrt_info={}, _derived={})
+
     def without_lenses(self) -> RigUncertainty:
         """The same with each camera's covariance cut to its pose (the lens's part marginalised): a
         cheaper model for ranking candidate poses, whose costs barely depend on it."""
@@ -142,6 +158,23 @@ def anchor_frame_covariance(T_robot_anchor: np.ndarray, cov_anchor_6x6: np.ndarr
     tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
     Ad = np.block([[R, tx @ R], [np.zeros((3, 3)), R]])
     return Ad @ np.asarray(cov_anchor_6x6, dtype=float) @ Ad.T
+
+
+def timing_camera_covariance(velocity_6: np.ndarray, T_world_robot: np.ndarray, camera_centre_w: np.ndarray,
+                             sigma_t_s: float) -> np.ndarray:
+    """Covariance (6, 6) of a camera's apparent pose (centre's move, rotation; world axes) caused by its
+    exposure time's uncertainty ``sigma_t_s`` while the robot moves with ``velocity_6 = (v, omega)``
+    (world frame, the robot origin's velocity; :func:`gtrig.vision.sequence.pose_velocities`).
+
+    The robot moved by ``(v, omega) dt`` is the camera moved by ``dc = -(v + omega x (c - t)) dt``
+    and ``dphi = -omega dt`` (``c`` its centre, ``t`` the robot origin), so the covariance is
+    ``sigma_t^2 g g^T`` along ``g = -(v + omega x (c - t), omega)``. As a nuisance of each camera it lets
+    two cameras of one instant disagree by their own jitter, which a single term on the pose cannot.
+    """
+    vel = np.asarray(velocity_6, dtype=float)
+    lever = np.asarray(camera_centre_w, dtype=float) - np.asarray(T_world_robot, dtype=float)[:3, 3]
+    g = -np.r_[vel[:3] + np.cross(vel[3:], lever), vel[3:]]
+    return float(sigma_t_s) ** 2 * np.outer(g, g)
 
 
 def add_robot_frame_covariance(T_world_robot: np.ndarray, cov_6x6: np.ndarray, cov_frame_6x6: np.ndarray

@@ -14,7 +14,7 @@ marker corners in the robot frame), computed once per rig.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -179,6 +179,21 @@ class VisionModel:
             Trm[m.id] = m.T_robot_marker.matrix()
             corners[m.id] = geo.transform_points(Trm[m.id], marker_corners_marker(m.side_m))
         return VisionModel(cams, side, Trm, corners)
+
+    def with_camera_motion(self, T_delta: dict[str, np.ndarray]) -> VisionModel:
+        """The model as seen by an instant whose cameras exposed at other times than its stamp.
+
+        ``T_delta[c]`` (4, 4) is the robot's world-frame motion from the instant's stamp to camera
+        ``c``'s exposure (``T_world_robot(t_c) = T_delta[c] T_world_robot(t)``). Projecting the moved
+        robot through camera ``c`` is projecting the robot at ``t`` through a camera at
+        ``T_delta[c]^-1 T_world_cam``: those cameras are replaced, the others shared.
+        """
+        cams = dict(self.cameras)
+        for name, D in T_delta.items():
+            g = cams[name]
+            T = geo.inv_T(D) @ g.T_world_cam
+            cams[name] = replace(g, T_world_cam=T, T_cam_world=geo.inv_T(T))
+        return replace(self, cameras=cams)
 
     def check(self, obs: FrameObservations) -> None:
         """Raise :class:`InputError` if a view names an unknown camera or marker."""

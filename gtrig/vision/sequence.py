@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from gtrig.errors import FormatError, InputError
 from gtrig.io.frames import FrameIndex, read_frame_index
@@ -356,12 +357,108 @@ def _resolve_flips(model: VisionModel, obs: list[FrameObservations], ests: list[
     return out
 
 
+def camera_time_offsets(obs: Sequence[FrameObservations], indices: dict[str, FrameIndex]
+                        ) -> list[dict[str, float]]:
+    """Per instant, each camera's image stamp minus the instant's stamp, seconds (the mean of its
+    images' stamps: cameras that are not triggered together fall up to ``sync_tol_s`` apart)."""
+    out = []
+    for o in obs:
+        per: dict[str, list[float]] = {}
+        for cam, row in o.frames:
+            per.setdefault(cam, []).append(float(indices[cam].stamps_s[row]) - o.stamp_s)
+        out.append({c: float(np.mean(v)) for c, v in per.items()})
+    return out
+
+
+def _moving_instant(model: VisionModel, o: FrameObservations, options: VisionOptions,
+                    T_prev: np.ndarray, deltas: dict[str, np.ndarray], extra: dict[str, np.ndarray]
+                    ) -> FrameEstimate:
+    opts = replace(options, rig_uncertainty=options.rig_uncertainty.with_camera_timing(extra))
+    return estimate_frame(model.with_camera_motion(deltas) if deltas else model, o, opts, PreviousPose(T_prev))
+
+
+def _moving_chunk(chunk_id: int, items: Sequence[tuple[Any, ...]], options: VisionOptions
+                  ) -> tuple[int, list[FrameEstimate]]:
+    return chunk_id, [_moving_instant(_W["model"], o, options, T, d, x) for o, T, d, x in items]
+
+
+def compensate_motion(model: VisionModel, obs: Sequence[FrameObservations], ests: Sequence[FrameEstimate],
+                      offsets: Sequence[dict[str, float]], stamp_sigma_s: dict[str, float],
+                      options: VisionOptions, *, max_gap_s: float = 0.5, nproc: int = 1, chunk_size: int = 16,
+                      init_args: tuple[Any, ...] = ()) -> tuple[list[FrameEstimate], set[int]]:
+    """The moving instants estimated again with their cameras' exposure times.
+
+    Two things the first estimate of an instant cannot know, from the velocity of the neighbouring
+    poses (:func:`pose_velocities`):
+
+    * cameras exposed at different times: free-running cameras whose images fall within 5 ms are one
+      instant, stamped at their mean. At 0.3 m/s two cameras 4 ms apart see the robot 1.2 mm apart;
+      fitted together, their views disagree and the compromise lands off the path, across it as much as
+      along it. Each camera's view is moved to the instant's stamp by the motion over its offset
+      ``offsets[i][c]`` (:meth:`VisionModel.with_camera_motion`).
+    * each camera's own time-stamp jitter (``stamp_sigma_s``): a camera nuisance along the motion
+      (:func:`gtrig.vision.covariance.timing_camera_covariance`), so that the cameras may disagree by
+      their own jitter and the pose's covariance holds it (this replaces
+      :func:`with_timing_uncertainty` for these instants).
+
+    Returns the estimates and the indices of those whose covariance now includes the timing; an instant
+    whose second estimate fails keeps its first.
+    """
+    from gtrig.vision.covariance import timing_camera_covariance
+
+    ok = [i for i, e in enumerate(ests) if e.ok]
+    out = list(ests)
+    if len(ok) < 2:
+        return out, set()
+    T = np.stack([ests[i].T_world_robot for i in ok])  # type: ignore[misc]
+    vel = pose_velocities(np.array([ests[i].stamp_s for i in ok]), T, max_gap_s)
+    jobs: list[tuple[int, tuple[Any, ...]]] = []
+    for k, i in enumerate(ok):
+        if not np.any(vel[k]):
+            continue
+        t = T[k][:3, 3]
+        deltas, extra = {}, {}
+        for c, dt in offsets[i].items():
+            if c not in model.cameras:
+                continue
+            if abs(dt) > 1e-6:
+                D = np.eye(4)
+                D[:3, :3] = Rotation.from_rotvec(vel[k, 3:] * dt).as_matrix()
+                D[:3, 3] = t + vel[k, :3] * dt - D[:3, :3] @ t
+                deltas[c] = D
+            sig = stamp_sigma_s.get(c, 0.0)
+            if sig > 0:
+                extra[c] = timing_camera_covariance(vel[k], T[k], model.cameras[c].T_world_cam[:3, 3], sig)
+        if deltas or extra:
+            jobs.append((i, (obs[i], T[k], deltas, extra)))
+    chunks = [jobs[j:j + chunk_size] for j in range(0, len(jobs), chunk_size)]
+    results: dict[int, list[FrameEstimate]] = {}
+    if nproc == 1 or len(chunks) <= 1:
+        for cid, c in enumerate(chunks):
+            results[cid] = [_moving_instant(model, o, options, Tp, d, x) for _, (o, Tp, d, x) in c]
+    else:
+        with process_pool(nproc, _worker_init, init_args) as ex:
+            futs = [ex.submit(_moving_chunk, cid, [it for _, it in c], options) for cid, c in enumerate(chunks)]
+            for fut in futs:
+                cid, res = fut.result()
+                results[cid] = res
+    done: set[int] = set()
+    for cid, c in enumerate(chunks):
+        for (i, _), e in zip(c, results[cid], strict=True):
+            if e.ok:
+                out[i] = e
+                done.add(i)
+    log.info("%d moving instants estimated again with their cameras' exposure times", len(done))
+    return out, done
+
+
 def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "validation",
                   planar: bool = True, workers: int = 0, *, options: VisionOptions | None = None,
                   detector: str = "auto",
                   checkpoint: str | os.PathLike[str] | None = None,
                   progress: Callable[[int, int], None] | None = None, chunk_size: int = 16,
-                  sync_tol_s: float = 0.005, estimate_noise: bool = True) -> VisionResult:
+                  sync_tol_s: float = 0.005, estimate_noise: bool = True,
+                  stale_checkpoint: str = "refuse") -> VisionResult:
     """GTvision over one sequence of a recording.
 
     Parameters
@@ -374,6 +471,8 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     options : estimation settings (default :class:`VisionOptions`).
     detector : "auto", "gtrig" or "aruco" (see :func:`gtrig.vision.detect.make_detector`).
     checkpoint : file to resume from and append to; None: no checkpoint.
+    stale_checkpoint : a checkpoint of other images, lenses or markers is refused ("refuse": a user's
+        file is not overwritten by guess) or started afresh ("restart": a folder the caller owns).
     progress : called as ``progress(done_instants, total_instants)``.
     estimate_noise : estimate the corner covariances' variance factor per camera from this sequence's
         residuals and estimate every instant again with it (:func:`calibrate_noise`); ignored when
@@ -382,7 +481,8 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     -------
     VisionResult
         For the run, each pose's covariance includes the motion hidden by its cameras' time-stamp
-        jitter (``stamp_sigma_s`` in the rig; :func:`with_timing_uncertainty`).
+        jitter (``stamp_sigma_s`` in the rig; :func:`with_timing_uncertainty`); every pose's, the
+        markers' common frame error when the rig gives one (``robot.markers_frame_cov``).
     """
     from gtrig.vision.detect import make_detector
 
@@ -404,7 +504,13 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     chunks = [instants[i:i + chunk_size] for i in range(0, len(instants), chunk_size)]
     key = _key(rig, sequence, det_name, instants, paths)
     ck = Path(checkpoint) if checkpoint is not None else None
-    done = _load_checkpoint(ck, key) if ck is not None else {}
+    try:
+        done = _load_checkpoint(ck, key) if ck is not None else {}
+    except InputError as e:
+        if stale_checkpoint != "restart":
+            raise
+        log.warning("%s; starting afresh", e)
+        done = {}
     if done:
         log.info("resuming: %d of %d chunks already in %s", len(done), len(chunks), ck)
     ckf = None
@@ -465,6 +571,11 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     t_est = time.perf_counter()
     ests = _estimate_all(model, obs, opts, nproc, chunk_size, init_args)
     ests = _resolve_flips(model, obs, ests, opts)
+    stamp_sigma = {c.name: c.stamp_sigma_s for c in rig.cameras}
+    timed: set[int] = set()
+    if sequence == "run":
+        ests, timed = compensate_motion(model, obs, ests, camera_time_offsets(obs, indices), stamp_sigma, opts,
+                                        nproc=nproc, chunk_size=chunk_size, init_args=init_args)
     t_est = time.perf_counter() - t_est
     for e in ests:  # an empty view is the common case in a run: not worth a line each
         if not e.ok:
@@ -475,7 +586,10 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
                        {"parallel": t_par, "noise": t_noise, "estimate": t_est,
                         "total": time.perf_counter() - t_start},
                        opts.corner_scale)
-    return with_timing_uncertainty(res, {c.name: c.stamp_sigma_s for c in rig.cameras})
+    res = with_timing_uncertainty(res, stamp_sigma, skip=timed)
+    if rig.robot.markers_frame_cov is not None:
+        res = with_robot_frame_uncertainty(res, np.asarray(rig.robot.markers_frame_cov, float))
+    return res
 
 
 def with_robot_frame_uncertainty(result: VisionResult, cov_frame_6x6: np.ndarray) -> VisionResult:
@@ -498,8 +612,6 @@ def pose_velocities(stamps_s: np.ndarray, T_world_robot: np.ndarray, max_gap_s: 
     ``stamps_s`` (M,): central differences of the nearest neighbours (one-sided at the ends and
     across gaps longer than ``max_gap_s``; zero for an isolated pose). ``omega`` is the rotation
     vector of ``R_next R_prev^T`` per second, the ``dphi`` of :mod:`gtrig.vision.projection`."""
-    from scipy.spatial.transform import Rotation
-
     t = np.asarray(stamps_s, float)
     M = len(t)
     out = np.zeros((M, 6))
@@ -522,7 +634,8 @@ def pose_velocities(stamps_s: np.ndarray, T_world_robot: np.ndarray, max_gap_s: 
 
 
 def with_timing_uncertainty(result: VisionResult, stamp_sigma_s: dict[str, float],
-                            max_gap_s: float = 0.5) -> VisionResult:
+                            max_gap_s: float = 0.5, skip: set[int] | frozenset[int] = frozenset()
+                            ) -> VisionResult:
     """A new result whose moving poses' covariances include the motion hidden by time-stamp jitter.
 
     An image stamped ``t`` was exposed at ``t + e``, ``e ~ N(0, sigma_t^2)`` (``sigma_t``: the
@@ -530,7 +643,9 @@ def with_timing_uncertainty(result: VisionResult, stamp_sigma_s: dict[str, float
     ``t + e``, so as the pose at ``t`` it is off by ``xi = (v, omega) e``: the covariance gains
     ``sigma_t^2 xi_dot xi_dot^T``, with the velocity from the neighbouring localized poses
     (:func:`pose_velocities`). At 0.3 m/s and 2 ms that is 0.6 mm, the size of the corner noise's
-    own share on a near marker; static sequences (validation) are left alone. Poses are unchanged.
+    own share on a near marker; static sequences (validation) are left alone, and so are the estimates
+    whose indices are in ``skip`` (their cameras' timing is in their covariance already,
+    :func:`compensate_motion`). Poses are unchanged.
     """
     ok = [i for i, e in enumerate(result.estimates) if e.ok]
     if result.sequence != "run" or len(ok) < 2 or not any(v > 0 for v in stamp_sigma_s.values()):
@@ -540,6 +655,8 @@ def with_timing_uncertainty(result: VisionResult, stamp_sigma_s: dict[str, float
     vel = pose_velocities(np.array([ests[i].stamp_s for i in ok]), T, max_gap_s)
     for k, i in enumerate(ok):
         e = ests[i]
+        if i in skip:
+            continue
         sig = max((stamp_sigma_s.get(cam, 0.0) for cam, _ in e.views), default=0.0)
         if sig > 0 and e.cov_6x6 is not None:
             ests[i] = replace(e, cov_6x6=e.cov_6x6 + sig**2 * np.outer(vel[k], vel[k]))

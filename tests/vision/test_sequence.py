@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from gtrig.errors import InputError
 from gtrig.io.frames import write_frame_index
 from gtrig.io.tum import Trajectory, read_tum, write_tum
 from gtrig.rig.load import dump_rig
@@ -96,6 +97,14 @@ def test_workers_and_resume_give_identical_outputs(rec, tmp_path):
     assert outs[0] == outs[1] == outs[2]
     stamps, cov = read_covariance_csv(tmp_path / "a.csv")
     assert cov.shape == (len(POSES), 3, 3) and np.all(np.linalg.eigvalsh(cov) > 0)
+    # the checkpoint of other markers: refused, or (a folder the caller owns) started afresh
+    other = rig.model_copy(update={"robot": rig.robot.model_copy(update={"markers": tuple(
+        m.model_copy(update={"side_m": m.side_m * 1.01}) for m in rig.robot.markers)})})
+    with pytest.raises(InputError, match="checkpoint of another run"):
+        run_recording(path, other, "validation", True, workers=1, detector="aruco", checkpoint=ck)
+    d = run_recording(path, other, "validation", True, workers=1, detector="aruco", checkpoint=ck,
+                      stale_checkpoint="restart")
+    assert len(d.localized()) == len(POSES)
 
 
 def test_cli_writes_tum_and_covariance(rec, tmp_path):
