@@ -36,13 +36,14 @@ import logging
 import math
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from typing import Any
 
 import numpy as np
 
 from gtrig.vision.covariance import UNCALIBRATED_MARKERS, RigUncertainty
 from gtrig.vision.init import InitOptions, PreviousPose, initial_pose
-from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel, stack_corners
-from gtrig.vision.refine import PlanarPrior, RefineOptions, refine_pose
+from gtrig.vision.observations import FrameObservations, MarkerView, StackedCorners, VisionModel, stack_corners
+from gtrig.vision.refine import PlanarPrior, RefineOptions, RefineResult, refine_pose
 
 log = logging.getLogger(__name__)
 
@@ -204,7 +205,7 @@ def scale_views(views: tuple[MarkerView, ...] | list[MarkerView], scale: dict[st
 
 
 def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOptions = VisionOptions(),
-                   previous: PreviousPose | None = None) -> FrameEstimate:
+                   previous: PreviousPose | None = None, start: FrameEstimate | None = None) -> FrameEstimate:
     """The robot pose of one instant (see the module docstring).
 
     Parameters
@@ -213,6 +214,9 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
     obs : all views of the instant (covariances as the detector gave them).
     options : estimation settings (``options.corner_scale`` is applied here).
     previous : the last pose localized before, to break flips; None for independent frames.
+    start : an estimate of this instant whose flip is settled (a second pass with another model of
+        the same instant, :func:`gtrig.vision.sequence.compensate_motion`): the fit starts from its pose
+        and keeps its flip margin instead of ranking every view's solutions again.
     """
     model.check(obs)
     scale = dict(options.corner_scale)
@@ -220,7 +224,16 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
     if not views:
         return FrameEstimate(obs.stamp_s, Status.NO_MARKER, "no marker detected in any camera")
     rejected: list[tuple[str, int]] = []
-    sc, init, fit = _fit(model, views, options, previous)
+
+    def fit_views() -> tuple[StackedCorners, float, tuple[np.ndarray, ...], RefineResult]:
+        if start is not None and start.T_world_robot is not None:
+            sc = stack_corners(model, views)
+            return sc, start.flip_margin, (), refine_pose(sc, start.T_world_robot, options.planar_prior,
+                                                          options.refine, options.rig_uncertainty)
+        sc, init, fit = _fit(model, views, options, previous)
+        return sc, init.margin, tuple(c.fit.T_world_robot for c in init.candidates), fit
+
+    sc, margin, alts, fit = fit_views()
     while len(views) > 1:
         per_view = np.bincount(sc.view, weights=fit.whitened**2, minlength=len(views))
         worst = int(np.argmax(per_view))
@@ -235,7 +248,7 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
         fit = refine_pose(sc, fit.T_world_robot, options.planar_prior, options.refine,
                           options.rig_uncertainty)
     if rejected:  # decide the flip again, and its margin, without the dropped views
-        sc, init, fit = _fit(model, views, options, previous)
+        sc, margin, alts, fit = fit_views()
     used = tuple((v.camera, v.marker_id) for v in views)
     r2 = np.sum(fit.residuals_px**2, axis=1)
     rms = float(np.sqrt(np.mean(r2)))
@@ -245,13 +258,12 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
     share = red / red.sum() if np.all(np.isfinite(red)) and red.sum() > 0 else np.full(len(red), np.nan)
     noise = tuple((name, float(fit.chi2 * share[i]), float(fit.dof * share[i]))
                   for i, name in enumerate(sc.camera_names))
-    common = dict(T_world_robot=fit.T_world_robot, cov_6x6=fit.cov_6x6, views=used, rejected=tuple(rejected),
-                  rms_px=rms, view_rms_px=view_rms, chi2=fit.chi2, dof=fit.dof, flip_margin=init.margin,
-                  noise=noise)
-    if init.margin < options.init.ambiguity_margin:
-        alts = tuple(c.fit.T_world_robot for c in init.candidates)
+    common: dict[str, Any] = dict(
+        T_world_robot=fit.T_world_robot, cov_6x6=fit.cov_6x6, views=used, rejected=tuple(rejected), rms_px=rms,
+        view_rms_px=view_rms, chi2=fit.chi2, dof=fit.dof, flip_margin=margin, noise=noise)
+    if margin < options.init.ambiguity_margin:
         return FrameEstimate(obs.stamp_s, Status.AMBIGUOUS,
-                             f"flip ambiguous: runner-up costs only {init.margin:.1f} more "
+                             f"flip ambiguous: runner-up costs only {margin:.1f} more "
                              f"({len(views)} view(s), {len(sc.camera_names)} camera(s))",
                              alternatives=alts, **common)
     # the corners' chi-square over their redundancy (what the corners leave over after the pose, the
