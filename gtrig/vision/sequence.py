@@ -401,6 +401,10 @@ def compensate_motion(model: VisionModel, obs: Sequence[FrameObservations], ests
       their own jitter and the pose's covariance holds it (this replaces
       :func:`with_timing_uncertainty` for these instants).
 
+    Only instants whose views come from two cameras or more are estimated again: one camera's timing
+    error moves its view exactly as the robot's motion over that time would, so for a single camera the
+    nuisance equals :func:`with_timing_uncertainty`'s term on the pose and the estimate is unchanged.
+
     Returns the estimates and the indices of those whose covariance now includes the timing; an instant
     whose second estimate fails keeps its first.
     """
@@ -414,7 +418,7 @@ def compensate_motion(model: VisionModel, obs: Sequence[FrameObservations], ests
     vel = pose_velocities(np.array([ests[i].stamp_s for i in ok]), T, max_gap_s)
     jobs: list[tuple[int, tuple[Any, ...]]] = []
     for k, i in enumerate(ok):
-        if not np.any(vel[k]):
+        if not np.any(vel[k]) or len(obs[i].cameras_with_views()) < 2:
             continue
         t = T[k][:3, 3]
         deltas, extra = {}, {}
