@@ -124,12 +124,13 @@ def marker_calibration(ctx: StageContext) -> list[AccuracyRow]:
     """The markers' poses on the robot from the hand-held images, anchored on the dima-marker (issue 5)."""
     from gtrig.markers.robotcal import calibrate_markers, marker_errors, specs_from_rig, write_markers_yaml
     from gtrig.rig import load_rig
+    from gtrig.vision.robot_frame import with_markers_frame_cov
 
     rig = _rig(ctx)
     rig2, cal = calibrate_markers(ctx.rec, rig)
     write_markers_yaml(ctx.out / "markers.yaml", cal, specs_from_rig(rig))
     # every marker now hangs on the dima-marker's hand-measured pose: its error is common to all
-    rig2 = _with_frame_cov(rig2, _hand_frame_covariance(rig2, cal.anchor))
+    rig2 = with_markers_frame_cov(rig2, _hand_frame_covariance(rig2, cal.anchor))
     _calibrated(ctx, rig2)
     ctx.products["marker_calibration"] = cal
     if not _has_truth(ctx):
@@ -187,19 +188,6 @@ def _validation_vision(ctx: StageContext, rig: Rig) -> VisionResult:
                          checkpoint=ctx.out / "gt_vision_validation.checkpoint", stale_checkpoint="restart")
 
 
-def _with_frame_cov(rig: Rig, cov_6x6: np.ndarray | None) -> Rig:
-    """``rig`` whose ``robot.markers_frame_cov`` is ``cov_6x6`` (None: no common frame error)."""
-    from gtrig.rig.models import pose_cov_rows
-
-    cov = None if cov_6x6 is None else pose_cov_rows(cov_6x6)
-    return rig.model_copy(update={"robot": rig.robot.model_copy(update={"markers_frame_cov": cov})})
-
-
-def _without_frame_cov(rig: Rig) -> Rig:
-    """GTvision's own covariances: without the markers' common frame error."""
-    return _with_frame_cov(rig, None)
-
-
 def _hand_frame_covariance(rig: Rig, anchor: int) -> np.ndarray:
     """The robot frame's common error (6, 6, robot axes) from the anchor's hand-measured pose (set square
     against the dima, offset measured with a caliper: 0.3 mm, 0.1 deg about z)."""
@@ -216,38 +204,20 @@ def robot_frame(ctx: StageContext) -> list[AccuracyRow]:
     from gtrig.markers.robotcal import RobotCalibration
     from gtrig.rig import load_rig
     from gtrig.survey import SurveyResult
-    from gtrig.vision.covariance import planar_covariance
-    from gtrig.vision.robot_frame import fit_frame_offset, frame_error_covariance, rig_in_surveyed_frame
+    from gtrig.vision.robot_frame import fit_validation, rig_tied_to_survey, with_markers_frame_cov
 
     cal = ctx.products.get("marker_calibration")
     sv = ctx.products.get("survey")
     if not isinstance(cal, RobotCalibration) or not isinstance(sv, SurveyResult):
         raise GtrigError("needs the marker calibration and the survey's validation poses")
     rig = _rig(ctx)
-    if rig.robot.markers_frame_cov is None:
-        raise GtrigError("the rig gives no covariance of the markers' frame (robot.markers_frame_cov)")
-    cov_hand = np.asarray(rig.robot.markers_frame_cov, float)
     # GTvision's own covariances: the frame error is what the stops are about to measure
-    val = _validation_vision(ctx, _without_frame_cov(rig))
-    ctx.products["vision_validation"] = val
-    names = list(read_table(ctx.rec / "validation" / "poses.csv", ("pose", "start_s", "end_s")).column("pose"))
-    if len(names) != len(val.estimates):
-        raise GtrigError(f"{len(names)} validation stops but {len(val.estimates)} GTvision instants")
-    missing = [n for n in names if n not in sv.poses.names]
-    if missing:
-        raise GtrigError(f"validation stop(s) {', '.join(missing)} not in the survey")
-    iv = [sv.poses.names.index(n) for n in names]
-    rows_cov = np.concatenate([np.arange(3 * i, 3 * i + 3) for i in iv])
-    nan3 = np.full(3, np.nan)
-    V = np.array([geo.T_to_se2(e.T_world_robot) if e.ok and e.T_world_robot is not None else nan3
-                  for e in val.estimates])
-    Cv = np.array([planar_covariance(e.cov_6x6) if e.ok and e.cov_6x6 is not None else np.full((3, 3), np.nan)
-                   for e in val.estimates])
-    fit = fit_frame_offset(names, V, Cv, sv.poses.xytheta[iv], sv.poses_cov_joint()[np.ix_(rows_cov, rows_cov)])
-    ctx.products["frame_fit"] = fit
-    rig2 = _with_frame_cov(rig_in_surveyed_frame(rig, fit.T_markers_surveyed),
-                           frame_error_covariance(fit.cov_d, cov_hand))
-    ctx.products["hand_frame_cov"] = cov_hand
+    val = _validation_vision(ctx, with_markers_frame_cov(rig, None))
+    names = read_table(ctx.rec / "validation" / "poses.csv", ("pose", "start_s", "end_s")).column("pose")
+    fit = fit_validation(names, val, sv.poses.names, sv.poses.xytheta, sv.poses_cov_joint())
+    rig2 = rig_tied_to_survey(rig, fit)
+    ctx.products.update(vision_validation=val, frame_fit=fit,
+                        hand_frame_cov=np.asarray(rig.robot.markers_frame_cov, float))
     _calibrated(ctx, rig2)
     log.info("robot frame from %d stops: offset %.2f mm, %.2f mm, %.4f deg (sigma %.2f mm, %.2f mm, %.4f deg), "
              "chi2 %.1f over %d dof", int(fit.used.sum()), *(1000 * fit.d_xytheta[:2]),
@@ -286,7 +256,7 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     from gtrig.vision import report as vision_report
     from gtrig.vision.covariance import UNCALIBRATED_MARKERS
     from gtrig.vision.estimate import VisionOptions
-    from gtrig.vision.robot_frame import FrameFit, frame_error_covariance, in_surveyed_frame
+    from gtrig.vision.robot_frame import FrameFit, frame_error_covariance, in_surveyed_frame, with_markers_frame_cov
     from gtrig.vision.sequence import VisionResult, run_recording, with_robot_frame_uncertainty, write_covariance_csv
 
     rig = _rig(ctx)
@@ -309,7 +279,7 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
                                          [frame_error_covariance(c, cov_hand) for c in fit.loo_cov])
         elif static:
             frame = rig.robot.markers_frame_cov
-            res_own = _validation_vision(ctx, _without_frame_cov(rig))
+            res_own = _validation_vision(ctx, with_markers_frame_cov(rig, None))
             res = res_own if frame is None else with_robot_frame_uncertainty(res_own, np.asarray(frame, float))
         else:
             # the rig's markers_frame_cov (the survey's offset, or the hand's) enters every pose

@@ -58,3 +58,18 @@ def test_demo_quick_runs_every_stage_against_truth(tmp_path: Path) -> None:
     # from 8 views and their covariances are about 2x optimistic (camera pose NEES / dof 0.7-3.4; 0.5-2
     # with the full sets), which GTvision inherits: 3.9 here, 0.6-1.2 on the full recordings
     assert 0.2 < rows[("GTvision", "validation, mean NEES / dof")] < 8.0
+
+    # the verb on its own: the calibrated rig is in the surveyed frame already, so a second fit finds
+    # no offset, and the rig it writes keeps the fit's common frame error
+    r2 = CliRunner().invoke(app, ["robot-frame", "--rig", str(res / "rig.calibrated.yaml"), "--recording",
+                                  str(out / "recording"), "--out", str(tmp_path / "rig2.yaml"), "--workers", "1"])
+    assert r2.exit_code == 0, r2.output
+    assert "markers moved by 0.00 mm, 0.00 mm" in r2.output and "from 26 of 26 stops" in r2.output
+    twice = load_rig(tmp_path / "rig2.yaml")
+    for m in twice.robot.markers:
+        np.testing.assert_allclose(m.T_robot_marker.matrix(), cal.marker(m.id).T_robot_marker.matrix(), atol=1e-7)
+    yaw_sd_deg = np.degrees(np.sqrt(np.asarray(twice.robot.markers_frame_cov)[5, 5]))
+    assert 0 < yaw_sd_deg < 0.05  # the survey's, not the hand's 0.1 deg
+    bad = CliRunner().invoke(app, ["robot-frame", "--rig", str(out / "recording" / "rig.yaml"), "--recording",
+                                   str(out / "recording"), "--out", str(tmp_path / "x.yaml"), "--anchor", "999"])
+    assert bad.exit_code != 0 and "marker 999" in bad.output and "Traceback" not in bad.output

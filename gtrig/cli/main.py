@@ -26,6 +26,7 @@ _SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("calib", "calib", "group"),
     ("markers", "markers", "group"),
     ("vision", "vision", "command"),
+    ("robot_frame", "robot-frame", "command"),
     ("laser", "laser", "group"),
 )
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
@@ -253,3 +253,51 @@ def in_surveyed_frame(result: VisionResult, D: Sequence[np.ndarray], cov_frame_6
         T, C = correct_pose(e.T_world_robot, e.cov_6x6, Di)
         ests.append(replace(e, T_world_robot=T, cov_6x6=add_robot_frame_covariance(T, C, Ci)))
     return replace(result, estimates=tuple(ests))
+
+
+def fit_validation(stop_names: Sequence[str], validation: VisionResult, survey_names: Sequence[str],
+                   survey_xytheta: np.ndarray, survey_cov_joint: np.ndarray, **kwargs: Any) -> FrameFit:
+    """:func:`fit_frame_offset` from GTvision's validation result and the survey's poses.
+
+    Parameters
+    ----------
+    stop_names : (K,) the stops of ``validation/poses.csv``, in the order of ``validation.estimates``.
+    validation : GTvision over the validation sequence, with its own covariances (without the markers'
+        common frame error: that is what is fitted).
+    survey_names, survey_xytheta, survey_cov_joint : the survey's pose names (P,), poses (P, 3) and
+        joint covariance (3P, 3P) (:meth:`gtrig.survey.SurveyResult.poses_cov_joint`).
+    kwargs : to :func:`fit_frame_offset`.
+    """
+    from gtrig.vision.covariance import planar_covariance
+
+    if len(stop_names) != len(validation.estimates):
+        raise InputError(f"{len(stop_names)} validation stops but {len(validation.estimates)} GTvision instants")
+    missing = [n for n in stop_names if n not in survey_names]
+    if missing:
+        raise InputError(f"validation stop(s) {', '.join(missing)} not in the survey")
+    iv = [list(survey_names).index(n) for n in stop_names]
+    rows = np.concatenate([np.arange(3 * i, 3 * i + 3) for i in iv])
+    nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
+    V = np.array([geo.T_to_se2(e.T_world_robot) if e.ok and e.T_world_robot is not None else nan3
+                  for e in validation.estimates])
+    Cv = np.array([planar_covariance(e.cov_6x6) if e.ok and e.cov_6x6 is not None else nan33
+                   for e in validation.estimates])
+    return fit_frame_offset(stop_names, V, Cv, np.asarray(survey_xytheta, float)[iv],
+                            np.asarray(survey_cov_joint, float)[np.ix_(rows, rows)], **kwargs)
+
+
+def with_markers_frame_cov(rig: Rig, cov_6x6: np.ndarray | None) -> Rig:
+    """``rig`` whose ``robot.markers_frame_cov`` is ``cov_6x6`` (None: no common frame error)."""
+    cov = None if cov_6x6 is None else pose_cov_rows(cov_6x6)
+    return rig.model_copy(update={"robot": rig.robot.model_copy(update={"markers_frame_cov": cov})})
+
+
+def rig_tied_to_survey(rig: Rig, fit: FrameFit) -> Rig:
+    """The rig in the surveyed robot frame: markers moved by the fitted offset, and the common frame
+    error the fit leaves (:func:`frame_error_covariance`) in place of the rig's own; the rig must give
+    that own one (``robot.markers_frame_cov``, the anchor's hand measurement) for height, roll and pitch."""
+    if rig.robot.markers_frame_cov is None:
+        raise InputError("the rig gives no covariance of the markers' frame (robot.markers_frame_cov)")
+    hand = np.asarray(rig.robot.markers_frame_cov, float)
+    return with_markers_frame_cov(rig_in_surveyed_frame(rig, fit.T_markers_surveyed),
+                                  frame_error_covariance(fit.cov_d, hand))
