@@ -79,13 +79,14 @@ class BlurredParams:
         in units of the residual variance (chi-square units).
     screen_margin, screen_excess : the screen before the codes' own fits, at the free fit's geometry:
         the leader's margin must reach ``screen_margin`` and its excess may not exceed the larger of
-        ``screen_excess`` and the margin (the right code's excess there is 30-1000, clutter's up to
+        ``screen_excess`` and 4 times the margin (the right code's excess there is 30-1000, clutter's up to
         tens of thousands).
     top_codes : codes refitted with their own geometry while one beats the best so far (at most).
     refit_margin : runner-up codes within this margin of the best, at its geometry, are refitted too.
     code_iterations : Gauss-Newton iterations of a code's own geometry fit.
     min_contrast : least white - black difference, grey levels.
     max_shift_px : largest move of a corner from the candidate to the fit.
+    subsample_px : from this many pixels on, the fit with free cells uses every other one.
     iterations : Gauss-Newton iterations of the fit with free cells (at most; in dim light more of
         them let the geometry drift, the free cells taking the border's place).
     """
@@ -97,10 +98,10 @@ class BlurredParams:
     max_side_px: float = 45.0
     min_solidity: float = 0.85
     max_free_misfit: float = 2.0
-    max_start_misfit: float = 4.0
+    max_start_misfit: float = 8.0
     max_start_share: float = 0.15
     max_excess_sd: float = 5.0
-    excess_share: float = 0.1
+    excess_share: float = 0.25
     min_margin: float = 40.0
     screen_margin: float = 20.0
     screen_excess: float = 400.0
@@ -110,6 +111,7 @@ class BlurredParams:
     min_contrast: float = 12.0
     max_shift_px: float = 4.0
     iterations: int = 3
+    subsample_px: int = 400
 
 
 @dataclass(frozen=True)
@@ -179,13 +181,23 @@ def find_blurred_candidates(gray: NDArray[np.uint8], params: BlurredParams, max_
 
 
 def image_noise(gray: NDArray[np.uint8]) -> float:
-    """Robust SD of the image noise, grey levels (Immerkaer's 3 x 3 operator, median of |response|
-    on a sparse grid: edges and texture are a minority of pixels and leave the median alone)."""
+    """Robust SD of the image noise, grey levels: Immerkaer's 3 x 3 operator (``[1 -2 1]`` outer
+    ``[1 -2 1]``, blind to planes and ramps, gain 6 on white noise) on every fourth row, sampled on a
+    sparse grid, and the median of its magnitude (edges and texture are a minority of pixels and leave
+    the median alone; ``|N(0, 1)|`` has median 0.6745). Dropping rows before filtering only changes
+    which neighbours enter, still independent noise. The response of an 8-bit image is an integer:
+    its median is interpolated within the integer bin it falls in, or it would move in steps of a
+    twelfth of the noise."""
     k = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
-    r = cv2.filter2D(gray[::2].astype(np.float32), -1, k)[1:-1:2, 1:-1:3]
-    # the operator's gain on white noise is 6; |N(0, 1)| has median 0.6745. Rows are taken every other
-    # one before filtering, which only changes which neighbours enter (still independent noise)
-    return float(np.median(np.abs(r))) / (6.0 * 0.6745)
+    r = np.abs(cv2.filter2D(gray[::4].astype(np.float32), -1, k)[1:-1, 1:-1:3]).astype(np.int32).ravel()
+    hist = np.bincount(r)
+    cum = np.cumsum(hist)
+    m = int(np.searchsorted(cum, 0.5 * len(r)))
+    below = cum[m] - hist[m]
+    # bin m spans m - 0.5 .. m + 0.5 (0 .. 0.5 for the first): linear within it
+    lo = max(m - 0.5, 0.0)
+    med = lo + (0.5 * len(r) - below) / max(hist[m], 1) * (m + 0.5 - lo)
+    return float(med) / (6.0 * 0.6745)
 
 
 def _profiles(px: NDArray[np.float64], quads: NDArray[np.float64], sig: NDArray[np.float64], n: int,
@@ -335,7 +347,8 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
         return np.stack([one, base + F @ code], axis=2)
 
     th = np.r_[quad.ravel(), sig]
-    r, c = _solve_levels(I, design(th[None, :8].reshape(1, 4, 2), th[None, 8]), ridge)
+    Acur = design(th[None, :8].reshape(1, 4, 2), th[None, 8])
+    r, c = _solve_levels(I, Acur, ridge)
     sse = float(r[0] @ r[0])
     A = np.full((9, 9), np.nan)
     if stop_start is not None and stop_start(sse, float(c[0, 1])):
@@ -350,12 +363,12 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
             # derivative at fixed linear coefficients, projected off the design's columns
             cells = c[0, 2:] if code is None else c[0, 1] * code
             dp = _prediction_jacobian(px, th[:8].reshape(4, 2), th[8], n, border, cells, c[0, 1])
-            Acur = np.ascontiguousarray(design(th[None, :8].reshape(1, 4, 2), th[None, 8])[0])
-            G = _gram(np.ascontiguousarray(Acur.T)[None], Acur[None])[0]
+            A0 = np.ascontiguousarray(Acur[0])
+            A0t = np.ascontiguousarray(A0.T)
+            G = _gram(A0t[None], A0[None])[0]
             G[np.diag_indices_from(G)] += ridge + 1e-9 * np.mean(np.diag(G)) + 1e-12
             dpT = np.ascontiguousarray(dp.T)
-            coef = np.linalg.solve(G, _gram(np.ascontiguousarray(Acur.T)[None], dpT[None])[0])
-            proj = _rows(Acur, coef)
+            proj = _rows(A0, np.linalg.solve(G, _gram(A0t[None], dpT[None])[0]))
             J = -(dpT - proj).T  # (9, N)
             fresh = True
         A = _gram(J[None], np.ascontiguousarray(J.T)[None])[0]
@@ -365,18 +378,19 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
             step = -np.linalg.solve(A + lam * (np.diag(np.diag(A)) + 1e-9 * np.eye(9)), g)
             tn = th + step
             tn[8] = np.clip(tn[8], 0.3, 5.0)
-            rn, cn = _solve_levels(I, design(tn[None, :8].reshape(1, 4, 2), tn[None, 8]), ridge)
+            An = design(tn[None, :8].reshape(1, 4, 2), tn[None, 8])
+            rn, cn = _solve_levels(I, An, ridge)
             sn = float(rn[0] @ rn[0])
             if sn < sse:
                 improved = True
                 break
             lam *= 10.0
         if improved:
-            # Broyden's rank-one update of the Jacobian: one evaluation per iteration instead of ten
-            # (with free cells the numerical one each time: there the update lets the geometry drift)
+            # with a code, Broyden's rank-one update of the Jacobian; with free cells a fresh one each
+            # time (updated, the geometry drifts with the cells in dim light)
             dth = tn - th
             J = None if code is None else J + np.outer(dth, rn[0] - res - dth @ J) / (dth @ dth)
-            th, sse, c, res = tn, sn, cn, rn[0]
+            th, sse, c, res, Acur = tn, sn, cn, rn[0], An
             lam *= 0.3
             fresh = False
             if np.abs(step[:8]).max() < 0.01 or sse > stop_sse_iter:
@@ -384,7 +398,7 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
         elif fresh or J is None:
             break
         else:
-            J = None  # the updated Jacobian went stale: a numerical one again
+            J = None  # the updated Jacobian went stale: a fresh one
     return th[:8].reshape(4, 2), float(th[8]), sse, c[0], A
 
 
@@ -461,16 +475,25 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
         if N < 3 * d2:
             continue
         dof = max(N - 11 - d2, 1)
+        # the free fit only has to bring the geometry close: on half the pixels (a checkerboard) when
+        # there are plenty, which halves the cost that clutter mostly pays
+        half = ((px[:, 0] + px[:, 1]) % 2 == 0) if N >= params.subsample_px else np.ones(N, bool)
+        dof_h = max(int(half.sum()) - 11 - d2, 1)
 
-        def hopeless(sse0: float, contrast: float, dof: int = dof) -> bool:
+        def hopeless(sse0: float, contrast: float, dof: int = dof_h) -> bool:
             # at the candidate's geometry a marker's misfit is a small share of its contrast (the
             # corners are within a pixel or two); clutter's is not, or there is no contrast at all
             excess_sd = np.sqrt(max(sse0 / dof - var, 0.0))
             return (sse0 > params.max_start_misfit**2 * var * dof or contrast < params.min_contrast
                     or excess_sd > params.max_start_share * contrast)
-        q1, s1, sse_free, cf, _ = _fit_geometry(px, I, quad, 1.5, n, border, None, params.iterations,
-                                             stop_start=hopeless,
-                                             stop_sse_iter=(1.25 * params.max_free_misfit) ** 2 * var * dof)
+        q1, s1, sse_free, cf, _ = _fit_geometry(px[half], I[half], quad, 1.5, n, border, None, params.iterations,
+                                                stop_start=hopeless,
+                                                stop_sse_iter=(1.1 * params.max_free_misfit) ** 2 * var * dof_h)
+        if not half.all() and sse_free <= (params.max_free_misfit**2) * var * dof_h:
+            # the free model's residual on every pixel, for the excess test of the codes' fits
+            _, _, sse_free, cf, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0)
+        else:
+            sse_free *= dof / dof_h
         s2 = sse_free / dof
         if (s2 > (params.max_free_misfit**2) * var or cf[1] < params.min_contrast
                 or np.abs(q1 - quad).max() > params.max_shift_px):
@@ -481,7 +504,7 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
         sse = _rank_codes(px, I, q1, s1, n, border, Wc)
         o = np.argsort(sse)[: params.top_codes]
         excess0, margin0 = (sse[o[0]] - sse_free) / s2, (sse[o[1]] - sse[o[0]]) / s2
-        if margin0 < params.screen_margin or excess0 > max(params.screen_excess, 2.0 * margin0):
+        if margin0 < params.screen_margin or excess0 > max(params.screen_excess, 4.0 * margin0):
             # before the codes' own fits: clutter that the free cells explain (a dark frame round a
             # pattern) fits no code by far more than the leader beats the next code
             log.debug("blurred candidate at (%.0f, %.0f): excess %.0f, margin %.0f at the free geometry: "
