@@ -147,7 +147,9 @@ def find_blurred_candidates(gray: NDArray[np.uint8], params: BlurredParams, max_
     params : :class:`BlurredParams`.
     max_side_bg, scale : the closing's largest dark object and downsampling (as in the first path).
     """
-    g = cv2.GaussianBlur(gray, (0, 0), params.smooth_px)
+    # the kernel cut at 2 sigma (OpenCV's default is 3): 5 x 5 instead of 7 x 7 at 1 px, 40 % faster
+    k = 2 * int(np.ceil(2.0 * params.smooth_px)) + 1
+    g = cv2.GaussianBlur(gray, (k, k), params.smooth_px)
     mask = cv2.medianBlur(dark_mask(g, max_side_bg, scale, params.ratio_threshold), 3)
     # RETR_CCOMP puts a blob lying in a hole of a larger dark region (a marker in its quiet zone on a
     # dark background) at the top level again
@@ -486,8 +488,15 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
             excess_sd = np.sqrt(max(sse0 / dof - var, 0.0))
             return (sse0 > params.max_start_misfit**2 * var * dof or contrast < params.min_contrast
                     or excess_sd > params.max_start_share * contrast)
+        # the start screen, most of the clutter's cost, on a quarter of the pixels when there are plenty
+        quarter = ((px[:, 0] + 2 * px[:, 1]) % 4 == 0) if N >= 2 * params.subsample_px else half
+        dof_q = max(int(quarter.sum()) - 11 - d2, 1)
+        if quarter is not half:
+            _, _, sse_q, cq, _ = _fit_geometry(px[quarter], I[quarter], quad, 1.5, n, border, None, 0)
+            if hopeless(sse_q, float(cq[1]), dof_q):
+                continue
         q1, s1, sse_free, cf, _ = _fit_geometry(px[half], I[half], quad, 1.5, n, border, None, params.iterations,
-                                                stop_start=hopeless,
+                                                stop_start=None if quarter is not half else hopeless,
                                                 stop_sse_iter=(1.1 * params.max_free_misfit) ** 2 * var * dof_h)
         if not half.all() and sse_free <= (params.max_free_misfit**2) * var * dof_h:
             # the free model's residual on every pixel, for the excess test of the codes' fits
