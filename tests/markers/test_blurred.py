@@ -26,8 +26,8 @@ def test_blurred_small_markers_found_with_right_id_and_corners() -> None:
     """20 px AprilTag 36h11 at blur 2 px, 0 and 30 deg tilt, full and dim light: the first path alone
     reads at most a quarter of them; with the second all but one are found (one dim, tilted marker
     gets no candidate), with the right ID and corners within 0.6 px."""
-    det = MarkerDetector(FAM)
-    sharp_only = MarkerDetector(FAM, params=DetectorParams(blurred=BlurredParams(enabled=False)))
+    det = MarkerDetector(FAM, params=DetectorParams(blurred=BlurredParams(enabled=True)))
+    sharp_only = MarkerDetector(FAM)
     found = total = first = 0
     for seed, (tilt, gain) in enumerate([(0, 230.0), (30, 230.0), (0, 70.0), (30, 70.0)]):
         img, truths = _scene(seed, tilt, gain)
@@ -52,7 +52,7 @@ def test_blurred_small_markers_found_with_right_id_and_corners() -> None:
 def test_blurred_path_no_wrong_id_in_clutter() -> None:
     """Marker-like clutter (dark squares holding white patterns) at every blur gives no detection."""
     rng = np.random.default_rng(7)
-    det = MarkerDetector(FAM)
+    det = MarkerDetector(FAM, params=DetectorParams(blurred=BlurredParams(enabled=True)))
     for blur in (0.0, 1.0, 2.0, 2.0):
         bg = clutter_background(SHAPE, rng, n_shapes=60)
         img, _ = render(SHAPE, [], background=bg, blur_px=blur, noise=3.0, rng=rng, ss=2)

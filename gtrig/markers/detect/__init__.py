@@ -16,7 +16,8 @@ Pipeline (see issue 5 and the RAWSEEDS vision GT system):
 5. decoding (:mod:`.decode`) of the cells through the refined corners' homography, solved from the
    blur model (:func:`.decode.unblur_cells`), border check, and corners reordered as printed
    (top-left, top-right, bottom-right, bottom-left);
-6. a second path for small, blurred markers (:mod:`.blurred`), on what the first one left: blobs of
+6. optionally (``DetectorParams(blurred=BlurredParams(enabled=True))``) a second path for small,
+   blurred markers (:mod:`.blurred`), on what the first one left: blobs of
    a smoothed dark mask, the corners and blur fitted to every pixel of the square with the cells
    free, every code ranked through that geometry by maximum likelihood, the leading codes refitted
    with their own geometry and accepted by a goodness-of-fit test and a chi-square margin.
@@ -99,8 +100,8 @@ class DetectorParams:
         (0.078 px RMS at blur 1 px against 0.074 px).
     unblur : read the data cells by solving the blur model (:func:`.decode.unblur_cells`) instead of
         thresholding each cell.
-    blurred : the second path, for small blurred markers (:class:`.blurred.BlurredParams`;
-        ``BlurredParams(enabled=False)`` turns it off).
+    blurred : the second path, for small blurred markers (:class:`.blurred.BlurredParams`; off by
+        default, ``BlurredParams(enabled=True)`` turns it on).
     """
 
     candidates: CandidateParams = field(default_factory=CandidateParams)
