@@ -15,7 +15,12 @@ Pipeline (see issue 5 and the RAWSEEDS vision GT system):
 4. late rejection of implausible fits (contrast, residual, blur, corner displacement);
 5. decoding (:mod:`.decode`) of the cells through the refined corners' homography, solved from the
    blur model (:func:`.decode.unblur_cells`), border check, and corners reordered as printed
-   (top-left, top-right, bottom-right, bottom-left).
+   (top-left, top-right, bottom-right, bottom-left);
+6. optionally (``DetectorParams(blurred=BlurredParams(enabled=True))``) a second path for small,
+   blurred markers (:mod:`.blurred`), on what the first one left: blobs of
+   a smoothed dark mask, the corners and blur fitted to every pixel of the square with the cells
+   free, every code ranked through that geometry by maximum likelihood, the leading codes refitted
+   with their own geometry and accepted by a goodness-of-fit test and a chi-square margin.
 
 Corners are in OpenCV's pixel convention (pixel centres at integer coordinates) of the raw image.
 """
@@ -24,15 +29,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from gtrig.errors import InputError
+from gtrig.markers.detect.blurred import BlurredParams, find_blurred_candidates, image_noise, read_blurred
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
 from gtrig.markers.detect.decode import sample_cells, unblur_cells
 from gtrig.markers.detect.edges import CLIP_HIGH, fit_edges, gather_band, intersect_corners, marker_context
-from gtrig.markers.families import decode_batch, family_spec, marker_cells
+from gtrig.markers.families import _codebook, decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily
 
 __all__ = ["Detection", "DetectorParams", "MarkerDetector", "detect_markers"]
@@ -93,6 +100,8 @@ class DetectorParams:
         (0.078 px RMS at blur 1 px against 0.074 px).
     unblur : read the data cells by solving the blur model (:func:`.decode.unblur_cells`) instead of
         thresholding each cell.
+    blurred : the second path, for small blurred markers (:class:`.blurred.BlurredParams`; off by
+        default, ``BlurredParams(enabled=True)`` turns it on).
     """
 
     candidates: CandidateParams = field(default_factory=CandidateParams)
@@ -107,6 +116,7 @@ class DetectorParams:
     tol: float = 1e-3
 
     unblur: bool = True
+    blurred: BlurredParams = field(default_factory=BlurredParams)
 
 
 class MarkerDetector:
@@ -132,6 +142,7 @@ class MarkerDetector:
         self.K = None if camera_matrix is None else np.asarray(camera_matrix, float)
         self.dist = np.zeros(5) if dist_coeffs is None else np.asarray(dist_coeffs, float)
         self._undist: Undistorter | None = None
+        self._codes: NDArray[np.uint8] | None = None
         # hole area of a marker <= its data area
         inner = (self.spec.data_cells / self.spec.cells) ** 2
         self._hole_frac = min(0.9, inner + 0.1)
@@ -194,6 +205,50 @@ class MarkerDetector:
     def detect(self, image: NDArray[np.uint8]) -> list[Detection]:
         """Detect and decode markers in a grayscale (H, W) or BGR (H, W, 3) 8-bit image."""
         gray = _to_gray(image)
+        dets = self._detect_sharp(gray)
+        if self.params.blurred.enabled:
+            dets = dets + self._detect_blurred(gray, dets)
+        return _dedupe(dets)
+
+    def _all_codes(self) -> NDArray[np.uint8]:
+        """Every code (C, d, d) of the family in its four rotations, as read in a quad's orientation."""
+        if self._codes is None:
+            book = _codebook(self.spec.family)
+            self._codes = np.concatenate([np.rot90(book, -r, axes=(1, 2)) for r in range(4)])
+        return self._codes
+
+    def _detect_blurred(self, gray: NDArray[np.uint8], found: list[Detection]) -> list[Detection]:
+        """The second path (:mod:`.blurred`) on the candidates that no detection of the first covers.
+
+        It works in raw pixels: over a marker of at most ``max_side_px`` the lens distortion is close
+        to a homography.
+        """
+        p = self.params
+        h, w = gray.shape
+        quads = find_blurred_candidates(gray, p.blurred, p.candidates.max_side_frac * min(h, w),
+                                        p.candidates.scale)
+        if found and quads:
+            # a candidate whose centre lies inside a detection is that marker (or a part of it)
+            polys = [d.corners_px.astype(np.float32).reshape(-1, 1, 2) for d in found]
+            quads = [q for q in quads
+                     if all(cv2.pointPolygonTest(poly, tuple(map(float, q.mean(axis=0))), False) < 0
+                            for poly in polys)]
+        if not quads:
+            return []
+        codes = self._all_codes()
+        reads = read_blurred(gray, np.array(quads), codes, self.spec.cells, self.spec.border_cells, p.blurred,
+                             image_noise(gray))
+        out = []
+        for r in reads:
+            ids, rot, _ = decode_batch(self.spec.family, codes[r.code][None], 0)
+            if ids[0] < 0:
+                continue
+            order = (np.arange(4) + rot[0]) % 4
+            out.append(Detection(int(ids[0]), r.corners[order].copy(), r.corner_cov[order].copy(), 0, r.sigma))
+        return out
+
+    def _detect_sharp(self, gray: NDArray[np.uint8]) -> list[Detection]:
+        """The first path: candidates, edge fits and decoding (module docstring, steps 1-5)."""
         p = self.params
         quads = find_candidates(gray, p.candidates, self._hole_frac)
         if not quads:
@@ -300,7 +355,7 @@ class MarkerDetector:
             order = (np.arange(4) + rot[k]) % 4
             out.append(Detection(int(ids[k]), corners[k][order].copy(), cov[k][order].copy(), int(ham[k]),
                                  float(blur[k])))
-        return _dedupe(out)
+        return out
 
 
 def _dedupe(dets: list[Detection]) -> list[Detection]:
@@ -325,7 +380,6 @@ def _area(q: NDArray[np.float64]) -> float:
 
 
 def _to_gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    import cv2
 
     img = np.asarray(image)
     if img.dtype != np.uint8:

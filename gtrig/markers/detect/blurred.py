@@ -1,0 +1,574 @@
+"""Small, blurred markers: candidates from a smoothed image and decoding by maximum likelihood.
+
+At blur sigma 2 px a 20 px AprilTag 36h11 has cells of 2.5 px: the black border merges with the
+blurred data cells, the dark mask of :mod:`.candidates` breaks the marker into fragments, and a
+white cell among black ones keeps a fifth of the marker's contrast, below the noise of one cell, so
+neither thresholding nor :func:`.decode.unblur_cells` reads it. All the pixels together still tell
+the codes apart by hundreds of chi-square units. This module is the detector's second path, run on
+what the first one left:
+
+1. candidates (:func:`find_blurred_candidates`): the dark mask of a smoothed image at a looser
+   ratio, where a blurred marker is one dark blob inside its white quiet zone; only small blobs
+   (the first path finds the large ones) and no hole tests (the blob has none). The detector drops
+   those whose centre lies in a marker the first path found;
+2. geometry without the code: the 4 corners and the blur fitted by Gauss-Newton to every pixel of
+   the square and half a cell around it, the model being the blurred-box one of
+   :func:`.edges.marker_context` with the levels and the 36 cells' light free (linear, solved inside:
+   variable projection), so the quad converges before any code is assumed. Clutter that this model
+   cannot fit to about the image noise (:func:`image_noise`) stops here, most of it at the first
+   evaluation;
+3. ranking: every code of the family in its 4 rotations through that geometry, the levels solved
+   per code from sums linear and quadratic in the code (as :func:`.decode.ml_decode` does), and a
+   screen on the leader's margin and excess residual;
+4. verification: the leader's corners and blur refitted with its cells fixed, the ranking repeated
+   there (a code that beats it is refitted in turn), close runners-up refitted too. The free model
+   nests every code's, so the right code's excess residual over it is about chi-square with 36
+   degrees of freedom; a read is accepted when that excess is small and the best code beats every
+   other hypothesis by a margin of ``min_margin`` chi-square units.
+
+Measured on ``bench/markers.py --quick`` (blur 2 px, noise 3): the 20 px markers are read with
+margins of 130-9000 chi-square units and corner errors of 0.06-0.4 px; the right code's residual SD
+is the image noise (2.8-3.5 grey levels against 3), 4.2 at 45 deg tilt in full light where the
+model's cell corners under shear show.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import ndtr
+
+from gtrig.markers.detect.candidates import _ordered_cw, dark_mask, robust_quad
+from gtrig.markers.detect.edges import quad_homographies
+
+log = logging.getLogger(__name__)
+
+__all__ = ["BlurredParams", "BlurredRead", "find_blurred_candidates", "image_noise", "read_blurred"]
+
+
+@dataclass(frozen=True)
+class BlurredParams:
+    """Tunables of the second path (pixel units refer to the input image).
+
+    enabled : run the second path. Off by default: it costs 3-4 ms per image even where it finds
+        nothing (its candidate stage) and 10-15 ms per marker it reads, which takes the bench's time
+        from about 0.9-1.4x OpenCV's ArUco detector to 1.4-2.2x depending on the machine's load
+        (target 1.5x); on, 99.5 % of the bench's markers of at least 20 px are detected instead of
+        92.7 %.
+    smooth_px : Gaussian smoothing of the image before the dark mask (joins the fragments of the
+        blurred border and cells).
+    ratio_threshold : dark when smoothed image / closing < this; looser than the first path's 0.6
+        since a blurred border never gets as dark as a sharp one.
+    min_side_px, max_side_px : side range of the candidates; larger markers are the first path's.
+    min_solidity : contour area / hull area.
+    max_free_misfit : the code-free fit's residual SD may be at most this many times the image noise
+        (no code can fit better than the model with free cells, so clutter stops here, before the
+        codes are tried).
+    max_start_misfit : the free model's residual SD at the candidate's geometry above which the fit
+        is abandoned after its first evaluation (cheap rejection of clutter).
+    max_start_share : ... or when the SD of its misfit beyond the noise exceeds this share of the
+        fitted contrast (0.03-0.10 for the bench's markers, up to several for clutter).
+    max_excess_sd : the best code's excess residual over the free fit may exceed its chi-square
+        mean by this many SDs (see :func:`read_blurred`).
+    excess_share : ... or by this share of the margin, whichever is larger: the model's own error
+        (cell corners under shear, the pixel's box taken for a Gaussian) grows with the contrast as the
+        margin does, while a pattern that is not a code differs from its nearest code by at least one
+        cell of the at least ``h_min`` (11 for AprilTag 36h11) that separate it from the next one.
+    min_margin : least margin of the runner-up code's residual sum of squares over the best one's,
+        in units of the residual variance (chi-square units).
+    screen_margin, screen_excess : the screen before the codes' own fits, at the free fit's geometry:
+        the leader's margin must reach ``screen_margin`` and its excess may not exceed the larger of
+        ``screen_excess`` and 4 times the margin (the right code's excess there is 30-1000, clutter's up to
+        tens of thousands).
+    top_codes : codes refitted with their own geometry while one beats the best so far (at most).
+    refit_margin : runner-up codes within this margin of the best, at its geometry, are refitted too.
+    code_iterations : Gauss-Newton iterations of a code's own geometry fit.
+    min_contrast : least white - black difference, grey levels.
+    max_shift_px : largest move of a corner from the candidate to the fit.
+    subsample_px, screen_px : about this many pixels (at least) serve the fit with free cells and the
+        start screen before it; the codes' fits use every pixel.
+    iterations : Gauss-Newton iterations of the fit with free cells (at most; in dim light more of
+        them let the geometry drift, the free cells taking the border's place).
+    """
+
+    enabled: bool = False
+    smooth_px: float = 1.0
+    ratio_threshold: float = 0.75
+    min_side_px: float = 12.0
+    max_side_px: float = 38.0
+    min_solidity: float = 0.85
+    max_free_misfit: float = 2.0
+    max_start_misfit: float = 8.0
+    max_start_share: float = 0.15
+    max_excess_sd: float = 5.0
+    excess_share: float = 0.25
+    min_margin: float = 40.0
+    screen_margin: float = 20.0
+    screen_excess: float = 400.0
+    top_codes: int = 3
+    refit_margin: float = 400.0
+    code_iterations: int = 4
+    min_contrast: float = 12.0
+    max_shift_px: float = 4.0
+    iterations: int = 3
+    subsample_px: int = 200
+    screen_px: int = 100
+
+
+@dataclass(frozen=True)
+class BlurredRead:
+    """One marker read by the second path.
+
+    code : index into the ``codes`` given to :func:`read_blurred`.
+    corners : (4, 2) fitted corners, quad orientation, pixels.
+    corner_cov : (4, 2, 2) their covariances (first order, from the Gauss-Newton normal matrix), px^2.
+    sigma : fitted blur, pixels.
+    rms : residual SD of the best code, grey levels.
+    margin : chi-square margin over the runner-up hypothesis.
+    """
+
+    code: int
+    corners: NDArray[np.float64]
+    corner_cov: NDArray[np.float64]
+    sigma: float
+    rms: float
+    margin: float
+
+
+_NEXT = np.array([1, 2, 3, 0])
+
+
+def find_blurred_candidates(gray: NDArray[np.uint8], params: BlurredParams, max_side_bg: float,
+                            scale: int = 4) -> list[NDArray[np.float64]]:
+    """Quads (each (4, 2), clockwise on screen) of small dark blobs of the smoothed image.
+
+    Parameters
+    ----------
+    gray : (H, W) uint8.
+    params : :class:`BlurredParams`.
+    max_side_bg, scale : the closing's largest dark object and downsampling (as in the first path).
+    """
+    # the kernel cut at 2 sigma (OpenCV's default is 3): 5 x 5 instead of 7 x 7 at 1 px, 40 % faster
+    k = 2 * int(np.ceil(2.0 * params.smooth_px)) + 1
+    g = cv2.GaussianBlur(gray, (k, k), params.smooth_px)
+    mask = cv2.medianBlur(dark_mask(g, max_side_bg, scale, params.ratio_threshold), 3)
+    # RETR_CCOMP puts a blob lying in a hole of a larger dark region (a marker in its quiet zone on a
+    # dark background) at the top level again
+    contours, hier = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    if hier is None:
+        return []
+    hier = hier[0]
+    lengths = np.fromiter(map(len, contours), int, len(contours))
+    lo, hi = 4 * params.min_side_px * 0.8, 4 * params.max_side_px * 1.3
+    out = []
+    for i in np.flatnonzero((hier[:, 3] < 0) & (lengths >= lo) & (lengths <= hi)):
+        c = contours[i]
+        area = cv2.contourArea(c)
+        if area < 0.5 * params.min_side_px**2 or area > 1.3 * params.max_side_px**2:
+            continue
+        hull = cv2.convexHull(c)
+        hull_area = cv2.contourArea(hull)
+        if hull_area <= 0 or area / hull_area < params.min_solidity:
+            continue
+        approx = cv2.approxPolyDP(hull, 0.05 * cv2.arcLength(hull, True), True)
+        if len(approx) != 4 or not cv2.isContourConvex(approx):
+            continue
+        a = _ordered_cw(approx.reshape(4, 2).astype(np.float64))
+        sides = np.hypot(*(a[_NEXT] - a).T)
+        if sides.min() < 0.7 * params.min_side_px or sides.min() < 0.4 * sides.max():
+            continue
+        q = robust_quad(c, a)
+        # the blob's corners are rounded by the blur: the hull's vertices are then a fair start
+        out.append(_ordered_cw(a if q is None else q))
+    return out
+
+
+def image_noise(gray: NDArray[np.uint8]) -> float:
+    """Robust SD of the image noise, grey levels: Immerkaer's 3 x 3 operator (``[1 -2 1]`` outer
+    ``[1 -2 1]``, blind to planes and ramps, gain 6 on white noise) on every fourth row, sampled on a
+    sparse grid, and the median of its magnitude (edges and texture are a minority of pixels and leave
+    the median alone; ``|N(0, 1)|`` has median 0.6745). Dropping rows before filtering only changes
+    which neighbours enter, still independent noise. The response of an 8-bit image is an integer:
+    its median is interpolated within the integer bin it falls in, or it would move in steps of a
+    twelfth of the noise."""
+    k = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
+    r = np.abs(cv2.filter2D(gray[::4].astype(np.float32), -1, k)[1:-1, 1:-1:3]).astype(np.int32).ravel()
+    hist = np.bincount(r)
+    cum = np.cumsum(hist)
+    m = int(np.searchsorted(cum, 0.5 * len(r)))
+    below = cum[m] - hist[m]
+    # bin m spans m - 0.5 .. m + 0.5 (0 .. 0.5 for the first): linear within it
+    lo = max(m - 0.5, 0.0)
+    med = lo + (0.5 * len(r) - below) / max(hist[m], 1) * (m + 0.5 - lo)
+    return float(med) / (6.0 * 0.6745)
+
+
+def _profiles(px: NDArray[np.float64], quads: NDArray[np.float64], sig: NDArray[np.float64], n: int,
+              border: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The blurred black square ``1 - S`` (K, N) and the blurred data cells ``F`` (K, N, d^2) at pixels
+    ``px`` (N, 2) for K geometries ``quads`` (K, 4, 2) and blurs ``sig`` (K,) (the model of
+    :func:`.edges.marker_context`)."""
+    H = quad_homographies(quads)
+    x, y = px[:, 0][None], px[:, 1][None]
+    w3 = H[:, 2, 0, None] * x + H[:, 2, 1, None] * y + H[:, 2, 2, None]
+    mx = (H[:, 0, 0, None] * x + H[:, 0, 1, None] * y + H[:, 0, 2, None]) / w3
+    my = (H[:, 1, 0, None] * x + H[:, 1, 1, None] * y + H[:, 1, 2, None]) / w3
+    s = sig[:, None] / np.abs(w3) * n
+    sx = np.maximum(s * np.hypot(H[:, 0, 0, None] - mx * H[:, 2, 0, None], H[:, 0, 1, None] - mx * H[:, 2, 1, None]),
+                    1e-3)
+    sy = np.maximum(s * np.hypot(H[:, 1, 0, None] - my * H[:, 2, 0, None], H[:, 1, 1, None] - my * H[:, 2, 1, None]),
+                    1e-3)
+    k = np.arange(n + 1, dtype=np.float64)
+    Fx = ndtr((mx[..., None] * n - k) / sx[..., None])
+    Fy = ndtr((my[..., None] * n - k) / sy[..., None])
+    X = (Fx[..., :-1] - Fx[..., 1:])[..., border:n - border]
+    Y = (Fy[..., :-1] - Fy[..., 1:])[..., border:n - border]
+    base = 1.0 - (Fx[..., 0] - Fx[..., -1]) * (Fy[..., 0] - Fy[..., -1])
+    d = n - 2 * border
+    F = (Y[..., :, None] * X[..., None, :]).reshape(*base.shape, d * d)
+    return base, F
+
+
+def _prediction_jacobian(px: NDArray[np.float64], quad: NDArray[np.float64], sig: float, n: int, border: int,
+                         cells: NDArray[np.float64], contrast: float) -> NDArray[np.float64]:
+    """Derivative (9, N) of the model ``a + b (1 - S) + F w`` at pixels ``px`` (N, 2) with respect to
+    the 8 corner coordinates and the blur, at fixed levels and cells (``contrast`` = b, ``cells`` =
+    b w as a (d, d) array).
+
+    The corners act through the homography (its derivative by differences of the 8 x 8 solve, then
+    the chain rule per pixel), on the cell coordinates and on the local blur widths in cell units.
+    One evaluation of the profiles instead of the nine of forward differences.
+    """
+    H0 = quad_homographies(quad[None])[0]
+    hq = 1e-4
+    Qp = np.repeat(quad.reshape(1, 8), 8, axis=0)
+    Qp[np.arange(8), np.arange(8)] += hq
+    dH = (quad_homographies(Qp.reshape(8, 4, 2)) - H0) / hq  # (8, 3, 3)
+    x, y = px[:, 0], px[:, 1]
+    w3 = H0[2, 0] * x + H0[2, 1] * y + H0[2, 2]
+    mx = (H0[0, 0] * x + H0[0, 1] * y + H0[0, 2]) / w3
+    my = (H0[1, 0] * x + H0[1, 1] * y + H0[1, 2]) / w3
+    dw = dH[:, 2, 0, None] * x + dH[:, 2, 1, None] * y + dH[:, 2, 2, None]
+    dmx = (dH[:, 0, 0, None] * x + dH[:, 0, 1, None] * y + dH[:, 0, 2, None] - mx * dw) / w3  # (8, N)
+    dmy = (dH[:, 1, 0, None] * x + dH[:, 1, 1, None] * y + dH[:, 1, 2, None] - my * dw) / w3
+    s = sig / np.abs(w3) * n
+    ds = -s * dw / w3  # (8, N)
+
+    def width(r: int, m: NDArray[np.float64], dm: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        """Blur width in cell units along grid axis ``r`` (N,) and its derivative (8, N)."""
+        a = H0[r, 0] - m * H0[2, 0]
+        b = H0[r, 1] - m * H0[2, 1]
+        da = dH[:, r, 0, None] - dm * H0[2, 0] - m * dH[:, 2, 0, None]
+        db = dH[:, r, 1, None] - dm * H0[2, 1] - m * dH[:, 2, 1, None]
+        hyp = np.maximum(np.hypot(a, b), 1e-12)
+        return np.maximum(s * hyp, 1e-3), ds * hyp + s * (a * da + b * db) / hyp
+
+    sx, dsx = width(0, mx, dmx)
+    sy, dsy = width(1, my, dmy)
+    k = np.arange(n + 1, dtype=np.float64)
+    d = n - 2 * border
+
+    def axis(m: NDArray[np.float64], dm: NDArray[np.float64], sm: NDArray[np.float64],
+             dsm: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        z = (m[:, None] * n - k) / sm[:, None]  # (N, n + 1)
+        Fz = ndtr(z)
+        ph = np.exp(-0.5 * z * z) * 0.3989422804014327
+        dz = (n * dm[:, :, None] - z[None] * dsm[:, :, None]) / sm[None, :, None]  # (8, N, n + 1)
+        dF = np.concatenate([ph[None] * dz, (-ph * z / sig)[None]])  # (9, N, n + 1)
+        B = (Fz[:, :-1] - Fz[:, 1:])[:, border:n - border]
+        dB = (dF[..., :-1] - dF[..., 1:])[..., border:n - border]
+        return B, dB, Fz[:, 0] - Fz[:, -1], dF[..., 0] - dF[..., -1]
+
+    X, dX, Sx, dSx = axis(mx, dmx, sx, dsx)
+    Y, dY, Sy, dSy = axis(my, dmy, sy, dsy)
+    C = cells.reshape(d, d)
+    dbase = -(dSx * Sy + Sx * dSy)  # (9, N)
+    return (contrast * dbase + np.einsum("knj,nj->kn", dY @ C, X)
+            + np.einsum("nj,knj->kn", Y @ C, dX))
+
+
+# products are split so that each BLAS call stays below OpenBLAS's threading threshold: on a loaded
+# machine its threads cost 50-100 times the single-threaded time of these small products
+_CHUNK = 512
+
+
+def _gram(At: NDArray[np.float64], A: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``At @ A`` for (K, P, N) and (K, N, Q), accumulated over chunks of N."""
+    out = np.zeros((A.shape[0], At.shape[1], A.shape[2]))
+    for s0 in range(0, A.shape[1], _CHUNK):
+        out += At[:, :, s0:s0 + _CHUNK] @ A[:, s0:s0 + _CHUNK]
+    return out
+
+
+def _rows(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a @ b`` for (M, P) and (P, Q), in chunks of rows of ``a``."""
+    return np.concatenate([a[s0:s0 + _CHUNK // 2] @ b for s0 in range(0, len(a), _CHUNK // 2)])
+
+
+def _solve_levels(I: NDArray[np.float64], A: NDArray[np.float64], ridge: NDArray[np.float64]
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Least squares ``I ~ A c`` for K designs ``A`` (K, N, P) at once, ``ridge`` (P,) added to the
+    normal equations' diagonal. Returns residuals (K, N) and coefficients (K, P)."""
+    # contiguous operands: numpy's batched matmul on a transposed view is 300 times slower here
+    A = np.ascontiguousarray(A)
+    At = np.ascontiguousarray(np.swapaxes(A, 1, 2))
+    AtA = _gram(At, A)
+    diag = np.arange(A.shape[2])
+    # a relative floor on the diagonal keeps a degenerate design (no pixel inside) solvable
+    AtA[:, diag, diag] += ridge + 1e-9 * AtA[:, diag, diag].mean(axis=1, keepdims=True) + 1e-12
+    c = np.linalg.solve(AtA, _gram(At, np.broadcast_to(I[None, :, None], (len(A), len(I), 1))))
+    return I[None] - np.einsum("knp,kp->kn", A, c[..., 0]), c[..., 0]
+
+
+def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[np.float64], sig: float,
+                  n: int, border: int, code: NDArray[np.float64] | None, iterations: int,
+                  stop_start: Callable[[float, float], bool] | None = None, stop_sse_iter: float = np.inf
+                  ) -> tuple[NDArray[np.float64], float, float, NDArray[np.float64], NDArray[np.float64]]:
+    """Corners and blur of one marker fitted to the pixels ``px`` (N, 2) of values ``I`` (N,) by
+    damped Gauss-Newton, with the levels (and without ``code`` the cells' whiteness) solved linearly
+    inside at every evaluation (variable projection; the Jacobian from :func:`_prediction_jacobian`,
+    updated by Broyden's formula between fresh ones when the cells are fixed).
+
+    Returns corners (4, 2), blur, residual sum of squares, the linear coefficients and the last
+    Gauss-Newton normal matrix ``J^T J`` (9, 9) of the 8 corner coordinates and the blur (NaN without
+    iterations); when ``stop_start(sse, contrast)`` holds at the start it returns at once, when after
+    an iteration the residual exceeds ``stop_sse_iter`` it stops there.
+    """
+    d2 = (n - 2 * border) ** 2
+    if code is None:
+        # levels a, b and the cells' light b W: I = a + b (1 - S) + F (b W); a weak ridge keeps the
+        # cells defined where the blur leaves one unseen
+        ridge = np.r_[0.0, 0.0, np.full(d2, 1e-2)]
+    else:
+        ridge = np.zeros(2)
+
+    def design(quads: NDArray[np.float64], sigs: NDArray[np.float64]) -> NDArray[np.float64]:
+        base, F = _profiles(px, quads, sigs, n, border)
+        one = np.ones_like(base)
+        if code is None:
+            return np.concatenate([one[..., None], base[..., None], F], axis=2)
+        return np.stack([one, base + F @ code], axis=2)
+
+    th = np.r_[quad.ravel(), sig]
+    Acur = design(th[None, :8].reshape(1, 4, 2), th[None, 8])
+    r, c = _solve_levels(I, Acur, ridge)
+    sse = float(r[0] @ r[0])
+    A = np.full((9, 9), np.nan)
+    if stop_start is not None and stop_start(sse, float(c[0, 1])):
+        return quad, sig, sse, c[0], A
+    lam = 1e-3
+    res = r[0]
+    J = None
+    fresh = False
+    for _ in range(iterations):
+        if J is None:
+            # variable projection (Kaufman's form): the residual's derivative is the prediction's
+            # derivative at fixed linear coefficients, projected off the design's columns
+            cells = c[0, 2:] if code is None else c[0, 1] * code
+            dp = _prediction_jacobian(px, th[:8].reshape(4, 2), th[8], n, border, cells, c[0, 1])
+            A0 = np.ascontiguousarray(Acur[0])
+            A0t = np.ascontiguousarray(A0.T)
+            G = _gram(A0t[None], A0[None])[0]
+            G[np.diag_indices_from(G)] += ridge + 1e-9 * np.mean(np.diag(G)) + 1e-12
+            dpT = np.ascontiguousarray(dp.T)
+            proj = _rows(A0, np.linalg.solve(G, _gram(A0t[None], dpT[None])[0]))
+            J = -(dpT - proj).T  # (9, N)
+            fresh = True
+        A = _gram(J[None], np.ascontiguousarray(J.T)[None])[0]
+        g = J @ res
+        improved = False
+        for _try in range(3):
+            step = -np.linalg.solve(A + lam * (np.diag(np.diag(A)) + 1e-9 * np.eye(9)), g)
+            tn = th + step
+            tn[8] = np.clip(tn[8], 0.3, 5.0)
+            An = design(tn[None, :8].reshape(1, 4, 2), tn[None, 8])
+            rn, cn = _solve_levels(I, An, ridge)
+            sn = float(rn[0] @ rn[0])
+            if sn < sse:
+                improved = True
+                break
+            lam *= 10.0
+        if improved:
+            # with a code, Broyden's rank-one update of the Jacobian; with free cells a fresh one each
+            # time (updated, the geometry drifts with the cells in dim light)
+            dth = tn - th
+            J = None if code is None else J + np.outer(dth, rn[0] - res - dth @ J) / (dth @ dth)
+            th, sse, c, res, Acur = tn, sn, cn, rn[0], An
+            lam *= 0.3
+            fresh = False
+            if np.abs(step[:8]).max() < 0.01 or sse > stop_sse_iter:
+                break
+        elif fresh or J is None:
+            break
+        else:
+            J = None  # the updated Jacobian went stale: a fresh one
+    return th[:8].reshape(4, 2), float(th[8]), sse, c[0], A
+
+
+def _rank_codes(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[np.float64], sig: float,
+                n: int, border: int, codes: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Residual sum of squares (C,) of every code (C, d^2) through one geometry, the levels solved per
+    code from sums linear and quadratic in the code (as in :func:`.decode.ml_decode`)."""
+    base, F = _profiles(px, quad[None], np.array([sig]), n, border)
+    base, F = base[0], F[0]
+    N = float(len(I))
+    Sm = base.sum() + codes @ F.sum(axis=0)
+    Ft = np.ascontiguousarray(F.T)
+    G = _gram(Ft[None], F[None])[0]
+    Smm = base @ base + 2.0 * (codes @ (Ft @ base)) + np.einsum("ci,ci->c", _rows(codes, G), codes)
+    SIm = I @ base + codes @ (Ft @ I)
+    var_m = Smm - Sm * Sm / N
+    cov = SIm - I.sum() * Sm / N
+    var_I = I @ I - I.sum() ** 2 / N
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where((cov > 0) & (var_m > 0), var_I - cov * cov / var_m, var_I)
+
+
+def _pixels(gray: NDArray[np.uint8], quad: NDArray[np.float64], n: int, reach: float
+            ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Pixel centres (N, 2) and values (N,) of the square ``quad`` and ``reach`` cells around it."""
+    h, w = gray.shape
+    x0, y0 = np.maximum(np.floor(quad.min(axis=0) - 4), 0).astype(int)
+    x1, y1 = np.minimum(np.ceil(quad.max(axis=0) + 4), [w - 1, h - 1]).astype(int)
+    if x1 <= x0 or y1 <= y0:
+        return np.zeros((0, 2)), np.zeros(0)
+    yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+    px = np.stack([xx.ravel(), yy.ravel()], -1).astype(np.float64)
+    H = quad_homographies(quad[None])[0]
+    w3 = H[2, 0] * px[:, 0] + H[2, 1] * px[:, 1] + H[2, 2]
+    mx = (H[0, 0] * px[:, 0] + H[0, 1] * px[:, 1] + H[0, 2]) / w3
+    my = (H[1, 0] * px[:, 0] + H[1, 1] * px[:, 1] + H[1, 2]) / w3
+    lim = reach / n
+    keep = (mx > -lim) & (mx < 1 + lim) & (my > -lim) & (my < 1 + lim)
+    return px[keep], gray[yy.ravel()[keep], xx.ravel()[keep]].astype(np.float64)
+
+
+def _spread_subset(px: NDArray[np.float64], k: int) -> NDArray[np.bool_]:
+    """Every ``k``-th pixel of ``px`` (N, 2) on a sheared lattice (a checkerboard for ``k = 2``), so the
+    subset covers the square evenly; all of them for ``k <= 1``."""
+    if k <= 1:
+        return np.ones(len(px), bool)
+    x, y = px[:, 0].astype(np.int64), px[:, 1].astype(np.int64)
+    return (x + max(1, k // 2) * y) % k == 0
+
+
+def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDArray[np.uint8], n: int,
+                 border: int, params: BlurredParams, noise: float) -> list[BlurredRead]:
+    """Read the markers of candidate ``quads`` (Q, 4, 2) by maximum likelihood (module docstring).
+
+    The model with free cells nests every code's model, so for the right code the excess residual
+    ``(SSE_code - SSE_free) / s^2`` is chi-square with ``d^2`` degrees of freedom (``s^2`` the free
+    fit's residual variance): a goodness-of-fit test for the code that needs no absolute noise level.
+    The absolute level (``noise``) only rejects candidates that even the free model cannot explain.
+
+    Parameters
+    ----------
+    gray : (H, W) uint8, the image the quads are in (no lens model: small markers are near-linear).
+    quads : (Q, 4, 2) candidates, clockwise on screen.
+    codes : (C, d, d) every code of the family in every rotation as read in a quad's orientation.
+    n, border : cells per side (border included) and border width, cells.
+    params : :class:`BlurredParams`.
+    noise : SD of the image noise, grey levels (:func:`image_noise`).
+
+    Returns
+    -------
+    The accepted reads.
+    """
+    C = codes.shape[0]
+    Wc = codes.reshape(C, -1).astype(np.float64)
+    d2 = Wc.shape[1]
+    var = max(noise, 0.5) ** 2
+    # the right code's excess residual is chi-square(d2): mean d2, SD sqrt(2 d2)
+    max_excess = d2 + params.max_excess_sd * np.sqrt(2.0 * d2)
+    out = []
+    for quad in quads:
+        px, I = _pixels(gray, quad, n, 0.5)
+        N = len(I)
+        if N < 3 * d2:
+            continue
+        dof = max(N - 11 - d2, 1)
+        # the free fit only has to bring the geometry close, and the start screen (most of what clutter
+        # costs) only to tell a marker's misfit from clutter's: both on a spread subset of the pixels
+        half = _spread_subset(px, N // params.subsample_px)
+        dof_h = max(int(half.sum()) - 11 - d2, 1)
+
+        def hopeless(sse0: float, contrast: float, dof: int = dof_h) -> bool:
+            # at the candidate's geometry a marker's misfit is a small share of its contrast (the
+            # corners are within a pixel or two); clutter's is not, or there is no contrast at all
+            excess_sd = np.sqrt(max(sse0 / dof - var, 0.0))
+            return (sse0 > params.max_start_misfit**2 * var * dof or contrast < params.min_contrast
+                    or excess_sd > params.max_start_share * contrast)
+        screen = _spread_subset(px, N // params.screen_px)
+        if screen.sum() < half.sum():
+            _, _, sse_q, cq, _ = _fit_geometry(px[screen], I[screen], quad, 1.5, n, border, None, 0)
+            if hopeless(sse_q, float(cq[1]), max(int(screen.sum()) - 11 - d2, 1)):
+                continue
+        q1, s1, sse_free, cf, _ = _fit_geometry(px[half], I[half], quad, 1.5, n, border, None, params.iterations,
+                                                stop_start=hopeless,
+                                                stop_sse_iter=(1.1 * params.max_free_misfit) ** 2 * var * dof_h)
+        if not half.all() and sse_free <= (params.max_free_misfit**2) * var * dof_h:
+            # the free model's residual on every pixel, for the excess test of the codes' fits
+            _, _, sse_free, cf, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0)
+        else:
+            sse_free *= dof / dof_h
+        s2 = sse_free / dof
+        if (s2 > (params.max_free_misfit**2) * var or cf[1] < params.min_contrast
+                or np.abs(q1 - quad).max() > params.max_shift_px):
+            log.debug("blurred candidate at (%.0f, %.0f): free fit SD %.2f (noise %.2f), contrast %.0f, "
+                      "shift %.1f px: rejected", *quad.mean(axis=0), np.sqrt(s2), np.sqrt(var), cf[1],
+                      np.abs(q1 - quad).max())
+            continue
+        sse = _rank_codes(px, I, q1, s1, n, border, Wc)
+        o = np.argsort(sse)[: params.top_codes]
+        excess0, margin0 = (sse[o[0]] - sse_free) / s2, (sse[o[1]] - sse[o[0]]) / s2
+        if margin0 < params.screen_margin or excess0 > max(params.screen_excess, 4.0 * margin0):
+            # before the codes' own fits: clutter that the free cells explain (a dark frame round a
+            # pattern) fits no code by far more than the leader beats the next code
+            log.debug("blurred candidate at (%.0f, %.0f): excess %.0f, margin %.0f at the free geometry: "
+                      "rejected", *quad.mean(axis=0), excess0, margin0)
+            continue
+        # the free cells absorb part of the geometry's misfit (and in dim light let it drift), so the
+        # leader is refitted with its own geometry, and ranked again there; a code that then beats it
+        # is refitted in turn (at most top_codes in all)
+        fits = {int(o[0]): _fit_geometry(px, I, q1, s1, n, border, Wc[o[0]], params.code_iterations)}
+        while True:
+            best = min(fits, key=lambda k: fits[k][2])
+            sse = _rank_codes(px, I, fits[best][0], fits[best][1], n, border, Wc)
+            sse[list(fits)] = np.inf
+            nxt = int(np.argmin(sse))
+            if sse[nxt] >= fits[best][2] or len(fits) >= params.top_codes:
+                break
+            fits[nxt] = _fit_geometry(px, I, fits[best][0], fits[best][1], n, border, Wc[nxt],
+                                      params.code_iterations)
+        # a refit only lowers a code's residual: the margin at the best geometry bounds the final one
+        rest = [f[2] for k, f in fits.items() if k != best] + [float(sse.min())]
+        if (min(rest) - fits[best][2]) / s2 < params.min_margin:
+            log.debug("blurred candidate at (%.0f, %.0f): margin %.0f after the leader's fit: rejected",
+                      *quad.mean(axis=0), (min(rest) - fits[best][2]) / s2)
+            continue
+        for ci in np.argsort(sse)[:2]:
+            if int(ci) not in fits and (sse[ci] - fits[best][2]) / s2 < params.refit_margin:
+                fits[int(ci)] = _fit_geometry(px, I, fits[best][0], fits[best][1], n, border, Wc[ci],
+                                              params.code_iterations)
+                sse[ci] = np.inf
+        best = min(fits, key=lambda k: fits[k][2])
+        qb, sb, sse_b, cb, JtJ = fits[best]
+        rest = [f[2] for k, f in fits.items() if k != best] + [float(sse.min())]
+        excess = (sse_b - sse_free) / s2
+        margin = (min(rest) - sse_b) / s2
+        ok = (excess <= max(max_excess, params.excess_share * margin) and margin >= params.min_margin
+              and cb[1] >= params.min_contrast and np.abs(qb - quad).max() <= params.max_shift_px)
+        log.debug("blurred candidate: code %d, residual SD %.2f (noise %.2f), excess %.0f, margin %.0f -> %s",
+                  best, np.sqrt(s2), np.sqrt(var), excess, margin, ok)
+        if ok:
+            s2b = sse_b / max(N - 11, 1)
+            with np.errstate(all="ignore"):
+                cov = s2b * np.linalg.pinv(JtJ)[:8, :8]
+            cov = np.stack([cov[2 * k:2 * k + 2, 2 * k:2 * k + 2] for k in range(4)])
+            out.append(BlurredRead(best, qb, cov, sb, float(np.sqrt(s2b)), float(margin)))
+    return out
