@@ -62,6 +62,8 @@ def detect(
     family: Annotated[MarkerFamily, typer.Option("--family", help="Marker family.")],
     out: Annotated[Path, typer.Option("--out", help="Output JSON (det.json).")],
     camera: Annotated[Path | None, typer.Option("--camera", help="cam.yaml: fit edges undistorted.")] = None,
+    blurred: Annotated[bool, typer.Option("--blurred", help="Also the second path for small, blurred markers "
+                                          "(slower; BENCHMARKS.md, Markers).")] = False,
 ) -> None:
     """Detect markers with sub-pixel corners and their covariances; write det.json."""
     import json
@@ -71,7 +73,8 @@ def detect(
     from gtrig.cli.common import track
     from gtrig.errors import FormatError, InputError
     from gtrig.io.atomic import atomic_write_text
-    from gtrig.markers.detect import MarkerDetector
+    from gtrig.markers.detect import DetectorParams, MarkerDetector
+    from gtrig.markers.detect.blurred import BlurredParams
 
     K = dist = None
     size = None
@@ -80,7 +83,8 @@ def detect(
 
         cam = read_cam_yaml(camera)
         K, dist, size = cam.camera_matrix, cam.dist_coeffs, cam.image_size
-    det = MarkerDetector(family, K, dist)
+    params = DetectorParams(blurred=BlurredParams(enabled=True)) if blurred else None
+    det = MarkerDetector(family, K, dist, params)
     files = _image_files(inputs)
     images = []
     n_det = 0

@@ -66,3 +66,25 @@ def test_image_noise() -> None:
     for noise in (1.5, 3.0, 6.0):
         img, _ = render(SHAPE, [], background=bg, blur_px=1.0, noise=noise, rng=rng, ss=2)
         assert abs(image_noise(img) - noise) < 0.2 * noise
+
+
+def test_cli_detect_blurred(tmp_path) -> None:
+    import json
+
+    import cv2
+    from typer.testing import CliRunner
+
+    from gtrig.cli.main import app
+
+    img, truths = _scene(0, 0.0, 230.0)
+    cv2.imwrite(str(tmp_path / "a.png"), img)
+    counts = []
+    for extra in ([], ["--blurred"]):
+        out = tmp_path / f"det{len(extra)}.json"
+        r = CliRunner().invoke(app, ["markers", "detect", str(tmp_path / "a.png"), "--family", FAM.value,
+                                     "--out", str(out), *extra])
+        assert r.exit_code == 0, r.output
+        dets = json.loads(out.read_text())["images"][0]["detections"]
+        assert {d["id"] for d in dets} <= {t.marker_id for t in truths}
+        counts.append(len(dets))
+    assert counts[1] >= len(truths) - 1 > counts[0]
