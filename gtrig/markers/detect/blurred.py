@@ -18,7 +18,7 @@ what the first one left:
    cannot fit to about the image noise (:func:`image_noise`) stops here, most of it at the first
    evaluation;
 3. ranking: every code of the family in its 4 rotations through that geometry, the levels solved
-   per code from sums linear and quadratic in the code (as :func:`.decode.ml_decode` does), and a
+   per code from sums linear and quadratic in the code, and a
    screen on the leader's margin and excess residual;
 4. verification: the leader's corners and blur refitted with its cells fixed, the ranking repeated
    there (a code that beats it is refitted in turn), close runners-up refitted too. The free model
@@ -413,7 +413,7 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
 def _rank_codes(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[np.float64], sig: float,
                 n: int, border: int, codes: NDArray[np.float64]) -> NDArray[np.float64]:
     """Residual sum of squares (C,) of every code (C, d^2) through one geometry, the levels solved per
-    code from sums linear and quadratic in the code (as in :func:`.decode.ml_decode`)."""
+    code from sums linear and quadratic in the code."""
     base, F = _profiles(px, quad[None], np.array([sig]), n, border)
     base, F = base[0], F[0]
     N = float(len(I))
