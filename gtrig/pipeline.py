@@ -174,18 +174,18 @@ def gtlaser(ctx: StageContext) -> list[AccuracyRow]:
     ]
 
 
-def _validation_vision(ctx: StageContext, rig: Rig) -> VisionResult:
-    """GTvision over the validation stops with ``rig``, planar, the rig's calibrated covariances; the
-    detections checkpointed, so an interrupted demo resumes instead of detecting again."""
+def _vision(ctx: StageContext, rig: Rig, sequence: str) -> VisionResult:
+    """GTvision over one sequence with ``rig``, planar, the rig's calibrated covariances; the detections
+    checkpointed, so an interrupted demo resumes instead of detecting again."""
     from gtrig.vision.covariance import UNCALIBRATED_MARKERS
     from gtrig.vision.estimate import VisionOptions
     from gtrig.vision.sequence import run_recording
 
     # each calibrated camera and marker in view gets a pose nuisance with the covariance its calibration
     # wrote into the rig (pose_cov); the others the sigmas of hand measurements
-    return run_recording(ctx.rec, rig, sequence="validation", planar=True,
+    return run_recording(ctx.rec, rig, sequence=sequence, planar=True,
                          options=VisionOptions(rig_uncertainty=UNCALIBRATED_MARKERS),
-                         checkpoint=ctx.out / "gt_vision_validation.checkpoint", stale_checkpoint="restart")
+                         checkpoint=ctx.out / f"gt_vision_{sequence}.checkpoint", stale_checkpoint="restart")
 
 
 def _hand_frame_covariance(rig: Rig, anchor: int) -> np.ndarray:
@@ -212,7 +212,7 @@ def robot_frame(ctx: StageContext) -> list[AccuracyRow]:
         raise GtrigError("needs the marker calibration and the survey's validation poses")
     rig = _rig(ctx)
     # GTvision's own covariances: the frame error is what the stops are about to measure
-    val = _validation_vision(ctx, with_markers_frame_cov(rig, None))
+    val = _vision(ctx, with_markers_frame_cov(rig, None), "validation")
     names = read_table(ctx.rec / "validation" / "poses.csv", ("pose", "start_s", "end_s")).column("pose")
     fit = fit_validation(names, val, sv.poses.names, sv.poses.xytheta, sv.poses_cov_joint())
     rig2 = rig_tied_to_survey(rig, fit)
@@ -254,10 +254,8 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
     from gtrig.markers.robotcal import RobotCalibration
     from gtrig.rig import load_rig
     from gtrig.vision import report as vision_report
-    from gtrig.vision.covariance import UNCALIBRATED_MARKERS
-    from gtrig.vision.estimate import VisionOptions
     from gtrig.vision.robot_frame import FrameFit, frame_error_covariance, in_surveyed_frame, with_markers_frame_cov
-    from gtrig.vision.sequence import VisionResult, run_recording, with_robot_frame_uncertainty, write_covariance_csv
+    from gtrig.vision.sequence import VisionResult, with_robot_frame_uncertainty, write_covariance_csv
 
     rig = _rig(ctx)
     cal = ctx.products.get("marker_calibration")
@@ -279,13 +277,11 @@ def gtvision(ctx: StageContext) -> list[AccuracyRow]:
                                          [frame_error_covariance(c, cov_hand) for c in fit.loo_cov])
         elif static:
             frame = rig.robot.markers_frame_cov
-            res_own = _validation_vision(ctx, with_markers_frame_cov(rig, None))
+            res_own = _vision(ctx, with_markers_frame_cov(rig, None), "validation")
             res = res_own if frame is None else with_robot_frame_uncertainty(res_own, np.asarray(frame, float))
         else:
             # the rig's markers_frame_cov (the survey's offset, or the hand's) enters every pose
-            res = run_recording(ctx.rec, rig, sequence=seq, planar=True,
-                                options=VisionOptions(rig_uncertainty=UNCALIBRATED_MARKERS),
-                                checkpoint=ctx.out / f"gt_vision_{seq}.checkpoint", stale_checkpoint="restart")
+            res = _vision(ctx, rig, seq)
         write_tum(ctx.out / f"gt_vision_{seq}.tum", res.trajectory())
         write_covariance_csv(ctx.out / f"gt_vision_{seq}_cov.csv", res)
         if not _has_truth(ctx):
