@@ -45,6 +45,7 @@ class ArucoDetector:
     """
 
     name = "opencv-aruco-subpix"
+    version = cv2.__version__
 
     def __init__(self, rig: Rig, sigma_px: float = ARUCO_SIGMA_PX) -> None:
         from gtrig.markers.families import family_spec, marker_cells
@@ -85,7 +86,8 @@ class GtrigDetector:
 
     name = "gtrig-markers"
 
-    def __init__(self, rig: Rig, detector_class: type) -> None:
+    def __init__(self, rig: Rig, detector_class: type, version: str = "") -> None:
+        self.version = version
         fams = {m.family for m in rig.robot.markers}
         if len(fams) != 1:
             raise InputError("GTvision handles one marker family per rig")
@@ -114,7 +116,7 @@ def make_detector(rig: Rig, which: str = "auto") -> ArucoDetector | GtrigDetecto
                                  "is not available") from None
             log.warning("gtrig.markers.detect is not available: falling back to OpenCV ArUco corners")
             return ArucoDetector(rig)
-        return GtrigDetector(rig, impl)
+        return GtrigDetector(rig, impl, str(getattr(mod, "DETECTOR_VERSION", "")))
     if which == "aruco":
         return ArucoDetector(rig)
     raise InputError(f"unknown detector {which!r}; choose auto, gtrig or aruco")

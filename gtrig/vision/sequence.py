@@ -499,7 +499,8 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     # the cameras' and markers' own calibrated covariances, where the rig holds them
     opts = replace(opts, planar=planar, rig_uncertainty=opts.rig_uncertainty.with_rig(rig))
     model = VisionModel.from_rig(rig)
-    det_name = make_detector(rig, detector).name
+    det = make_detector(rig, detector)
+    det_name = det.name
     indices = camera_indices(rec, sequence, rig)
     intervals = read_static_intervals(rec / "validation" / "poses.csv") if sequence == "validation" else None
     instants = make_instants(indices, sequence, sync_tol_s, intervals)
@@ -507,7 +508,8 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     if any(ix.video is not None for ix in indices.values()):
         raise InputError("GTvision reads image files; extract the frames of video.* first")
     chunks = [instants[i:i + chunk_size] for i in range(0, len(instants), chunk_size)]
-    key = _key(rig, sequence, det_name, instants, paths)
+    # a new version of the detector's code makes other detections: not the checkpoint's
+    key = _key(rig, sequence, f"{det.name}/{det.version}", instants, paths)
     ck = Path(checkpoint) if checkpoint is not None else None
     try:
         done = _load_checkpoint(ck, key) if ck is not None else {}

@@ -167,3 +167,14 @@ def test_timing_uncertainty_adds_the_hidden_motion():
     static = replace(res, sequence="validation")
     assert with_timing_uncertainty(static, {"cam0": 0.002}) is static
     assert with_timing_uncertainty(res, {"cam0": 0.0}) is res
+
+
+def test_checkpoint_is_not_reused_across_detector_versions(rec, tmp_path, monkeypatch):
+    import gtrig.markers.detect as det
+
+    path, rig = rec
+    ck = tmp_path / "ck.jsonl"
+    run_recording(path, rig, "validation", True, workers=1, detector="gtrig", checkpoint=ck)
+    monkeypatch.setattr(det, "DETECTOR_VERSION", det.DETECTOR_VERSION + 1)
+    with pytest.raises(InputError, match="checkpoint of another run"):
+        run_recording(path, rig, "validation", True, workers=1, detector="gtrig", checkpoint=ck)

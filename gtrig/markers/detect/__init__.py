@@ -42,7 +42,11 @@ from gtrig.markers.detect.edges import CLIP_HIGH, fit_edges, gather_band, inters
 from gtrig.markers.families import _codebook, decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily
 
-__all__ = ["Detection", "DetectorParams", "MarkerDetector", "detect_markers"]
+__all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", "detect_markers"]
+
+#: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
+#: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
+DETECTOR_VERSION = 2
 
 
 @dataclass(frozen=True)
