@@ -109,11 +109,10 @@ class VisionResult:
         """(M, 6, 6), or (M, 3, 3) over x, y, yaw when planar, for the localized poses."""
         from gtrig.vision.covariance import planar_covariance
 
-        ok = self.localized()
-        covs = [e.cov_6x6 for e in ok]
+        covs = [e.cov_6x6 for e in self.localized() if e.cov_6x6 is not None]  # a localized pose has one
         if self.planar:
             return np.stack([planar_covariance(c) for c in covs]) if covs else np.zeros((0, 3, 3))
-        return np.stack(covs) if covs else np.zeros((0, 6, 6))  # type: ignore[arg-type]
+        return np.stack(covs) if covs else np.zeros((0, 6, 6))
 
 
 # ------------------------------------------------------------------------------------------ instants
@@ -163,7 +162,7 @@ def make_instants(indices: dict[str, FrameIndex], sequence: str, sync_tol_s: flo
             raise InputError("the validation sequence needs its static intervals")
         out = []
         for t0, t1 in intervals_s:
-            imgs = []
+            imgs: list[tuple[str, int]] = []
             for name in sorted(indices):
                 st = indices[name].stamps_s
                 imgs.extend((name, int(i)) for i in np.flatnonzero((st >= t0) & (st <= t1)))
@@ -538,7 +537,8 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     if progress:
         progress(n_done, len(instants))
     t_par = time.perf_counter()
-    init_args = (rig_to_dict(rig), detector, opts, paths, {})
+    init_args: tuple[Any, ...] = (rig_to_dict(rig), detector, opts, paths, {})
+
     def record(cid: int, items: Any) -> None:
         nonlocal n_done
         done[cid] = items
