@@ -204,7 +204,7 @@ def bench_images(seed: int, workers: int, frames: int) -> None:
 def bench_recording(rec: Path, rig_path: Path, workers: int) -> None:
     from gtrig.io.tum import read_tum
     from gtrig.rig import load_rig
-    from gtrig.vision.covariance import ANCHOR_PLACEMENT_SIGMA, anchor_frame_covariance
+    from gtrig.vision.covariance import hand_placement_frame_covariance
     from gtrig.vision.report import accuracy_on_recording, interpolate_truth, summarize
     from gtrig.vision.sequence import run_recording, with_robot_frame_uncertainty
 
@@ -212,8 +212,8 @@ def bench_recording(rec: Path, rig_path: Path, workers: int) -> None:
     model = VisionModel.from_rig(rig)
     # the markers' common frame error comes with a calibrated rig (robot.markers_frame_cov, which
     # run_recording adds); an older rig: the dima-marker's (14) hand placement, as gtrig.pipeline had it
-    cov_frame = None if rig.robot.markers_frame_cov is not None else anchor_frame_covariance(
-        rig.marker(14).T_robot_marker.matrix(), np.diag(np.asarray(ANCHOR_PLACEMENT_SIGMA) ** 2))
+    cov_frame = None if rig.robot.markers_frame_cov is not None else hand_placement_frame_covariance(
+        rig.marker(14).T_robot_marker.matrix())
     print(f"\n### {rec} (rig {rig_path}), {workers or 'all'} worker(s)\n")
     if cov_frame is None:
         print("(the rig's markers were tied to the survey at these validation stops: the validation rows\n"

@@ -124,13 +124,15 @@ def marker_calibration(ctx: StageContext) -> list[AccuracyRow]:
     """The markers' poses on the robot from the hand-held images, anchored on the dima-marker (issue 5)."""
     from gtrig.markers.robotcal import calibrate_markers, marker_errors, specs_from_rig, write_markers_yaml
     from gtrig.rig import load_rig
+    from gtrig.vision.covariance import hand_placement_frame_covariance
     from gtrig.vision.robot_frame import with_markers_frame_cov
 
     rig = _rig(ctx)
     rig2, cal = calibrate_markers(ctx.rec, rig)
     write_markers_yaml(ctx.out / "markers.yaml", cal, specs_from_rig(rig))
     # every marker now hangs on the dima-marker's hand-measured pose: its error is common to all
-    rig2 = with_markers_frame_cov(rig2, _hand_frame_covariance(rig2, cal.anchor))
+    T_anchor = rig2.marker(cal.anchor).T_robot_marker.matrix()
+    rig2 = with_markers_frame_cov(rig2, hand_placement_frame_covariance(T_anchor))
     _calibrated(ctx, rig2)
     ctx.products["marker_calibration"] = cal
     if not _has_truth(ctx):
@@ -186,15 +188,6 @@ def _vision(ctx: StageContext, rig: Rig, sequence: str) -> VisionResult:
     return run_recording(ctx.rec, rig, sequence=sequence, planar=True,
                          options=VisionOptions(rig_uncertainty=UNCALIBRATED_MARKERS),
                          checkpoint=ctx.out / f"gt_vision_{sequence}.checkpoint", stale_checkpoint="restart")
-
-
-def _hand_frame_covariance(rig: Rig, anchor: int) -> np.ndarray:
-    """The robot frame's common error (6, 6, robot axes) from the anchor's hand-measured pose (set square
-    against the dima, offset measured with a caliper: 0.3 mm, 0.1 deg about z)."""
-    from gtrig.vision.covariance import ANCHOR_PLACEMENT_SIGMA, anchor_frame_covariance
-
-    sig = np.asarray(ANCHOR_PLACEMENT_SIGMA)
-    return anchor_frame_covariance(rig.marker(anchor).T_robot_marker.matrix(), np.diag(sig**2))
 
 
 def robot_frame(ctx: StageContext) -> list[AccuracyRow]:

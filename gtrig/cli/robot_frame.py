@@ -30,7 +30,7 @@ def command(
     from gtrig.rig import load_rig
     from gtrig.rig.load import dump_rig
     from gtrig.survey import run_recording_survey
-    from gtrig.vision.covariance import ANCHOR_PLACEMENT_SIGMA, anchor_frame_covariance
+    from gtrig.vision.covariance import hand_placement_frame_covariance
     from gtrig.vision.robot_frame import fit_validation, rig_tied_to_survey, with_markers_frame_cov
     from gtrig.vision.sequence import run_recording
 
@@ -40,7 +40,7 @@ def command(
             T_anchor = r.marker(anchor).T_robot_marker.matrix()
         except KeyError:
             raise InputError(f"{rig}: marker {anchor} (--anchor) is not in robot.markers") from None
-        r = with_markers_frame_cov(r, anchor_frame_covariance(T_anchor, np.diag(np.asarray(ANCHOR_PLACEMENT_SIGMA)**2)))
+        r = with_markers_frame_cov(r, hand_placement_frame_covariance(T_anchor))
     survey = run_recording_survey(recording)
     with Progress(TextColumn("GTvision, validation stops"), BarColumn(), MofNCompleteColumn(),
                   TimeRemainingColumn(), console=err_console, transient=True) as prog:

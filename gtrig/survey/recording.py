@@ -50,11 +50,9 @@ class SurveyResult:
         blocks alone when it did not run."""
         if self.joint is not None:
             return self.joint.poses_cov_joint
-        P = len(self.poses.names)
-        C = np.zeros((3 * P, 3 * P))
-        for i in range(P):
-            C[3 * i:3 * i + 3, 3 * i:3 * i + 3] = self.poses.cov_xytheta[i]
-        return C
+        from scipy.linalg import block_diag
+
+        return block_diag(*self.poses.cov_xytheta)
 
 
 @dataclass(frozen=True)

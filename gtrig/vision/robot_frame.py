@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy.linalg import block_diag
 from scipy.stats import chi2 as chi2_dist
 
 from gtrig import geometry as geo
@@ -127,10 +128,7 @@ def fit_frame_offset(names: Sequence[str], xytheta_markers: np.ndarray, cov_mark
         raise InputError(f"frame offset: {K} stops but {V.shape[0]} GTvision and {S.shape[0]} surveyed poses")
     Cs = np.asarray(cov_survey, float)
     if Cs.shape == (K, 3, 3):
-        full = np.zeros((3 * K, 3 * K))
-        for k in range(K):
-            full[3 * k:3 * k + 3, 3 * k:3 * k + 3] = Cs[k]
-        Cs = full
+        Cs = block_diag(*Cs)
     if Cs.shape != (3 * K, 3 * K):
         raise InputError(f"frame offset: survey covariance of shape {Cs.shape}, expected ({3 * K}, {3 * K})")
     Cv = np.asarray(cov_markers, float).reshape(K, 3, 3)
@@ -138,13 +136,12 @@ def fit_frame_offset(names: Sequence[str], xytheta_markers: np.ndarray, cov_mark
     Rt = np.swapaxes(_rot2(V[:, 2]), -1, -2)
     d = np.concatenate([np.einsum("kij,kj->ki", Rt, S[:, :2] - V[:, :2]),
                         geo.wrap_angle(S[:, 2] - V[:, 2])[:, None]], axis=1)
-    J = np.zeros((3 * K, 3 * K))
-    for k in range(K):
-        J[3 * k:3 * k + 2, 3 * k:3 * k + 2] = Rt[k] if np.all(np.isfinite(Rt[k])) else 0.0
-        J[3 * k + 2, 3 * k + 2] = 1.0
-    Cv_full = np.zeros((3 * K, 3 * K))
-    for k in range(K):  # a stop GTvision did not localize has no covariance: zero, it is left out below
-        Cv_full[3 * k:3 * k + 3, 3 * k:3 * k + 3] = np.nan_to_num(Cv[k])
+    Jk = np.zeros((K, 3, 3))
+    Jk[:, :2, :2] = np.nan_to_num(Rt)
+    Jk[:, 2, 2] = 1.0
+    J = block_diag(*Jk)
+    # a stop GTvision did not localize has no covariance: zero, it is left out below
+    Cv_full = block_diag(*np.nan_to_num(Cv))
     # the survey's error and GTvision's are independent; J rotates both into the markers' robot axes
     Sigma_all = J @ (Cs + Cv_full) @ J.T
     used = np.all(np.isfinite(d), axis=1) & np.all(np.isfinite(Cv.reshape(K, 9)), axis=1)
