@@ -27,6 +27,7 @@ Corners are in OpenCV's pixel convention (pixel centres at integer coordinates) 
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import cv2
@@ -106,6 +107,12 @@ class DetectorParams:
         thresholding each cell.
     blurred : the second path, for small blurred markers (:class:`.blurred.BlurredParams`; off by
         default, ``BlurredParams(enabled=True)`` turns it on).
+    early_px_per_edge : the first pass (plain steps, only a start for the next ones) fits every
+        ``k``-th pixel of an edge with more than this many (:meth:`.edges.EdgeSamples.thinned`).
+    threads : threads one detection may use; 0 follows OpenCV's setting (``cv2.getNumThreads()``,
+        which OpenCV's own ArUco detector uses too, and which GTvision's worker processes set to 1).
+        With two or more the second path runs in a helper thread beside the first; the output is the
+        same.
     """
 
     candidates: CandidateParams = field(default_factory=CandidateParams)
@@ -118,6 +125,9 @@ class DetectorParams:
     passes: int = 3
     iterations: int = 10
     tol: float = 1e-3
+
+    early_px_per_edge: int = 300
+    threads: int = 0
 
     unblur: bool = True
     blurred: BlurredParams = field(default_factory=BlurredParams)
@@ -209,10 +219,18 @@ class MarkerDetector:
     def detect(self, image: NDArray[np.uint8]) -> list[Detection]:
         """Detect and decode markers in a grayscale (H, W) or BGR (H, W, 3) 8-bit image."""
         gray = _to_gray(image)
-        dets = self._detect_sharp(gray)
-        if self.params.blurred.enabled:
-            dets = dets + self._detect_blurred(gray, dets)
-        return _dedupe(dets)
+        if not self.params.blurred.enabled:
+            return _dedupe(self._detect_sharp(gray))
+        if _threads(self.params.threads) < 2:
+            cands = self._blurred_candidates(gray)
+            dets = self._detect_sharp(gray)
+        else:
+            # the second path's candidate stage (OpenCV's filters and contours, which release the GIL)
+            # beside the first path
+            later = _helper_pool().submit(self._blurred_candidates, gray)
+            dets = self._detect_sharp(gray)
+            cands = later.result()
+        return _dedupe(dets + self._detect_blurred(gray, cands, dets))
 
     def _all_codes(self) -> NDArray[np.uint8]:
         """Every code (C, d, d) of the family in its four rotations, as read in a quad's orientation."""
@@ -221,17 +239,25 @@ class MarkerDetector:
             self._codes = np.concatenate([np.rot90(book, -r, axes=(1, 2)) for r in range(4)])
         return self._codes
 
-    def _detect_blurred(self, gray: NDArray[np.uint8], found: list[Detection]) -> list[Detection]:
-        """The second path (:mod:`.blurred`) on the candidates that no detection of the first covers.
-
-        It works in raw pixels: over a marker of at most ``max_side_px`` the lens distortion is close
-        to a homography.
-        """
+    def _blurred_candidates(self, gray: NDArray[np.uint8]) -> tuple[list[NDArray[np.float64]], float]:
+        """The second path's candidate quads (:func:`.blurred.find_blurred_candidates`) and the image's
+        noise SD (:func:`.blurred.image_noise`)."""
         p = self.params
         h, w = gray.shape
         quads = find_blurred_candidates(gray, p.blurred, p.candidates.max_side_frac * min(h, w),
                                         p.candidates.scale)
-        if found and quads:
+        return quads, image_noise(gray) if quads else float("nan")
+
+    def _detect_blurred(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float],
+                        found: list[Detection]) -> list[Detection]:
+        """The second path (:mod:`.blurred`) on its candidates ``cands`` (from
+        :meth:`_blurred_candidates`) that no detection of the first path (``found``) covers.
+
+        It works in raw pixels: over a marker of at most ``max_side_px`` the lens distortion is close
+        to a homography.
+        """
+        quads, noise = cands
+        if found:
             # a candidate whose centre lies inside a detection is that marker (or a part of it)
             polys = [d.corners_px.astype(np.float32).reshape(-1, 1, 2) for d in found]
             quads = [q for q in quads
@@ -240,8 +266,8 @@ class MarkerDetector:
         if not quads:
             return []
         codes = self._all_codes()
-        reads = read_blurred(gray, np.array(quads), codes, self.spec.cells, self.spec.border_cells, p.blurred,
-                             image_noise(gray))
+        reads = read_blurred(gray, np.array(quads), codes, self.spec.cells, self.spec.border_cells,
+                             self.params.blurred, noise)
         out = []
         for r in reads:
             ids, rot, _ = decode_batch(self.spec.family, codes[r.code][None], 0)
@@ -286,6 +312,8 @@ class MarkerDetector:
                 w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
                 excl = np.minimum(sigma, 0.3 * L)
             samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
+            if fit is None:
+                samples = samples.thinned(p.early_px_per_edge)
             if fit is None:
                 fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, tol=p.tol)
             else:
@@ -360,6 +388,22 @@ class MarkerDetector:
             out.append(Detection(int(ids[k]), corners[k][order].copy(), cov[k][order].copy(), int(ham[k]),
                                  float(blur[k])))
         return out
+
+
+def _threads(threads: int) -> int:
+    """Threads a detection may use: ``threads``, or OpenCV's setting when 0."""
+    return threads if threads > 0 else cv2.getNumThreads()
+
+
+_POOL: ThreadPoolExecutor | None = None
+
+
+def _helper_pool() -> ThreadPoolExecutor:
+    """One helper thread for the second path, shared by every detector of the process."""
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gtrig-markers")
+    return _POOL
 
 
 def _dedupe(dets: list[Detection]) -> list[Detection]:

@@ -43,12 +43,12 @@ Coordinates are "fit coordinates": raw pixels, or undistorted pixels when a came
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.special import ndtr
 
+from gtrig.markers.detect import _kernels
 from gtrig.markers.detect.camera import Undistorter
 
 _INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
@@ -64,8 +64,6 @@ CLIPPED_ITER_FACTOR = 4
 MAX_CLIPPED_WHITE = 4.0
 #: share of an edge's band pixels clipped above which the edge is fitted as clipped
 CLIPPED_EDGE_SHARE = 0.1
-# sign flips of the rows of rho and log sigma, stored negated in fit_edges' Jacobian
-_SIGNS = np.outer(*2 * [np.array([1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0])])
 
 
 @dataclass(frozen=True)
@@ -113,6 +111,26 @@ class EdgeSamples:
     val: NDArray[np.float64]
     edge: NDArray[np.int64]
     starts: NDArray[np.int64]
+
+    def thinned(self, max_per_edge: int) -> EdgeSamples:
+        """Every ``k``-th pixel of each edge with more than ``max_per_edge`` of them (``k`` the
+        smallest that leaves at most that many), the others whole.
+
+        The band's pixels run across the edge within each step along it, so a stride that does not
+        divide the band's width picks a sheared lattice that still covers the band evenly.
+        """
+        E = len(self.starts)
+        cnt = np.bincount(self.edge, minlength=E)
+        stride = np.maximum(-(-cnt // max(max_per_edge, 1)), 1)
+        if stride.max() <= 1:
+            return self
+        first = np.where(self.starts >= 0, self.starts, 0)
+        keep = (np.arange(len(self.edge)) - first[self.edge]) % stride[self.edge] == 0
+        edge = self.edge[keep]
+        starts = np.full(E, -1, np.int64)
+        u, at = np.unique(edge, return_index=True)
+        starts[u] = at
+        return EdgeSamples(self.xy[keep], self.val[keep], edge, starts)
 
 
 def gather_band(
@@ -328,13 +346,7 @@ def fit_edges(
     ext = np.zeros(N) if extra is None else np.asarray(extra, np.float64)
     NP = 7
     has = cnt > 8
-    lam = np.full(E, 1e-3)
-    JTJ = np.tile(np.eye(NP), (E, 1, 1))
-    JTr = np.zeros((E, NP))
-    cur = np.zeros(E)
-    eye = np.eye(NP)
     wt = np.sqrt(cnt)
-
     clipped = (v >= CLIP_HIGH) | (v <= CLIP_LOW)
     any_clipped = bool(clipped.any())
     # edges with a tenth of their band clipped (a saturated side, not noise in a dim black): fitted
@@ -347,108 +359,15 @@ def fit_edges(
         # start the white level above the clip: from there the clipped pixels agree and the ramp's
         # pixels pull it down smoothly; from the clip level the hinge can hold it (a local minimum)
         P[slow, 3] = np.maximum(P[slow, 3], 2.0 * (CLIP_HIGH - P[slow, 2]))
-
-    def compact(act: NDArray[np.int64]) -> tuple[Any, ...]:
-        """The samples of the edges ``act`` (ascending), contiguous per edge, the bounds of each edge,
-        which samples are clipped and which belong to clipped edges (None when none is)."""
-        keep = np.zeros(E, bool)
-        keep[act] = True
-        m = keep[e]
-        return (np.ascontiguousarray(X[m, 0]), np.ascontiguousarray(X[m, 1]), v[m], ext[m],
-                np.concatenate([[0], np.cumsum(cnt[act].astype(np.int64))]),
-                clipped[m] if any_clipped else None, slow[e[m]] if slow.any() else None)
-
-    def normal_eq(Pa: NDArray[np.float64], arrs: tuple[Any, ...]
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """Per-edge J^T J (A, 7, 7), J^T r (A, 7) and r^T r (A,) of the edges whose samples are
-        ``arrs`` (from :func:`compact`) at parameters ``Pa`` (A, 7)."""
-        X0, X1, va, exa, bnd, clip, exact = arrs
-        cnt_a = np.diff(bnd)
-        th, rho, a, b, ls, ca, cu = Pa.T
-        isg = np.exp(-ls)
-        # per-edge factors (trigonometry, exponentials) computed per edge and gathered per pixel in one
-        # call; in-place products below keep the temporaries few (this function is most of the time)
-        c, s, rho_, a_, b_, isg_, ca_, cu_, gk = np.repeat(
-            np.stack([np.cos(th), np.sin(th), rho, a, b, isg, ca, cu, b * isg * _INV_SQRT_2PI]), cnt_a, axis=1)
-        Jr = np.empty((NP + 1, len(va)))
-        dm = X0 * c
-        dm += X1 * s  # distance from the reference point across the edge, d + rho
-        d = dm - rho_
-        u = X1 * c
-        u -= X0 * s  # along the edge; du/dtheta = -(d + rho)
-        z = d * isg_
-        Phi = ndtr(z)
-        g = z * z
-        g *= -0.5
-        np.exp(g, out=g)
-        g *= gk  # b phi(z) / sigma
-        q4 = g * d  # negated d Phi / d log sigma, times b
-        if exact is not None:  # clipped edges: the pixel-integrated step (module docstring)
-            k = np.flatnonzero(exact)
-            Pk, dPk, sPk = pixel_step(d[k], 1.0 / isg_[k], c[k], s[k])
-            Phi[k] = Pk
-            g[k] = b_[k] * dPk
-            q4[k] = -b_[k] * sPk
-        Phi += exa
-        base = b_ * Phi
-        base += a_
-        f = Jr[2]
-        np.multiply(ca_, d, out=f)
-        f += cu_ * u
-        f += 1.0
-        dd = Jr[1]  # d pred / d d; the Jacobian row of rho is its negative (signs fixed in G below)
-        np.multiply(g, f, out=dd)
-        dd += base * ca_
-        np.multiply(dd, u, out=Jr[0])
-        dm *= cu_
-        dm *= base
-        Jr[0] -= dm
-        np.multiply(Phi, f, out=Jr[3])
-        np.multiply(q4, f, out=Jr[4])  # negated row of log sigma
-        np.multiply(base, d, out=Jr[5])
-        np.multiply(base, u, out=Jr[6])
-        np.multiply(base, f, out=Jr[7])
-        np.subtract(va, Jr[7], out=Jr[7])  # residual
-        if clip is not None:  # censored: a clipped pixel the model puts beyond the clip level agrees
-            agree = clip & (((va >= CLIP_HIGH) & (Jr[7] <= 0)) | ((va <= CLIP_LOW) & (Jr[7] >= 0)))
-            Jr[:, agree] = 0.0
-        # [J; r] [J; r]^T per edge holds J^T J, J^T r and r^T r at once (segments are contiguous)
-        G = np.empty((len(Pa), NP + 1, NP + 1))
-        for k in range(len(Pa)):
-            blk = Jr[:, bnd[k] : bnd[k + 1]]
-            G[k] = blk @ blk.T
-        G *= _SIGNS
-        return G[:, :NP, :NP], G[:, :NP, NP], G[:, NP, NP]
-
-    act = np.flatnonzero(has)
-    arrs = compact(act)
-    if len(act):
-        JTJ[act], JTr[act], cur[act] = normal_eq(P[act], arrs)
     # a clipped edge's white level converges slowly (only the ramp's unclipped pixels set it) and
     # drags the line with it: such edges get more iterations and must also settle their contrast
-    for it in range(iterations * (CLIPPED_ITER_FACTOR if slow.any() else 1)):
-        if it == iterations:
-            act = act[slow[act]]
-            arrs = compact(act)
-        if not len(act):
-            break
-        A = JTJ[act] + lam[act, None, None] * (JTJ[act] * eye + 1e-9 * eye)
-        delta = np.linalg.solve(A, JTr[act][..., None])[..., 0]
-        Pn = P[act] + delta
-        Pn[:, 4] = np.clip(Pn[:, 4], np.log(0.05), np.log(20.0))
-        if slow.any():  # see MAX_CLIPPED_WHITE
-            s_act = slow[act]
-            Pn[s_act, 3] = np.minimum(Pn[s_act, 3], MAX_CLIPPED_WHITE * (CLIP_HIGH - Pn[s_act, 2]))
-        JTJ_n, JTr_n, new = normal_eq(Pn, arrs)
-        better = new <= cur[act]
-        upd = act[better]
-        P[upd], cur[upd], JTJ[upd], JTr[upd] = Pn[better], new[better], JTJ_n[better], JTr_n[better]
-        lam[act] = np.where(better, lam[act] * 0.3, lam[act] * 10.0)
-        done = np.abs(delta[:, 1]) + np.abs(delta[:, 0]) * wt[act] < tol
-        done &= ~slow[act] | (np.abs(delta[:, 3]) < 1e-3 * np.abs(P[act, 3]))
-        if done.any():
-            act = act[~done]
-            arrs = compact(act)
+    bounds = np.concatenate([[0], np.cumsum(cnt.astype(np.int64))])
+    P, cur, JTJ = _kernels.edge_lm(
+        np.ascontiguousarray(X[:, 0]), np.ascontiguousarray(X[:, 1]), np.ascontiguousarray(v, np.float64),
+        np.ascontiguousarray(ext), bounds, np.ascontiguousarray(P, np.float64), has,
+        clipped if any_clipped else np.zeros(0, bool), slow, iterations, CLIPPED_ITER_FACTOR, tol, wt,
+        np.log(0.05), np.log(20.0), MAX_CLIPPED_WHITE, CLIP_LOW, CLIP_HIGH)
+    eye = np.eye(NP)
     dof = np.maximum(cnt - NP, 1)
     s2 = cur / dof
     JTJ[~has] = eye
@@ -513,18 +432,6 @@ def quad_homographies(quads: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.concatenate([h, np.ones((Q, 1))], axis=1).reshape(Q, 3, 3)
 
 
-def _ndtr_saturated(z: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``ndtr(z)``, evaluated only where it is not 0 or 1 to double precision (|z| < 9).
-
-    Most of the grid lines of a marker are many blur widths from a given band pixel; skipping them
-    makes :func:`marker_context` 2-3 times faster on markers of 35 px and more.
-    """
-    out = (z > 0).astype(np.float64)
-    m = np.abs(z) < 9.0
-    out[m] = ndtr(z[m])
-    return out
-
-
 def marker_context(
     samples: EdgeSamples,
     fit: EdgeFit,
@@ -559,34 +466,11 @@ def marker_context(
     -------
     (N,) float, in units of the edge contrast.
     """
-    n = white.shape[1]
-    Hm = quad_homographies(corners)
     e = samples.edge
-    q = e // 4
     x, y = samples.xy[:, 0], samples.xy[:, 1]
-    # every pixel through its quad's homography at once (the nine entries gathered per pixel)
-    H = Hm.reshape(-1, 9)[q].T
-    w3 = H[6] * x + H[7] * y + H[8]
-    mx = (H[0] * x + H[1] * y + H[2]) / w3
-    my = (H[3] * x + H[4] * y + H[5]) / w3
-    sg = fit.sigma[e]
-    # marginal blur in cell units: sigma times |grad m| (d m / d pixel = (H_row - m H_3) / w3)
-    scale = sg / np.abs(w3) * n
-    sx = scale * np.hypot(H[0] - mx * H[6], H[1] - mx * H[7])
-    sy = scale * np.hypot(H[3] - my * H[6], H[4] - my * H[7])
-    k = np.arange(n + 1, dtype=np.float64)
-    Fx = _ndtr_saturated((mx[:, None] * n - k) / sx[:, None])  # (N, n + 1): past the k-th grid line
-    Fy = _ndtr_saturated((my[:, None] * n - k) / sy[:, None])
-    X = Fx[:, :-1] - Fx[:, 1:]
-    Y = Fy[:, :-1] - Fy[:, 1:]
-    S = (Fx[:, 0] - Fx[:, -1]) * (Fy[:, 0] - Fy[:, -1])
-    # the bilinear form Y^T W X, one matrix product per quad (pixels are grouped by quad)
-    R = np.empty(len(e))
-    bnd = np.searchsorted(q, np.arange(len(white) + 1))
-    for qq in range(len(white)):
-        s0, s1 = bnd[qq], bnd[qq + 1]
-        if s1 > s0:
-            R[s0:s1] = np.einsum("pj,pj->p", Y[s0:s1] @ white[qq], X[s0:s1])
     th = fit.theta[e]
     d = np.cos(th) * (x - fit.mid[e, 0]) + np.sin(th) * (y - fit.mid[e, 1]) - fit.rho[e]
-    return 1.0 - S + R - ndtr(d / sg)
+    H = quad_homographies(corners).reshape(-1, 9)
+    return _kernels.marker_context(np.ascontiguousarray(x), np.ascontiguousarray(y), e // 4, H,
+                                   np.ascontiguousarray(fit.sigma[e]),
+                                   np.ascontiguousarray(white, dtype=np.float64), d)

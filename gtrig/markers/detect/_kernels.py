@@ -1,0 +1,278 @@
+"""Compiled per-pixel kernels of the edge fits (numba).
+
+The detector's time goes into a few loops over the pixels of the edge bands, each evaluating the
+blurred-step model, its derivatives and sums of their products. In NumPy every one of those steps is
+a pass over an array with its own temporaries, and on small markers the interpreter's overhead per
+call dominates; compiled, each loop is one pass with the values in registers. The formulas are those
+documented in :mod:`.edges` (the model, :func:`.edges.pixel_step`, :func:`.edges.marker_context`);
+the NumPy forms there remain the reference the tests compare these kernels with.
+
+``cache=True`` keeps the machine code next to the module, so only the first run on a machine pays
+the compilation (about a second per kernel).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+_INV_SQRT_2 = 1.0 / math.sqrt(2.0)
+
+
+@njit(cache=True, inline="always")
+def _ndtr(z: float) -> float:
+    return 0.5 * math.erfc(-z * _INV_SQRT_2)
+
+
+@njit(cache=True, nogil=True)
+def _pixel_step(d: float, s: float, cos_t: float, sin_t: float) -> tuple[float, float, float]:
+    """Scalar :func:`.edges.pixel_step`: profile, d/d d and d/d log s of the pixel-integrated step."""
+    w1 = max(abs(cos_t), 1e-4)
+    w2 = max(abs(sin_t), 1e-4)
+    h1, h2 = 0.5 * w1, 0.5 * w2
+    s2 = s * s
+    prof = 0.0
+    slope = 0.0
+    dls = 0.0
+    for k in range(4):
+        o1 = 1.0 if k < 2 else -1.0
+        o2 = 1.0 if k % 2 == 0 else -1.0
+        sign = o1 * o2
+        x = d + o1 * h1 + o2 * h2
+        z = x / s
+        cdf = _ndtr(z)
+        sphi = s * _INV_SQRT_2PI * math.exp(-0.5 * z * z)
+        prof += sign * (0.5 * (x * x + s2) * cdf + 0.5 * x * sphi)
+        slope += sign * (x * cdf + sphi)
+        dls += sign * cdf
+    iw = 1.0 / (w1 * w2)
+    return prof * iw, slope * iw, dls * iw * s2
+
+
+@njit(cache=True, nogil=True)
+def edge_normal_eq(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.float64],
+                   extra: NDArray[np.float64], lo: int, hi: int, P: NDArray[np.float64],
+                   clipped: NDArray[np.bool_], exact: bool, clip_low: float, clip_high: float,
+                   out: NDArray[np.float64]) -> None:
+    """``[J r]^T [J r]`` (8, 8) of the blurred-step model of :func:`.edges.fit_edges` for one edge,
+    written into ``out``.
+
+    Parameters
+    ----------
+    X0, X1 : (N,) pixel coordinates relative to the edge's reference point; the edge's pixels are
+        ``lo:hi``.
+    val, extra : (N,) intensities and the fixed profile part (:func:`.edges.marker_context`).
+    P : (7,) parameters ``(theta, rho, a, b, log sigma, c, c_u)``.
+    clipped : (N,) censored pixels (empty: none).
+    exact : the edge is modelled by the pixel-integrated step.
+    out : (8, 8): ``J^T J`` in ``[:7, :7]``, ``J^T r`` in ``[:7, 7]`` and ``r^T r`` in ``[7, 7]``,
+        ``J`` the derivative of the prediction (so ``J^T r`` is minus half the gradient of ``r^T r``).
+    """
+    th, rho, a, b, ls, ca, cu = P[0], P[1], P[2], P[3], P[4], P[5], P[6]
+    c, s = math.cos(th), math.sin(th)
+    isg = math.exp(-ls)
+    gk = b * isg * _INV_SQRT_2PI
+    has_clip = clipped.shape[0] > 0
+    J = np.empty(8)
+    out[:] = 0.0
+    for i in range(lo, hi):
+        x0, x1 = X0[i], X1[i]
+        dm = x0 * c + x1 * s  # distance from the reference point across the edge
+        d = dm - rho
+        u = x1 * c - x0 * s  # along the edge
+        if exact:
+            Phi, dP, sP = _pixel_step(d, 1.0 / isg, c, s)
+            g = b * dP  # d pred / d d at unit shading
+            q4 = -b * sP  # minus d pred / d log sigma at unit shading
+        else:
+            z = d * isg
+            Phi = _ndtr(z)
+            g = gk * math.exp(-0.5 * z * z)
+            q4 = g * d
+        Phi += extra[i]
+        base = a + b * Phi
+        f = 1.0 + ca * d + cu * u
+        dd = g * f + base * ca
+        r = val[i] - base * f
+        if has_clip and clipped[i]:
+            # censored: a clipped pixel the model puts beyond the clip level agrees
+            if (val[i] >= clip_high and r <= 0.0) or (val[i] <= clip_low and r >= 0.0):
+                continue
+        J[0] = dd * u - dm * cu * base  # theta
+        J[1] = -dd  # rho
+        J[2] = f  # a
+        J[3] = Phi * f  # b
+        J[4] = -q4 * f  # log sigma
+        J[5] = base * d  # c
+        J[6] = base * u  # c_u
+        J[7] = r
+        for p in range(8):
+            Jp = J[p]
+            for q in range(p, 8):
+                out[p, q] += Jp * J[q]
+    for p in range(8):
+        for q in range(p + 1, 8):
+            out[q, p] = out[p, q]
+
+
+@njit(cache=True)
+def _solve(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``A^-1 b`` by Gaussian elimination with partial pivoting (NaN where ``A`` is singular)."""
+    n = b.shape[0]
+    M = A.copy()
+    x = b.copy()
+    for k in range(n):
+        piv = k
+        for r in range(k + 1, n):
+            if abs(M[r, k]) > abs(M[piv, k]):
+                piv = r
+        if M[piv, k] == 0.0 or not np.isfinite(M[piv, k]):
+            x[:] = np.nan
+            return x
+        if piv != k:
+            for c in range(n):
+                M[k, c], M[piv, c] = M[piv, c], M[k, c]
+            x[k], x[piv] = x[piv], x[k]
+        for r in range(k + 1, n):
+            f = M[r, k] / M[k, k]
+            for c in range(k, n):
+                M[r, c] -= f * M[k, c]
+            x[r] -= f * x[k]
+    for k in range(n - 1, -1, -1):
+        acc = x[k]
+        for c in range(k + 1, n):
+            acc -= M[k, c] * x[c]
+        x[k] = acc / M[k, k]
+    return x
+
+
+@njit(cache=True, nogil=True)
+def edge_lm(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.float64],
+            extra: NDArray[np.float64], bounds: NDArray[np.int64], P: NDArray[np.float64],
+            has: NDArray[np.bool_], clipped: NDArray[np.bool_], slow: NDArray[np.bool_], iterations: int,
+            slow_factor: int, tol: float, wt: NDArray[np.float64], ls_lo: float, ls_hi: float,
+            max_white: float, clip_low: float, clip_high: float
+            ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Levenberg-Marquardt of every edge of :func:`.edges.fit_edges` (its docstring), each on its own.
+
+    Parameters
+    ----------
+    X0, X1, val, extra, clipped : as in :func:`edge_normal_eq`; edge ``k``'s pixels are
+        ``bounds[k]:bounds[k + 1]``.
+    P : (E, 7) initial parameters. has : (E,) edges with enough pixels (the others are left as they
+        are). slow : (E,) clipped edges: the pixel-integrated step, ``slow_factor`` times the
+        iterations, the white level at most ``max_white`` times the visible contrast, and their
+        contrast must settle too.
+    iterations, tol, wt : iteration limit; an edge stops once ``|d rho| + wt |d theta| < tol``.
+    ls_lo, ls_hi : bounds of log sigma.
+
+    Returns
+    -------
+    P (E, 7), residual sums of squares (E,) and ``J^T J`` (E, 7, 7) at the estimates (the identity for
+    edges not fitted).
+    """
+    E = P.shape[0]
+    P = P.copy()
+    JTJ = np.zeros((E, 7, 7))
+    cur = np.zeros(E)
+    G = np.empty((8, 8))
+    A = np.empty((7, 7))
+    Pn = np.empty(7)
+    JTr = np.empty(7)
+    for k in range(E):
+        if not has[k]:
+            for p in range(7):
+                JTJ[k, p, p] = 1.0
+            continue
+        lo, hi = bounds[k], bounds[k + 1]
+        edge_normal_eq(X0, X1, val, extra, lo, hi, P[k], clipped, slow[k], clip_low, clip_high, G)
+        JTJ[k] = G[:7, :7]
+        JTr[:] = G[:7, 7]
+        cur[k] = G[7, 7]
+        lam = 1e-3
+        for _it in range(iterations * slow_factor if slow[k] else iterations):
+            A[:] = JTJ[k]
+            for p in range(7):
+                A[p, p] += lam * (JTJ[k, p, p] + 1e-9)
+            delta = _solve(A, JTr)
+            for p in range(7):
+                Pn[p] = P[k, p] + delta[p]
+            Pn[4] = min(max(Pn[4], ls_lo), ls_hi)
+            if slow[k]:
+                Pn[3] = min(Pn[3], max_white * (clip_high - Pn[2]))
+            edge_normal_eq(X0, X1, val, extra, lo, hi, Pn, clipped, slow[k], clip_low, clip_high, G)
+            if G[7, 7] <= cur[k]:
+                P[k] = Pn
+                cur[k] = G[7, 7]
+                JTJ[k] = G[:7, :7]
+                JTr[:] = G[:7, 7]
+                lam *= 0.3
+            else:
+                lam *= 10.0
+            done = abs(delta[1]) + abs(delta[0]) * wt[k] < tol
+            if slow[k]:
+                done = done and abs(delta[3]) < 1e-3 * abs(P[k, 3])
+            if done:
+                break
+    return P, cur, JTJ
+
+
+@njit(cache=True, inline="always")
+def _ndtr_sat(z: float) -> float:
+    # 0 or 1 to double precision beyond 9 SD: most grid lines are far from a given band pixel
+    if z >= 9.0:
+        return 1.0
+    if z <= -9.0:
+        return 0.0
+    return _ndtr(z)
+
+
+@njit(cache=True, nogil=True)
+def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray[np.int64],
+                   H: NDArray[np.float64], sigma: NDArray[np.float64], white: NDArray[np.float64],
+                   dist: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Per-pixel :func:`.edges.marker_context`: ``1 - S + R - Phi(d / sigma)``.
+
+    Parameters
+    ----------
+    x, y : (N,) fit coordinates of the band pixels; quad : (N,) their quad.
+    H : (Q, 9) homographies to marker units (:func:`.edges.quad_homographies`, row-major).
+    sigma : (N,) blur of each pixel's edge, pixels.
+    white : (Q, n, n) white cells.
+    dist : (N,) signed distance of each pixel to its edge's line, pixels.
+    """
+    N = x.shape[0]
+    n = white.shape[1]
+    out = np.empty(N)
+    Fx = np.empty(n + 1)
+    Fy = np.empty(n + 1)
+    for i in range(N):
+        h = H[quad[i]]
+        xi, yi = x[i], y[i]
+        w3 = h[6] * xi + h[7] * yi + h[8]
+        mx = (h[0] * xi + h[1] * yi + h[2]) / w3
+        my = (h[3] * xi + h[4] * yi + h[5]) / w3
+        scale = sigma[i] / abs(w3) * n
+        sx = scale * math.hypot(h[0] - mx * h[6], h[1] - mx * h[7])
+        sy = scale * math.hypot(h[3] - my * h[6], h[4] - my * h[7])
+        for k in range(n + 1):
+            Fx[k] = _ndtr_sat((mx * n - k) / sx)
+            Fy[k] = _ndtr_sat((my * n - k) / sy)
+        W = white[quad[i]]
+        R = 0.0
+        for r in range(n):
+            Yr = Fy[r] - Fy[r + 1]
+            if Yr == 0.0:
+                continue
+            acc = 0.0
+            for c in range(n):
+                if W[r, c] != 0.0:
+                    acc += W[r, c] * (Fx[c] - Fx[c + 1])
+            R += Yr * acc
+        S = (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
+        out[i] = 1.0 - S + R - _ndtr(dist[i] / sigma[i])
+    return out
