@@ -276,3 +276,146 @@ def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray
         S = (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
         out[i] = 1.0 - S + R - _ndtr(dist[i] / sigma[i])
     return out
+
+
+@njit(cache=True, nogil=True)
+def quad_homographies(quads: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Homographies (Q, 3, 3) taking corner ``k`` of each quad (Q, 4, 2) to (0, 0), (1, 0), (1, 1),
+    (0, 1) in turn (:func:`.edges.quad_homographies`); NaN where a quad is degenerate."""
+    Q = quads.shape[0]
+    out = np.empty((Q, 3, 3))
+    A = np.zeros((8, 8))
+    rhs = np.empty(8)
+    us = (0.0, 1.0, 1.0, 0.0)
+    vs = (0.0, 0.0, 1.0, 1.0)
+    for q in range(Q):
+        A[:] = 0.0
+        for k in range(4):
+            x, y = quads[q, k, 0], quads[q, k, 1]
+            u, v = us[k], vs[k]
+            A[k, 0], A[k, 1], A[k, 2], A[k, 6], A[k, 7] = x, y, 1.0, -u * x, -u * y
+            A[4 + k, 3], A[4 + k, 4], A[4 + k, 5], A[4 + k, 6], A[4 + k, 7] = x, y, 1.0, -v * x, -v * y
+            rhs[k], rhs[4 + k] = u, v
+        h = _solve(A, rhs)
+        for i in range(8):
+            out[q, i // 3, i % 3] = h[i]
+        out[q, 2, 2] = 1.0
+    return out
+
+
+@njit(cache=True, nogil=True)
+def cell_profiles(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.float64],
+                  sigma: NDArray[np.float64], n: int, border: int
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The blurred black square ``1 - S`` (K, N) and the blurred data cells ``F`` (K, N, d^2) at pixels
+    ``(x, y)`` (N,) for K homographies ``H`` (K, 3, 3) to marker units and blurs ``sigma`` (K,)
+    (:func:`.blurred._profiles`; the model of :func:`.edges.marker_context`)."""
+    K, N = H.shape[0], x.shape[0]
+    d = n - 2 * border
+    base = np.empty((K, N))
+    F = np.empty((K, N, d * d))
+    Fx = np.empty(n + 1)
+    Fy = np.empty(n + 1)
+    for g in range(K):
+        h = H[g].ravel()
+        for i in range(N):
+            xi, yi = x[i], y[i]
+            w3 = h[6] * xi + h[7] * yi + h[8]
+            mx = (h[0] * xi + h[1] * yi + h[2]) / w3
+            my = (h[3] * xi + h[4] * yi + h[5]) / w3
+            s = sigma[g] / abs(w3) * n
+            sx = max(s * math.hypot(h[0] - mx * h[6], h[1] - mx * h[7]), 1e-3)
+            sy = max(s * math.hypot(h[3] - my * h[6], h[4] - my * h[7]), 1e-3)
+            for k in range(n + 1):
+                Fx[k] = _ndtr((mx * n - k) / sx)
+                Fy[k] = _ndtr((my * n - k) / sy)
+            base[g, i] = 1.0 - (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
+            for r in range(d):
+                Yr = Fy[border + r] - Fy[border + r + 1]
+                for c in range(d):
+                    F[g, i, r * d + c] = Yr * (Fx[border + c] - Fx[border + c + 1])
+    return base, F
+
+
+@njit(cache=True, nogil=True)
+def cell_jacobian(x: NDArray[np.float64], y: NDArray[np.float64], H0: NDArray[np.float64],
+                  dH: NDArray[np.float64], sig: float, n: int, border: int, cells: NDArray[np.float64],
+                  contrast: float) -> NDArray[np.float64]:
+    """Derivative (9, N) of the model ``a + b (1 - S) + F w`` with respect to the 8 corner
+    coordinates (through the homography ``H0`` (3, 3) and its derivatives ``dH`` (8, 3, 3)) and the
+    blur, at fixed levels and cells (``contrast`` = b, ``cells`` = b w as a (d, d) array); the
+    formulas of :func:`.blurred._prediction_jacobian`."""
+    N = x.shape[0]
+    d = n - 2 * border
+    out = np.empty((9, N))
+    h = H0.ravel()
+    D = dH.reshape(8, 9)
+    dmx = np.empty(8)
+    dmy = np.empty(8)
+    ds = np.empty(8)
+    dsx = np.empty(8)
+    dsy = np.empty(8)
+    Fx = np.empty(n + 1)
+    Fy = np.empty(n + 1)
+    dFx = np.empty((9, n + 1))
+    dFy = np.empty((9, n + 1))
+    CX = np.empty(d)
+    YC = np.empty(d)
+    for i in range(N):
+        xi, yi = x[i], y[i]
+        w3 = h[6] * xi + h[7] * yi + h[8]
+        mx = (h[0] * xi + h[1] * yi + h[2]) / w3
+        my = (h[3] * xi + h[4] * yi + h[5]) / w3
+        s = sig / abs(w3) * n
+        ax, bx = h[0] - mx * h[6], h[1] - mx * h[7]
+        ay, by = h[3] - my * h[6], h[4] - my * h[7]
+        hx = max(math.hypot(ax, bx), 1e-12)
+        hy = max(math.hypot(ay, by), 1e-12)
+        sx = max(s * hx, 1e-3)
+        sy = max(s * hy, 1e-3)
+        for j in range(8):
+            dw = D[j, 6] * xi + D[j, 7] * yi + D[j, 8]
+            dmx[j] = (D[j, 0] * xi + D[j, 1] * yi + D[j, 2] - mx * dw) / w3
+            dmy[j] = (D[j, 3] * xi + D[j, 4] * yi + D[j, 5] - my * dw) / w3
+            ds[j] = -s * dw / w3
+            dax = D[j, 0] - dmx[j] * h[6] - mx * D[j, 6]
+            dbx = D[j, 1] - dmx[j] * h[7] - mx * D[j, 7]
+            day = D[j, 3] - dmy[j] * h[6] - my * D[j, 6]
+            dby = D[j, 4] - dmy[j] * h[7] - my * D[j, 7]
+            dsx[j] = ds[j] * hx + s * (ax * dax + bx * dbx) / hx
+            dsy[j] = ds[j] * hy + s * (ay * day + by * dby) / hy
+        for k in range(n + 1):
+            zx = (mx * n - k) / sx
+            zy = (my * n - k) / sy
+            Fx[k] = _ndtr(zx)
+            Fy[k] = _ndtr(zy)
+            phx = math.exp(-0.5 * zx * zx) * _INV_SQRT_2PI
+            phy = math.exp(-0.5 * zy * zy) * _INV_SQRT_2PI
+            for j in range(8):
+                dFx[j, k] = phx * (n * dmx[j] - zx * dsx[j]) / sx
+                dFy[j, k] = phy * (n * dmy[j] - zy * dsy[j]) / sy
+            dFx[8, k] = -phx * zx / sig
+            dFy[8, k] = -phy * zy / sig
+        Sx = Fx[0] - Fx[n]
+        Sy = Fy[0] - Fy[n]
+        # C X and Y^T C, so that both bilinear terms are dot products per parameter
+        for r in range(d):
+            acc = 0.0
+            for c in range(d):
+                acc += cells[r, c] * (Fx[border + c] - Fx[border + c + 1])
+            CX[r] = acc
+        for c in range(d):
+            acc = 0.0
+            for r in range(d):
+                acc += (Fy[border + r] - Fy[border + r + 1]) * cells[r, c]
+            YC[c] = acc
+        for j in range(9):
+            dSx = dFx[j, 0] - dFx[j, n]
+            dSy = dFy[j, 0] - dFy[j, n]
+            v = -contrast * (dSx * Sy + Sx * dSy)
+            for r in range(d):
+                v += (dFy[j, border + r] - dFy[j, border + r + 1]) * CX[r]
+            for c in range(d):
+                v += YC[c] * (dFx[j, border + c] - dFx[j, border + c + 1])
+            out[j, i] = v
+    return out

@@ -41,8 +41,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import ndtr
 
+from gtrig.markers.detect import _kernels
 from gtrig.markers.detect.candidates import _ordered_cw, dark_mask, robust_quad
 from gtrig.markers.detect.edges import quad_homographies
 
@@ -223,26 +223,10 @@ def _profiles(px: NDArray[np.float64], quads: NDArray[np.float64], sig: NDArray[
               border: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The blurred black square ``1 - S`` (K, N) and the blurred data cells ``F`` (K, N, d^2) at pixels
     ``px`` (N, 2) for K geometries ``quads`` (K, 4, 2) and blurs ``sig`` (K,) (the model of
-    :func:`.edges.marker_context`)."""
-    H = quad_homographies(quads)
-    x, y = px[:, 0][None], px[:, 1][None]
-    w3 = H[:, 2, 0, None] * x + H[:, 2, 1, None] * y + H[:, 2, 2, None]
-    mx = (H[:, 0, 0, None] * x + H[:, 0, 1, None] * y + H[:, 0, 2, None]) / w3
-    my = (H[:, 1, 0, None] * x + H[:, 1, 1, None] * y + H[:, 1, 2, None]) / w3
-    s = sig[:, None] / np.abs(w3) * n
-    sx = np.maximum(s * np.hypot(H[:, 0, 0, None] - mx * H[:, 2, 0, None], H[:, 0, 1, None] - mx * H[:, 2, 1, None]),
-                    1e-3)
-    sy = np.maximum(s * np.hypot(H[:, 1, 0, None] - my * H[:, 2, 0, None], H[:, 1, 1, None] - my * H[:, 2, 1, None]),
-                    1e-3)
-    k = np.arange(n + 1, dtype=np.float64)
-    Fx = ndtr((mx[..., None] * n - k) / sx[..., None])
-    Fy = ndtr((my[..., None] * n - k) / sy[..., None])
-    X = (Fx[..., :-1] - Fx[..., 1:])[..., border:n - border]
-    Y = (Fy[..., :-1] - Fy[..., 1:])[..., border:n - border]
-    base = 1.0 - (Fx[..., 0] - Fx[..., -1]) * (Fy[..., 0] - Fy[..., -1])
-    d = n - 2 * border
-    F = (Y[..., :, None] * X[..., None, :]).reshape(*base.shape, d * d)
-    return base, F
+    :func:`.edges.marker_context`; compiled in :func:`._kernels.cell_profiles`)."""
+    return _kernels.cell_profiles(np.ascontiguousarray(px[:, 0]), np.ascontiguousarray(px[:, 1]),
+                                  _kernels.quad_homographies(np.ascontiguousarray(quads, np.float64)),
+                                  np.ascontiguousarray(sig, np.float64), n, border)
 
 
 def _prediction_jacobian(px: NDArray[np.float64], quad: NDArray[np.float64], sig: float, n: int, border: int,
@@ -252,55 +236,18 @@ def _prediction_jacobian(px: NDArray[np.float64], quad: NDArray[np.float64], sig
     b w as a (d, d) array).
 
     The corners act through the homography (its derivative by differences of the 8 x 8 solve, then
-    the chain rule per pixel), on the cell coordinates and on the local blur widths in cell units.
-    One evaluation of the profiles instead of the nine of forward differences.
+    the chain rule per pixel, in :func:`._kernels.cell_jacobian`), on the cell coordinates and on the
+    local blur widths in cell units: one evaluation of the profiles instead of the nine of forward
+    differences.
     """
-    H0 = quad_homographies(quad[None])[0]
+    Qp = np.repeat(quad.reshape(1, 8), 9, axis=0)
     hq = 1e-4
-    Qp = np.repeat(quad.reshape(1, 8), 8, axis=0)
-    Qp[np.arange(8), np.arange(8)] += hq
-    dH = (quad_homographies(Qp.reshape(8, 4, 2)) - H0) / hq  # (8, 3, 3)
-    x, y = px[:, 0], px[:, 1]
-    w3 = H0[2, 0] * x + H0[2, 1] * y + H0[2, 2]
-    mx = (H0[0, 0] * x + H0[0, 1] * y + H0[0, 2]) / w3
-    my = (H0[1, 0] * x + H0[1, 1] * y + H0[1, 2]) / w3
-    dw = dH[:, 2, 0, None] * x + dH[:, 2, 1, None] * y + dH[:, 2, 2, None]
-    dmx = (dH[:, 0, 0, None] * x + dH[:, 0, 1, None] * y + dH[:, 0, 2, None] - mx * dw) / w3  # (8, N)
-    dmy = (dH[:, 1, 0, None] * x + dH[:, 1, 1, None] * y + dH[:, 1, 2, None] - my * dw) / w3
-    s = sig / np.abs(w3) * n
-    ds = -s * dw / w3  # (8, N)
-
-    def width(r: int, m: NDArray[np.float64], dm: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-        """Blur width in cell units along grid axis ``r`` (N,) and its derivative (8, N)."""
-        a = H0[r, 0] - m * H0[2, 0]
-        b = H0[r, 1] - m * H0[2, 1]
-        da = dH[:, r, 0, None] - dm * H0[2, 0] - m * dH[:, 2, 0, None]
-        db = dH[:, r, 1, None] - dm * H0[2, 1] - m * dH[:, 2, 1, None]
-        hyp = np.maximum(np.hypot(a, b), 1e-12)
-        return np.maximum(s * hyp, 1e-3), ds * hyp + s * (a * da + b * db) / hyp
-
-    sx, dsx = width(0, mx, dmx)
-    sy, dsy = width(1, my, dmy)
-    k = np.arange(n + 1, dtype=np.float64)
+    Qp[np.arange(1, 9), np.arange(8)] += hq
+    Hs = _kernels.quad_homographies(Qp.reshape(9, 4, 2))
     d = n - 2 * border
-
-    def axis(m: NDArray[np.float64], dm: NDArray[np.float64], sm: NDArray[np.float64],
-             dsm: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-        z = (m[:, None] * n - k) / sm[:, None]  # (N, n + 1)
-        Fz = ndtr(z)
-        ph = np.exp(-0.5 * z * z) * 0.3989422804014327
-        dz = (n * dm[:, :, None] - z[None] * dsm[:, :, None]) / sm[None, :, None]  # (8, N, n + 1)
-        dF = np.concatenate([ph[None] * dz, (-ph * z / sig)[None]])  # (9, N, n + 1)
-        B = (Fz[:, :-1] - Fz[:, 1:])[:, border:n - border]
-        dB = (dF[..., :-1] - dF[..., 1:])[..., border:n - border]
-        return B, dB, Fz[:, 0] - Fz[:, -1], dF[..., 0] - dF[..., -1]
-
-    X, dX, Sx, dSx = axis(mx, dmx, sx, dsx)
-    Y, dY, Sy, dSy = axis(my, dmy, sy, dsy)
-    C = cells.reshape(d, d)
-    dbase = -(dSx * Sy + Sx * dSy)  # (9, N)
-    return (contrast * dbase + np.einsum("knj,nj->kn", dY @ C, X)
-            + np.einsum("nj,knj->kn", Y @ C, dX))
+    return _kernels.cell_jacobian(np.ascontiguousarray(px[:, 0]), np.ascontiguousarray(px[:, 1]), Hs[0],
+                                  (Hs[1:] - Hs[0]) / hq, float(sig), n, border,
+                                  np.ascontiguousarray(cells, np.float64).reshape(d, d), float(contrast))
 
 
 # products are split so that each BLAS call stays below OpenBLAS's threading threshold: on a loaded

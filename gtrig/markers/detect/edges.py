@@ -417,19 +417,10 @@ def quad_homographies(quads: NDArray[np.float64]) -> NDArray[np.float64]:
     """Homographies (Q, 3, 3) from fit coordinates to marker units: corner ``k`` of each quad (Q, 4, 2)
     goes to (0, 0), (1, 0), (1, 1), (0, 1) in turn (the convention of :func:`.decode.sample_cells`).
 
-    Solved as the 8 x 8 linear system of the direct linear transform with ``h33 = 1``, batched.
+    Solved as the 8 x 8 linear system of the direct linear transform with ``h33 = 1``
+    (:func:`._kernels.quad_homographies`; NaN for a degenerate quad).
     """
-    Q = len(quads)
-    dst = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
-    x, y = quads[..., 0], quads[..., 1]  # (Q, 4)
-    u, v = np.broadcast_to(dst[:, 0], (Q, 4)), np.broadcast_to(dst[:, 1], (Q, 4))
-    z, o = np.zeros((Q, 4)), np.ones((Q, 4))
-    A = np.concatenate([np.stack([x, y, o, z, z, z, -u * x, -u * y], -1),
-                        np.stack([z, z, z, x, y, o, -v * x, -v * y], -1)], axis=1)  # (Q, 8, 8)
-    rhs = np.concatenate([u, v], axis=1)
-    with np.errstate(all="ignore"):
-        h = np.linalg.solve(A, rhs[..., None])[..., 0]
-    return np.concatenate([h, np.ones((Q, 1))], axis=1).reshape(Q, 3, 3)
+    return _kernels.quad_homographies(np.ascontiguousarray(quads, np.float64))
 
 
 def marker_context(
