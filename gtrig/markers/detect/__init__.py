@@ -47,7 +47,7 @@ __all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", 
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 2
+DETECTOR_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -107,8 +107,6 @@ class DetectorParams:
         thresholding each cell.
     blurred : the second path, for small blurred markers (:class:`.blurred.BlurredParams`; off by
         default, ``BlurredParams(enabled=True)`` turns it on).
-    early_px_per_edge : the first pass (plain steps, only a start for the next ones) fits every
-        ``k``-th pixel of an edge with more than this many (:meth:`.edges.EdgeSamples.thinned`).
     threads : threads one detection may use; 0 follows OpenCV's setting (``cv2.getNumThreads()``,
         which OpenCV's own ArUco detector uses too, and which GTvision's worker processes set to 1).
         With two or more the second path runs in a helper thread beside the first; the output is the
@@ -126,7 +124,6 @@ class DetectorParams:
     iterations: int = 10
     tol: float = 1e-3
 
-    early_px_per_edge: int = 300
     threads: int = 0
 
     unblur: bool = True
@@ -312,8 +309,6 @@ class MarkerDetector:
                 w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
                 excl = np.minimum(sigma, 0.3 * L)
             samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
-            if fit is None:
-                samples = samples.thinned(p.early_px_per_edge)
             if fit is None:
                 fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, tol=p.tol)
             else:

@@ -112,26 +112,6 @@ class EdgeSamples:
     edge: NDArray[np.int64]
     starts: NDArray[np.int64]
 
-    def thinned(self, max_per_edge: int) -> EdgeSamples:
-        """Every ``k``-th pixel of each edge with more than ``max_per_edge`` of them (``k`` the
-        smallest that leaves at most that many), the others whole.
-
-        The band's pixels run across the edge within each step along it, so a stride that does not
-        divide the band's width picks a sheared lattice that still covers the band evenly.
-        """
-        E = len(self.starts)
-        cnt = np.bincount(self.edge, minlength=E)
-        stride = np.maximum(-(-cnt // max(max_per_edge, 1)), 1)
-        if stride.max() <= 1:
-            return self
-        first = np.where(self.starts >= 0, self.starts, 0)
-        keep = (np.arange(len(self.edge)) - first[self.edge]) % stride[self.edge] == 0
-        edge = self.edge[keep]
-        starts = np.full(E, -1, np.int64)
-        u, at = np.unique(edge, return_index=True)
-        starts[u] = at
-        return EdgeSamples(self.xy[keep], self.val[keep], edge, starts)
-
 
 def gather_band(
     gray: NDArray[np.uint8],
