@@ -27,7 +27,6 @@ Corners are in OpenCV's pixel convention (pixel centres at integer coordinates) 
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import cv2
@@ -35,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gtrig.errors import InputError
+from gtrig.markers.detect import _threads
 from gtrig.markers.detect.blurred import BlurredParams, find_blurred_candidates, image_noise, read_blurred
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
@@ -218,13 +218,13 @@ class MarkerDetector:
         gray = _to_gray(image)
         if not self.params.blurred.enabled:
             return _dedupe(self._detect_sharp(gray))
-        if _threads(self.params.threads) < 2:
+        if _threads.threads(self.params.threads) < 2:
             cands = self._blurred_candidates(gray)
             dets = self._detect_sharp(gray)
         else:
             # the second path's candidate stage (OpenCV's filters and contours, which release the GIL)
             # beside the first path
-            later = _helper_pool().submit(self._blurred_candidates, gray)
+            later = _threads.helper_pool().submit(self._blurred_candidates, gray)
             dets = self._detect_sharp(gray)
             cands = later.result()
         return _dedupe(dets + self._detect_blurred(gray, cands, dets))
@@ -240,9 +240,7 @@ class MarkerDetector:
         """The second path's candidate quads (:func:`.blurred.find_blurred_candidates`) and the image's
         noise SD (:func:`.blurred.image_noise`)."""
         p = self.params
-        h, w = gray.shape
-        quads = find_blurred_candidates(gray, p.blurred, p.candidates.max_side_frac * min(h, w),
-                                        p.candidates.scale)
+        quads = find_blurred_candidates(gray, p.blurred, p.candidates.max_side_px(gray.shape), p.candidates.scale)
         return quads, image_noise(gray) if quads else float("nan")
 
     def _detect_blurred(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float],
@@ -295,6 +293,7 @@ class MarkerDetector:
         p1 = np.roll(Q, -1, axis=1).reshape(-1, 2)
         L = side.ravel()
         sigma = np.full(len(p0), 1.0)
+        nt = _threads.threads(p.threads)
         fit = None
         for _pass in range(p.passes):
             w = 3.0 * sigma + p.band_px
@@ -310,12 +309,12 @@ class MarkerDetector:
                 excl = np.minimum(sigma, 0.3 * L)
             samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
             if fit is None:
-                fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, tol=p.tol)
+                fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, tol=p.tol, threads=nt)
             else:
                 corners, _ = intersect_corners(fit, len(Q))
-                extra = marker_context(samples, fit, corners, white)
+                extra = marker_context(samples, fit, corners, white, nt)
                 fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, extra=extra, init=fit,
-                                tol=p.tol)
+                                tol=p.tol, threads=nt)
             # the blur is about the same on the four edges of a marker: the next pass starts from
             # their median, which recovers an edge whose plain-step fit collapsed to a sharp step
             # (white cells one border-width inside pull sigma to 0 on small markers)
@@ -383,22 +382,6 @@ class MarkerDetector:
             out.append(Detection(int(ids[k]), corners[k][order].copy(), cov[k][order].copy(), int(ham[k]),
                                  float(blur[k])))
         return out
-
-
-def _threads(threads: int) -> int:
-    """Threads a detection may use: ``threads``, or OpenCV's setting when 0."""
-    return threads if threads > 0 else cv2.getNumThreads()
-
-
-_POOL: ThreadPoolExecutor | None = None
-
-
-def _helper_pool() -> ThreadPoolExecutor:
-    """One helper thread for the second path, shared by every detector of the process."""
-    global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gtrig-markers")
-    return _POOL
 
 
 def _dedupe(dets: list[Detection]) -> list[Detection]:

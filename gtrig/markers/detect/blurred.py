@@ -102,7 +102,6 @@ class BlurredParams:
     min_side_px: float = 12.0
     max_side_px: float = 38.0
     min_solidity: float = 0.85
-    candidate_scale: int = 1
     max_free_misfit: float = 2.0
     max_start_misfit: float = 8.0
     max_start_share: float = 0.15
@@ -154,18 +153,10 @@ def find_blurred_candidates(gray: NDArray[np.uint8], params: BlurredParams, max_
     params : :class:`BlurredParams`.
     max_side_bg, scale : the closing's largest dark object and downsampling (as in the first path).
     """
-    f = params.candidate_scale
-    if f > 1:
-        h, w = gray.shape
-        img = cv2.resize(gray, (w // f, h // f), interpolation=cv2.INTER_AREA)
-        # the area average is a box of f pixels (variance f^2 / 12 minus the pixel's own 1 / 12)
-        sm = float(np.sqrt(max(params.smooth_px**2 - (f * f - 1) / 12.0, 0.0))) / f
-    else:
-        img, sm = gray, params.smooth_px
     # the kernel cut at 2 sigma (OpenCV's default is 3): 5 x 5 instead of 7 x 7 at 1 px, 40 % faster
-    k = 2 * int(np.ceil(2.0 * sm)) + 1
-    g = cv2.GaussianBlur(img, (k, k), sm) if sm > 0.1 else img
-    mask = cv2.medianBlur(dark_mask(g, max_side_bg / f, max(1, scale // f), params.ratio_threshold), 3)
+    k = 2 * int(np.ceil(2.0 * params.smooth_px)) + 1
+    g = cv2.GaussianBlur(gray, (k, k), params.smooth_px)
+    mask = cv2.medianBlur(dark_mask(g, max_side_bg, scale, params.ratio_threshold), 3)
     # RETR_CCOMP puts a blob lying in a hole of a larger dark region (a marker in its quiet zone on a
     # dark background) at the top level again
     contours, hier = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
@@ -173,13 +164,12 @@ def find_blurred_candidates(gray: NDArray[np.uint8], params: BlurredParams, max_
         return []
     hier = hier[0]
     lengths = np.fromiter(map(len, contours), int, len(contours))
-    lo_side, hi_side = params.min_side_px / f, params.max_side_px / f
-    lo, hi = 4 * lo_side * 0.8, 4 * hi_side * 1.3
+    lo, hi = 4 * params.min_side_px * 0.8, 4 * params.max_side_px * 1.3
     out = []
     for i in np.flatnonzero((hier[:, 3] < 0) & (lengths >= lo) & (lengths <= hi)):
         c = contours[i]
         area = cv2.contourArea(c)
-        if area < 0.5 * lo_side**2 or area > 1.3 * hi_side**2:
+        if area < 0.5 * params.min_side_px**2 or area > 1.3 * params.max_side_px**2:
             continue
         hull = cv2.convexHull(c)
         hull_area = cv2.contourArea(hull)
@@ -190,12 +180,11 @@ def find_blurred_candidates(gray: NDArray[np.uint8], params: BlurredParams, max_
             continue
         a = _ordered_cw(approx.reshape(4, 2).astype(np.float64))
         sides = np.hypot(*(a[_NEXT] - a).T)
-        if sides.min() < 0.7 * lo_side or sides.min() < 0.4 * sides.max():
+        if sides.min() < 0.7 * params.min_side_px or sides.min() < 0.4 * sides.max():
             continue
         q = robust_quad(c, a)
         # the blob's corners are rounded by the blur: the hull's vertices are then a fair start
-        # (pixel centre i of the smaller image is at f i + (f - 1) / 2 in the input)
-        out.append(_ordered_cw(a if q is None else q) * f + 0.5 * (f - 1))
+        out.append(_ordered_cw(a if q is None else q))
     return out
 
 

@@ -42,13 +42,14 @@ Coordinates are "fit coordinates": raw pixels, or undistorted pixels when a came
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.special import ndtr
 
-from gtrig.markers.detect import _kernels
+from gtrig.markers.detect import _kernels, _threads
 from gtrig.markers.detect.camera import Undistorter
 
 _INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
@@ -62,6 +63,8 @@ CLIPPED_ITER_FACTOR = 4
 #: ramp is below the clip (a motion-blurred edge, whose ramp is linear), contrast and blur trade off and
 #: the fit runs to a white level of thousands with a blur of a pixel, which spoils the decoding
 MAX_CLIPPED_WHITE = 4.0
+#: band pixels of one fit below which splitting it between threads costs more than it saves
+_SPLIT_MIN_PX = 2000
 #: share of an edge's band pixels clipped above which the edge is fitted as clipped
 CLIPPED_EDGE_SHARE = 0.1
 
@@ -278,6 +281,7 @@ def fit_edges(
     extra: NDArray[np.float64] | None = None,
     init: EdgeFit | None = None,
     tol: float = 1e-4,
+    threads: int = 1,
 ) -> EdgeFit:
     """Fit the blurred-step model to every edge (see the module docstring).
 
@@ -296,6 +300,7 @@ def fit_edges(
     tol : an edge stops iterating once a step moves its line by less than this (pixels, the
         angle step weighted by the square root of the edge's pixel count, about its half length);
         the others go on, so well-conditioned edges do not pay for slow ones.
+    threads : with 2 the edges are fitted in two groups of about equal pixel counts at once.
     """
     E = len(p0)
     t = p1 - p0
@@ -342,11 +347,19 @@ def fit_edges(
     # a clipped edge's white level converges slowly (only the ramp's unclipped pixels set it) and
     # drags the line with it: such edges get more iterations and must also settle their contrast
     bounds = np.concatenate([[0], np.cumsum(cnt.astype(np.int64))])
-    P, cur, JTJ = _kernels.edge_lm(
-        np.ascontiguousarray(X[:, 0]), np.ascontiguousarray(X[:, 1]), np.ascontiguousarray(v, np.float64),
-        np.ascontiguousarray(ext), bounds, np.ascontiguousarray(P, np.float64), has,
-        clipped if any_clipped else np.zeros(0, bool), slow, iterations, CLIPPED_ITER_FACTOR, tol, wt,
-        np.log(0.05), np.log(20.0), MAX_CLIPPED_WHITE, CLIP_LOW, CLIP_HIGH)
+    pix = (np.ascontiguousarray(X[:, 0]), np.ascontiguousarray(X[:, 1]), np.ascontiguousarray(v, np.float64),
+           np.ascontiguousarray(ext))
+    clip_arg = clipped if any_clipped else np.zeros(0, bool)
+    P = np.ascontiguousarray(P, np.float64)
+    # edges are independent: groups of edges of about equal pixel counts go to separate threads
+    cut = [0, E]
+    if threads > 1 and N > _SPLIT_MIN_PX and E > 1:
+        cut = [0, int(np.clip(np.searchsorted(bounds, 0.5 * N), 1, E - 1)), E]
+    parts = [(*pix, bounds[a:b + 1], P[a:b], has[a:b], clip_arg, slow[a:b], iterations, CLIPPED_ITER_FACTOR, tol,
+              wt[a:b], np.log(0.05), np.log(20.0), MAX_CLIPPED_WHITE, CLIP_LOW, CLIP_HIGH)
+             for a, b in itertools.pairwise(cut)]
+    res = _threads.run_split(_kernels.edge_lm, parts)
+    P, cur, JTJ = (np.concatenate([r[k] for r in res]) for k in range(3))
     eye = np.eye(NP)
     dof = np.maximum(cnt - NP, 1)
     s2 = cur / dof
@@ -408,6 +421,7 @@ def marker_context(
     fit: EdgeFit,
     corners: NDArray[np.float64],
     white: NDArray[np.float64],
+    threads: int = 1,
 ) -> NDArray[np.float64]:
     """The part of each band pixel's blurred profile that one straight step does not explain.
 
@@ -433,6 +447,8 @@ def marker_context(
     white : (Q, n, n) 1 for white cells, in the quads' orientation (cell (0, 0) at corner 0, cell
         (0, n-1) at corner 1).
 
+    threads : with 2 the pixels are evaluated in two halves at once.
+
     Returns
     -------
     (N,) float, in units of the edge contrast.
@@ -442,6 +458,12 @@ def marker_context(
     th = fit.theta[e]
     d = np.cos(th) * (x - fit.mid[e, 0]) + np.sin(th) * (y - fit.mid[e, 1]) - fit.rho[e]
     H = quad_homographies(corners).reshape(-1, 9)
-    return _kernels.marker_context(np.ascontiguousarray(x), np.ascontiguousarray(y), e // 4, H,
-                                   np.ascontiguousarray(fit.sigma[e]),
-                                   np.ascontiguousarray(white, dtype=np.float64), d)
+    args = (np.ascontiguousarray(x), np.ascontiguousarray(y), e // 4, H, np.ascontiguousarray(fit.sigma[e]),
+            np.ascontiguousarray(white, dtype=np.float64), d)
+    N = len(e)
+    if threads < 2 or N <= _SPLIT_MIN_PX:
+        return _kernels.marker_context(*args)
+    # pixels are independent: two halves in two threads
+    half = N // 2
+    parts = [tuple(a if a is H or a is args[5] else a[sl] for a in args) for sl in (slice(0, half), slice(half, N))]
+    return np.concatenate(_threads.run_split(_kernels.marker_context, parts))

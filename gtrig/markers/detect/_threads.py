@@ -1,0 +1,43 @@
+"""Threads of one detection: how many it may use, and the helper threads that run parts beside it.
+
+The compiled kernels (:mod:`._kernels`) and OpenCV release the GIL, so two threads of one detection
+really run at once; the detector follows OpenCV's thread setting (``cv2.getNumThreads()``), which
+OpenCV's own ArUco detector uses too and which GTvision's worker processes set to 1.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, TypeVar
+
+import cv2
+
+T = TypeVar("T")
+
+_POOL: ThreadPoolExecutor | None = None
+_LOCK = threading.Lock()
+
+
+def threads(setting: int) -> int:
+    """Threads a detection may use: ``setting``, or OpenCV's when it is 0."""
+    return setting if setting > 0 else cv2.getNumThreads()
+
+
+def helper_pool() -> ThreadPoolExecutor:
+    """Two helper threads shared by every detector of the process (one may hold the second path's
+    candidate stage while the other takes half of a kernel's work)."""
+    global _POOL
+    with _LOCK:
+        if _POOL is None:
+            _POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="gtrig-markers")
+        return _POOL
+
+
+def run_split(fn: Callable[..., T], parts: Sequence[tuple[Any, ...]]) -> list[T]:
+    """``[fn(*p) for p in parts]``, the first part in this thread and the others in helper threads."""
+    if len(parts) == 1:
+        return [fn(*parts[0])]
+    later = [helper_pool().submit(fn, *p) for p in parts[1:]]
+    return [fn(*parts[0])] + [f.result() for f in later]
