@@ -14,6 +14,13 @@ from gtrig.markers.synth import clutter_background, homography_from_pose, render
 from gtrig.rig.models import MarkerFamily
 
 
+def test_normal_cdf_within_its_bound() -> None:
+    """The kernels' normal CDF (Abramowitz and Stegun 26.2.17) is within 7.5e-8 of SciPy's."""
+    z = np.linspace(-12, 12, 200001)
+    got = np.array([_kernels._ndtr(float(v)) for v in z[::50]])
+    assert np.abs(got - ndtr(z[::50])).max() < 7.5e-8
+
+
 def _prediction(X0: np.ndarray, X1: np.ndarray, extra: np.ndarray, P: np.ndarray, exact: bool) -> np.ndarray:
     """The blurred-step model of ``fit_edges`` (its module docstring), in NumPy."""
     th, rho, a, b, ls, ca, cu = P
@@ -52,8 +59,10 @@ def test_edge_normal_equations_match_finite_differences(exact: bool) -> None:
     # (a relative 2e-5 of the theta row here)
     rtol = 1e-4 if exact else 1e-5
     np.testing.assert_allclose(G[:7, :7], J @ J.T, rtol=rtol, atol=1e-6 * np.abs(J @ J.T).max())
-    np.testing.assert_allclose(G[:7, 7], J @ r, rtol=rtol, atol=1e-6 * np.abs(J @ r).max())
-    assert G[7, 7] == pytest.approx(r @ r, rel=1e-12)
+    # the kernels' normal CDF is within 7.5e-8 of SciPy's: each residual within b 7.5e-8 (shading ~1)
+    dr = 1.1 * P[3] * 7.5e-8
+    np.testing.assert_allclose(G[:7, 7], J @ r, rtol=rtol, atol=dr * np.abs(J).sum(axis=1).max())
+    assert abs(G[7, 7] - r @ r) <= 2.0 * dr * np.abs(r).sum() + 1e-9 * (r @ r)
 
 
 def test_edge_lm_recovers_a_simulated_edge() -> None:
@@ -102,7 +111,7 @@ def _quads(rng: np.random.Generator, Q: int) -> np.ndarray:
 
 def test_homographies_and_marker_context() -> None:
     """The kernels' homographies take each quad's corners to the unit square; the compiled context
-    equals its NumPy form to 1e-12."""
+    equals its NumPy form within the normal CDF's approximation (sums of 20 terms of 7.5e-8 each)."""
     rng = np.random.default_rng(8)
     quads = _quads(rng, 3)
     H = _kernels.quad_homographies(quads)
@@ -117,7 +126,7 @@ def test_homographies_and_marker_context() -> None:
     sigma, dist = rng.uniform(0.4, 2.0, N), rng.uniform(-5, 5, N)
     H9 = H.reshape(-1, 9)
     got = _kernels.marker_context(xy[:, 0].copy(), xy[:, 1].copy(), q, H9, sigma, white, dist)
-    np.testing.assert_allclose(got, _context_numpy(xy[:, 0], xy[:, 1], q, H9, sigma, white, dist), atol=1e-12)
+    np.testing.assert_allclose(got, _context_numpy(xy[:, 0], xy[:, 1], q, H9, sigma, white, dist), atol=2e-6)
 
 
 def test_cell_jacobian_matches_finite_differences_of_the_profiles() -> None:

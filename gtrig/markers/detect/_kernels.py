@@ -20,12 +20,26 @@ from numba import njit
 from numpy.typing import NDArray
 
 _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
-_INV_SQRT_2 = 1.0 / math.sqrt(2.0)
+
+
+# Abramowitz and Stegun 26.2.17: Phi(z) = 1 - phi(z) t (b1 + t (b2 + ... + t b5)), t = 1 / (1 + p |z|),
+# absolute error below 7.5e-8 (a millionth of a grey level per unit contrast, far below any noise).
+# From the density, which the fits need anyway, it costs a third of libm's erfc.
+_AS_P = 0.2316419
+_AS_B = (0.319381530, -0.356563782, 1.781477937, -1.821255978, 1.330274429)
+
+
+@njit(cache=True, inline="always")
+def _ndtr_from_pdf(z: float, pdf: float) -> float:
+    """Standard normal CDF at ``z`` given its density ``pdf`` = phi(z) (error < 7.5e-8)."""
+    t = 1.0 / (1.0 + _AS_P * abs(z))
+    q = pdf * t * (_AS_B[0] + t * (_AS_B[1] + t * (_AS_B[2] + t * (_AS_B[3] + t * _AS_B[4]))))
+    return 1.0 - q if z >= 0.0 else q
 
 
 @njit(cache=True, inline="always")
 def _ndtr(z: float) -> float:
-    return 0.5 * math.erfc(-z * _INV_SQRT_2)
+    return _ndtr_from_pdf(z, _INV_SQRT_2PI * math.exp(-0.5 * z * z))
 
 
 @njit(cache=True, nogil=True)
@@ -44,8 +58,9 @@ def _pixel_step(d: float, s: float, cos_t: float, sin_t: float) -> tuple[float, 
         sign = o1 * o2
         x = d + o1 * h1 + o2 * h2
         z = x / s
-        cdf = _ndtr(z)
-        sphi = s * _INV_SQRT_2PI * math.exp(-0.5 * z * z)
+        pdf = _INV_SQRT_2PI * math.exp(-0.5 * z * z)
+        cdf = _ndtr_from_pdf(z, pdf)
+        sphi = s * pdf
         prof += sign * (0.5 * (x * x + s2) * cdf + 0.5 * x * sphi)
         slope += sign * (x * cdf + sphi)
         dls += sign * cdf
@@ -90,8 +105,9 @@ def edge_normal_eq(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArra
             q4 = -b * sP  # minus d pred / d log sigma at unit shading
         else:
             z = d * isg
-            Phi = _ndtr(z)
-            g = gk * math.exp(-0.5 * z * z)
+            e = math.exp(-0.5 * z * z)
+            Phi = _ndtr_from_pdf(z, _INV_SQRT_2PI * e)
+            g = gk * e
             q4 = g * d
         Phi += extra[i]
         base = a + b * Phi
@@ -387,10 +403,10 @@ def cell_jacobian(x: NDArray[np.float64], y: NDArray[np.float64], H0: NDArray[np
         for k in range(n + 1):
             zx = (mx * n - k) / sx
             zy = (my * n - k) / sy
-            Fx[k] = _ndtr(zx)
-            Fy[k] = _ndtr(zy)
             phx = math.exp(-0.5 * zx * zx) * _INV_SQRT_2PI
             phy = math.exp(-0.5 * zy * zy) * _INV_SQRT_2PI
+            Fx[k] = _ndtr_from_pdf(zx, phx)
+            Fy[k] = _ndtr_from_pdf(zy, phy)
             for j in range(8):
                 dFx[j, k] = phx * (n * dmx[j] - zx * dsx[j]) / sx
                 dFy[j, k] = phy * (n * dmy[j] - zy * dsy[j]) / sy
