@@ -435,3 +435,78 @@ def cell_jacobian(x: NDArray[np.float64], y: NDArray[np.float64], H0: NDArray[np
                 v += YC[c] * (dFx[j, border + c] - dFx[j, border + c + 1])
             out[j, i] = v
     return out
+
+
+@njit(cache=True, nogil=True)
+def _band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.float64], nrm: NDArray[np.float64],
+               L: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64],
+               excl: NDArray[np.float64], out_x: NDArray[np.int64], out_y: NDArray[np.int64],
+               out_e: NDArray[np.int64], fill: bool) -> int:
+    """The pixels of every edge's band (:func:`.edges.gather_band` without a lens model): count them,
+    and with ``fill`` write them; returns the count."""
+    h, w = shape_hw
+    m = 0
+    for e in range(p0.shape[0]):
+        swap = abs(t[e, 1]) > abs(t[e, 0])
+        # the edge's major axis first ("u"), the other second ("v")
+        iu, iv = (1, 0) if swap else (0, 1)
+        Au, Av, Tu, Tv, Nu, Nv = p0[e, iu], p0[e, iv], t[e, iu], t[e, iv], nrm[e, iu], nrm[e, iv]
+        size_u, size_v = (h, w) if swap else (w, h)
+        s_lo, s_hi = excl[e], L[e] - excl[e]
+        if s_hi < s_lo:
+            continue
+        d_lo, d_hi = -w_in[e], w_out[e]
+        umin, umax = np.inf, -np.inf
+        for s in (s_lo, s_hi):
+            for d in (d_lo, d_hi):
+                cu = Au + s * Tu + d * Nu
+                umin, umax = min(umin, cu), max(umax, cu)
+        u0 = max(math.ceil(umin - 1e-6), 0)
+        u1 = min(math.floor(umax + 1e-6), size_u - 1)
+        for col in range(u0, u1 + 1):
+            du = col - Au
+            if abs(Tv) < 1e-9:
+                s_a, s_b = -np.inf, np.inf
+            else:
+                s_a, s_b = (s_lo - du * Tu) / Tv, (s_hi - du * Tu) / Tv
+            d_a, d_b = (d_lo - du * Nu) / Nv, (d_hi - du * Nu) / Nv
+            lo = max(min(s_a, s_b), min(d_a, d_b)) + Av
+            hi = min(max(s_a, s_b), max(d_a, d_b)) + Av
+            v0 = max(math.ceil(lo - 1e-6), 0)
+            v1 = min(math.floor(hi + 1e-6), size_v - 1)
+            for v in range(v0, v1 + 1):
+                x, y = (v, col) if swap else (col, v)
+                # the exact band test (the scan above is a superset)
+                rx, ry = x - p0[e, 0], y - p0[e, 1]
+                ss = rx * t[e, 0] + ry * t[e, 1]
+                dd = rx * nrm[e, 0] + ry * nrm[e, 1]
+                if dd >= d_lo and dd <= d_hi and ss >= s_lo and ss <= s_hi:
+                    if fill:
+                        out_x[m], out_y[m], out_e[m] = x, y, e
+                    m += 1
+    return m
+
+
+@njit(cache=True, nogil=True)
+def band_pixels(gray: NDArray[np.uint8], p0: NDArray[np.float64], t: NDArray[np.float64], nrm: NDArray[np.float64],
+                L: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64],
+                excl: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """Band pixels of every edge (E edges from ``p0`` along unit ``t``, normal ``nrm``, length ``L``):
+    coordinates (M, 2), values (M,) and edge index (M,), sorted by edge, then along and across it.
+
+    Each band is the parallelogram ``s in [excl, L - excl]``, ``d in [-w_in, w_out]``; it is scanned
+    along the edge's major axis, where it is an interval of the other axis in every column.
+    """
+    shape_hw = (gray.shape[0], gray.shape[1])
+    z = np.empty(0, np.int64)
+    M = _band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, z, z, z, False)
+    xs = np.empty(M, np.int64)
+    ys = np.empty(M, np.int64)
+    es = np.empty(M, np.int64)
+    _band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, xs, ys, es, True)
+    xy = np.empty((M, 2))
+    val = np.empty(M)
+    for i in range(M):
+        xy[i, 0], xy[i, 1] = xs[i], ys[i]
+        val[i] = gray[ys[i], xs[i]]
+    return xy, val, es

@@ -139,73 +139,30 @@ def gather_band(
     L = np.hypot(t[:, 0], t[:, 1])
     t = t / L[:, None]
     n = np.column_stack([t[:, 1], -t[:, 0]])
+    w_in, w_out, end_excl = (np.ascontiguousarray(np.broadcast_to(np.asarray(a, np.float64), (E,)))
+                             for a in (w_in, w_out, end_excl))
     if undist is None:
-        ix, iy, edge = _band_pixels_raw(gray.shape, p0, t, n, L, w_in, w_out, end_excl)
-        px, py = ix.astype(np.float64), iy.astype(np.float64)
-    else:
-        ix, iy, edge = _band_boxes_undistorted(gray.shape, p0, p1, t, n, w_in, w_out, undist)
-        px = undist.map_x[iy, ix].astype(np.float64)
-        py = undist.map_y[iy, ix].astype(np.float64)
+        xy, val, edge = _kernels.band_pixels(np.ascontiguousarray(gray), p0, t, n, L, w_in, w_out, end_excl)
+        return EdgeSamples(xy, val, edge, _starts(edge, E))
+    ix, iy, edge = _band_boxes_undistorted(gray.shape, p0, p1, t, n, w_in, w_out, undist)
+    px = undist.map_x[iy, ix].astype(np.float64)
+    py = undist.map_y[iy, ix].astype(np.float64)
     # the exact band test (the pixel sets above are supersets)
     rx, ry = px - p0[edge, 0], py - p0[edge, 1]
     s = rx * t[edge, 0] + ry * t[edge, 1]
     d = rx * n[edge, 0] + ry * n[edge, 1]
     sel = (d >= -w_in[edge]) & (d <= w_out[edge]) & (s >= end_excl[edge]) & (s <= (L - end_excl)[edge])
     edge = edge[sel]
+    return EdgeSamples(np.column_stack([px[sel], py[sel]]), gray[iy[sel], ix[sel]].astype(np.float64), edge,
+                       _starts(edge, E))
+
+
+def _starts(edge: NDArray[np.int64], E: int) -> NDArray[np.int64]:
+    """First index of each of ``E`` edges in ``edge`` (sorted), -1 for edges without pixels."""
     starts = np.full(E, -1, np.int64)
     u, first = np.unique(edge, return_index=True)
     starts[u] = first
-    return EdgeSamples(np.column_stack([px[sel], py[sel]]), gray[iy[sel], ix[sel]].astype(np.float64), edge,
-                       starts)
-
-
-def _band_pixels_raw(
-    shape: tuple[int, ...], a: NDArray[np.float64], t: NDArray[np.float64], n: NDArray[np.float64],
-    L: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64],
-    end_excl: NDArray[np.float64],
-) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.int64]]:
-    """Integer pixels (x, y) and edge index, sorted by edge, of the bands of all edges at once.
-
-    Each band is a parallelogram ``s in [excl, L - excl]``, ``d in [-w_in, w_out]`` (``s`` along
-    ``t``, ``d`` along ``n`` from ``a``). It is scanned along the edge's major axis: for every
-    integer coordinate there the band is an interval of the other one, so the pixels are generated
-    by two ``np.repeat`` expansions instead of testing every pixel of each edge's bounding box (a
-    45 deg edge's box holds several times its band). The intervals are widened by a small margin;
-    :func:`gather_band` applies the exact test.
-    """
-    E = len(a)
-    h, w = shape[:2]
-    # coordinates with the edge's major axis first ("u") and the other second ("v")
-    swap = np.abs(t[:, 1]) > np.abs(t[:, 0])
-    sw = swap[:, None]
-    A, T, Nn = (np.where(sw, z[:, ::-1], z) for z in (a, t, n))
-    size_u, size_v = np.where(swap, h, w), np.where(swap, w, h)
-    s_lo, s_hi = end_excl, L - end_excl
-    d_lo, d_hi = -np.asarray(w_in, np.float64), np.asarray(w_out, np.float64)
-    cu = np.stack([A[:, 0] + s * T[:, 0] + d * Nn[:, 0] for s in (s_lo, s_hi) for d in (d_lo, d_hi)])
-    u0 = np.maximum(np.ceil(cu.min(axis=0) - 1e-6), 0).astype(np.int64)
-    u1 = np.minimum(np.floor(cu.max(axis=0) + 1e-6), size_u - 1).astype(np.int64)
-    ncol = np.where(s_hi >= s_lo, np.maximum(u1 - u0 + 1, 0), 0)
-    ecol = np.repeat(np.arange(E), ncol)
-    col = np.arange(len(ecol)) - np.repeat(np.cumsum(ncol) - ncol, ncol) + u0[ecol]
-    # the interval of v at each column from both constraints (|Nn_v| = |T_u| >= 1/sqrt 2)
-    du = col - A[ecol, 0]
-    Tv, Nv = T[ecol, 1], Nn[ecol, 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ds = np.stack([(s_lo[ecol] - du * T[ecol, 0]) / Tv, (s_hi[ecol] - du * T[ecol, 0]) / Tv])
-        ds = np.where(np.abs(Tv) < 1e-9, np.array([[-np.inf], [np.inf]]), ds)
-    dd = np.stack([(d_lo[ecol] - du * Nn[ecol, 0]) / Nv, (d_hi[ecol] - du * Nn[ecol, 0]) / Nv])
-    lo = np.maximum(ds.min(axis=0), dd.min(axis=0)) + A[ecol, 1]
-    hi = np.minimum(ds.max(axis=0), dd.max(axis=0)) + A[ecol, 1]
-    v0 = np.maximum(np.ceil(lo - 1e-6), 0).astype(np.int64)
-    v1 = np.minimum(np.floor(hi + 1e-6), size_v[ecol] - 1).astype(np.int64)
-    nrow = np.maximum(v1 - v0 + 1, 0)
-    k = np.repeat(np.arange(len(col)), nrow)
-    vv = np.arange(len(k)) - np.repeat(np.cumsum(nrow) - nrow, nrow) + v0[k]
-    uu = col[k]
-    edge = ecol[k]
-    sk = swap[edge]
-    return np.where(sk, vv, uu), np.where(sk, uu, vv), edge
+    return starts
 
 
 def _band_boxes_undistorted(
