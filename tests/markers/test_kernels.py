@@ -205,3 +205,19 @@ def test_band_pixels_are_exactly_the_band() -> None:
         assert len(got) == inside.sum()
         np.testing.assert_array_equal(s.val[s.edge == e], gray[got[:, 1], got[:, 0]])
     assert np.all(np.diff(s.edge) >= 0)
+
+
+def test_cell_design_is_the_profiles() -> None:
+    """The fits' design is ``[1, 1 - S, F]`` with the cells free and ``[1, 1 - S + F code]`` for a code,
+    with the profiles of :func:`_kernels.cell_profiles`."""
+    rng = np.random.default_rng(12)
+    quad = _quads(rng, 1)
+    xy = quad[0].mean(axis=0) + rng.uniform(-18, 18, (300, 2))
+    x, y = xy[:, 0].copy(), xy[:, 1].copy()
+    H = _kernels.quad_homographies(quad)
+    base, F = _kernels.cell_profiles(x, y, H, np.array([1.4]), 8, 1)
+    free = _kernels.cell_design(x, y, H[0], 1.4, 8, 1, np.zeros(0))
+    np.testing.assert_allclose(free, np.column_stack([np.ones(300), base[0], F[0]]), rtol=0, atol=1e-15)
+    code = rng.integers(0, 2, 36).astype(float)
+    one = _kernels.cell_design(x, y, H[0], 1.4, 8, 1, code)
+    np.testing.assert_allclose(one, np.column_stack([np.ones(300), base[0] + F[0] @ code]), atol=1e-12)

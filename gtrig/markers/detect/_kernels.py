@@ -510,3 +510,47 @@ def band_pixels(gray: NDArray[np.uint8], p0: NDArray[np.float64], t: NDArray[np.
         xy[i, 0], xy[i, 1] = xs[i], ys[i]
         val[i] = gray[ys[i], xs[i]]
     return xy, val, es
+
+
+@njit(cache=True, nogil=True)
+def cell_design(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.float64], sigma: float, n: int,
+                border: int, code: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The linear design of the blurred-marker model at pixels ``(x, y)`` (N,) for the homography
+    ``H`` (3, 3) to marker units and blur ``sigma``: columns ``[1, 1 - S, F]`` (N, 2 + d^2) with the
+    cells free (``code`` empty), or ``[1, 1 - S + F code]`` (N, 2) for a code (d^2,) (the profiles of
+    :func:`cell_profiles`)."""
+    N = x.shape[0]
+    d = n - 2 * border
+    free = code.shape[0] == 0
+    A = np.empty((N, 2 + d * d if free else 2))
+    Fx = np.empty(n + 1)
+    Fy = np.empty(n + 1)
+    h = H.ravel()
+    for i in range(N):
+        xi, yi = x[i], y[i]
+        w3 = h[6] * xi + h[7] * yi + h[8]
+        mx = (h[0] * xi + h[1] * yi + h[2]) / w3
+        my = (h[3] * xi + h[4] * yi + h[5]) / w3
+        s = sigma / abs(w3) * n
+        sx = max(s * math.hypot(h[0] - mx * h[6], h[1] - mx * h[7]), 1e-3)
+        sy = max(s * math.hypot(h[3] - my * h[6], h[4] - my * h[7]), 1e-3)
+        for k in range(n + 1):
+            Fx[k] = _ndtr((mx * n - k) / sx)
+            Fy[k] = _ndtr((my * n - k) / sy)
+        base = 1.0 - (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
+        A[i, 0] = 1.0
+        if free:
+            A[i, 1] = base
+            for r in range(d):
+                Yr = Fy[border + r] - Fy[border + r + 1]
+                for c in range(d):
+                    A[i, 2 + r * d + c] = Yr * (Fx[border + c] - Fx[border + c + 1])
+        else:
+            acc = 0.0
+            for r in range(d):
+                Yr = Fy[border + r] - Fy[border + r + 1]
+                for c in range(d):
+                    if code[r * d + c] != 0.0:
+                        acc += code[r * d + c] * Yr * (Fx[border + c] - Fx[border + c + 1])
+            A[i, 1] = base + acc
+    return A

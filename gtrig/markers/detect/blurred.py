@@ -294,12 +294,13 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
     else:
         ridge = np.zeros(2)
 
+    xs, ys = np.ascontiguousarray(px[:, 0]), np.ascontiguousarray(px[:, 1])
+    code_arg = np.zeros(0) if code is None else np.ascontiguousarray(code, np.float64)
+
     def design(quads: NDArray[np.float64], sigs: NDArray[np.float64]) -> NDArray[np.float64]:
-        base, F = _profiles(px, quads, sigs, n, border)
-        one = np.ones_like(base)
-        if code is None:
-            return np.concatenate([one[..., None], base[..., None], F], axis=2)
-        return np.stack([one, base + F @ code], axis=2)
+        """(1, N, P) design at one geometry (:func:`._kernels.cell_design`)."""
+        H = _kernels.quad_homographies(np.ascontiguousarray(quads, np.float64))[0]
+        return _kernels.cell_design(xs, ys, H, float(sigs[0]), n, border, code_arg)[None]
 
     th = np.r_[quad.ravel(), sig]
     Acur = design(th[None, :8].reshape(1, 4, 2), th[None, 8])
