@@ -62,8 +62,8 @@ def detect(
     family: Annotated[MarkerFamily, typer.Option("--family", help="Marker family.")],
     out: Annotated[Path, typer.Option("--out", help="Output JSON (det.json).")],
     camera: Annotated[Path | None, typer.Option("--camera", help="cam.yaml: fit edges undistorted.")] = None,
-    blurred: Annotated[bool, typer.Option("--blurred", help="Also the second path for small, blurred markers "
-                                          "(slower; BENCHMARKS.md, Markers).")] = False,
+    blurred: Annotated[bool, typer.Option("--blurred/--no-blurred", help="The second path for small, blurred "
+                                          "markers (on by default; off: faster, and those are missed).")] = True,
 ) -> None:
     """Detect markers with sub-pixel corners and their covariances; write det.json."""
     import json
@@ -83,7 +83,7 @@ def detect(
 
         cam = read_cam_yaml(camera)
         K, dist, size = cam.camera_matrix, cam.dist_coeffs, cam.image_size
-    params = DetectorParams(blurred=BlurredParams(enabled=True)) if blurred else None
+    params = None if blurred else DetectorParams(blurred=BlurredParams(enabled=False))
     det = MarkerDetector(family, K, dist, params)
     files = _image_files(inputs)
     images = []

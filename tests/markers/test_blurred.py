@@ -26,8 +26,8 @@ def test_blurred_small_markers_found_with_right_id_and_corners() -> None:
     """20 px AprilTag 36h11 at blur 2 px, 0 and 30 deg tilt, full and dim light: the first path alone
     reads at most a quarter of them; with the second all but one are found (one dim, tilted marker
     gets no candidate), with the right ID and corners within 0.6 px."""
-    det = MarkerDetector(FAM, params=DetectorParams(blurred=BlurredParams(enabled=True)))
-    sharp_only = MarkerDetector(FAM)
+    det = MarkerDetector(FAM)  # the second path is on by default
+    sharp_only = MarkerDetector(FAM, params=DetectorParams(blurred=BlurredParams(enabled=False)))
     found = total = first = 0
     for seed, (tilt, gain) in enumerate([(0, 230.0), (30, 230.0), (0, 70.0), (30, 70.0)]):
         img, truths = _scene(seed, tilt, gain)
@@ -79,7 +79,7 @@ def test_cli_detect_blurred(tmp_path) -> None:
     img, truths = _scene(0, 0.0, 230.0)
     cv2.imwrite(str(tmp_path / "a.png"), img)
     counts = []
-    for extra in ([], ["--blurred"]):
+    for extra in (["--no-blurred"], []):
         out = tmp_path / f"det{len(extra)}.json"
         r = CliRunner().invoke(app, ["markers", "detect", str(tmp_path / "a.png"), "--family", FAM.value,
                                      "--out", str(out), *extra])

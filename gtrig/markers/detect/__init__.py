@@ -16,8 +16,8 @@ Pipeline (see issue 5 and the RAWSEEDS vision GT system):
 5. decoding (:mod:`.decode`) of the cells through the refined corners' homography, solved from the
    blur model (:func:`.decode.unblur_cells`), border check, and corners reordered as printed
    (top-left, top-right, bottom-right, bottom-left);
-6. optionally (``DetectorParams(blurred=BlurredParams(enabled=True))``) a second path for small,
-   blurred markers (:mod:`.blurred`), on what the first one left: blobs of
+6. a second path for small, blurred markers (:mod:`.blurred`; ``BlurredParams(enabled=False)`` turns it
+   off), on what the first one left: blobs of
    a smoothed dark mask, the corners and blur fitted to every pixel of the square with the cells
    free, every code ranked through that geometry by maximum likelihood, the leading codes refitted
    with their own geometry and accepted by a goodness-of-fit test and a chi-square margin.
@@ -105,11 +105,12 @@ class DetectorParams:
         (0.078 px RMS at blur 1 px against 0.074 px).
     unblur : read the data cells by solving the blur model (:func:`.decode.unblur_cells`) instead of
         thresholding each cell.
-    blurred : the second path, for small blurred markers (:class:`.blurred.BlurredParams`; off by
-        default, ``BlurredParams(enabled=True)`` turns it on).
+    blurred : the second path, for small blurred markers (:class:`.blurred.BlurredParams`; on by
+        default, ``BlurredParams(enabled=False)`` turns it off).
     threads : threads one detection may use; 0 follows OpenCV's setting (``cv2.getNumThreads()``,
         which OpenCV's own ArUco detector uses too, and which GTvision's worker processes set to 1).
-        With two or more the second path runs in a helper thread beside the first; the output is the
+        With two or more the second path's candidate stage runs in a helper thread beside the first
+        path, and the edge fits are split between two threads (:mod:`._threads`); the output is the
         same.
     """
 

@@ -55,11 +55,10 @@ __all__ = ["BlurredParams", "BlurredRead", "find_blurred_candidates", "image_noi
 class BlurredParams:
     """Tunables of the second path (pixel units refer to the input image).
 
-    enabled : run the second path. Off by default: it costs 3-4 ms per image even where it finds
-        nothing (its candidate stage) and 10-15 ms per marker it reads, which takes the bench's time
-        from about 0.9-1.4x OpenCV's ArUco detector to 1.4-2.2x depending on the machine's load
-        (target 1.5x); on, 99.5 % of the bench's markers of at least 20 px are detected instead of
-        92.7 %.
+    enabled : run the second path (the default). It costs 3-4 ms of CPU per image even where it finds
+        nothing (its candidate stage, beside the first path when OpenCV has two threads) and 5-8 ms per
+        marker it reads; on the bench it takes the markers of at least 20 px detected from 92.7 % to
+        99.5 % (``bench/markers.py``; BENCHMARKS.md, Markers).
     smooth_px : Gaussian smoothing of the image before the dark mask (joins the fragments of the
         blurred border and cells).
     ratio_threshold : dark when smoothed image / closing < this; looser than the first path's 0.6
@@ -96,7 +95,7 @@ class BlurredParams:
         them let the geometry drift, the free cells taking the border's place).
     """
 
-    enabled: bool = False
+    enabled: bool = True
     smooth_px: float = 1.0
     ratio_threshold: float = 0.75
     min_side_px: float = 12.0
