@@ -221,3 +221,16 @@ def test_cell_design_is_the_profiles() -> None:
     code = rng.integers(0, 2, 36).astype(float)
     one = _kernels.cell_design(x, y, H[0], 1.4, 8, 1, code)
     np.testing.assert_allclose(one, np.column_stack([np.ones(300), base[0] + F[0] @ code]), atol=1e-12)
+
+
+def test_helper_pool_works_in_a_forked_child() -> None:
+    """A process forked after the helper threads started gets a fresh pool (the inherited one has no
+    threads, and work sent to it would never run)."""
+    import multiprocessing as mp
+
+    from gtrig.markers.detect import _threads
+
+    assert _threads.run_split(abs, [(-1,), (-2,)]) == [1, 2]
+    ctx = mp.get_context("fork")
+    with ctx.Pool(1) as pool:
+        assert pool.apply_async(_threads.run_split, (abs, [(-3,), (-4,)])).get(timeout=60) == [3, 4]

@@ -124,7 +124,6 @@ class DetectorParams:
     passes: int = 3
     iterations: int = 10
     tol: float = 1e-3
-
     threads: int = 0
 
     unblur: bool = True

@@ -7,6 +7,7 @@ OpenCV's own ArUco detector uses too and which GTvision's worker processes set t
 
 from __future__ import annotations
 
+import os
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -18,6 +19,16 @@ T = TypeVar("T")
 
 _POOL: ThreadPoolExecutor | None = None
 _LOCK = threading.Lock()
+
+
+def _forget_pool() -> None:
+    # a forked child inherits the pool but not its threads: work sent to it would never run
+    global _POOL, _LOCK
+    _POOL = None
+    _LOCK = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_pool)
 
 
 def threads(setting: int) -> int:
