@@ -319,6 +319,24 @@ def quad_homographies(quads: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
+@njit(cache=True, inline="always")
+def _grid_cdfs(h: NDArray[np.float64], xi: float, yi: float, sigma: float, n: int, Fx: NDArray[np.float64],
+               Fy: NDArray[np.float64]) -> float:
+    """At pixel ``(xi, yi)``, for the homography ``h`` (9,) to marker units and blur ``sigma``: the
+    blurred indicators ``Fx[k]``, ``Fy[k]`` of being past grid line ``k`` (0..n) along each axis, and
+    the blurred black square's complement ``1 - S``."""
+    w3 = h[6] * xi + h[7] * yi + h[8]
+    mx = (h[0] * xi + h[1] * yi + h[2]) / w3
+    my = (h[3] * xi + h[4] * yi + h[5]) / w3
+    s = sigma / abs(w3) * n
+    sx = max(s * math.hypot(h[0] - mx * h[6], h[1] - mx * h[7]), 1e-3)
+    sy = max(s * math.hypot(h[3] - my * h[6], h[4] - my * h[7]), 1e-3)
+    for k in range(n + 1):
+        Fx[k] = _ndtr((mx * n - k) / sx)
+        Fy[k] = _ndtr((my * n - k) / sy)
+    return 1.0 - (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
+
+
 @njit(cache=True, nogil=True)
 def cell_profiles(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.float64],
                   sigma: NDArray[np.float64], n: int, border: int
@@ -335,17 +353,7 @@ def cell_profiles(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.
     for g in range(K):
         h = H[g].ravel()
         for i in range(N):
-            xi, yi = x[i], y[i]
-            w3 = h[6] * xi + h[7] * yi + h[8]
-            mx = (h[0] * xi + h[1] * yi + h[2]) / w3
-            my = (h[3] * xi + h[4] * yi + h[5]) / w3
-            s = sigma[g] / abs(w3) * n
-            sx = max(s * math.hypot(h[0] - mx * h[6], h[1] - mx * h[7]), 1e-3)
-            sy = max(s * math.hypot(h[3] - my * h[6], h[4] - my * h[7]), 1e-3)
-            for k in range(n + 1):
-                Fx[k] = _ndtr((mx * n - k) / sx)
-                Fy[k] = _ndtr((my * n - k) / sy)
-            base[g, i] = 1.0 - (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
+            base[g, i] = _grid_cdfs(h, x[i], y[i], sigma[g], n, Fx, Fy)
             for r in range(d):
                 Yr = Fy[border + r] - Fy[border + r + 1]
                 for c in range(d):
@@ -527,17 +535,7 @@ def cell_design(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.fl
     Fy = np.empty(n + 1)
     h = H.ravel()
     for i in range(N):
-        xi, yi = x[i], y[i]
-        w3 = h[6] * xi + h[7] * yi + h[8]
-        mx = (h[0] * xi + h[1] * yi + h[2]) / w3
-        my = (h[3] * xi + h[4] * yi + h[5]) / w3
-        s = sigma / abs(w3) * n
-        sx = max(s * math.hypot(h[0] - mx * h[6], h[1] - mx * h[7]), 1e-3)
-        sy = max(s * math.hypot(h[3] - my * h[6], h[4] - my * h[7]), 1e-3)
-        for k in range(n + 1):
-            Fx[k] = _ndtr((mx * n - k) / sx)
-            Fy[k] = _ndtr((my * n - k) / sy)
-        base = 1.0 - (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
+        base = _grid_cdfs(h, x[i], y[i], sigma, n, Fx, Fy)
         A[i, 0] = 1.0
         if free:
             A[i, 1] = base
