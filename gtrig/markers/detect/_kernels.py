@@ -552,3 +552,24 @@ def cell_design(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.fl
                         acc += code[r * d + c] * Yr * (Fx[border + c] - Fx[border + c + 1])
             A[i, 1] = base + acc
     return A
+
+
+@njit(cache=True, nogil=True)
+def side_points(pts: NDArray[np.float64], approx: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """The contour points ``pts`` (P, 2) that belong to each side of ``approx`` (4, 2) (side ``i``
+    from corner ``i`` to ``i + 1``): within the side's middle 70 % and within ``max(2, 5 %)`` of its
+    length across it (:func:`.candidates.robust_quad`). Returns (4, P)."""
+    P = pts.shape[0]
+    sel = np.zeros((4, P), np.bool_)
+    for i in range(4):
+        j = (i + 1) % 4
+        tx, ty = approx[j, 0] - approx[i, 0], approx[j, 1] - approx[i, 1]
+        L = math.hypot(tx, ty)
+        tx, ty = tx / L, ty / L
+        near = max(2.0, 0.05 * L)
+        for k in range(P):
+            rx, ry = pts[k, 0] - approx[i, 0], pts[k, 1] - approx[i, 1]
+            s = rx * tx + ry * ty
+            d = rx * ty - ry * tx
+            sel[i, k] = s > 0.15 * L and s < 0.85 * L and abs(d) < near
+    return sel

@@ -17,6 +17,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from gtrig.markers.detect import _kernels
+
 
 @dataclass(frozen=True)
 class CandidateParams:
@@ -129,17 +131,9 @@ def robust_quad(contour: NDArray[np.int32], approx: NDArray[np.float64]) -> NDAr
     """
     pts = contour.reshape(-1, 2)
     t = approx[_NEXT] - approx  # (4, 2) sides
-    L = np.hypot(t[:, 0], t[:, 1])
-    if L.min() < 3:
+    if np.hypot(t[:, 0], t[:, 1]).min() < 3:
         return None
-    t = t / L[:, None]
-    # every contour point in the frame of every side at once: (4, P)
-    rx = pts[:, 0][None, :] - approx[:, :1]
-    ry = pts[:, 1][None, :] - approx[:, 1:]
-    s = rx * t[:, :1] + ry * t[:, 1:]
-    d = rx * t[:, 1:] - ry * t[:, :1]
-    Lc = L[:, None]
-    sel = (s > 0.15 * Lc) & (s < 0.85 * Lc) & (np.abs(d) < np.maximum(2.0, 0.05 * Lc))
+    sel = _kernels.side_points(np.ascontiguousarray(pts, np.float64), np.ascontiguousarray(approx, np.float64))
     if sel.sum(axis=1).min() < 3:
         return None
     pts32 = pts.astype(np.float32)
