@@ -29,7 +29,7 @@ _AS_P = 0.2316419
 _AS_B = (0.319381530, -0.356563782, 1.781477937, -1.821255978, 1.330274429)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _ndtr_from_pdf(z: float, pdf: float) -> float:
     """Standard normal CDF at ``z`` given its density ``pdf`` = phi(z) (error < 7.5e-8)."""
     t = 1.0 / (1.0 + _AS_P * abs(z))
@@ -37,12 +37,12 @@ def _ndtr_from_pdf(z: float, pdf: float) -> float:
     return 1.0 - q if z >= 0.0 else q
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _ndtr(z: float) -> float:
     return _ndtr_from_pdf(z, _INV_SQRT_2PI * math.exp(-0.5 * z * z))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _pixel_step(d: float, s: float, cos_t: float, sin_t: float) -> tuple[float, float, float]:
     """Scalar :func:`.edges.pixel_step`: profile, d/d d and d/d log s of the pixel-integrated step."""
     w1 = max(abs(cos_t), 1e-4)
@@ -68,7 +68,7 @@ def _pixel_step(d: float, s: float, cos_t: float, sin_t: float) -> tuple[float, 
     return prof * iw, slope * iw, dls * iw * s2
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def edge_normal_eq(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.float64],
                    extra: NDArray[np.float64], lo: int, hi: int, P: NDArray[np.float64],
                    clipped: NDArray[np.bool_], exact: bool, clip_low: float, clip_high: float,
@@ -135,7 +135,7 @@ def edge_normal_eq(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArra
             out[q, p] = out[p, q]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _solve(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """``A^-1 b`` by Gaussian elimination with partial pivoting (NaN where ``A`` is singular)."""
     n = b.shape[0]
@@ -166,7 +166,7 @@ def _solve(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
     return x
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def edge_lm(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.float64],
             extra: NDArray[np.float64], bounds: NDArray[np.int64], P: NDArray[np.float64],
             has: NDArray[np.bool_], clipped: NDArray[np.bool_], slow: NDArray[np.bool_], iterations: int,
@@ -237,7 +237,7 @@ def edge_lm(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
     return P, cur, JTJ
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _ndtr_sat(z: float) -> float:
     # 0 or 1 to double precision beyond 9 SD: most grid lines are far from a given band pixel
     if z >= 9.0:
@@ -247,7 +247,7 @@ def _ndtr_sat(z: float) -> float:
     return _ndtr(z)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray[np.int64],
                    H: NDArray[np.float64], sigma: NDArray[np.float64], white: NDArray[np.float64],
                    dist: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -294,7 +294,7 @@ def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def quad_homographies(quads: NDArray[np.float64]) -> NDArray[np.float64]:
     """Homographies (Q, 3, 3) taking corner ``k`` of each quad (Q, 4, 2) to (0, 0), (1, 0), (1, 1),
     (0, 1) in turn (:func:`.edges.quad_homographies`); NaN where a quad is degenerate."""
@@ -319,7 +319,7 @@ def quad_homographies(quads: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _grid_cdfs(h: NDArray[np.float64], xi: float, yi: float, sigma: float, n: int, Fx: NDArray[np.float64],
                Fy: NDArray[np.float64]) -> float:
     """At pixel ``(xi, yi)``, for the homography ``h`` (9,) to marker units and blur ``sigma``: the
@@ -337,7 +337,7 @@ def _grid_cdfs(h: NDArray[np.float64], xi: float, yi: float, sigma: float, n: in
     return 1.0 - (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def cell_profiles(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.float64],
                   sigma: NDArray[np.float64], n: int, border: int
                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -361,7 +361,7 @@ def cell_profiles(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.
     return base, F
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def cell_jacobian(x: NDArray[np.float64], y: NDArray[np.float64], H0: NDArray[np.float64],
                   dH: NDArray[np.float64], sig: float, n: int, border: int, cells: NDArray[np.float64],
                   contrast: float) -> NDArray[np.float64]:
@@ -445,7 +445,7 @@ def cell_jacobian(x: NDArray[np.float64], y: NDArray[np.float64], H0: NDArray[np
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.float64], nrm: NDArray[np.float64],
                L: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64],
                excl: NDArray[np.float64], out_x: NDArray[np.int64], out_y: NDArray[np.int64],
@@ -495,7 +495,7 @@ def _band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np
     return m
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def band_pixels(gray: NDArray[np.uint8], p0: NDArray[np.float64], t: NDArray[np.float64], nrm: NDArray[np.float64],
                 L: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64],
                 excl: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
@@ -520,7 +520,7 @@ def band_pixels(gray: NDArray[np.uint8], p0: NDArray[np.float64], t: NDArray[np.
     return xy, val, es
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def cell_design(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.float64], sigma: float, n: int,
                 border: int, code: NDArray[np.float64]) -> NDArray[np.float64]:
     """The linear design of the blurred-marker model at pixels ``(x, y)`` (N,) for the homography
@@ -554,7 +554,7 @@ def cell_design(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.fl
     return A
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def side_points(pts: NDArray[np.float64], approx: NDArray[np.float64]) -> NDArray[np.bool_]:
     """The contour points ``pts`` (P, 2) that belong to each side of ``approx`` (4, 2) (side ``i``
     from corner ``i`` to ``i + 1``): within the side's middle 70 % and within ``max(2, 5 %)`` of its

@@ -388,8 +388,10 @@ def _pixels(gray: NDArray[np.uint8], quad: NDArray[np.float64], n: int, reach: f
     px = np.stack([xx.ravel(), yy.ravel()], -1).astype(np.float64)
     H = quad_homographies(quad[None])[0]
     w3 = H[2, 0] * px[:, 0] + H[2, 1] * px[:, 1] + H[2, 2]
-    mx = (H[0, 0] * px[:, 0] + H[0, 1] * px[:, 1] + H[0, 2]) / w3
-    my = (H[1, 0] * px[:, 0] + H[1, 1] * px[:, 1] + H[1, 2]) / w3
+    # a degenerate candidate's horizon can cross the box: those pixels are not in the square
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mx = (H[0, 0] * px[:, 0] + H[0, 1] * px[:, 1] + H[0, 2]) / w3
+        my = (H[1, 0] * px[:, 0] + H[1, 1] * px[:, 1] + H[1, 2]) / w3
     lim = reach / n
     keep = (mx > -lim) & (mx < 1 + lim) & (my > -lim) & (my < 1 + lim)
     return px[keep], gray[yy.ravel()[keep], xx.ravel()[keep]].astype(np.float64)
