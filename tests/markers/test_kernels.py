@@ -9,7 +9,7 @@ from scipy.special import ndtr
 
 from gtrig.markers.detect import DetectorParams, MarkerDetector, _kernels
 from gtrig.markers.detect.blurred import BlurredParams
-from gtrig.markers.detect.edges import CLIP_HIGH, CLIP_LOW, gather_band, pixel_step
+from gtrig.markers.detect.edges import CLIP_HIGH, CLIP_LOW, pixel_step
 from gtrig.markers.synth import clutter_background, homography_from_pose, render
 from gtrig.rig.models import MarkerFamily
 
@@ -178,33 +178,6 @@ def test_helper_thread_gives_the_same_detections() -> None:
     assert [d.id for d in out[1]] == [d.id for d in out[2]]
     for a, b in zip(out[1], out[2], strict=True):
         np.testing.assert_array_equal(a.corners_px, b.corners_px)
-
-
-def test_band_pixels_are_exactly_the_band() -> None:
-    """:func:`gather_band` returns every pixel inside each edge's band parallelogram and no other,
-    sorted by edge, whatever the edge's direction (brute force over the image)."""
-    rng = np.random.default_rng(4)
-    gray = rng.integers(0, 256, (60, 80), dtype=np.uint8)
-    E = 12
-    p0 = rng.uniform(5, 55, (E, 2))
-    ang = rng.uniform(0, 2 * np.pi, E)
-    ang[:4] = [0.0, np.pi / 2, np.pi / 4, np.pi]  # axis-aligned and diagonal edges too
-    p1 = p0 + rng.uniform(8, 40, E)[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
-    w_in, w_out, excl = rng.uniform(1, 4, E), rng.uniform(1, 4, E), rng.uniform(0, 3, E)
-    s = gather_band(gray, p0, p1, w_in, w_out, excl)
-    yy, xx = np.mgrid[0:60, 0:80]
-    for e in range(E):
-        t = (p1[e] - p0[e]) / np.linalg.norm(p1[e] - p0[e])
-        n = np.array([t[1], -t[0]])
-        rx, ry = xx - p0[e, 0], yy - p0[e, 1]
-        along, across = rx * t[0] + ry * t[1], rx * n[0] + ry * n[1]
-        L = np.linalg.norm(p1[e] - p0[e])
-        inside = (across >= -w_in[e]) & (across <= w_out[e]) & (along >= excl[e]) & (along <= L - excl[e])
-        got = s.xy[s.edge == e].astype(int)
-        assert {tuple(p) for p in got} == set(zip(xx[inside], yy[inside], strict=True))
-        assert len(got) == inside.sum()
-        np.testing.assert_array_equal(s.val[s.edge == e], gray[got[:, 1], got[:, 0]])
-    assert np.all(np.diff(s.edge) >= 0)
 
 
 def test_cell_design_is_the_profiles() -> None:
