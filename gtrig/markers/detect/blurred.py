@@ -213,8 +213,7 @@ def _profiles(px: NDArray[np.float64], quads: NDArray[np.float64], sig: NDArray[
     ``px`` (N, 2) for K geometries ``quads`` (K, 4, 2) and blurs ``sig`` (K,) (the model of
     :func:`.edges.marker_context`; compiled in :func:`._kernels.cell_profiles`)."""
     return _kernels.cell_profiles(np.ascontiguousarray(px[:, 0]), np.ascontiguousarray(px[:, 1]),
-                                  _kernels.quad_homographies(np.ascontiguousarray(quads, np.float64)),
-                                  np.ascontiguousarray(sig, np.float64), n, border)
+                                  quad_homographies(quads), np.ascontiguousarray(sig, np.float64), n, border)
 
 
 def _prediction_jacobian(px: NDArray[np.float64], quad: NDArray[np.float64], sig: float, n: int, border: int,
@@ -231,7 +230,7 @@ def _prediction_jacobian(px: NDArray[np.float64], quad: NDArray[np.float64], sig
     Qp = np.repeat(quad.reshape(1, 8), 9, axis=0)
     hq = 1e-4
     Qp[np.arange(1, 9), np.arange(8)] += hq
-    Hs = _kernels.quad_homographies(Qp.reshape(9, 4, 2))
+    Hs = quad_homographies(Qp.reshape(9, 4, 2))
     d = n - 2 * border
     return _kernels.cell_jacobian(np.ascontiguousarray(px[:, 0]), np.ascontiguousarray(px[:, 1]), Hs[0],
                                   (Hs[1:] - Hs[0]) / hq, float(sig), n, border,
@@ -298,7 +297,7 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
 
     def design(quads: NDArray[np.float64], sigs: NDArray[np.float64]) -> NDArray[np.float64]:
         """(1, N, P) design at one geometry (:func:`._kernels.cell_design`)."""
-        H = _kernels.quad_homographies(np.ascontiguousarray(quads, np.float64))[0]
+        H = quad_homographies(quads)[0]
         return _kernels.cell_design(xs, ys, H, float(sigs[0]), n, border, code_arg)[None]
 
     th = np.r_[quad.ravel(), sig]

@@ -61,11 +61,11 @@ def closure_normalised(gray: NDArray[np.uint8], max_side_px: float, scale: int =
     max_side_px : largest dark object (marker side) to normalise, pixels.
     scale : the closing runs on an image ``scale`` times smaller.
     """
-    bg = closing_background(gray, max_side_px, scale).astype(np.float32)
+    bg = _closing_background(gray, max_side_px, scale).astype(np.float32)
     return gray.astype(np.float32) / np.maximum(bg, 1.0)
 
 
-def closing_background(gray: NDArray[np.uint8], max_side_px: float, scale: int) -> NDArray[np.uint8]:
+def _closing_background(gray: NDArray[np.uint8], max_side_px: float, scale: int) -> NDArray[np.uint8]:
     """The closing of ``gray`` (on an image ``scale`` times smaller), upsampled bilinearly, uint8."""
     h, w = gray.shape
     sw, sh = max(1, w // scale), max(1, h // scale)
@@ -86,16 +86,15 @@ def _ratio_lut(threshold: float) -> NDArray[np.uint8]:
     return np.minimum(dark.sum(axis=1), 255).astype(np.uint8)
 
 
-def dark_mask(gray: NDArray[np.uint8], max_side_px: float, scale: int = 4, threshold: float = 0.6,
-              background: NDArray[np.uint8] | None = None) -> NDArray[np.uint8]:
+def dark_mask(gray: NDArray[np.uint8], max_side_px: float, scale: int = 4, threshold: float = 0.6
+              ) -> NDArray[np.uint8]:
     """``closure_normalised(gray, max_side_px, scale) < threshold`` as a 0 / 255 uint8 mask.
 
     Computed in 8 bits (a per-pixel threshold from a lookup table on the background, then one
     comparison) instead of a float image: the float division cost 12 ms on a 1024 x 768 image, this
-    about 1 ms, with the same result. ``background``: the closing (:func:`closing_background`) if it
-    is already known.
+    about 1 ms, with the same result.
     """
-    bg = closing_background(gray, max_side_px, scale) if background is None else background
+    bg = _closing_background(gray, max_side_px, scale)
     return cv2.compare(gray, cv2.LUT(bg, _ratio_lut(threshold)), cv2.CMP_LT)
 
 
@@ -151,16 +150,15 @@ def robust_quad(contour: NDArray[np.int32], approx: NDArray[np.float64]) -> NDAr
 
 
 def find_candidates(
-    gray: NDArray[np.uint8], params: CandidateParams, max_hole_fraction: float | None = None,
-    background: NDArray[np.uint8] | None = None,
+    gray: NDArray[np.uint8], params: CandidateParams, max_hole_fraction: float | None = None
 ) -> list[NDArray[np.float64]]:
     """Candidate quadrilaterals (each (4, 2), clockwise on screen, pixel coordinates) of dark squares.
 
     Tests, in order of cost: contour length, area, solidity, holes (Euler number and hole fraction),
-    four-vertex convex polygon, robust quadrilateral. ``background``: the closing
-    (:func:`closing_background` at ``max_side_px(gray.shape)`` and ``params.scale``) if already known.
+    four-vertex convex polygon, robust quadrilateral.
     """
-    mask = dark_mask(gray, params.max_side_px(gray.shape), params.scale, params.ratio_threshold, background)
+    max_side = params.max_side_px(gray.shape)
+    mask = dark_mask(gray, max_side, params.scale, params.ratio_threshold)
     if params.smooth:
         mask = cv2.medianBlur(mask, 3)
     contours, hier = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
@@ -168,7 +166,7 @@ def find_candidates(
         return []
     hier = hier[0]
     min_len = 4 * params.min_side_px * 0.8
-    max_len = 4 * params.max_side_px(gray.shape) * 1.5
+    max_len = 4 * max_side * 1.5
     hole_frac_max = params.max_hole_fraction if max_hole_fraction is None else max_hole_fraction
     out = []
     lengths = np.fromiter(map(len, contours), int, len(contours))

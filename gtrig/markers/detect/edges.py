@@ -317,10 +317,8 @@ def fit_edges(
              for a, b in itertools.pairwise(cut)]
     res = _threads.run_split(_kernels.edge_lm, parts)
     P, cur, JTJ = (np.concatenate([r[k] for r in res]) for k in range(3))
-    eye = np.eye(NP)
     dof = np.maximum(cnt - NP, 1)
     s2 = cur / dof
-    JTJ[~has] = eye
     with np.errstate(all="ignore"):
         cov = np.linalg.pinv(JTJ)[:, :2, :2] * s2[:, None, None]
     ok = has & np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(cov.reshape(E, -1)), axis=1)
@@ -415,12 +413,10 @@ def marker_context(
     th = fit.theta[e]
     d = np.cos(th) * (x - fit.mid[e, 0]) + np.sin(th) * (y - fit.mid[e, 1]) - fit.rho[e]
     H = quad_homographies(corners).reshape(-1, 9)
-    args = (np.ascontiguousarray(x), np.ascontiguousarray(y), e // 4, H, np.ascontiguousarray(fit.sigma[e]),
-            np.ascontiguousarray(white, dtype=np.float64), d)
+    W = np.ascontiguousarray(white, dtype=np.float64)
+    xs, ys, quad, sg = np.ascontiguousarray(x), np.ascontiguousarray(y), e // 4, np.ascontiguousarray(fit.sigma[e])
     N = len(e)
-    if threads < 2 or N <= _SPLIT_MIN_PX:
-        return _kernels.marker_context(*args)
-    # pixels are independent: two halves in two threads
-    half = N // 2
-    parts = [tuple(a if a is H or a is args[5] else a[sl] for a in args) for sl in (slice(0, half), slice(half, N))]
+    # pixels are independent: with two threads, two halves at once
+    cuts = [0, N // 2, N] if threads > 1 and N > _SPLIT_MIN_PX else [0, N]
+    parts = [(xs[a:b], ys[a:b], quad[a:b], H, sg[a:b], W, d[a:b]) for a, b in itertools.pairwise(cuts)]
     return np.concatenate(_threads.run_split(_kernels.marker_context, parts))
