@@ -40,3 +40,28 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
     """Write ``data`` to ``path`` atomically."""
     with atomic_open(path, "wb") as f:
         f.write(data)
+
+
+@contextlib.contextmanager
+def atomic_group(*paths: str | os.PathLike[str]) -> Iterator[list[Path]]:
+    """Write several outputs all or none: yields one temporary path per output (same folder), renamed
+    into place together when the block succeeds; on any error every temporary is removed and the
+    previous outputs are left as they were."""
+    finals = [Path(p) for p in paths]
+    if len({p.resolve() for p in finals}) != len(finals):
+        raise ValueError("two outputs of one group name the same file")
+    tmps: list[Path] = []
+    try:
+        for p in finals:
+            p.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+            os.close(fd)
+            tmps.append(Path(tmp))
+        yield tmps
+        for tmp, p in zip(tmps, finals, strict=True):
+            os.replace(tmp, p)
+    except BaseException:
+        for tmp in tmps:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+        raise

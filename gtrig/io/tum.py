@@ -5,12 +5,16 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_write_text
+
+if TYPE_CHECKING:
+    from gtrig.trajectory import PoseTrack
 
 
 @dataclass(frozen=True)
@@ -89,10 +93,16 @@ def read_tum(path: str | os.PathLike[str]) -> Trajectory:
     return Trajectory(a[:, 0].copy(), a[:, 1:4].copy(), q / n[:, None])
 
 
-def write_tum(path: str | os.PathLike[str], traj: Trajectory) -> None:
-    """Write a TUM file atomically (full double precision for positions, 9 digits for quaternions)."""
+def tum_text(traj: Trajectory | PoseTrack) -> str:
+    """The TUM text of a trajectory or pose track (microsecond stamps, nanometre positions, 12-digit
+    quaternions)."""
     out = [
         f"{t:.6f} {x:.9f} {y:.9f} {z:.9f} {qx:.12f} {qy:.12f} {qz:.12f} {qw:.12f}"
         for t, (x, y, z), (qx, qy, qz, qw) in zip(traj.stamps_s, traj.xyz, traj.quat_xyzw, strict=True)
     ]
-    atomic_write_text(path, "# timestamp tx ty tz qx qy qz qw\n" + "\n".join(out) + "\n")
+    return "# timestamp tx ty tz qx qy qz qw\n" + "\n".join(out) + "\n"
+
+
+def write_tum(path: str | os.PathLike[str], traj: Trajectory | PoseTrack) -> None:
+    """Write a TUM file atomically (see :func:`tum_text`)."""
+    atomic_write_text(path, tum_text(traj))
