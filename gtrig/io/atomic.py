@@ -54,14 +54,14 @@ def atomic_group(*paths: str | os.PathLike[str]) -> Iterator[list[Path]]:
     try:
         for p in finals:
             p.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+            fd, name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
             os.close(fd)
-            tmps.append(Path(tmp))
+            tmps.append(Path(name))
         yield tmps
-        for tmp, p in zip(tmps, finals, strict=True):
-            os.replace(tmp, p)
+        for t, p in zip(tmps, finals, strict=True):
+            os.replace(t, p)
     except BaseException:
-        for tmp in tmps:
+        for t in tmps:
             with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
+                os.unlink(t)
         raise
