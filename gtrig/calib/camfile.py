@@ -101,7 +101,12 @@ def cam_from_dict(d: Any, source: str = "<cam>") -> CameraIntrinsics:
         raise FormatError(f"{source}: dist_coeffs: expected 4, 5, 8, 12 or 14 coefficients, got {dist.size}")
     if w <= 0 or h <= 0:
         raise FormatError(f"{source}: image_size: must be positive")
-    rms = float(d.get("rms_px", math.nan))
+    if not (np.all(np.isfinite(K)) and np.all(np.isfinite(dist))):
+        raise FormatError(f"{source}: camera_matrix and dist_coeffs must be finite numbers")
+    try:
+        rms = float(d.get("rms_px", math.nan))
+    except (TypeError, ValueError):
+        raise FormatError(f"{source}: rms_px: expected a number of pixels") from None
     extra = {k: v for k, v in d.items() if k not in ("image_size", "camera_matrix", "dist_coeffs", "rms_px")}
     return CameraIntrinsics((w, h), K, dist, rms, extra)
 

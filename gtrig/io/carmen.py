@@ -21,6 +21,7 @@ from __future__ import annotations
 import gzip
 import math
 import os
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -110,7 +111,7 @@ def _lines(p: Path) -> list[str]:
         raw = gzip.decompress(p.read_bytes()) if p.suffix == ".gz" else p.read_bytes()
     except FileNotFoundError:
         raise FormatError(f"{p}: no such file") from None
-    except (OSError, EOFError) as e:
+    except (OSError, EOFError, zlib.error) as e:
         raise FormatError(f"{p}: not a readable gzip file ({e})") from None
     try:
         return raw.decode("ascii").splitlines()

@@ -92,21 +92,34 @@ def read_frame_index(folder: str | os.PathLike[str]) -> FrameIndex:
     if not p.is_file():
         raise FormatError(f"{p}: no such file (each camera folder needs frame,stamp_s,file)")
     frames, stamps, files = [], [], []
-    with open(p, newline="", encoding="utf-8") as f:
-        rows = csv.reader(f)
-        header = next(rows, None)
-        if header is None or [h.strip() for h in header[:2]] != ["frame", "stamp_s"]:
-            raise FormatError(f"{p}:1: header must be 'frame,stamp_s,file'")
-        for line, row in enumerate(rows, 2):
-            if not row or row[0].startswith("#"):
-                continue
-            try:
-                frames.append(int(row[0]))
-                stamps.append(float(row[1]))
-            except (ValueError, IndexError):
-                raise FormatError(f"{p}:{line}: expected 'frame,stamp_s,file'") from None
-            files.append(row[2] if len(row) > 2 else "")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise FormatError(f"{p}: not a text CSV file (undecodable bytes)") from None
+    except OSError as e:
+        raise FormatError(f"{p}: cannot read ({e.strerror or e})") from None
+    if "\0" in text:
+        raise FormatError(f"{p}: holds NUL bytes, not a CSV file")
+    rows = csv.reader(text.splitlines())
+    header = next(rows, None)
+    if header is None or [h.strip() for h in header[:2]] != ["frame", "stamp_s"]:
+        raise FormatError(f"{p}:1: header must be 'frame,stamp_s,file'")
+    for line, row in enumerate(rows, 2):
+        if not row or row[0].startswith("#"):
+            continue
+        try:
+            frames.append(int(row[0]))
+            stamps.append(float(row[1]))
+        except (ValueError, IndexError):
+            raise FormatError(f"{p}:{line}: expected 'frame,stamp_s,file'") from None
+        name = row[2].strip() if len(row) > 2 else ""
+        if name and (Path(name).name != name or name in (".", "..")):
+            # a recording is self-contained: an index may not point outside its camera's folder
+            raise FormatError(f"{p}:{line}: file {name!r} is not a plain file name in this folder")
+        files.append(name)
     st = np.array(stamps)
+    if not np.all(np.isfinite(st)):
+        raise FormatError(f"{p}: a time stamp is not a finite number")
     if st.size and np.any(np.diff(st) <= 0):
         raise FormatError(f"{p}: time stamps do not increase at line {int(np.argmax(np.diff(st) <= 0)) + 3}")
     videos = sorted(v for v in folder.glob("video.*") if v.suffix.lower() in VIDEO_SUFFIXES)

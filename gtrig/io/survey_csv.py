@@ -63,6 +63,10 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = ()) -> Ta
         raise FormatError(f"{p}: no such file") from None
     except IsADirectoryError:
         raise FormatError(f"{p}: is a folder, expected a CSV file") from None
+    except UnicodeDecodeError:
+        raise FormatError(f"{p}: not a text CSV file (undecodable bytes)") from None
+    except OSError as e:
+        raise FormatError(f"{p}: cannot read ({e.strerror or e})") from None
     header: tuple[str, ...] | None = None
     rows: list[tuple[str, ...]] = []
     lines: list[int] = []

@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_write_text
+from gtrig.io.yamlfile import read_text_file
 
 if TYPE_CHECKING:
     from gtrig.trajectory import PoseTrack
@@ -62,10 +63,7 @@ class Trajectory:
 def read_tum(path: str | os.PathLike[str]) -> Trajectory:
     """Read a TUM file; one-line errors name the file and line."""
     p = Path(path)
-    try:
-        lines = p.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
-        raise FormatError(f"{p}: no such file") from None
+    lines = read_text_file(p).splitlines()
     rows = []
     for i, line in enumerate(lines, 1):
         s = line.strip()

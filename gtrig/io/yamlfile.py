@@ -49,6 +49,10 @@ class _LimitedLoader(yaml.SafeLoader):
             self._depth -= 1
 
 
+def _one_line(msg: object) -> str:
+    return " ".join(str(msg).split())[:200]
+
+
 class _RefusedError(Exception):
     pass
 
@@ -78,8 +82,9 @@ def compose_yaml(text: str, source: str) -> yaml.Node | None:
     if len(text) > MAX_BYTES:
         raise FormatError(f"{source}: {len(text) / 2**20:.0f} MiB of YAML, more than the {MAX_BYTES >> 20} MiB "
                           "a configuration may have")
-    loader = _LimitedLoader(text)
+    loader: _LimitedLoader | None = None
     try:
+        loader = _LimitedLoader(text)  # the reader refuses control characters here
         node = loader.get_single_node()
         if node is not None:
             _expanded_size(node, {}, set())
@@ -91,9 +96,10 @@ def compose_yaml(text: str, source: str) -> yaml.Node | None:
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark else source
-        raise FormatError(f"{where}: not valid YAML ({getattr(e, 'problem', None) or e})") from None
+        raise FormatError(f"{where}: not valid YAML ({_one_line(getattr(e, 'problem', None) or e)})") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def construct_yaml(node: yaml.Node | None, source: str) -> Any:
@@ -106,7 +112,7 @@ def construct_yaml(node: yaml.Node | None, source: str) -> Any:
     except RecursionError:
         raise FormatError(f"{source}: refused: nested too deeply") from None
     except yaml.YAMLError as e:
-        raise FormatError(f"{source}: not valid YAML ({getattr(e, 'problem', None) or e})") from None
+        raise FormatError(f"{source}: not valid YAML ({_one_line(getattr(e, 'problem', None) or e)})") from None
     finally:
         loader.dispose()
 
