@@ -8,6 +8,31 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 
+def _die_with_parent(parent_pid: int) -> None:
+    """Ask Linux to send this worker SIGTERM when its parent dies (a SIGKILL of gtrig must not orphan
+    workers blocked on a pipe); elsewhere a no-op."""
+    import ctypes
+    import os
+    import signal
+    import sys
+
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            PR_SET_PDEATHSIG = 1
+            libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:  # the parent died before the request took effect
+        os._exit(1)
+
+
+def _worker_start(parent_pid: int, initializer: Callable[..., Any] | None, initargs: tuple[Any, ...]) -> None:
+    _die_with_parent(parent_pid)
+    if initializer is not None:
+        initializer(*initargs)
+
+
 @contextlib.contextmanager
 def process_pool(
     workers: int, initializer: Callable[..., Any] | None = None, initargs: tuple[Any, ...] = ()
@@ -17,13 +42,17 @@ def process_pool(
     OpenCV's worker threads do not survive fork(): a child forked while the parent's OpenCV thread pool
     is alive can hang in its first parallel call (seen with calibration then GTvision in one process).
     Forking (rather than spawning) is kept so that workers share large read-only state at no cost.
+    Workers die with their parent, even when it is killed with SIGKILL.
     """
+    import os
+
     import cv2
 
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
-        with ProcessPoolExecutor(workers, initializer=initializer, initargs=initargs) as ex:
+        with ProcessPoolExecutor(workers, initializer=_worker_start,
+                                 initargs=(os.getpid(), initializer, initargs)) as ex:
             yield ex
     finally:
         cv2.setNumThreads(threads)
