@@ -39,8 +39,13 @@ def points(
     ),
 ) -> None:
     """World points by trilateration from distances to the reference points (and to each other)."""
+    from gtrig.cli import checks
     from gtrig.io.survey_csv import read_reference_points, read_world_distances, write_points
     from gtrig.survey.points import estimate_world_points
+
+    checks.sigma_m("--sigma", sigma)
+    checks.sigma_m("--reference-sigma", reference_sigma)
+    checks.outputs([reference, distances], [out, plot])
 
     refs = read_reference_points(reference, reference_sigma)
     d = read_world_distances(distances, 0.002 if sigma is None else sigma)
@@ -91,6 +96,7 @@ def poses(
     """Validation poses from robot-point to world-point distances."""
     import numpy as np
 
+    from gtrig.cli import checks
     from gtrig.io.survey_csv import (
         read_points,
         read_pose_distances,
@@ -99,6 +105,9 @@ def poses(
         write_poses,
     )
     from gtrig.survey.poses import estimate_poses
+
+    checks.sigma_m("--sigma", sigma)
+    checks.outputs([points, robot_points, distances, initial], [out, plot])
 
     wp = read_points(points)
     init = read_pose_table(initial) if initial is not None else None
@@ -168,6 +177,7 @@ def adjust(
     'survey points' then 'survey poses', then one least squares over all of them."""
     import numpy as np
 
+    from gtrig.cli import checks
     from gtrig.io.survey_csv import (
         read_pose_distances,
         read_reference_points,
@@ -178,12 +188,20 @@ def adjust(
     )
     from gtrig.survey import run_survey
 
+    checks.sigma_m("--sigma", sigma)
+    checks.sigma_m("--reference-sigma", reference_sigma)
+    checks.outputs([reference, distances, robot_points, pose_distances], [out_points, out_poses])
+
     s = 0.002 if sigma is None else sigma
     r = run_survey(read_reference_points(reference, reference_sigma), read_world_distances(distances, s),
                    read_robot_points(robot_points), read_pose_distances(pose_distances, s),
                    on_ambiguity=on_ambiguity, on_outlier=on_outlier)
-    write_points(out_points, r.points.names, r.points.xy, r.points.cov_xy)
-    write_poses(out_poses, r.poses.names, r.poses.xytheta, r.poses.cov_xytheta)
+    from gtrig.io.atomic import atomic_group
+
+    # both or neither: the two tables are one adjustment
+    with atomic_group(out_points, out_poses) as (tmp_points, tmp_poses):
+        write_points(tmp_points, r.points.names, r.points.xy, r.points.cov_xy)
+        write_poses(tmp_poses, r.poses.names, r.poses.xytheta, r.poses.cov_xytheta)
     sd_w = 1000 * np.sqrt(r.points.cov_xy[:, [0, 1], [0, 1]])
     sd_p = np.sqrt(r.poses.cov_xytheta[:, [0, 1, 2], [0, 1, 2]])
     jt = r.joint
@@ -209,9 +227,15 @@ def predict(
     """Expected pose uncertainty at every place of the room for this layout of world points."""
     import numpy as np
 
+    from gtrig.cli import checks
     from gtrig.io.atomic import atomic_write_text
     from gtrig.io.survey_csv import read_points, read_robot_points
     from gtrig.survey.predict import predict_pose_uncertainty
+
+    checks.sigma_m("--sigma", sigma)
+    checks.number("--step", step, lo=0.001, unit="m")
+    checks.number("--margin", margin, lo=0.0, hi=1000.0, unit="m")
+    checks.outputs([points, robot_points], [out, plot])
 
     wp = read_points(points)
     m = predict_pose_uncertainty(

@@ -27,6 +27,10 @@ class UncertaintyMap:
     sigma_theta_rad: np.ndarray
 
 
+#: the largest map :func:`predict_pose_uncertainty` computes (a 100 m room at 3 cm steps)
+MAX_CELLS = 10_000_000
+
+
 def predict_pose_uncertainty(
     world_xy: np.ndarray,
     world_cov_xy: np.ndarray,
@@ -49,9 +53,15 @@ def predict_pose_uncertainty(
     W = np.asarray(world_xy, dtype=float)
     if W.shape[0] < 2 or robot_xy.shape[0] < 2:
         raise InputError("the prediction needs at least 2 world points and 2 robot points")
-    if step_m <= 0:
-        raise InputError(f"step must be positive, got {step_m:g}")
+    if not (np.isfinite(step_m) and step_m > 0):
+        raise InputError(f"step must be a positive number of metres, got {step_m:g}")
+    if not (np.isfinite(margin_m) and margin_m >= 0):
+        raise InputError(f"margin must be a non-negative number of metres, got {margin_m:g}")
     lo, hi = W.min(axis=0) - margin_m, W.max(axis=0) + margin_m
+    cells = float(np.prod(np.floor((hi - lo) / step_m) + 1))
+    if cells > MAX_CELLS:
+        raise InputError(f"a grid of {cells:.3g} cells (step {step_m:g} m, margin {margin_m:g} m) is more than "
+                         f"the {MAX_CELLS:.0e} a map may have: use a larger step or a smaller margin")
     xs = np.arange(lo[0], hi[0] + 1e-9, step_m)
     ys = np.arange(lo[1], hi[1] + 1e-9, step_m)
     gx, gy = np.meshgrid(xs, ys)
