@@ -33,7 +33,6 @@ import csv
 import hashlib
 import json
 import logging
-import math
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -50,6 +49,7 @@ from gtrig.io.tum import Trajectory
 from gtrig.parallel import process_pool
 from gtrig.rig.load import rig_to_dict
 from gtrig.rig.models import Rig
+from gtrig.trajectory import PoseTrack
 from gtrig.vision.estimate import FrameEstimate, Status, VisionOptions, estimate_frame
 from gtrig.vision.init import PreviousPose
 from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel
@@ -104,6 +104,19 @@ class VisionResult:
             return Trajectory(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)))
         return Trajectory.from_matrices(np.array([e.stamp_s for e in ok]),
                                         np.stack([e.T_world_robot for e in ok]))  # type: ignore[misc]
+
+    def to_pose_track(self) -> PoseTrack:
+        """The localized poses as the one pose-track type: ``T_world_robot`` with the full (6, 6)
+        covariance over the world-frame perturbation (x, y, z, rx, ry, rz), every pose OK (an instant that
+        failed has no pose). A planar run's file carries the x, y, yaw marginal
+        (:func:`write_pose_track_files`)."""
+        ok = self.localized()
+        if not ok:
+            return PoseTrack.empty("GTvision", "se3")
+        return PoseTrack.from_matrices(np.array([e.stamp_s for e in ok]),
+                                       np.stack([e.T_world_robot for e in ok]),  # type: ignore[misc]
+                                       cov=np.stack([e.cov_6x6 for e in ok]),  # type: ignore[misc]
+                                       cov_kind="se3", source="GTvision")
 
     def covariances(self) -> np.ndarray:
         """(M, 6, 6), or (M, 3, 3) over x, y, yaw when planar, for the localized poses."""
@@ -670,28 +683,36 @@ def with_timing_uncertainty(result: VisionResult, stamp_sigma_s: dict[str, float
     return replace(result, estimates=tuple(ests))
 
 
-def write_covariance_csv(path: str | os.PathLike[str], result: VisionResult) -> None:
-    """One row per localized pose: ``stamp_s`` and the covariance row-major (6 x 6 over x, y, z, rx, ry,
-    rz; or 3 x 3 over x, y, yaw when planar), metres and radians, atomically."""
-    from gtrig.io.atomic import atomic_open
+def file_track(result: VisionResult) -> PoseTrack:
+    """The track as written: the localized poses with their x, y, yaw covariance when planar (the floor
+    prior fixes z, roll and pitch), else the full 6 x 6."""
+    track = result.to_pose_track()
+    return track.with_cov(track.cov_xytheta(), "xyyaw") if result.planar else track
 
-    ok = result.localized()
-    covs = result.covariances()
-    names = ("x", "y", "yaw") if result.planar else ("x", "y", "z", "rx", "ry", "rz")
-    header = ["stamp_s"] + [f"c_{a}_{b}" for a in names for b in names]
-    with atomic_open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(header)
-        for e, c in zip(ok, covs, strict=True):
-            w.writerow([f"{e.stamp_s:.6f}"] + [repr(float(v)) for v in c.ravel()])
+
+def write_pose_track_files(result: VisionResult, tum_path: str | os.PathLike[str],
+                           cov_path: str | os.PathLike[str] | None = None) -> None:
+    """The TUM file and (with ``cov_path``) the one covariance CSV layout of gtrig.io.posetrack, both or
+    neither."""
+    from gtrig.io.posetrack import write_pose_track
+
+    write_pose_track(file_track(result), tum_path, cov_path)
+
+
+def write_covariance_csv(path: str | os.PathLike[str], result: VisionResult) -> None:
+    """The covariance CSV alone (gtrig.io.posetrack's layout: ``stamp_s,status,reason,cov_x_x,...``),
+    one row per localized pose, atomically."""
+    from gtrig.io.atomic import atomic_write_text
+    from gtrig.io.posetrack import covariance_text
+
+    atomic_write_text(path, covariance_text(file_track(result)))
 
 
 def read_covariance_csv(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """``(stamps_s (M,), cov (M, k, k))`` from :func:`write_covariance_csv`."""
-    with open(path, newline="", encoding="utf-8") as f:
-        r = csv.reader(f)
-        header = next(r)
-        k = int(round(math.sqrt(len(header) - 1)))
-        rows = [[float(x) for x in row] for row in r if row]
-    a = np.array(rows).reshape(-1, 1 + k * k)
-    return a[:, 0], a[:, 1:].reshape(-1, k, k)
+    """``(stamps_s (M,), cov (M, k, k))`` from :func:`write_covariance_csv` (or the layout before it)."""
+    from gtrig.io.posetrack import read_covariance_csv as read_any
+
+    stamps, cov, kind, *_ = read_any(path)
+    if cov is None:
+        raise FormatError(f"{path}: no covariance columns")
+    return stamps, cov
