@@ -90,15 +90,8 @@ def _object_for_recording(rec: Path) -> list[np.ndarray]:
     p = rec / OBJECT_FILE
     if p.is_file():
         return load_object_outline(p)
-    cfg = rec / "sim_config.yaml"
-    if cfg.is_file():
-        scenario = (yaml.safe_load(cfg.read_text(encoding="utf-8")) or {}).get("scenario", "gtroom")
-        if scenario == "gtroom":
-            # the simulated GT room's calibration objects stand at fixed, known places (seed-independent)
-            from gtrig.sim.gtroom import clutter
-
-            return [b.corners_xy() for b in clutter() if b.name.startswith("calib_object")]
-    raise InputError(f"{rec}: no {OBJECT_FILE} (the outline of the object that defines the world frame)")
+    raise InputError(f"{rec}: no {OBJECT_FILE} (the outline of the object that defines the world frame; "
+                     "docs/formats.md; a recording simulated before it was written: simulate it again)")
 
 
 def calibrate_recording(
