@@ -46,6 +46,7 @@ from scipy.spatial.transform import Rotation
 from gtrig.errors import FormatError, InputError
 from gtrig.io.frames import FrameIndex, read_frame_index
 from gtrig.io.tum import Trajectory
+from gtrig.kinematics import pose_velocities  # moved to the core; re-exported for its callers
 from gtrig.parallel import process_pool
 from gtrig.rig.load import rig_to_dict
 from gtrig.rig.models import Rig
@@ -624,33 +625,6 @@ def with_robot_frame_uncertainty(result: VisionResult, cov_frame_6x6: np.ndarray
         for e in result.estimates
     )
     return replace(result, estimates=ests)
-
-
-def pose_velocities(stamps_s: np.ndarray, T_world_robot: np.ndarray, max_gap_s: float = 0.5
-                    ) -> np.ndarray:
-    """World-frame velocities (M, 6), ``(v, omega)`` in m/s and rad/s, of poses (M, 4, 4) at increasing
-    ``stamps_s`` (M,): central differences of the nearest neighbours (one-sided at the ends and
-    across gaps longer than ``max_gap_s``; zero for an isolated pose). ``omega`` is the rotation
-    vector of ``R_next R_prev^T`` per second, the ``dphi`` of :mod:`gtrig.vision.projection`."""
-    t = np.asarray(stamps_s, float)
-    M = len(t)
-    out = np.zeros((M, 6))
-    if M < 2:
-        return out
-    gap = np.diff(t) > max_gap_s
-    prev = np.arange(M) - 1
-    nxt = np.arange(M) + 1
-    prev[1:][gap] = np.arange(1, M)[gap]  # no usable neighbour before: the pose itself
-    prev[0] = 0
-    nxt[:-1][gap] = np.arange(M - 1)[gap]
-    nxt[-1] = M - 1
-    dt = t[nxt] - t[prev]
-    ok = dt > 0
-    a, b = prev[ok], nxt[ok]
-    out[ok, :3] = (T_world_robot[b, :3, 3] - T_world_robot[a, :3, 3]) / dt[ok, None]
-    dR = np.einsum("nij,nkj->nik", T_world_robot[b, :3, :3], T_world_robot[a, :3, :3])
-    out[ok, 3:] = Rotation.from_matrix(dR).as_rotvec() / dt[ok, None]
-    return out
 
 
 def with_timing_uncertainty(result: VisionResult, stamp_sigma_s: dict[str, float],
