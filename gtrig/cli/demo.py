@@ -43,3 +43,5 @@ def command(
         result = pipeline.run(rec, out / "results", on_stage=lambda name: status.update(f"processing: {name}"))
     print_result(result, True)
     console.print(f"demo finished in {time.perf_counter() - t0:.0f} s; outputs in {out}")
+    if result.exit_code:
+        raise typer.Exit(result.exit_code)

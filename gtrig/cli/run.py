@@ -74,3 +74,5 @@ def command(
                               config=cfg, only=only, from_stage=from_stage, reuse=not no_reuse)
     print_result(result, (recording / "truth").is_dir())
     console.print(f"finished in {time.perf_counter() - t0:.0f} s; outputs in {out}", highlight=False)
+    if result.exit_code:
+        raise typer.Exit(result.exit_code)  # a stage refused its input: say so to scripts too

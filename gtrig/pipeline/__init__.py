@@ -41,21 +41,27 @@ if TYPE_CHECKING:
 _VISION_PRODUCTS = ("tracks/GTvision/validation", "tracks/GTvision/run", "vision_results/validation",
                     "vision_results/run")
 
+_SURVEY_FILES = ("survey/reference_points.csv", "survey/world_distances.csv", "survey/robot_points.csv",
+                 "survey/pose_distances.csv")
+
 STAGES: tuple[Stage, ...] = (
-    Stage("survey", "survey", survey, produces=("survey",), reads=("survey",), section="survey"),
+    Stage("survey", "survey", survey, produces=("survey",), reads=_SURVEY_FILES, section="survey"),
     Stage("cameras", "camera calibration", camera_calibration, consumes=("rig",),
-          produces=("rig", "camera_report"), reads=("calib",), section="cameras"),
+          produces=("rig", "camera_report"), reads=("calib/boards.yaml", "calib/world_board"),
+          section="cameras"),
     Stage("markers", "marker calibration", marker_calibration, consumes=("rig",),
-          produces=("rig", "marker_calibration"), reads=("handheld",), section="markers"),
+          produces=("rig", "marker_calibration"), reads=("handheld/camera.yaml", "handheld/images"),
+          section="markers"),
     Stage("robot-frame", "robot frame", robot_frame, consumes=("rig", "survey", "marker_calibration"),
-          produces=("rig", "frame_fit", "vision_validation", "hand_frame_cov"), reads=("validation",),
-          section="vision"),
+          produces=("rig", "frame_fit", "vision_validation", "hand_frame_cov"),
+          reads=("validation/poses.csv", "validation/cameras"), section="vision"),
     Stage("laser", "GTlaser", gtlaser, consumes=("rig",),
-          produces=("rig", "laser_report", "laser_result", "tracks/GTlaser/run"), reads=("background", "run"),
-          section="laser"),
+          produces=("rig", "laser_report", "laser_result", "tracks/GTlaser/run"),
+          reads=("background/lasers", "run/lasers", "calib/laser_object.yaml"), section="laser"),
     Stage("vision", "GTvision", gtvision, consumes=("rig",),
           uses=("marker_calibration", "frame_fit", "vision_validation", "hand_frame_cov", "survey"),
-          produces=_VISION_PRODUCTS, reads=("validation", "run"), section="vision"),
+          produces=_VISION_PRODUCTS, reads=("validation/poses.csv", "validation/cameras", "run/cameras"),
+          section="vision"),
 )
 
 

@@ -6,7 +6,7 @@ A stage's key is a hash of
   edit anywhere reruns every stage; never a stale result);
 * its configuration section (``run.yaml``'s part for it);
 * the fingerprint of what it reads in the recording (path, size and modification time of every file
-  under each entry of its ``reads``, and of ``rig.yaml`` and ``truth/``);
+  under the top-level folder of each of its ``reads``, and of ``rig.yaml`` and ``truth/``);
 * the keys of the stages that produced what it consumes (a rerun upstream reruns it).
 
 The record holds the stage's :class:`~gtrig.pipeline.context.StageOutput` (its products as objects,
@@ -98,8 +98,11 @@ def forget(out: Path, name: str) -> None:
     _path(out, name).unlink(missing_ok=True)
 
 
-def recording_prints(rec: Path, entries: tuple[str, ...]) -> dict[str, str]:
-    return {e: fingerprint(rec, e) for e in sorted({*entries, "rig.yaml", "truth"})}
+def recording_prints(rec: Path, reads: tuple[str, ...]) -> dict[str, str]:
+    """Fingerprints of the top-level entries holding ``reads`` (``calib/boards.yaml`` -> all of ``calib/``:
+    a stage may read more of a folder than it requires), of ``rig.yaml`` and of ``truth/``."""
+    tops = {Path(r).parts[0] for r in reads}
+    return {e: fingerprint(rec, e) for e in sorted({*tops, "rig.yaml", "truth"})}
 
 
 __all__ = ["code_version", "fingerprint", "forget", "load_record", "recording_prints", "save_record", "stage_key"]

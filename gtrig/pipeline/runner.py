@@ -4,10 +4,12 @@ The rules a stage can count on (gtrig.pipeline.context explains how a stage decl
 
 * the recording is checked once (a folder with ``rig.yaml``; the rig is read and validated) and the
   effective configuration is written as ``DIR/run.yaml`` before any stage runs;
-* a stage whose ``reads`` are missing from the recording, or whose ``consumes`` no earlier stage
-  produced, is skipped with one line saying which file or which stage; so is a stage that refuses its
-  input (a :class:`~gtrig.errors.GtrigError`: too few views, no markers...): one stage's refusal must
-  not hide the others' results;
+* before any stage runs, every stage asked for has what it ``reads`` in the recording, else one line
+  names the stage and the missing file (:class:`~gtrig.errors.InputError`, exit code 2);
+* a stage whose ``consumes`` no earlier stage produced is skipped with one line naming the product; so
+  is a stage that refuses its input (a :class:`~gtrig.errors.GtrigError`: too few views, no
+  markers...): one stage's refusal must not hide the others' results (the run's exit code is then the
+  error's);
 * a finished stage is reused when its key is unchanged (gtrig.pipeline.cache); ``from_stage`` reruns
   that stage and every later one; ``only`` runs just those stages (the others reused when finished);
 * the products of each stage are handed to the next as objects; a new ``rig`` is also written as
@@ -24,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gtrig.config import RunConfig, write_config
-from gtrig.errors import ConfigError, GtrigError
+from gtrig.errors import ConfigError, GtrigError, InputError
 from gtrig.io.recording import recording_dir
 from gtrig.pipeline import cache
 from gtrig.pipeline.context import AccuracyRow, Products, Stage, StageInput, StageOutput
@@ -45,6 +47,8 @@ class PipelineResult:
     skipped : {stage name: why} for the stages that did not give a result.
     reused : names of the stages taken from their last run.
     products : the final context (rig, survey, pose tracks by name...).
+    exit_code : 0, or the largest exit code of the errors that stopped a stage (2 bad input, 3 no
+        convergence).
     """
 
     rows: tuple[AccuracyRow, ...]
@@ -53,6 +57,7 @@ class PipelineResult:
     checks: tuple[AccuracyRow, ...] = ()
     reused: tuple[str, ...] = ()
     products: Products = Products()
+    exit_code: int = 0
 
     @property
     def warnings(self) -> tuple[AccuracyRow, ...]:
@@ -88,6 +93,13 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
     out_p.mkdir(parents=True, exist_ok=True)
     write_config(cfg, out_p / "run.yaml")
     has_truth = (rec_p / "truth").is_dir()
+    for st in stages:
+        if only and st.name not in only:
+            continue
+        missing = [r for r in st.reads if not (rec_p / r).exists()]
+        if missing:
+            raise InputError(f"stage {st.name} needs {rec_p / missing[0]}, which the recording lacks "
+                             "(docs/formats.md; leave the stage out with --stages)")
     products = Products(rig=rig)
     producer_key: dict[str, str] = {"rig": cache.stage_key("recording", None, cache.recording_prints(rec_p, ()), {})}
     rows: list[AccuracyRow] = []
@@ -96,13 +108,12 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
     skipped: dict[str, str] = {}
     reused: list[str] = []
     rerun = False
+    exit_code = 0
     for st in stages:
         rerun = rerun or st.name == from_stage
         wanted = not only or st.name in only
-        missing = [r for r in st.reads if not (rec_p / r).exists()]
-        if missing:
-            skipped[st.name] = f"the recording has no {missing[0]} ({rec_p / missing[0]})"
-            log.warning("%s: skipped: %s", st.name, skipped[st.name])
+        if any(not (rec_p / r).exists() for r in st.reads):
+            skipped[st.name] = "not asked for (--stages), and the recording lacks what it reads"
             continue
         absent = [c for c in st.consumes if not products.has(c)]
         if absent:
@@ -132,6 +143,7 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
             except GtrigError as e:
                 log.warning("%s: %s", st.title, e)
                 skipped[st.name] = str(e)
+                exit_code = max(exit_code, e.exit_code)
                 seconds[st.name] = time.perf_counter() - t
                 continue
             st.check_output(result)
@@ -148,4 +160,4 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
         write_accuracy_csv(out_p / "accuracy.csv", rows)
     if checks:
         write_accuracy_csv(out_p / "summary.csv", checks)
-    return PipelineResult(tuple(rows), seconds, skipped, tuple(checks), tuple(reused), products)
+    return PipelineResult(tuple(rows), seconds, skipped, tuple(checks), tuple(reused), products, exit_code)
