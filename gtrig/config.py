@@ -111,7 +111,7 @@ class SurveyConfig(Section):
     multistart: bool = True
     on_ambiguity: Literal["refuse", "warn"] = "refuse"
     on_outlier: Literal["exclude", "refuse", "keep"] = "exclude"
-    alpha: float = Field(0.001, gt=0, lt=1)
+    alpha: float = Field(default=0.001, gt=0, lt=1)
 
 
 class CamerasConfig(Section):
@@ -132,8 +132,8 @@ class VisionConfig(Section):
 
     detector: Literal["auto", "gtrig", "aruco"] = "auto"
     planar: bool = True
-    sync_tol_s: float = Field(0.005, ge=0)
-    chunk_size: int = Field(16, ge=1)
+    sync_tol_s: float = Field(default=0.005, ge=0)
+    chunk_size: int = Field(default=16, ge=1)
     estimate_noise: bool = True
     options: VisionEstimateSection = Field(default_factory=VisionEstimateSection)  # type: ignore[valid-type]
 
@@ -147,7 +147,7 @@ class LaserConfig(Section):
 class RunConfig(Section):
     """Everything ``gtrig run`` can be told, one section per stage."""
 
-    workers: int = Field(0, ge=0, description="processes; 0 = one per core (results do not depend on it)")
+    workers: int = Field(default=0, ge=0, description="processes; 0 = one per core (results do not depend on it)")
     survey: SurveyConfig = Field(default_factory=SurveyConfig)
     cameras: CamerasConfig = Field(default_factory=CamerasConfig)
     markers: MarkersConfig = Field(default_factory=MarkersConfig)

@@ -88,10 +88,18 @@ def load_record(out: Path, name: str, key: str) -> StageOutput | None:
     return output
 
 
-def save_record(out: Path, name: str, key: str, output: StageOutput) -> None:
+def save_record(out: Path, name: str, key: str, output: StageOutput) -> bool:
+    """Write the stage's record; False (and a warning) when its products cannot be pickled: the stage
+    then runs again next time, which costs time, never correctness."""
     from gtrig.io.atomic import atomic_write_bytes
 
-    atomic_write_bytes(_path(out, name), pickle.dumps({"key": key, "output": output}, protocol=5))
+    try:
+        data = pickle.dumps({"key": key, "output": output}, protocol=5)
+    except (pickle.PicklingError, TypeError, AttributeError) as e:
+        log.warning("%s: its products cannot be kept for reuse (%s); it will run again next time", name, e)
+        return False
+    atomic_write_bytes(_path(out, name), data)
+    return True
 
 
 def forget(out: Path, name: str) -> None:

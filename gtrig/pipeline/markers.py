@@ -9,7 +9,7 @@ from gtrig.pipeline.context import AccuracyRow, StageInput, StageOutput
 
 
 def marker_calibration(inp: StageInput) -> StageOutput:
-    from gtrig.config import apply_to_dataclass
+    from gtrig.config import Section, apply_to_dataclass
     from gtrig.markers.robotcal import calibrate_markers, marker_errors, specs_from_rig, write_markers_yaml
     from gtrig.markers.robotcal.calibrate import RobotCalOptions
     from gtrig.rig import load_rig
@@ -19,7 +19,8 @@ def marker_calibration(inp: StageInput) -> StageOutput:
     cfg = inp.config.markers
     rig = inp.products.rig
     assert rig is not None
-    opts = apply_to_dataclass(cfg.options, RobotCalOptions()) if cfg.options.overrides() else None
+    options: Section = cfg.options
+    opts = apply_to_dataclass(options, RobotCalOptions()) if options.overrides() else None
     rig2, cal = calibrate_markers(inp.rec, rig, cfg.anchor, opts)
     write_markers_yaml(inp.out / "markers.yaml", cal, specs_from_rig(rig))
     # every marker now hangs on the dima-marker's hand-measured pose: its error is common to all
