@@ -16,14 +16,22 @@ def process_pool(
 
     OpenCV's worker threads do not survive fork(): a child forked while the parent's OpenCV thread pool
     is alive can hang in its first parallel call (seen with calibration then GTvision in one process).
-    Forking (rather than spawning) is kept so that workers share large read-only state at no cost.
+    Forking (rather than spawning) is kept so that workers share large read-only state at no cost. On an
+    exception in the block (KeyboardInterrupt included) the chunks not yet started are cancelled.
     """
     import cv2
 
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
-        with ProcessPoolExecutor(workers, initializer=initializer, initargs=initargs) as ex:
+        ex = ProcessPoolExecutor(workers, initializer=initializer, initargs=initargs)
+        try:
             yield ex
+        except BaseException:
+            # interrupted (Ctrl-C) or failed: drop the chunks not started rather than computing them all
+            # before giving control back (``with`` would wait for every submitted one)
+            ex.shutdown(wait=True, cancel_futures=True)
+            raise
+        ex.shutdown(wait=True)
     finally:
         cv2.setNumThreads(threads)
