@@ -311,10 +311,14 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
 
 
 # ----------------------------------------------------------------------------------------- the runner
-def _key(rig: Rig, sequence: str, detector: str, instants: list[Instant], paths: dict[str, list[str]]) -> str:
+def _key(rig: Rig, sequence: str, detector: str, instants: list[Instant], paths: dict[str, list[str]],
+         rec: Path | None = None) -> str:
     """What the checkpointed detections depend on: the images, the detector, the lenses and the markers'
     families and sizes; not the poses nor the estimator's options, so a re-estimation with a newly
-    calibrated rig or other settings reuses them."""
+    calibrated rig or other settings reuses them. The images count by their path inside the recording
+    ``rec``, so a recording moved or copied elsewhere keeps its detections."""
+    if rec is not None:
+        paths = {c: [os.path.relpath(p, rec) for p in ps] for c, ps in paths.items()}
     doc_rig = rig_to_dict(rig)
     for c in doc_rig["cameras"]:
         for k in ("T_world_cam", "pose_cov", "stamp_sigma_s"):
@@ -522,7 +526,7 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
         raise InputError("GTvision reads image files; extract the frames of video.* first")
     chunks = [instants[i:i + chunk_size] for i in range(0, len(instants), chunk_size)]
     # a new version of the detector's code makes other detections: not the checkpoint's
-    key = _key(rig, sequence, f"{det.name}/{det.version}", instants, paths)
+    key = _key(rig, sequence, f"{det.name}/{det.version}", instants, paths, rec)
     ck = Path(checkpoint) if checkpoint is not None else None
     try:
         done = _load_checkpoint(ck, key) if ck is not None else {}
