@@ -41,8 +41,9 @@ def process_pool(
 
     OpenCV's worker threads do not survive fork(): a child forked while the parent's OpenCV thread pool
     is alive can hang in its first parallel call (seen with calibration then GTvision in one process).
-    Forking (rather than spawning) is kept so that workers share large read-only state at no cost.
-    Workers die with their parent, even when it is killed with SIGKILL.
+    Forking (rather than spawning) is kept so that workers share large read-only state at no cost. On an
+    exception in the block (KeyboardInterrupt included) the chunks not yet started are cancelled. Workers
+    die with their parent, even when it is killed with SIGKILL.
     """
     import os
 
@@ -51,8 +52,14 @@ def process_pool(
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
-        with ProcessPoolExecutor(workers, initializer=_worker_start,
-                                 initargs=(os.getpid(), initializer, initargs)) as ex:
+        ex = ProcessPoolExecutor(workers, initializer=_worker_start, initargs=(os.getpid(), initializer, initargs))
+        try:
             yield ex
+        except BaseException:
+            # interrupted (Ctrl-C) or failed: drop the chunks not started rather than computing them all
+            # before giving control back (``with`` would wait for every submitted one)
+            ex.shutdown(wait=True, cancel_futures=True)
+            raise
+        ex.shutdown(wait=True)
     finally:
         cv2.setNumThreads(threads)

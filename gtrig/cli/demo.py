@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from gtrig.cli.common import console, handle_errors
+from gtrig.cli.run import print_result
 
 
 @handle_errors
@@ -15,7 +16,8 @@ def command(
     seed: int = typer.Option(0, help="Simulator seed."),
     quick: bool = typer.Option(False, "--quick", help="Short sequences (a smoke test)."),
 ) -> None:
-    """Simulate the GT room, run every stage, and print the accuracy against truth."""
+    """Simulate the GT room, then run every stage on it (what `gtrig run` does) and print the accuracy against
+    truth."""
     import time
 
     from rich.table import Table
@@ -39,12 +41,7 @@ def command(
 
     with console.status("processing") as status:
         result = pipeline.run(rec, out / "results", on_stage=lambda name: status.update(f"processing: {name}"))
-    acc = Table("stage", "metric", "value", "target", "", title="accuracy against truth")
-    for r in result.rows:
-        mark = "" if r.ok is None else ("[green]ok[/green]" if r.ok else "[red]miss[/red]")
-        acc.add_row(r.stage, r.metric, f"{r.value:.4g} {r.unit}", r.target, mark)
-    if result.rows:
-        console.print(acc)
-    for name, why in result.skipped.items():
-        console.print(f"[yellow]skipped[/yellow] {name}: {why}")
+    print_result(result, True)
     console.print(f"demo finished in {time.perf_counter() - t0:.0f} s; outputs in {out}")
+    if result.exit_code:
+        raise typer.Exit(result.exit_code)

@@ -21,6 +21,7 @@ _SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("rig", "rig", "group"),
     ("sim", "sim", "command"),
     ("demo", "demo", "command"),
+    ("run", "run", "command"),
     ("survey", "survey", "group"),
     ("evaluate", "evaluate", "group"),
     ("calib", "calib", "group"),

@@ -40,13 +40,12 @@ def command(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
     from rich.table import Table
 
-    from gtrig.io.tum import write_tum
     from gtrig.rig import load_rig
     from gtrig.vision.covariance import RigUncertainty
     from gtrig.vision.estimate import VisionOptions
     from gtrig.vision.refine import PlanarPrior
     from gtrig.vision.report import summarize
-    from gtrig.vision.sequence import run_recording, write_covariance_csv
+    from gtrig.vision.sequence import run_recording, write_pose_track_files
 
     r = load_rig(rig)
     ru = RigUncertainty(camera_sigma_mm / 1000, math.radians(camera_sigma_deg), marker_sigma_mm / 1000,
@@ -60,9 +59,7 @@ def command(
         result = run_recording(recording, r, sequence, planar, workers, options=opts, detector=detector,
                                checkpoint=checkpoint,
                                progress=lambda d, n: prog.update(task, completed=d, total=n))
-    write_tum(out, result.trajectory())
-    if covariance is not None:
-        write_covariance_csv(covariance, result)
+    write_pose_track_files(result, out, covariance)
     checkpoint.unlink(missing_ok=True)
     rep = summarize(result)
     console.print(f"{out}: {rep.localized} of {rep.instants} instants localized ({sequence}, "

@@ -7,7 +7,7 @@ import os
 import numpy as np
 
 from gtrig.evaluate.poses import PoseComparison
-from gtrig.survey.plots import _figure, ellipse_xy, save
+from gtrig.plotting import ellipse_xy, figure, save
 
 
 def plot_comparison(
@@ -19,7 +19,7 @@ def plot_comparison(
 ) -> None:
     """Reference and estimate poses (lines in pose order, arrows for headings), an error vector from each
     estimate to its reference, and ``n_sigma`` position ellipses where covariances are given."""
-    fig, ax = _figure(figsize=(8, 8))
+    fig, ax = figure(figsize=(8, 8))
     R, E = c.reference_xytheta, c.estimate_xytheta
     ax.plot(R[:, 0], R[:, 1], "b.-", lw=0.8, label=reference_label)
     ax.plot(E[:, 0], E[:, 1], "r.-", lw=0.8, label=estimate_label)

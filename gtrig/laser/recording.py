@@ -13,17 +13,16 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gtrig import geometry as geo
 from gtrig.errors import FormatError, InputError
 from gtrig.io.atomic import atomic_open
+from gtrig.io.posetrack import write_pose_track
 from gtrig.io.scans import ScanLog, read_scans
-from gtrig.io.tum import Trajectory, write_tum
 from gtrig.laser.background import BackgroundModel, build_background
 from gtrig.laser.calibrate import CalibrationReport, calibrate_scanners, calibrated_rig, object_outlines
 from gtrig.laser.foreground import foreground_mask, foreground_threshold
 from gtrig.laser.fuse import frame_points
 from gtrig.laser.hull_icp import HullModel
-from gtrig.laser.track import OK, STATUS_NAMES, TrackResult, TrackSettings, track_frames
+from gtrig.laser.track import OK, TrackResult, TrackSettings, to_pose_track, track_frames
 from gtrig.rig.load import load_rig
 from gtrig.rig.models import Rig
 
@@ -91,15 +90,8 @@ def _object_for_recording(rec: Path) -> list[np.ndarray]:
     p = rec / OBJECT_FILE
     if p.is_file():
         return load_object_outline(p)
-    cfg = rec / "sim_config.yaml"
-    if cfg.is_file():
-        scenario = (yaml.safe_load(cfg.read_text(encoding="utf-8")) or {}).get("scenario", "gtroom")
-        if scenario == "gtroom":
-            # the simulated GT room's calibration objects stand at fixed, known places (seed-independent)
-            from gtrig.sim.gtroom import clutter
-
-            return [b.corners_xy() for b in clutter() if b.name.startswith("calib_object")]
-    raise InputError(f"{rec}: no {OBJECT_FILE} (the outline of the object that defines the world frame)")
+    raise InputError(f"{rec}: no {OBJECT_FILE} (the outline of the object that defines the world frame; "
+                     "docs/formats.md; a recording simulated before it was written: simulate it again)")
 
 
 def calibrate_recording(
@@ -246,31 +238,16 @@ def write_track(
     cov_path: str | os.PathLike[str] | None = None,
     include_flagged: bool = False,
 ) -> int:
-    """Write ``OK`` poses (and, with ``include_flagged``, degenerate and ambiguous ones) as TUM, and a
-    covariance CSV with the same rows: ``timestamp,x,y,theta,cov_xx,cov_xy,cov_xtheta,cov_yy,cov_ytheta,
-    cov_thetatheta,status,n_points,n_sides,rms_m``. Returns the number of poses written."""
-    keep = result.ok if not include_flagged else np.isfinite(result.xytheta[:, 0])
-    idx = np.flatnonzero(keep)
-    T = np.stack([geo.se2_to_T(*result.xytheta[k]) for k in idx]) if idx.size else np.zeros((0, 4, 4))
-    if idx.size == 0:
+    """Write ``OK`` poses (and, with ``include_flagged``, the degenerate and ambiguous ones, status
+    ``rejected`` with their reason) as TUM and, with ``cov_path``, the one covariance CSV layout of
+    :mod:`gtrig.io.posetrack` (same rows), both or neither. Returns the number of poses written."""
+    track = to_pose_track(result)
+    if not include_flagged:
+        track = track.usable()
+    if len(track) == 0:
         raise InputError("no pose to write: the hull was never localized")
-    write_tum(tum_path, Trajectory.from_matrices(result.stamps_s[idx], T))
-    if cov_path is not None:
-        with atomic_open(cov_path, "w", newline="\n") as f:
-            f.write(
-                "timestamp,x,y,theta,cov_xx,cov_xy,cov_xtheta,cov_yy,cov_ytheta,cov_thetatheta,"
-                "status,n_points,n_sides,rms_m\n"
-            )
-            for k in idx:
-                c = result.cov_xytheta[k]
-                x, y, th = result.xytheta[k]
-                f.write(
-                    f"{result.stamps_s[k]:.6f},{x:.6f},{y:.6f},{th:.8f},{c[0, 0]:.6e},{c[0, 1]:.6e},"
-                    f"{c[0, 2]:.6e},{c[1, 1]:.6e},{c[1, 2]:.6e},{c[2, 2]:.6e},"
-                    f"{STATUS_NAMES[int(result.status[k])]},{result.n_points[k]},{result.n_sides[k]},"
-                    f"{result.rms_m[k]:.5f}\n"
-                )
-    return int(idx.size)
+    write_pose_track(track, tum_path, cov_path)
+    return len(track)
 
 
 __all__ = [

@@ -6,10 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gtrig.geometry import wrap_angle
 from gtrig.io.tum import Trajectory
 from gtrig.laser.calibrate import CalibrationReport
-from gtrig.laser.track import DEGENERATE, OK, TrackResult
+from gtrig.laser.track import AMBIGUOUS, DEGENERATE, LOST, OK, TrackResult, to_pose_track
 
 
 @dataclass(frozen=True)
@@ -44,55 +43,47 @@ class TrackAccuracy:
 
 
 def truth_xytheta(truth: Trajectory, stamps_s: np.ndarray) -> np.ndarray:
-    """True planar poses (N, 3) at ``stamps_s``, interpolated linearly (heading unwrapped first)."""
-    yaw = np.unwrap(truth.yaw_rad())
-    out = np.column_stack(
-        [
-            np.interp(stamps_s, truth.stamps_s, truth.xyz[:, 0]),
-            np.interp(stamps_s, truth.stamps_s, truth.xyz[:, 1]),
-            np.interp(stamps_s, truth.stamps_s, yaw),
-        ]
-    )
-    return out
+    """True planar poses (N, 3) at ``stamps_s`` (:func:`gtrig.evaluate.truth.truth_xytheta`)."""
+    from gtrig.evaluate.truth import truth_xytheta as planar
+
+    return planar(truth, stamps_s)
 
 
 def accuracy(result: TrackResult, truth: Trajectory) -> TrackAccuracy:
-    """Compare a :class:`TrackResult` with a dense true trajectory (``truth/run.tum``), over the frames
-    inside its time span; truth is interpolated linearly at the frame stamps."""
+    """A :class:`TrackResult` against a dense true trajectory (``truth/run.tum``) over the frames inside
+    its time span, scored by :func:`gtrig.evaluate.truth.score_track`: the smoothed ``OK`` poses (the
+    track GTlaser writes), the same frames before smoothing, and the degenerate ones (flagged, allowed
+    to be off, counted)."""
+    from gtrig.evaluate.truth import score_track
+    from gtrig.trajectory import PoseTrack
+
     t = result.stamps_s
     inside = (t >= truth.stamps_s[0]) & (t <= truth.stamps_s[-1])
-    tr = truth_xytheta(truth, t)
-    e_pos = np.hypot(result.xytheta[:, 0] - tr[:, 0], result.xytheta[:, 1] - tr[:, 1])
-    e_yaw = np.abs(wrap_angle(result.xytheta[:, 2] - tr[:, 2]))
-    r_pos = np.hypot(result.raw_xytheta[:, 0] - tr[:, 0], result.raw_xytheta[:, 1] - tr[:, 1])
-    r_yaw = np.abs(wrap_angle(result.raw_xytheta[:, 2] - tr[:, 2]))
-    ok = inside & (result.status == OK)
-    deg = inside & (result.status == DEGENERATE)
-    z = result.xytheta[ok] - tr[ok]
-    z[:, 2] = wrap_angle(z[:, 2])
-    nees = np.einsum("ni,nij,nj->n", z, np.linalg.inv(result.cov_xytheta[ok]), z) if ok.any() else np.zeros(0)
+    ok = result.status == OK
+    deg = result.status == DEGENERATE
+    smoothed = score_track(to_pose_track(result).usable(), truth, expected_stamps_s=t)
 
-    def _mean(a: np.ndarray) -> float:
-        return float(np.mean(a)) if a.size else float("nan")
+    def planar(idx: np.ndarray, poses: np.ndarray) -> PoseTrack:
+        idx = idx & np.isfinite(poses[:, 0])
+        return PoseTrack.from_xytheta(t[idx], poses[idx], source="GTlaser")
 
-    def _max(a: np.ndarray) -> float:
-        return float(np.max(a)) if a.size else float("nan")
-
+    raw = score_track(planar(ok, result.raw_xytheta), truth)
+    degenerate = score_track(planar(deg, result.xytheta), truth)
     return TrackAccuracy(
         n_frames=int(inside.sum()),
-        n_ok=int(ok.sum()),
-        n_degenerate=int(deg.sum()),
-        n_lost=int(np.sum(inside & (result.status == 2))),
-        n_ambiguous=int(np.sum(inside & (result.status == 3))),
-        mean_pos_m=_mean(e_pos[ok]),
-        max_pos_m=_max(e_pos[ok]),
-        mean_abs_yaw_rad=_mean(e_yaw[ok]),
-        max_abs_yaw_rad=_max(e_yaw[ok]),
-        raw_mean_pos_m=_mean(r_pos[ok]),
-        raw_mean_abs_yaw_rad=_mean(r_yaw[ok]),
-        mean_nees=_mean(nees),
-        n_ok_wrong_5cm=int(np.sum(e_pos[ok] > 0.05)),
-        n_degenerate_wrong_5cm=int(np.sum(e_pos[deg] > 0.05)),
+        n_ok=smoothed.n_scored,
+        n_degenerate=degenerate.n_scored,
+        n_lost=int(np.sum(inside & (result.status == LOST))),
+        n_ambiguous=int(np.sum(inside & (result.status == AMBIGUOUS))),
+        mean_pos_m=smoothed.mean_pos_m,
+        max_pos_m=smoothed.max_pos_m,
+        mean_abs_yaw_rad=smoothed.mean_abs_yaw_rad,
+        max_abs_yaw_rad=smoothed.max_abs_yaw_rad,
+        raw_mean_pos_m=raw.mean_pos_m,
+        raw_mean_abs_yaw_rad=raw.mean_abs_yaw_rad,
+        mean_nees=smoothed.mean_nees,
+        n_ok_wrong_5cm=smoothed.n_pos_over(0.05),
+        n_degenerate_wrong_5cm=degenerate.n_pos_over(0.05),
     )
 
 

@@ -30,6 +30,8 @@ from gtrig.geometry import wrap_angle
 from gtrig.laser.acquire import acquire
 from gtrig.laser.fuse import FramedPoints
 from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull_batch, scanner_sensitivity
+from gtrig.smoothing import rts_smooth  # noqa: F401  (moved to the core; re-exported for its callers)
+from gtrig.trajectory import PoseStatus, PoseTrack
 
 log = logging.getLogger(__name__)
 
@@ -147,75 +149,6 @@ def _twin(xytheta: np.ndarray, cov: np.ndarray, centre_r: np.ndarray) -> tuple[n
     J = np.eye(3)
     J[:2, 2] = 2 * np.array([[0.0, -1.0], [1.0, 0.0]]) @ R @ centre_r
     return out, J @ cov @ J.T
-
-
-def rts_smooth(
-    stamps_s: np.ndarray,
-    z_xytheta: np.ndarray,
-    R_z: np.ndarray,
-    accel_std_mps2: float,
-    ang_accel_std_radps2: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Rauch-Tung-Striebel smoothing of planar poses with a constant-velocity model.
-
-    Parameters
-    ----------
-    stamps_s
-        (n,) increasing times, seconds.
-    z_xytheta
-        (n, 3) measured poses (theta continuous, unwrapped); rows of ``nan`` are not measured.
-    R_z
-        (n, 3, 3) measurement covariances.
-    accel_std_mps2, ang_accel_std_radps2
-        Spectral densities (as standard deviations) of the white linear and angular acceleration.
-
-    Returns
-    -------
-    xytheta : (n, 3) smoothed poses.
-    cov_xytheta : (n, 3, 3) their covariances.
-    """
-    n = len(stamps_s)
-    qd = np.array([accel_std_mps2**2, accel_std_mps2**2, ang_accel_std_radps2**2])
-    dt = np.r_[0.0, np.diff(stamps_s)]
-    F = np.tile(np.eye(6), (n, 1, 1))
-    F[:, [0, 1, 2], [3, 4, 5]] = dt[:, None]
-    Q = np.zeros((n, 6, 6))
-    Q[:, [0, 1, 2], [0, 1, 2]] = qd * dt[:, None] ** 3 / 3
-    Q[:, [0, 1, 2], [3, 4, 5]] = Q[:, [3, 4, 5], [0, 1, 2]] = qd * dt[:, None] ** 2 / 2
-    Q[:, [3, 4, 5], [3, 4, 5]] = qd * dt[:, None]
-    meas = np.isfinite(z_xytheta[:, 0])
-    xf = np.zeros((n, 6))
-    Pf = np.zeros((n, 6, 6))
-    xp = np.zeros((n, 6))
-    Pp = np.zeros((n, 6, 6))
-    first = int(np.flatnonzero(meas)[0])
-    x = np.r_[z_xytheta[first], 0.0, 0.0, 0.0]
-    P = np.zeros((6, 6))
-    P[:3, :3] = R_z[first]
-    P[3:, 3:] = np.eye(3)
-    for k in range(n):
-        if k > 0:
-            Fk = F[k]
-            x = Fk @ x
-            P = Fk @ P @ Fk.T + Q[k]
-        xp[k], Pp[k] = x, P
-        if meas[k]:
-            Kg = P[:, :3] @ np.linalg.inv(P[:3, :3] + R_z[k])
-            x = x + Kg @ (z_xytheta[k] - x[:3])
-            P = P - Kg @ P[:3, :]
-            P = 0.5 * (P + P.T)
-        xf[k], Pf[k] = x, P
-    # smoother gains C_k = Pf_k F_{k+1}^T Pp_{k+1}^-1, all at once
-    C = np.zeros((n, 6, 6))
-    if n > 1:
-        C[:-1] = Pf[:-1] @ np.swapaxes(F[1:], 1, 2) @ np.linalg.inv(Pp[1:])
-    xs = xf.copy()
-    Ps = Pf.copy()
-    for k in range(n - 2, -1, -1):
-        Ck = C[k]
-        xs[k] = xf[k] + Ck @ (xs[k + 1] - xp[k + 1])
-        Ps[k] = Pf[k] + Ck @ (Ps[k + 1] - Pp[k + 1]) @ Ck.T
-    return xs[:, :3], Ps[:, :3, :3]
 
 
 def _resolve_heading(
@@ -469,3 +402,25 @@ def track_frames(
         stamps.copy(), xytheta, cov, status, raw_w, raw_cov, n_points, n_sides, rms, track_id, tuple(reasons),
         cov_cal,
     )
+
+
+def to_pose_track(result: TrackResult, source: str = "GTlaser") -> PoseTrack:
+    """The frames with a pose as the one pose-track type (planar, ``xyyaw`` covariance).
+
+    ``OK`` frames are OK; ``DEGENERATE`` and ``AMBIGUOUS`` ones are kept as REJECTED with their reason
+    (never ground truth: a degenerate fit leaves a direction unmeasured, an ambiguous one may be turned
+    by pi); ``LOST`` frames have no pose and are left out. The poses are the same transforms the TUM
+    file always held (:func:`gtrig.geometry.se2_to_T`).
+    """
+    from gtrig.geometry import se2_to_T
+
+    idx = np.flatnonzero(np.isfinite(result.xytheta[:, 0]))
+    if idx.size == 0:
+        return PoseTrack.empty(source, "xyyaw")
+    T = np.stack([se2_to_T(*result.xytheta[k]) for k in idx])
+    ok = result.status[idx] == OK
+    status = np.where(ok, PoseStatus.OK, PoseStatus.REJECTED).astype(np.uint8)
+    reasons = tuple("" if o else f"{STATUS_NAMES[int(result.status[k])]}: {result.reasons[k]}".rstrip(": ")
+                    for k, o in zip(idx, ok, strict=True))
+    return PoseTrack.from_matrices(result.stamps_s[idx], T, cov=result.cov_xytheta[idx], cov_kind="xyyaw",
+                                   status=status, reasons=reasons, source=source)

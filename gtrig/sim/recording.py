@@ -104,6 +104,19 @@ def _write_rigs_and_truth(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig)
          [[n, f"{x:.6f}", f"{y:.6f}"] for n, (x, y) in scene.reference_true_xy.items()])
     _csv(out / "validation" / "poses.csv", ["pose", "start_s", "end_s"],
          [[i + 1, f"{a:.6f}", f"{b:.6f}"] for i, (a, b) in enumerate(tl.validation_intervals_s)])
+    write_laser_object(out)
+
+
+def write_laser_object(out: Path) -> None:
+    """``calib/laser_object.yaml``: the outlines of the objects that define the world frame for the
+    scanners' calibration (the GT room's ``calib_object*`` boxes, fixed and seed-independent), world
+    frame, metres; what a lab writes from its own survey of those objects (docs/formats.md)."""
+    from gtrig.sim.gtroom import clutter
+
+    objs = [{"name": b.name, "corners_xy": [[float(x), float(y)] for x, y in b.corners_xy()]}
+            for b in clutter() if b.name.startswith("calib_object")]
+    doc = {"units": "world frame, metres; corners in order around each object", "objects": objs}
+    atomic_write_text(out / "calib" / "laser_object.yaml", yaml.safe_dump(doc, sort_keys=False))
 
 
 def _camera_offsets(scene: Scene) -> list[float]:

@@ -1,46 +1,16 @@
 """Figures of the survey: world points and validation poses with error ellipses, uncertainty maps.
 
-Only this module (and :mod:`gtrig.evaluate.plots`) imports matplotlib; files are written atomically.
+The figure, save and ellipse helpers are gtrig.plotting's; files are written atomically.
 """
 
 from __future__ import annotations
 
-import io
 import os
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 
-from gtrig.io.atomic import atomic_write_bytes
-
-
-def _figure(**kw: Any) -> tuple[Any, Any]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt.subplots(**kw)
-
-
-def save(fig: Any, path: str | os.PathLike[str]) -> None:
-    """Save a figure atomically (format from the suffix) and close it."""
-    import matplotlib.pyplot as plt
-
-    buf = io.BytesIO()
-    fmt = os.path.splitext(str(path))[1].lstrip(".").lower() or "png"
-    fig.savefig(buf, format=fmt, dpi=130, bbox_inches="tight")
-    plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
-
-
-def ellipse_xy(center: np.ndarray, cov: np.ndarray, n_sigma: float = 3.0, n: int = 72) -> np.ndarray:
-    """Outline (n, 2) of the ``n_sigma`` ellipse of a 2 x 2 covariance around ``center``."""
-    w, V = np.linalg.eigh(0.5 * (cov + cov.T))
-    a = np.linspace(0, 2 * np.pi, n)
-    circle = np.column_stack([np.cos(a), np.sin(a)])
-    return center + n_sigma * (circle * np.sqrt(np.maximum(w, 0))) @ V.T
+from gtrig.plotting import ellipse_xy, figure, save
 
 
 def plot_world_points(
@@ -54,7 +24,7 @@ def plot_world_points(
     scale: float = 10.0,
 ) -> None:
     """World points with their ``n_sigma`` ellipses magnified ``scale`` times (seeds: 3 sigma, x10)."""
-    fig, ax = _figure(figsize=(7, 7))
+    fig, ax = figure(figsize=(7, 7))
     for n, p, c in zip(names, xy, cov_xy, strict=True):
         e = ellipse_xy(p, c * scale**2, n_sigma)
         ax.plot(e[:, 0], e[:, 1], "b-", lw=1)
@@ -85,7 +55,7 @@ def plot_poses(
 ) -> None:
     """Validation poses (arrows along the robot x axis) with position ellipses magnified ``scale`` times
     and the heading's ``n_sigma`` wedge in the label."""
-    fig, ax = _figure(figsize=(7, 7))
+    fig, ax = figure(figsize=(7, 7))
     if world_xy is not None:
         ax.plot(world_xy[:, 0], world_xy[:, 1], "ks", ms=4, label="world points")
     for n, p, c in zip(names, xytheta, cov_xytheta, strict=True):
@@ -118,7 +88,7 @@ def plot_uncertainty_map(
     path: str | os.PathLike[str],
 ) -> None:
     """Two panels: expected position sigma (mm) and heading sigma (deg), worst heading, world points."""
-    fig, axes = _figure(ncols=2, figsize=(12, 5.5))
+    fig, axes = figure(ncols=2, figsize=(12, 5.5))
     for ax, z, title in (
         (axes[0], sigma_pos_m * 1000, "position sigma, worst axis (mm)"),
         (axes[1], np.degrees(sigma_theta_rad), "heading sigma (deg)"),

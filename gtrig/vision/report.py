@@ -10,12 +10,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
-from gtrig import geometry as geo
 from gtrig.io.tum import Trajectory
 from gtrig.rig.models import Rig
-from gtrig.vision.covariance import PLANAR_INDEX, nees, pose_error_xi
 from gtrig.vision.sequence import VisionResult
 
 
@@ -65,14 +62,10 @@ def summarize(result: VisionResult) -> VisionReport:
 
 
 def interpolate_truth(truth: Trajectory, stamps_s: np.ndarray) -> np.ndarray:
-    """Truth poses (M, 4, 4) at ``stamps_s``: linear in position, slerp in rotation, clamped."""
-    t = np.clip(np.asarray(stamps_s, dtype=float), truth.stamps_s[0], truth.stamps_s[-1])
-    xyz = np.column_stack([np.interp(t, truth.stamps_s, truth.xyz[:, k]) for k in range(3)])
-    R = Slerp(truth.stamps_s, Rotation.from_quat(truth.quat_xyzw))(t).as_matrix()
-    T = np.tile(np.eye(4), (len(t), 1, 1))
-    T[:, :3, :3] = R
-    T[:, :3, 3] = xyz
-    return T
+    """Truth poses (M, 4, 4) at ``stamps_s`` (:func:`gtrig.evaluate.truth.truth_matrices`)."""
+    from gtrig.evaluate.truth import truth_matrices
+
+    return truth_matrices(truth, stamps_s)
 
 
 @dataclass(frozen=True)
@@ -127,7 +120,8 @@ def accuracy_on_recording(result: VisionResult, rec_dir: str | os.PathLike[str],
 def accuracy(result: VisionResult, truth: Trajectory, rig_true: Rig | None = None,
              frame_stamps: dict[str, np.ndarray] | None = None,
              T_true_robot_frame: np.ndarray | None = None) -> VisionAccuracy:
-    """Errors of the localized poses against ``truth`` (``truth/run.tum`` or ``truth/validation.tum``).
+    """Errors of the localized poses against ``truth`` (``truth/run.tum`` or ``truth/validation.tum``),
+    scored by :func:`gtrig.evaluate.truth.score_track` on the result's pose track.
 
     With ``rig_true`` and the per-camera image stamps (``frame_stamps``), also counts the images in which
     a marker is fully visible at the true pose and how many of them were localized (run acceptance).
@@ -135,36 +129,14 @@ def accuracy(result: VisionResult, truth: Trajectory, rig_true: Rig | None = Non
     one, ``T_true @ T_true_robot_frame``; for markers calibrated relative to an anchor whose given pose is
     ``A`` and true pose ``A_true`` that is ``A_true @ inv(A)`` (the anchor's own error taken out).
     """
-    from gtrig.vision.synthetic import visible_views
+    from gtrig.evaluate.truth import score_track, visible_localized
 
-    ok = result.localized()
-    dof = 3 if result.planar else 6
-    pos, yaw, ne = [], [], []
-    if ok:
-        Tt = interpolate_truth(truth, np.array([e.stamp_s for e in ok]))
-        if T_true_robot_frame is not None:
-            Tt = Tt @ np.asarray(T_true_robot_frame, dtype=float)
-        for e, T in zip(ok, Tt, strict=True):
-            assert e.T_world_robot is not None and e.cov_6x6 is not None
-            err = pose_error_xi(e.T_world_robot, T)
-            pos.append(float(np.linalg.norm(err[:2])))
-            yaw.append(abs(float(geo.wrap_angle(geo.T_to_se2(e.T_world_robot)[2] - geo.T_to_se2(T)[2]))))
-            if result.planar:
-                i = np.array(PLANAR_INDEX)
-                ne.append(nees(err[i], e.cov_6x6[np.ix_(i, i)]))
-            else:
-                ne.append(nees(err, e.cov_6x6))
+    sc = score_track(result.to_pose_track(), truth, T_true_body=T_true_robot_frame,
+                     dof="planar" if result.planar else "full")
     n_vis = n_vis_ok = 0
     if rig_true is not None and frame_stamps is not None:
         ok_frames = {f for o, e in zip(result.observations, result.estimates, strict=True) if e.ok
                      for f in o.frames}
-        for cam, stamps in frame_stamps.items():
-            Tt = interpolate_truth(truth, stamps)
-            for i, T in enumerate(Tt):
-                if any(c == cam for c, _, _ in visible_views(rig_true, T)):
-                    n_vis += 1
-                    n_vis_ok += (cam, i) in ok_frames
-    nan = math.nan
-    return VisionAccuracy(len(result.estimates), len(ok), float(np.mean(pos)) if pos else nan,
-                          float(np.max(pos)) if pos else nan, float(np.mean(yaw)) if yaw else nan,
-                          float(np.mean(ne)) if ne else nan, dof, n_vis, n_vis_ok)
+        n_vis, n_vis_ok = visible_localized(ok_frames, frame_stamps, truth, rig_true)
+    return VisionAccuracy(len(result.estimates), len(result.localized()), sc.mean_pos_m, sc.max_pos_m,
+                          sc.mean_abs_yaw_rad, sc.mean_nees, sc.nees_dof, n_vis, n_vis_ok)

@@ -33,7 +33,6 @@ import csv
 import hashlib
 import json
 import logging
-import math
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -47,9 +46,11 @@ from scipy.spatial.transform import Rotation
 from gtrig.errors import FormatError, InputError
 from gtrig.io.frames import FrameIndex, read_frame_index
 from gtrig.io.tum import Trajectory
+from gtrig.kinematics import pose_velocities  # moved to the core; re-exported for its callers
 from gtrig.parallel import process_pool
 from gtrig.rig.load import rig_to_dict
 from gtrig.rig.models import Rig
+from gtrig.trajectory import PoseTrack
 from gtrig.vision.estimate import FrameEstimate, Status, VisionOptions, estimate_frame
 from gtrig.vision.init import PreviousPose
 from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel
@@ -104,6 +105,19 @@ class VisionResult:
             return Trajectory(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)))
         return Trajectory.from_matrices(np.array([e.stamp_s for e in ok]),
                                         np.stack([e.T_world_robot for e in ok]))  # type: ignore[misc]
+
+    def to_pose_track(self) -> PoseTrack:
+        """The localized poses as the one pose-track type: ``T_world_robot`` with the full (6, 6)
+        covariance over the world-frame perturbation (x, y, z, rx, ry, rz), every pose OK (an instant that
+        failed has no pose). A planar run's file carries the x, y, yaw marginal
+        (:func:`write_pose_track_files`)."""
+        ok = self.localized()
+        if not ok:
+            return PoseTrack.empty("GTvision", "se3")
+        return PoseTrack.from_matrices(np.array([e.stamp_s for e in ok]),
+                                       np.stack([e.T_world_robot for e in ok]),  # type: ignore[misc]
+                                       cov=np.stack([e.cov_6x6 for e in ok]),  # type: ignore[misc]
+                                       cov_kind="se3", source="GTvision")
 
     def covariances(self) -> np.ndarray:
         """(M, 6, 6), or (M, 3, 3) over x, y, yaw when planar, for the localized poses."""
@@ -297,10 +311,14 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
 
 
 # ----------------------------------------------------------------------------------------- the runner
-def _key(rig: Rig, sequence: str, detector: str, instants: list[Instant], paths: dict[str, list[str]]) -> str:
+def _key(rig: Rig, sequence: str, detector: str, instants: list[Instant], paths: dict[str, list[str]],
+         rec: Path | None = None) -> str:
     """What the checkpointed detections depend on: the images, the detector, the lenses and the markers'
     families and sizes; not the poses nor the estimator's options, so a re-estimation with a newly
-    calibrated rig or other settings reuses them."""
+    calibrated rig or other settings reuses them. The images count by their path inside the recording
+    ``rec``, so a recording moved or copied elsewhere keeps its detections."""
+    if rec is not None:
+        paths = {c: [os.path.relpath(p, rec) for p in ps] for c, ps in paths.items()}
     doc_rig = rig_to_dict(rig)
     for c in doc_rig["cameras"]:
         for k in ("T_world_cam", "pose_cov", "stamp_sigma_s"):
@@ -508,7 +526,7 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
         raise InputError("GTvision reads image files; extract the frames of video.* first")
     chunks = [instants[i:i + chunk_size] for i in range(0, len(instants), chunk_size)]
     # a new version of the detector's code makes other detections: not the checkpoint's
-    key = _key(rig, sequence, f"{det.name}/{det.version}", instants, paths)
+    key = _key(rig, sequence, f"{det.name}/{det.version}", instants, paths, rec)
     ck = Path(checkpoint) if checkpoint is not None else None
     try:
         done = _load_checkpoint(ck, key) if ck is not None else {}
@@ -613,33 +631,6 @@ def with_robot_frame_uncertainty(result: VisionResult, cov_frame_6x6: np.ndarray
     return replace(result, estimates=ests)
 
 
-def pose_velocities(stamps_s: np.ndarray, T_world_robot: np.ndarray, max_gap_s: float = 0.5
-                    ) -> np.ndarray:
-    """World-frame velocities (M, 6), ``(v, omega)`` in m/s and rad/s, of poses (M, 4, 4) at increasing
-    ``stamps_s`` (M,): central differences of the nearest neighbours (one-sided at the ends and
-    across gaps longer than ``max_gap_s``; zero for an isolated pose). ``omega`` is the rotation
-    vector of ``R_next R_prev^T`` per second, the ``dphi`` of :mod:`gtrig.vision.projection`."""
-    t = np.asarray(stamps_s, float)
-    M = len(t)
-    out = np.zeros((M, 6))
-    if M < 2:
-        return out
-    gap = np.diff(t) > max_gap_s
-    prev = np.arange(M) - 1
-    nxt = np.arange(M) + 1
-    prev[1:][gap] = np.arange(1, M)[gap]  # no usable neighbour before: the pose itself
-    prev[0] = 0
-    nxt[:-1][gap] = np.arange(M - 1)[gap]
-    nxt[-1] = M - 1
-    dt = t[nxt] - t[prev]
-    ok = dt > 0
-    a, b = prev[ok], nxt[ok]
-    out[ok, :3] = (T_world_robot[b, :3, 3] - T_world_robot[a, :3, 3]) / dt[ok, None]
-    dR = np.einsum("nij,nkj->nik", T_world_robot[b, :3, :3], T_world_robot[a, :3, :3])
-    out[ok, 3:] = Rotation.from_matrix(dR).as_rotvec() / dt[ok, None]
-    return out
-
-
 def with_timing_uncertainty(result: VisionResult, stamp_sigma_s: dict[str, float],
                             max_gap_s: float = 0.5, skip: set[int] | frozenset[int] = frozenset()
                             ) -> VisionResult:
@@ -670,28 +661,36 @@ def with_timing_uncertainty(result: VisionResult, stamp_sigma_s: dict[str, float
     return replace(result, estimates=tuple(ests))
 
 
-def write_covariance_csv(path: str | os.PathLike[str], result: VisionResult) -> None:
-    """One row per localized pose: ``stamp_s`` and the covariance row-major (6 x 6 over x, y, z, rx, ry,
-    rz; or 3 x 3 over x, y, yaw when planar), metres and radians, atomically."""
-    from gtrig.io.atomic import atomic_open
+def file_track(result: VisionResult) -> PoseTrack:
+    """The track as written: the localized poses with their x, y, yaw covariance when planar (the floor
+    prior fixes z, roll and pitch), else the full 6 x 6."""
+    track = result.to_pose_track()
+    return track.with_cov(track.cov_xytheta(), "xyyaw") if result.planar else track
 
-    ok = result.localized()
-    covs = result.covariances()
-    names = ("x", "y", "yaw") if result.planar else ("x", "y", "z", "rx", "ry", "rz")
-    header = ["stamp_s"] + [f"c_{a}_{b}" for a in names for b in names]
-    with atomic_open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(header)
-        for e, c in zip(ok, covs, strict=True):
-            w.writerow([f"{e.stamp_s:.6f}"] + [repr(float(v)) for v in c.ravel()])
+
+def write_pose_track_files(result: VisionResult, tum_path: str | os.PathLike[str],
+                           cov_path: str | os.PathLike[str] | None = None) -> None:
+    """The TUM file and (with ``cov_path``) the one covariance CSV layout of gtrig.io.posetrack, both or
+    neither."""
+    from gtrig.io.posetrack import write_pose_track
+
+    write_pose_track(file_track(result), tum_path, cov_path)
+
+
+def write_covariance_csv(path: str | os.PathLike[str], result: VisionResult) -> None:
+    """The covariance CSV alone (gtrig.io.posetrack's layout: ``stamp_s,status,reason,cov_x_x,...``),
+    one row per localized pose, atomically."""
+    from gtrig.io.atomic import atomic_write_text
+    from gtrig.io.posetrack import covariance_text
+
+    atomic_write_text(path, covariance_text(file_track(result)))
 
 
 def read_covariance_csv(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """``(stamps_s (M,), cov (M, k, k))`` from :func:`write_covariance_csv`."""
-    with open(path, newline="", encoding="utf-8") as f:
-        r = csv.reader(f)
-        header = next(r)
-        k = int(round(math.sqrt(len(header) - 1)))
-        rows = [[float(x) for x in row] for row in r if row]
-    a = np.array(rows).reshape(-1, 1 + k * k)
-    return a[:, 0], a[:, 1:].reshape(-1, k, k)
+    """``(stamps_s (M,), cov (M, k, k))`` from :func:`write_covariance_csv` (or the layout before it)."""
+    from gtrig.io.posetrack import read_covariance_csv as read_any
+
+    stamps, cov, kind, *_ = read_any(path)
+    if cov is None:
+        raise FormatError(f"{path}: no covariance columns")
+    return stamps, cov

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -12,11 +13,10 @@ from gtrig.cli.main import app
 from gtrig.evaluate.poses import compare_poses
 from gtrig.io.survey_csv import PoseTable, read_pose_table
 
-REF = Path("/work/shared/reference")
-if not REF.is_dir():
-    REF = Path(__file__).resolve().parents[3] / "shared" / "reference"
+# ../shared beside the repository; in CI (``CI`` set) a missing copy fails the tests instead of skipping them
+REF = Path(__file__).resolve().parents[2].parent / "shared" / "reference"
 pytestmark = pytest.mark.skipif(
-    not (REF / "validation_poses.csv").exists(), reason="reference tables missing"
+    not (REF / "validation_poses.csv").exists() and not os.environ.get("CI"), reason="../shared/reference missing"
 )
 runner = CliRunner()
 

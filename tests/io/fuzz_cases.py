@@ -112,7 +112,7 @@ READERS: dict[str, tuple[Callable[[Path], object], Callable[[], bytes], str]] = 
     "world_distances": (_lazy("gtrig.io.survey_csv", "read_world_distances"), _world_distances, ".csv"),
     "pose_distances": (_lazy("gtrig.io.survey_csv", "read_pose_distances"), _pose_distances, ".csv"),
     "robot_points": (_lazy("gtrig.io.survey_csv", "read_robot_points"), _robot_points, ".csv"),
-    "camera_yaml": (_lazy("gtrig.calib.camfile", "read_cam_yaml"), _cam, ".yaml"),
+    "camera_yaml": (_lazy("gtrig.io.camfile", "read_cam_yaml"), _cam, ".yaml"),
     "rig_yaml": (_lazy("gtrig.rig.load", "load_rig"), _rig, ".yaml"),
     "carmen": (_lazy("gtrig.io.carmen", "read_carmen"), _carmen, ".log.gz"),
 }

@@ -5,6 +5,7 @@ import pytest
 
 from gtrig.errors import GtrigError
 from gtrig.geometry import wrap_angle
+from gtrig.io.posetrack import read_pose_track
 from gtrig.io.scans import ScanLog, write_scans
 from gtrig.laser import synth
 from gtrig.laser.background import build_background
@@ -87,10 +88,14 @@ def _write_recording(root, room, sequence, beams_override=None, shuffle=False, d
 def test_track_recording_writes_tum_and_covariance(tmp_path, room, sequence):
     rig = _write_recording(tmp_path, room, sequence)
     res = track_recording(tmp_path, "run", rig=rig, out_tum=tmp_path / "gt.tum", out_cov=tmp_path / "cov.csv")
-    lines = (tmp_path / "gt.tum").read_text().splitlines()
-    cov = (tmp_path / "cov.csv").read_text().splitlines()
-    assert len(lines) - 1 == len(cov) - 1 == int(res.ok.sum())
-    assert cov[0].startswith("timestamp,x,y,theta,cov_xx")
+    # the one pose-track layout (gtrig.io.posetrack): the OK frames, their covariances to the last digit
+    track = read_pose_track(tmp_path / "gt.tum", tmp_path / "cov.csv")
+    ok = res.ok
+    assert len(track) == int(ok.sum()) and track.source == "GTlaser" and track.cov_kind == "xyyaw"
+    np.testing.assert_allclose(track.stamps_s, res.stamps_s[ok], atol=5e-7)
+    np.testing.assert_array_equal(track.cov, res.cov_xytheta[ok])
+    np.testing.assert_allclose(track.xytheta(), res.xytheta[ok], atol=2e-9)
+    assert (track.status == 0).all()
 
 
 def _one_line(e: BaseException) -> str:

@@ -178,3 +178,24 @@ def test_checkpoint_is_not_reused_across_detector_versions(rec, tmp_path, monkey
     monkeypatch.setattr(det, "DETECTOR_VERSION", det.DETECTOR_VERSION + 1)
     with pytest.raises(InputError, match="checkpoint of another run"):
         run_recording(path, rig, "validation", True, workers=1, detector="gtrig", checkpoint=ck)
+
+
+def test_checkpoint_follows_a_moved_recording(rec, tmp_path, monkeypatch):
+    """The detections are keyed on the images' paths inside the recording: a copy elsewhere reuses them
+    (no image is read again) and gives the same poses."""
+    import shutil
+
+    import gtrig.vision.sequence as seq
+
+    path, rig = rec
+    ck = tmp_path / "ck.jsonl"
+    a = run_recording(path, rig, "validation", True, workers=1, detector="aruco", checkpoint=ck)
+    moved = tmp_path / "moved"
+    shutil.copytree(path, moved)
+
+    def no_detection(*args, **kw):
+        raise AssertionError("detected again")
+
+    monkeypatch.setattr(seq, "_process_chunk", no_detection)
+    b = run_recording(moved, rig, "validation", True, workers=1, detector="aruco", checkpoint=ck)
+    assert [e.T_world_robot.tobytes() for e in a.localized()] == [e.T_world_robot.tobytes() for e in b.localized()]

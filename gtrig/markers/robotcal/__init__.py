@@ -26,8 +26,8 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from gtrig.calib.camfile import CameraIntrinsics, read_cam_yaml
 from gtrig.errors import InputError
+from gtrig.io.camfile import CameraIntrinsics, read_cam_yaml
 from gtrig.markers.robotcal.calibrate import RobotCalibration, RobotCalOptions, calibrate_from_views
 from gtrig.markers.robotcal.markersfile import (
     apply_to_rig,

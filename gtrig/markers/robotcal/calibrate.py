@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from gtrig.calib.camfile import CameraIntrinsics
 from gtrig.errors import InputError
+from gtrig.io.camfile import CameraIntrinsics
 from gtrig.markers.robotcal.bundle import BundleOptions, BundleResult, bundle_adjust
 from gtrig.markers.robotcal.graph import solve_graph
 from gtrig.markers.robotcal.imageposes import image_pose

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gtrig import geometry as geo
-from gtrig.calib.se3avg import mean_rotation
+from gtrig.geometry.se3avg import mean_rotation
 from gtrig.markers.robotcal.observe import Array
 from gtrig.markers.robotcal.pairs import PairEdge
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gtrig import geometry as geo
-from gtrig.calib.se3avg import mean_pose
+from gtrig.geometry.se3avg import mean_pose
 from gtrig.markers.robotcal.observe import Array
 from gtrig.markers.robotcal.pairs import close_matrix
 from gtrig.markers.robotcal.pnp import ViewPoses

@@ -19,8 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gtrig import geometry as geo
-from gtrig.calib.camfile import CameraIntrinsics
 from gtrig.errors import FormatError, InputError
+from gtrig.io.camfile import CameraIntrinsics
 from gtrig.rig.models import MarkerFamily
 
 Array = NDArray[np.float64]

@@ -5,7 +5,7 @@ candidate relative poses ``T_a_b = inv(T_cam_a) T_cam_b``. The true one is the s
 a wrong one (one marker flipped) moves with the viewpoint, because the flip mirrors the plane about the
 line of sight. So the candidate that most other images agree with (within ``tol_m``, ``tol_rad``) is
 taken, each image contributes its candidate nearest to it, and those are averaged on SE(3)
-(:func:`gtrig.calib.se3avg.mean_pose`). Images whose candidate stays far from the mean are outliers of
+(:func:`gtrig.geometry.se3avg.mean_pose`). Images whose candidate stays far from the mean are outliers of
 the pair (a misdetection, a bent marker in one view) and are named in the report.
 """
 
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gtrig import geometry as geo
-from gtrig.calib.se3avg import mean_pose
+from gtrig.geometry.se3avg import mean_pose
 from gtrig.markers.robotcal.observe import Array
 from gtrig.markers.robotcal.pnp import ViewPoses
 

@@ -1,10 +1,15 @@
-"""`gtrig demo --quick`: every stage runs on a small simulated recording and meets its accuracy there."""
+"""`gtrig demo --quick`: every stage runs on a small simulated recording and meets its accuracy there;
+`gtrig run` on the same recording without its truth writes the same pose tracks byte for byte, reuses
+finished stages, and `--from laser` reruns only GTlaser and what follows."""
 
 from __future__ import annotations
 
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from gtrig import pipeline
@@ -12,11 +17,17 @@ from gtrig.cli.main import app
 from gtrig.rig import load_rig
 
 
-def test_demo_quick_runs_every_stage_against_truth(tmp_path: Path) -> None:
-    out = tmp_path / "demo"
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("demo")
     r = CliRunner().invoke(app, ["demo", "--quick", "--out", str(out)])
     assert r.exit_code == 0, r.output
-    assert "skipped" not in r.output
+    assert "skipped" not in r.output and "accuracy against truth" in r.output
+    return out
+
+
+def test_demo_quick_runs_every_stage_against_truth(demo: Path, tmp_path: Path) -> None:
+    out = demo
     res = out / "results"
     for name in ("rig.calibrated.yaml", "markers.yaml", "gt_laser.tum", "gt_laser_cov.csv",
                  "gt_vision_validation.tum", "gt_vision_run.tum", "survey/world_points.csv", "accuracy.csv"):
@@ -73,3 +84,49 @@ def test_demo_quick_runs_every_stage_against_truth(tmp_path: Path) -> None:
     bad = CliRunner().invoke(app, ["robot-frame", "--rig", str(out / "recording" / "rig.yaml"), "--recording",
                                    str(out / "recording"), "--out", str(tmp_path / "x.yaml"), "--anchor", "999"])
     assert bad.exit_code != 0 and "marker 999" in bad.output and "Traceback" not in bad.output
+
+
+TRACKS = ("gt_laser.tum", "gt_laser_cov.csv", "gt_vision_validation.tum", "gt_vision_validation_cov.csv",
+          "gt_vision_run.tum", "gt_vision_run_cov.csv")
+
+
+def test_run_without_truth_writes_the_same_tracks(demo: Path, tmp_path: Path) -> None:
+    from gtrig.io.posetrack import read_pose_track
+
+    # the recording as a lab would have it: no truth/ (hard links: nothing copied, nothing changed)
+    rec = tmp_path / "recording"
+    shutil.copytree(demo / "recording", rec, copy_function=os.link, ignore=shutil.ignore_patterns("truth"))
+    out = tmp_path / "out"
+    out.mkdir()
+    for seq in ("validation", "run"):  # the detections only (the images are the same): not what is compared
+        shutil.copy(demo / "results" / f"gt_vision_{seq}.checkpoint", out)
+    r = CliRunner().invoke(app, ["run", "--recording", str(rec), "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "without truth" in r.output and "accuracy against truth" not in r.output and "skipped" not in r.output
+    for name in TRACKS:
+        assert (out / name).read_bytes() == (demo / "results" / name).read_bytes(), name
+    assert (out / "rig.calibrated.yaml").read_bytes() == (demo / "results" / "rig.calibrated.yaml").read_bytes()
+    assert not (out / "accuracy.csv").exists() and (out / "summary.csv").is_file()
+    checks = pipeline.read_accuracy_csv(out / "summary.csv")
+    assert checks[("GTvision", "validation, poses localized")] == 26
+    assert checks[("GTlaser", "run, frames localized")] > 90  # %
+    assert checks[("robot frame", "stops used")] == 26
+    # the tracks read back as pose tracks with their statuses and covariances
+    las = read_pose_track(out / "gt_laser.tum", out / "gt_laser_cov.csv")
+    vis = read_pose_track(out / "gt_vision_run.tum", out / "gt_vision_run_cov.csv")
+    assert las.source == "GTlaser" and vis.source == "GTvision" and las.cov_kind == vis.cov_kind == "xyyaw"
+    assert las.ok.all() and np.all(np.linalg.eigvalsh(vis.cov) > 0)
+    # nothing changed: every stage is reused
+    r2 = CliRunner().invoke(app, ["run", "--recording", str(rec), "--out", str(out)])
+    assert r2.exit_code == 0 and "reused (unchanged since their last run): survey, cameras, markers, " \
+        "robot-frame, laser, vision" in r2.output, r2.output
+
+
+def test_from_laser_reruns_laser_and_what_follows(demo: Path) -> None:
+    res = demo / "results"
+    before = {n: (res / n).read_bytes() for n in (*TRACKS, "accuracy.csv")}
+    r = CliRunner().invoke(app, ["run", "--recording", str(demo / "recording"), "--out", str(res), "--from", "laser"])
+    assert r.exit_code == 0, r.output
+    assert "reused (unchanged since their last run): survey, cameras, markers, robot-frame\n" in r.output
+    for n, b in before.items():
+        assert (res / n).read_bytes() == b, n

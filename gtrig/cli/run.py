@@ -1,0 +1,78 @@
+"""``gtrig run``: every stage on a recording (a lab's own, or a simulated one)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from gtrig.cli.common import console, handle_errors
+
+
+def print_result(result: object, has_truth: bool) -> None:
+    """The accuracy table (with truth), the checks that need none, warnings and skipped stages."""
+    from rich.table import Table
+
+    from gtrig.pipeline import PipelineResult
+
+    assert isinstance(result, PipelineResult)
+
+    def mark(ok: bool | None) -> str:
+        return "" if ok is None else ("[green]ok[/green]" if ok else "[red]miss[/red]")
+
+    if result.checks:
+        t = Table("stage", "check", "value", "expected", "", title="what the recording says without truth")
+        for r in result.checks:
+            t.add_row(r.stage, r.metric, f"{r.value:.4g} {r.unit}", r.target, mark(r.ok))
+        console.print(t)
+    if result.rows:
+        acc = Table("stage", "metric", "value", "target", "", title="accuracy against truth")
+        for r in result.rows:
+            acc.add_row(r.stage, r.metric, f"{r.value:.4g} {r.unit}", r.target, mark(r.ok))
+        console.print(acc)
+    elif not has_truth:
+        console.print("no truth/ in the recording: accuracy is judged by the checks above", highlight=False)
+    for w in result.warnings:
+        console.print(f"[yellow]warning[/yellow] {w.stage}: {w.metric} is {w.value:.4g} {w.unit} "
+                      f"(expected {w.target})", highlight=False)
+    if result.reused:
+        console.print(f"reused (unchanged since their last run): {', '.join(result.reused)}", highlight=False)
+    for name, why in result.skipped.items():
+        console.print(f"[yellow]skipped[/yellow] {name}: {why}", highlight=False)
+
+
+@handle_errors
+def command(
+    recording: Path = typer.Option(None, "--recording", "-r", help="The recording folder (docs/formats.md)."),
+    out: Path = typer.Option(None, "--out", "-o", help="Folder for every output (created)."),
+    config: Path = typer.Option(None, "--config", "-c", help="A run.yaml overriding some defaults."),
+    stages: str = typer.Option(None, "--stages", help="Comma-separated stages to run (default: all)."),
+    from_stage: str = typer.Option(None, "--from", help="Run this stage and every later one again."),
+    workers: int = typer.Option(None, "--workers", "-j", min=0, help="Processes (0 = one per core)."),
+    no_reuse: bool = typer.Option(False, "--no-reuse", help="Run every stage, even a finished one."),
+    print_config: bool = typer.Option(False, "--print-config", help="Print the effective configuration and exit."),
+) -> None:
+    """Run every stage on a recording: survey, calibrations, GTlaser, GTvision; reuse finished stages."""
+    import time
+
+    from gtrig import pipeline
+    from gtrig.config import load_config
+    from gtrig.errors import InputError
+
+    cfg = load_config(config)
+    if workers is not None:
+        cfg = cfg.model_copy(update={"workers": workers})
+    if print_config:
+        console.print(cfg.to_yaml(), end="", highlight=False, markup=False)
+        return
+    if recording is None or out is None:
+        raise InputError("gtrig run needs --recording REC and --out DIR (or --print-config)")
+    only = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
+    t0 = time.perf_counter()
+    with console.status("processing") as status:
+        result = pipeline.run(recording, out, on_stage=lambda name: status.update(f"processing: {name}"),
+                              config=cfg, only=only, from_stage=from_stage, reuse=not no_reuse)
+    print_result(result, (recording / "truth").is_dir())
+    console.print(f"finished in {time.perf_counter() - t0:.0f} s; outputs in {out}", highlight=False)
+    if result.exit_code:
+        raise typer.Exit(result.exit_code)  # a stage refused its input: say so to scripts too

@@ -1,0 +1,77 @@
+"""The whole job on one recording, as a table of contents: each stage that exists runs in turn.
+
+``run(rec, out)`` reads a recording, runs the stages of :data:`STAGES` in order and, when the
+recording carries its truth (simulated), measures every result against it (gtrig.evaluate.truth).
+Stages hand each other objects through a typed context (gtrig.pipeline.context, which also says how a
+new stage declares what it consumes and produces); finished stages are reused (gtrig.pipeline.cache);
+the runner's rules are in gtrig.pipeline.runner.
+
+=============  ==========================================  ==============================================
+stage          consumes (uses)                              produces
+=============  ==========================================  ==============================================
+survey         -                                            survey
+cameras        rig                                          rig, camera_report
+markers        rig                                          rig, marker_calibration
+robot-frame    rig, survey, marker_calibration              rig, frame_fit, vision_validation, hand_frame_cov
+laser          rig                                          rig, laser_report, laser_result, tracks/GTlaser/run
+vision         rig (marker_calibration, frame_fit, ...)     tracks/GTvision/{validation,run}, vision_results
+=============  ==========================================  ==============================================
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from gtrig.pipeline.cameras import camera_calibration
+from gtrig.pipeline.context import AccuracyRow, Products, Stage, StageInput, StageOutput
+from gtrig.pipeline.laser import gtlaser
+from gtrig.pipeline.markers import marker_calibration
+from gtrig.pipeline.robot_frame import robot_frame
+from gtrig.pipeline.rows import read_accuracy_csv, write_accuracy_csv
+from gtrig.pipeline.runner import PipelineResult, run_stages
+from gtrig.pipeline.survey import survey
+from gtrig.pipeline.vision import gtvision
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
+
+    from gtrig.config import RunConfig
+
+_VISION_PRODUCTS = ("tracks/GTvision/validation", "tracks/GTvision/run", "vision_results/validation",
+                    "vision_results/run")
+
+_SURVEY_FILES = ("survey/reference_points.csv", "survey/world_distances.csv", "survey/robot_points.csv",
+                 "survey/pose_distances.csv")
+
+STAGES: tuple[Stage, ...] = (
+    Stage("survey", "survey", survey, produces=("survey",), reads=_SURVEY_FILES, section="survey"),
+    Stage("cameras", "camera calibration", camera_calibration, consumes=("rig",),
+          produces=("rig", "camera_report"), reads=("calib/boards.yaml", "calib/world_board"),
+          section="cameras"),
+    Stage("markers", "marker calibration", marker_calibration, consumes=("rig",),
+          produces=("rig", "marker_calibration"), reads=("handheld/camera.yaml", "handheld/images"),
+          section="markers"),
+    Stage("robot-frame", "robot frame", robot_frame, consumes=("rig", "survey", "marker_calibration"),
+          produces=("rig", "frame_fit", "vision_validation", "hand_frame_cov"),
+          reads=("validation/poses.csv", "validation/cameras"), section="vision"),
+    Stage("laser", "GTlaser", gtlaser, consumes=("rig",),
+          produces=("rig", "laser_report", "laser_result", "tracks/GTlaser/run"),
+          reads=("background/lasers", "run/lasers", "calib/laser_object.yaml"), section="laser"),
+    Stage("vision", "GTvision", gtvision, consumes=("rig",),
+          uses=("marker_calibration", "frame_fit", "vision_validation", "hand_frame_cov", "survey"),
+          produces=_VISION_PRODUCTS, reads=("validation/poses.csv", "validation/cameras", "run/cameras"),
+          section="vision"),
+)
+
+
+def run(rec: str | Path, out: str | Path, on_stage: Callable[[str], None] | None = None, *,
+        config: RunConfig | None = None, only: Sequence[str] | None = None, from_stage: str | None = None,
+        reuse: bool = True) -> PipelineResult:
+    """Run every available stage on the recording ``rec``, writing under ``out``
+    (:func:`gtrig.pipeline.runner.run_stages` with :data:`STAGES`)."""
+    return run_stages(STAGES, rec, out, config, only=only, from_stage=from_stage, reuse=reuse, on_stage=on_stage)
+
+
+__all__ = ["STAGES", "AccuracyRow", "PipelineResult", "Products", "Stage", "StageInput", "StageOutput",
+           "read_accuracy_csv", "run", "write_accuracy_csv"]

@@ -1,0 +1,163 @@
+"""Run the stages in order on one recording: validate, reuse what finished, hand products on, write.
+
+The rules a stage can count on (gtrig.pipeline.context explains how a stage declares itself):
+
+* the recording is checked once (a folder with ``rig.yaml``; the rig is read and validated) and the
+  effective configuration is written as ``DIR/run.yaml`` before any stage runs;
+* before any stage runs, every stage asked for has what it ``reads`` in the recording, else one line
+  names the stage and the missing file (:class:`~gtrig.errors.InputError`, exit code 2);
+* a stage whose ``consumes`` no earlier stage produced is skipped with one line naming the product; so
+  is a stage that refuses its input (a :class:`~gtrig.errors.GtrigError`: too few views, no
+  markers...): one stage's refusal must not hide the others' results (the run's exit code is then the
+  error's);
+* a finished stage is reused when its key is unchanged (gtrig.pipeline.cache); ``from_stage`` reruns
+  that stage and every later one; ``only`` runs just those stages (the others reused when finished);
+* the products of each stage are handed to the next as objects; a new ``rig`` is also written as
+  ``DIR/rig.calibrated.yaml``; the truth rows go to ``DIR/accuracy.csv``, the checks to
+  ``DIR/summary.csv``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from gtrig.config import RunConfig, write_config
+from gtrig.errors import ConfigError, GtrigError, InputError
+from gtrig.io.recording import recording_dir
+from gtrig.pipeline import cache
+from gtrig.pipeline.context import AccuracyRow, Products, Stage, StageInput, StageOutput
+from gtrig.pipeline.rows import write_accuracy_csv
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PipelineResult:
+    """What a run did.
+
+    Attributes
+    ----------
+    rows : the accuracy table against truth (empty without truth).
+    checks : the figures that need no truth; ``ok=False`` ones are warnings.
+    seconds : wall time per stage run (a reused stage: its lookup).
+    skipped : {stage name: why} for the stages that did not give a result.
+    reused : names of the stages taken from their last run.
+    products : the final context (rig, survey, pose tracks by name...).
+    exit_code : 0, or the largest exit code of the errors that stopped a stage (2 bad input, 3 no
+        convergence).
+    """
+
+    rows: tuple[AccuracyRow, ...]
+    seconds: dict[str, float]
+    skipped: dict[str, str]
+    checks: tuple[AccuracyRow, ...] = ()
+    reused: tuple[str, ...] = ()
+    products: Products = Products()
+    exit_code: int = 0
+
+    @property
+    def warnings(self) -> tuple[AccuracyRow, ...]:
+        return tuple(c for c in self.checks if c.ok is False)
+
+
+def stage_names(stages: Sequence[Stage]) -> tuple[str, ...]:
+    return tuple(s.name for s in stages)
+
+
+def _check_names(stages: Sequence[Stage], names: Sequence[str], what: str) -> None:
+    known = stage_names(stages)
+    bad = [n for n in names if n not in known]
+    if bad:
+        raise ConfigError(f"{what}: unknown stage {bad[0]!r}; the stages are {', '.join(known)}")
+
+
+def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config: RunConfig | None = None, *,
+               only: Sequence[str] | None = None, from_stage: str | None = None, reuse: bool = True,
+               on_stage: Callable[[str], None] | None = None) -> PipelineResult:
+    """Run ``stages`` on the recording ``rec``, writing under ``out`` (module docstring)."""
+    from gtrig.rig import load_rig
+    from gtrig.rig.load import dump_rig
+
+    cfg = config or RunConfig()
+    if only:
+        _check_names(stages, only, "--stages")
+    if from_stage:
+        _check_names(stages, [from_stage], "--from")
+    rec_p = recording_dir(rec)
+    rig = load_rig(rec_p / "rig.yaml")
+    out_p = Path(out)
+    out_p.mkdir(parents=True, exist_ok=True)
+    write_config(cfg, out_p / "run.yaml")
+    has_truth = (rec_p / "truth").is_dir()
+    for st in stages:
+        if only and st.name not in only:
+            continue
+        missing = [r for r in st.reads if not (rec_p / r).exists()]
+        if missing:
+            raise InputError(f"stage {st.name} needs {rec_p / missing[0]}, which the recording lacks "
+                             "(docs/formats.md; leave the stage out with --stages)")
+    products = Products(rig=rig)
+    producer_key: dict[str, str] = {"rig": cache.stage_key("recording", None, cache.recording_prints(rec_p, ()), {})}
+    rows: list[AccuracyRow] = []
+    checks: list[AccuracyRow] = []
+    seconds: dict[str, float] = {}
+    skipped: dict[str, str] = {}
+    reused: list[str] = []
+    rerun = False
+    exit_code = 0
+    for st in stages:
+        rerun = rerun or st.name == from_stage
+        wanted = not only or st.name in only
+        if any(not (rec_p / r).exists() for r in st.reads):
+            skipped[st.name] = "not asked for (--stages), and the recording lacks what it reads"
+            continue
+        absent = [c for c in st.consumes if not products.has(c)]
+        if absent:
+            skipped[st.name] = f"needs {absent[0]}, which no earlier stage produced"
+            log.warning("%s: skipped: %s", st.name, skipped[st.name])
+            continue
+        section = getattr(cfg, st.section).model_dump(mode="json") if st.section else None
+        upstream = {c: producer_key.get(c, "") for c in (*st.consumes, *st.uses)}
+        key = cache.stage_key(st.name, section, cache.recording_prints(rec_p, st.reads), upstream)
+        t = time.perf_counter()
+        result: StageOutput | None = None
+        if reuse and not (rerun and wanted):
+            result = cache.load_record(out_p, st.name, key)
+            if result is not None:
+                reused.append(st.name)
+                log.info("%s: reused (finished before with the same inputs, options and code)", st.name)
+        if result is None and not wanted:
+            skipped[st.name] = "not asked for (--stages) and not finished before"
+            continue
+        if result is None:
+            if on_stage:
+                on_stage(st.title)
+            cache.forget(out_p, st.name)
+            inp = StageInput(rec_p, out_p, cfg, products, has_truth, cfg.workers)
+            try:
+                result = st.fn(inp)
+            except GtrigError as e:
+                log.warning("%s: %s", st.title, e)
+                skipped[st.name] = str(e)
+                exit_code = max(exit_code, e.exit_code)
+                seconds[st.name] = time.perf_counter() - t
+                continue
+            st.check_output(result)
+            cache.save_record(out_p, st.name, key, result)
+        products = products.updated(result.products)
+        for name in result.products:
+            producer_key[name] = key
+        if "rig" in result.products:
+            dump_rig(products.rig, out_p / "rig.calibrated.yaml")  # type: ignore[arg-type]
+        rows.extend(result.rows)
+        checks.extend(result.checks)
+        seconds[st.name] = time.perf_counter() - t
+    if rows:
+        write_accuracy_csv(out_p / "accuracy.csv", rows)
+    if checks:
+        write_accuracy_csv(out_p / "summary.csv", checks)
+    return PipelineResult(tuple(rows), seconds, skipped, tuple(checks), tuple(reused), products, exit_code)
