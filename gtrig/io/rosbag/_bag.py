@@ -91,10 +91,8 @@ def time_to_s(stamp: Any) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def ns_to_s(ns: int | np.ndarray) -> float | np.ndarray:
+def ns_to_s(ns: int) -> float:
     """Integer nanoseconds (a bag's receive time) as float seconds, split before converting."""
-    if isinstance(ns, np.ndarray):
-        return (ns // 1_000_000_000) + (ns % 1_000_000_000) * 1e-9
     return ns // 1_000_000_000 + (ns % 1_000_000_000) * 1e-9
 
 

@@ -47,8 +47,9 @@ log = logging.getLogger(__name__)
 
 StampSource = Literal["header", "receive"]
 
-POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PointStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
-              "geometry_msgs/msg/TransformStamped", "nav_msgs/msg/Odometry", "nav_msgs/msg/Path")
+POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PointStamped",
+              "geometry_msgs/msg/PoseWithCovarianceStamped", "geometry_msgs/msg/TransformStamped",
+              "nav_msgs/msg/Odometry", "nav_msgs/msg/Path")
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 
 
@@ -225,8 +226,8 @@ def _read_tf(reader: Any, tf: tuple[str, str, str], stamp: StampSource, name: st
 
     if down_child == [child] and not down_parent and not edges[child][1]:
         # one moving link: its messages as published (a matrix round trip would cost 1e-16)
-        st, xyz, q = series[child]
-        return _make_track(st, xyz, q, None, name, parent, child, f"{tf_topic}:{parent}.{child}")
+        st1, xyz1, q1 = series[child]
+        return _make_track(st1, xyz1, q1, None, name, parent, child, f"{tf_topic}:{parent}.{child}")
 
     def chain_T(frames: list[str]) -> np.ndarray:
         T = np.tile(np.eye(4), (len(stamps), 1, 1))
