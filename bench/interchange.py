@@ -159,6 +159,8 @@ def round_trip(rec: Path, work: Path) -> None:
     for sub in ("calib", "handheld", "survey", "truth"):
         if (rec / sub).is_dir():
             shutil.copytree(rec / sub, back / sub)
+    if (rec / "sim_config.yaml").is_file():  # the simulated room's calibration object is found through it
+        shutil.copyfile(rec / "sim_config.yaml", back / "sim_config.yaml")
     print(f"round trip: {rec} -> ROS 1 bags -> {back} in {time.perf_counter() - t0:.1f} s")
     for seq in ("run", "validation", "background"):
         if (rec / seq).is_dir():
