@@ -152,8 +152,9 @@ def _bad_bag(path: Path, ver: int, kind: str, rig) -> dict:  # type: ignore[no-u
                 amin = sc.angle_min_rad + (0.01 if kind == "angle" else 0.0)
                 w.write("/scan", 20.0 + i, T["sensor_msgs/msg/LaserScan"](
                     header=header(w.ts, ver, t, "l", i), angle_min=amin,
-                    angle_max=amin + beams * sc.angle_increment_rad, angle_increment=sc.angle_increment_rad, time_increment=0.0, scan_time=0.01, range_min=0.0,
-                    range_max=30.0, ranges=np.ones(beams, np.float32), intensities=np.zeros(0, np.float32)))
+                    angle_max=amin + beams * sc.angle_increment_rad, angle_increment=sc.angle_increment_rad,
+                    time_increment=0.0, scan_time=0.01, range_min=0.0, range_max=30.0,
+                    ranges=np.ones(beams, np.float32), intensities=np.zeros(0, np.float32)))
             else:
                 w.write("/img", 20.0 + i, T["sensor_msgs/msg/Image"](
                     header=header(w.ts, ver, t, "c", i), height=768, width=1024, encoding="mono16",
