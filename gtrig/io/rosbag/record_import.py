@@ -69,6 +69,8 @@ class _Stream:
     header_s: list[float] = field(default_factory=list)
     receive_s: list[float] = field(default_factory=list)
     rows: list[Any] = field(default_factory=list)
+    raws: list[bytes] = field(default_factory=list)  # LaserScan messages, decoded in bulk at the end
+    msgtype: str = ""
     files: list[str] = field(default_factory=list)
     sensor: Any = None
     writer: Any = None  # cv2.VideoWriter
@@ -86,16 +88,33 @@ class ImportReport:
     trajectories: tuple[str, ...]
 
 
-def _check_scan(msg: Any, sc: Any, where: str, n: int) -> None:
-    count = len(msg.ranges)
-    if count != sc.beams:
-        raise InputError(f"{where}: message {n} has {count} beams, the rig's {sc.name} has {sc.beams}")
-    if abs(msg.angle_min - sc.angle_min_rad) > ANGLE_TOL_RAD:
-        raise InputError(f"{where}: angle_min {msg.angle_min:.6f} rad, the rig's {sc.name} has "
-                         f"{sc.angle_min_rad:.6f}")
-    if abs(msg.angle_increment - sc.angle_increment_rad) > ANGLE_TOL_RAD / max(sc.beams, 1):
-        raise InputError(f"{where}: angle_increment {msg.angle_increment:.8f} rad, the rig's {sc.name} has "
-                         f"{sc.angle_increment_rad:.8f}")
+def _scans(s: _Stream, reader: Any, where: str) -> np.ndarray:
+    """Decode a scan stream (its header stamps into ``s.header_s``), check every message's geometry
+    against the rig, and return the (K, beams) ranges with no return as ``nan``."""
+    from gtrig.io.rosbag.scan_decode import decode_scans
+
+    b = decode_scans(s.raws, bool(reader.is2), lambda raw: deserialize(reader, raw, s.msgtype, where))
+    s.raws = []
+    s.header_s = b.stamps_s.tolist()
+    sc = s.sensor
+    bad = np.flatnonzero(b.beams != sc.beams)
+    if bad.size:
+        raise InputError(f"{where}: message {bad[0] + 1} has {b.beams[bad[0]]} beams, the rig's {sc.name} has "
+                         f"{sc.beams}")
+    amin, inc = b.geometry[:, 0].astype(float), b.geometry[:, 2].astype(float)
+    bad = np.flatnonzero(np.abs(amin - sc.angle_min_rad) > ANGLE_TOL_RAD)
+    if bad.size:
+        raise InputError(f"{where}: message {bad[0] + 1}: angle_min {amin[bad[0]]:.6f} rad, the rig's {sc.name} "
+                         f"has {sc.angle_min_rad:.6f}")
+    bad = np.flatnonzero(np.abs(inc - sc.angle_increment_rad) > ANGLE_TOL_RAD / max(sc.beams, 1))
+    if bad.size:
+        raise InputError(f"{where}: message {bad[0] + 1}: angle_increment {inc[bad[0]]:.8f} rad, the rig's "
+                         f"{sc.name} has {sc.angle_increment_rad:.8f}")
+    r = b.ranges.astype(np.float64)
+    rmin, rmax = b.geometry[:, 5:6].astype(float), b.geometry[:, 6:7].astype(float)
+    with np.errstate(invalid="ignore"):
+        r[~np.isfinite(r) | (r < rmin) | (r > rmax)] = np.nan
+    return r
 
 
 def _image(msg: Any, where: str, n: int) -> np.ndarray:
@@ -216,6 +235,11 @@ def _import_streams(bag: Any, streams: dict[str, _Stream], seq: Path, which: str
         pending: list[Future[None]] = []
         for conn, t_ns, raw in reader.messages(conns):
             s = streams[conn.topic]
+            if s.kind in ("laser", "onboard"):  # decoded in bulk after the pass (scan_decode)
+                s.raws.append(raw)
+                s.receive_s.append(ns_to_s(t_ns))
+                s.msgtype = conn.msgtype
+                continue
             where = f"{reader.paths[0]}:{conn.topic}"
             msg = deserialize(reader, raw, conn.msgtype, where)
             n = len(s.header_s) + 1
@@ -251,13 +275,6 @@ def _import_streams(bag: Any, streams: dict[str, _Stream], seq: Path, which: str
                 pending.append(pool.submit(_write_png, folder / name, img, image_format))
                 if len(pending) > 4 * max(1, workers):  # bounded memory: wait for the oldest
                     pending.pop(0).result()
-            elif s.kind in ("laser", "onboard"):
-                if n == 1 or len(msg.ranges) != s.sensor.beams:
-                    _check_scan(msg, s.sensor, where, n)
-                r = np.asarray(msg.ranges, dtype=np.float64)
-                bad = ~np.isfinite(r) | (r < msg.range_min) | (r > msg.range_max)
-                r[bad] = np.nan
-                s.rows.append(r)
             else:
                 q = msg.pose.pose.orientation
                 yaw = np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
@@ -265,6 +282,16 @@ def _import_streams(bag: Any, streams: dict[str, _Stream], seq: Path, which: str
                                msg.twist.twist.linear.x, msg.twist.twist.angular.z))
         for f in pending:
             f.result()
+        for s in streams.values():
+            if s.kind in ("laser", "onboard") and s.raws:
+                where = f"{reader.paths[0]}:{s.topic}"
+                s.rows = [_scans(s, reader, where)]
+                st = np.array(s.stamp(which))
+                back = np.flatnonzero(np.diff(st) <= 0)
+                if back.size:
+                    i = int(back[0]) + 1
+                    raise FormatError(f"{where}: {which} stamps do not increase at message {i + 1} "
+                                      f"({st[i - 1]:.9f} then {st[i]:.9f})")
     counts = {}
     for s in streams.values():
         counts[f"{s.kind} {s.name}"] = len(s.header_s)
