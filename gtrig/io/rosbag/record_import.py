@@ -26,7 +26,6 @@ GIL), scans are decoded by rosbags and written by the scan CSV writer in one go.
 from __future__ import annotations
 
 import contextlib
-import csv
 import logging
 import os
 import shutil
@@ -329,11 +328,9 @@ def _video_write(s: _Stream, folder: Path, img: np.ndarray, where: str) -> None:
 
 def _write_stamps(path: Path, s: _Stream) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_open(path, "w", newline="") as f:
-        w = csv.writer(f, lineterminator="\n")
-        w.writerow(["index", "header_s", "receive_s"])
-        for i, (h, r) in enumerate(zip(s.header_s, s.receive_s, strict=True)):
-            w.writerow([i, f"{h:.9f}", f"{r:.9f}"])
+    rows = "".join(f"{i},{h:.9f},{r:.9f}\n" for i, (h, r) in enumerate(zip(s.header_s, s.receive_s, strict=True)))
+    with atomic_open(path, "w", encoding="utf-8", newline="\n") as f:
+        f.write("index,header_s,receive_s\n" + rows)
 
 
 def _import_trajectories(bag: Any, cfg: TopicsConfig, seq: Path, which: str) -> tuple[str, ...]:
