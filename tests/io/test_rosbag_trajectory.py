@@ -51,9 +51,8 @@ def _same_as_evo(track: PoseTrack, bag: Path, topic: str) -> None:
 ])
 def test_real_bags_read_as_evo_reads_them(shared_dir: Path, bag: str, topic: str) -> None:
     path = shared_dir / "data/rosbags" / bag
-    track = read_bag_trajectory(path, topic)
+    track = read_trajectory(path, topic=topic)  # the front door: a bag by its name
     _same_as_evo(track, path, topic)
-    assert read_trajectory(path, topic=topic).stamps_s.size == len(track)  # through the front door
 
 
 def test_amcl_covariance_survives_import_and_export(shared_dir: Path, tmp_path: Path) -> None:
