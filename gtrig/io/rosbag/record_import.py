@@ -319,7 +319,7 @@ def _video_write(s: _Stream, folder: Path, img: np.ndarray, where: str) -> None:
     if s.writer is None:
         h, w = img.shape
         rate = float(getattr(s.sensor, "rate_hz", 10.0))
-        s.writer = cv2.VideoWriter(str(folder / "video.mkv"), cv2.VideoWriter_fourcc(*"FFV1"), rate, (w, h),
+        s.writer = cv2.VideoWriter(str(folder / "video.mkv"), cv2.VideoWriter_fourcc(*"FFV1"), rate, (w, h),  # type: ignore[attr-defined]
                                    isColor=False)
         if not s.writer.isOpened():
             raise InputError(f"{where}: this OpenCV cannot write FFV1 video (import to images instead)")
