@@ -180,3 +180,26 @@ def test_writing_an_ambiguous_name_needs_a_format(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="does not say which format"):
         write_trajectory(_track_3d(), tmp_path / "a.txt")
     assert not (tmp_path / "a.txt").exists()
+
+
+def test_files_gtrig_writes_read_by_evo(tmp_path: Path, shared_dir: Path) -> None:
+    fi = pytest.importorskip("evo.tools.file_interface")
+    track = _track_3d(cov=False)
+    write_trajectory(track, tmp_path / "a.tum")
+    t = fi.read_tum_trajectory_file(str(tmp_path / "a.tum"))
+    np.testing.assert_allclose(t.timestamps, track.stamps_s, atol=5e-7)
+    np.testing.assert_allclose(t.positions_xyz, track.xyz, atol=5e-10)
+    write_trajectory(track, tmp_path / "a.kitti")
+    k = fi.read_kitti_poses_file(str(tmp_path / "a.kitti"))
+    np.testing.assert_allclose(np.array(k.poses_se3), track.matrices(), atol=1e-11)
+    write_trajectory(track, tmp_path / "state_groundtruth_estimate0/data.csv")
+    e = fi.read_euroc_csv_trajectory(str(tmp_path / "state_groundtruth_estimate0/data.csv"))
+    np.testing.assert_allclose(e.timestamps, track.stamps_s, atol=3e-7)
+    np.testing.assert_allclose(e.positions_xyz, track.xyz, atol=5e-10)
+    q = e.orientations_quat_wxyz[:, [1, 2, 3, 0]]
+    np.testing.assert_allclose(q * np.sign(q[:, 3:]), track.quat_xyzw, atol=1e-12)
+    # and the real TUM file reads as evo reads it
+    real = shared_dir / "data/trajectories/freiburg1_xyz-groundtruth.txt"
+    a, b = read_trajectory(real), fi.read_tum_trajectory_file(str(real))
+    np.testing.assert_array_equal(a.stamps_s, b.timestamps)
+    np.testing.assert_array_equal(a.xyz, b.positions_xyz)
