@@ -155,7 +155,7 @@ def round_trip(rec: Path, work: Path) -> None:
         if bag.exists():
             bag.unlink()
         topics = export_recording(rec, bag, 1, sequence=seq)
-        import_bag(bag, topics, back, rig_path=rec / "rig.yaml")
+        import_bag(bag, topics, back, rig_path=rec / "rig.yaml", image_format="png")  # the original's files
         shutil.rmtree(back / seq / "stamps")  # gtrig's sidecar, not in the original layout
         if (rec / seq / "poses.csv").is_file():  # the validation stops are no sensor: not in a bag
             shutil.copyfile(rec / seq / "poses.csv", back / seq / "poses.csv")
