@@ -164,10 +164,14 @@ def fixed_decimal_text(a: np.ndarray, decimals: int) -> np.ndarray:
     mag = np.abs(a) * (10.0 ** decimals)
     finite = mag < 1e15  # False for nan and inf too
     mag[~finite] = 0.0
-    k = (mag + 0.5).astype(np.int64)  # round half up; the halves themselves are done by Python below
+    # round half up (the halves themselves are done by Python below); int32 arithmetic where it fits is
+    # about twice as fast as int64's
+    k = (mag + 0.5).astype(np.int32 if (mag.max() if mag.size else 0.0) < 2.0e9 else np.int64)
     # the scaled float rounds differently from % (the exact binary value) only next to a tie
     special = (np.isfinite(a) & ~finite) | (np.abs(mag - k) > 0.5 - 1e-6)
     unit = 10 ** decimals
+    if k.dtype == np.int32 and decimals > 8:  # the decimals' 4-digit groups would overflow int32
+        k = k.astype(np.int64)
     ip = k // unit
     fp = k - ip * unit
     top = int(ip.max()) if ip.size else 0

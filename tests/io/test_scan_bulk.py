@@ -25,6 +25,9 @@ def test_fixed_decimal_text_is_percent_formatting(decimals: int) -> None:
     got = [bytes(row).decode().strip() for row in t]
     want = [f"%.{decimals}f" % v for v in a]
     assert got == want
+    small = rng.uniform(-2, 2, 1000)  # int32 arithmetic throughout
+    assert [bytes(r).decode().strip() for r in fixed_decimal_text(small[None, :], decimals)[0]] == \
+        [f"%.{decimals}f" % v for v in small]
 
 
 def test_write_scans_text_unchanged(tmp_path: Path) -> None:
