@@ -29,6 +29,8 @@ _SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("vision", "vision", "command"),
     ("robot_frame", "robot-frame", "command"),
     ("laser", "laser", "group"),
+    ("import_", "import", "group"),
+    ("export", "export", "command"),
 )
 
 

@@ -1,4 +1,5 @@
-"""Camera frame sequences: ``cameras/<cam>/timestamps.csv`` (``frame,stamp_s,file``) plus images."""
+"""Camera frame sequences: ``cameras/<cam>/timestamps.csv`` (``frame,stamp_s,file``) plus images, or a
+video (``video.mp4``, ``video.mkv``, ...) decoded with OpenCV, its frame count checked against the stamps."""
 
 from __future__ import annotations
 
@@ -15,6 +16,8 @@ from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_open
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv", ".mov")
+#: ``<video>#frame=<n>``: an image source naming one frame of a video (:func:`read_image`)
+VIDEO_FRAME_SEP = "#frame="
 
 
 @dataclass(frozen=True)
@@ -36,23 +39,15 @@ class FrameIndex:
     def path(self, i: int) -> Path:
         return self.folder / self.files[i]
 
-    def read(self, i: int) -> np.ndarray:
-        """Frame ``i`` as an 8-bit grey image (from its image file, or seeking in the video)."""
+    def source(self, i: int) -> str:
+        """Where frame ``i`` is: its image file, or ``<video>#frame=<n>`` (:func:`read_image` reads both)."""
         if self.video is not None:
-            cap = cv2.VideoCapture(str(self.video))
-            try:
-                cap.set(cv2.CAP_PROP_POS_FRAMES, int(self.frames[i]))
-                ok, img = cap.read()
-            finally:
-                cap.release()
-            if not ok:
-                raise FormatError(f"{self.video}: cannot read frame {int(self.frames[i])}")
-            return img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-        p = self.path(i)
-        img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
-        if img is None:
-            raise FormatError(f"{p}: cannot read the image")
-        return img
+            return f"{self.video}{VIDEO_FRAME_SEP}{int(self.frames[i])}"
+        return str(self.path(i))
+
+    def read(self, i: int) -> np.ndarray:
+        """Frame ``i`` as an 8-bit grey image (from its image file, or decoded from the video)."""
+        return read_image(self.source(i))
 
     def iter_images(self) -> Iterator[tuple[float, np.ndarray]]:
         """``(stamp_s, image)`` in order; a video is decoded sequentially, not seeked per frame."""
@@ -74,6 +69,72 @@ class FrameIndex:
                 n += 1
         finally:
             cap.release()
+
+
+class _VideoDecoder:
+    """One open video, decoded forward; a frame behind the position, or far ahead, is sought."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.cap = cv2.VideoCapture(path)
+        if not self.cap.isOpened():
+            raise FormatError(f"{path}: OpenCV cannot open this video")
+        self.next = 0
+
+    def frame(self, n: int) -> np.ndarray:
+        if n < self.next or n > self.next + 64:
+            self.cap.set(cv2.CAP_PROP_POS_FRAMES, n)
+            self.next = n
+        while self.next < n:
+            if not self.cap.grab():
+                raise FormatError(f"{self.path}: ends before frame {n}")
+            self.next += 1
+        ok, img = self.cap.read()
+        if not ok:
+            raise FormatError(f"{self.path}: cannot read frame {n}")
+        self.next += 1
+        return img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+
+
+_DECODERS: dict[str, _VideoDecoder] = {}
+
+
+def read_image(source: str | os.PathLike[str]) -> np.ndarray:
+    """An 8-bit grey image from an image file or from ``<video>#frame=<n>`` (:meth:`FrameIndex.source`).
+
+    Videos are decoded forward by one decoder per video and process (the stages read frames in time
+    order, so a sequence costs one decode of the video, not one seek per frame).
+    """
+    s = str(source)
+    if VIDEO_FRAME_SEP in s:
+        path, n = s.rsplit(VIDEO_FRAME_SEP, 1)
+        dec = _DECODERS.get(path)
+        if dec is None:
+            if len(_DECODERS) >= 8:  # one per camera is the usual need
+                _DECODERS.pop(next(iter(_DECODERS))).cap.release()
+            dec = _DECODERS[path] = _VideoDecoder(path)
+        return dec.frame(int(n))
+    img = cv2.imread(s, cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise FormatError(f"{s}: cannot read the image")
+    return img
+
+
+def video_frame_count(video: Path) -> int:
+    """Frames in ``video``: the container's count when it states one, else every frame grabbed
+    (FFV1 in Matroska states none; grabbing decodes, about as fast as reading the video once)."""
+    cap = cv2.VideoCapture(str(video))
+    try:
+        if not cap.isOpened():
+            raise FormatError(f"{video}: OpenCV cannot open this video")
+        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        if video.suffix.lower() == ".mkv" or n <= 0:
+            n = 0
+            while cap.grab():
+                n += 1
+        return n
+    finally:
+        cap.release()
 
 
 def write_frame_index(folder: str | os.PathLike[str], stamps_s: np.ndarray, files: list[str]) -> None:
@@ -126,4 +187,13 @@ def read_frame_index(folder: str | os.PathLike[str]) -> FrameIndex:
     video = videos[0] if videos and not any(files) else None
     if video is None and not all(files):
         raise FormatError(f"{p}: rows without a file name and no video.* beside it")
+    if video is not None:
+        n_video = video_frame_count(video)
+        if n_video != len(frames):
+            raise FormatError(f"{video}: {n_video} frames, but {p} stamps {len(frames)}")
+        fr = np.array(frames, dtype=int)
+        if np.any(fr != np.arange(len(fr))):
+            bad = int(np.argmax(fr != np.arange(len(fr))))
+            raise FormatError(f"{p}:{bad + 2}: frame {fr[bad]}, expected {bad} (a video's frames are numbered "
+                              "0, 1, 2, ...)")
     return FrameIndex(folder.name, folder, np.array(frames, dtype=int), st, tuple(files), video)

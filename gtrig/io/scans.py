@@ -151,15 +151,104 @@ def read_scans(
     return ScanLog(stamps, np.ascontiguousarray(ranges))
 
 
+_ZERO4 = np.frombuffer("".join(f"{i:04d}" for i in range(10000)).encode(), np.uint8).reshape(10000, 4)
+_SPACE4 = np.frombuffer("".join(f"{i:4d}" for i in range(10000)).encode(), np.uint8).reshape(10000, 4)
+
+
+def fixed_decimal_text(a: np.ndarray, decimals: int) -> np.ndarray:
+    """(N, M) numbers as a (N, M, W) byte array: each right-aligned ``%.{decimals}f`` text, padded
+    with spaces on the left; the characters Python's ``%`` formatting gives, built by integer
+    arithmetic and 4-digit table look-ups over the whole array. Numbers that way cannot do exactly
+    (ties of the rounding, beyond 1e15) are formatted by Python; ``nan`` and ``inf`` are filled in."""
+    a = np.asarray(a, dtype=float)
+    mag = np.abs(a) * (10.0 ** decimals)
+    finite = mag < 1e15  # False for nan and inf too
+    mag[~finite] = 0.0
+    # round half up (the halves themselves are done by Python below); int32 arithmetic where it fits is
+    # about twice as fast as int64's
+    k = (mag + 0.5).astype(np.int32 if (mag.max() if mag.size else 0.0) < 2.0e9 else np.int64)
+    # the scaled float rounds differently from % (the exact binary value) only next to a tie
+    special = (np.isfinite(a) & ~finite) | (np.abs(mag - k) > 0.5 - 1e-6)
+    unit = 10 ** decimals
+    if k.dtype == np.int32 and decimals > 8:  # the decimals' 4-digit groups would overflow int32
+        k = k.astype(np.int64)
+    ip = k // unit
+    fp = k - ip * unit
+    top = int(ip.max()) if ip.size else 0
+    n_int = 4 * max(1, -(-len(str(top)) // 4))  # integer digits in whole groups of 4
+    n_dec = 4 * (-(-decimals // 4))
+    extra = [f"%.{decimals}f" % float(v) for v in a[special]]
+    body = 1 + n_int + (1 + decimals if decimals > 0 else 0)  # sign, integer, point, decimals
+    width = max([body, 4] + [len(e) for e in extra])
+    out = np.full(a.shape + (width,), ord(" "), dtype=np.uint8)
+    c0 = width - body + 1  # first integer column
+    # decimals: groups of 4 from the point (the last group padded with zeros to the right, then cut)
+    if decimals:
+        f = fp * 10 ** (n_dec - decimals)
+        dec = np.empty(a.shape + (n_dec,), np.uint8)
+        for g in range(n_dec // 4):
+            div = 10 ** (n_dec - 4 * (g + 1))
+            q = f // div
+            dec[..., 4 * g:4 * g + 4] = np.take(_ZERO4, q, axis=0)  # take: 10x faster than [q] here
+            f = f - q * div
+        out[..., c0 + n_int] = ord(".")
+        out[..., c0 + n_int + 1:] = dec[..., :decimals]
+    # integer part: the leading group space-padded, the others zero-padded where a leading one is
+    groups = []
+    rest = ip
+    for _ in range(n_int // 4):
+        q = rest // 10000
+        groups.append(rest - q * 10000)
+        rest = q
+    groups.reverse()  # most significant first
+    if len(groups) == 1:  # the usual case (below 10000): one look-up
+        out[..., c0:c0 + 4] = np.take(_SPACE4, groups[0], axis=0)
+        groups = []
+    higher = np.zeros(a.shape, bool)
+    for g, v in enumerate(groups):
+        last = g == len(groups) - 1
+        cols = slice(c0 + 4 * g, c0 + 4 * g + 4)
+        txt = np.where(higher[..., None], np.take(_ZERO4, v, axis=0), np.take(_SPACE4, v, axis=0))
+        if not last:  # a group of zeros with nothing before it is blank
+            txt[~higher & (v == 0)] = ord(" ")
+        out[..., cols] = txt
+        higher |= v > 0
+    neg = np.signbit(a) & finite
+    if np.any(neg):
+        # the sign goes left of the first digit: count the leading spaces of the integer columns
+        r, c = np.nonzero(neg)
+        blanks = np.sum(np.cumprod(out[r, c, c0:c0 + n_int] == ord(" "), axis=1), axis=1)
+        out[r, c, c0 - 1 + blanks] = ord("-")
+    for word, mask in ((b"nan", np.isnan(a)), (b"inf", np.isposinf(a)), (b"-inf", np.isneginf(a))):
+        if np.any(mask):
+            out[mask] = np.frombuffer(word.rjust(width), np.uint8)
+    if extra:
+        texts = np.frombuffer("".join(e.rjust(width) for e in extra).encode(), np.uint8).reshape(-1, width)
+        out[special] = texts  # row-major order, as a[special] listed them
+    return out
+
+
 def write_scans(path: str | os.PathLike[str], log: ScanLog, range_decimals: int = 4) -> None:
     """Write a scan CSV atomically: stamps with 9 decimals, ranges with ``range_decimals``
-    (default 0.1 mm, below the devices' 1 mm resolution), ``nan`` for no return."""
+    (default 0.1 mm, below the devices' 1 mm resolution), ``nan`` for no return.
+
+    The text is that of ``"%.9f" + ",%.4f" * B`` per row, built for the whole log at once
+    (:func:`fixed_decimal_text`): about 1 M ranges/s.
+    """
     B = log.beams
-    fmt = "%.9f" + f",%.{int(range_decimals)}f" * B
     header = "timestamp," + ",".join(f"r_{i}" for i in range(B))
-    data = np.column_stack([log.stamps_s, log.ranges_m]).tolist()
-    with atomic_open(path, "w", encoding="utf-8", newline="\n") as f:
-        f.write(header + "\n")
-        f.write("\n".join(fmt % tuple(row) for row in data))
-        if data:
-            f.write("\n")
+    n = len(log)
+    if n:
+        parts = [fixed_decimal_text(log.stamps_s[:, None], 9), fixed_decimal_text(log.ranges_m, int(range_decimals))]
+        w = max(p.shape[2] for p in parts)
+        grid = np.full((n, B + 1, w + 1), ord(" "), np.uint8)
+        grid[:, :1, w - parts[0].shape[2]:w] = parts[0]
+        grid[:, 1:, w - parts[1].shape[2]:w] = parts[1]
+        # fixed-width cells, each followed by a comma (a newline after the last), then the padding dropped
+        grid[:, :, w] = ord(",")
+        grid[:, -1, w] = ord("\n")
+        body = grid.tobytes().translate(None, b" ")
+    with atomic_open(path, "wb") as f:
+        f.write((header + "\n").encode())
+        if n:
+            f.write(body)

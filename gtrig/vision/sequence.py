@@ -44,7 +44,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig.errors import FormatError, InputError
-from gtrig.io.frames import FrameIndex, read_frame_index
+from gtrig.io.frames import FrameIndex, read_frame_index, read_image
 from gtrig.io.tum import Trajectory
 from gtrig.kinematics import pose_velocities  # moved to the core; re-exported for its callers
 from gtrig.parallel import process_pool
@@ -233,17 +233,13 @@ def _worker_init(rig_doc: dict[str, Any], detector: str, options: VisionOptions,
 
 
 def _process_chunk(chunk_id: int, instants: Sequence[Instant]) -> tuple[int, list[dict[str, Any]]]:
-    import cv2
 
     model: VisionModel = _W["model"]
     out = []
     for ins in instants:
         views: list[MarkerView] = []
         for cam, i in ins.images:
-            path = _W["paths"][cam][i]
-            img = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
-            if img is None:
-                raise FormatError(f"{path}: cannot read the image")
+            img = read_image(_W["paths"][cam][i])  # an image file or a video's frame
             views.extend(replace(v, frame=i) for v in _W["detect"](img, model.cameras[cam]))
         obs = FrameObservations(ins.stamp_s, tuple(views), tuple(sorted({c for c, _ in ins.images})),
                                 tuple(ins.images))
@@ -521,9 +517,7 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     indices = camera_indices(rec, sequence, rig)
     intervals = read_static_intervals(rec / "validation" / "poses.csv") if sequence == "validation" else None
     instants = make_instants(indices, sequence, sync_tol_s, intervals)
-    paths = {name: [str(ix.path(i)) for i in range(len(ix))] for name, ix in indices.items()}
-    if any(ix.video is not None for ix in indices.values()):
-        raise InputError("GTvision reads image files; extract the frames of video.* first")
+    paths = {name: [ix.source(i) for i in range(len(ix))] for name, ix in indices.items()}
     chunks = [instants[i:i + chunk_size] for i in range(0, len(instants), chunk_size)]
     # a new version of the detector's code makes other detections: not the checkpoint's
     key = _key(rig, sequence, f"{det.name}/{det.version}", instants, paths, rec)
