@@ -1,0 +1,194 @@
+"""Scores that know the ground truth is not the truth: every gtrig pose has a covariance, so use it.
+
+"The uncertainty of every pose is rarely computed for trajectory evaluation" (Vaidis et al., 2023). With
+``g_i ~ N(0, C_i)`` the GT's own error (gtrig.trajectory's convention: world-frame perturbation) and
+``e_i = est_i - gt_i`` the observed error (world frame, after any alignment), ``e_i = e*_i - g_i`` where
+``e*_i = est_i - truth_i`` is what a user wants. Then, assuming GT errors independent between poses:
+
+- per pose, ``d2_i = e_i^T C_i^-1 e_i``: for an estimate as good as the truth, ``d2_i ~ chi2(k)``, so the
+  *share resolved* (``d2_i <= chi2_k(0.95)``) is 95 %: this share is "how often the GT cannot tell the
+  estimate from the truth";
+- the mean error per axis ``mean(e)`` estimates ``mean(e*)`` without bias, with variance
+  ``sum_i C_i / n^2``: its 95 % interval (normal) says whether a bias is resolvable;
+- the mean squared error: ``E|e_i|^2 = |e*_i|^2 + tr C_i``, so ``MSE* = mean|e|^2 - mean tr C`` with
+  variance ``(1/n^2) sum_i (4 e*_i^T C_i e*_i + 2 tr C_i^2)`` (Gaussian moments; ``e*`` replaced by its
+  unbiased plug-in): an interval for the RMSE against the *truth*, the GT's uncertainty included; when
+  its lower end is 0, the estimate is as good as the GT can tell.
+
+A lever arm (the estimate's body frame offset from the GT's robot frame by ``L`` in the body) shows as an
+error ``R(theta_i) L + c`` turning with the heading: :func:`lever_arm` fits it and says when it is resolved.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+from scipy.spatial.transform import Rotation
+
+from gtrig.trajectory import PoseTrack
+
+Z95 = float(stats.norm.ppf(0.975))
+
+
+def world_errors(gt: PoseTrack, est: PoseTrack) -> np.ndarray:
+    """(n, k) ``est - gt`` in the axes of ``gt.cov_kind``: ``(x, y, z, rx, ry, rz)`` with the rotation error
+    ``log(R_est R_gt^T)`` (world frame), ``(x, y, yaw)`` with the yaw difference wrapped, or ``(x, y, z)``."""
+    dt = est.xyz - gt.xyz
+    if gt.cov_kind == "xyz":
+        return dt
+    if gt.cov_kind == "xyyaw":
+        dyaw = (est.yaw_rad() - gt.yaw_rad() + np.pi) % (2 * np.pi) - np.pi
+        return np.column_stack([dt[:, :2], dyaw])
+    dphi = (Rotation.from_quat(est.quat_xyzw) * Rotation.from_quat(gt.quat_xyzw).inv()).as_rotvec()
+    return np.column_stack([dt, dphi])
+
+
+def _blocks(kind: str) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """(translation axes, rotation axes) of a covariance kind."""
+    return {"se3": ((0, 1, 2), (3, 4, 5)), "xyyaw": ((0, 1), (2,)), "xyz": ((0, 1, 2), ())}[kind]
+
+
+@dataclass(frozen=True)
+class Interval:
+    """A point estimate and its 95 % interval."""
+
+    value: float
+    low: float
+    high: float
+
+    def contains(self, x: float) -> bool:
+        return self.low <= x <= self.high
+
+
+@dataclass(frozen=True)
+class GTAwareScores:
+    """The GT-aware scores of one estimate (module docstring).
+
+    Attributes
+    ----------
+    axes : names of the error components (``x, y, yaw`` or ``x, y, z, rx, ry, rz`` or ``x, y, z``).
+    n : poses scored (those with a finite, positive-definite GT covariance).
+    d2 : (n,) Mahalanobis distances squared of the errors under the GT covariance.
+    share_resolved : share of poses with ``d2 <= chi2_k(0.95)`` (95 % for a perfect estimate).
+    mean_d2_per_dof : ``mean(d2) / k`` (1 for a perfect estimate).
+    bias : per axis, the mean error and its interval.
+    rmse_trans_m, rmse_rot_rad : the RMSE against the truth (GT's uncertainty removed) and its interval
+        (``rmse_rot_rad`` None for a position-only GT).
+    gt_sigma_trans_m : ``sqrt(mean tr C_trans)``: the GT's own RMS position uncertainty.
+    indistinguishable : the RMSE intervals reach 0 and no bias interval excludes 0.
+    """
+
+    axes: tuple[str, ...]
+    n: int
+    d2: np.ndarray
+    share_resolved: float
+    mean_d2_per_dof: float
+    bias: dict[str, Interval]
+    rmse_trans_m: Interval
+    rmse_rot_rad: Interval | None
+    gt_sigma_trans_m: float
+    indistinguishable: bool
+
+
+def _rmse_interval(e: np.ndarray, C: np.ndarray) -> tuple[Interval, float]:
+    n = len(e)
+    trC = np.trace(C, axis1=1, axis2=2)
+    msq = float(np.mean(np.sum(e * e, axis=1)) - np.mean(trC))
+    eCe = np.einsum("ni,nij,nj->n", e, C, e)
+    trC2 = np.einsum("nij,nji->n", C, C)
+    var = float(np.sum(np.maximum(4 * (eCe - trC2) + 2 * trC2, 2 * trC2))) / n**2
+    sd = np.sqrt(var)
+    lo, hi = msq - Z95 * sd, msq + Z95 * sd
+    return Interval(float(np.sqrt(max(msq, 0.0))), float(np.sqrt(max(lo, 0.0))), float(np.sqrt(max(hi, 0.0)))), \
+        float(np.sqrt(np.mean(trC)))
+
+
+def score(gt: PoseTrack, est: PoseTrack) -> GTAwareScores | None:
+    """GT-aware scores of ``est`` against ``gt`` (paired pose for pose, same world frame); None when the GT
+    carries no covariance."""
+    if gt.cov is None or gt.cov_kind not in ("se3", "xyyaw", "xyz"):
+        return None
+    from gtrig.trajectory import COV_AXES
+
+    e_all = world_errors(gt, est)
+    C_all = np.asarray(gt.cov, float)
+    finite = np.all(np.isfinite(C_all), axis=(1, 2)) & np.all(np.isfinite(e_all), axis=1)
+    if np.any(finite):
+        ev = np.linalg.eigvalsh(C_all[finite])
+        pd = np.zeros(len(C_all), bool)
+        pd[np.nonzero(finite)[0]] = ev[:, 0] > 0
+    else:
+        pd = finite
+    if not np.any(pd):
+        return None
+    e, C = e_all[pd], C_all[pd]
+    n, k = e.shape
+    d2 = np.einsum("ni,ni->n", e, np.linalg.solve(C, e[:, :, None])[:, :, 0])
+    axes = COV_AXES[gt.cov_kind]
+    bias = {}
+    for a, name in enumerate(axes):
+        m = float(np.mean(e[:, a]))
+        h = Z95 * float(np.sqrt(np.sum(C[:, a, a]))) / n
+        bias[name] = Interval(m, m - h, m + h)
+    it, ir = _blocks(gt.cov_kind)
+    it_, ir_ = np.array(it), np.array(ir)
+    rmse_t, sig_t = _rmse_interval(e[:, it_], C[:, it_[:, None], it_[None, :]])
+    rmse_r = _rmse_interval(e[:, ir_], C[:, ir_[:, None], ir_[None, :]])[0] if ir else None
+    indist = rmse_t.low == 0.0 and (rmse_r is None or rmse_r.low == 0.0) and all(
+        b.contains(0.0) for b in bias.values())
+    return GTAwareScores(axes, n, d2, float(np.mean(d2 <= stats.chi2.ppf(0.95, k))), float(np.mean(d2) / k),
+                         bias, rmse_t, rmse_r, sig_t, bool(indist))
+
+
+@dataclass(frozen=True)
+class LeverArm:
+    """A heading-correlated error fitted as a lever arm.
+
+    Attributes
+    ----------
+    xy_m : (2,) the offset of the estimate's body frame from the GT's robot frame, in the robot frame.
+    sigma_m : (2,) its standard deviations (residual autocorrelation accounted for).
+    explained : share of the error variance the lever arm explains.
+    resolved : True when ``|L|`` is over 5 of its sigmas and explains over 10 % of the variance, i.e. the
+        error turns with the heading: a missing lever arm (a warning for the user).
+    """
+
+    xy_m: np.ndarray
+    sigma_m: np.ndarray
+    explained: float
+    resolved: bool
+
+
+def lever_arm(gt: PoseTrack, est: PoseTrack) -> LeverArm | None:
+    """Fit ``e_xy,i = R(yaw_gt,i) L + c`` (least squares) to the planar position errors; None when the heading
+    does not vary enough (under 90 degrees of spread) to separate ``L`` from ``c``."""
+    yaw = gt.yaw_rad()
+    if len(yaw) < 10:
+        return None
+    # the spread of headings: the resultant length of unit heading vectors is 1 for a constant heading
+    if np.hypot(np.mean(np.cos(yaw)), np.mean(np.sin(yaw))) > 0.9:
+        return None
+    e = (est.xyz - gt.xyz)[:, :2]
+    c, s = np.cos(yaw), np.sin(yaw)
+    n = len(yaw)
+    A = np.zeros((2 * n, 4))
+    A[0::2, 0], A[0::2, 1], A[0::2, 2] = c, -s, 1.0
+    A[1::2, 0], A[1::2, 1], A[1::2, 3] = s, c, 1.0
+    b = e.reshape(-1)
+    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+    r = b - A @ sol
+    r0 = b - np.repeat(e.mean(axis=0)[None, :], n, axis=0).reshape(-1)
+    ss0 = float(r0 @ r0)
+    explained = 0.0 if ss0 == 0 else 1.0 - float(r @ r) / ss0
+    rx = r[0::2]
+    rho = float(np.corrcoef(rx[:-1], rx[1:])[0, 1]) if n > 3 and np.std(rx) > 0 else 0.0
+    rho = min(max(rho, 0.0), 0.99)
+    inflate = (1 + rho) / (1 - rho)  # AR(1) effective-sample-size correction
+    s2 = float(r @ r) / max(2 * n - 4, 1)
+    cov = s2 * inflate * np.linalg.inv(A.T @ A)
+    L = sol[:2]
+    sig = np.sqrt(np.diag(cov)[:2])
+    snr = float(np.linalg.norm(L) / max(np.linalg.norm(sig), 1e-300))
+    return LeverArm(L, sig, float(explained), bool(snr > 5 and explained > 0.1))
