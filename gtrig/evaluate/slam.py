@@ -97,7 +97,8 @@ class SlamEvaluation:
             for lab, iv, unit in (("RMSE trans vs truth", g.rmse_trans_m, "m"),
                                   ("RMSE rot vs truth", g.rmse_rot_rad, "rad")):
                 if iv is not None:
-                    out += [Row("gt-aware", lab, "value", iv.value, unit), Row("gt-aware", lab, "95% low", iv.low, unit),
+                    out += [Row("gt-aware", lab, "value", iv.value, unit),
+                            Row("gt-aware", lab, "95% low", iv.low, unit),
                             Row("gt-aware", lab, "95% high", iv.high, unit)]
             for ax, iv in g.bias.items():
                 unit = "m" if ax in ("x", "y", "z") else "rad"
