@@ -85,8 +85,11 @@ def _load(p: Path) -> np.ndarray:
     return np.loadtxt(p, delimiter=",")[:, :4]
 
 
-@pytest.mark.parametrize("solution, gt_name", [(s, "GROUNDTRUTH") for s in SOLUTIONS]
-                         + [(s, "GT-extended") for s in SOLUTIONS] + [("Bicocca_2009-02-25b-GT-extended", "GROUNDTRUTH")])
+CASES = [(s, g) for g in ("GROUNDTRUTH", "GT-extended") for s in SOLUTIONS] + [
+    ("Bicocca_2009-02-25b-GT-extended", "GROUNDTRUTH")]
+
+
+@pytest.mark.parametrize("solution, gt_name", CASES)
 def test_ate_rpe_equal_toolkit(solution: str, gt_name: str) -> None:
     X = _load(B25 / f"{solution}.csv")
     GT = _load(B25 / f"Bicocca_2009-02-25b-{gt_name}.csv")
