@@ -238,7 +238,7 @@ def compare(
     a: Path = typer.Option(..., "--a", help="First GT source (TUM + NAME_cov.csv, RAWSEEDS CSV, ...)."),
     b: Path = typer.Option(..., "--b", help="Second GT source, interpolated at the first one's stamps."),
     align: str = typer.Option("none", "--align", help="none (one world frame), se2, yaw, se3, sim3."),
-    max_gap: float = typer.Option(0.5, "--max-gap", help="Longest gap of b bridged by interpolation (s)."),
+    max_gap: float = typer.Option(0.2, "--max-gap", help="Longest gap of b bridged by interpolation (s)."),
     t_offset: float = typer.Option(0.0, "--t-offset", help="Seconds added to b's stamps."),
     fmt: str = typer.Option("table", "--format", help="table, csv or md."),
     format_in: str | None = typer.Option(None, "--format-in", help="FMT or A_FMT,B_FMT."),

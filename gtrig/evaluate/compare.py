@@ -71,7 +71,7 @@ def _planar(t: PoseTrack) -> PoseTrack:
     return replace(t, cov=c, cov_kind="xyyaw") if c is not None else replace(t, cov=None, cov_kind="xyyaw")
 
 
-def compare_sources(a: PoseTrack, b: PoseTrack, align: AlignKind = "none", max_gap_s: float = 0.5,
+def compare_sources(a: PoseTrack, b: PoseTrack, align: AlignKind = "none", max_gap_s: float = 0.2,
                     t_offset_s: float = 0.0) -> SourceComparison:
     """``b`` against ``a`` (module docstring); only the usable poses of each are compared."""
     a, b = a.usable(), b.usable()

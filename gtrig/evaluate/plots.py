@@ -78,11 +78,15 @@ def track_figure(track: PoseTrack, other: PoseTrack | None = None, label: str = 
     ax.plot(track.xyz[:, 0], track.xyz[:, 1], "b-", lw=0.8, label=label)
     C = track.cov_xytheta() if track.cov is not None else (track.cov if track.cov_kind == "xyz" else None)
     if C is not None and len(track):
+        # millimetre ellipses on a room-sized path: magnified by a power of ten to about 1 % of the extent
+        extent = float(np.ptp(track.xyz[:, :2], axis=0).max()) or 1.0
+        sig = float(np.nanmedian(np.sqrt(np.maximum(C[:, 0, 0] + C[:, 1, 1], 0)))) or 1e-12
+        mag = float(10 ** max(0, np.floor(np.log10(0.01 * extent / (n_sigma * sig)))))
         for i in np.arange(0, len(track), max(1, len(track) // max_ellipses)):
             if np.all(np.isfinite(C[i][:2, :2])):
-                e = ellipse_xy(track.xyz[i, :2], C[i][:2, :2], n_sigma)
+                e = ellipse_xy(track.xyz[i, :2], C[i][:2, :2] * mag**2, n_sigma)
                 ax.plot(e[:, 0], e[:, 1], "c-", lw=0.5)
-        ax.plot([], [], "c-", lw=0.5, label=f"{n_sigma:g} sigma")
+        ax.plot([], [], "c-", lw=0.5, label=f"{n_sigma:g} sigma" + (f" x{mag:g}" if mag > 1 else ""))
     for code, (name, col, mk) in _STATUS_STYLE.items():
         m = track.status == code
         if np.any(m):

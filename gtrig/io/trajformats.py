@@ -121,7 +121,7 @@ def read_trajectory(path: str | os.PathLike[str], fmt: str | None = None,
         if cov_path.is_file():
             from gtrig.io.posetrack import read_pose_track
 
-            log.info("%s: covariances from %s", p, cov_path.name)
+            log.debug("%s: covariances from %s", p, cov_path.name)
             return read_pose_track(p, cov_path, source=p.stem)
         return PoseTrack(a[:, 0], a[:, 1:4], q, source=p.stem)
     if f == "kitti":
