@@ -47,4 +47,8 @@ def command(
         console.print(acc)
     for name, why in result.skipped.items():
         console.print(f"[yellow]skipped[/yellow] {name}: {why}")
-    console.print(f"demo finished in {time.perf_counter() - t0:.0f} s; outputs in {out}")
+    from gtrig.report import write_report
+
+    with console.status("writing the report"):
+        report = write_report(out / "results", out / "report.html", rec / "truth")
+    console.print(f"demo finished in {time.perf_counter() - t0:.0f} s; outputs in {out}; report: {report}")

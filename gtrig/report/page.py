@@ -129,7 +129,7 @@ def _tracks(inv: ResultsInventory) -> list[Section]:
     out = []
     summary = Section("tracks", "Pose tracks")
     rows = []
-    for name, (tum, cov) in inv.tracks.items():
+    for name, (tum, _cov) in inv.tracks.items():
         if name.startswith("truth"):
             continue
         try:
