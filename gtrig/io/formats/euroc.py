@@ -1,0 +1,72 @@
+"""EuRoC MAV ground truth: ``state_groundtruth_estimate0/data.csv``.
+
+Header ``#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [],
+q_RS_z [], v_RS_R_x [m s^-1], ..., b_w_RS_S_x [rad s^-1], ..., b_a_RS_S_x [m s^-2], ...``: integer
+nanosecond stamps, position, quaternion **w first**, velocity in the world frame, gyroscope and
+accelerometer biases (17 columns; the 8-column pose-only variant, as evo's, also reads).
+
+gtrig writes the velocity from central differences of the positions (``numpy.gradient`` over the
+stamps) and zero biases (a GT room measures none). Precision kept: stamps 1 ns (integers; read back
+as float seconds, 0.2 us at a 2009 epoch), positions 1e-9 m, quaternions 1e-12.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from gtrig.io.atomic import atomic_write_text
+from gtrig.io.formats._common import check_stamps, numeric_rows, read_lines, unit_quaternions
+from gtrig.trajectory import PoseTrack
+
+HEADER = ("#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], "
+          "v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1], b_w_RS_S_x [rad s^-1], "
+          "b_w_RS_S_y [rad s^-1], b_w_RS_S_z [rad s^-1], b_a_RS_S_x [m s^-2], b_a_RS_S_y [m s^-2], "
+          "b_a_RS_S_z [m s^-2]")
+
+
+def read_euroc(path: str | os.PathLike[str]) -> PoseTrack:
+    """A EuRoC ground-truth CSV as a pose track (no covariance)."""
+    p, lines = read_lines(path)
+    a, numbers = numeric_rows(p, lines, (8, 17), ",", "8 or 17 comma-separated values (EuRoC "
+                              "'#timestamp, p_RS_R_x, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z, ...')")
+    stamps = _stamps_s(p, lines, numbers)
+    check_stamps(p, stamps, numbers)
+    q = unit_quaternions(p, a[:, [5, 6, 7, 4]], numbers)
+    return PoseTrack(stamps, a[:, 1:4], q, source=p.parent.name if p.name == "data.csv" else p.stem)
+
+
+def _stamps_s(p: Path, lines: list[str], numbers: list[int]) -> np.ndarray:
+    # integer nanoseconds (1.4e18 is past float64's 2^53): seconds and the rest split as integers first
+    out = np.empty(len(numbers))
+    for k, n in enumerate(numbers):
+        cell = lines[n - 1].split(",", 1)[0].strip()
+        try:
+            ns = int(cell)
+        except ValueError:
+            ns = int(round(float(cell)))
+        out[k] = ns // 1_000_000_000 + (ns % 1_000_000_000) * 1e-9
+    return out
+
+
+def euroc_text(track: PoseTrack) -> str:
+    stamps_ns = np.rint(track.stamps_s * 1e9).astype(np.int64)
+    if len(track) > 1:
+        vel = np.gradient(track.xyz, track.stamps_s, axis=0)
+    else:
+        vel = np.zeros((len(track), 3))
+    q = track.quat_xyzw
+    out = [HEADER]
+    for i in range(len(track)):
+        x, y, z = track.xyz[i]
+        out.append(f"{stamps_ns[i]},{x:.9f},{y:.9f},{z:.9f},{q[i, 3]:.12f},{q[i, 0]:.12f},{q[i, 1]:.12f},"
+                   f"{q[i, 2]:.12f},{vel[i, 0]:.9f},{vel[i, 1]:.9f},{vel[i, 2]:.9f},0,0,0,0,0,0")
+    return "\n".join(out) + "\n"
+
+
+def write_euroc(track: PoseTrack, path: str | os.PathLike[str]) -> list[Path]:
+    """Write the EuRoC layout to ``path`` (conventionally ``state_groundtruth_estimate0/data.csv``)."""
+    atomic_write_text(path, euroc_text(track))
+    return [Path(path)]
