@@ -155,7 +155,7 @@ def slam(
     rpe_delta: int = typer.Option(1, "--rpe-delta", help="evo RPE step in paired poses."),
     fmt: str = typer.Option("table", "--format", help="table, csv, md or json."),
     format_in: str | None = typer.Option(
-        None, "--format-in", help="Input format(s) when the extension does not say: FMT or GT_FMT,EST_FMT."
+        None, "--format-in", help="Input format(s) (tum, gtrig, kitti, euroc, rawseeds, csv): FMT or GT_FMT,EST_FMT."
     ),
     plot: Path | None = typer.Option(None, "--plot", help="Folder for the figures."),
 ) -> None:
@@ -163,7 +163,8 @@ def slam(
     from gtrig.errors import InputError
     from gtrig.evaluate import tables
     from gtrig.evaluate.slam import evaluate_slam
-    from gtrig.io.trajformats import read_relations, read_trajectory
+    from gtrig.io.formats import read_trajectory
+    from gtrig.io.relations import read_relations
 
     if fmt not in ("table", "csv", "md", "json"):
         raise InputError(f"--format must be table, csv, md or json, got {fmt!r}")
@@ -246,7 +247,7 @@ def compare(
     """Two GT sources of one run side by side on their common span (differences and covariance consistency)."""
     from gtrig.errors import InputError
     from gtrig.evaluate.compare import compare_sources
-    from gtrig.io.trajformats import read_trajectory
+    from gtrig.io.formats import read_trajectory
 
     if fmt not in ("table", "csv", "md"):
         raise InputError(f"--format must be table, csv or md, got {fmt!r}")

@@ -124,7 +124,7 @@ def _truth_for(inv: ResultsInventory, name: str) -> Path | None:
 def _tracks(inv: ResultsInventory) -> list[Section]:
     from gtrig.evaluate import plots
     from gtrig.evaluate.slam import evaluate_slam
-    from gtrig.io.trajformats import read_trajectory
+    from gtrig.io.formats import read_trajectory
 
     out = []
     summary = Section("tracks", "Pose tracks")
@@ -188,7 +188,7 @@ def _consistency(inv: ResultsInventory) -> Section | None:
     """Two GT sources of the run against each other (what stands in for truth on a real recording)."""
     from gtrig.evaluate.compare import compare_sources
     from gtrig.evaluate.plots import d2_figure, error_bounds_figure
-    from gtrig.io.trajformats import read_trajectory
+    from gtrig.io.formats import read_trajectory
 
     names = [n for n, (_, cov) in inv.tracks.items() if cov is not None and "validation" not in n]
     if len(names) < 2:

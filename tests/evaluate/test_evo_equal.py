@@ -10,7 +10,7 @@ import pytest
 
 from gtrig.evaluate.associate import associate_nearest
 from gtrig.evaluate.slam import evaluate_slam
-from gtrig.io.trajformats import read_trajectory
+from gtrig.io.formats import read_trajectory
 
 evo_sync = pytest.importorskip("evo.core.sync")
 evo_metrics = pytest.importorskip("evo.core.metrics")

@@ -10,7 +10,8 @@ import pytest
 from scipy.optimize import least_squares
 
 from gtrig.evaluate import metrics_rawseeds as mr
-from gtrig.io.trajformats import read_relations, read_trajectory
+from gtrig.io.formats import read_trajectory
+from gtrig.io.relations import read_relations
 
 DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "rawseeds"
 B25 = DATA / "Bicocca_2009-02-25b"

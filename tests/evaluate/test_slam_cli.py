@@ -42,13 +42,13 @@ def test_bad_inputs(tmp_path: Path) -> None:
     write_pose_track(_track(scale_t=1e9), ns)
     odd = tmp_path / "est.xyz"
     odd.write_text("0 0 0\n")
-    _fail(["evaluate", "slam", "--gt", str(gt), "--estimate", str(odd)], "unknown trajectory format")
+    _fail(["evaluate", "slam", "--gt", str(gt), "--estimate", str(odd)], "not a trajectory in any known format")
     _fail(["evaluate", "slam", "--gt", str(gt), "--estimate", str(late)], "no common time span")
     _fail(["evaluate", "slam", "--gt", str(gt), "--estimate", str(ns)], "time unit mismatch")
     rel = tmp_path / "r.relations"
     rel.write_text("5000 5001 0.1 0 0 0 0 0\n")
     _fail(["evaluate", "slam", "--gt", str(gt), "--estimate", str(gt), "--relations", str(rel)], "relations")
-    _fail(["evaluate", "slam", "--gt", str(gt), "--estimate", str(gt), "--format-in", "euroc"], "--format-in")
+    _fail(["evaluate", "slam", "--gt", str(gt), "--estimate", str(gt), "--format-in", "euroc"], "asked for")
     bad = tmp_path / "bad.tum"
     bad.write_text("0 1 2 3\n")
     _fail(["evaluate", "slam", "--gt", str(gt), "--estimate", str(bad)], "bad.tum:1")
