@@ -17,7 +17,7 @@ evo's ``offset_2``); :func:`gtrig.evaluate.time_offset.estimate_time_offset` est
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -36,7 +36,8 @@ class Association:
     Attributes
     ----------
     gt, est : the paired poses, same length M, row i of one paired with row i of the other. ``gt`` keeps
-        its covariance and status; ``est`` is stamped on the GT clock (offset applied).
+        its covariance and status. Both carry the pair's stamp on the GT clock: the GT's for interpolated
+        pairs, the shorter track's for nearest-stamp pairs (a pose of the longer one may serve twice).
     dt_s : (M,) ``t_est - t_gt`` of each pair after the offset (0 for interpolated pairs).
     method : ``"nearest"`` or ``"interpolate"``.
     max_dt_s : the nearest-stamp tolerance, or the longest estimate gap bridged by interpolation.
@@ -108,6 +109,13 @@ def nearest_indices(stamps_1: np.ndarray, stamps_2: np.ndarray, max_dt_s: float)
     return i1[keep], i2[keep]
 
 
+def _take(track: PoseTrack, idx: np.ndarray, stamps_s: np.ndarray) -> PoseTrack:
+    """The poses ``idx`` of ``track`` (repeats allowed) stamped ``stamps_s``."""
+    return replace(track, stamps_s=stamps_s, xyz=track.xyz[idx], quat_xyzw=track.quat_xyzw[idx],
+                   cov=None if track.cov is None else track.cov[idx], status=track.status[idx],
+                   reasons=tuple(track.reasons[i] for i in idx))
+
+
 def _gaps(stamps: np.ndarray, max_gap_s: float, t0: float, t1: float) -> np.ndarray:
     d = np.diff(stamps)
     k = np.nonzero(d > max_gap_s)[0]
@@ -156,7 +164,12 @@ def associate_nearest(gt: PoseTrack, est: PoseTrack, max_dt_s: float = 0.01,
     if i_gt.size == 0:
         raise InputError(f"no pose pairs within --max-dt {max_dt_s:g} s (t_offset {t_offset_s:g} s); "
                          "raise --max-dt, set --t-offset, or use --associate interpolate")
-    g, e = gt.select(i_gt), est_on_gt.select(i_est)
+    # one pose of the longer track may serve two pairs, so both paired tracks carry the shorter one's stamps
+    # (strictly increasing); dt_s keeps the true stamp differences
+    short_stamps = gt.stamps_s[i_gt] if len(est) > len(gt) else est_on_gt.stamps_s[i_est]
+    dt = est_on_gt.stamps_s[i_est] - gt.stamps_s[i_gt]
+    g = _take(gt, i_gt, short_stamps)
+    e = _take(est_on_gt, i_est, short_stamps)
     lo, hi = max(gt.stamps_s[0], est_on_gt.stamps_s[0]), min(gt.stamps_s[-1], est_on_gt.stamps_s[-1])
     # a dropout of the estimate: an interval over three of its typical ones (and over the tolerance)
     med = float(np.median(np.diff(est_on_gt.stamps_s))) if len(est) > 1 else 0.0
@@ -166,7 +179,7 @@ def associate_nearest(gt: PoseTrack, est: PoseTrack, max_dt_s: float = 0.01,
     n_outside = int(np.sum(~in_span))
     # a denser GT has poses no estimate pose asks for, by design; a sparser one has poses without partner
     n_in_gaps = int(np.sum(in_span)) - int(np.unique(i_gt).size) if len(est) > len(gt) else 0
-    return Association(g, e, e.stamps_s - g.stamps_s, "nearest", float(max_dt_s), float(t_offset_s),
+    return Association(g, e, dt, "nearest", float(max_dt_s), float(t_offset_s),
                        len(gt), len(est), n_outside, n_in_gaps, gaps, len(est) - int(np.unique(i_est).size))
 
 
