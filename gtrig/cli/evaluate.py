@@ -4,11 +4,16 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import typer
 
 from gtrig.cli.common import console, handle_errors
+from gtrig.io.survey_csv import PoseTable
+
+if TYPE_CHECKING:
+    from gtrig.evaluate.slam import SlamEvaluation
 
 app = typer.Typer(help="Evaluate estimates against references.", no_args_is_help=True)
 
@@ -17,12 +22,13 @@ def _cols(s: str | None) -> tuple[str, ...] | None:
     return None if s is None else tuple(c.strip() for c in s.split(","))
 
 
-def _pair_tum_by_stamp(reference: Path, estimate: Path, ref_t, est_t, max_dt: float):  # type: ignore[no-untyped-def]
+def _pair_tum_by_stamp(reference: Path, estimate: Path, ref_t: PoseTable, est_t: PoseTable, max_dt: float
+                       ) -> tuple[PoseTable, PoseTable]:
     """TUM poses are named by their stamps, never by their rows: a TUM input with non-integer stamps is paired
     with the other input by nearest stamp (within ``max_dt``), and both tables renamed by the stamp."""
     from gtrig.errors import InputError
     from gtrig.evaluate.associate import nearest_indices
-    from gtrig.io.survey_csv import PoseTable, _looks_like_tum
+    from gtrig.io.survey_csv import _looks_like_tum
     from gtrig.io.tum import read_tum
 
     tums = [_looks_like_tum(p) for p in (reference, estimate)]
@@ -34,6 +40,7 @@ def _pair_tum_by_stamp(reference: Path, estimate: Path, ref_t, est_t, max_dt: fl
         raise InputError("a TUM file with non-integer stamps cannot be paired with named poses: give two TUM files "
                          "(paired by stamp) or poses named alike")
     sr, se = stamps
+    assert sr is not None and se is not None
     i_r, i_e = nearest_indices(sr, se, max_dt)
     if i_r.size == 0:
         raise InputError(f"no pair of TUM stamps within --max-dt {max_dt:g} s")
@@ -194,7 +201,7 @@ def slam(
             console.print(f"wrote {p}")
 
 
-def _print_tables(ev) -> None:  # type: ignore[no-untyped-def]
+def _print_tables(ev: SlamEvaluation) -> None:
     from rich.table import Table
 
     from gtrig.evaluate import tables

@@ -25,6 +25,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig.errors import InputError
+from gtrig.evaluate import quat
 from gtrig.trajectory import PLANAR_INDEX, PoseTrack
 
 AlignKind = Literal["none", "se3", "sim3", "yaw", "se2", "sim2"]
@@ -118,8 +119,8 @@ def apply_alignment(track: PoseTrack, a: Alignment) -> PoseTrack:
     if a.kind == "none":
         return track
     xyz = a.scale * track.xyz @ a.R.T + a.t
-    rot = Rotation.from_matrix(a.R) * Rotation.from_quat(track.quat_xyzw)
-    q = rot.as_quat()
+    q = quat.mul(Rotation.from_matrix(a.R).as_quat()[None, :], track.quat_xyzw)
+    q /= np.linalg.norm(q, axis=1)[:, None]
     q[q[:, 3] < 0] *= -1
     cov = None
     if track.cov is not None:

@@ -109,11 +109,17 @@ def nearest_indices(stamps_1: np.ndarray, stamps_2: np.ndarray, max_dt_s: float)
     return i1[keep], i2[keep]
 
 
+def _n_distinct(idx: np.ndarray, n: int) -> int:
+    m = np.zeros(n, bool)
+    m[idx] = True
+    return int(np.count_nonzero(m))
+
+
 def _take(track: PoseTrack, idx: np.ndarray, stamps_s: np.ndarray) -> PoseTrack:
     """The poses ``idx`` of ``track`` (repeats allowed) stamped ``stamps_s``."""
+    reasons = tuple(track.reasons[i] for i in idx) if any(track.reasons) else ("",) * len(idx)
     return replace(track, stamps_s=stamps_s, xyz=track.xyz[idx], quat_xyzw=track.quat_xyzw[idx],
-                   cov=None if track.cov is None else track.cov[idx], status=track.status[idx],
-                   reasons=tuple(track.reasons[i] for i in idx))
+                   cov=None if track.cov is None else track.cov[idx], status=track.status[idx], reasons=reasons)
 
 
 def _gaps(stamps: np.ndarray, max_gap_s: float, t0: float, t1: float) -> np.ndarray:
@@ -178,9 +184,9 @@ def associate_nearest(gt: PoseTrack, est: PoseTrack, max_dt_s: float = 0.01,
     in_span = (gt.stamps_s >= es[0] - max_dt_s) & (gt.stamps_s <= es[-1] + max_dt_s)
     n_outside = int(np.sum(~in_span))
     # a denser GT has poses no estimate pose asks for, by design; a sparser one has poses without partner
-    n_in_gaps = int(np.sum(in_span)) - int(np.unique(i_gt).size) if len(est) > len(gt) else 0
+    n_in_gaps = int(np.sum(in_span)) - _n_distinct(i_gt, len(gt)) if len(est) > len(gt) else 0
     return Association(g, e, dt, "nearest", float(max_dt_s), float(t_offset_s),
-                       len(gt), len(est), n_outside, n_in_gaps, gaps, len(est) - int(np.unique(i_est).size))
+                       len(gt), len(est), n_outside, n_in_gaps, gaps, len(est) - _n_distinct(i_est, len(est)))
 
 
 def interpolate_track(track: PoseTrack, stamps_s: np.ndarray) -> PoseTrack:

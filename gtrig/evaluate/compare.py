@@ -14,7 +14,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
-from scipy.spatial.transform import Rotation
 
 from gtrig.evaluate import metrics_evo
 from gtrig.evaluate.align import AlignKind, Alignment, apply_alignment, fit_alignment
@@ -91,7 +90,6 @@ def compare_sources(a: PoseTrack, b: PoseTrack, align: AlignKind = "none", max_g
         if np.any(ok):
             d2 = np.einsum("ni,ni->n", e[ok], np.linalg.solve(C[ok], e[ok][:, :, None])[:, :, 0])
             share = float(np.mean(d2 <= stats.chi2.ppf(0.95, len(axes))))
-    Ra = Rotation.from_quat(assoc.gt.quat_xyzw).as_matrix()
-    Rb = Rotation.from_quat(bb.quat_xyzw).as_matrix()
+    Ra, Rb = assoc.gt.quat_xyzw, bb.quat_xyzw
     ape = metrics_evo.ape(assoc.gt.stamps_s, Ra, assoc.gt.xyz, Rb, bb.xyz)
     return SourceComparison(assoc, al, axes, e, ape, d2, share)

@@ -36,8 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
-from scipy.spatial.transform import Rotation
 
+from gtrig.evaluate import quat
 from gtrig.trajectory import PoseTrack
 
 Z95 = float(stats.norm.ppf(0.975))
@@ -54,7 +54,7 @@ def world_errors(gt: PoseTrack, est: PoseTrack) -> np.ndarray:
     if gt.cov_kind == "xyyaw":
         dyaw = (est.yaw_rad() - gt.yaw_rad() + np.pi) % (2 * np.pi) - np.pi
         return np.column_stack([dt[:, :2], dyaw])
-    dphi = (Rotation.from_quat(est.quat_xyzw) * Rotation.from_quat(gt.quat_xyzw).inv()).as_rotvec()
+    dphi = quat.rotvec(quat.mul(est.quat_xyzw, quat.conj(gt.quat_xyzw)))
     return np.column_stack([dt, dphi])
 
 
@@ -201,22 +201,24 @@ def lever_arm(gt: PoseTrack, est: PoseTrack) -> LeverArm | None:
     e = (est.xyz - gt.xyz)[:, :2]
     c, s = np.cos(yaw), np.sin(yaw)
     n = len(yaw)
-    A = np.zeros((2 * n, 4))
-    A[0::2, 0], A[0::2, 1], A[0::2, 2] = c, -s, 1.0
-    A[1::2, 0], A[1::2, 1], A[1::2, 3] = s, c, 1.0
-    b = e.reshape(-1)
-    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
-    r = b - A @ sol
-    r0 = b - np.repeat(e.mean(axis=0)[None, :], n, axis=0).reshape(-1)
-    ss0 = float(r0 @ r0)
-    explained = 0.0 if ss0 == 0 else 1.0 - float(r @ r) / ss0
-    rx = r[0::2]
+    # e_x = c Lx - s Ly + cx, e_y = s Lx + c Ly + cy: the 4 x 4 normal equations, built without the 2n x 4 matrix
+    sc, ss = float(np.sum(c)), float(np.sum(s))
+    AtA = np.array([[n, 0.0, sc, ss], [0.0, n, -ss, sc], [sc, -ss, n, 0.0], [ss, sc, 0.0, n]])
+    Atb = np.array([np.sum(c * e[:, 0] + s * e[:, 1]), np.sum(-s * e[:, 0] + c * e[:, 1]), np.sum(e[:, 0]),
+                    np.sum(e[:, 1])])
+    sol = np.linalg.solve(AtA, Atb)
+    pred = np.column_stack([c * sol[0] - s * sol[1] + sol[2], s * sol[0] + c * sol[1] + sol[3]])
+    res = e - pred
+    ss_res = float(np.sum(res * res))
+    ss0 = float(np.sum((e - e.mean(axis=0)) ** 2))
+    explained = 0.0 if ss0 == 0 else 1.0 - ss_res / ss0
+    rx = res[:, 0]
     rho = float(np.corrcoef(rx[:-1], rx[1:])[0, 1]) if n > 3 and np.std(rx) > 0 else 0.0
     rho = min(max(rho, 0.0), 0.99)
     inflate = (1 + rho) / (1 - rho)  # AR(1) effective-sample-size correction
-    s2 = float(r @ r) / max(2 * n - 4, 1)
-    cov = s2 * inflate * np.linalg.inv(A.T @ A)
+    s2 = ss_res / max(2 * n - 4, 1)
+    cov = s2 * inflate * np.linalg.inv(AtA)
     L = sol[:2]
     sig = np.sqrt(np.diag(cov)[:2])
-    snr = float(np.linalg.norm(L) / max(np.linalg.norm(sig), 1e-300))
+    snr = float(np.linalg.norm(L)) / max(float(np.linalg.norm(sig)), 1e-300)
     return LeverArm(L, sig, float(explained), bool(snr > 5 and explained > 0.1))

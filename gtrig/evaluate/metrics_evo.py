@@ -12,7 +12,7 @@ RPE (relative pose error) over consecutive pairs ``(i, i + delta)`` of the paire
 ``trans`` = ``|trans(E_i)|``, ``rot`` = angle of ``E_i``, ``full`` = ``||E_i - I||_F``.
 
 Statistics as evo prints them: rmse, mean, median, std (population, ddof 0), min, max, sse.
-Throughput: ~10^6 poses per 0.3 s for APE and RPE together (one core).
+Throughput: APE and RPE (all three relations) of 10^6 pairs in ~0.5 s on one core.
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+from gtrig.evaluate import quat
 
 RELATIONS: tuple[str, ...] = ("trans", "rot", "full")
 STATS: tuple[str, ...] = ("rmse", "mean", "median", "std", "min", "max", "sse")
@@ -57,50 +58,45 @@ def error_stats(e: np.ndarray) -> dict[str, float]:
             "std": float(np.std(e)), "min": float(np.min(e)), "max": float(np.max(e)), "sse": sse}
 
 
-def _angle(R: np.ndarray) -> np.ndarray:
-    """(n,) rotation angles of (n, 3, 3) rotation matrices (the norm of the rotation vector, as evo)."""
-    return Rotation.from_matrix(R).magnitude()
+def _full(angle: np.ndarray, trans: np.ndarray) -> np.ndarray:
+    """``||[R t; 0 1] - I||_F`` from the rotation angle and ``|t|``: ``||R - I||_F^2 = 8 sin^2(angle / 2)``."""
+    return np.sqrt(8.0 * np.sin(0.5 * angle) ** 2 + trans * trans)
 
 
-def _full(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """``||[R t; 0 1] - I||_F`` for (n, 3, 3) R and (n, 3) t."""
-    d = R - np.eye(3)
-    return np.sqrt(np.einsum("nij,nij->n", d, d) + np.einsum("ni,ni->n", t, t))
-
-
-def ape(stamps_s: np.ndarray, R_gt: np.ndarray, t_gt: np.ndarray, R_est: np.ndarray, t_est: np.ndarray
+def ape(stamps_s: np.ndarray, q_gt: np.ndarray, t_gt: np.ndarray, q_est: np.ndarray, t_est: np.ndarray
         ) -> dict[str, ErrorSeries]:
-    """APE series ``trans``, ``rot``, ``full`` (module docstring) of paired poses ((n, 3, 3) and (n, 3))."""
-    dt = t_est - t_gt
-    RE = np.einsum("nji,njk->nik", R_est, R_gt)  # R_est^T R_gt
-    tE = np.einsum("nji,nj->ni", R_est, -dt)  # R_est^T (t_gt - t_est)
+    """APE series ``trans``, ``rot``, ``full`` (module docstring) of paired poses: (n, 4) ``quat_xyzw`` and
+    (n, 3) positions. Rotation angles from quaternions (as precise near 0 as evo's rotation vectors)."""
+    trans = np.linalg.norm(t_est - t_gt, axis=1)
+    angle = quat.angle(quat.mul(quat.conj(q_est), q_gt))
     s = np.asarray(stamps_s, float)
     return {
-        "trans": ErrorSeries("APE trans", "m", s, np.linalg.norm(dt, axis=1)),
-        "rot": ErrorSeries("APE rot", "rad", s, _angle(RE)),
-        "full": ErrorSeries("APE full", "", s, _full(RE, tE)),
+        "trans": ErrorSeries("APE trans", "m", s, trans),
+        "rot": ErrorSeries("APE rot", "rad", s, angle),
+        "full": ErrorSeries("APE full", "", s, _full(angle, trans)),
     }
 
 
-def _relative(R: np.ndarray, t: np.ndarray, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``T_i^-1 T_j`` for index arrays ``i``, ``j``."""
-    Rr = np.einsum("nji,njk->nik", R[i], R[j])
-    tr = np.einsum("nji,nj->ni", R[i], t[j] - t[i])
-    return Rr, tr
+def _relative(q: np.ndarray, t: np.ndarray, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``T_i^-1 T_j`` for index arrays ``i``, ``j``: quaternions and translations."""
+    qi = q[i]
+    return quat.mul(quat.conj(qi), q[j]), quat.rotate(qi, t[j] - t[i], inverse=True)
 
 
-def rpe(stamps_s: np.ndarray, R_gt: np.ndarray, t_gt: np.ndarray, R_est: np.ndarray, t_est: np.ndarray,
+def rpe(stamps_s: np.ndarray, q_gt: np.ndarray, t_gt: np.ndarray, q_est: np.ndarray, t_est: np.ndarray,
         delta: int = 1) -> dict[str, ErrorSeries]:
-    """RPE series over pairs ``(k delta, (k + 1) delta)`` (evo's consecutive pairs, delta in frames)."""
+    """RPE series over pairs ``(k delta, (k + 1) delta)`` (evo's consecutive pairs, delta in frames).
+
+    ``|trans(E)| = |t_P - t_Q|`` (a rotation keeps lengths), ``angle(E) = angle(R_Q^-1 R_P)``."""
     ids = np.arange(0, len(t_gt), max(int(delta), 1))
     i, j = ids[:-1], ids[1:]
-    Rq, tq = _relative(R_gt, t_gt, i, j)
-    Rp, tp = _relative(R_est, t_est, i, j)
-    RE = np.einsum("nji,njk->nik", Rq, Rp)
-    tE = np.einsum("nji,nj->ni", Rq, tp - tq)
+    Rq, tq = _relative(q_gt, t_gt, i, j)
+    Rp, tp = _relative(q_est, t_est, i, j)
+    trans = np.linalg.norm(tp - tq, axis=1)
+    angle = quat.angle(quat.mul(quat.conj(Rq), Rp))
     s = np.asarray(stamps_s, float)[j]
     return {
-        "trans": ErrorSeries("RPE trans", "m", s, np.linalg.norm(tE, axis=1)),
-        "rot": ErrorSeries("RPE rot", "rad", s, _angle(RE)),
-        "full": ErrorSeries("RPE full", "", s, _full(RE, tE)),
+        "trans": ErrorSeries("RPE trans", "m", s, trans),
+        "rot": ErrorSeries("RPE rot", "rad", s, angle),
+        "full": ErrorSeries("RPE full", "", s, _full(angle, trans)),
     }

@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gtrig.errors import InputError
-from gtrig.evaluate import gt_aware, metrics_evo, metrics_rawseeds
+from gtrig.evaluate import gt_aware as ga
+from gtrig.evaluate import metrics_evo, metrics_rawseeds
 from gtrig.evaluate.align import AlignKind, Alignment, apply_alignment, fit_alignment
 from gtrig.evaluate.associate import Association, AssociationMethod, associate
 from gtrig.evaluate.time_offset import TimeOffset, estimate_time_offset
@@ -48,8 +48,8 @@ class SlamEvaluation:
     rpe: dict[str, metrics_evo.ErrorSeries] | None
     rawseeds_ate: metrics_rawseeds.RawseedsATE | None
     rawseeds_rpe: metrics_rawseeds.RawseedsRPE | None
-    gt_aware: gt_aware.GTAwareScores | None
-    lever_arm: gt_aware.LeverArm | None
+    gt_aware: ga.GTAwareScores | None
+    lever_arm: ga.LeverArm | None
     time_offset: TimeOffset | None
     n_gt_unusable: int = 0
     warnings: tuple[str, ...] = field(default_factory=tuple)
@@ -115,12 +115,15 @@ class SlamEvaluation:
 
 
 def _usable(track: PoseTrack) -> tuple[PoseTrack, int]:
-    u = track.usable()
+    ok = track.ok
+    if bool(np.all(ok)):
+        return track, 0  # select() would copy 10^6 poses for nothing
+    u = track.select(ok)
     return u, len(track) - len(u)
 
 
 def _se3_arrays(t: PoseTrack) -> tuple[np.ndarray, np.ndarray]:
-    return Rotation.from_quat(t.quat_xyzw).as_matrix(), t.xyz
+    return t.quat_xyzw, t.xyz
 
 
 def evaluate_slam(gt: PoseTrack, est: PoseTrack, *, metrics: MetricSet = "all", align: AlignKind = "se3",
@@ -178,8 +181,8 @@ def evaluate_slam(gt: PoseTrack, est: PoseTrack, *, metrics: MetricSet = "all", 
         if relations is not None:
             check_relations(relations, g, e_on)
             r_rpe = metrics_rawseeds.rpe(e_on.stamps_s, e_on.xytheta(), relations)
-    scores = gt_aware.score(assoc.gt, ea)
-    lever = gt_aware.lever_arm(assoc.gt, ea)
+    scores = ga.score(assoc.gt, ea)
+    lever = ga.lever_arm(assoc.gt, ea)
     if lever is not None and lever.resolved:
         warnings.append(f"the error turns with the heading: a lever arm of ({lever.xy_m[0]:+.3f}, "
                         f"{lever.xy_m[1]:+.3f}) m (+-{lever.sigma_m[0]:.3f}, {lever.sigma_m[1]:.3f}) between the "
