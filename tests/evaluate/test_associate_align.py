@@ -83,3 +83,21 @@ def test_poses_pairs_tum_by_stamp_not_row(tmp_path: Path) -> None:
     mean = dict((r.split(",")[0], r.split(",")[1:]) for r in lines)["mean"]
     assert abs(float(mean[0]) + 0.01) < 1e-6  # reference - estimate = -1 cm in x, every pair
     assert f"{len(gt) - 1}/{len(gt)}" in res.stdout
+
+
+def test_align_interval_and_auto_offset_through_evaluate_slam() -> None:
+    from gtrig.evaluate.slam import evaluate_slam
+
+    gt = _path(np.arange(0, 40, 0.02))
+    t_est = np.arange(1, 39, 0.05)
+    e = _path(t_est + 0.08)
+    xyz = e.xyz + [2.0, 1.0, 0.0]
+    xyz[t_est > 20] += [0.05, 0, 0]  # a jump in the second half: fit on the first only
+    est = PoseTrack(t_est, xyz, e.quat_xyzw)
+    ev = evaluate_slam(gt, est, align="se3", align_interval_s=(0, 19.5), t_offset_s="auto", method="interpolate",
+                       metrics="evo")
+    assert ev.time_offset is not None and abs(ev.time_offset.offset_s - 0.08) < 0.01
+    err = ev.ape["trans"].values  # type: ignore[index]
+    first = ev.association.gt.stamps_s < 19.5
+    late = ev.association.gt.stamps_s > 21
+    assert np.median(err[first]) < 2e-3 and abs(np.median(err[late]) - 0.05) < 5e-3
