@@ -42,6 +42,10 @@ def command(
     with console.status("processing") as status:
         result = pipeline.run(rec, out / "results", on_stage=lambda name: status.update(f"processing: {name}"))
     print_result(result, True)
-    console.print(f"demo finished in {time.perf_counter() - t0:.0f} s; outputs in {out}")
+    from gtrig.report import write_report
+
+    with console.status("writing the report"):
+        report = write_report(out / "results", out / "report.html", rec / "truth")
+    console.print(f"demo finished in {time.perf_counter() - t0:.0f} s; outputs in {out}; report: {report}")
     if result.exit_code:
         raise typer.Exit(result.exit_code)

@@ -4,16 +4,50 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+import numpy as np
 import typer
 
 from gtrig.cli.common import console, handle_errors
+from gtrig.io.survey_csv import PoseTable
+
+if TYPE_CHECKING:
+    from gtrig.evaluate.slam import SlamEvaluation
 
 app = typer.Typer(help="Evaluate estimates against references.", no_args_is_help=True)
 
 
 def _cols(s: str | None) -> tuple[str, ...] | None:
     return None if s is None else tuple(c.strip() for c in s.split(","))
+
+
+def _pair_tum_by_stamp(reference: Path, estimate: Path, ref_t: PoseTable, est_t: PoseTable, max_dt: float
+                       ) -> tuple[PoseTable, PoseTable]:
+    """TUM poses are named by their stamps, never by their rows: a TUM input with non-integer stamps is paired
+    with the other input by nearest stamp (within ``max_dt``), and both tables renamed by the stamp."""
+    from gtrig.errors import InputError
+    from gtrig.evaluate.associate import nearest_indices
+    from gtrig.io.survey_csv import _looks_like_tum
+    from gtrig.io.tum import read_tum
+
+    tums = [_looks_like_tum(p) for p in (reference, estimate)]
+    stamps = [read_tum(p).stamps_s if t else None for p, t in zip((reference, estimate), tums, strict=True)]
+    integral = [s is not None and bool(np.all(np.abs(s - np.round(s)) < 1e-9)) for s in stamps]
+    if not any(tums) or all(t == i for t, i in zip(tums, integral, strict=True)):
+        return ref_t, est_t  # names (or integer stamps used as pose numbers) on both sides
+    if not all(tums):
+        raise InputError("a TUM file with non-integer stamps cannot be paired with named poses: give two TUM files "
+                         "(paired by stamp) or poses named alike")
+    sr, se = stamps
+    assert sr is not None and se is not None
+    i_r, i_e = nearest_indices(sr, se, max_dt)
+    if i_r.size == 0:
+        raise InputError(f"no pair of TUM stamps within --max-dt {max_dt:g} s")
+    names = tuple(f"{sr[i]:.6f}" for i in i_r)
+    return (PoseTable(names + tuple(f"{sr[i]:.6f}" for i in np.setdiff1d(np.arange(sr.size), i_r)),
+                      np.vstack([ref_t.xytheta[i_r], ref_t.xytheta[np.setdiff1d(np.arange(sr.size), i_r)]])),
+            PoseTable(names, est_t.xytheta[i_e]))
 
 
 @app.command("poses")
@@ -31,6 +65,7 @@ def poses(
     ),
     per_pose: bool = typer.Option(False, "--per-pose", help="Also print the per-pose errors."),
     plot: Path | None = typer.Option(None, "--plot", help="Figure: both trajectories, errors, ellipses."),
+    max_dt: float = typer.Option(0.01, "--max-dt", help="TUM inputs: largest stamp difference of a pair (s)."),
 ) -> None:
     """Per-pose errors (reference - estimate, angles wrapped) and per-axis statistics."""
     from gtrig.errors import InputError
@@ -39,10 +74,10 @@ def poses(
 
     if fmt not in ("table", "csv", "md"):
         raise InputError(f"--format must be table, csv or md, got {fmt!r}")
-    c = ev.compare_poses(
-        read_pose_table(reference, _cols(reference_columns)),
-        read_pose_table(estimate, _cols(estimate_columns), method),
-    )
+    ref_t = read_pose_table(reference, _cols(reference_columns))
+    est_t = read_pose_table(estimate, _cols(estimate_columns), method)
+    ref_t, est_t = _pair_tum_by_stamp(reference, estimate, ref_t, est_t, max_dt)
+    c = ev.compare_poses(ref_t, est_t)
     if fmt == "csv":
         typer.echo(ev.summary_csv(c), nl=False)
         if per_pose:
@@ -76,3 +111,170 @@ def poses(
         from gtrig.evaluate.plots import plot_comparison
 
         plot_comparison(c, plot, reference.name, estimate.name + (f" ({method})" if method else ""))
+
+
+def _formats_in(s: str | None) -> tuple[str | None, str | None]:
+    if s is None:
+        return None, None
+    parts = [p.strip() or None for p in s.split(",")]
+    return (parts[0], parts[0]) if len(parts) == 1 else (parts[0], parts[1])
+
+
+def _interval(s: str | None) -> tuple[float, float] | None:
+    from gtrig.errors import InputError
+
+    if s is None:
+        return None
+    try:
+        t0, t1 = (float(v) for v in s.split(","))
+    except ValueError:
+        raise InputError(f"--align-interval must be T0,T1 in seconds, got {s!r}") from None
+    if not t1 > t0:
+        raise InputError(f"--align-interval {s!r}: T1 must be after T0")
+    return t0, t1
+
+
+def _offset(s: str) -> float | str:
+    from gtrig.errors import InputError
+
+    if s == "auto":
+        return "auto"
+    try:
+        return float(s)
+    except ValueError:
+        raise InputError(f"--t-offset must be seconds or auto, got {s!r}") from None
+
+
+@app.command("slam")
+@handle_errors
+def slam(
+    gt: Path = typer.Option(..., "--gt", help="Ground truth: TUM (+ NAME_cov.csv), KITTI, EuRoC or RAWSEEDS CSV."),
+    estimate: Path = typer.Option(..., "--estimate", help="Estimated trajectory, same formats."),
+    relations: Path | None = typer.Option(None, "--relations", help="RAWSEEDS relations file (for its RPE)."),
+    metrics: str = typer.Option("all", "--metrics", help="rawseeds, evo or all."),
+    align: str = typer.Option("se3", "--align", help="none, se2, yaw, se3, sim3 (or sim2)."),
+    align_interval: str | None = typer.Option(None, "--align-interval", help="T0,T1: fit the alignment there."),
+    assoc: str = typer.Option("nearest", "--associate", help="nearest (evo's) or interpolate (SE(3))."),
+    max_dt: float | None = typer.Option(
+        None, "--max-dt", help="nearest: largest stamp difference (0.01 s); interpolate: longest gap (0.2 s)."
+    ),
+    t_offset: str = typer.Option("0", "--t-offset", help="Seconds added to the estimate's stamps, or auto."),
+    rpe_delta: int = typer.Option(1, "--rpe-delta", help="evo RPE step in paired poses."),
+    fmt: str = typer.Option("table", "--format", help="table, csv, md or json."),
+    format_in: str | None = typer.Option(
+        None, "--format-in", help="Input format(s) (tum, gtrig, kitti, euroc, rawseeds, csv): FMT or GT_FMT,EST_FMT."
+    ),
+    plot: Path | None = typer.Option(None, "--plot", help="Folder for the figures."),
+) -> None:
+    """Score a SLAM result against a GT: evo's APE/RPE, RAWSEEDS' ATE/RPE and the GT-aware scores."""
+    from gtrig.errors import InputError
+    from gtrig.evaluate import tables
+    from gtrig.evaluate.slam import evaluate_slam
+    from gtrig.io.formats import read_trajectory
+    from gtrig.io.relations import read_relations
+
+    if fmt not in ("table", "csv", "md", "json"):
+        raise InputError(f"--format must be table, csv, md or json, got {fmt!r}")
+    f_gt, f_est = _formats_in(format_in)
+    g = read_trajectory(gt, f_gt)
+    e = read_trajectory(estimate, f_est)
+    rel = read_relations(relations) if relations is not None else None
+    ev = evaluate_slam(g, e, metrics=metrics, align=align, align_interval_s=_interval(align_interval),  # type: ignore[arg-type]
+                       method=assoc, max_dt_s=max_dt, t_offset_s=_offset(t_offset), relations=rel,  # type: ignore[arg-type]
+                       rpe_delta=rpe_delta)
+    if fmt == "csv":
+        typer.echo(tables.rows_csv(ev.rows()), nl=False)
+    elif fmt == "json":
+        typer.echo(tables.rows_json(ev), nl=False)
+    elif fmt == "md":
+        typer.echo(tables.rows_markdown(ev), nl=False)
+    else:
+        _print_tables(ev)
+    for w in ev.warnings:
+        from gtrig.cli.common import err_console
+
+        err_console.print(f"[yellow]warning:[/yellow] {w}", highlight=False)
+    if plot is not None:
+        from gtrig.evaluate.plots import plot_slam
+
+        for p in plot_slam(ev, plot, gt.stem, estimate.stem):
+            console.print(f"wrote {p}")
+
+
+def _print_tables(ev: SlamEvaluation) -> None:
+    from rich.table import Table
+
+    from gtrig.evaluate import tables
+
+    a = ev.association.summary()
+    console.print(
+        f"paired {a['matched']} poses ({a['method']}, max dt {a['max_dt_s']:g} s, t_offset {a['t_offset_s']:.6g} s)"
+        f" of {a['gt_poses']} GT / {a['est_poses']} estimated; GT skipped: {a['gt_skipped_outside']} outside the "
+        f"estimate, {a['gt_skipped_in_gaps']} in {a['gaps']} gaps ({a['gap_time_s']:.2f} s); alignment "
+        f"{ev.alignment.kind}, scale {ev.alignment.scale:.6f}"
+        + (f"; {ev.n_gt_unusable} GT poses rejected or bridged, not scored" if ev.n_gt_unusable else ""),
+        highlight=False,
+    )
+    if ev.time_offset is not None:
+        to = ev.time_offset
+        console.print(f"time offset {to.offset_s:+.4f} s (95 % {to.low_s:+.4f} .. {to.high_s:+.4f})")
+    m = tables.evo_matrix(ev)
+    if m:
+        t = Table("evo", "rmse", "mean", "median", "std", "min", "max", title="evo's APE / RPE")
+        for r in m:
+            t.add_row(*r)
+        console.print(t)
+    for fam, title in (("rawseeds", "RAWSEEDS toolkit (get_ATE.m / get_RPE.m)"),
+                       ("gt-aware", "GT-aware (the GT's covariance in the scores)")):
+        rows = [r for r in ev.rows() if r.family == fam]
+        if rows:
+            t = Table("metric", "statistic", "value", "unit", title=title)
+            for r in rows:
+                t.add_row(r.metric, r.statistic, f"{r.value:.6g}", r.unit)
+            console.print(t)
+    if ev.gt_aware is not None:
+        g = ev.gt_aware
+        verdict = "[green]as good as the GT can tell[/green]" if g.indistinguishable else "distinguished from the GT"
+        console.print(f"{100 * g.share_resolved:.1f} % of poses within the GT's 95 % region (a perfect estimate: "
+                      f"95 %); RMSE against the truth {1000 * g.rmse_trans_m.value:.2f} mm "
+                      f"(95 % {1000 * g.rmse_trans_m.low:.2f} .. {1000 * g.rmse_trans_m.high:.2f}); {verdict}")
+
+
+@app.command("compare")
+@handle_errors
+def compare(
+    a: Path = typer.Option(..., "--a", help="First GT source (TUM + NAME_cov.csv, RAWSEEDS CSV, ...)."),
+    b: Path = typer.Option(..., "--b", help="Second GT source, interpolated at the first one's stamps."),
+    align: str = typer.Option("none", "--align", help="none (one world frame), se2, yaw, se3, sim3."),
+    max_gap: float = typer.Option(0.2, "--max-gap", help="Longest gap of b bridged by interpolation (s)."),
+    t_offset: float = typer.Option(0.0, "--t-offset", help="Seconds added to b's stamps."),
+    fmt: str = typer.Option("table", "--format", help="table, csv or md."),
+    format_in: str | None = typer.Option(None, "--format-in", help="FMT or A_FMT,B_FMT."),
+) -> None:
+    """Two GT sources of one run side by side on their common span (differences and covariance consistency)."""
+    from gtrig.errors import InputError
+    from gtrig.evaluate.compare import compare_sources
+    from gtrig.io.formats import read_trajectory
+
+    if fmt not in ("table", "csv", "md"):
+        raise InputError(f"--format must be table, csv or md, got {fmt!r}")
+    fa, fb = _formats_in(format_in)
+    c = compare_sources(read_trajectory(a, fa), read_trajectory(b, fb), align, max_gap, t_offset)  # type: ignore[arg-type]
+    rows = c.rows()
+    if fmt == "csv":
+        typer.echo("metric,statistic,value,unit")
+        for r in rows:
+            typer.echo(f"{r[0]},{r[1]},{r[2]:.9g},{r[3]}")
+    elif fmt == "md":
+        typer.echo(f"{b.name} against {a.name}, alignment {c.alignment.kind}\n")
+        typer.echo("| metric | statistic | value | unit |\n|---|---|---|---|")
+        for r in rows:
+            typer.echo(f"| {r[0]} | {r[1]} | {r[2]:.6g} | {r[3]} |")
+    else:
+        from rich.table import Table
+
+        t = Table("metric", "statistic", "value", "unit", title=f"{b.name} against {a.name} (alignment "
+                  f"{c.alignment.kind})")
+        for r in rows:
+            t.add_row(r[0], r[1], f"{r[2]:.6g}", r[3])
+        console.print(t)

@@ -31,6 +31,7 @@ _SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("laser", "laser", "group"),
     ("import_", "import", "group"),
     ("export", "export", "command"),
+    ("report", "report", "command"),
 )
 
 

@@ -1,0 +1,188 @@
+"""Evaluation bench: speed against evo on 10^6-pose trajectories, the RAWSEEDS tables, and GT-aware scores on
+simulated runs.
+
+    python bench/evaluate.py [--n 1000000] [--skip-evo] [--recs /work/recs]
+
+Sections (Markdown on stdout):
+
+1. speed: two TUM files of ``--n`` poses (GT at 100 Hz, an estimate stamped 3 ms off with noise), read and
+   scored by gtrig (APE + RPE, translation and rotation, SE(3) Umeyama, nearest-stamp association) and by evo
+   (the same four metrics through its Python API: file_interface, sync, align, metrics); wall times and
+   their ratio, measured in the same run;
+2. RAWSEEDS Bicocca 2009-02-25b: ATE / RPE of the published solutions against the GROUNDTRUTH and the
+   GT-extended, and the GT-extended against the GROUNDTRUTH; the external GT against the GT-extended on
+   25a, 25b, 26a (ATE RMSE after the toolkit's 2-D alignment);
+3. GT-aware: on the simulated runs in ``--recs`` (``sN/results`` and ``sN/recording/truth``), the truth and a
+   1 cm biased truth scored against GTlaser and GTvision with their own covariances.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gtrig.evaluate.slam import evaluate_slam
+from gtrig.io.formats import read_trajectory
+from gtrig.io.relations import read_relations
+from gtrig.io.tum import write_tum
+from gtrig.trajectory import PoseTrack
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / ".." / "shared" / "data"
+
+
+def _synthetic(n: int, rng: np.random.Generator) -> tuple[PoseTrack, PoseTrack]:
+    t = 1.0e9 + np.arange(n) * 0.01
+    s = np.arange(n) * 0.01
+    xyz = np.column_stack([5 * np.sin(0.01 * s), 3 * np.sin(0.02 * s), 0.2 * np.sin(0.05 * s)])
+    yaw = 0.3 * s
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_euler("zyx", np.column_stack([yaw, 0.01 * np.sin(s), 0.01 * np.cos(s)])).as_quat()
+    gt = PoseTrack(t, xyz, q)
+    dq = Rotation.from_rotvec(rng.normal(0, 0.002, (n, 3)))
+    qe = (dq * Rotation.from_quat(q)).as_quat()
+    est = PoseTrack(t + 0.003, xyz + rng.normal(0, 0.01, (n, 3)) + [1.0, -2.0, 0.5], qe)
+    return gt, est
+
+
+def bench_speed(n: int, skip_evo: bool) -> None:
+    rng = np.random.default_rng(0)
+    gt, est = _synthetic(n, rng)
+    with tempfile.TemporaryDirectory() as d:
+        pg, pe = Path(d) / "gt.tum", Path(d) / "est.tum"
+        write_tum(pg, gt)
+        write_tum(pe, est)
+        t0, c0 = time.perf_counter(), time.process_time()
+        g, e = read_trajectory(pg), read_trajectory(pe)
+        t1, c1 = time.perf_counter(), time.process_time()
+        ev = evaluate_slam(g, e, metrics="evo", align="se3", method="nearest", max_dt_s=0.01)
+        t2, c2 = time.perf_counter(), time.process_time()
+        ours = {k: ev.ape[k].stats()["rmse"] for k in ("trans", "rot")}
+        ours.update({f"rpe_{k}": ev.rpe[k].stats()["rmse"] for k in ("trans", "rot")})  # type: ignore[index]
+        gtrig_wall, gtrig_cpu = t2 - t0, c2 - c0
+        print(f"## speed, {n} poses (machine shared; compare the ratio)\n")
+        print("| tool | read (s) | evaluate (s) | total (s) | total CPU (s) | APE trans rmse | APE rot rmse | "
+              "RPE trans rmse |")
+        print("|---|---|---|---|---|---|---|---|")
+        print(f"| gtrig | {t1 - t0:.2f} | {t2 - t1:.2f} | {t2 - t0:.2f} | {c2 - c0:.2f} (read {c1 - c0:.2f}) | "
+              f"{ours['trans']:.6f} | {ours['rot']:.6f} | {ours['rpe_trans']:.6f} |")
+        if skip_evo:
+            return
+        try:
+            from evo.core import metrics, sync
+            from evo.tools import file_interface
+        except ImportError:
+            print("\nevo not installed (pip install -e '.[bench]'): no peer figures")
+            return
+        t0, c0 = time.perf_counter(), time.process_time()
+        r = file_interface.read_tum_trajectory_file(str(pg))
+        s = file_interface.read_tum_trajectory_file(str(pe))
+        t1, c1 = time.perf_counter(), time.process_time()
+        r, s = sync.associate_trajectories(r, s, max_diff=0.01)
+        s = copy.deepcopy(s)
+        s.align(r)
+        theirs = {}
+        PR = metrics.PoseRelation
+        for name, M, rel in (("trans", metrics.APE, PR.translation_part), ("rot", metrics.APE, PR.rotation_angle_rad),
+                             ("rpe_trans", metrics.RPE, PR.translation_part),
+                             ("rpe_rot", metrics.RPE, PR.rotation_angle_rad)):
+            m = M(rel)
+            m.process_data((r, s))
+            theirs[name] = m.get_statistic(metrics.StatisticsType.rmse)
+        t2, c2 = time.perf_counter(), time.process_time()
+        print(f"| evo | {t1 - t0:.2f} | {t2 - t1:.2f} | {t2 - t0:.2f} | {c2 - c0:.2f} (read {c1 - c0:.2f}) | "
+              f"{theirs['trans']:.6f} | {theirs['rot']:.6f} | {theirs['rpe_trans']:.6f} |")
+        print(f"\nevo / gtrig, wall: {(t2 - t0) / gtrig_wall:.1f}x; CPU: {(c2 - c0) / gtrig_cpu:.1f}x")
+        diff = max(abs(ours[k] - theirs[k]) for k in ours)
+        print(f"\nlargest difference of the four RMSEs: {diff:.2e}")
+
+
+def _ate_rpe(gt_file: Path, est_file: Path, rel: np.ndarray | None, align: str = "se2") -> tuple[float, ...]:
+    g, e = read_trajectory(gt_file), read_trajectory(est_file)
+    ev = evaluate_slam(g, e, metrics="rawseeds", align=align, relations=rel)  # type: ignore[arg-type]
+    a = ev.rawseeds_ate
+    assert a is not None
+    r = ev.rawseeds_rpe
+    return (*a.ate, a.heading[0], a.rmse_m, len(a.dist_m), *((r.t_rpe_m, r.r_rpe_deg) if r else (np.nan, np.nan)))
+
+
+def bench_rawseeds() -> None:
+    b = DATA / "rawseeds" / "Bicocca_2009-02-25b"
+    if not b.is_dir():
+        print("\nRAWSEEDS data missing: no table")
+        return
+    rel = read_relations(b / "Bicocca_2009-02-25b.relations")
+    print("\n## RAWSEEDS Bicocca 2009-02-25b (toolkit definitions)\n")
+    print("| estimate | GT | ATE mean (m) | ATE std (m) | mean-3std | mean+3std | heading mean (rad) | ATE rmse (m) "
+          "| GT samples | T-RPE (m) | R-RPE (deg) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    sols = ("SOLUTION_CI-GRAPH_Stereo", "SOLUTION_GraphSLAM_Laser", "SOLUTION_H-SLAM_Trinocular")
+    for gname in ("GROUNDTRUTH", "GT-extended"):
+        for s in sols:
+            v = _ate_rpe(b / f"Bicocca_2009-02-25b-{gname}.csv", b / f"{s}.csv", rel)
+            print(f"| {s[9:]} | {gname} | " + " | ".join(f"{x:.4f}" for x in v[:6]) + f" | {v[6]} | {v[7]:.4f} | "
+                  f"{v[8]:.3f} |")
+    v = _ate_rpe(b / "Bicocca_2009-02-25b-GROUNDTRUTH.csv", b / "Bicocca_2009-02-25b-GT-extended.csv", rel)
+    print("| GT-extended | GROUNDTRUTH | " + " | ".join(f"{x:.4f}" for x in v[:6]) + f" | {v[6]} | {v[7]:.4f} | "
+          f"{v[8]:.3f} |")
+    print("\n## external GT against GT-extended (2-D alignment, GT samples in the GT-extended's span)\n")
+    print("| run | GT samples | ATE rmse (m) | ATE mean (m) | ATE std (m) | heading mean (deg) |")
+    print("|---|---|---|---|---|---|")
+    for run in ("Bicocca_2009-02-25a", "Bicocca_2009-02-25b", "Bicocca_2009-02-26a"):
+        d = DATA / "rawseeds" / run
+        v = _ate_rpe(d / f"{run}-GROUNDTRUTH.csv", d / f"{run}-GT-extended.csv", None)
+        print(f"| {run} | {v[6]} | {v[5]:.4f} | {v[0]:.4f} | {v[1]:.4f} | {np.degrees(v[4]):.3f} |")
+
+
+def bench_gt_aware(recs: Path) -> None:
+    runs = sorted(p for p in recs.glob("s*") if (p / "DONE").exists())
+    if not runs:
+        print(f"\nno simulated runs in {recs}: no GT-aware table")
+        return
+    print("\n## GT-aware: the truth and a 1 cm biased truth against the GT sources of simulated runs\n")
+    print("| run | GT | estimate | poses | within GT 95 % | NEES/dof | RMSE vs truth (mm, 95 %) | GT sigma (mm) | "
+          "verdict |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for run in runs:
+        truth = read_trajectory(run / "recording" / "truth" / "run.tum")
+        biased = PoseTrack(truth.stamps_s, truth.xyz + [0.01, 0, 0], truth.quat_xyzw)
+        for gname in ("gt_laser", "gt_vision_run", "gt_fusion"):
+            p = run / "results" / f"{gname}.tum"
+            if not p.is_file():
+                continue
+            gt = read_trajectory(p)
+            for label, est in (("truth", truth), ("truth + 1 cm", biased)):
+                ev = evaluate_slam(gt, est, metrics="evo", align="none", method="interpolate")
+                s = ev.gt_aware
+                if s is None:
+                    continue
+                r = s.rmse_trans_m
+                print(f"| {run.name} | {gname} | {label} | {s.n} | {100 * s.share_resolved:.1f} % | "
+                      f"{s.mean_d2_per_dof:.2f} | {1000 * r.value:.2f} ({1000 * r.low:.2f}..{1000 * r.high:.2f}) | "
+                      f"{1000 * s.gt_sigma_trans_m:.2f} | "
+                      f"{'indistinguishable' if s.indistinguishable else 'distinguished'} |")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--n", type=int, default=1_000_000)
+    ap.add_argument("--skip-evo", action="store_true")
+    ap.add_argument("--recs", type=Path, default=ROOT / ".." / "recs")
+    ap.add_argument("--only", choices=("speed", "rawseeds", "gt-aware"), default=None)
+    a = ap.parse_args()
+    if a.only in (None, "speed"):
+        bench_speed(a.n, a.skip_evo)
+    if a.only in (None, "rawseeds"):
+        bench_rawseeds()
+    if a.only in (None, "gt-aware"):
+        bench_gt_aware(a.recs)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,25 @@
+"""``gtrig report RESULTS_DIR --out report.html``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from gtrig.cli.common import console, handle_errors
+
+
+@handle_errors
+def command(
+    results: Path = typer.Argument(..., help="A pipeline output folder (e.g. demo_out/results)."),
+    out: Path = typer.Option(Path("report.html"), "--out", help="The HTML file to write."),
+    truth: Path | None = typer.Option(None, "--truth", help="The recording's truth/ folder (found beside it)."),
+) -> None:
+    """One self-contained HTML page of a results folder: accuracy, every stage's summary and figures."""
+    import time
+
+    from gtrig.report import write_report
+
+    t0 = time.perf_counter()
+    p = write_report(results, out, truth)
+    console.print(f"report: {p} ({p.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")

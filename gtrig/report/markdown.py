@@ -1,0 +1,51 @@
+"""Stage summaries written as Markdown (headings, pipe tables, paragraphs) rendered as HTML, escaped.
+
+Only the subset gtrig's stages write; anything else is shown as a paragraph, never interpreted."""
+
+from __future__ import annotations
+
+import html
+
+
+def _cells(line: str) -> list[str]:
+    return [c.strip() for c in line.strip().strip("|").split("|")]
+
+
+def markdown_to_html(text: str) -> str:
+    """HTML of the Markdown ``text`` (headings shifted down two levels: the page has its own)."""
+    out: list[str] = []
+    lines = text.splitlines()
+    i = 0
+    para: list[str] = []
+
+    def flush() -> None:
+        if para:
+            out.append("<p>" + html.escape(" ".join(para)) + "</p>")
+            para.clear()
+
+    while i < len(lines):
+        s = lines[i].rstrip()
+        if s.startswith("#"):
+            flush()
+            level = min(len(s) - len(s.lstrip("#")) + 2, 6)
+            out.append(f"<h{level}>{html.escape(s.lstrip('#').strip())}</h{level}>")
+        elif s.startswith("|") and i + 1 < len(lines) and set(lines[i + 1].replace("|", "").strip()) <= set("-: "):
+            flush()
+            head = _cells(s)
+            rows = []
+            i += 2
+            while i < len(lines) and lines[i].strip().startswith("|"):
+                rows.append(_cells(lines[i]))
+                i += 1
+            out.append("<table><thead><tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in head)
+                       + "</tr></thead><tbody>"
+                       + "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows)
+                       + "</tbody></table>")
+            continue
+        elif not s.strip():
+            flush()
+        else:
+            para.append(s.strip())
+        i += 1
+    flush()
+    return "\n".join(out)

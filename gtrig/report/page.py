@@ -1,0 +1,420 @@
+"""Build the one-page HTML report of a results folder: everything inline (styles, images as base64 PNG, one
+small script that checks the figures decoded), nothing fetched from the network.
+
+Sections, each shown only when its files are present (the others are named as skipped, with why):
+accuracy against truth (``accuracy.csv``), the pose tracks (summary, path with ellipses and flagged poses,
+errors with 3-sigma bounds against truth, status over time, NEES histogram), the consistency of two GT
+sources (without truth too), GTvision's per-camera coverage and detections, the survey, the calibration
+(its summary and residuals), time sync, and every stage's Markdown summary.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import datetime as _dt
+import html
+import io
+import json
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gtrig.errors import GtrigError
+from gtrig.report.collect import ResultsInventory, inventory
+
+log = logging.getLogger(__name__)
+
+CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:0;color:#222;background:#fafafa}
+header{background:#1f3a5f;color:#fff;padding:14px 24px}header h1{margin:0;font-size:22px}
+header p{margin:4px 0 0;font-size:13px;opacity:.85}
+nav{padding:8px 24px;background:#e8eef5;font-size:13px}nav a{margin-right:14px;color:#1f3a5f}
+section{background:#fff;margin:14px 24px;padding:10px 18px;border:1px solid #ddd;border-radius:6px}
+h2{font-size:18px;border-bottom:1px solid #eee;padding-bottom:4px}h3{font-size:15px}h4,h5,h6{font-size:14px}
+table{border-collapse:collapse;font-size:12px;margin:8px 0}th,td{border:1px solid #ccc;padding:3px 7px;text-align:right}
+th{background:#f0f3f7}td:first-child,th:first-child{text-align:left}
+.ok{color:#17803d;font-weight:600}.miss{color:#c0392b;font-weight:600}.note{color:#777;font-size:12px}
+.warn{background:#fff5e0;border-left:4px solid #e6a700;padding:6px 10px;font-size:13px}
+figure{margin:10px 0}figure img{max-width:100%;border:1px solid #eee}figcaption{font-size:12px;color:#555}
+"""
+
+CHECK_JS = """
+window.addEventListener('load',function(){var imgs=document.querySelectorAll('figure img');var ok=0;
+for(var i=0;i<imgs.length;i++){if(imgs[i].complete&&imgs[i].naturalWidth>0){ok++;}}
+document.body.setAttribute('data-figures-loaded',String(ok));
+document.body.setAttribute('data-tables',String(document.querySelectorAll('table').length));
+document.body.setAttribute('data-load-ms',String(Math.round(performance.now())));});
+"""
+
+
+@dataclass
+class Section:
+    """One section of the page: an anchor, a title and HTML parts."""
+
+    key: str
+    title: str
+    parts: list[str] = field(default_factory=list)
+    n_figures: int = 0
+
+    def add(self, fragment: str) -> None:
+        self.parts.append(fragment)
+
+    def figure(self, fig: Any, caption: str) -> None:
+        import matplotlib.pyplot as plt
+
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+        plt.close(fig)
+        data = base64.b64encode(buf.getvalue()).decode("ascii")
+        self.parts.append(f'<figure><img alt="{html.escape(caption)}" src="data:image/png;base64,{data}">'
+                          f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+        self.n_figures += 1
+
+    def table(self, header: list[str], rows: list[list[str]], raw: bool = False) -> None:
+        esc = (lambda s: s) if raw else html.escape
+        self.parts.append("<table><thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header)
+                          + "</tr></thead><tbody>" + "".join(
+                              "<tr>" + "".join(f"<td>{esc(c)}</td>" for c in r) + "</tr>" for r in rows)
+                          + "</tbody></table>")
+
+    def html(self) -> str:
+        return f'<section id="{self.key}"><h2>{html.escape(self.title)}</h2>' + "\n".join(self.parts) + "</section>"
+
+
+def _read_csv(p: Path) -> list[dict[str, str]]:
+    with open(p, encoding="utf-8", newline="") as f:
+        return list(csv.DictReader(row for row in f if not row.startswith("#")))
+
+
+# --- sections ----------------------------------------------------------------------------------------------
+
+def _accuracy(inv: ResultsInventory) -> Section | None:
+    if inv.accuracy is None:
+        return None
+    s = Section("accuracy", "Accuracy against truth")
+    rows = []
+    for r in _read_csv(inv.accuracy):
+        ok = r.get("ok", "")
+        mark = {"1": '<span class="ok">ok</span>', "0": '<span class="miss">miss</span>',
+                "True": '<span class="ok">ok</span>', "False": '<span class="miss">miss</span>'}.get(ok, "")
+        try:
+            val = f"{float(r.get('value', 'nan')):.4g}"
+        except ValueError:
+            val = html.escape(r.get("value", ""))
+        rows.append([html.escape(r.get("stage", "")), html.escape(r.get("metric", "")), val,
+                     html.escape(r.get("unit", "")), html.escape(r.get("target", "")), mark])
+    s.table(["stage", "metric", "value", "unit", "target", ""], rows, raw=True)
+    n_miss = sum("miss" in r[-1] for r in rows)
+    s.add(f'<p class="note">{len(rows)} figures, {n_miss} missing their target.</p>')
+    return s
+
+
+def _truth_for(inv: ResultsInventory, name: str) -> Path | None:
+    if inv.truth is None:
+        return None
+    cand = inv.truth / ("validation.tum" if "validation" in name else "run.tum")
+    return cand if cand.is_file() else None
+
+
+def _tracks(inv: ResultsInventory) -> list[Section]:
+    from gtrig.evaluate import plots
+    from gtrig.evaluate.slam import evaluate_slam
+    from gtrig.io.formats import read_trajectory
+
+    out = []
+    summary = Section("tracks", "Pose tracks")
+    rows = []
+    for name, (tum, _cov) in inv.tracks.items():
+        if name.startswith("truth"):
+            continue
+        try:
+            tr = read_trajectory(tum)
+        except GtrigError as e:
+            summary.add(f'<p class="warn">{html.escape(name)}: not read ({html.escape(str(e))})</p>')
+            continue
+        if not len(tr):
+            continue
+        c = tr.counts()
+        C = tr.cov_xytheta() if tr.cov is not None and tr.cov_kind != "xyz" else tr.cov
+        sig = (f"{1000 * np.nanmedian(np.sqrt(C[:, 0, 0] + C[:, 1, 1])):.2f}" if C is not None else "-")
+        sig_yaw = (f"{np.degrees(np.nanmedian(np.sqrt(C[:, 2, 2]))):.3f}" if C is not None and tr.cov_kind != "xyz"
+                   else "-")
+        t0, t1 = tr.span_s()
+        rate = (len(tr) - 1) / (t1 - t0) if t1 > t0 else float("nan")
+        row = [name, str(len(tr)), f"{t1 - t0:.1f}", f"{rate:.1f}", str(c["ok"]), str(c["flagged"]),
+               str(c["bridged"]), str(c["rejected"]), sig, sig_yaw, "-", "-", "-"]
+        sec = Section(f"track-{name.replace('/', '-')}", f"Track {name}")
+        truth_p = _truth_for(inv, name)
+        truth = read_trajectory(truth_p) if truth_p is not None else None
+        sec.figure(plots.track_figure(tr, truth, name, "truth"),
+                   f"{name}: path, 3-sigma ellipses, flagged/bridged/rejected poses" + (", truth in red" if truth
+                                                                                          else ""))
+        if truth is not None and len(tr.usable()) >= 2:
+            try:
+                ev = evaluate_slam(tr, truth, metrics="evo", align="none", method="interpolate", max_dt_s=0.05)
+            except GtrigError as e:
+                sec.add(f'<p class="warn">against truth: {html.escape(str(e))}</p>')
+                ev = None
+            if ev is not None:
+                sec.figure(plots.error_bounds_figure(ev.association.gt, ev.est_aligned,
+                                                     f"truth - {name} (minus the GT's error)"),
+                           f"{name}: error against truth with the GT's own 3-sigma bounds")
+                st = ev.ape["trans"].stats() if ev.ape else {}
+                row[10] = f"{1000 * st.get('rmse', float('nan')):.2f}"
+                if ev.gt_aware is not None:
+                    row[11] = f"{ev.gt_aware.mean_d2_per_dof:.2f}"
+                    row[12] = f"{100 * ev.gt_aware.share_resolved:.1f}"
+                    sec.figure(plots.d2_figure(ev.gt_aware.d2, len(ev.gt_aware.axes), f"{name} against truth"),
+                               f"{name}: d2 of the error under its covariance, against chi2")
+        from gtrig.report.figures import status_figure
+
+        sec.figure(status_figure(tr, f"{name}: status over time"), f"{name}: status, sigma and gaps over time")
+        rows.append(row)
+        out.append(sec)
+    if not rows:
+        return []
+    summary.table(["track", "poses", "span (s)", "rate (Hz)", "ok", "flagged", "bridged", "rejected",
+                   "median sigma xy (mm)", "median sigma yaw (deg)", "RMSE vs truth (mm)", "NEES / dof",
+                   "within 95 % (%)"], rows)
+    return [summary, *out]
+
+
+def _consistency(inv: ResultsInventory) -> Section | None:
+    """Two GT sources of the run against each other (what stands in for truth on a real recording)."""
+    from gtrig.evaluate.compare import compare_sources
+    from gtrig.evaluate.plots import d2_figure, error_bounds_figure
+    from gtrig.io.formats import read_trajectory
+
+    names = [n for n, (_, cov) in inv.tracks.items() if cov is not None and "validation" not in n]
+    if len(names) < 2:
+        return None
+    s = Section("consistency", "Consistency of the GT sources")
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            a, b = read_trajectory(inv.tracks[names[i]][0]), read_trajectory(inv.tracks[names[j]][0])
+            if len(b) < len(a):  # the denser source is interpolated at the sparser one's stamps
+                a, b = b, a
+                names[i], names[j] = names[j], names[i]
+            try:
+                c = compare_sources(a, b, "none", 0.2)
+            except GtrigError as e:
+                s.add(f'<p class="note">{html.escape(names[j])} against {html.escape(names[i])}: '
+                      f"{html.escape(str(e))}</p>")
+                continue
+            s.add(f"<h3>{html.escape(names[j])} against {html.escape(names[i])}</h3>")
+            s.table(["metric", "statistic", "value", "unit"], [[m, st, f"{v:.5g}", u] for m, st, v, u in c.rows()])
+            s.figure(error_bounds_figure(c.association.gt, c.association.est, f"{names[j]} - {names[i]}"),
+                     f"{names[j]} - {names[i]} with {names[i]}'s 3-sigma bounds")
+            if c.d2 is not None:
+                s.figure(d2_figure(c.d2, len(c.axes), "d2 under the sum of both covariances"),
+                         f"{names[j]} against {names[i]}: d2 under both covariances, against chi2")
+    return s
+
+
+def _cameras(inv: ResultsInventory) -> Section | None:
+    from gtrig.report.figures import camera_figure
+
+    if not inv.vision_checkpoints:
+        return None
+    s = Section("cameras", "GTvision: per-camera coverage and detections")
+    for cp in inv.vision_checkpoints:
+        per: dict[str, dict[str, list[float]]] = {}
+        n_obs = 0
+        with open(cp, encoding="utf-8") as f:
+            for line in f:
+                try:
+                    rec = json.loads(line)
+                except json.JSONDecodeError:
+                    continue
+                for item in rec.get("items", []) if isinstance(rec, dict) else []:
+                    obs = item.get("obs") if isinstance(item, dict) else None
+                    if not isinstance(obs, dict):
+                        continue
+                    n_obs += 1
+                    for v in obs.get("views", []):
+                        cam, corners = v[0], np.asarray(v[2], float).reshape(-1, 2)
+                        d = per.setdefault(str(cam), {"t": [], "u": [], "v": []})
+                        d["t"].append(float(obs.get("stamp_s", 0.0)))
+                        d["u"].extend(corners[:, 0].tolist())
+                        d["v"].extend(corners[:, 1].tolist())
+        if per:
+            s.table(["camera", "marker detections", "instants"],
+                    [[c, str(len(d["t"])), str(len(set(d["t"])))] for c, d in sorted(per.items())])
+            s.figure(camera_figure(per, cp.stem), f"{cp.stem}: marker corners in each image and detections "
+                                                   f"over time ({n_obs} instants)")
+    return s if s.n_figures else None
+
+
+def _survey(inv: ResultsInventory) -> Section | None:
+    from gtrig.report.figures import survey_figure
+
+    if inv.world_points is None:
+        return None
+    s = Section("survey", "Survey")
+    rows = _read_csv(inv.world_points)
+    pts = {r["name"]: np.array([float(r["x"]), float(r["y"])]) for r in rows}
+    cov = None
+    if rows and "cov_xx" in rows[0]:
+        cov = np.array([[[float(r["cov_xx"]), float(r["cov_xy"])], [float(r["cov_xy"]), float(r["cov_yy"])]]
+                        for r in rows])
+    truth = None
+    if inv.truth is not None and (inv.truth / "world_points.csv").is_file():
+        truth = {r["name"]: np.array([float(r["x"]), float(r["y"])]) for r in _read_csv(inv.truth /
+                                                                                          "world_points.csv")}
+    poses = pose_cov = None
+    if inv.validation_poses is not None:
+        vr = _read_csv(inv.validation_poses)
+        poses = np.array([[float(r["x"]), float(r["y"]), float(r["theta"])] for r in vr])
+        if vr and "cov_xx" in vr[0]:
+            pose_cov = np.array([[[float(r["cov_xx"]), float(r["cov_xy"])], [float(r["cov_xy"]), float(r["cov_yy"])]]
+                                 for r in vr])
+    table = []
+    for n, p in pts.items():
+        sd = "-"
+        if cov is not None:
+            k = list(pts).index(n)
+            sd = f"{1000 * np.sqrt(cov[k, 0, 0]):.2f}, {1000 * np.sqrt(cov[k, 1, 1]):.2f}"
+        err = f"{1000 * np.linalg.norm(p - truth[n]):.2f}" if truth and n in truth else "-"
+        table.append([n, f"{p[0]:.4f}", f"{p[1]:.4f}", sd, err])
+    s.table(["point", "x (m)", "y (m)", "sigma x, y (mm)", "error vs truth (mm)"], table)
+    s.figure(survey_figure(pts, cov, truth, poses, pose_cov, 200.0),
+             "world points and validation poses with 3-sigma ellipses (and errors against truth), magnified 200x")
+    return s
+
+
+def _calibration(inv: ResultsInventory) -> Section | None:
+    import yaml
+
+    from gtrig.report.figures import bars_figure
+
+    if inv.calibration_yaml is None:
+        return None
+    s = Section("calibration", "Calibration residuals")
+    d = yaml.safe_load(inv.calibration_yaml.read_text(encoding="utf-8")) or {}
+    groups: dict[str, dict[str, float]] = {}
+    for cam, v in (d.get("intrinsics") or {}).items():
+        if isinstance(v, dict) and "rms_px" in v:
+            groups.setdefault("intrinsics RMS (px)", {})[str(cam)] = float(v["rms_px"])
+    for cam, v in ((d.get("network") or {}).get("world_board_rms_px") or {}).items():
+        groups.setdefault("world board RMS (px)", {})[str(cam)] = float(v)
+    truth = d.get("truth") or {}
+    tgroups: dict[str, dict[str, float]] = {}
+    for cam, v in truth.items():
+        if isinstance(v, dict):
+            for k in ("joint_mm", "chain_mm"):
+                if k in v:
+                    tgroups.setdefault(k.replace("_mm", " position error (mm)"), {})[str(cam)] = float(v[k])
+    if groups:
+        s.figure(bars_figure(groups, "px", "reprojection residuals per camera"), "calibration residuals per camera")
+    if tgroups:
+        s.figure(bars_figure(tgroups, "mm", "camera position error against truth: joint bundle vs chain"),
+                 "camera pose errors against truth")
+    net = d.get("network") or {}
+    if "rms_px" in net:
+        s.add(f'<p class="note">network bundle adjustment RMS {float(net["rms_px"]):.4f} px, residual sigma '
+              f'{float(net.get("sigma_px", float("nan"))):.4f} px</p>')
+    for w in (net.get("warnings") or []):
+        s.add(f'<p class="warn">{html.escape(str(w))}</p>')
+    return s if s.parts else None
+
+
+def _sync(inv: ResultsInventory) -> Section | None:
+    from gtrig.report.figures import curves_figure
+
+    curves: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for p in inv.sync:
+        rows = _read_csv(p)
+        if not rows:
+            continue
+        keys = list(rows[0])
+        xk = next((k for k in keys if "lag" in k or "offset" in k), None)
+        yks = [k for k in keys if k != xk and ("corr" in k or "score" in k or "cost" in k)]
+        if xk is None or not yks:
+            continue
+        x = np.array([float(r[xk]) for r in rows])
+        for yk in yks:
+            curves[f"{p.stem} {yk}"] = (x, np.array([float(r[yk]) for r in rows]))
+    if not curves:
+        return None
+    s = Section("sync", "Time synchronization")
+    s.figure(curves_figure(curves, "lag (s)", "correlation", "sync correlation curves"),
+             "correlation against the clock offset (the maxima marked)")
+    return s
+
+
+def _summaries(inv: ResultsInventory) -> Section | None:
+    from gtrig.report.markdown import markdown_to_html
+
+    if not inv.summaries:
+        return None
+    s = Section("summaries", "Stage summaries")
+    for p in inv.summaries:
+        s.add(f"<h3>{html.escape(str(p.relative_to(inv.root)))}</h3>")
+        s.add(markdown_to_html(p.read_text(encoding="utf-8")))
+    return s
+
+
+SECTIONS: tuple[tuple[str, Callable[[ResultsInventory], Any]], ...] = (
+    ("accuracy against truth", _accuracy),
+    ("pose tracks", _tracks),
+    ("consistency of GT sources", _consistency),
+    ("cameras", _cameras),
+    ("survey", _survey),
+    ("calibration", _calibration),
+    ("time sync", _sync),
+    ("stage summaries", _summaries),
+)
+
+
+def build_report(results_dir: str | Path, truth_dir: str | Path | None = None) -> str:
+    """The report's HTML for ``results_dir`` (module docstring)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from gtrig import __version__
+
+    inv = inventory(results_dir, truth_dir)
+    if not inv.root.is_dir():
+        from gtrig.errors import InputError
+
+        raise InputError(f"{inv.root}: no such results folder")
+    sections: list[Section] = []
+    skipped: list[str] = []
+    for label, fn in SECTIONS:
+        try:
+            got = fn(inv)
+        except (GtrigError, ValueError, KeyError, IndexError, OSError) as e:
+            log.warning("report: %s skipped (%s)", label, e)
+            skipped.append(f"{label}: could not be read ({e})")
+            continue
+        got = [got] if isinstance(got, Section) else (got or [])
+        if not got:
+            skipped.append(f"{label}: no input in the folder")
+        sections += got
+    n_fig = sum(s.n_figures for s in sections)
+    when = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    nav = "".join(f'<a href="#{s.key}">{html.escape(s.title)}</a>' for s in sections)
+    notes = "".join(f"<li>{html.escape(x)}</li>" for x in skipped)
+    head = (f"<header><h1>gtrig report: {html.escape(str(inv.root))}</h1><p>gtrig {__version__}, {when}; "
+            f"{len(sections)} sections, {n_fig} figures; truth: "
+            f"{html.escape(str(inv.truth)) if inv.truth else 'none (consistency figures instead)'}</p></header>")
+    body = "\n".join(s.html() for s in sections)
+    skipped_html = f'<section id="skipped"><h2>Not in this folder</h2><ul class="note">{notes}</ul></section>' \
+        if skipped else ""
+    return (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>gtrig report</title>'
+            f"<style>{CSS}</style></head><body data-figures-expected=\"{n_fig}\">{head}<nav>{nav}</nav>{body}"
+            f"{skipped_html}<script>{CHECK_JS}</script></body></html>\n")
+
+
+def write_report(results_dir: str | Path, out: str | Path, truth_dir: str | Path | None = None) -> Path:
+    """Write :func:`build_report` to ``out`` atomically; returns the path."""
+    from gtrig.io.atomic import atomic_write_text
+
+    text = build_report(results_dir, truth_dir)
+    atomic_write_text(out, text)
+    return Path(out)
