@@ -65,11 +65,16 @@ class OffsetEstimate:
     def to_dict(self) -> dict[str, object]:
         return {"verdict": self.verdict, "offset_s": None if np.isnan(self.offset_s) else float(self.offset_s),
                 "ci95_s": None if np.isnan(self.offset_s) else [float(v) for v in self.ci95_s],
-                "coarse_s": float(self.coarse_s), "peak": float(self.peak), "second_peak": float(self.second_peak),
+                "coarse_s": _num(self.coarse_s), "peak": _num(self.peak), "second_peak": _num(self.second_peak),
                 "windows": int(self.windows), "reason": self.reason}
 
 
-def _rate_on_grid(stamps: np.ndarray, yaw: np.ndarray, grid: np.ndarray, max_dt: float) -> tuple[np.ndarray, np.ndarray]:
+def _num(v: float) -> float | None:
+    return None if not np.isfinite(v) else float(v)
+
+
+def _rate_on_grid(stamps: np.ndarray, yaw: np.ndarray, grid: np.ndarray, max_dt: float,
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """Heading rate on ``grid`` (rad/s) and where it is valid (a sample within ``max_dt`` on both sides)."""
     th = np.unwrap(yaw)
     h = np.interp(grid, stamps, th)
@@ -269,4 +274,5 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
                               estimate.reason)
     return OffsetEstimate(estimate.source, "ok", best, (best - half, best + half), estimate.coarse_s, estimate.peak,
                           estimate.second_peak, estimate.lags_s, estimate.corr, estimate.windows,
-                          f"peak {estimate.peak:.3f} at {c:+.3f} s; refined by the fusion's fit ({int(use.sum())} fixes)")
+                          f"peak {estimate.peak:.3f} at {c:+.3f} s; refined by the fusion's fit "
+                          f"({int(use.sum())} fixes)")
