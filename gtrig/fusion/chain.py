@@ -216,6 +216,12 @@ def assemble(X, K, process, proc_u, proc_W, dts, fix_node, fix_alpha, fix_kind, 
         for a in range(p):
             cost += ek[a] * ek[a]
             for b in range(p):
-                C[a, b] += np.dot(Ekk[:, a], Ekk[:, b])
-            gk[a] -= np.dot(Ekk[:, a], ek)
+                t = 0.0
+                for r_ in range(p):
+                    t += Ekk[r_, a] * Ekk[r_, b]
+                C[a, b] += t
+            t = 0.0
+            for r_ in range(p):
+                t += Ekk[r_, a] * ek[r_]
+            gk[a] -= t
     return cost
