@@ -131,6 +131,27 @@ def _decorrelated(f: Fixes, window_s: float) -> Fixes:
     return Fixes(f.source, f.stamps_s, f.model, f.value, cov, f.lever_xy)
 
 
+def _check_units(fixes: Sequence[Fixes], odometry: OdometryLog) -> None:
+    """Odometry in another unit (mm, degrees) travels or turns a multiple of what the sources see."""
+    f = max(fixes, key=len)
+    if len(f) < 3:
+        return
+    step = max(1, len(f) // 200)  # compare over ~200 spans: the fixes' noise stays below the motion
+    z = f.value[::step]
+    path_fix = float(np.sum(np.hypot(*np.diff(z[:, :2], axis=0).T)))
+    o = interpolate_odometry(odometry, f.stamps_s[::step])
+    path_odo = float(np.sum(np.hypot(*np.diff(o[:, :2], axis=0).T)))
+    if path_fix > 0.5 and not 0.5 < path_odo / path_fix < 2.0:
+        raise InputError(f"fusion: the odometry travels {path_odo:.3g} where {f.source} travels {path_fix:.3g} m: "
+                         "is the odometry in another unit (mm? feet?)")
+    if f.model is FixModel.POSE:
+        turn_fix = float(np.sum(np.abs(np.diff(np.unwrap(z[:, 2])))))
+        turn_odo = float(np.sum(np.abs(np.diff(o[:, 2]))))
+        if turn_fix > 1.0 and not 0.5 < turn_odo / turn_fix < 2.0:
+            raise InputError(f"fusion: the odometry turns {turn_odo:.3g} where {f.source} turns {turn_fix:.3g} rad: "
+                             "is its heading in another unit (degrees?)")
+
+
 def _merge(fixes: Sequence[Fixes]) -> dict[str, np.ndarray]:
     st = np.concatenate([f.stamps_s for f in fixes])
     order = np.argsort(st, kind="stable")
@@ -273,6 +294,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
                                  f"the odometry ({o0:.3f}-{o1:.3f} s); wrong clock or offset?")
             inside.append(Fixes(f.source, f.stamps_s[keep], f.model, f.value[keep], f.cov[keep], f.lever_xy))
         fixes = inside
+        _check_units(fixes, odometry)
     fx = _merge([_decorrelated(f, opts.correlation_s) for f in fixes])
     per_source = {s: {"offered": float(len(f)), "used": 0.0, "rejected": 0.0, "downweighted": 0.0,
                       "offset_s": float(opts.offsets_s.get(s, 0.0))} for s, f in zip(sources, fixes, strict=True)}

@@ -265,8 +265,7 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
                               "the fusion cost has no minimum near the correlation peak")
     half = 1.96 * float(np.sqrt(2.0 / curv))
     verdict: Verdict = estimate.verdict if estimate.verdict != "ok" else "ok"
-    src_dt = float(np.median(np.diff(f.stamps_s)))
-    if abs(best - c) > half_width_s * 0.95 or 2 * half > 0.5 * src_dt:
+    if abs(best - c) > half_width_s * 0.95 or 2 * half > 2 * half_width_s:
         verdict = "ambiguous"
     if verdict != "ok":
         return OffsetEstimate(estimate.source, verdict, float("nan"), (float("nan"),) * 2, estimate.coarse_s,
