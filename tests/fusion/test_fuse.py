@@ -5,12 +5,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from fusion_synth import nees, planar_errors
 
 from gtrig.errors import InputError
 from gtrig.fusion import FusionOptions, fixes_from_track, fuse, fuse_tracks
 from gtrig.trajectory import PoseStatus, PoseTrack
-
-from fusion_synth import nees, planar_errors
 
 INDEP = FusionOptions(correlation_s=0.0)  # the synthetic fixes' errors are independent
 
