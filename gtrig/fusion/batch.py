@@ -93,7 +93,8 @@ def smooth_batch(chain: FactorChain, X_init: np.ndarray, K_init: np.ndarray, fix
             rel = (cost - cost_new) / max(cost, 1e-300)
             X, K, cost, sys, chi2, rw = X_new, K_new, cost_new, sys_new, chi2_new, rw_new
             lam = max(lam / 10.0, 1e-12)
-            if rel < tol:
+            # converged: the cost stalls or the step is far below any pose's precision (0.1 um / urad)
+            if rel < tol or max(float(np.abs(dx).max()), float(np.abs(dk).max(initial=0.0))) < 1e-7:
                 converged = True
                 break
         else:
