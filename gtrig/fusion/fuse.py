@@ -136,7 +136,8 @@ def _check_units(fixes: Sequence[Fixes], odometry: OdometryLog) -> None:
     f = max(fixes, key=len)
     if len(f) < 3:
         return
-    step = max(1, len(f) // 200)  # compare over ~200 spans: the fixes' noise stays below the motion
+    # compare over spans of about a second: the fixes' noise stays below the motion, and no span turns by pi
+    step = max(1, int(round(1.0 / max(float(np.median(np.diff(f.stamps_s))), 1e-6))))
     z = f.value[::step]
     path_fix = float(np.sum(np.hypot(*np.diff(z[:, :2], axis=0).T)))
     o = interpolate_odometry(odometry, f.stamps_s[::step])
