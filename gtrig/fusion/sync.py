@@ -237,7 +237,8 @@ def estimate_offset(ref_stamps_s: np.ndarray, ref_yaw: np.ndarray, src_stamps_s:
 
 
 def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryLog,
-                     options: FusionOptions | None = None, half_width_s: float = 0.015) -> OffsetEstimate:
+                     options: FusionOptions | None = None, half_width_s: float = 0.015,
+                     anchors: tuple[Fixes, ...] = ()) -> OffsetEstimate:
     """Refine an ``ok`` (or coarse) estimate with the offset as a parameter of the fusion's own fit.
 
     The source's fixes (positions and headings, each weighed by its covariance) are smoothed with the
@@ -245,6 +246,10 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
     offset within ``half_width_s`` of the coarse peak, and the 95 % interval comes from the cost's curvature
     (Fisher information = cost'' / 2). The fixes' decorrelation (FusionOptions.correlation_s) keeps that
     curvature honest for time-correlated errors.
+
+    ``anchors``: other sources fused unshifted (their clock then is the reference: a mm-accurate GT
+    source pins the time far better than the odometry's slipping heading); ``estimate`` must then be
+    relative to them too.
     """
     from gtrig.fusion.batch import smooth_batch
     from gtrig.fusion.ekf import smooth_ekf
@@ -261,18 +266,33 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
         return estimate
     f = Fixes(fixes.source, fixes.stamps_s[keep], fixes.model, fixes.value[keep], fixes.cov[keep], fixes.lever_xy)
     f = _decorrelated(f, opts.correlation_s)
-    base = _merge([f])
+    anc = []
+    for a in anchors:
+        m = (a.stamps_s >= f.stamps_s[0] - c - margin) & (a.stamps_s <= f.stamps_s[-1] - c + margin)
+        anc.append(_decorrelated(Fixes(a.source, a.stamps_s[m], a.model, a.value[m], a.cov[m], a.lever_xy),
+                                 opts.correlation_s))
+    base = _merge([f, *anc])
+    names = (f.source, *(a.source for a in anc))
+
+    def shifted(offset: float) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        st_ = base["stamps"] - np.where(base["source"] == 0, offset, 0.0)
+        order = np.argsort(st_, kind="stable")
+        return {**{k: v[order] for k, v in base.items()}, "stamps": st_[order]}, order
+
     i0 = max(int(np.searchsorted(odometry.stamps_s, base["stamps"][0] - c - margin)) - 1, 0)
     i1 = min(int(np.searchsorted(odometry.stamps_s, base["stamps"][-1] - c + margin)), len(odometry) - 1)
     stamps = odometry.stamps_s[i0:i1 + 1]
-    chain0, _, _, P0 = _chain(stamps, {**base, "stamps": base["stamps"] - c}, odometry, opts, (f.source,))
+    fx0, order0 = shifted(c)
+    chain0, _, _, P0 = _chain(stamps, fx0, odometry, opts, names)
     ekf = smooth_ekf(chain0, P0, opts.odometry.prior()[1], gate_prob=opts.gate_prob)
-    use = ekf.accept
+    use = np.zeros(order0.size, bool)
+    use[order0] = ekf.accept  # the gate's verdict per fix, in the unshifted order
     state = {"X": ekf.X, "K": ekf.K}
 
     def cost(offset: float) -> float:
-        ch, _, _, _ = _chain(stamps, {**base, "stamps": base["stamps"] - offset}, odometry, opts, (f.source,))
-        res = smooth_batch(ch, state["X"], state["K"], fix_use=use, huber_k=opts.huber_k, max_iter=8)
+        fx, order = shifted(offset)
+        ch, _, _, _ = _chain(stamps, fx, odometry, opts, names)
+        res = smooth_batch(ch, state["X"], state["K"], fix_use=use[order], huber_k=opts.huber_k, max_iter=8)
         state["X"], state["K"] = res.X, res.K
         return res.cost
 

@@ -26,3 +26,12 @@ def test_no_turning_is_unobservable() -> None:
     yaw = np.full(t.size, 0.3) + np.random.default_rng(1).normal(0, 1e-4, t.size)
     est = estimate_offset(t, yaw, t[::5] + 0.1, yaw[::5], "straight")
     assert est.verdict == "unobservable" and np.isnan(est.offset_s)
+
+
+def test_offset_between_two_gt_sources(run) -> None:
+    """A GT source as the reference (its fixes anchor the fit): a 3 ms camera offset to the laser's clock."""
+    vision = run.vision.shifted(0.003)  # the camera clock reads 3 ms late
+    coarse = estimate_offset(run.laser.stamps_s, run.laser.yaw_rad(), vision.stamps_s, vision.yaw_rad(), "vision")
+    fine = refine_by_fusion(coarse, fixes_from_track(vision), run.odometry, anchors=(fixes_from_track(run.laser),))
+    assert fine.verdict == "ok" and abs(fine.offset_s - 0.003) < 0.001
+    assert fine.ci95_s[0] <= 0.003 <= fine.ci95_s[1]
