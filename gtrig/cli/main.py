@@ -32,6 +32,8 @@ _SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("import_", "import", "group"),
     ("export", "export", "command"),
     ("report", "report", "command"),
+    ("fuse", "fuse", "command"),
+    ("sync", "sync", "command"),
 )
 
 

@@ -1,0 +1,79 @@
+"""``gtrig sync``: each GT source's clock offset to the reference (odometry), with a 95 % interval."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from gtrig.cli.common import console, handle_errors
+
+
+@handle_errors
+def command(
+    recording: Path | None = typer.Option(None, "--recording", help="The recording folder (for run/odometry.csv)."),
+    reference: str = typer.Option("odometry", "--reference",
+                                  help="The reference clock: odometry, an odometry CSV path, or the NAME of one "
+                                  "of the sources (a GT source pins time better than odometry's slip)."),
+    source: list[str] = typer.Option(..., "--source", help="NAME=track.tum[,cov.csv] (repeatable)."),
+    out: Path = typer.Option(..., "--out", help="Output sync.yaml."),
+    search_s: float = typer.Option(3.0, "--search-s", help="Lags searched, both signs, seconds."),
+    figure: Path | None = typer.Option(None, "--figure", help="PNG of the correlation curves."),
+    refine: bool = typer.Option(True, "--refine/--no-refine",
+                                help="Refine with the offset as a parameter of the fusion's fit (needs covariances)."),
+) -> None:
+    """Clock offsets of GT sources to odometry: cross-correlation of heading rates, then a sub-sample fit."""
+    from gtrig.errors import InputError
+    from gtrig.fusion.measurements import fixes_from_track
+    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.io.odometry import read_odometry
+    from gtrig.io.offsets import CONVENTION, write_offsets
+    from gtrig.io.posetrack import read_pose_track
+
+    tracks = {}
+    for spec in source:
+        if "=" not in spec:
+            raise InputError(f"--source {spec!r}: expected NAME=track.tum[,cov.csv]")
+        name, files = spec.split("=", 1)
+        parts = files.split(",")
+        tracks[name] = read_pose_track(parts[0], parts[1] if len(parts) > 1 else None, source=name)
+    ref_track = tracks.get(reference)
+    if reference == "odometry" or ref_track is not None:
+        if recording is None:
+            raise InputError(f"--reference {reference} needs --recording (its run/odometry.csv)")
+        odo_path = recording / "run" / "odometry.csv"
+    else:
+        odo_path = Path(reference)
+    odo = read_odometry(odo_path)
+    if ref_track is not None:
+        ru = ref_track.usable()
+        ref_t, ref_yaw = ru.stamps_s, ru.yaw_rad()
+        if refine and ref_track.cov is None:
+            raise InputError(f"--reference {reference}: the refinement needs its covariance (NAME=track.tum,cov.csv)")
+    else:
+        ref_t, ref_yaw = odo.stamps_s, odo.xytheta[:, 2]
+    results = {}
+    for name, track in tracks.items():
+        if name == reference:
+            continue
+        use = track.usable()
+        est = estimate_offset(ref_t, ref_yaw, use.stamps_s, use.yaw_rad(), name, search_s=search_s)
+        if refine and track.cov is not None:
+            anchors = (fixes_from_track(ref_track, reference),) if ref_track is not None else ()
+            est = refine_by_fusion(est, fixes_from_track(track, name), odo, anchors=anchors)
+        results[name] = est
+        ci = "" if est.verdict != "ok" else f" [{est.ci95_s[0] * 1e3:+.2f}, {est.ci95_s[1] * 1e3:+.2f}] ms"
+        num = "" if est.verdict != "ok" else f" {est.offset_s * 1e3:+.3f} ms"
+        console.print(f"{name}: {est.verdict}{num}{ci} ({est.reason})", highlight=False)
+    if figure is not None:
+        from gtrig.fusion.plots import correlation_figure
+
+        correlation_figure(list(results.values()), figure)
+    if ref_track is not None:
+        results_doc = {reference: {"verdict": "ok", "offset_s": 0.0, "ci95_s": [0.0, 0.0], "reason": "the reference"}}
+    else:
+        results_doc = {}
+    results_doc.update({k: v.to_dict() for k, v in results.items()})
+    write_offsets(out, reference if (ref_track is not None or reference == "odometry") else str(odo_path),
+                  results_doc)
+    console.print(f"{out}: {len(results)} source(s) against {reference}; {CONVENTION}", highlight=False)
