@@ -1,0 +1,323 @@
+"""One smoothed trajectory from any GT sources and odometry: ``fuse`` and ``fuse_tracks``.
+
+Steps: put every source on the reference (odometry) clock with its offset (gtrig.fusion.sync); split the
+span where no source sees the robot for longer than ``max_gap_s``; per segment, nodes at the odometry
+stamps (or a fixed rate), one factor per odometry increment (or constant velocity) and one per fix at
+its own stamp; a robust start (gtrig.fusion.init); the gated EKF + RTS (gtrig.fusion.ekf); then, by
+default, the batch MAP solve with a Huber loss from the EKF's estimate (gtrig.fusion.batch), with marginal
+covariances. The output has one pose per node inside the sources' span, each ``OK`` (observed) or
+``BRIDGED`` (carried by odometry through a gap, its length in the reason), with the (x, y, yaw) marginal
+covariance; the report names every rejected fix by source and stamp.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from gtrig.errors import InputError
+from gtrig.fusion.batch import smooth_batch
+from gtrig.fusion.chain import PROCESS_CV, PROCESS_ODOMETRY, FactorChain
+from gtrig.fusion.ekf import smooth_ekf
+from gtrig.fusion.init import odom_in_world
+from gtrig.fusion.measurements import Fixes, FixModel, fixes_from_track
+from gtrig.fusion.process import (
+    ConstantVelocityNoise,
+    OdometryNoise,
+    constant_velocity_cov,
+    interpolate_odometry,
+    odometry_increments,
+    whitening,
+)
+from gtrig.io.odometry import OdometryLog
+from gtrig.trajectory import PoseStatus, PoseTrack
+
+
+@dataclass(frozen=True)
+class FusionOptions:
+    """How to fuse.
+
+    Attributes
+    ----------
+    estimator : ``"batch"`` (EKF + RTS start, then the robust MAP solve) or ``"ekf"`` (the seeds' EKF +
+        RTS alone).
+    rate_hz : None: one pose per odometry stamp; a number: a regular grid at that rate (the constant
+        velocity model uses 50 Hz when None).
+    offsets_s : per source, its clock minus the reference clock (``gtrig sync``); subtracted from its stamps.
+    max_gap_s : a longer span without any fix ends a segment (None: odometry bridges every gap).
+    bridge_after_s : poses inside a gap between accepted fixes longer than this are BRIDGED.
+    gate_prob : chi-square gate of each fix's innovation (probability of keeping a good fix).
+    huber_k : Huber threshold (sigmas) of the batch solve.
+    odometry : the odometry noise model; cv : the constant-velocity model (no odometry).
+    prior_sigma : (x, y, yaw) sigmas of the start around the robust anchor (m, m, rad).
+    """
+
+    estimator: Literal["batch", "ekf"] = "batch"
+    rate_hz: float | None = None
+    offsets_s: Mapping[str, float] = field(default_factory=dict)
+    max_gap_s: float | None = None
+    bridge_after_s: float = 0.25
+    gate_prob: float = 0.9999
+    huber_k: float = 3.0
+    odometry: OdometryNoise = OdometryNoise()
+    cv: ConstantVelocityNoise = ConstantVelocityNoise()
+    prior_sigma: tuple[float, float, float] = (0.1, 0.1, 0.1)
+
+
+@dataclass(frozen=True)
+class Outlier:
+    """A fix refused by the gate (``gate``) or down-weighted by the robust loss (``huber``)."""
+
+    source: str
+    stamp_s: float
+    chi2: float
+    dof: int
+    stage: str
+
+
+@dataclass(frozen=True)
+class Segment:
+    t0_s: float
+    t1_s: float
+    poses: int
+    bridged: int
+    longest_bridge_s: float
+    odometry_params: tuple[float, ...]
+    odometry_params_sigma: tuple[float, ...]
+    iterations: int
+
+
+@dataclass(frozen=True)
+class FusionReport:
+    """What fusion did: per source, fixes offered, used and rejected; segments; the outliers; timing."""
+
+    estimator: str
+    process: str
+    sources: dict[str, dict[str, float]]
+    segments: tuple[Segment, ...]
+    outliers: tuple[Outlier, ...]
+    seconds: float
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def _check_fixes(f: Fixes) -> None:
+    if len(f) and (not np.all(np.isfinite(f.stamps_s)) or np.any(np.diff(f.stamps_s) <= 0)):
+        i = int(np.argmax(~(np.diff(f.stamps_s) > 0))) + 1 if len(f) > 1 else 0
+        raise InputError(f"{f.source}: stamps must increase strictly (fix {i + 1}, {f.stamps_s[i]:.6f})")
+
+
+def _merge(fixes: Sequence[Fixes]) -> dict[str, np.ndarray]:
+    st = np.concatenate([f.stamps_s for f in fixes])
+    order = np.argsort(st, kind="stable")
+    cat = {
+        "stamps": st,
+        "z": np.concatenate([f.value for f in fixes]),
+        "cov": np.concatenate([f.cov for f in fixes]),
+        "kind": np.concatenate([np.full(len(f), f.kind_code(), np.int64) for f in fixes]),
+        "lever": np.concatenate([np.tile(f.lever_xy, (len(f), 1)) for f in fixes]),
+        "source": np.concatenate([np.full(len(f), k, np.int64) for k, f in enumerate(fixes)]),
+    }
+    return {k: v[order] for k, v in cat.items()}
+
+
+def _segments(stamps: np.ndarray, max_gap_s: float | None) -> list[tuple[int, int]]:
+    if max_gap_s is None or stamps.size < 2:
+        return [(0, stamps.size)]
+    cut = np.flatnonzero(np.diff(stamps) > max_gap_s) + 1
+    edges = np.r_[0, cut, stamps.size]
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True) if b - a >= 3]
+
+
+def _fix_whitening(cov: np.ndarray, kind: np.ndarray) -> np.ndarray:
+    W = whitening(cov)
+    W[kind == 1, 2, :] = 0.0  # a position fix says nothing on its third axis
+    return W
+
+
+def _node_stamps(t0: float, t1: float, odometry: OdometryLog | None, rate_hz: float | None) -> np.ndarray:
+    if odometry is not None and rate_hz is None:
+        s = odometry.stamps_s
+        i0 = max(int(np.searchsorted(s, t0, "right")) - 1, 0)
+        i1 = min(int(np.searchsorted(s, t1, "left")), s.size - 1)
+        return s[i0:i1 + 1]
+    step = 1.0 / (rate_hz or 50.0)
+    n = int(np.ceil((t1 - t0) / step)) + 1
+    return t0 + np.arange(n) * step
+
+
+def _chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: OdometryLog | None, opts: FusionOptions,
+           sources: tuple[str, ...]) -> tuple[FactorChain, np.ndarray, np.ndarray, np.ndarray]:
+    """The factor chain, the start (N, d), the parameters' start and the start's covariance (d, d)."""
+    N = stamps.size
+    node = np.clip(np.searchsorted(stamps, fx["stamps"], "right") - 1, 0, N - 2)
+    alpha = np.clip((fx["stamps"] - stamps[node]) / (stamps[node + 1] - stamps[node]), 0.0, 1.0)
+    W = _fix_whitening(fx["cov"], fx["kind"])
+    if odometry is not None:
+        odo = interpolate_odometry(odometry, stamps)
+        u, qcov = odometry_increments(odo, stamps, opts.odometry)
+        proc, d = PROCESS_ODOMETRY, 3
+        k0, Pk = opts.odometry.prior()
+        proc_W = whitening(qcov)
+        odo_fix = interpolate_odometry(odometry, fx["stamps"])
+        tol = (0.05, np.deg2rad(3.0))
+    else:
+        odo = np.zeros((N, 3))
+        u = np.zeros((N - 1, 3))
+        proc, d = PROCESS_CV, 6
+        k0, Pk = np.zeros(0), np.zeros((0, 0))
+        proc_W = whitening(constant_velocity_cov(np.diff(stamps), opts.cv))
+        odo_fix = np.zeros((fx["stamps"].size, 3))
+        tol = (0.2, np.deg2rad(10.0))
+    # robust anchor from the first fixes (first 10 s or 200 fixes)
+    first = np.flatnonzero(fx["stamps"] <= fx["stamps"][0] + 10.0)[:200]
+    if odometry is None:
+        first = first[:10]
+    is_pose = fx["kind"][first] == 0
+    T_wo = odom_in_world(fx["z"][first][is_pose], odo_fix[first][is_pose], fx["z"][first][~is_pose][:, :2],
+                         odo_fix[first][~is_pose], fx["lever"][first][~is_pose], *tol)
+    c, s = np.cos(T_wo[2]), np.sin(T_wo[2])
+    X = np.zeros((N, d))
+    X[:, 0] = T_wo[0] + c * odo[:, 0] - s * odo[:, 1]
+    X[:, 1] = T_wo[1] + s * odo[:, 0] + c * odo[:, 1]
+    X[:, 2] = T_wo[2] + odo[:, 2]
+    P0 = np.diag(np.r_[np.square(opts.prior_sigma), np.full(d - 3, 1.0)])
+    if proc == PROCESS_CV and not np.any(fx["kind"] == 0):
+        P0[2, 2] = np.pi**2  # heading unknown: only positions seen
+    chain = FactorChain(
+        stamps_s=stamps, process=proc, proc_u=np.ascontiguousarray(u), proc_W=np.ascontiguousarray(proc_W),
+        fix_node=node.astype(np.int64), fix_alpha=alpha, fix_kind=fx["kind"], fix_z=fx["z"], fix_cov=fx["cov"],
+        fix_W=np.ascontiguousarray(W), fix_lever=fx["lever"], fix_source=fx["source"], fix_stamps_s=fx["stamps"],
+        sources=sources, x0=X[0].copy(), W0=whitening(P0[None])[0], k0=k0,
+        Wk=whitening(Pk[None])[0] if Pk.size else np.zeros((0, 0)))
+    return chain, X, k0, P0
+
+
+def _bridged(out_stamps: np.ndarray, accepted_stamps: np.ndarray, after_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per pose: inside a gap longer than ``after_s`` between accepted fixes? and that gap's length."""
+    if accepted_stamps.size == 0:
+        span = float(out_stamps[-1] - out_stamps[0]) if out_stamps.size else 0.0
+        return np.ones(out_stamps.size, bool), np.full(out_stamps.size, span)
+    k = np.searchsorted(accepted_stamps, out_stamps)
+    prev = np.where(k > 0, accepted_stamps[np.maximum(k - 1, 0)], out_stamps[0])
+    nxt = np.where(k < accepted_stamps.size, accepted_stamps[np.minimum(k, accepted_stamps.size - 1)], out_stamps[-1])
+    exact = (k < accepted_stamps.size) & (accepted_stamps[np.minimum(k, accepted_stamps.size - 1)] == out_stamps)
+    gap = nxt - prev
+    return (gap > after_s) & ~exact, gap
+
+
+def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: FusionOptions | None = None,
+         ) -> tuple[PoseTrack, FusionReport]:
+    """Smooth absolute fixes with odometry (or constant velocity) into one trajectory.
+
+    Parameters
+    ----------
+    fixes : the sources' fixes (:func:`~gtrig.fusion.measurements.fixes_from_track`), each on its own clock.
+    odometry : wheel odometry on the reference clock, or None for the constant-velocity model.
+    options : :class:`FusionOptions`.
+
+    Returns
+    -------
+    track : ``source="fusion"``, ``cov_kind="xyyaw"``, one pose per node inside the sources' span, OK or
+        BRIDGED; stamps on the reference clock.
+    report : :class:`FusionReport`.
+
+    Raises
+    ------
+    InputError : no fixes, stamps not increasing, sources outside the odometry's span, a covariance that is
+        not positive definite.
+    """
+    t_start = time.perf_counter()
+    opts = options or FusionOptions()
+    fixes = [f.shifted(-float(opts.offsets_s.get(f.source, 0.0))) for f in fixes if len(f)]
+    if not fixes:
+        raise InputError("fusion: no usable fix in any source")
+    for f in fixes:
+        _check_fixes(f)
+    sources = tuple(f.source for f in fixes)
+    if len(set(sources)) != len(sources):
+        raise InputError(f"fusion: two sources share a name ({', '.join(sources)})")
+    if odometry is not None:
+        if len(odometry) < 2:
+            raise InputError("fusion: the odometry has fewer than two records")
+        o0, o1 = float(odometry.stamps_s[0]), float(odometry.stamps_s[-1])
+        inside = []
+        for f in fixes:
+            keep = (f.stamps_s >= o0) & (f.stamps_s <= o1)
+            if not np.any(keep):
+                raise InputError(f"fusion: {f.source} ({f.stamps_s[0]:.3f}-{f.stamps_s[-1]:.3f} s) does not overlap "
+                                 f"the odometry ({o0:.3f}-{o1:.3f} s); wrong clock or offset?")
+            inside.append(Fixes(f.source, f.stamps_s[keep], f.model, f.value[keep], f.cov[keep], f.lever_xy))
+        fixes = inside
+    fx = _merge(fixes)
+    per_source = {s: {"offered": float(len(f)), "used": 0.0, "rejected": 0.0, "downweighted": 0.0,
+                      "offset_s": float(opts.offsets_s.get(s, 0.0))} for s, f in zip(sources, fixes, strict=True)}
+    out_st, out_xyt, out_cov, out_status, out_reason = [], [], [], [], []
+    outliers: list[Outlier] = []
+    segments: list[Segment] = []
+    for a, b in _segments(fx["stamps"], opts.max_gap_s):
+        seg = {k: v[a:b] for k, v in fx.items()}
+        t0, t1 = float(seg["stamps"][0]), float(seg["stamps"][-1])
+        stamps = _node_stamps(t0, t1, odometry, opts.rate_hz)
+        if stamps.size < 2:
+            continue
+        chain, X0, k0, P0 = _chain(stamps, seg, odometry, opts, sources)
+        _, Pk = opts.odometry.prior() if odometry is not None else (None, np.zeros((0, 0)))
+        ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob)
+        X, K, cov, cov_k, iters = ekf.X, ekf.K, ekf.cov_x, ekf.cov_k, 0
+        use = ekf.accept
+        huber_w = np.ones(use.size)
+        if opts.estimator == "batch":
+            res = smooth_batch(chain, ekf.X, ekf.K, fix_use=use, huber_k=opts.huber_k)
+            X, K, cov, cov_k, iters = res.X, res.K, res.cov_x, res.cov_k, res.iterations
+            huber_w = res.robust_w
+        dims = np.where(seg["kind"] == 0, 3, 2)
+        for j in np.flatnonzero(~use):
+            outliers.append(Outlier(sources[seg["source"][j]], float(seg["stamps"][j]), float(ekf.nis[j]),
+                                    int(dims[j]), "gate"))
+        for j in np.flatnonzero(use & (huber_w < 1.0)):
+            outliers.append(Outlier(sources[seg["source"][j]], float(seg["stamps"][j]), float(ekf.nis[j]),
+                                    int(dims[j]), "huber"))
+        for k, s in enumerate(sources):
+            m = seg["source"] == k
+            per_source[s]["used"] += float(np.sum(use[m]))
+            per_source[s]["rejected"] += float(np.sum(~use[m]))
+            per_source[s]["downweighted"] += float(np.sum(use[m] & (huber_w[m] < 1.0)))
+        inside = (stamps >= t0) & (stamps <= t1)
+        br, gap = _bridged(stamps, np.unique(seg["stamps"][use]), opts.bridge_after_s)
+        br = br[inside]
+        gap = gap[inside]
+        out_st.append(stamps[inside])
+        out_xyt.append(X[inside, :3])
+        out_cov.append(cov[inside, :3, :3])
+        out_status.append(np.where(br, PoseStatus.BRIDGED, PoseStatus.OK).astype(np.uint8))
+        out_reason += [f"bridged: {g:.2f} s without a fix" if f else "" for f, g in zip(br, gap, strict=True)]
+        sig = np.sqrt(np.diag(cov_k)) if cov_k.size else np.zeros(0)
+        segments.append(Segment(t0, t1, int(inside.sum()), int(br.sum()), float(gap[br].max()) if br.any() else 0.0,
+                                tuple(float(v) for v in K), tuple(float(v) for v in sig), int(iters)))
+    if not out_st:
+        raise InputError("fusion: no segment with at least three fixes")
+    st = np.concatenate(out_st)
+    xyt = np.concatenate(out_xyt)
+    track = PoseTrack.from_xytheta(st, xyt, cov=np.concatenate(out_cov), status=np.concatenate(out_status),
+                                   reasons=tuple(out_reason), source="fusion")
+    report = FusionReport(opts.estimator, "odometry" if odometry is not None else "constant velocity", per_source,
+                          tuple(segments), tuple(sorted(outliers, key=lambda o: o.stamp_s)),
+                          time.perf_counter() - t_start)
+    return track, report
+
+
+def fuse_tracks(tracks: Mapping[str, PoseTrack], odometry: OdometryLog | None = None,
+                options: FusionOptions | None = None,
+                lever_xy: Mapping[str, tuple[float, float]] | None = None) -> tuple[PoseTrack, FusionReport]:
+    """:func:`fuse` on pose tracks (``{"vision": track, "laser": track}``); ``xyz`` tracks become position
+    fixes of the point at ``lever_xy[name]`` in the robot frame."""
+    fixes = [fixes_from_track(t, name, (lever_xy or {}).get(name),
+                              FixModel.POSITION if t.cov_kind == "xyz" else FixModel.POSE)
+             for name, t in tracks.items()]
+    return fuse(fixes, odometry, options)

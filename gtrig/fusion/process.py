@@ -1,0 +1,116 @@
+"""Process models: odometry increments with slip noise, or constant velocity when no odometry is given.
+
+Odometry (Borenstein and Feng 1996, UMBmark): systematic errors are the parameters of the chain (a
+distance scale, a turn-rate scale and a curvature per metre from unequal wheel radii; see
+gtrig.fusion.kernels); non-systematic errors (wheel slip) are process noise whose variance grows with
+the distance each wheel rolls, plus a small floor per second (encoder quantisation, stamp jitter).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gtrig.io.odometry import OdometryLog
+
+
+@dataclass(frozen=True)
+class OdometryNoise:
+    """Odometry's random errors and the prior on its systematic ones.
+
+    Attributes
+    ----------
+    slip_m_per_sqrt_m : each wheel's travel error, metres per square root of metre rolled.
+    wheelbase_m : distance between the wheels (turns the wheels' slip into heading noise).
+    lateral_ratio : side slip as a fraction of the forward slip.
+    floor_m_per_sqrt_s, floor_rad_per_sqrt_s : noise floor per square root of second, even standing.
+    sigma_dist_scale, sigma_turn_scale : prior sigmas of the distance and turn-rate scales (around 1).
+    sigma_curv_rad_per_m : prior sigma of the curvature bias (around 0).
+    """
+
+    slip_m_per_sqrt_m: float = 0.002
+    wheelbase_m: float = 0.5
+    lateral_ratio: float = 0.5
+    floor_m_per_sqrt_s: float = 0.0005
+    floor_rad_per_sqrt_s: float = 0.0005
+    sigma_dist_scale: float = 0.05
+    sigma_turn_scale: float = 0.05
+    sigma_curv_rad_per_m: float = 0.02
+
+    def prior(self) -> tuple[np.ndarray, np.ndarray]:
+        """Mean (3,) and covariance (3, 3) of ``(k_dist, k_turn, k_curv)``."""
+        s = np.array([self.sigma_dist_scale, self.sigma_turn_scale, self.sigma_curv_rad_per_m])
+        return np.array([1.0, 1.0, 0.0]), np.diag(s**2)
+
+
+@dataclass(frozen=True)
+class ConstantVelocityNoise:
+    """White-noise acceleration: spectral densities of the linear (m^2/s^3) and angular (rad^2/s^3)
+    accelerations; a walking-pace robot accelerates by about 0.5 m/s^2 and 1 rad/s^2."""
+
+    q_linear: float = 0.25
+    q_angular: float = 1.0
+
+
+def interpolate_odometry(log: OdometryLog, stamps_s: np.ndarray) -> np.ndarray:
+    """(N, 3) odometry poses at ``stamps_s`` (linear in x, y and the unwrapped heading)."""
+    th = np.unwrap(log.xytheta[:, 2])
+    return np.column_stack([np.interp(stamps_s, log.stamps_s, log.xytheta[:, 0]),
+                            np.interp(stamps_s, log.stamps_s, log.xytheta[:, 1]),
+                            np.interp(stamps_s, log.stamps_s, th)])
+
+
+def odometry_increments(xytheta: np.ndarray, stamps_s: np.ndarray, noise: OdometryNoise,
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Robot-frame increments between consecutive odometry poses and their noise.
+
+    Parameters
+    ----------
+    xytheta : (N, 3) odometry poses (its own frame), heading unwrapped.
+    stamps_s : (N,) their stamps.
+    noise : the slip model.
+
+    Returns
+    -------
+    u : (N-1, 3) increments ``(dx, dy, dyaw)`` in the frame of the earlier pose (m, m, rad).
+    cov : (N-1, 3, 3) their covariance.
+    """
+    d = np.diff(xytheta, axis=0)
+    c, s = np.cos(xytheta[:-1, 2]), np.sin(xytheta[:-1, 2])
+    u = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
+    ds = np.hypot(u[:, 0], u[:, 1])
+    half_b = noise.wheelbase_m / 2
+    wr = np.abs(ds + u[:, 2] * half_b)
+    wl = np.abs(ds - u[:, 2] * half_b)
+    s2 = noise.slip_m_per_sqrt_m**2
+    dt = np.diff(stamps_s)
+    var_fwd = s2 * (wr + wl) / 4 + noise.floor_m_per_sqrt_s**2 * dt
+    var_lat = noise.lateral_ratio**2 * s2 * (wr + wl) / 4 + noise.floor_m_per_sqrt_s**2 * dt
+    var_th = s2 * (wr + wl) / noise.wheelbase_m**2 + noise.floor_rad_per_sqrt_s**2 * dt
+    cov_fth = s2 * (wr - wl) / (2 * noise.wheelbase_m)
+    cov = np.zeros((len(u), 3, 3))
+    cov[:, 0, 0] = var_fwd
+    cov[:, 1, 1] = var_lat
+    cov[:, 2, 2] = var_th
+    cov[:, 0, 2] = cov[:, 2, 0] = cov_fth
+    return u, cov
+
+
+def constant_velocity_cov(dts: np.ndarray, noise: ConstantVelocityNoise) -> np.ndarray:
+    """(N-1, 6, 6) covariance of the constant-velocity residual over steps ``dts`` (white-noise
+    acceleration, Bar-Shalom's discretisation)."""
+    q = np.array([noise.q_linear, noise.q_linear, noise.q_angular])
+    dt = np.asarray(dts, float)[:, None]
+    cov = np.zeros((dt.size, 6, 6))
+    i = np.arange(3)
+    cov[:, i, i] = q * dt**3 / 3
+    cov[:, i, i + 3] = cov[:, i + 3, i] = q * dt**2 / 2
+    cov[:, i + 3, i + 3] = q * dt
+    return cov
+
+
+def whitening(cov: np.ndarray) -> np.ndarray:
+    """(N, k, k) upper factors W with W^T W = cov^-1 (so W r is standard normal)."""
+    L = np.linalg.cholesky(np.linalg.inv(cov))  # info = L L^T
+    return np.swapaxes(L, 1, 2)
