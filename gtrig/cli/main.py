@@ -29,6 +29,7 @@ _SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("robot_frame", "robot-frame", "command"),
     ("laser", "laser", "group"),
     ("gps", "gps", "command"),
+    ("fuse", "fuse", "command"), ("sync", "sync", "command"),
 )
 
 

@@ -54,6 +54,11 @@ class FusionOptions:
     huber_k : Huber threshold (sigmas) of the batch solve.
     odometry : the odometry noise model; cv : the constant-velocity model (no odometry).
     prior_sigma : (x, y, yaw) sigmas of the start around the robust anchor (m, m, rad).
+    correlation_s : a source's errors stay correlated over about this long (its calibration and
+        model errors change with the pose, not from frame to frame); each fix's covariance is multiplied
+        by the number of the same source's fixes within this window, so that a second of 75 Hz fixes
+        counts as ``1 / correlation_s`` independent ones (effective sample size). 0 treats every fix as
+        independent.
     """
 
     estimator: Literal["batch", "ekf"] = "batch"
@@ -66,6 +71,7 @@ class FusionOptions:
     odometry: OdometryNoise = OdometryNoise()
     cv: ConstantVelocityNoise = ConstantVelocityNoise()
     prior_sigma: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    correlation_s: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -110,6 +116,19 @@ def _check_fixes(f: Fixes) -> None:
     if len(f) and (not np.all(np.isfinite(f.stamps_s)) or np.any(np.diff(f.stamps_s) <= 0)):
         i = int(np.argmax(~(np.diff(f.stamps_s) > 0))) + 1 if len(f) > 1 else 0
         raise InputError(f"{f.source}: stamps must increase strictly (fix {i + 1}, {f.stamps_s[i]:.6f})")
+
+
+def _decorrelated(f: Fixes, window_s: float) -> Fixes:
+    """``f`` with each covariance multiplied by the count of its source's fixes within ``window_s``."""
+    if window_s <= 0 or len(f) < 2:
+        return f
+    lo = np.searchsorted(f.stamps_s, f.stamps_s - window_s / 2, "left")
+    hi = np.searchsorted(f.stamps_s, f.stamps_s + window_s / 2, "right")
+    n = np.maximum(hi - lo, 1).astype(float)
+    cov = f.cov * n[:, None, None]
+    if f.model is FixModel.POSITION:
+        cov[:, 2, 2] = 1.0
+    return Fixes(f.source, f.stamps_s, f.model, f.value, cov, f.lever_xy)
 
 
 def _merge(fixes: Sequence[Fixes]) -> dict[str, np.ndarray]:
@@ -254,7 +273,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
                                  f"the odometry ({o0:.3f}-{o1:.3f} s); wrong clock or offset?")
             inside.append(Fixes(f.source, f.stamps_s[keep], f.model, f.value[keep], f.cov[keep], f.lever_xy))
         fixes = inside
-    fx = _merge(fixes)
+    fx = _merge([_decorrelated(f, opts.correlation_s) for f in fixes])
     per_source = {s: {"offered": float(len(f)), "used": 0.0, "rejected": 0.0, "downweighted": 0.0,
                       "offset_s": float(opts.offsets_s.get(s, 0.0))} for s, f in zip(sources, fixes, strict=True)}
     out_st, out_xyt, out_cov, out_status, out_reason = [], [], [], [], []

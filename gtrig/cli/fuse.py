@@ -1,0 +1,93 @@
+"""``gtrig fuse``: one smoothed trajectory from GTvision, GTlaser and odometry, a covariance per pose."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from gtrig.cli.common import console, handle_errors
+
+
+@handle_errors
+def command(
+    rig: Path | None = typer.Option(None, "--rig", help="The calibrated rig (checked; the odometry rate)."),
+    recording: Path | None = typer.Option(None, "--recording", help="The recording (default odometry from it)."),
+    vision: Path | None = typer.Option(None, "--vision", help="GTvision trajectory (TUM)."),
+    vision_cov: Path | None = typer.Option(None, "--vision-cov", help="Its covariance CSV."),
+    laser: Path | None = typer.Option(None, "--laser", help="GTlaser trajectory (TUM)."),
+    laser_cov: Path | None = typer.Option(None, "--laser-cov", help="Its covariance CSV."),
+    odometry: Path | None = typer.Option(None, "--odometry", help="Odometry CSV (default REC/run/odometry.csv)."),
+    no_odometry: bool = typer.Option(False, "--no-odometry", help="Constant-velocity model instead of odometry."),
+    sync: Path | None = typer.Option(None, "--sync", help="sync.yaml from gtrig sync (offsets applied)."),
+    rate: str = typer.Option("odometry", "--rate", help="'odometry' (a pose per odometry stamp) or a rate in Hz."),
+    estimator: str = typer.Option("batch", "--estimator", help="batch (robust MAP) or ekf (EKF + RTS)."),
+    max_gap: float | None = typer.Option(None, "--max-gap", help="End a segment after this long without a fix (s)."),
+    out: Path = typer.Option(..., "--out", help="Output trajectory (TUM)."),
+    covariance: Path = typer.Option(..., "--covariance", help="Output covariance CSV (x, y, yaw)."),
+    report: Path | None = typer.Option(None, "--report", help="Output JSON report (outliers, parameters)."),
+) -> None:
+    """Fuse GT sources with odometry (EKF + RTS, then a robust batch MAP); bridged poses flagged."""
+    import json
+
+    from gtrig.errors import InputError
+    from gtrig.fusion import FusionOptions, fuse_tracks
+    from gtrig.io.odometry import read_odometry
+    from gtrig.io.offsets import read_offsets
+    from gtrig.io.posetrack import read_pose_track, write_pose_track
+
+    if estimator not in ("batch", "ekf"):
+        raise InputError(f"--estimator {estimator!r}: batch or ekf")
+    if rig is not None:
+        from gtrig.rig import load_rig
+
+        load_rig(rig)
+    tracks = {}
+    for name, tum, cov in (("vision", vision, vision_cov), ("laser", laser, laser_cov)):
+        if tum is None:
+            continue
+        if cov is None:
+            raise InputError(f"--{name} needs --{name}-cov: fusion weighs every fix by its covariance")
+        tracks[name] = read_pose_track(tum, cov, source=name)
+    if not tracks:
+        raise InputError("give at least one source (--vision / --laser)")
+    odo = None
+    if not no_odometry:
+        path = odometry or (recording / "run" / "odometry.csv" if recording is not None else None)
+        if path is None:
+            raise InputError("no odometry: give --odometry, --recording, or --no-odometry")
+        odo = read_odometry(path)
+    rate_hz = None
+    if rate != "odometry":
+        try:
+            rate_hz = float(rate)
+        except ValueError:
+            raise InputError(f"--rate {rate!r}: 'odometry' or a number of Hz") from None
+        if not rate_hz > 0:
+            raise InputError(f"--rate {rate!r}: must be positive")
+    offsets = read_offsets(sync) if sync is not None else {}
+    opts = FusionOptions(estimator=estimator, rate_hz=rate_hz, offsets_s=offsets, max_gap_s=max_gap)  # type: ignore[arg-type]
+    track, rep = fuse_tracks(tracks, odo, opts)
+    paths = [out, covariance] + ([report] if report else [])
+    if report is not None:
+        from gtrig.io.atomic import atomic_group
+        from gtrig.io.posetrack import covariance_text
+        from gtrig.io.tum import tum_text
+
+        with atomic_group(*paths) as tmps:
+            tmps[0].write_text(tum_text(track), encoding="utf-8", newline="\n")
+            tmps[1].write_text(covariance_text(track), encoding="utf-8", newline="\n")
+            tmps[2].write_text(json.dumps(rep.to_dict(), indent=1), encoding="utf-8")
+    else:
+        write_pose_track(track, out, covariance)
+    c = track.counts()
+    console.print(f"{out}: {len(track)} poses ({c['ok']} observed, {c['bridged']} bridged), {rep.estimator}, "
+                  f"{rep.seconds:.2f} s", highlight=False)
+    for s, v in rep.sources.items():
+        console.print(f"  {s}: {int(v['used'])} of {int(v['offered'])} fixes used, {int(v['rejected'])} rejected, "
+                      f"{int(v['downweighted'])} down-weighted, offset {v['offset_s'] * 1e3:+.3f} ms", highlight=False)
+    for seg in rep.segments:
+        if seg.odometry_params:
+            k = seg.odometry_params
+            console.print(f"  odometry: distance scale {k[0]:.5f}, turn scale {k[1]:.5f}, curvature "
+                          f"{k[2] * 1e3:+.3f} mrad/m", highlight=False)

@@ -1,0 +1,278 @@
+"""Clock offsets between a GT source and the reference (odometry), from the robot's turns.
+
+Sign convention: ``offset_s`` = the source's stamp minus the reference's stamp of the same instant, so
+``source_stamp - offset_s`` is on the reference clock (:class:`~gtrig.fusion.fuse.FusionOptions` subtracts
+it). A source whose clock runs 0.3 s late has ``offset_s = +0.3``.
+
+Method (the seeds' check made quantitative, deliverable "Synchronization validation"):
+
+1. coarse: normalised cross-correlation of the heading rates, both on a 100 Hz grid (the source's only
+   where it has samples), over lags in ``[-search_s, search_s]``; its peak;
+2. fine: a 1-D minimisation (Brent) of the least-squares misfit between the source's headings at their
+   own stamps and the reference heading interpolated at ``stamp - offset``, with a gain and a level per
+   10 s window (odometry's turn-scale error and heading drift), around the coarse peak;
+3. interval: a jackknife over those windows (each left out in turn), Student's t with W - 1 dof.
+
+Verdicts: ``unobservable`` when the robot turns too little (heading-rate spread under 0.02 rad/s, or
+fewer than 3 windows with turns); ``ambiguous`` when a second correlation peak, away from the first by
+more than its width, reaches 90 % of it, or when the jackknife interval is wider than ``max_ci_s``;
+``ok`` otherwise. Only ``ok`` estimates carry a number to apply.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+from scipy.stats import t as student_t
+
+from gtrig.fusion.measurements import Fixes
+from gtrig.io.odometry import OdometryLog
+
+if TYPE_CHECKING:
+    from gtrig.fusion.fuse import FusionOptions
+
+Verdict = Literal["ok", "ambiguous", "unobservable"]
+
+
+@dataclass(frozen=True)
+class OffsetEstimate:
+    """One source's clock offset to the reference.
+
+    Attributes
+    ----------
+    source : its name. verdict : ``ok``, ``ambiguous`` or ``unobservable``.
+    offset_s : the estimate (``nan`` unless ``ok``); ci95_s : (low, high) 95 % interval (``nan`` unless ok).
+    coarse_s : the cross-correlation peak; peak : its normalised correlation; second_peak : the best
+        other peak's. lags_s, corr : the correlation curve (for a figure). windows : used in the fit.
+    reason : why the verdict, one line.
+    """
+
+    source: str
+    verdict: Verdict
+    offset_s: float
+    ci95_s: tuple[float, float]
+    coarse_s: float
+    peak: float
+    second_peak: float
+    lags_s: np.ndarray
+    corr: np.ndarray
+    windows: int
+    reason: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {"verdict": self.verdict, "offset_s": None if np.isnan(self.offset_s) else float(self.offset_s),
+                "ci95_s": None if np.isnan(self.offset_s) else [float(v) for v in self.ci95_s],
+                "coarse_s": _num(self.coarse_s), "peak": _num(self.peak), "second_peak": _num(self.second_peak),
+                "windows": int(self.windows), "reason": self.reason}
+
+
+def _num(v: float) -> float | None:
+    return None if not np.isfinite(v) else float(v)
+
+
+def _rate_on_grid(stamps: np.ndarray, yaw: np.ndarray, grid: np.ndarray, max_dt: float,
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Heading rate on ``grid`` (rad/s) and where it is valid (a sample within ``max_dt`` on both sides)."""
+    th = np.unwrap(yaw)
+    h = np.interp(grid, stamps, th)
+    rate = np.gradient(h, grid)
+    k = np.searchsorted(stamps, grid)
+    prev = np.where(k > 0, stamps[np.maximum(k - 1, 0)], -np.inf)
+    nxt = np.where(k < stamps.size, stamps[np.minimum(k, stamps.size - 1)], np.inf)
+    valid = (grid - prev <= max_dt) & (nxt - grid <= max_dt) & (grid >= stamps[0]) & (grid <= stamps[-1])
+    return rate, valid
+
+
+def _misfit(offset: float, src_t: np.ndarray, src_th: np.ndarray, ref_t: np.ndarray, ref_th: np.ndarray,
+            win: np.ndarray, n_win: int, mask: np.ndarray | None = None) -> float:
+    """Sum over windows of the least-squares misfit of ``src_th ~ a_w + b_w ref_th(t - offset)``."""
+    r = np.interp(src_t - offset, ref_t, ref_th)
+    total = 0.0
+    for w in range(n_win):
+        m = win == w
+        if mask is not None:
+            m &= mask
+        if m.sum() < 3:
+            continue
+        A = np.column_stack([np.ones(m.sum()), r[m]])
+        coef, *_ = np.linalg.lstsq(A, src_th[m], rcond=None)
+        total += float(np.sum((src_th[m] - A @ coef) ** 2))
+    return total
+
+
+def estimate_offset(ref_stamps_s: np.ndarray, ref_yaw: np.ndarray, src_stamps_s: np.ndarray, src_yaw: np.ndarray,
+                    source: str = "source", search_s: float = 3.0, grid_hz: float = 100.0, window_s: float = 10.0,
+                    min_rate_std: float = 0.02, ambiguity: float = 0.9, max_ci_s: float | None = None,
+                    ) -> OffsetEstimate:
+    """The clock offset of a source to the reference from their headings.
+
+    Parameters
+    ----------
+    ref_stamps_s, ref_yaw : (N,) the reference's stamps and heading (rad; e.g. odometry theta).
+    src_stamps_s, src_yaw : (M,) the source's stamps and heading (e.g. ``PoseTrack.yaw_rad()``).
+    search_s : lags searched, both signs, seconds.
+    grid_hz : the correlation's grid.
+    window_s : the fit's windows (each has its own heading gain and level).
+    min_rate_std : below this heading-rate spread (rad/s) in the overlap the offset is unobservable.
+    ambiguity : a second peak at this fraction of the first makes the estimate ambiguous.
+    max_ci_s : a wider 95 % interval is ambiguous (None: no limit; the fusion refinement checks its own).
+    """
+    rt, ry = np.asarray(ref_stamps_s, float), np.asarray(ref_yaw, float)
+    st, sy = np.asarray(src_stamps_s, float), np.asarray(src_yaw, float)
+    step = 1.0 / grid_hz
+    nan2 = (float("nan"), float("nan"))
+
+    def verdict(v: Verdict, reason: str, coarse: float = float("nan"), peak: float = float("nan"),
+                second: float = float("nan"), lags: np.ndarray | None = None, corr: np.ndarray | None = None,
+                windows: int = 0) -> OffsetEstimate:
+        return OffsetEstimate(source, v, float("nan"), nan2, coarse, peak, second,
+                              np.zeros(0) if lags is None else lags, np.zeros(0) if corr is None else corr, windows,
+                              reason)
+
+    if rt.size < 3 or st.size < 3:
+        return verdict("unobservable", "fewer than 3 samples")
+    t0, t1 = max(rt[0], st[0]), min(rt[-1], st[-1])
+    if t1 - t0 < 4 * search_s:
+        return verdict("unobservable", f"the overlap ({max(t1 - t0, 0):.1f} s) is shorter than 4 x the search window")
+    src_dt = float(np.median(np.diff(st)))
+    grid = np.arange(t0, t1, step)
+    s_rate, s_valid = _rate_on_grid(st, sy, grid, max(2.5 * src_dt, 2 * step))
+    ref_grid = np.arange(rt[0], rt[-1], step)
+    r_rate, _ = _rate_on_grid(rt, ry, ref_grid, np.inf)
+    if np.std(s_rate[s_valid]) < min_rate_std or np.std(r_rate) < min_rate_std:
+        return verdict("unobservable", "the robot hardly turns: no heading-rate signal to align")
+    # --- coarse: normalised cross-correlation over the lags
+    lags = np.arange(-round(search_s * grid_hz), round(search_s * grid_hz) + 1) * step
+    corr = np.full(lags.size, np.nan)
+    for k, lag in enumerate(lags):
+        g = grid - lag
+        m = s_valid & (g >= rt[0]) & (g <= rt[-1])
+        if m.sum() < 10:
+            continue
+        a = s_rate[m] - s_rate[m].mean()
+        b = np.interp(g[m], ref_grid, r_rate)
+        b = b - b.mean()
+        den = np.sqrt((a @ a) * (b @ b))
+        corr[k] = (a @ b) / den if den > 0 else np.nan
+    if not np.any(np.isfinite(corr)):
+        return verdict("unobservable", "no overlap at any lag")
+    c = np.nan_to_num(corr, nan=-1.0)
+    kmax = int(np.argmax(c))
+    peak = float(c[kmax])
+    # the main peak's width: down to half its height on each side
+    lo = kmax
+    while lo > 0 and c[lo - 1] > 0.5 * peak:
+        lo -= 1
+    hi = kmax
+    while hi < c.size - 1 and c[hi + 1] > 0.5 * peak:
+        hi += 1
+    is_local = np.r_[False, (c[1:-1] >= c[:-2]) & (c[1:-1] >= c[2:]), False]
+    others = is_local & ((np.arange(c.size) < lo) | (np.arange(c.size) > hi))
+    second = float(c[others].max()) if np.any(others) else float("nan")
+    coarse = float(lags[kmax])
+    if peak < 0.3:
+        return verdict("ambiguous", f"no correlation peak (best {peak:.2f})", coarse, peak, second, lags, corr)
+    if np.isfinite(second) and second >= ambiguity * peak:
+        return verdict("ambiguous", f"two peaks: {peak:.3f} at {coarse:+.3f} s and {second:.3f} elsewhere",
+                       coarse, peak, second, lags, corr)
+    if kmax in (0, c.size - 1):
+        return verdict("ambiguous", "the peak is at the edge of the search window; widen it", coarse, peak, second,
+                       lags, corr)
+    # --- fine: 1-D minimisation of the heading misfit at the source's own stamps
+    keep = (st >= t0 + search_s) & (st <= t1 - search_s)
+    sts, sys_ = st[keep], np.unwrap(sy)[keep]
+    ref_th = np.unwrap(ry)
+    win = np.floor((sts - sts[0]) / window_s).astype(int)
+    n_win = int(win.max()) + 1 if win.size else 0
+    # windows where the robot turns: the source's heading moves by more than 2 deg
+    turning = np.array([np.ptp(sys_[win == w]) > np.deg2rad(2.0) if np.any(win == w) else False for w in range(n_win)])
+    if turning.sum() < 3:
+        return verdict("unobservable", f"only {int(turning.sum())} windows of {window_s:.0f} s with turns",
+                       coarse, peak, second, lags, corr, int(turning.sum()))
+    use = turning[win]
+    bounds = (coarse - 2 * step, coarse + 2 * step)
+
+    def fit(mask: np.ndarray) -> float:
+        res = minimize_scalar(_misfit, bounds=bounds, method="bounded",
+                              args=(sts, sys_, rt, ref_th, win, n_win, mask), options={"xatol": 1e-6})
+        return float(res.x)
+
+    best = fit(use)
+    ids = np.flatnonzero(turning)
+    jack = np.array([fit(use & (win != w)) for w in ids])
+    W = ids.size
+    se = float(np.sqrt((W - 1) / W * np.sum((jack - jack.mean()) ** 2)))
+    half = float(student_t.ppf(0.975, W - 1)) * max(se, 1e-6)
+    ci = (best - half, best + half)
+    if max_ci_s is not None and 2 * half > max_ci_s:
+        return OffsetEstimate(source, "ambiguous", float("nan"), nan2, coarse, peak, second, lags, corr, W,
+                              f"the 95 % interval ({2 * half * 1e3:.1f} ms) is wider than {max_ci_s * 1e3:.1f} ms")
+    return OffsetEstimate(source, "ok", best, ci, coarse, peak, second, lags, corr, W,
+                          f"peak {peak:.3f} at {coarse:+.3f} s, refined over {W} windows")
+
+
+def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryLog,
+                     options: FusionOptions | None = None, half_width_s: float = 0.015) -> OffsetEstimate:
+    """Refine an ``ok`` (or coarse) estimate with the offset as a parameter of the fusion's own fit.
+
+    The source's fixes (positions and headings, each weighed by its covariance) are smoothed with the
+    odometry alone at trial offsets; Brent's method minimises the batch cost (-2 log-likelihood) over the
+    offset within ``half_width_s`` of the coarse peak, and the 95 % interval comes from the cost's curvature
+    (Fisher information = cost'' / 2). The fixes' decorrelation (FusionOptions.correlation_s) keeps that
+    curvature honest for time-correlated errors.
+    """
+    from gtrig.fusion.batch import smooth_batch
+    from gtrig.fusion.ekf import smooth_ekf
+    from gtrig.fusion.fuse import FusionOptions, _chain, _decorrelated, _merge
+
+    if estimate.verdict == "unobservable" or not np.isfinite(estimate.coarse_s):
+        return estimate
+    opts = options or FusionOptions()
+    c = float(estimate.coarse_s)
+    o0, o1 = float(odometry.stamps_s[0]), float(odometry.stamps_s[-1])
+    margin = 2 * half_width_s + 0.1
+    keep = (fixes.stamps_s - c >= o0 + margin) & (fixes.stamps_s - c <= o1 - margin)
+    if keep.sum() < 10:
+        return estimate
+    f = Fixes(fixes.source, fixes.stamps_s[keep], fixes.model, fixes.value[keep], fixes.cov[keep], fixes.lever_xy)
+    f = _decorrelated(f, opts.correlation_s)
+    base = _merge([f])
+    i0 = max(int(np.searchsorted(odometry.stamps_s, base["stamps"][0] - c - margin)) - 1, 0)
+    i1 = min(int(np.searchsorted(odometry.stamps_s, base["stamps"][-1] - c + margin)), len(odometry) - 1)
+    stamps = odometry.stamps_s[i0:i1 + 1]
+    chain0, _, _, P0 = _chain(stamps, {**base, "stamps": base["stamps"] - c}, odometry, opts, (f.source,))
+    ekf = smooth_ekf(chain0, P0, opts.odometry.prior()[1], gate_prob=opts.gate_prob)
+    use = ekf.accept
+    state = {"X": ekf.X, "K": ekf.K}
+
+    def cost(offset: float) -> float:
+        ch, _, _, _ = _chain(stamps, {**base, "stamps": base["stamps"] - offset}, odometry, opts, (f.source,))
+        res = smooth_batch(ch, state["X"], state["K"], fix_use=use, huber_k=opts.huber_k, max_iter=8)
+        state["X"], state["K"] = res.X, res.K
+        return res.cost
+
+    res = minimize_scalar(cost, bounds=(c - half_width_s, c + half_width_s), method="bounded",
+                          options={"xatol": 2e-5})
+    best = float(res.x)
+    h = 1e-3
+    curv = (cost(best + h) - 2 * cost(best) + cost(best - h)) / h**2
+    if not curv > 0:
+        return OffsetEstimate(estimate.source, "ambiguous", float("nan"), (float("nan"),) * 2, estimate.coarse_s,
+                              estimate.peak, estimate.second_peak, estimate.lags_s, estimate.corr, estimate.windows,
+                              "the fusion cost has no minimum near the correlation peak")
+    half = 1.96 * float(np.sqrt(2.0 / curv))
+    verdict: Verdict = estimate.verdict if estimate.verdict != "ok" else "ok"
+    src_dt = float(np.median(np.diff(f.stamps_s)))
+    if abs(best - c) > half_width_s * 0.95 or 2 * half > 0.5 * src_dt:
+        verdict = "ambiguous"
+    if verdict != "ok":
+        return OffsetEstimate(estimate.source, verdict, float("nan"), (float("nan"),) * 2, estimate.coarse_s,
+                              estimate.peak, estimate.second_peak, estimate.lags_s, estimate.corr, estimate.windows,
+                              estimate.reason)
+    return OffsetEstimate(estimate.source, "ok", best, (best - half, best + half), estimate.coarse_s, estimate.peak,
+                          estimate.second_peak, estimate.lags_s, estimate.corr, estimate.windows,
+                          f"peak {estimate.peak:.3f} at {c:+.3f} s; refined by the fusion's fit "
+                          f"({int(use.sum())} fixes)")

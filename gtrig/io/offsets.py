@@ -1,0 +1,50 @@
+"""``sync.yaml``: clock offsets per source, as ``gtrig sync`` writes them and ``gtrig fuse --sync`` reads them.
+
+::
+
+    reference: odometry
+    convention: offset_s = source stamp - reference stamp of the same instant
+    sources:
+      vision: {verdict: ok, offset_s: 0.0012, ci95_s: [0.0001, 0.0023], ...}
+      laser: {verdict: unobservable, offset_s: null, ...}
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import yaml
+
+from gtrig.errors import FormatError
+from gtrig.io.atomic import atomic_write_text
+
+CONVENTION = "offset_s = source stamp - reference stamp of the same instant"
+
+
+def write_offsets(path: str | os.PathLike[str], reference: str, sources: dict[str, dict[str, object]]) -> None:
+    doc = {"reference": reference, "convention": CONVENTION, "sources": sources}
+    atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False))
+
+
+def read_offsets(path: str | os.PathLike[str]) -> dict[str, float]:
+    """Offsets (seconds) of the sources whose verdict is ``ok``; the others are left out (no number)."""
+    p = Path(path)
+    try:
+        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FormatError(f"{p}: no such file") from None
+    except yaml.YAMLError as e:
+        raise FormatError(f"{p}: not YAML ({str(e).splitlines()[0]})") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("sources"), dict):
+        raise FormatError(f"{p}: no 'sources' mapping")
+    out: dict[str, float] = {}
+    for name, v in doc["sources"].items():
+        if not isinstance(v, dict) or "verdict" not in v:
+            raise FormatError(f"{p}: sources.{name}: needs a verdict")
+        if v["verdict"] == "ok":
+            try:
+                out[str(name)] = float(v["offset_s"])
+            except (TypeError, ValueError, KeyError):
+                raise FormatError(f"{p}: sources.{name}.offset_s: not a number") from None
+    return out
