@@ -7,10 +7,10 @@ Three tests, in order, each naming its reason on the epochs it refuses:
    ``any`` keeps every fix with a position (1, 2, 3, 4, 5, 9).
 2. the receiver's sigmas: the latitude and longitude 1-sigma must both be below ``max_sigma_m``
    (0.2 m: the RAWSEEDS toolkit's read_gps.m cut); without GST, the HDOP model's.
-3. multipath outliers (the RTK float and code fixes only): a fix is compared with the straight line
-   between its kept neighbours (at most ``max_gap_s`` away on each side); the normalised squared
-   residual, with the fix's, the neighbours' and a bounded-acceleration motion covariance, over the
-   chi-square gate (3 dof) rejects the worst one, and the test is repeated until none is over.
+3. multipath outliers (the RTK float and code fixes only): a fix is compared with a robust local
+   fit of the other kept fixes within ``window_s`` (a quadratic in time per axis, Tukey-weighted, so
+   a reflected-path block of a few epochs does not drag it); the normalised squared residual over
+   the chi-square gate (3 dof) rejects it.
 """
 
 from __future__ import annotations
@@ -37,50 +37,59 @@ class FilterOptions:
     fix : which fix types are kept (module docstring).
     max_sigma_m : the cut on the receiver's latitude and longitude sigmas; ``None`` for none.
     outlier_gate : chi-square gate of the outlier test (3 dof); ``None`` to skip the test.
-    accel_sigma_mps2 : 1-sigma acceleration of the vehicle, for the motion term of the outlier test.
-    max_gap_s : neighbours farther than this do not judge a fix.
+    window_s : half-width of the outlier test's local fit, seconds.
     """
 
     fix: FixKind = "fixed"
     max_sigma_m: float | None = 0.2
     outlier_gate: float | None = GATE_3DOF
-    accel_sigma_mps2: float = 1.0
-    max_gap_s: float = 2.0
+    window_s: float = 1.2
 
 
 def _outliers(t: np.ndarray, xyz: np.ndarray, cov: np.ndarray, testable: np.ndarray, opts: FilterOptions,
               ) -> np.ndarray:
-    """Indices (into the arrays) rejected as outliers by the neighbour test."""
+    """Indices (into the arrays) rejected as outliers: each testable fix against a robust local fit.
+
+    For fix ``i`` the other fixes within ``window_s`` are fitted, per axis, with a quadratic in time
+    (a path with bounded acceleration through a turn) by iteratively reweighted least squares with
+    Tukey's biweight (c = 4.685 sigmas), which ignores a multipath block of up to about a third of
+    the window; fix ``i`` itself is left out. Its normalised squared residual, with the fit's
+    prediction variance added to its own, over ``outlier_gate`` (3 dof) rejects it. Fixes with fewer
+    than 5 neighbours, or none on one side, are not judged.
+    """
     n = t.size
-    alive = np.ones(n, bool)
-    rejected: list[int] = []
-    for _ in range(max(10, n // 20)):
-        idx = np.flatnonzero(alive)
-        if idx.size < 3:
-            break
-        tt, pp, cc = t[idx], xyz[idx], cov[idx]
-        t0, t1, t2 = tt[:-2], tt[1:-1], tt[2:]
-        d1, d2 = t1 - t0, t2 - t1
-        w = d1 / (d1 + d2)
-        pred = (1 - w)[:, None] * pp[:-2] + w[:, None] * pp[2:]
-        r = pp[1:-1] - pred
-        # the straight line misses a path of acceleration a by up to a d1 d2 / 2
-        s_m = opts.accel_sigma_mps2 * d1 * d2 / 2.0
-        S = cc[1:-1] + ((1 - w) ** 2)[:, None, None] * cc[:-2] + (w**2)[:, None, None] * cc[2:]
-        S = S + (s_m**2)[:, None, None] * np.eye(3)
-        nis = np.einsum("ni,ni->n", r, np.linalg.solve(S, r[..., None])[..., 0])
-        ok = testable[idx[1:-1]] & (d1 <= opts.max_gap_s) & (d2 <= opts.max_gap_s)
-        nis = np.where(ok, nis, 0.0)
-        if not np.any(nis > opts.outlier_gate):
-            break
-        # remove every fix that is over the gate and the worst among its neighbours, then look again
-        left = np.concatenate([[0.0], nis[:-1]])
-        right = np.concatenate([nis[1:], [0.0]])
-        worst = (nis > opts.outlier_gate) & (nis >= left) & (nis >= right)
-        out = idx[1:-1][worst]
-        alive[out] = False
-        rejected.extend(out.tolist())
-    return np.array(sorted(rejected), np.int64)
+    w_s = opts.window_s
+    lo = np.searchsorted(t, t - w_s, "left")
+    hi = np.searchsorted(t, t + w_s, "right")
+    K = int(np.max(hi - lo)) if n else 0
+    if n < 6 or K < 6:
+        return np.zeros(0, np.int64)
+    j = lo[:, None] + np.arange(K)[None, :]
+    valid = (j < hi[:, None]) & (j != np.arange(n)[:, None])
+    j = np.minimum(j, n - 1)
+    tau = np.where(valid, t[j] - t[:, None], 0.0)
+    both_sides = np.any(valid & (tau < 0), axis=1) & np.any(valid & (tau > 0), axis=1)
+    judged = testable & both_sides & (valid.sum(axis=1) >= 5)
+    A = np.stack([np.ones_like(tau), tau, tau * tau], axis=-1)  # (n, K, 3)
+    var = np.diagonal(cov, axis1=1, axis2=2)  # (n, 3) per-axis variances
+    nis = np.zeros(n)
+    for ax in range(3):
+        y = xyz[j, ax]
+        s2 = var[j, ax] + 1e-12
+        w = np.where(valid, 1.0 / s2, 0.0)
+        for _ in range(4):
+            N = np.einsum("nki,nk,nkj->nij", A, w, A) + 1e-12 * np.eye(3)
+            b = np.einsum("nki,nk,nk->ni", A, w, y)
+            coef = np.linalg.solve(N, b[..., None])[..., 0]
+            r = (y - np.einsum("nki,ni->nk", A, coef)) / np.sqrt(s2)
+            u = r / 4.685
+            w = np.where(valid & (np.abs(u) < 1), (1 - u * u) ** 2 / s2, 0.0)
+        N = np.einsum("nki,nk,nkj->nij", A, w, A) + 1e-12 * np.eye(3)
+        b = np.einsum("nki,nk,nk->ni", A, w, y)
+        coef = np.linalg.solve(N, b[..., None])[..., 0]
+        var_pred = np.linalg.inv(N)[:, 0, 0]
+        nis += (xyz[:, ax] - coef[:, 0]) ** 2 / (var[:, ax] + var_pred)
+    return np.flatnonzero(judged & (nis > opts.outlier_gate))
 
 
 def filter_epochs(ep: Epochs, xyz: np.ndarray, cov: np.ndarray, opts: FilterOptions) -> tuple[np.ndarray, np.ndarray]:

@@ -6,6 +6,17 @@ batch MAP; lost-fix stretches come out BRIDGED with the odometry's grown covaria
 observable only through motion (a position-only sensor sees yaw as the robot moves with its lever
 arm); where its 1-sigma exceeds ``max_yaw_sigma_rad`` an observed pose is FLAGGED "heading not
 observable".
+
+The fusion is planar; the antenna sits ``lever_arm_m[2]`` above the ground on a robot that rolls and
+pitches on real ground (kerbs, camber, braking), so each fix's horizontal covariance gains the mount
+term ``(lever_z * tilt_sigma_rad)^2`` (at least 1 cm): the point the fusion sees moves by that much
+about the lever arm's nominal place.
+
+RTK errors are not white: multipath and the residual atmosphere keep a fix's error for seconds
+(the simulator's Gauss-Markov time constant is 8 s), so the fusion counts one independent fix per
+``correlation_s`` (its effective-sample-size weighting, ``FusionOptions.correlation_s``): twice the
+error's time constant, the window over which a first-order Gauss-Markov process gives one
+independent sample.
 """
 
 from __future__ import annotations
@@ -20,7 +31,8 @@ from gtrig.trajectory import PoseStatus, PoseTrack
 
 
 def smooth_with_odometry(res: GpsResult, odometry: OdometryLog, lever_arm_m: tuple[float, float, float] = (0, 0, 0),
-                         max_yaw_sigma_rad: float = np.radians(5.0), options: object | None = None) -> PoseTrack:
+                         max_yaw_sigma_rad: float = np.radians(5.0), tilt_sigma_rad: float = np.radians(2.0),
+                         correlation_s: float = 16.0, options: object | None = None) -> PoseTrack:
     """The robot's planar track (``cov_kind="xyyaw"``) from the kept fixes and ``odometry``.
 
     Parameters
@@ -30,12 +42,17 @@ def smooth_with_odometry(res: GpsResult, odometry: OdometryLog, lever_arm_m: tup
     odometry : wheel odometry.
     lever_arm_m : the antenna in the robot frame (x forward, y left, z up), metres; x, y enter the fusion's
         measurement model (z is dropped: the track is planar).
-    options : a :class:`gtrig.fusion.FusionOptions`, or None for its defaults.
+    tilt_sigma_rad : 1-sigma roll and pitch of the robot on the ground (the mount term).
+    correlation_s : the window over which the fixes' errors count as one (module docstring).
+    options : a :class:`gtrig.fusion.FusionOptions` (its ``correlation_s`` replaced), or None.
     """
     from gtrig.fusion import FusionOptions, fixes_from_track, fuse
 
-    fx = fixes_from_track(res.track, source="gps", lever_xy=(float(lever_arm_m[0]), float(lever_arm_m[1])))
-    track, _report = fuse([fx], odometry, options if isinstance(options, FusionOptions) else FusionOptions())
+    mount_m = max(abs(float(lever_arm_m[2])) * tilt_sigma_rad, 0.01)
+    cov = res.track.cov + np.diag([mount_m**2, mount_m**2, 0.0])
+    fx = fixes_from_track(res.track.with_cov(cov), source="gps", lever_xy=(float(lever_arm_m[0]), float(lever_arm_m[1])))
+    fo = options if isinstance(options, FusionOptions) else FusionOptions()
+    track, _report = fuse([fx], odometry, replace(fo, correlation_s=correlation_s))
     cov = track.cov_xytheta()
     if cov is None:
         return track

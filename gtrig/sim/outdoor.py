@@ -22,6 +22,8 @@ Physics (docs/gps.md, "Simulator"):
   ``tau_s``, so consecutive fixes share their error as real ones do), sigmas growing as the satellite
   count falls; in float, multipath outliers (a 1.5-5 m reflected-path offset over a few epochs)
   that the receiver's sigmas do not show;
+- the ground: roll and pitch wander (Gauss-Markov, 2 deg, 3 s), so the antenna on its 0.6 m mast
+  moves about 2 cm about the point above the robot frame;
 - odometry: distance scale, turn scale and a curvature bias (a wheel radius difference), plus slip.
 """
 
@@ -59,6 +61,8 @@ class OutdoorParams:
     sigma_float_m: float = 0.25
     outlier_rate_hz: float = 0.1
     log_latency_s: float = 0.020
+    tilt_sigma_deg: float = 2.0
+    tilt_tau_s: float = 3.0
 
 
 def _buildings(rng: np.random.Generator) -> np.ndarray:
@@ -133,6 +137,14 @@ def _gauss_markov(rng: np.random.Generator, n: int, dt: float, tau: float) -> np
     return x
 
 
+def _antenna(pose: np.ndarray, tilt: np.ndarray) -> np.ndarray:
+    """(N, 3) the antenna in ENU: robot pose ``x, y, yaw`` (N, 3) with roll, pitch (N, 2) applied to the lever arm."""
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_euler("ZYX", np.column_stack([pose[:, 2], tilt[:, 1], tilt[:, 0]]))
+    return np.column_stack([pose[:, :2], np.zeros(len(pose))]) + R.apply(np.asarray(LEVER_ARM_M))
+
+
 def _checksum(body: str) -> str:
     x = 0
     for ch in body.encode():
@@ -167,10 +179,10 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
     t_o, pose = _path(prm.duration_s, prm.speed_mps, rng, dt_o)
     # GPS epochs on the UTC grid
     t_g = np.arange(0.0, t_o[-1], 1.0 / prm.gps_rate_hz)
-    xg, yg, yawg = (np.interp(t_g, t_o, pose[:, k]) for k in range(3))
-    c, s = np.cos(yawg), np.sin(yawg)
-    lx, ly, lz = LEVER_ARM_M
-    ant = np.column_stack([xg + c * lx - s * ly, yg + s * lx + c * ly, np.full(t_g.size, lz)])
+    # the ground is not flat: roll and pitch wander (kerbs, camber, braking), tilting the antenna mast
+    tilt = _gauss_markov(rng, t_o.size, dt_o, prm.tilt_tau_s)[:, :2] * np.radians(prm.tilt_sigma_deg)
+    antenna_o = _antenna(pose, tilt)
+    ant = np.column_stack([np.interp(t_g, t_o, antenna_o[:, k]) for k in range(3)])
     # constellation: azimuths uniform, elevations uniform over the sky's solid angle above 10 deg, drifting
     az0 = rng.uniform(0, 2 * np.pi, prm.n_sats)
     el0 = np.arcsin(rng.uniform(np.sin(np.radians(10)), np.sin(np.radians(85)), prm.n_sats))
@@ -270,8 +282,6 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
 
     (out / "truth").mkdir(parents=True, exist_ok=True)
     write_tum(out / "truth" / "robot.tum", PoseTrack.from_xytheta(T0_UNIX_S + t_o, pose))
-    antenna_o = np.column_stack([pose[:, 0] + np.cos(pose[:, 2]) * lx - np.sin(pose[:, 2]) * ly,
-                                 pose[:, 1] + np.sin(pose[:, 2]) * lx + np.cos(pose[:, 2]) * ly, np.full(t_o.size, lz)])
     write_tum(out / "truth" / "antenna.tum", PoseTrack(T0_UNIX_S + t_o, antenna_o, np.tile([0, 0, 0, 1.0], (t_o.size, 1))))
     rows = ["utc_s,n_visible,quality,outlier,err_e,err_n,err_u"] + [
         f"{utc[i]:.3f},{int(n_vis[i])},{int(quality[i])},{int(outlier[i])},{err[i, 0]:.5f},{err[i, 1]:.5f},{err[i, 2]:.5f}"
@@ -280,7 +290,8 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
     meta = {"origin": {"lat_deg": ORIGIN[0], "lon_deg": ORIGIN[1], "h_m": ORIGIN[2]}, "lever_arm_m": LEVER_ARM_M,
             "t0_unix_s": T0_UNIX_S, "seed": seed, "buildings": bld.tolist(),
             "odometry_errors": {"scale": e_scale, "turn_scale": e_turn, "curvature_rad_per_m": e_curv},
-            "log_latency_s": prm.log_latency_s}
+            "log_latency_s": prm.log_latency_s,
+            "tilt_sigma_deg": prm.tilt_sigma_deg}
     atomic_write_text(out / "truth" / "outdoor.json", json.dumps(meta, indent=1) + "\n")
     share = {f"q{q}": float(np.mean(quality == q)) for q in (0, 4, 5)}
     return {"epochs": float(t_g.size), **share, "outliers": float(outlier.sum())}
