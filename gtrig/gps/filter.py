@@ -43,7 +43,7 @@ class FilterOptions:
     fix: FixKind = "fixed"
     max_sigma_m: float | None = 0.2
     outlier_gate: float | None = GATE_3DOF
-    window_s: float = 1.2
+    window_s: float = 2.0
 
 
 def _outliers(t: np.ndarray, xyz: np.ndarray, cov: np.ndarray, testable: np.ndarray, opts: FilterOptions,
@@ -52,10 +52,10 @@ def _outliers(t: np.ndarray, xyz: np.ndarray, cov: np.ndarray, testable: np.ndar
 
     For fix ``i`` the other fixes within ``window_s`` are fitted, per axis, with a quadratic in time
     (a path with bounded acceleration through a turn) by iteratively reweighted least squares with
-    Tukey's biweight (c = 4.685 sigmas), which ignores a multipath block of up to about a third of
+    Tukey's biweight (c = 4.685 sigmas, started from a Huber fit), which ignores a multipath block of up to about a third of
     the window; fix ``i`` itself is left out. Its normalised squared residual, with the fit's
     prediction variance added to its own, over ``outlier_gate`` (3 dof) rejects it. Fixes with fewer
-    than 5 neighbours, or none on one side, are not judged.
+    than 5 neighbours are not judged.
     """
     n = t.size
     w_s = opts.window_s
@@ -68,8 +68,9 @@ def _outliers(t: np.ndarray, xyz: np.ndarray, cov: np.ndarray, testable: np.ndar
     valid = (j < hi[:, None]) & (j != np.arange(n)[:, None])
     j = np.minimum(j, n - 1)
     tau = np.where(valid, t[j] - t[:, None], 0.0)
-    both_sides = np.any(valid & (tau < 0), axis=1) & np.any(valid & (tau > 0), axis=1)
-    judged = testable & both_sides & (valid.sum(axis=1) >= 5)
+    # one side is enough (the start of a float stretch after a loss): the fit's prediction variance
+    # grows by itself when it extrapolates
+    judged = testable & (valid.sum(axis=1) >= 5)
     A = np.stack([np.ones_like(tau), tau, tau * tau], axis=-1)  # (n, K, 3)
     var = np.diagonal(cov, axis1=1, axis2=2)  # (n, 3) per-axis variances
     nis = np.zeros(n)
@@ -77,13 +78,17 @@ def _outliers(t: np.ndarray, xyz: np.ndarray, cov: np.ndarray, testable: np.ndar
         y = xyz[j, ax]
         s2 = var[j, ax] + 1e-12
         w = np.where(valid, 1.0 / s2, 0.0)
-        for _ in range(4):
+        # a convex start (Huber, k = 1.345) so that Tukey's redescending weights begin near the path
+        for it in range(7):
             N = np.einsum("nki,nk,nkj->nij", A, w, A) + 1e-12 * np.eye(3)
             b = np.einsum("nki,nk,nk->ni", A, w, y)
             coef = np.linalg.solve(N, b[..., None])[..., 0]
-            r = (y - np.einsum("nki,ni->nk", A, coef)) / np.sqrt(s2)
-            u = r / 4.685
-            w = np.where(valid & (np.abs(u) < 1), (1 - u * u) ** 2 / s2, 0.0)
+            r = np.abs(y - np.einsum("nki,ni->nk", A, coef)) / np.sqrt(s2)
+            if it < 3:
+                w = np.where(valid, np.minimum(1.0, 1.345 / np.maximum(r, 1e-12)) / s2, 0.0)
+            else:
+                u = r / 4.685
+                w = np.where(valid & (u < 1), (1 - u * u) ** 2 / s2, 0.0)
         N = np.einsum("nki,nk,nkj->nij", A, w, A) + 1e-12 * np.eye(3)
         b = np.einsum("nki,nk,nk->ni", A, w, y)
         coef = np.linalg.solve(N, b[..., None])[..., 0]
