@@ -24,21 +24,27 @@ def _vector3(text: str | None, name: str) -> tuple[float, float, float] | None:
 
 @handle_errors
 def command(
-    log: Annotated[Path, typer.Option("--log", help="GPS log: NMEA 0183, RAWSEEDS 'unixtime, sentence', or RTKLIB .pos")],
+    log: Annotated[Path, typer.Option("--log", help="GPS log: NMEA 0183, RAWSEEDS 'unixtime, sentence', RTKLIB .pos")],
     out: Annotated[Path, typer.Option("--out", help="TUM trajectory of the antenna to write")],
     covariance: Annotated[Path, typer.Option("--covariance", help="covariance CSV (x, y, z), same rows as --out")],
     fmt: Annotated[str, typer.Option("--format", help="auto, rawseeds, nmea or rtklib")] = "auto",
     fix: Annotated[str, typer.Option("--fix", help="fixed (RTK fixed only), float (and RTK float) or any")] = "fixed",
-    max_sigma: Annotated[float, typer.Option("--max-sigma", help="keep fixes whose lat and lon sigmas are both below this (m); 0 = no cut")] = 0.2,
+    max_sigma: Annotated[float, typer.Option(
+        "--max-sigma", help="keep fixes whose lat and lon sigmas are both below this (m); 0 = no cut")] = 0.2,
     frame: Annotated[str, typer.Option("--frame", help="enu (at the origin) or utm (minus the origin's)")] = "enu",
-    origin: Annotated[str, typer.Option("--origin", help="first (the first kept fix) or LAT,LON,H (deg, deg, m ellipsoidal)")] = "first",
+    origin: Annotated[str, typer.Option(
+        "--origin", help="first (the first kept fix) or LAT,LON,H (deg, deg, m ellipsoidal)")] = "first",
     clock: Annotated[str, typer.Option("--clock", help="stamps: auto, log (the log's own clock) or utc")] = "auto",
-    lever_arm: Annotated[str | None, typer.Option("--antenna-lever-arm", help="X,Y,Z of the antenna in the robot frame (m); used with --odometry")] = None,
-    odometry: Annotated[Path | None, typer.Option("--odometry", help="odometry CSV to smooth the fixes with (fusion)")] = None,
+    lever_arm: Annotated[str | None, typer.Option(
+        "--antenna-lever-arm", help="X,Y,Z of the antenna in the robot frame (m); used with --odometry")] = None,
+    odometry: Annotated[Path | None, typer.Option(
+        "--odometry", help="odometry CSV (same clock) to smooth the fixes with (fusion)")] = None,
     no_outliers: Annotated[bool, typer.Option("--no-outlier-test", help="skip the multipath outlier test")] = False,
-    max_malformed: Annotated[float, typer.Option("--max-malformed", help="refuse a log with more than this share of malformed sentences")] = 0.01,
+    max_malformed: Annotated[float, typer.Option(
+        "--max-malformed", help="refuse a log with more than this share of malformed sentences")] = 0.01,
     report: Annotated[Path | None, typer.Option("--report", help="JSON report to write")] = None,
-    plot: Annotated[Path | None, typer.Option("--plot", help="folder for the coverage map and time-series figures")] = None,
+    plot: Annotated[Path | None, typer.Option(
+        "--plot", help="folder for the coverage map and time-series figures")] = None,
 ) -> None:
     """RTK-GPS ground truth: fix-aware filtering, ENU/UTM, covariances from GST (docs/gps.md)."""
     import json

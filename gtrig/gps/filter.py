@@ -52,7 +52,8 @@ def _outliers(t: np.ndarray, xyz: np.ndarray, cov: np.ndarray, testable: np.ndar
 
     For fix ``i`` the other fixes within ``window_s`` are fitted, per axis, with a quadratic in time
     (a path with bounded acceleration through a turn) by iteratively reweighted least squares with
-    Tukey's biweight (c = 4.685 sigmas, started from a Huber fit), which ignores a multipath block of up to about a third of
+    Tukey's biweight (c = 4.685 sigmas, started from a Huber fit), which ignores a multipath block of
+    up to about a third of
     the window; fix ``i`` itself is left out. Its normalised squared residual, with the fit's
     prediction variance added to its own, over ``outlier_gate`` (3 dof) rejects it. Fixes with fewer
     than 5 neighbours are not judged.

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from gtrig.errors import FormatError
-from gtrig.gps import _scan as S
+from gtrig.gps import _scan as S  # noqa: N812  (the scanner's codes, S.K_GGA ...)
 
 KNOT_MPS = 1852.0 / 3600.0
 
@@ -204,7 +204,8 @@ class _Decoder:
         self.fail(has & (np.isnan(lat_raw) | np.isnan(lon_raw)), f"{self.kind} has only one of latitude/longitude")
         self.fail(has & ((ns == 0) | (ew == 0)), f"{self.kind} position lacks its N/S or E/W letter")
         self.fail(has & ~(np.abs(lat) <= 90.0), f"{self.kind} latitude out of range (|lat| > 90 deg or minutes >= 60)")
-        self.fail(has & ~(np.abs(lon) <= 180.0), f"{self.kind} longitude out of range (|lon| > 180 deg or minutes >= 60)")
+        self.fail(has & ~(np.abs(lon) <= 180.0),
+                  f"{self.kind} longitude out of range (|lon| > 180 deg or minutes >= 60)")
         self.fail(lat_raw < 0, f"{self.kind} latitude is negative (the sign belongs in N/S)")
         self.fail(lon_raw < 0, f"{self.kind} longitude is negative (the sign belongs in E/W)")
         return lat, lon

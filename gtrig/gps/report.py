@@ -92,7 +92,8 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
     """A few lines for the console."""
     shares = ", ".join(f"{k} {v:.1%}" for k, v in sorted(rep["fix_share_time"].items(), key=lambda kv: -kv[1]))
     lost = rep["lost_fix_intervals"]
-    out = [f"{rep['epochs']} epochs at {rep['rate_hz']:.1f} Hz; kept {rep['kept']} ({rep['kept_share_time']:.1%} of the time)",
+    out = [f"{rep['epochs']} epochs at {rep['rate_hz']:.1f} Hz; kept {rep['kept']} "
+           f"({rep['kept_share_time']:.1%} of the time)",
            f"fix types over time: {shares}",
            f"lost-fix intervals: {lost['count']} ({lost['total_s']:.0f} s, longest {lost['longest_s']:.0f} s)"]
     if rep["refused"]:

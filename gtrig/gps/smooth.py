@@ -50,7 +50,8 @@ def smooth_with_odometry(res: GpsResult, odometry: OdometryLog, lever_arm_m: tup
 
     mount_m = max(abs(float(lever_arm_m[2])) * tilt_sigma_rad, 0.01)
     cov = res.track.cov + np.diag([mount_m**2, mount_m**2, 0.0])
-    fx = fixes_from_track(res.track.with_cov(cov), source="gps", lever_xy=(float(lever_arm_m[0]), float(lever_arm_m[1])))
+    lever_xy = (float(lever_arm_m[0]), float(lever_arm_m[1]))
+    fx = fixes_from_track(res.track.with_cov(cov), source="gps", lever_xy=lever_xy)
     fo = options if isinstance(options, FusionOptions) else FusionOptions()
     track, _report = fuse([fx], odometry, replace(fo, correlation_s=correlation_s))
     cov = track.cov_xytheta()
@@ -58,6 +59,6 @@ def smooth_with_odometry(res: GpsResult, odometry: OdometryLog, lever_arm_m: tup
         return track
     weak = (np.sqrt(np.maximum(cov[:, 2, 2], 0)) > max_yaw_sigma_rad) & (track.status == PoseStatus.OK)
     status = np.where(weak, PoseStatus.FLAGGED, track.status).astype(np.uint8)
-    reasons = tuple("heading not observable (yaw sigma > %.0f deg)" % np.degrees(max_yaw_sigma_rad) if w else r
+    reasons = tuple(f"heading not observable (yaw sigma > {np.degrees(max_yaw_sigma_rad):.0f} deg)" if w else r
                     for w, r in zip(weak, track.reasons, strict=True))
     return replace(track, status=status, reasons=reasons, source="gps+odometry", frame_id=res.frame)

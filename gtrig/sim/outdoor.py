@@ -99,9 +99,7 @@ def _path(duration_s: float, speed: float, rng: np.random.Generator, dt: float) 
     v[(t > duration_s / 3) & (t < duration_s / 3 + 10)] = 0.0
     dist = np.minimum(np.concatenate([[0], np.cumsum(v[:-1] * dt)]), arc[-1] - 0.01)
     x, y = np.interp(dist, arc, xy[:, 0]), np.interp(dist, arc, xy[:, 1])
-    dx, dy = np.gradient(np.interp(dist + 0.3, arc, xy[:, 0]) - x), np.gradient(np.interp(dist + 0.3, arc, xy[:, 1]) - y)
     yaw = np.unwrap(np.arctan2(np.interp(dist + 0.3, arc, xy[:, 1]) - y, np.interp(dist + 0.3, arc, xy[:, 0]) - x))
-    del dx, dy
     return t, np.column_stack([x, y, yaw])
 
 
@@ -207,7 +205,7 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
     # reported covariance (ENU) and the error drawn from it
     geom = np.sqrt(6.0 / np.maximum(n_vis, 4))
     base = np.where(quality == 4, prm.sigma_fixed_m, prm.sigma_float_m) * geom
-    aniso = 1.0 + 0.5 * rng.uniform(size=t_g.size).round(1) * 0 + 0.4  # N-S worse than E-W (the northern hole)
+    aniso = 1.4  # semi-axes 1.4 and 1/1.4 of the base sigma; N-S worse than E-W (the northern sky hole)
     orient = np.radians(np.interp(t_g, [0, t_g[-1] + 1], rng.uniform(-30, 30, 2)))  # major axis near north
     a_m, b_m = base * aniso, base / aniso
     sig_alt = 1.8 * base
@@ -282,9 +280,11 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
 
     (out / "truth").mkdir(parents=True, exist_ok=True)
     write_tum(out / "truth" / "robot.tum", PoseTrack.from_xytheta(T0_UNIX_S + t_o, pose))
-    write_tum(out / "truth" / "antenna.tum", PoseTrack(T0_UNIX_S + t_o, antenna_o, np.tile([0, 0, 0, 1.0], (t_o.size, 1))))
+    level = np.tile([0, 0, 0, 1.0], (t_o.size, 1))
+    write_tum(out / "truth" / "antenna.tum", PoseTrack(T0_UNIX_S + t_o, antenna_o, level))
     rows = ["utc_s,n_visible,quality,outlier,err_e,err_n,err_u"] + [
-        f"{utc[i]:.3f},{int(n_vis[i])},{int(quality[i])},{int(outlier[i])},{err[i, 0]:.5f},{err[i, 1]:.5f},{err[i, 2]:.5f}"
+        f"{utc[i]:.3f},{int(n_vis[i])},{int(quality[i])},{int(outlier[i])},"
+        f"{err[i, 0]:.5f},{err[i, 1]:.5f},{err[i, 2]:.5f}"
         for i in range(t_g.size)]
     atomic_write_text(out / "truth" / "gps_truth.csv", "\n".join(rows) + "\n")
     meta = {"origin": {"lat_deg": ORIGIN[0], "lon_deg": ORIGIN[1], "h_m": ORIGIN[2]}, "lever_arm_m": LEVER_ARM_M,

@@ -16,16 +16,7 @@ from gtrig.gps.frames import Origin, to_local
 from gtrig.gps.groundtruth import GpsOptions, gps_ground_truth
 from gtrig.gps.nmea import days_from_civil, decode_nmea
 
-
-def cs(body: str) -> str:
-    x = 0
-    for ch in body.encode():
-        x ^= ch
-    return f"${body}*{x:02X}"
-
-
-GGA = "GPGGA,{t},4530.36844637,N,00909.97033083,E,{q},8,0.9,129.085,M,48.022,M,1.0,0000"
-GST = "GPGST,{t},0.02,0.020,0.010,30.0,0.018,0.013,0.030"
+from ._nmea_text import GGA, GST, cs
 
 
 def test_checksum_full_truncated_and_bad() -> None:
@@ -162,13 +153,14 @@ def test_enu_against_ecef_formulas_and_utm_covariance() -> None:
     assert J[0, 1] < 0
 
 
-POS = """% program   : RTKPOST ver.2.4.3
-% pos mode  : kinematic
-%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio
-2008/10/04 13:55:52.600   45.506174120    9.166706630   186.5270   1   9   0.0068   0.0052   0.0155  -0.0021   0.0010  -0.0042   0.60   12.3
-2008/10/04 13:55:52.800   45.506174140    9.166706640   186.5280   2   9   0.1068   0.0852   0.1555   0.0321   0.0010  -0.0042   0.80    2.1
-2008/10/04 13:55:53.000   45.506174160    9.166706650   186.5290   1   9   0.0068   0.0052   0.0155  -0.0021   0.0010  -0.0042   1.00   12.3
-"""
+_HEAD = ("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
+         "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio")
+_ROWS = (("52.600", "45.506174120", "9.166706630", "186.5270", "1", "0.0068", "0.0052", "0.0155", "-0.0021"),
+         ("52.800", "45.506174140", "9.166706640", "186.5280", "2", "0.1068", "0.0852", "0.1555", "0.0321"),
+         ("53.000", "45.506174160", "9.166706650", "186.5290", "1", "0.0068", "0.0052", "0.0155", "-0.0021"))
+POS = "\n".join(["% program   : RTKPOST ver.2.4.3", "% pos mode  : kinematic", _HEAD]
+                + [f"2008/10/04 13:55:{t}   {la}    {lo}   {h}   {q}   9   {n}   {e}   {u}   {ne}   0.0010  -0.0042"
+                   "   0.60   12.3" for t, la, lo, h, q, n, e, u, ne in _ROWS]) + "\n"
 
 
 def test_rtklib_pos(tmp_path: Path) -> None:

@@ -31,7 +31,10 @@ def _read_gps_m(path: Path) -> list[tuple[int, float, float, float, int]]:
         if len(text) < 25:
             continue
         comma = [k for k, ch in enumerate(text) if ch == ","]
-        field = lambda j: text[comma[j - 1] + 1:comma[j] - 1 + 1]  # noqa: E731  (1-based c(j)+1 : c(j+1)-1)
+
+        def field(j: int, text: str = text, comma: list[int] = comma) -> str:
+            return text[comma[j - 1] + 1:comma[j]]  # MATLAB's 1-based c(j)+1 : c(j+1)-1
+
         if text[24] == "A":
             lat, lon = float(field(3)), float(field(5))
             quality = int(field(7))
