@@ -47,7 +47,7 @@ def _hex(c: int) -> int:
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _number(buf: np.ndarray, a: int, b: int, pow10: np.ndarray) -> float:
     """The decimal in ``buf[a:b]`` (optional sign, digits, one dot), ``nan`` if it is not one."""
     if a >= b:
@@ -89,8 +89,9 @@ def scan(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, vals: np.ndarray
          stamp: np.ndarray) -> None:
     """Fill the per-line outputs for the lines ``buf[starts[i]:ends[i]]`` (newline excluded).
 
-    Outputs (length = number of lines): ``vals`` (L, MAX_FIELDS) float64 field values (``nan`` when
-    empty or not a number), ``chars`` (L, MAX_FIELDS) uint8 first byte of each field (0 when empty),
+    Outputs (length = number of lines L): ``vals`` (MAX_FIELDS, L) float64 field values (``nan`` when
+    empty or not a number; field-major, so that one field of many lines is contiguous), ``chars``
+    (MAX_FIELDS, L) uint8 first byte of each field (0 when empty),
     ``nfields``, ``kind``, ``talker`` (index in TALKERS, -1 for none), ``cs``, ``bad`` codes and
     ``stamp`` (the log-clock prefix in seconds, ``nan`` without one).
     """
@@ -98,8 +99,8 @@ def scan(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, vals: np.ndarray
     for li in range(starts.size):
         a = starts[li]
         b = ends[li]
-        vals[li, :] = np.nan
-        chars[li, :] = 0
+        vals[:, li] = np.nan
+        chars[:, li] = 0
         nfields[li] = 0
         talker[li] = -1
         cs[li] = CS_NONE
@@ -113,15 +114,24 @@ def scan(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, vals: np.ndarray
             kind[li] = K_BLANK
             continue
         kind[li] = K_BAD
+        # one pass: the '$', the '*', the XOR between them and any byte that is not printable ASCII
         d = -1
+        star = -1
+        x = 0
         binary = False
         for i in range(a, b):
             c = buf[i]
             if c > 126 or (c < 32 and c != 9):
                 binary = True
                 break
-            if d < 0 and c == 36:
-                d = i
+            if d < 0:
+                if c == 36:
+                    d = i
+            elif star < 0:
+                if c == 42:
+                    star = i
+                else:
+                    x ^= c
         if binary:
             bad[li] = B_BINARY
             continue
@@ -142,14 +152,6 @@ def scan(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, vals: np.ndarray
                 bad[li] = B_PREFIX
                 continue
             stamp[li] = t
-        # checksum: XOR of the bytes between '$' and '*'
-        star = -1
-        x = 0
-        for i in range(d + 1, b):
-            if buf[i] == 42:
-                star = i
-                break
-            x ^= buf[i]
         body_end = b if star < 0 else star
         if star >= 0:
             nd = b - star - 1
@@ -239,8 +241,8 @@ def scan(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, vals: np.ndarray
                     nf += 1
                     break
                 if i > f0:
-                    chars[li, nf] = buf[f0]
-                    vals[li, nf] = _number(buf, f0, i, pow10)
+                    chars[nf, li] = buf[f0]
+                    vals[nf, li] = _number(buf, f0, i, pow10)
                 nf += 1
                 if i == body_end:
                     break

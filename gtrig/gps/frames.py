@@ -77,7 +77,7 @@ def to_local(lat_deg: np.ndarray, lon_deg: np.ndarray, h_m: np.ndarray, origin: 
     if frame == "enu":
         tr = Transformer.from_pipeline(
             f"+proj=pipeline +step +proj=cart +ellps=WGS84 +step +proj=topocentric +ellps=WGS84 "
-            f"+lat_0={origin.lat_deg!r} +lon_0={origin.lon_deg!r} +h_0={origin.h_m!r}")
+            f"+lat_0={float(origin.lat_deg)!r} +lon_0={float(origin.lon_deg)!r} +h_0={float(origin.h_m)!r}")
         e, n, u = tr.transform(lon, lat, h)
         xyz = np.column_stack([e, n, u])
         if cov_enu is None:

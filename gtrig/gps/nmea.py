@@ -150,11 +150,20 @@ class _Decoder:
     def __init__(self, kind: str, idx: np.ndarray, vals: np.ndarray, chars: np.ndarray, nf: np.ndarray):
         self.kind = kind
         self.idx = idx
-        self.v = vals[idx]
-        self.c = chars[idx]
+        # columns are gathered one by one when a check asks for them (copying all 21 costs more)
+        self._vals = vals
+        self._chars = chars
         self.nf = nf[idx]
         self.reason = np.full(idx.size, -1, np.int64)
         self.messages: list[str] = []
+
+    def v(self, j: int | slice) -> np.ndarray:
+        """Field(s) ``j`` as numbers (``nan`` when empty or not a number)."""
+        return self._vals[j, self.idx] if isinstance(j, int) else self._vals[j, self.idx].T
+
+    def c(self, j: int) -> np.ndarray:
+        """The first byte of field ``j`` (0 when empty)."""
+        return self._chars[j, self.idx]
 
     def fail(self, mask: np.ndarray, message: str) -> None:
         new = mask & (self.reason < 0)
@@ -172,14 +181,14 @@ class _Decoder:
 
     def numeric(self, j: int, name: str, required: bool = False) -> np.ndarray:
         """Field ``j`` as numbers; a non-empty field that is not a number (or an empty required one) fails."""
-        x = self.v[:, j]
-        self.fail(np.isnan(x) & (self.c[:, j] != 0), f"{self.kind} {name} is not a number")
+        x = self.v(j)
+        self.fail(np.isnan(x) & (self.c(j) != 0), f"{self.kind} {name} is not a number")
         if required:
             self.fail(np.isnan(x), f"{self.kind} {name} is empty")
         return x
 
     def letter(self, j: int, name: str, allowed: bytes, required: bool = False) -> np.ndarray:
-        ch = self.c[:, j]
+        ch = self.c(j)
         ok = np.isin(ch, np.frombuffer(allowed, np.uint8)) | (ch == 0)
         if required:
             ok &= ch != 0
@@ -285,7 +294,7 @@ def _decode_gsa(d: _Decoder) -> dict[str, np.ndarray]:
     d.letter(0, "mode", b"AM")
     fix = d.numeric(1, "fix type", True)
     d.fail(~np.isin(fix, (1.0, 2.0, 3.0)), "GSA fix type is not 1..3")
-    used = np.sum(~np.isnan(d.v[:, 2:14]), axis=1)
+    used = np.sum(~np.isnan(d.v(slice(2, 14))), axis=1)
     pdop, hdop, vdop = (d.numeric(j, n) for j, n in ((14, "PDOP"), (15, "HDOP"), (16, "VDOP")))
     return {"fix_type": np.nan_to_num(fix).astype(np.int8), "n_used": used, "pdop": pdop, "hdop": hdop, "vdop": vdop}
 
@@ -299,7 +308,7 @@ def _decode_gsv(d: _Decoder) -> dict[str, np.ndarray]:
     in_view = d.numeric(2, "satellites in view", True)
     d.fail(i_msg > n_msg, "GSV message number exceeds the message count")
     groups = np.clip((nf - 3) // 4, 0, 4)
-    snr = d.v[:, 6:19:4] if d.v.shape[1] >= 19 else np.full((nf.size, 4), np.nan)
+    snr = d.v(slice(6, 19, 4))
     present = np.arange(4)[None, :] < groups[:, None]
     snr_sum = np.where(present & ~np.isnan(snr), snr, 0.0).sum(axis=1)
     snr_n = (present & ~np.isnan(snr)).sum(axis=1)
@@ -315,8 +324,8 @@ def decode_nmea(data: bytes, path: str = "<bytes>") -> NmeaLog:
     buf = np.frombuffer(data, np.uint8)
     starts, ends = S.line_bounds(buf)
     n = int(starts.size)
-    vals = np.empty((n, S.MAX_FIELDS), np.float64)
-    chars = np.empty((n, S.MAX_FIELDS), np.uint8)
+    vals = np.empty((S.MAX_FIELDS, n), np.float64)
+    chars = np.empty((S.MAX_FIELDS, n), np.uint8)
     nf = np.empty(n, np.int64)
     kind = np.empty(n, np.int8)
     talker = np.empty(n, np.int8)
@@ -388,10 +397,11 @@ def read_nmea(path: str | os.PathLike[str]) -> NmeaLog:
         raise FormatError(f"{p}: no such file") from None
     except IsADirectoryError:
         raise FormatError(f"{p}: is a folder, not a log") from None
-    if not data.strip():
+    if not data[:4096].strip() and not data.strip():
         raise FormatError(f"{p}: empty log")
-    head = data[:65536]
-    if b"\x00" in head or sum(b > 126 or (b < 32 and b not in (9, 10, 13)) for b in head) > 0.05 * len(head):
+    head = np.frombuffer(data[:65536], np.uint8)
+    odd = (head > 126) | ((head < 32) & (head != 9) & (head != 10) & (head != 13))
+    if np.any(head == 0) or odd.sum() > 0.05 * head.size:
         raise FormatError(f"{p}: a binary file, not an NMEA text log")
     log = decode_nmea(data, str(p))
     if sum(log.account.decoded.values()) + log.account.ignored == 0:
