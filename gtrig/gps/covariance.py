@@ -7,12 +7,15 @@ in (east, north) the horizontal covariance is ``a^2 u u^T + b^2 v v^T`` (``v`` p
 whose diagonal must give back the latitude (north) and longitude (east) sigmas.
 
 The RAWSEEDS Trimble 5700 logs break that rule: their latitude sigma equals the ellipse's *east*
-standard deviation and vice versa (the ellipse is read from east, not north), while the jitter of
-the positions themselves follows the latitude/longitude sigmas (docs/gps.md measures both). So each
-record is checked: where the ellipse, read by the standard, reproduces the latitude/longitude sigmas
-(to 5 %), the full ellipse is used; where it does not, the diagonal comes from the latitude and
-longitude sigmas and the unknown-sign correlation ``c`` (from the ellipse's ``(a^2 - b^2)``) is
-bounded by adding ``|c|`` to both variances, a covariance that contains either sign.
+standard deviation and vice versa. Their numbers fit exactly when the orientation is that of the
+semi-*minor* axis (the two semi-axes swapped), and the positions' own jitter agrees: its shape is
+more likely under that reading than under the standard one or under the other reading that also
+gives back the sigmas (axes from east, counter-clockwise), in each of the three shared logs
+(docs/gps.md, bench/gps_accuracy.py). So each record is checked: where the standard ellipse
+reproduces the latitude/longitude sigmas (to 5 %, or 5 mm), it is used; else where the swapped one
+does, that one; where neither does, the diagonal comes from the latitude and longitude sigmas and
+the unknown correlation ``c`` (from the ellipse's ``a^2 - b^2``) is bounded by adding ``|c|`` to both
+variances, a covariance that contains either sign.
 
 Without GST, the horizontal covariance comes from HDOP with a user-equivalent range error per fix
 type (:data:`UERE_M`): ``sigma_E = sigma_N = HDOP * UERE / sqrt(2)`` (the DRMS split over two axes),
@@ -36,9 +39,14 @@ class CovSource(enum.IntEnum):
     """Where a fix's covariance comes from."""
 
     GST_ELLIPSE = 0
-    GST_SIGMAS = 1  # the ellipse disagrees with the sigmas (the Trimble convention): sigmas + bounded correlation
+    GST_SIGMAS = 1  # the ellipse agrees with the sigmas in neither reading: sigmas + bounded correlation
     HDOP = 2
     RTKLIB = 3
+    GST_ELLIPSE_SWAPPED = 4  # the orientation is the semi-minor axis' (the RAWSEEDS Trimble logs)
+
+
+#: names of the :class:`CovSource` codes, in code order
+COV_SOURCE_NAMES = tuple(s.name.lower() for s in CovSource)
 
 
 def gst_cov_enu(major_m: np.ndarray, minor_m: np.ndarray, orient_deg: np.ndarray, sigma_lat_m: np.ndarray,
@@ -46,7 +54,8 @@ def gst_cov_enu(major_m: np.ndarray, minor_m: np.ndarray, orient_deg: np.ndarray
     """ENU covariances (N, 3, 3) from GST fields (N,), and the :class:`CovSource` per record.
 
     A record's ellipse is used when its diagonal matches the latitude/longitude sigmas to ``tol``
-    (relative, or 5 mm), else the sigmas with the correlation bound (module docstring).
+    (relative, or 5 mm), read by the standard or with its axes swapped; else the sigmas with the
+    correlation bound (module docstring).
     """
     a2, b2 = np.square(major_m), np.square(minor_m)
     th = np.radians(orient_deg)
@@ -59,15 +68,19 @@ def gst_cov_enu(major_m: np.ndarray, minor_m: np.ndarray, orient_deg: np.ndarray
     def close(var: np.ndarray, s: np.ndarray) -> np.ndarray:
         return np.abs(np.sqrt(var) - s) <= np.maximum(tol * s, 0.005)
 
-    use_ellipse = close(cEE, sE) & close(cNN, sN) & np.isfinite(cEN)
+    # the same ellipse with its semi-axes swapped (orientation of the semi-minor axis)
+    sEE = b2 * uE**2 + a2 * uN**2
+    sNN = b2 * uN**2 + a2 * uE**2
+    std = close(cEE, sE) & close(cNN, sN) & np.isfinite(cEN)
+    swp = ~std & close(sEE, sE) & close(sNN, sN) & np.isfinite(cEN)
     c_bound = np.where(np.isfinite(cEN), np.abs(cEN), 0.0)
     cov = np.zeros((major_m.size, 3, 3))
-    cov[:, 0, 0] = np.where(use_ellipse, cEE, sE**2 + c_bound)
-    cov[:, 1, 1] = np.where(use_ellipse, cNN, sN**2 + c_bound)
-    cov[:, 0, 1] = cov[:, 1, 0] = np.where(use_ellipse, cEN, 0.0)
+    cov[:, 0, 0] = np.where(std, cEE, np.where(swp, sEE, sE**2 + c_bound))
+    cov[:, 1, 1] = np.where(std, cNN, np.where(swp, sNN, sN**2 + c_bound))
+    cov[:, 0, 1] = cov[:, 1, 0] = np.where(std, cEN, np.where(swp, -cEN, 0.0))
     cov[:, 2, 2] = np.square(sigma_alt_m)
-    src = np.where(use_ellipse, CovSource.GST_ELLIPSE, CovSource.GST_SIGMAS).astype(np.int8)
-    return cov, src
+    src = np.where(std, CovSource.GST_ELLIPSE, np.where(swp, CovSource.GST_ELLIPSE_SWAPPED, CovSource.GST_SIGMAS))
+    return cov, src.astype(np.int8)
 
 
 def hdop_cov_enu(hdop: np.ndarray, quality: np.ndarray, vdop: np.ndarray | None = None) -> np.ndarray:

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from gtrig.gps.covariance import COV_SOURCE_NAMES
 from gtrig.gps.epochs import FIX_NAMES
 from gtrig.gps.groundtruth import GpsResult
 
@@ -75,8 +76,7 @@ def gps_report(res: GpsResult, log_span_utc: tuple[float, float] | None = None) 
                  "p95": float(np.nanpercentile(ep.hdop, 95)) if np.any(np.isfinite(ep.hdop)) else None},
         "sigma_kept_m": {"median_horizontal": float(np.median(np.sqrt(res.track.cov[:, 0, 0] + res.track.cov[:, 1, 1])))
                          if len(res.track) and res.track.cov is not None else None},
-        "covariance_source": {n: int(np.sum(ep.cov_source == i)) for i, n in
-                              enumerate(("gst_ellipse", "gst_sigmas", "hdop", "rtklib"))},
+        "covariance_source": {n: int(np.sum(ep.cov_source == i)) for i, n in enumerate(COV_SOURCE_NAMES)},
         "clock_offset_log_minus_utc_s": res.clock_offset_s,
         "not_epochs": dict(ep.dropped),
     }

@@ -103,14 +103,19 @@ def test_gst_ellipse_standard_and_trimble_convention() -> None:
     cov, src = gst_cov_enu(*(np.array([v]) for v in (a, b, 30.0, sN, sE, 0.05)))
     assert src[0] == CovSource.GST_ELLIPSE
     assert cov[0, 0, 1] == pytest.approx((a * a - b * b) * math.sin(th) * math.cos(th))
-    # Trimble/RAWSEEDS: the latitude sigma is the ellipse's east one; sigmas kept, correlation bounded
+    # Trimble/RAWSEEDS: the latitude sigma is the ellipse's east one: the orientation is the
+    # semi-minor axis', the swapped ellipse is used, correlation of the other sign
     cov2, src2 = gst_cov_enu(*(np.array([v]) for v in (a, b, 30.0, sE, sN, 0.05)))
-    assert src2[0] == CovSource.GST_SIGMAS and cov2[0, 0, 1] == 0.0
-    c = abs((a * a - b * b) * math.sin(th) * math.cos(th))
-    assert cov2[0, 1, 1] == pytest.approx(sE**2 + c) and cov2[0, 0, 0] == pytest.approx(sN**2 + c)
-    for sign in (1, -1):  # the bound contains either sign of the correlation
-        C = np.array([[sN**2, sign * c], [sign * c, sE**2]])
-        assert np.all(np.linalg.eigvalsh(cov2[0, :2, :2] - C) >= -1e-15)
+    c = (a * a - b * b) * math.sin(th) * math.cos(th)
+    assert src2[0] == CovSource.GST_ELLIPSE_SWAPPED
+    assert cov2[0, 0, 0] == pytest.approx(sN**2) and cov2[0, 1, 1] == pytest.approx(sE**2)
+    assert cov2[0, 0, 1] == pytest.approx(-c)
+    # sigmas that neither reading gives: the sigmas, and a bound that contains either sign of c
+    cov3, src3 = gst_cov_enu(*(np.array([v]) for v in (a, b, 30.0, 0.02, 0.02, 0.05)))
+    assert src3[0] == CovSource.GST_SIGMAS and cov3[0, 0, 1] == 0.0
+    for sign in (1, -1):
+        C = np.array([[0.02**2, sign * abs(c)], [sign * abs(c), 0.02**2]])
+        assert np.all(np.linalg.eigvalsh(cov3[0, :2, :2] - C) >= -1e-15)
 
 
 def test_enu_against_ecef_formulas_and_utm_covariance() -> None:

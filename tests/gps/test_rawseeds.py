@@ -129,3 +129,7 @@ def test_every_line_accounted_for(rawseeds_like) -> None:
     assert ln["checksums"]["truncated"] == sum(ln["decoded"].values()) and ln["checksums"]["bad"] == 0
     # GST lags GGA by about 10 ms in these logs: every epoch found its GST
     assert rep["covariance_source"]["hdop"] == 0
+    # the Trimble's ellipses give back their sigmas with the semi-axes swapped (docs/gps.md)
+    cs = rep["covariance_source"]
+    assert cs["gst_ellipse_swapped"] + cs["gst_ellipse"] >= 0.95 * rep["epochs"]
+    assert cs["gst_ellipse_swapped"] > cs["gst_ellipse"]
