@@ -20,7 +20,7 @@ def _save(fig: object, path: Path) -> None:
 
 
 def coverage_map(res: GpsResult, path: str | Path, ellipse_every: int = 50, title: str = "") -> Path:
-    """The path in the output frame, each epoch coloured by its fix type (refused ones hollow),
+    """The path in the output frame, each epoch coloured by its fix type, the kept ones marked black,
     with the 1-sigma horizontal ellipse of every ``ellipse_every``-th kept fix (scaled x10 when
     smaller than the line width would show)."""
     import matplotlib
@@ -36,10 +36,8 @@ def coverage_map(res: GpsResult, path: str | Path, ellipse_every: int = 50, titl
         m = q == code
         ax.scatter(tr.xyz[m, 0], tr.xyz[m, 1], s=3, color=FIX_COLOURS.get(int(code), "grey"),
                    label=f"{FIX_NAMES.get(int(code), code)} ({m.mean():.0%})")
-    rej = ~tr.ok
-    ax.scatter(tr.xyz[rej, 0], tr.xyz[rej, 1], s=14, marker="x", color="0.35", linewidths=0.25, alpha=0.5,
-               label="refused", zorder=3)
     kept = res.track
+    ax.scatter(kept.xyz[:, 0], kept.xyz[:, 1], s=0.3, color="k", label="kept (ground truth)", zorder=3)
     scale = 10.0
     if kept.cov is not None:
         for i in range(0, len(kept), max(1, ellipse_every)):
@@ -52,7 +50,8 @@ def coverage_map(res: GpsResult, path: str | Path, ellipse_every: int = 50, titl
     axes = ("east", "north") if res.frame == "enu" else ("UTM easting", "UTM northing")
     ax.set_xlabel(f"{axes[0]} (m)")
     ax.set_ylabel(f"{axes[1]} (m)")
-    ax.set_title(title or f"coverage: fix types, 1-sigma ellipses x{scale:g} every {ellipse_every} kept fixes")
+    ax.set_title(title or f"coverage: fix types, 1-sigma ellipses x{scale:g} every {ellipse_every} kept fixes",
+                 fontsize=9)
     ax.legend(loc="best", fontsize=7, markerscale=3)
     ax.grid(alpha=0.3)
     out = Path(path)
