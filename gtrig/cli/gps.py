@@ -84,6 +84,9 @@ def command(
 
         track = smooth_with_odometry(res, read_odometry(odometry), arm or (0.0, 0.0, 0.0))
     rep = gps_report(res)
+    if odometry is not None:
+        rep["smoothed"] = {"poses": len(track), **track.counts(),
+                           "heading_not_observable": int(sum("heading" in r for r in track.reasons))}
     outs: list[Path] = [out, covariance]
     write_pose_track(track, out, covariance)
     if report is not None:
@@ -95,4 +98,8 @@ def command(
         outs += [coverage_map(res, plot / "gps_coverage.png"), time_series(res, plot / "gps_time.png")]
     for line in report_lines(rep):
         console.print(line, highlight=False)
+    if "smoothed" in rep:
+        s = rep["smoothed"]
+        console.print(f"smoothed with odometry: {s['poses']} poses, {s['ok']} observed, {s['bridged']} bridged, "
+                      f"{s['heading_not_observable']} with the heading not observable", highlight=False)
     console.print("wrote " + ", ".join(str(p) for p in outs), highlight=False)

@@ -71,3 +71,20 @@ def test_bad_input_one_line_exit_2_nothing_written(tmp_path: Path, case: str) ->
     assert len(lines) == 1 and lines[0].startswith("error:") and expect in lines[0], r.output
     assert "Traceback" not in r.output
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+def test_smoothing_with_odometry_through_the_verb(tmp_path: Path) -> None:
+    from gtrig.sim.outdoor import OutdoorParams, simulate_outdoor
+
+    rec = tmp_path / "rec"
+    simulate_outdoor(rec, seed=0, params=OutdoorParams(duration_s=240.0))
+    r = _run(tmp_path, rec / "gps" / "gps.log", "--clock", "utc", "--odometry", str(rec / "odometry" / "odometry.csv"),
+             "--antenna-lever-arm=-0.2,0.05,0.6")
+    assert r.exit_code == 0, r.output
+    tr = read_pose_track(tmp_path / "o" / "gps.tum", tmp_path / "o" / "gps_cov.csv")
+    assert tr.cov_kind == "xyyaw" and tr.source == "gps+odometry"
+    rep = json.loads((tmp_path / "o" / "r.json").read_text())["smoothed"]
+    assert rep["bridged"] > 0 and rep["ok"] > 0 and rep["poses"] == len(tr)
+    # a horizontal lever arm without odometry has no heading to turn it with: refused
+    r2 = _run(tmp_path / "x", rec / "gps" / "gps.log", "--antenna-lever-arm=-0.2,0.05,0.6")
+    assert r2.exit_code == 2 and "needs --odometry" in r2.output
