@@ -144,6 +144,9 @@ def epochs_from_nmea(log: NmeaLog) -> Epochs:
         key_e = np.round(utc[keep] * 1000).astype(np.int64)
         j = np.clip(np.searchsorted(uk, key_e), 0, uk.size - 1)
         has = uk[j] == key_e
+        # a GST of all-zero sigmas (a receiver before its first solution) carries no covariance
+        zero = (gst["sigma_lat_m"] == 0) & (gst["sigma_lon_m"] == 0)
+        has &= ~zero[first[j]]
         g = first[j[has]]
         c, s = gst_cov_enu(gst["major_m"][g], gst["minor_m"][g], gst["orient_deg"][g], gst["sigma_lat_m"][g],
                            gst["sigma_lon_m"][g], gst["sigma_alt_m"][g])

@@ -111,6 +111,8 @@ def filter_epochs(ep: Epochs, xyz: np.ndarray, cov: np.ndarray, opts: FilterOpti
         new = m & (reason == "")
         reason[new] = why if isinstance(why, str) else why[new]
 
+    finite = np.all(np.isfinite(ep.cov_enu), axis=(1, 2)) & (ep.cov_enu[:, 0, 0] > 0) & (ep.cov_enu[:, 1, 1] > 0)
+    refuse(~finite, "no covariance (no usable GST, no HDOP)")
     allowed = FIX_SETS[opts.fix]
     from gtrig.gps.epochs import FIX_NAMES
 

@@ -80,6 +80,12 @@ def gps_report(res: GpsResult, log_span_utc: tuple[float, float] | None = None) 
         "clock_offset_log_minus_utc_s": res.clock_offset_s,
         "not_epochs": dict(ep.dropped),
     }
+    # satellites, HDOP and fix type over time, one sample a second (a figure or `gtrig report` draws them)
+    step = max(1, int(round(1.0 / period))) if period > 0 else 1
+    rep["series_1hz"] = {"t_s": np.round(ep.utc_s[::step] - ep.utc_s[0], 3).tolist(),
+                         "n_sat": np.nan_to_num(ep.n_sat[::step], nan=-1).astype(int).tolist(),
+                         "hdop": [None if not np.isfinite(v) else float(v) for v in ep.hdop[::step]],
+                         "quality": ep.quality[::step].astype(int).tolist()}
     if res.account is not None:
         a = res.account
         rep["lines"] = {"total": a.n_lines, "decoded": a.decoded, "ignored": a.ignored, "blank": a.blank,

@@ -199,3 +199,19 @@ def test_too_many_malformed_refused(tmp_path: Path) -> None:
     # a few bad sentences in a long log are skipped and counted instead
     ok = gps_ground_truth(p, GpsOptions(max_malformed=0.2))
     assert len(ok.track) == 9 and ok.account.malformed_lines[0][0] == 4
+
+
+def test_zero_sigma_gst_and_missing_hdop_are_no_covariance(tmp_path: Path) -> None:
+    rows = []
+    for k in range(6):
+        t = f"1200{0.2 * k:05.2f}"
+        rows.append(cs(GGA.format(t=t, q=4)))
+        rows.append(cs(f"GPGST,{t},0.0,0.0,0.0,0.0,0.0,0.0,0.0") if k < 3 else cs(GST.format(t=t)))
+    rows.append(cs("GPGGA,120001.20,4530.36844637,N,00909.97033083,E,4,8,,129.085,M,48.022,M,1.0,0000"))
+    p = tmp_path / "z.nmea"
+    p.write_text("\n".join(rows) + "\n")
+    res = gps_ground_truth(p)
+    # the zero-sigma GSTs fall back to HDOP (flagged); no GST and no HDOP: refused with its reason
+    assert res.all_epochs.counts()["flagged"] == 3 and len(res.track) == 6
+    assert res.all_epochs.reasons[-1] == "no covariance (no usable GST, no HDOP)"
+    assert np.all(np.linalg.eigvalsh(res.track.cov) > 0)
