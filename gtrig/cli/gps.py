@@ -53,7 +53,7 @@ def command(
     from gtrig.gps.filter import FIX_SETS, FilterOptions
     from gtrig.gps.frames import Origin
     from gtrig.gps.groundtruth import GpsOptions, gps_ground_truth
-    from gtrig.gps.report import gps_report, report_lines
+    from gtrig.gps.report import gps_report, report_lines, report_markdown
     from gtrig.io.atomic import atomic_write_text
     from gtrig.io.posetrack import write_pose_track
 
@@ -89,13 +89,21 @@ def command(
                            "heading_not_observable": int(sum("heading" in r for r in track.reasons))}
     outs: list[Path] = [out, covariance]
     write_pose_track(track, out, covariance)
-    if report is not None:
-        atomic_write_text(report, json.dumps(rep, indent=1) + "\n")
-        outs.append(report)
+    figures: list[Path] = []
     if plot is not None:
         from gtrig.gps.plots import coverage_map, time_series
 
-        outs += [coverage_map(res, plot / "gps_coverage.png"), time_series(res, plot / "gps_time.png")]
+        figures = [coverage_map(res, plot / "gps_coverage.png"), time_series(res, plot / "gps_time.png")]
+        outs += figures
+    if report is not None:
+        import os
+
+        # the JSON, and a Markdown summary beside it that `gtrig report` shows with the figures
+        md = report.with_suffix(".md")
+        rel = [os.path.relpath(f, md.parent) for f in figures]
+        atomic_write_text(report, json.dumps(rep, indent=1) + "\n")
+        atomic_write_text(md, report_markdown(rep, rel))
+        outs += [report, md]
     for line in report_lines(rep):
         console.print(line, highlight=False)
     if "smoothed" in rep:

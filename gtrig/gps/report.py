@@ -6,6 +6,7 @@ what became of every line, the clock offset. A plain dict (JSON), for ``gtrig gp
 from __future__ import annotations
 
 from collections import Counter
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -69,7 +70,8 @@ def gps_report(res: GpsResult, log_span_utc: tuple[float, float] | None = None) 
         "kept_share_time": float(epoch_durations(ep.utc_s)[0][kept].sum() / max(t1 - t0, 1e-9)),
         "lost_fix_intervals": {"count": len(lost), "total_s": float(sum(durations)),
                                "longest_s": float(max(durations, default=0.0)),
-                               "intervals": [[a, b] for a, b in lost]},
+                               "intervals": [[a, b] for a, b in lost],
+                               "t0_s": float(res.all_epochs.stamps_s[0])},
         "satellites": {"median": float(np.nanmedian(ep.n_sat)) if len(ep) else None,
                        "min": float(np.nanmin(ep.n_sat)) if len(ep) else None},
         "hdop": {"median": float(np.nanmedian(ep.hdop)) if np.any(np.isfinite(ep.hdop)) else None,
@@ -113,3 +115,23 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
         out.append(f"log clock - UTC: {off['median']:.3f} s (min {off['min']:.3f}, max {off['max']:.3f}, "
                    f"drift {off['drift'] * 1e6:.0f} ppm)")
     return out
+
+
+def report_markdown(rep: dict[str, Any], figures: list[str] | None = None) -> str:
+    """The report as a Markdown summary (``gtrig report`` shows every stage's ``*.md`` in a results folder)."""
+    out = ["# RTK-GPS ground truth", ""]
+    out += [f"- {line}" for line in report_lines(rep)]
+    out += ["", "| fix type | share of the time |", "|---|---|"]
+    out += [f"| {k} | {v:.1%} |" for k, v in sorted(rep["fix_share_time"].items(), key=lambda kv: -kv[1])]
+    lost = rep["lost_fix_intervals"]["intervals"]
+    t0 = rep["lost_fix_intervals"]["t0_s"]
+    if lost:
+        out += ["", "| lost-fix interval | start (s from the first epoch) | end (s) | length (s) |", "|---|---|---|---|"]
+        out += [f"| {i + 1} | {a - t0:.1f} | {b - t0:.1f} | {b - a:.1f} |" for i, (a, b) in enumerate(lost)]
+    if "smoothed" in rep:
+        s = rep["smoothed"]
+        out += ["", f"Smoothed with odometry: {s['poses']} poses, {s['ok']} observed, {s['bridged']} bridged, "
+                f"{s['heading_not_observable']} with the heading not observable."]
+    for f in figures or []:
+        out += ["", f"![{Path(f).stem}]({f})"]
+    return "\n".join(out) + "\n"

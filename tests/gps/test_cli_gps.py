@@ -42,6 +42,8 @@ def test_good_log_writes_track_covariance_report_and_plots(tmp_path: Path) -> No
     rep = json.loads((tmp_path / "o" / "r.json").read_text())
     assert rep["kept"] == 20 and rep["lines"]["total"] == 40
     assert (tmp_path / "o" / "gps_coverage.png").stat().st_size > 1000
+    md = (tmp_path / "o" / "r.md").read_text()  # the summary `gtrig report` shows
+    assert "| rtk_fixed | 100.0% |" in md and "(gps_coverage.png)" in md
 
 
 def _bad_inputs(tmp: Path) -> dict[str, tuple[Path, str, list[str]]]:
