@@ -2,7 +2,8 @@
 
 The logs: the three shared RAWSEEDS Bovisa logs with their prefixes stripped and full two-digit
 checksums restored (so pynmea2 verifies every checksum, as gtrig does), and one simulated outdoor
-run (GGA/GST/RMC at 5 Hz) long enough to bring the total to about ``--sentences`` sentences. Both sides do the same job, timed
+run (GGA/GST/RMC at 5 Hz) long enough to bring the total to about ``--sentences`` sentences. Both
+sides do the same job, timed
 from the file on disk to local ENU positions of the GGA fixes with their GST sigmas:
 
 - gtrig: ``read_nmea`` -> ``epochs_from_nmea`` -> ``frames.to_local`` (the verb's pipeline minus the
@@ -136,7 +137,8 @@ def main() -> None:
         if worst > 1e-3:
             raise SystemExit(f"the two disagree by {worst:.3g} m")
         print(f"pynmea2 + pyproj (same job):       {_rates(n, t_peer)}")
-        print(f"ratio (CPU): {t_peer[1] / t_ours[1]:.1f}x, (wall): {t_peer[0] / t_ours[0]:.1f}x; the same {fixes} fixes, positions agree to {worst * 1e3:.2g} mm")
+        print(f"ratio (CPU): {t_peer[1] / t_ours[1]:.1f}x, (wall): {t_peer[0] / t_ours[0]:.1f}x; "
+              f"the same {fixes} fixes, positions agree to {worst * 1e3:.2g} mm")
 
 
 def _rates(n: int, t: np.ndarray) -> str:

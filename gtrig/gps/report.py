@@ -126,7 +126,8 @@ def report_markdown(rep: dict[str, Any], figures: list[str] | None = None) -> st
     lost = rep["lost_fix_intervals"]["intervals"]
     t0 = rep["lost_fix_intervals"]["t0_s"]
     if lost:
-        out += ["", "| lost-fix interval | start (s from the first epoch) | end (s) | length (s) |", "|---|---|---|---|"]
+        out += ["", "| lost-fix interval | start (s from the first epoch) | end (s) | length (s) |",
+                "|---|---|---|---|"]
         out += [f"| {i + 1} | {a - t0:.1f} | {b - t0:.1f} | {b - a:.1f} |" for i, (a, b) in enumerate(lost)]
     if "smoothed" in rep:
         s = rep["smoothed"]
