@@ -95,7 +95,8 @@ def _outliers(t: np.ndarray, xyz: np.ndarray, cov: np.ndarray, testable: np.ndar
         coef = np.linalg.solve(N, b[..., None])[..., 0]
         var_pred = np.linalg.inv(N)[:, 0, 0]
         nis += (xyz[:, ax] - coef[:, 0]) ** 2 / (var[:, ax] + var_pred)
-    return np.flatnonzero(judged & (nis > opts.outlier_gate))
+    gate = GATE_3DOF if opts.outlier_gate is None else opts.outlier_gate
+    return np.flatnonzero(judged & (nis > gate))
 
 
 def filter_epochs(ep: Epochs, xyz: np.ndarray, cov: np.ndarray, opts: FilterOptions) -> tuple[np.ndarray, np.ndarray]:

@@ -72,9 +72,9 @@ def read_rtklib_pos(path: str | os.PathLike[str]) -> Epochs:
     week_tow = "/" not in rows[0][0]
     tcols = 2
     need = tcols + 3 + 2 + 6
-    for r, ln in zip(rows, line_no, strict=True):
+    for r, row_no in zip(rows, line_no, strict=True):
         if len(r) < need:
-            raise FormatError(f"{p}:{ln}: {len(r)} columns, a .pos row has at least {need}")
+            raise FormatError(f"{p}:{row_no}: {len(r)} columns, a .pos row has at least {need}")
     try:
         num = np.array([[float(v) for v in r[tcols:need]] for r in rows])
         if week_tow:

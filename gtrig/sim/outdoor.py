@@ -220,7 +220,8 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
     err = np.einsum("nij,nj->ni", L, z)
     # multipath outliers in float: a reflected path offsets the fix by 1.5-5 m for 1-4 epochs
     outlier = np.zeros(t_g.size, bool)
-    for i in np.flatnonzero((quality == 5) & (rng.uniform(size=t_g.size) < prm.outlier_rate_hz / prm.gps_rate_hz)):
+    starts = np.flatnonzero((quality == 5) & (rng.uniform(size=t_g.size) < prm.outlier_rate_hz / prm.gps_rate_hz))
+    for i in starts.tolist():
         k = int(rng.integers(1, 5))
         ang = rng.uniform(0, 2 * np.pi)
         mag = rng.uniform(1.5, 5.0)
