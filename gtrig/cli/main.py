@@ -34,6 +34,7 @@ _SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("report", "report", "command"),
     ("fuse", "fuse", "command"),
     ("sync", "sync", "command"),
+    ("gps", "gps", "command"),
 )
 
 

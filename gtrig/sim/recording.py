@@ -222,8 +222,14 @@ def simulate(
         settings is refused rather than mixed.
     on_step : called as ``on_step(name, index, count)`` before each step (progress display).
     """
+    if cfg.scenario == "outdoor":  # RTK-GPS and odometry on a campus (gtrig.sim.outdoor, docs/gps.md)
+        from gtrig.sim.outdoor import simulate_outdoor
+
+        t = time.perf_counter()
+        simulate_outdoor(out_dir, seed=cfg.seed, quick=cfg.quick)
+        return {"outdoor": time.perf_counter() - t}
     if cfg.scenario != "gtroom":
-        raise InputError(f"unknown scenario {cfg.scenario!r}; available: gtroom")
+        raise InputError(f"unknown scenario {cfg.scenario!r}; available: gtroom, outdoor")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     state_path = out / STATE_FILE
