@@ -51,7 +51,18 @@ class TrackSettings:
     max_gap_s : a longer gap between frames ends the track.
     lost_after : failing frames in a row after which the track is lost.
     max_rms_m : a fit with a larger residual RMS is a failure.
-    max_jump_m, max_jump_rad : a fit farther than this from its prediction is a failure.
+    max_jump_m, max_jump_rad : a fit farther than this from its prediction is a failure whatever the
+        predicted uncertainty (a ceiling; the gate proper is ``gate_chi2``).
+    predict_accel_std_mps2, predict_ang_accel_std_radps2 : white-acceleration process noise (square root
+        of the spectral density) of the constant-velocity filter that predicts each frame while
+        tracking: what real robots' accelerating, braking and turning leave unpredicted.
+    max_speed_mps, max_turn_rate_radps : prior standard deviation of the velocity of a new track that
+        has no recent predecessor: its first frames are fitted one by one until the filter knows it.
+    capture_m, capture_rad : frames are fitted together from one prediction only as far ahead as its
+        standard deviation stays within a third of these (the ICP's reach from its start pose).
+    gate_chi2 : a fit whose Mahalanobis distance (squared) from its prediction, under the predicted
+        covariance plus the fit's own, exceeds this is a failure (3 dof; 21.1 is p = 1e-4) ...
+    min_jump_m, min_jump_rad : ... unless it is within these of the prediction in position and heading.
     prior_max_gap_s : a previous track at most this old sets the heading of a new one.
     reacquire_gap_s, reacquire_radius_m : a track lost for at most this long is searched for within this
         radius of its last pose, and near its heading.
@@ -69,8 +80,17 @@ class TrackSettings:
     max_gap_s: float = 0.25
     lost_after: int = 8
     max_rms_m: float = 0.03
-    max_jump_m: float = 0.06
-    max_jump_rad: float = np.radians(5.0)
+    max_jump_m: float = 0.30
+    max_jump_rad: float = np.radians(20.0)
+    predict_accel_std_mps2: float = 1.5
+    predict_ang_accel_std_radps2: float = 3.0
+    max_speed_mps: float = 2.5
+    max_turn_rate_radps: float = 3.0
+    capture_m: float = 0.04
+    capture_rad: float = np.radians(3.0)
+    gate_chi2: float = 21.1
+    min_jump_m: float = 0.015
+    min_jump_rad: float = np.radians(1.0)
     prior_max_gap_s: float = 2.0
     reacquire_gap_s: float = 0.5
     reacquire_radius_m: float = 1.0
@@ -137,6 +157,60 @@ def _velocity(stamps: np.ndarray, poses: np.ndarray) -> np.ndarray:
     if den <= 0:
         return np.zeros(3)
     return (t @ (poses - poses.mean(axis=0))) / den
+
+
+def _cv_transition(dt: float, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Transition (6, 6) and process noise (6, 6) of the constant-velocity model over ``dt`` seconds,
+    state (x, y, theta, vx, vy, omega), white acceleration of spectral density ``qd`` (3,)."""
+    F = np.eye(6)
+    F[[0, 1, 2], [3, 4, 5]] = dt
+    Q = np.zeros((6, 6))
+    Q[[0, 1, 2], [0, 1, 2]] = qd * dt**3 / 3
+    Q[[0, 1, 2], [3, 4, 5]] = Q[[3, 4, 5], [0, 1, 2]] = qd * dt**2 / 2
+    Q[[3, 4, 5], [3, 4, 5]] = qd * dt
+    return F, Q
+
+
+@dataclass(frozen=True)
+class _Predictor:
+    """The tracking filter's state at ``stamp_s``: mean (6,) and covariance (6, 6) of (x, y, theta,
+    vx, vy, omega), world frame, theta continuous."""
+
+    stamp_s: float
+    x: np.ndarray
+    P: np.ndarray
+
+    def predict(self, stamps_s: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted poses (n, 3) and their covariances (n, 3, 3) at ``stamps_s`` (n,)."""
+        tau = np.asarray(stamps_s, dtype=float) - self.stamp_s
+        pose = self.x[:3] + tau[:, None] * self.x[3:]
+        P = self.P
+        cov = (
+            P[:3, :3]
+            + tau[:, None, None] * (P[:3, 3:] + P[3:, :3])
+            + tau[:, None, None] ** 2 * P[3:, 3:]
+            + np.einsum("n,ij->nij", np.abs(tau) ** 3 / 3, np.diag(qd))
+        )
+        return pose, cov
+
+    def update(self, stamp_s: float, z: np.ndarray, R: np.ndarray, qd: np.ndarray) -> _Predictor:
+        """The state after predicting to ``stamp_s`` and measuring pose ``z`` (3,) with covariance R."""
+        F, Q = _cv_transition(stamp_s - self.stamp_s, qd)
+        x = F @ self.x
+        P = F @ self.P @ F.T + Q
+        K = P[:, :3] @ np.linalg.inv(P[:3, :3] + R)
+        x = x + K @ (z - x[:3])
+        P = P - K @ P[:3, :]
+        return _Predictor(float(stamp_s), x, 0.5 * (P + P.T))
+
+
+def _start_predictor(
+    stamp_s: float, pose: np.ndarray, R: np.ndarray, v0: np.ndarray, Pv0: np.ndarray
+) -> _Predictor:
+    P = np.zeros((6, 6))
+    P[:3, :3] = R
+    P[3:, 3:] = Pv0
+    return _Predictor(float(stamp_s), np.r_[pose, v0], P)
 
 
 def _twin(xytheta: np.ndarray, cov: np.ndarray, centre_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -244,6 +318,24 @@ def _resolve_heading(
     return True
 
 
+def _refilter(
+    tid: int,
+    track_id: np.ndarray,
+    status: np.ndarray,
+    stamps: np.ndarray,
+    raw: np.ndarray,
+    raw_cov: np.ndarray,
+    qd: np.ndarray,
+    Pv0: np.ndarray,
+) -> _Predictor:
+    """The tracking filter run afresh over the OK frames of track ``tid`` (after its heading flipped)."""
+    idx = np.flatnonzero((track_id == tid) & (status == OK))
+    state = _start_predictor(stamps[idx[0]], raw[idx[0]], raw_cov[idx[0]], np.zeros(3), Pv0)
+    for j in idx[1:]:
+        state = state.update(stamps[j], raw[j], raw_cov[j], qd)
+    return state
+
+
 def calibration_covariance(
     fp: FramedPoints, model: HullModel, xytheta: np.ndarray, scanner_cov: np.ndarray, icp: IcpSettings
 ) -> np.ndarray:
@@ -312,8 +404,10 @@ def track_frames(
     reasons = [""] * F
     centre_r = model.corners_xy.mean(axis=0)
     tracks: list[list[int | bool]] = []  # [first frame, heading ambiguous]
+    qd = np.array([st.predict_accel_std_mps2**2] * 2 + [st.predict_ang_accel_std_radps2**2])
+    Pv_unknown = np.diag([st.max_speed_mps**2, st.max_speed_mps**2, st.max_turn_rate_radps**2])
 
-    last_ok: list[int] = []  # frames of the current track fitted OK, for the velocity
+    pred_state: _Predictor | None = None  # the tracking filter of the current track
     tracking = False
     fails = 0
     last_pose_frame = -1  # last OK frame of any track
@@ -322,10 +416,11 @@ def track_frames(
         if not tracking:
             sl = fp.frame(k)
             prior, radius, inherited = None, None, False
-            if last_pose_frame >= 0 and stamps[k] - stamps[last_pose_frame] <= st.prior_max_gap_s:
+            gap = np.inf if last_pose_frame < 0 else stamps[k] - stamps[last_pose_frame]
+            if gap <= st.prior_max_gap_s:
                 prior = raw[last_pose_frame]
                 inherited = bool(tracks[track_id[last_pose_frame]][1])  # the prior's own heading unresolved
-                if stamps[k] - stamps[last_pose_frame] <= st.reacquire_gap_s:
+                if gap <= st.reacquire_gap_s:
                     radius = st.reacquire_radius_m
             acq = None
             if sl.stop - sl.start >= st.icp.min_points:
@@ -353,13 +448,23 @@ def track_frames(
             raw[k], raw_cov[k] = pose, f.cov_xytheta
             status[k], n_points[k], n_sides[k], rms[k] = OK, f.n_points, f.n_sides, f.rms_m
             track_id[k] = len(tracks) - 1
-            last_ok, fails, tracking, last_pose_frame = [k], 0, True, k
+            # the velocity of a new track: that of the track just lost, made uncertain by the robot's
+            # accelerations over the gap, else unknown up to the robot's top speed; its first frames
+            # are then fitted one at a time until the filter has measured it
+            if pred_state is not None and radius is not None and not acq.ambiguous:
+                v0 = pred_state.x[3:].copy()
+                Pv0 = pred_state.P[3:, 3:] + np.diag(qd) * gap + Pv_unknown * min(1.0, gap / st.reacquire_gap_s) ** 2
+            else:
+                v0, Pv0 = np.zeros(3), Pv_unknown
+            pred_state = _start_predictor(stamps[k], pose, f.cov_xytheta, v0, Pv0)
+            fails, tracking, last_pose_frame = 0, True, k
             log.debug(
                 "hull acquired at frame %d (%.3f s)%s", k, stamps[k], " (heading ambiguous)" * acq.ambiguous
             )
             k += 1
             continue
 
+        assert pred_state is not None
         end = min(F, k + st.chunk_frames)
         gaps = np.flatnonzero(np.diff(stamps[k - 1 : end]) > st.max_gap_s)
         if gaps.size:
@@ -367,10 +472,16 @@ def track_frames(
         if end <= k:
             tracking = False
             continue
-        ref = last_ok[-1]
-        recent = [j for j in last_ok[-10:] if stamps[ref] - stamps[j] <= 0.2]
-        vel = _velocity(stamps[recent], raw[recent])
-        pred = raw[ref] + (stamps[k:end] - stamps[ref])[:, None] * vel
+        pred, pred_cov = pred_state.predict(stamps[k:end], qd)
+        # fit together only the frames the prediction reaches: its standard deviation within a third
+        # of the ICP's capture (at least one frame)
+        sd_xy = np.sqrt(np.maximum(pred_cov[:, 0, 0], pred_cov[:, 1, 1]))
+        sd_th = np.sqrt(pred_cov[:, 2, 2])
+        reach = (3 * sd_xy <= st.capture_m) & (3 * sd_th <= st.capture_rad)
+        n_fit = max(1, int(np.argmin(reach)) if not reach.all() else len(reach))
+        end = k + n_fit
+        pred, pred_cov = pred[:n_fit], pred_cov[:n_fit]
+        vel = pred_state.x[3:]
         sl = slice(int(fp.frame_start[k]), int(fp.frame_start[end]))
         fid = np.repeat(np.arange(end - k), np.diff(fp.frame_start[k : end + 1]))
         xy = fp.xy_world[sl]
@@ -396,20 +507,29 @@ def track_frames(
             pred,
             st.icp,
         )
+        next_k = end
         for i in range(end - k):
             j = k + i
             pose = fits.xytheta[i]
-            jump = np.hypot(*(pose[:2] - pred[i, :2]))
+            d = pose - pred[i]
+            jump = float(np.hypot(d[0], d[1]))
             n_points[j], n_sides[j], rms[j] = fits.n_points[i], fits.n_sides[i], fits.rms_m[i]
             bad = ""
             if fits.n_points[i] < st.icp.min_points:
                 bad = f"few points ({fits.n_points[i]})"
             elif not fits.rms_m[i] <= st.max_rms_m:
                 bad = f"residual {1000 * fits.rms_m[i]:.0f} mm"
-            elif jump > st.max_jump_m or abs(pose[2] - pred[i, 2]) > max(
-                st.max_jump_rad, 4.0 * np.sqrt(fits.cov_xytheta[i, 2, 2])
-            ):
-                bad = f"jump of {1000 * jump:.0f} mm from the prediction"
+            elif not fits.degenerate[i]:
+                # the gate scales with what the prediction and the fit can each be off by
+                S = pred_cov[i] + fits.cov_xytheta[i]
+                m2 = float(d @ np.linalg.solve(S, d))
+                small = jump <= st.min_jump_m and abs(d[2]) <= st.min_jump_rad
+                if jump > st.max_jump_m or abs(d[2]) > st.max_jump_rad or (m2 > st.gate_chi2 and not small):
+                    bad = f"jump of {1000 * jump:.0f} mm, {np.degrees(d[2]):.1f} deg from the prediction"
+            if bad and i > 0:
+                # predicted from farther back than the frame before it: try again from a fresh prediction
+                next_k = j
+                break
             if bad:
                 reasons[j] = bad
                 fails += 1
@@ -420,21 +540,23 @@ def track_frames(
                 fails += 1
             else:
                 raw[j], raw_cov[j] = pose, fits.cov_xytheta[i]
-                status[j] = OK
+                status[j], reasons[j] = OK, ""
                 track_id[j] = len(tracks) - 1
-                last_ok.append(j)
+                pred_state = pred_state.update(stamps[j], pose, fits.cov_xytheta[i], qd)
                 last_pose_frame = j
                 fails = 0
             if fails >= st.lost_after:
                 tracking = False
                 log.debug("track lost at frame %d (%.3f s): %s", j, stamps[j], reasons[j])
-                end = j + 1
+                next_k = j + 1
                 break
+        end = next_k
         # resolve the pi symmetry as soon as the robot has moved, before a later track inherits it
         tid = len(tracks) - 1
         if st.forward_motion and tracks[tid][1]:
             if _resolve_heading(tid, track_id, status, raw, raw_cov, centre_r, st.min_motion_m):
                 tracks[tid][1] = False
+                pred_state = _refilter(tid, track_id, status, stamps, raw, raw_cov, qd, Pv_unknown)
         k = end
 
     for tid, (_first, ambiguous) in enumerate(tracks):

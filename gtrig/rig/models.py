@@ -160,9 +160,35 @@ class Camera(_Strict):
         return np.asarray(self.dist_coeffs, dtype=float)
 
 
+class BeamTiming(StrEnum):
+    """How a scanner fires its beams within one scan.
+
+    ``sweep``: a rotating mirror sweeps the beams one after the other, beam ``i`` at
+    ``|angle_i - angle_0| / (2 pi rate_hz)`` after the first (SICK LMS, Hokuyo URG: the mirror turns
+    once per period, so 180 degrees take half a period). ``simultaneous``: every beam of a scan fires
+    at the same instant (flash solid-state devices, and simulators that stamp a whole scan at once).
+    """
+
+    SWEEP = "sweep"
+    SIMULTANEOUS = "simultaneous"
+
+
+class StampAt(StrEnum):
+    """Which instant of the sweep a scan's time stamp refers to (drivers differ: the first beam, the
+    middle of the sweep, or the last beam when the scan is sent). Meaningless for ``simultaneous``."""
+
+    START = "start"
+    MIDDLE = "middle"
+    END = "end"
+
+
 class LaserScanner(_Strict):
     """A 2D laser scanner: beam ``i`` points at ``angle_min_rad + i * angle_increment_rad``
-    in the scanner's x-y plane."""
+    in the scanner's x-y plane.
+
+    ``beam_timing`` and ``stamp_at`` say when each beam fired relative to the scan's stamp
+    (:func:`gtrig.laser.fuse.beam_delays_s`); the default is a mirror sweep stamped at its first beam.
+    """
 
     name: str = Field(min_length=1)
     T_world_scanner: Pose
@@ -172,6 +198,8 @@ class LaserScanner(_Strict):
     range_max_m: float = Field(gt=0)
     rate_hz: float = Field(gt=0, le=1000)
     range_sigma_m: float = Field(default=0.01, ge=0)
+    beam_timing: BeamTiming = BeamTiming.SWEEP
+    stamp_at: StampAt = StampAt.START
 
     @field_validator("angle_increment_rad")
     @classmethod
@@ -188,6 +216,15 @@ class LaserScanner(_Strict):
     @property
     def angles_rad(self) -> geo.Array:
         return self.angle_min_rad + self.angle_increment_rad * np.arange(self.beams)
+
+    def beam_delays_s(self) -> geo.Array:
+        """Firing time (B,) of each beam after the scan's stamp, seconds (negative: before it)."""
+        if self.beam_timing == BeamTiming.SIMULTANEOUS:
+            return np.zeros(self.beams)
+        a = self.angles_rad
+        d = np.abs(a - a[0]) / (2 * np.pi) / self.rate_hz
+        ref = {StampAt.START: 0.0, StampAt.MIDDLE: 0.5 * d[-1], StampAt.END: d[-1]}[self.stamp_at]
+        return d - ref
 
 
 class MarkerFamily(StrEnum):
