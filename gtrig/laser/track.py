@@ -30,6 +30,7 @@ from gtrig.geometry import wrap_angle
 from gtrig.laser.acquire import acquire
 from gtrig.laser.fuse import FramedPoints
 from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull_batch, scanner_sensitivity
+from gtrig.laser.process_noise import local_ml_process_noise
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +39,8 @@ DEGENERATE = 1
 LOST = 2
 AMBIGUOUS = 3
 STATUS_NAMES = {OK: "ok", DEGENERATE: "degenerate", LOST: "lost", AMBIGUOUS: "ambiguous"}
+# multiples of the settings' process noise searched by the maximum-likelihood choice (x 1 to x 100)
+_Q_GRID = np.geomspace(1.0, 100.0, 5)
 
 
 @dataclass(frozen=True)
@@ -69,7 +72,10 @@ class TrackSettings:
     forward_motion : the robot drives forwards, so the direction of motion resolves the pi symmetry.
     min_motion_m : displacement needed to use the direction of motion.
     smooth : run the RTS smoother on each track.
-    accel_std_mps2, ang_accel_std_radps2 : white-acceleration process noise of the smoother.
+    accel_std_mps2, ang_accel_std_radps2 : white-acceleration process noise of the smoother (with
+        ``adapt_process_noise``, the least of those searched: up to 100 times these, chosen per track by
+        maximum likelihood of its innovations over ``adapt_window_s`` around each frame,
+        :mod:`gtrig.laser.process_noise`).
     floor_std_m, floor_std_rad : added in quadrature to the smoothed covariance: errors that smoothing
         cannot average out because they persist over many frames (the laser plane cutting a tilted gown,
         reflectivity bias). The scanners' calibration is propagated separately (``scanner_cov``).
@@ -97,6 +103,8 @@ class TrackSettings:
     forward_motion: bool = True
     min_motion_m: float = 0.05
     smooth: bool = True
+    adapt_process_noise: bool = True
+    adapt_window_s: float = 1.0
     accel_std_mps2: float = 0.07
     ang_accel_std_radps2: float = 0.07
     floor_std_m: float = 0.0005
@@ -248,8 +256,18 @@ def rts_smooth(
     xytheta : (n, 3) smoothed poses.
     cov_xytheta : (n, 3, 3) their covariances.
     """
-    n = len(stamps_s)
     qd = np.array([accel_std_mps2**2, accel_std_mps2**2, ang_accel_std_radps2**2])
+    return rts_smooth_varying(stamps_s, z_xytheta, R_z, np.broadcast_to(qd, (len(stamps_s), 3)))
+
+
+def rts_smooth_varying(
+    stamps_s: np.ndarray, z_xytheta: np.ndarray, R_z: np.ndarray, qd: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`rts_smooth` with a process noise that varies along the track: ``qd`` (n, 3) spectral
+    densities of the white acceleration in x, y, theta over the interval ending at each frame
+    ((m/s^2)^2 s, (rad/s^2)^2 s)."""
+    n = len(stamps_s)
+    qd = np.asarray(qd, dtype=float)
     dt = np.r_[0.0, np.diff(stamps_s)]
     F = np.tile(np.eye(6), (n, 1, 1))
     F[:, [0, 1, 2], [3, 4, 5]] = dt[:, None]
@@ -575,7 +593,19 @@ def track_frames(
                 continue
             z = raw[idx].copy()
             z[:, 2] = np.unwrap(z[:, 2])
-            xs, Ps = rts_smooth(stamps[idx], z, raw_cov[idx], st.accel_std_mps2, st.ang_accel_std_radps2)
+            qa, qw = st.accel_std_mps2, st.ang_accel_std_radps2
+            if st.adapt_process_noise and idx.size >= 10:
+                # the robot's own accelerations, from the track's innovations, near each frame
+                # (process_noise): braking into a bend needs a looser model than cruising
+                good = np.isin(status[idx], (OK, AMBIGUOUS))
+                zz = np.where(good[:, None], z, np.nan)
+                qda, qdw = local_ml_process_noise(
+                    stamps[idx], zz, raw_cov[idx], qa * _Q_GRID, qw * _Q_GRID, st.adapt_window_s
+                )
+                qd = np.column_stack([qda**2, qda**2, qdw**2])
+                xs, Ps = rts_smooth_varying(stamps[idx], z, raw_cov[idx], qd)
+            else:
+                xs, Ps = rts_smooth(stamps[idx], z, raw_cov[idx], qa, qw)
             xytheta[idx], cov[idx] = (
                 xs,
                 Ps + np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2]),
