@@ -14,7 +14,7 @@ import numpy as np
 import yaml
 
 from gtrig import geometry as geo
-from gtrig.errors import FormatError, InputError
+from gtrig.errors import ConfigError, FormatError, InputError
 from gtrig.io.atomic import atomic_open
 from gtrig.io.scans import ScanLog, read_scans
 from gtrig.io.tum import Trajectory, write_tum
@@ -190,6 +190,9 @@ def track_sequence(
     ``scanner_cov`` (3 S, 3 S) is the scanners' calibration covariance, propagated into each pose."""
     if not rig.laser_scanners:
         raise InputError("the rig has no laser scanners")
+    if rig.robot.hull is None:
+        raise ConfigError("rig: robot.hull: missing field: GTlaser tracks the robot's hull (length_m, width_m, "
+                          "z_min_m, z_max_m)")
     logs = read_scanner_logs(Path(seq_dir) / "lasers", rig, "sequence")
     scs = rig.laser_scanners
     masks = [

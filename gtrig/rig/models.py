@@ -115,7 +115,8 @@ class Camera(_Strict):
     ]
     dist_coeffs: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
     T_world_cam: Pose
-    rate_hz: float = Field(gt=0, le=1000)
+    #: frame rate of a video camera; ``None`` for a camera that takes stills (calibration, validation)
+    rate_hz: float | None = Field(default=None, gt=0, le=1000)
     #: standard deviation of the image time stamps about the true mid-exposure instants (trigger and
     #: transfer jitter), seconds; GTvision adds the motion it hides to every moving pose's covariance
     stamp_sigma_s: float = Field(default=0.0, ge=0, le=1.0)
@@ -317,7 +318,8 @@ class OnboardScanner(_Strict):
 
 
 class Robot(_Strict):
-    hull: Hull
+    #: the gown the fixed laser scanners see; GTlaser needs it, a vision-only rig leaves it out
+    hull: Hull | None = None
     markers: tuple[Marker, ...] = ()
     #: covariance (6 x 6) of the error common to every marker: how far the robot frame the markers
     #: realise may be from the robot frame itself (the anchor's measured pose, or what the survey of the
