@@ -12,7 +12,40 @@ grid, so a whole track costs about one pass per grid row.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+
+def white_noise_model(dt: np.ndarray, qd: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Transitions and process noises of x, y, theta each driven by white noise through ``order``
+    integrators (2: constant velocity, 3: constant acceleration).
+
+    Parameters
+    ----------
+    dt : (N,) time steps, seconds.
+    qd : (N, 3) or (3,) spectral densities of the white noise of x, y, theta.
+    order : 2 or 3.
+
+    Returns
+    -------
+    F, Q : (N, 3 order, 3 order); the state is (pose, its first derivative, ...), three at a time.
+    """
+    dt = np.asarray(dt, dtype=float)
+    N = dt.size
+    qd = np.broadcast_to(np.asarray(qd, dtype=float), (N, 3))
+    i = np.arange(order)
+    p = i[None, :] - i[:, None]  # F_ij = dt^(j - i) / (j - i)!
+    fact = np.array([math.factorial(max(k, 0)) for k in p.ravel()], dtype=float).reshape(p.shape)
+    Fn = np.where(p >= 0, dt[:, None, None] ** np.maximum(p, 0) / fact, 0.0)
+    # Q_ij = q dt^(2n-1-i-j) / ((n-1-i)! (n-1-j)! (2n-1-i-j)) (integrated white noise)
+    a = order - 1 - i
+    e = a[:, None] + a[None, :] + 1
+    den = np.array([[math.factorial(u) * math.factorial(v) for v in a] for u in a], dtype=float) * e
+    Qn = dt[:, None, None] ** e / den
+    F = np.einsum("kde,ab->kdaeb", Fn, np.eye(3)).reshape(N, 3 * order, 3 * order)
+    Q = np.einsum("kde,ka,ab->kdaeb", Qn, qd, np.eye(3)).reshape(N, 3 * order, 3 * order)
+    return F, Q
 
 
 def innovation_loglik(
@@ -21,6 +54,7 @@ def innovation_loglik(
     R_z: np.ndarray,
     q_lin: np.ndarray,
     q_ang: np.ndarray,
+    order: int = 2,
 ) -> np.ndarray:
     """Log-likelihood of a track's measurements under the constant-velocity model, for every pair of
     spectral densities.
@@ -32,12 +66,14 @@ def innovation_loglik(
     R_z : (n, 3, 3) measurement covariances.
     q_lin : (A,) linear white-acceleration densities, (m/s^2)^2 s.
     q_ang : (B,) angular ones, (rad/s^2)^2 s.
+    order : 2, the constant-velocity model; 3, constant acceleration (densities then of the white
+        jerk, (m/s^3)^2 s and (rad/s^3)^2 s).
 
     Returns
     -------
     (A, B) log-likelihoods (up to a common constant).
     """
-    return innovation_loglik_terms(stamps_s, z_xytheta, R_z, q_lin, q_ang).sum(axis=0)
+    return innovation_loglik_terms(stamps_s, z_xytheta, R_z, q_lin, q_ang, order).sum(axis=0)
 
 
 def innovation_loglik_terms(
@@ -46,6 +82,7 @@ def innovation_loglik_terms(
     R_z: np.ndarray,
     q_lin: np.ndarray,
     q_ang: np.ndarray,
+    order: int = 2,
 ) -> np.ndarray:
     """Per-frame terms (n, A, B) of :func:`innovation_loglik` (zero where a frame is not measured,
     and at the first measured frame)."""
@@ -55,10 +92,34 @@ def innovation_loglik_terms(
     qd[..., 2] = np.asarray(q_ang, dtype=float)[None, :]
     qd = qd.reshape(-1, 3)
     G = qd.shape[0]
+    m = 3 * order
     meas = np.flatnonzero(np.isfinite(z_xytheta[:, 0]))
     terms = np.zeros((len(stamps_s), G))
     if meas.size < 3:
         return terms.reshape(-1, A, B)
+    first = meas[0]
+    x = np.zeros((G, m))
+    x[:, :3] = z_xytheta[first]
+    P = np.tile(np.eye(m), (G, 1, 1))
+    P[:, :3, :3] = R_z[first]
+    dts = np.diff(stamps_s[meas])
+    Fs, _ = white_noise_model(dts, np.zeros(3), order)
+    _, Qunit = white_noise_model(dts, np.ones(3), order)  # per unit density, axis by axis
+    axis = np.tile(np.arange(3), order)
+    for n_k, k in enumerate(meas[1:]):
+        F = Fs[n_k]
+        x = x @ F.T
+        Qg = Qunit[n_k][None] * np.sqrt(qd[:, axis][:, :, None] * qd[:, axis][:, None, :])
+        P = F @ P @ F.T + Qg
+        S = P[:, :3, :3] + R_z[k]
+        Si = np.linalg.inv(S)
+        nu = z_xytheta[k] - x[:, :3]
+        terms[k] = -0.5 * (np.einsum("gi,gij,gj->g", nu, Si, nu) + np.linalg.slogdet(S)[1])
+        K = P[:, :, :3] @ Si
+        x = x + np.einsum("gij,gj->gi", K, nu)
+        P = P - K @ P[:, :3, :]
+        P = 0.5 * (P + np.swapaxes(P, 1, 2))
+    return terms.reshape(-1, A, B)
     first = meas[0]
     x = np.zeros((G, 6))
     x[:, :3] = z_xytheta[first]
@@ -99,12 +160,13 @@ def ml_process_noise(
     R_z: np.ndarray,
     accel_std_grid_mps2: np.ndarray,
     ang_accel_std_grid_radps2: np.ndarray,
+    order: int = 2,
 ) -> tuple[float, float]:
     """The (linear, angular) white-acceleration standard deviations, among the grids (A,) and (B,),
     whose innovations are most likely (:func:`innovation_loglik`)."""
     a = np.asarray(accel_std_grid_mps2, dtype=float)
     b = np.asarray(ang_accel_std_grid_radps2, dtype=float)
-    ll = innovation_loglik(stamps_s, z_xytheta, R_z, a**2, b**2)
+    ll = innovation_loglik(stamps_s, z_xytheta, R_z, a**2, b**2, order)
     i, j = np.unravel_index(int(np.argmax(ll)), ll.shape)
     return float(a[i]), float(b[j])
 
@@ -116,13 +178,14 @@ def local_ml_process_noise(
     accel_std_grid_mps2: np.ndarray,
     ang_accel_std_grid_radps2: np.ndarray,
     window_s: float,
+    order: int = 2,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-frame (n,) linear and angular white-acceleration standard deviations: at each frame, the
     grid pair whose innovations within ``window_s`` (centred) are most likely. A robot cruising and
     then braking into a bend gets a stiff model on the straight and a loose one in the bend."""
     a = np.asarray(accel_std_grid_mps2, dtype=float)
     b = np.asarray(ang_accel_std_grid_radps2, dtype=float)
-    terms = innovation_loglik_terms(stamps_s, z_xytheta, R_z, a**2, b**2)  # (n, A, B)
+    terms = innovation_loglik_terms(stamps_s, z_xytheta, R_z, a**2, b**2, order)  # (n, A, B)
     c = np.concatenate([np.zeros((1,) + terms.shape[1:]), np.cumsum(terms, axis=0)])
     t = np.asarray(stamps_s, dtype=float)
     lo = np.searchsorted(t, t - window_s / 2, side="left")

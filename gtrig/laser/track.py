@@ -29,8 +29,8 @@ import numpy as np
 from gtrig.geometry import wrap_angle
 from gtrig.laser.acquire import acquire
 from gtrig.laser.fuse import FramedPoints
-from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull_batch, scanner_sensitivity
-from gtrig.laser.process_noise import local_ml_process_noise
+from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull_batch, scanner_sensitivity, side_bias_sensitivity
+from gtrig.laser.process_noise import local_ml_process_noise, white_noise_model
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +79,9 @@ class TrackSettings:
     floor_std_m, floor_std_rad : added in quadrature to the smoothed covariance: errors that smoothing
         cannot average out because they persist over many frames (the laser plane cutting a tilted gown,
         reflectivity bias). The scanners' calibration is propagated separately (``scanner_cov``).
+    surface_bias_std_m, side_bias_std_m : range bias of the hull's fabric (its reflectivity: dark
+        ranges long, light short), common to all sides and of each side, propagated into each pose
+        after smoothing (:func:`surface_bias_covariance`); 0 leaves it out.
     """
 
     icp: IcpSettings = field(default_factory=IcpSettings)
@@ -105,9 +108,14 @@ class TrackSettings:
     smooth: bool = True
     adapt_process_noise: bool = True
     adapt_window_s: float = 1.0
+    smoother_order: int = 3
+    jerk_std_mps3: float = 0.1
+    ang_jerk_std_radps3: float = 0.1
     accel_std_mps2: float = 0.07
     ang_accel_std_radps2: float = 0.07
     floor_std_m: float = 0.0005
+    surface_bias_std_m: float = 0.002
+    side_bias_std_m: float = 0.0015
     floor_std_rad: float = np.radians(0.02)
 
 
@@ -261,30 +269,37 @@ def rts_smooth(
 
 
 def rts_smooth_varying(
-    stamps_s: np.ndarray, z_xytheta: np.ndarray, R_z: np.ndarray, qd: np.ndarray
+    stamps_s: np.ndarray, z_xytheta: np.ndarray, R_z: np.ndarray, qd: np.ndarray, order: int = 2
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`rts_smooth` with a process noise that varies along the track: ``qd`` (n, 3) spectral
-    densities of the white acceleration in x, y, theta over the interval ending at each frame
-    ((m/s^2)^2 s, (rad/s^2)^2 s)."""
+    """:func:`rts_smooth` with a process noise that varies along the track, and of either order.
+
+    Parameters
+    ----------
+    stamps_s, z_xytheta, R_z
+        As :func:`rts_smooth`.
+    qd
+        (n, 3) spectral densities of the white noise driving x, y, theta over the interval ending at
+        each frame: white acceleration for ``order`` 2 ((m/s^2)^2 s, (rad/s^2)^2 s), white jerk for
+        ``order`` 3 ((m/s^3)^2 s, (rad/s^3)^2 s).
+    order
+        2: constant velocity (state pose, velocity); 3: constant acceleration (pose, velocity,
+        acceleration), which follows a robot braking into a bend without the lag a constant-velocity
+        model needs a loose process noise to avoid, so it can average over more frames.
+    """
     n = len(stamps_s)
-    qd = np.asarray(qd, dtype=float)
+    m = 3 * order
     dt = np.r_[0.0, np.diff(stamps_s)]
-    F = np.tile(np.eye(6), (n, 1, 1))
-    F[:, [0, 1, 2], [3, 4, 5]] = dt[:, None]
-    Q = np.zeros((n, 6, 6))
-    Q[:, [0, 1, 2], [0, 1, 2]] = qd * dt[:, None] ** 3 / 3
-    Q[:, [0, 1, 2], [3, 4, 5]] = Q[:, [3, 4, 5], [0, 1, 2]] = qd * dt[:, None] ** 2 / 2
-    Q[:, [3, 4, 5], [3, 4, 5]] = qd * dt[:, None]
+    F, Q = white_noise_model(dt, np.asarray(qd, dtype=float), order)
     meas = np.isfinite(z_xytheta[:, 0])
-    xf = np.zeros((n, 6))
-    Pf = np.zeros((n, 6, 6))
-    xp = np.zeros((n, 6))
-    Pp = np.zeros((n, 6, 6))
+    xf = np.zeros((n, m))
+    Pf = np.zeros((n, m, m))
+    xp = np.zeros((n, m))
+    Pp = np.zeros((n, m, m))
     first = int(np.flatnonzero(meas)[0])
-    x = np.r_[z_xytheta[first], 0.0, 0.0, 0.0]
-    P = np.zeros((6, 6))
+    x = np.zeros(m)
+    x[:3] = z_xytheta[first]
+    P = np.eye(m)
     P[:3, :3] = R_z[first]
-    P[3:, 3:] = np.eye(3)
     for k in range(n):
         if k > 0:
             Fk = F[k]
@@ -298,7 +313,7 @@ def rts_smooth_varying(
             P = 0.5 * (P + P.T)
         xf[k], Pf[k] = x, P
     # smoother gains C_k = Pf_k F_{k+1}^T Pp_{k+1}^-1, all at once
-    C = np.zeros((n, 6, 6))
+    C = np.zeros((n, m, m))
     if n > 1:
         C[:-1] = Pf[:-1] @ np.swapaxes(F[1:], 1, 2) @ np.linalg.inv(Pp[1:])
     xs = xf.copy()
@@ -381,6 +396,36 @@ def calibration_covariance(
         icp,
     )
     out[have] = A @ np.asarray(scanner_cov, dtype=float) @ np.swapaxes(A, 1, 2)
+    return out
+
+
+def surface_bias_covariance(
+    fp: FramedPoints,
+    model: HullModel,
+    xytheta: np.ndarray,
+    common_std_m: float,
+    side_std_m: float,
+    icp: IcpSettings,
+) -> np.ndarray:
+    """Covariance (F, 3, 3) that an unknown range bias of the hull's fabric induces on each pose
+    ``xytheta`` (F, 3; ``nan`` rows get ``nan``), through
+    :func:`gtrig.laser.hull_icp.side_bias_sensitivity`: a bias common to all sides (standard deviation
+    ``common_std_m``: one fabric of unknown reflectivity) plus one of each side (``side_std_m``:
+    sides of different fabric or wear)."""
+    F = fp.n_frames
+    out = np.full((F, 3, 3), np.nan)
+    have = np.isfinite(xytheta[:, 0])
+    if not have.any():
+        return out
+    counts = np.diff(fp.frame_start)
+    pt = np.repeat(have, counts)
+    fid = np.repeat(np.cumsum(have) - 1, counts)[pt]
+    A = side_bias_sensitivity(
+        model, fp.xy_world[pt], fid, fp.scanner_index[pt], fp.scanner_xy_world, fp.dir_world[pt], fp.sigma_m,
+        xytheta[have], icp,
+    )
+    C = common_std_m**2 * np.ones((4, 4)) + side_std_m**2 * np.eye(4)
+    out[have] = A @ C @ np.swapaxes(A, 1, 2)
     return out
 
 
@@ -599,17 +644,25 @@ def track_frames(
                 # (process_noise): braking into a bend needs a looser model than cruising
                 good = np.isin(status[idx], (OK, AMBIGUOUS))
                 zz = np.where(good[:, None], z, np.nan)
+                if st.smoother_order == 3:
+                    qa, qw = st.jerk_std_mps3, st.ang_jerk_std_radps3
                 qda, qdw = local_ml_process_noise(
-                    stamps[idx], zz, raw_cov[idx], qa * _Q_GRID, qw * _Q_GRID, st.adapt_window_s
+                    stamps[idx], zz, raw_cov[idx], qa * _Q_GRID, qw * _Q_GRID, st.adapt_window_s,
+                    st.smoother_order,
                 )
                 qd = np.column_stack([qda**2, qda**2, qdw**2])
-                xs, Ps = rts_smooth_varying(stamps[idx], z, raw_cov[idx], qd)
+                xs, Ps = rts_smooth_varying(stamps[idx], z, raw_cov[idx], qd, st.smoother_order)
             else:
                 xs, Ps = rts_smooth(stamps[idx], z, raw_cov[idx], qa, qw)
             xytheta[idx], cov[idx] = (
                 xs,
                 Ps + np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2]),
             )
+    if st.surface_bias_std_m > 0 or st.side_bias_std_m > 0:
+        # the fabric's range bias moves with the side, not from frame to frame: after smoothing
+        cov = cov + np.nan_to_num(
+            surface_bias_covariance(fp, model, raw, st.surface_bias_std_m, st.side_bias_std_m, st.icp)
+        )
     cov_cal = np.zeros((F, 3, 3))
     if scanner_cov is not None:
         cov_cal = calibration_covariance(fp, model, raw, scanner_cov, st.icp)
