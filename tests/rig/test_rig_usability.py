@@ -82,3 +82,21 @@ def test_beam_delays_follow_the_device() -> None:
     assert np.allclose(end, sweep - sweep[-1]) and np.allclose(mid, sweep - sweep[-1] / 2)
     flash = s.model_copy(update={"beam_timing": BeamTiming.SIMULTANEOUS}).beam_delays_s()
     assert np.all(flash == 0)
+
+
+def test_gtrig_vision_says_which_defaults_it_assumed(tmp_path: Path) -> None:
+    rig = make_scene(0).rig_nominal
+    dump_rig(rig, tmp_path / "rig.yaml")
+    (tmp_path / "rec").mkdir()
+    args = ["vision", "--rig", str(tmp_path / "rig.yaml"), "--recording", str(tmp_path / "rec"),
+            "--out", str(tmp_path / "gt.tum"), "--planar"]
+    r = runner.invoke(app, args)
+    assert r.exit_code == 2 and "Traceback" not in r.output  # an empty recording: one clear error
+    assert "assumed: camera pose sigma 3 mm / 0.05 deg for cam0, cam1" in r.output
+    assert "assumed: floor prior 3 mm" in r.output
+    # a rig that gives its cameras' uncertainty is taken at its word
+    cov = tuple(tuple(float(1e-6 if i == j else 0.0) for j in range(6)) for i in range(6))
+    rig2 = rig.model_copy(update={"cameras": tuple(c.model_copy(update={"pose_cov": cov}) for c in rig.cameras)})
+    dump_rig(rig2, tmp_path / "rig.yaml")
+    r = runner.invoke(app, args)
+    assert "assumed: camera" not in r.output and "assumed: marker pose sigma" in r.output
