@@ -298,7 +298,8 @@ def fit_hull_batch(
         lin = _linearise(model, p, fid, sid, S, dir_world, var_r, pose, wide if it == 1 else st.gate_m, st)
         k_side, inl, r, w, J = lin.side, lin.inlier, lin.r, lin.w, lin.J
         H = _normal_matrix(fid, w, J, K)
-        g = np.column_stack([np.bincount(fid, w * J[i] * r, minlength=K) for i in range(3)])
+        # (float: bincount of no points at all is an integer array)
+        g = np.column_stack([np.bincount(fid, w * J[i] * r, minlength=K) for i in range(3)]).astype(float)
         H[:, [0, 1, 2], [0, 1, 2]] += prior
         g += prior * (pose - init)
         delta = -np.linalg.solve(H, g[..., None])[..., 0]

@@ -36,7 +36,7 @@ def path(speed_mps: float):
     return at
 
 
-def _track(room, speed_mps, stamp_at=StampAt.START, told=None, seed=5):
+def _track(room, speed_mps, stamp_at=StampAt.START, told=None, seed=5, hidden_s=None):
     """Simulate the scanners firing as ``stamp_at`` says; track with the rig saying ``told`` (default
     the truth)."""
     rng = np.random.default_rng(seed)
@@ -51,7 +51,12 @@ def _track(room, speed_mps, stamp_at=StampAt.START, told=None, seed=5):
     run = synth.swept_scan_sequence(true_scs, room["static"], room["hull"], at, stamps, rng)
     models = [build_background(b, s) for b, s in zip(bg, rig_scs, strict=True)]
     masks = [foreground_mask(r, foreground_threshold(m)) for r, m in zip(run, models, strict=True)]
+    if hidden_s is not None:  # the robot out of every scanner's sight (a crowd passing, a door)
+        for m, st in zip(masks, stamps, strict=True):
+            m[(st >= hidden_s[0]) & (st < hidden_s[1])] = False
     res = track_frames(frame_points(rig_scs, stamps, run, masks), HullModel.from_hull(room["hull"]))
+    if hidden_s is not None:
+        return res, at(res.stamps_s)
     truth = at(res.stamps_s)
     ok = res.status == OK
     e = np.hypot(*(res.xytheta[ok, :2] - truth[ok, :2]).T)
@@ -85,3 +90,18 @@ def test_beam_timing_matters_at_speed(room):
     _, e_right, _, _ = _track(room, 2.0)
     _, e_wrong, _, _ = _track(room, 2.0, told={"beam_timing": BeamTiming.SIMULTANEOUS})
     assert e_wrong.mean() > 1.5 * e_right.mean()
+
+
+def test_lost_track_recovered_within_a_fifth_of_a_second(room):
+    # hidden for 0.2 s at 2 m/s (long enough to lose the track), the robot is found again at once and
+    # tracked on from there with its old velocity: within 0.2 s every frame is OK again
+    res, truth = _track(room, 2.0, hidden_s=(0.6, 0.8))
+    t = res.stamps_s
+    back = (t >= 0.8) & (t < 0.8 + 0.2)
+    after = t >= 0.8
+    first_ok = t[after & (res.status == OK)][0]
+    assert first_ok - 0.8 < 0.03
+    late = t >= first_ok
+    assert np.all(res.status[late] == OK)
+    e = np.hypot(*(res.xytheta[late, :2] - truth[late, :2]).T)
+    assert e.max() < 0.02 and back.sum() > 10
