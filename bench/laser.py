@@ -13,6 +13,7 @@ Open3D (``registration_icp``) if it imports, else a SciPy KD-tree ICP; the table
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 
 import numpy as np
@@ -27,7 +28,7 @@ from gtrig.laser.synth import cast_rays, hull_segments_world
 from gtrig.laser.track import OK, TrackSettings, track_frames
 from gtrig.sim.config import LaserSimConfig, MotionSimConfig, SimConfig
 from gtrig.sim.gtroom import VALIDATION_POSES, continuous_path, make_scene
-from gtrig.sim.lasers import configure_scene, simulate_fixed_scans
+from gtrig.sim.lasers import configure_scene, simulate_fixed_scans, with_scanner_stamp_sigma
 from gtrig.sim.motion import RobotMotion, agile_path, static_motion
 
 
@@ -169,6 +170,9 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
              calibrate: bool = True, validate: bool = True, peer: bool = True) -> dict:
     cfg = SimConfig(seed=seed, laser=LaserSimConfig(**(laser or {})), motion=MotionSimConfig(**(motion or {})))
     sc = configure_scene(make_scene(seed), cfg)
+    # the rigs say how well the scanners' clocks are synchronised, as a recording's rig.yaml does
+    sc = dataclasses.replace(sc, rig_true=with_scanner_stamp_sigma(sc.rig_true),
+                             rig_nominal=with_scanner_stamp_sigma(sc.rig_nominal))
     if cfg.motion.profile == "agile":
         m = cfg.motion
         ts, xyth = agile_path(VALIDATION_POSES, m.speed_mps, m.accel_mps2, m.lat_accel_mps2,

@@ -37,6 +37,7 @@ class FramedPoints:
     ranges_m : per scanner, (N_s, B_s) all ranges, metres (for the free-space test of the global search).
     masks : per scanner, (N_s, B_s) foreground masks.
     beam_dirs : per scanner, (B_s, 2) unit beam directions in the world.
+    stamp_sigma_s : (S,) standard deviation of each scanner's clock offset, seconds (None: exact).
     """
 
     frame_stamps_s: np.ndarray
@@ -52,6 +53,7 @@ class FramedPoints:
     ranges_m: tuple[np.ndarray, ...]
     masks: tuple[np.ndarray, ...]
     beam_dirs: tuple[np.ndarray, ...]
+    stamp_sigma_s: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -204,4 +206,5 @@ def frame_points(
         ranges_m=tuple(np.asarray(r, dtype=float) for r in ranges_m),
         masks=tuple(masks),
         beam_dirs=tuple(all_dirs),
+        stamp_sigma_s=np.array([s.stamp_sigma_s for s in scanners]),
     )

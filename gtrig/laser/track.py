@@ -114,8 +114,8 @@ class TrackSettings:
     accel_std_mps2: float = 0.07
     ang_accel_std_radps2: float = 0.07
     floor_std_m: float = 0.0005
-    surface_bias_std_m: float = 0.002
-    side_bias_std_m: float = 0.0015
+    surface_bias_std_m: float = 0.0015
+    side_bias_std_m: float = 0.001
     floor_std_rad: float = np.radians(0.02)
 
 
@@ -429,6 +429,32 @@ def surface_bias_covariance(
     return out
 
 
+def timing_covariance(fp: FramedPoints, stamps_s: np.ndarray, xytheta: np.ndarray, track_id: np.ndarray) -> np.ndarray:
+    """Covariance (F, 3, 3) of the poses due to the scanners' clock offsets: a frame's fit holds at the
+    mean of its points' true times, off from its stamp by the points' share-weighted mean offset
+    (standard deviation ``sqrt(sum_s w_s^2 sigma_s^2)``, offsets independent between scanners), so the
+    pose is off by that times its velocity (from the smoothed poses of its own track)."""
+    F = fp.n_frames
+    out = np.zeros((F, 3, 3))
+    sig = fp.stamp_sigma_s
+    if sig is None or not np.any(sig > 0):
+        return out
+    counts = np.diff(fp.frame_start)
+    fid = np.repeat(np.arange(F), counts)
+    S = len(sig)
+    n = np.bincount(fid * S + fp.scanner_index, minlength=F * S).reshape(F, S).astype(float)
+    w = n / np.maximum(n.sum(axis=1, keepdims=True), 1.0)
+    var_t = (w**2) @ (sig**2)
+    vel = np.zeros((F, 3))
+    for tid in np.unique(track_id[track_id >= 0]):
+        idx = np.flatnonzero(track_id == tid)
+        if idx.size >= 2:
+            z = xytheta[idx].copy()
+            z[:, 2] = np.unwrap(z[:, 2])
+            vel[idx] = np.gradient(z, stamps_s[idx], axis=0)
+    return var_t[:, None, None] * np.einsum("fi,fj->fij", vel, vel)
+
+
 def track_frames(
     fp: FramedPoints,
     model: HullModel,
@@ -663,6 +689,8 @@ def track_frames(
         cov = cov + np.nan_to_num(
             surface_bias_covariance(fp, model, raw, st.surface_bias_std_m, st.side_bias_std_m, st.icp)
         )
+    # the scanners' clocks: the motion a stamp offset hides (the rig's stamp_sigma_s)
+    cov = cov + timing_covariance(fp, stamps, xytheta, track_id)
     cov_cal = np.zeros((F, 3, 3))
     if scanner_cov is not None:
         cov_cal = calibration_covariance(fp, model, raw, scanner_cov, st.icp)

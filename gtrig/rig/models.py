@@ -201,6 +201,9 @@ class LaserScanner(_Strict):
     range_sigma_m: float = Field(default=0.01, ge=0)
     beam_timing: BeamTiming = BeamTiming.SWEEP
     stamp_at: StampAt = StampAt.START
+    #: standard deviation of the scan stamps' offset from the recording clock (the logging PC's
+    #: synchronisation, the driver's latency), seconds; GTlaser adds the motion it hides to each pose
+    stamp_sigma_s: float = Field(default=0.0, ge=0, le=1.0)
 
     @field_validator("angle_increment_rad")
     @classmethod

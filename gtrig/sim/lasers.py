@@ -221,6 +221,14 @@ def blocking_box(scanner: LaserScanner, fraction: float) -> Box:
                float(bis), 0.5)
 
 
+def with_scanner_stamp_sigma(rig):  # noqa: ANN001, ANN201
+    """``rig`` with its fixed scanners' ``stamp_sigma_s`` set to the simulator's clock model (a fixed
+    offset per scanner plus per-scan jitter): the lab knows how well its logging PCs are synchronised."""
+    sig = float(np.hypot(CLOCK_OFFSET_SIGMA_S, STAMP_JITTER_SIGMA_S))
+    return rig.model_copy(update={"laser_scanners": tuple(
+        s.model_copy(update={"stamp_sigma_s": sig}) for s in rig.laser_scanners)})
+
+
 def configure_scene(scene: Scene, cfg: SimConfig) -> Scene:
     """The scene as ``cfg.laser`` sets it up: the fixed scanners' beam timing and stamp reference
     (true and nominal rig: the lab knows its driver), and the clutter blocking a scanner. The default

@@ -27,7 +27,7 @@ from gtrig.rig.models import Rig
 from gtrig.sim.config import SimConfig
 from gtrig.sim.gtroom import VALIDATION_POSES, WORLD_POINT_NAMES, Scene, continuous_path, make_scene
 from gtrig.sim.motion import RobotMotion, agile_path, static_motion
-from gtrig.sim.lasers import configure_scene
+from gtrig.sim.lasers import configure_scene, with_scanner_stamp_sigma
 
 log = logging.getLogger(__name__)
 
@@ -89,7 +89,7 @@ def _csv(path: Path, header: list[str], rows: list[list[object]]) -> None:
 # ---------------------------------------------------------------------------------------------- steps
 def _with_stamp_sigma(rig: Rig, cfg: SimConfig) -> Rig:
     cams = tuple(c.model_copy(update={"stamp_sigma_s": cfg.camera.stamp_jitter_s}) for c in rig.cameras)
-    return rig.model_copy(update={"cameras": cams})
+    return with_scanner_stamp_sigma(rig.model_copy(update={"cameras": cams}))
 
 
 def _write_rigs_and_truth(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
