@@ -4,19 +4,25 @@ The loop (journal paper, section 6, with the additions of issue 7):
 
 1. Foreground returns of every scan (:mod:`gtrig.laser.foreground`), all scanners fused into world
    points grouped by frame (:mod:`gtrig.laser.fuse`), in one vectorised pass.
-2. While tracking, frames are processed in chunks of ``chunk_frames``: each frame starts from the pose
-   predicted with the current velocity, points are compensated for the motion within the frame (the
-   scanners are not synchronised), gated near the predicted outline, and the hull is fitted by
-   point-to-line ICP (:func:`gtrig.laser.hull_icp.fit_hull_batch`, all frames of a chunk at once).
+2. While tracking, a constant-velocity Kalman filter predicts each frame; frames are fitted together
+   (up to ``chunk_frames``) only as far ahead as the prediction's uncertainty stays within the ICP's
+   reach, points are compensated for the motion within the frame (the scanners are not synchronised,
+   each beam has its firing time), gated near the predicted outline, and the hull is fitted by
+   point-to-line ICP (:func:`gtrig.laser.hull_icp.fit_hull_batch`, all frames of a chunk at once). A
+   fit is accepted by its Mahalanobis distance from the prediction (issue 19: a fixed 6 cm gate and a
+   zero velocity after each acquisition lost robots faster than about 0.5 m/s).
 3. A frame whose fit is degenerate is flagged (``DEGENERATE``); after ``lost_after`` failing frames in a
    row, or a gap in time, the track is lost and the global search (:mod:`gtrig.laser.acquire`) runs on
    each frame until the hull is found again.
 4. The rectangle looks the same turned by pi: a new track takes the heading nearest the previous track's
    if that is recent, else the direction of motion decides once the robot has moved (``forward_motion``);
    a track that never moves and has no recent predecessor stays ``AMBIGUOUS``.
-5. Each track is smoothed by a Rauch-Tung-Striebel smoother with a constant-velocity model, using each
-   frame's ICP covariance as its measurement noise (degenerate frames only constrain the directions
-   their points fix). The smoothed covariance is reported per pose.
+5. Each track is smoothed by a Rauch-Tung-Striebel smoother (constant acceleration by default), using
+   each frame's ICP covariance as its measurement noise (degenerate frames only constrain the
+   directions their points fix) and a process noise chosen near each frame by maximum likelihood
+   (:mod:`gtrig.laser.process_noise`). The smoothed covariance is reported per pose, with what
+   smoothing cannot average added: a floor, the fabric's range bias, the scanners' clock offsets and
+   their calibration.
 """
 
 from __future__ import annotations
