@@ -1,13 +1,16 @@
-"""GTlaser benchmark (issue 7): accuracy, speed, and a general point-to-point ICP side by side.
+"""GTlaser benchmark (issues 7, 19): localized share, errors and NEES against speed, with Open3D's ICP.
 
-For each seed: the simulated GT room (people walking, uneven floor, mixed pixels, reflectivity bias,
-scanner clock offsets), a background sequence, and the continuous run. The scanners are calibrated from
-the background sequence (nominal poses 3 cm / 2 deg off), then the run is tracked twice: with the
-calibrated poses and with the true ones (to separate calibration from tracking). The baseline is a
-point-to-point ICP of points sampled along the hull outline to the same foreground points, from
-Open3D (``registration_icp``) if it imports, else a SciPy KD-tree ICP; the table says which.
+For each scenario and seed: the simulated GT room (people walking, uneven floor, mixed pixels,
+reflectivity bias, scanner clock offsets of 2 ms), a background sequence, and the continuous run,
+driven as the scenario says (``cruise``: 0.3 m/s; ``agile``: up to 1.5 m/s, 1 m/s^2, 2 rad/s;
+``agile-blocked``: scanner 0 half blocked by clutter; ``agile-end-stamps``: scans stamped at the end of
+the sweep; ``agile-two-fabrics``: a hull with dark and light sides; ``agile-2mps``: up to 2 m/s at
+1.5 m/s^2). The scanners are calibrated from the background sequence (nominal poses 3 cm / 2 deg off),
+then the run is tracked with the calibrated poses and with the true ones. The peer is Open3D's
+point-to-point ``registration_icp`` (outline points of the hull to the same foreground points, started
+from its own previous pose), else a SciPy KD-tree ICP; the table says which.
 
-    python bench/laser.py [--seeds 0 1 2] [--duration 75]
+    python bench/laser.py [--seeds 0 1 2] [--scenarios cruise agile agile-blocked] [--duration S]
 """
 
 from __future__ import annotations
