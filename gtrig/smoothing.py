@@ -7,7 +7,40 @@ Vectorised where the recursion allows (the gains of the backward pass at once); 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+
+def white_noise_model(dt: np.ndarray, qd: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Transitions and process noises of x, y, theta each driven by white noise through ``order``
+    integrators (2: constant velocity, 3: constant acceleration).
+
+    Parameters
+    ----------
+    dt : (N,) time steps, seconds.
+    qd : (N, 3) or (3,) spectral densities of the white noise of x, y, theta.
+    order : 2 or 3.
+
+    Returns
+    -------
+    F, Q : (N, 3 order, 3 order); the state is (pose, its first derivative, ...), three at a time.
+    """
+    dt = np.asarray(dt, dtype=float)
+    N = dt.size
+    qd = np.broadcast_to(np.asarray(qd, dtype=float), (N, 3))
+    i = np.arange(order)
+    p = i[None, :] - i[:, None]  # F_ij = dt^(j - i) / (j - i)!
+    fact = np.array([math.factorial(max(k, 0)) for k in p.ravel()], dtype=float).reshape(p.shape)
+    Fn = np.where(p >= 0, dt[:, None, None] ** np.maximum(p, 0) / fact, 0.0)
+    # Q_ij = q dt^(2n-1-i-j) / ((n-1-i)! (n-1-j)! (2n-1-i-j)) (integrated white noise)
+    a = order - 1 - i
+    e = a[:, None] + a[None, :] + 1
+    den = np.array([[math.factorial(u) * math.factorial(v) for v in a] for u in a], dtype=float) * e
+    Qn = dt[:, None, None] ** e / den
+    F = np.einsum("kde,ab->kdaeb", Fn, np.eye(3)).reshape(N, 3 * order, 3 * order)
+    Q = np.einsum("kde,ka,ab->kdaeb", Qn, qd, np.eye(3)).reshape(N, 3 * order, 3 * order)
+    return F, Q
 
 
 def rts_smooth(
@@ -35,25 +68,42 @@ def rts_smooth(
     xytheta : (n, 3) smoothed poses.
     cov_xytheta : (n, 3, 3) their covariances.
     """
-    n = len(stamps_s)
     qd = np.array([accel_std_mps2**2, accel_std_mps2**2, ang_accel_std_radps2**2])
+    return rts_smooth_varying(stamps_s, z_xytheta, R_z, np.broadcast_to(qd, (len(stamps_s), 3)))
+
+
+def rts_smooth_varying(
+    stamps_s: np.ndarray, z_xytheta: np.ndarray, R_z: np.ndarray, qd: np.ndarray, order: int = 2
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`rts_smooth` with a process noise that varies along the track, and of either order.
+
+    Parameters
+    ----------
+    stamps_s, z_xytheta, R_z
+        As :func:`rts_smooth`.
+    qd
+        (n, 3) spectral densities of the white noise driving x, y, theta over the interval ending at
+        each frame: white acceleration for ``order`` 2 ((m/s^2)^2 s, (rad/s^2)^2 s), white jerk for
+        ``order`` 3 ((m/s^3)^2 s, (rad/s^3)^2 s).
+    order
+        2: constant velocity (state pose, velocity); 3: constant acceleration (pose, velocity,
+        acceleration), which follows a robot braking into a bend without the lag a constant-velocity
+        model needs a loose process noise to avoid, so it can average over more frames.
+    """
+    n = len(stamps_s)
+    m = 3 * order
     dt = np.r_[0.0, np.diff(stamps_s)]
-    F = np.tile(np.eye(6), (n, 1, 1))
-    F[:, [0, 1, 2], [3, 4, 5]] = dt[:, None]
-    Q = np.zeros((n, 6, 6))
-    Q[:, [0, 1, 2], [0, 1, 2]] = qd * dt[:, None] ** 3 / 3
-    Q[:, [0, 1, 2], [3, 4, 5]] = Q[:, [3, 4, 5], [0, 1, 2]] = qd * dt[:, None] ** 2 / 2
-    Q[:, [3, 4, 5], [3, 4, 5]] = qd * dt[:, None]
+    F, Q = white_noise_model(dt, np.asarray(qd, dtype=float), order)
     meas = np.isfinite(z_xytheta[:, 0])
-    xf = np.zeros((n, 6))
-    Pf = np.zeros((n, 6, 6))
-    xp = np.zeros((n, 6))
-    Pp = np.zeros((n, 6, 6))
+    xf = np.zeros((n, m))
+    Pf = np.zeros((n, m, m))
+    xp = np.zeros((n, m))
+    Pp = np.zeros((n, m, m))
     first = int(np.flatnonzero(meas)[0])
-    x = np.r_[z_xytheta[first], 0.0, 0.0, 0.0]
-    P = np.zeros((6, 6))
+    x = np.zeros(m)
+    x[:3] = z_xytheta[first]
+    P = np.eye(m)
     P[:3, :3] = R_z[first]
-    P[3:, 3:] = np.eye(3)
     for k in range(n):
         if k > 0:
             Fk = F[k]
@@ -67,7 +117,7 @@ def rts_smooth(
             P = 0.5 * (P + P.T)
         xf[k], Pf[k] = x, P
     # smoother gains C_k = Pf_k F_{k+1}^T Pp_{k+1}^-1, all at once
-    C = np.zeros((n, 6, 6))
+    C = np.zeros((n, m, m))
     if n > 1:
         C[:-1] = Pf[:-1] @ np.swapaxes(F[1:], 1, 2) @ np.linalg.inv(Pp[1:])
     xs = xf.copy()

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from gtrig.cli.common import console, handle_errors
+from gtrig.errors import ConfigError
 
 app = typer.Typer(help="Rig files: validate and summarise.", no_args_is_help=True)
 
@@ -21,14 +22,23 @@ def check(rig: Path = typer.Argument(..., help="rig.yaml")) -> None:
     from gtrig import geometry as geo
     from gtrig.rig import load_rig
 
-    r = load_rig(rig)
+    from gtrig.cli.common import err_console
+    from gtrig.rig.load import RigErrors
+
+    try:
+        r = load_rig(rig)
+    except RigErrors as e:
+        # every problem of the file at once, one line each: a new rig is fixed in one pass
+        for p in e.problems[:-1]:
+            err_console.print(f"[red]error:[/red] {p}", highlight=False, soft_wrap=True)
+        raise ConfigError(e.problems[-1]) from None
     console.print(f"[bold]{rig}[/bold]: valid rig '{r.world.name}'")
     t = Table("camera", "resolution", "fx, fy (px)", "position (m)", "tilt down (deg)", "rate (Hz)")
     for c in r.cameras:
         T = c.T_world_cam.matrix()
         tilt = np.degrees(np.arcsin(-T[2, 2]))
         t.add_row(c.name, f"{c.resolution[0]} x {c.resolution[1]}", f"{c.K[0, 0]:.1f}, {c.K[1, 1]:.1f}",
-                  ", ".join(f"{v:.3f}" for v in c.T_world_cam.xyz), f"{tilt:.1f}", f"{c.rate_hz:g}")
+                  ", ".join(f"{v:.3f}" for v in c.T_world_cam.xyz), f"{tilt:.1f}", "stills" if c.rate_hz is None else f"{c.rate_hz:g}")
     if r.cameras:
         console.print(t)
     t = Table("scanner", "position (m)", "yaw (deg)", "beams", "fov (deg)", "rate (Hz)")
@@ -46,6 +56,8 @@ def check(rig: Path = typer.Argument(..., help="rig.yaml")) -> None:
     if r.robot.markers:
         console.print(t)
     h = r.robot.hull
-    console.print(f"hull: {h.length_m * 1000:.0f} x {h.width_m * 1000:.0f} mm, z {h.z_min_m:.2f}-{h.z_max_m:.2f} m; "
+    hull = "no hull" if h is None else (
+        f"hull: {h.length_m * 1000:.0f} x {h.width_m * 1000:.0f} mm, z {h.z_min_m:.2f}-{h.z_max_m:.2f} m")
+    console.print(f"{hull}; "
                   f"{len(r.robot.onboard_scanners)} onboard scanner(s); odometry {r.robot.odometry.rate_hz:g} Hz; "
                   f"{len(r.survey.reference_points)} survey reference point(s)")

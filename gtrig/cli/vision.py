@@ -48,6 +48,26 @@ def command(
     from gtrig.vision.sequence import run_recording, write_pose_track_files
 
     r = load_rig(rig)
+    # the rig's own uncertainty wherever it gives one; say which defaults stand in for the rest
+    assumed = []
+    no_cov = [c.name for c in r.cameras if c.pose_cov is None]
+    if no_cov:
+        assumed.append(f"camera pose sigma {camera_sigma_mm:g} mm / {camera_sigma_deg:g} deg for {', '.join(no_cov)} "
+                       "(--camera-sigma-mm/-deg)")
+    no_cov = [str(m.id) for m in r.robot.markers if m.pose_cov is None]
+    if no_cov:
+        assumed.append(f"marker pose sigma {marker_sigma_mm:g} mm / {marker_sigma_deg:g} deg for marker(s) "
+                       f"{', '.join(no_cov)} (--marker-sigma-mm/-deg)")
+    if r.robot.markers_frame_cov is None:
+        assumed.append("no error of the markers' robot frame (robot.markers_frame_cov absent: gtrig robot-frame "
+                       "writes it)")
+    if planar:
+        assumed.append(f"floor prior {floor_sigma_mm:g} mm / {floor_tilt_deg:g} deg (--floor-sigma-mm/-tilt-deg)")
+    no_jitter = [c.name for c in r.cameras if c.stamp_sigma_s == 0]
+    if no_jitter:
+        assumed.append(f"exact image time stamps for {', '.join(no_jitter)} (stamp_sigma_s absent)")
+    for a in assumed:
+        err_console.print(f"assumed: {a}", highlight=False, soft_wrap=True)
     ru = RigUncertainty(camera_sigma_mm / 1000, math.radians(camera_sigma_deg), marker_sigma_mm / 1000,
                         math.radians(marker_sigma_deg))
     opts = VisionOptions(planar=planar, prior=PlanarPrior(0.0, floor_sigma_mm / 1000,

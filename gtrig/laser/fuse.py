@@ -37,6 +37,7 @@ class FramedPoints:
     ranges_m : per scanner, (N_s, B_s) all ranges, metres (for the free-space test of the global search).
     masks : per scanner, (N_s, B_s) foreground masks.
     beam_dirs : per scanner, (B_s, 2) unit beam directions in the world.
+    stamp_sigma_s : (S,) standard deviation of each scanner's clock offset, seconds (None: exact).
     """
 
     frame_stamps_s: np.ndarray
@@ -52,6 +53,7 @@ class FramedPoints:
     ranges_m: tuple[np.ndarray, ...]
     masks: tuple[np.ndarray, ...]
     beam_dirs: tuple[np.ndarray, ...]
+    stamp_sigma_s: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -96,10 +98,11 @@ def scan_points_world(
 
 
 def beam_delays_s(scanner: LaserScanner) -> np.ndarray:
-    """Firing time (B,) of each beam after the scan's stamp, seconds: the mirror turns once per period
-    and beam ``i`` fires when it points at its angle (SICK LMS, Hokuyo URG; stamps mark the first beam)."""
-    a = scanner.angles_rad
-    return np.abs(a - a[0]) / (2 * np.pi) / scanner.rate_hz
+    """Firing time (B,) of each beam after the scan's stamp, seconds, as the rig says the device fires
+    them (:meth:`gtrig.rig.models.LaserScanner.beam_delays_s`): a mirror sweep (SICK LMS, Hokuyo URG:
+    beam ``i`` fires when the mirror points at its angle) or all at once, stamped at the start, middle
+    or end of the sweep."""
+    return scanner.beam_delays_s()
 
 
 def check_stamps(stamps_s: np.ndarray, what: str) -> None:
@@ -143,6 +146,8 @@ def frame_points(
     if ref_st.size == 0:
         raise InputError("no scans in the sequence")
     half = 0.5 / scanners[ref].rate_hz
+    ref_delays = beam_delays_s(scanners[ref])
+    ref_mid = 0.5 * (ref_delays[0] + ref_delays[-1])
     xy, sid, dirs, dts, fidx = [], [], [], [], []
     origins, all_dirs = [], []
     scan_of_frame = np.full((len(scanners), len(ref_st)), -1, dtype=np.intp)
@@ -153,12 +158,16 @@ def frame_points(
         all_dirs.append(dd / np.linalg.norm(dd, axis=1, keepdims=True))
         if len(st) == 0:
             continue
-        j = np.clip(np.searchsorted(ref_st, st), 1, len(ref_st) - 1)
-        j = np.where(np.abs(ref_st[j - 1] - st) <= np.abs(ref_st[j] - st), j - 1, j)
+        # a scan joins the frame whose reference sweep is nearest in the middle of the sweeps: scanners
+        # whose stamps refer to different instants of the sweep (start, end) still pair up right
+        delays = beam_delays_s(s)
+        mid = st + 0.5 * (delays[0] + delays[-1]) - ref_mid
+        j = np.clip(np.searchsorted(ref_st, mid), 1, len(ref_st) - 1)
+        j = np.where(np.abs(ref_st[j - 1] - mid) <= np.abs(ref_st[j] - mid), j - 1, j)
         if len(ref_st) == 1:
             j = np.zeros(len(st), dtype=int)
         dt = st - ref_st[j]
-        keep_scan = np.abs(dt) <= half * 1.0001
+        keep_scan = np.abs(mid - ref_st[j]) <= half * 1.0001
         scan_of_frame[i, j[keep_scan]] = np.flatnonzero(keep_scan)
         mm = m & keep_scan[:, None]
         n_idx, b_idx = np.nonzero(mm)
@@ -168,7 +177,7 @@ def frame_points(
         dn = d[b_idx]
         dirs.append(dn / np.linalg.norm(dn, axis=1, keepdims=True))
         sid.append(np.full(n_idx.size, i, dtype=np.int32))
-        dts.append(dt[n_idx] + beam_delays_s(s)[b_idx])
+        dts.append(dt[n_idx] + delays[b_idx])
         fidx.append(j[n_idx])
     if xy:
         fi = np.concatenate(fidx)
@@ -197,4 +206,5 @@ def frame_points(
         ranges_m=tuple(np.asarray(r, dtype=float) for r in ranges_m),
         masks=tuple(masks),
         beam_dirs=tuple(all_dirs),
+        stamp_sigma_s=np.array([s.stamp_sigma_s for s in scanners]),
     )

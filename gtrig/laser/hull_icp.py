@@ -298,7 +298,8 @@ def fit_hull_batch(
         lin = _linearise(model, p, fid, sid, S, dir_world, var_r, pose, wide if it == 1 else st.gate_m, st)
         k_side, inl, r, w, J = lin.side, lin.inlier, lin.r, lin.w, lin.J
         H = _normal_matrix(fid, w, J, K)
-        g = np.column_stack([np.bincount(fid, w * J[i] * r, minlength=K) for i in range(3)])
+        # (float: bincount of no points at all is an integer array)
+        g = np.column_stack([np.bincount(fid, w * J[i] * r, minlength=K) for i in range(3)]).astype(float)
         H[:, [0, 1, 2], [0, 1, 2]] += prior
         g += prior * (pose - init)
         delta = -np.linalg.solve(H, g[..., None])[..., 0]
@@ -395,6 +396,55 @@ def scanner_sensitivity(
         for j in range(3):
             B[:, i, :, j] = np.bincount(cell, wi * Jc[j], minlength=K * n_s).reshape(K, n_s)
     return -np.linalg.solve(H, B.reshape(K, 3, 3 * n_s))
+
+
+def side_bias_sensitivity(
+    model: HullModel,
+    xy_world: np.ndarray,
+    frame_index: np.ndarray,
+    scanner_index: np.ndarray,
+    scanner_xy_world: np.ndarray,
+    dir_world: np.ndarray,
+    sigma_range_m: np.ndarray,
+    xytheta: np.ndarray,
+    settings: IcpSettings,
+) -> np.ndarray:
+    """How the fitted robot poses move with a range bias of each hull side, to first order.
+
+    A dark fabric returns weaker pulses that a scanner ranges long, a light one short (a few
+    millimetres between black and white, more on glossy cloth): every point on side ``k`` then moves
+    by ``b_k`` along its beam ``u``, its residual by ``b_k (n . u)``, and the least-squares pose by
+    ``-H^-1 sum_i w_i J_i^T (n_i . u_i)`` over that side's points. The bias stays with the side while
+    the robot moves, so smoothing cannot average it out; :func:`gtrig.laser.track.track_frames` adds
+    ``A diag(sigma_b^2) A^T`` after smoothing.
+
+    Parameters
+    ----------
+    As :func:`scanner_sensitivity`.
+
+    Returns
+    -------
+    (K, 3, 4) ``d xytheta_k / d b_side`` (m/m, rad/m), sides in the hull's order; zero for frames
+    without points.
+    """
+    st = settings
+    p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
+    fid = np.asarray(frame_index, dtype=np.intp)
+    sid = np.asarray(scanner_index, dtype=np.intp)
+    pose = np.asarray(xytheta, dtype=float).reshape(-1, 3)
+    S = np.asarray(scanner_xy_world, dtype=float)
+    K = pose.shape[0]
+    var_r = (np.asarray(sigma_range_m, dtype=float) ** 2)[sid]
+    d = np.asarray(dir_world, dtype=float)
+    lin = _linearise(model, p, fid, sid, S, d, var_r, pose, st.gate_m, st)
+    H = _normal_matrix(fid, lin.w, lin.J, K)
+    H[:, [0, 1, 2], [0, 1, 2]] += [1 / st.prior_std_m**2, 1 / st.prior_std_m**2, 1 / st.prior_std_rad**2]
+    dr_db = lin.nw[:, 0] * d[:, 0] + lin.nw[:, 1] * d[:, 1]
+    cell = fid * 4 + lin.side
+    B = np.zeros((K, 3, 4))
+    for i in range(3):
+        B[:, i, :] = np.bincount(cell, lin.w * lin.J[i] * dr_db, minlength=K * 4).reshape(K, 4)
+    return -np.linalg.solve(H, B)
 
 
 def fit_hull(

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gtrig.errors import FormatError, InputError
+from gtrig.errors import ConfigError, FormatError, InputError
 from gtrig.io.atomic import atomic_open
 from gtrig.io.posetrack import write_pose_track
 from gtrig.io.scans import ScanLog, read_scans
@@ -182,6 +182,9 @@ def track_sequence(
     ``scanner_cov`` (3 S, 3 S) is the scanners' calibration covariance, propagated into each pose."""
     if not rig.laser_scanners:
         raise InputError("the rig has no laser scanners")
+    if rig.robot.hull is None:
+        raise ConfigError("rig: robot.hull: missing field: GTlaser tracks the robot's hull (length_m, width_m, "
+                          "z_min_m, z_max_m)")
     logs = read_scanner_logs(Path(seq_dir) / "lasers", rig, "sequence")
     scs = rig.laser_scanners
     masks = [

@@ -121,3 +121,48 @@ def scan_sequence(
             rows.append(scan(s, np.concatenate(segs), rng))
         out.append(np.array(rows).reshape(len(st), s.beams))
     return out
+
+
+def swept_scan_sequence(
+    scanners: tuple[LaserScanner, ...],
+    static_segments: ArrayLike,
+    hull: Hull,
+    planar_poses_at: object,
+    stamps_s: list[np.ndarray],
+    rng: np.random.Generator,
+) -> list[np.ndarray]:
+    """Scans (N_s, B) of every scanner at its stamps ``stamps_s[s]``, each beam cast at the instant
+    the device fires it (:meth:`LaserScanner.beam_delays_s`: a mirror sweep, or all at once), so that
+    a fast robot moves during a scan as it does in front of a real scanner.
+
+    ``planar_poses_at(t) -> (M, 3)`` gives the robot's poses at times ``t`` (M,).
+    """
+    out = []
+    static = np.asarray(static_segments, dtype=float)
+    corners_r = hull.corners_xy()
+    for s, st in zip(scanners, stamps_s, strict=True):
+        T = s.T_world_scanner.matrix()
+        a = s.angles_rad
+        dirs = np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]) @ T[:3, :3].T
+        dirs = dirs[:, :2] / np.linalg.norm(dirs[:, :2], axis=1, keepdims=True)
+        r_static = cast_rays(T[:2, 3], dirs, static, np.inf)
+        t_beam = np.asarray(st, dtype=float)[:, None] + s.beam_delays_s()[None, :]  # (N, B)
+        poses = np.asarray(planar_poses_at(t_beam.ravel()), dtype=float).reshape(*t_beam.shape, 3)  # type: ignore[operator]
+        c, sn = np.cos(poses[..., 2]), np.sin(poses[..., 2])
+        # hull corners (N, B, 4, 2) at each beam's instant, then its sides against that beam only
+        cw = np.stack([c[..., None] * corners_r[:, 0] - sn[..., None] * corners_r[:, 1],
+                       sn[..., None] * corners_r[:, 0] + c[..., None] * corners_r[:, 1]], -1) + poses[..., None, :2]
+        e = np.roll(cw, -1, axis=-2) - cw
+        ao = cw - T[:2, 3]
+        d = dirs[None, :, None, :]
+        den = d[..., 0] * -e[..., 1] + d[..., 1] * e[..., 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tt = (ao[..., 0] * -e[..., 1] + ao[..., 1] * e[..., 0]) / den
+            u = (d[..., 0] * ao[..., 1] - d[..., 1] * ao[..., 0]) / den
+        hit = (np.abs(den) > 1e-12) & (tt > 1e-9) & (u >= 0) & (u <= 1)
+        r_hull = np.where(hit, tt, np.inf).min(axis=-1)
+        r = np.minimum(np.where(np.isfinite(r_static), r_static, np.inf)[None, :], r_hull)
+        r = r + rng.normal(0.0, s.range_sigma_m, r.shape)
+        r[~(r <= s.range_max_m)] = np.nan
+        out.append(r)
+    return out

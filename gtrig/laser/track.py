@@ -4,19 +4,25 @@ The loop (journal paper, section 6, with the additions of issue 7):
 
 1. Foreground returns of every scan (:mod:`gtrig.laser.foreground`), all scanners fused into world
    points grouped by frame (:mod:`gtrig.laser.fuse`), in one vectorised pass.
-2. While tracking, frames are processed in chunks of ``chunk_frames``: each frame starts from the pose
-   predicted with the current velocity, points are compensated for the motion within the frame (the
-   scanners are not synchronised), gated near the predicted outline, and the hull is fitted by
-   point-to-line ICP (:func:`gtrig.laser.hull_icp.fit_hull_batch`, all frames of a chunk at once).
+2. While tracking, a constant-velocity Kalman filter predicts each frame; frames are fitted together
+   (up to ``chunk_frames``) only as far ahead as the prediction's uncertainty stays within the ICP's
+   reach, points are compensated for the motion within the frame (the scanners are not synchronised,
+   each beam has its firing time), gated near the predicted outline, and the hull is fitted by
+   point-to-line ICP (:func:`gtrig.laser.hull_icp.fit_hull_batch`, all frames of a chunk at once). A
+   fit is accepted by its Mahalanobis distance from the prediction (issue 19: a fixed 6 cm gate and a
+   zero velocity after each acquisition lost robots faster than about 0.5 m/s).
 3. A frame whose fit is degenerate is flagged (``DEGENERATE``); after ``lost_after`` failing frames in a
    row, or a gap in time, the track is lost and the global search (:mod:`gtrig.laser.acquire`) runs on
    each frame until the hull is found again.
 4. The rectangle looks the same turned by pi: a new track takes the heading nearest the previous track's
    if that is recent, else the direction of motion decides once the robot has moved (``forward_motion``);
    a track that never moves and has no recent predecessor stays ``AMBIGUOUS``.
-5. Each track is smoothed by a Rauch-Tung-Striebel smoother with a constant-velocity model, using each
-   frame's ICP covariance as its measurement noise (degenerate frames only constrain the directions
-   their points fix). The smoothed covariance is reported per pose.
+5. Each track is smoothed by a Rauch-Tung-Striebel smoother (constant acceleration by default), using
+   each frame's ICP covariance as its measurement noise (degenerate frames only constrain the
+   directions their points fix) and a process noise chosen near each frame by maximum likelihood
+   (:mod:`gtrig.laser.process_noise`). The smoothed covariance is reported per pose, with what
+   smoothing cannot average added: a floor, the fabric's range bias, the scanners' clock offsets and
+   their calibration.
 """
 
 from __future__ import annotations
@@ -29,8 +35,9 @@ import numpy as np
 from gtrig.geometry import wrap_angle
 from gtrig.laser.acquire import acquire
 from gtrig.laser.fuse import FramedPoints
-from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull_batch, scanner_sensitivity
-from gtrig.smoothing import rts_smooth  # noqa: F401  (moved to the core; re-exported for its callers)
+from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull_batch, scanner_sensitivity, side_bias_sensitivity
+from gtrig.laser.process_noise import local_ml_process_noise
+from gtrig.smoothing import rts_smooth, rts_smooth_varying  # the core's smoother (re-exported for old callers)
 from gtrig.trajectory import PoseStatus, PoseTrack
 
 log = logging.getLogger(__name__)
@@ -40,6 +47,8 @@ DEGENERATE = 1
 LOST = 2
 AMBIGUOUS = 3
 STATUS_NAMES = {OK: "ok", DEGENERATE: "degenerate", LOST: "lost", AMBIGUOUS: "ambiguous"}
+# multiples of the settings' process noise searched by the maximum-likelihood choice (x 1 to x 100)
+_Q_GRID = np.geomspace(1.0, 100.0, 5)
 
 
 @dataclass(frozen=True)
@@ -53,17 +62,34 @@ class TrackSettings:
     max_gap_s : a longer gap between frames ends the track.
     lost_after : failing frames in a row after which the track is lost.
     max_rms_m : a fit with a larger residual RMS is a failure.
-    max_jump_m, max_jump_rad : a fit farther than this from its prediction is a failure.
+    max_jump_m, max_jump_rad : a fit farther than this from its prediction is a failure whatever the
+        predicted uncertainty (a ceiling; the gate proper is ``gate_chi2``).
+    predict_accel_std_mps2, predict_ang_accel_std_radps2 : white-acceleration process noise (square root
+        of the spectral density) of the constant-velocity filter that predicts each frame while
+        tracking: what real robots' accelerating, braking and turning leave unpredicted.
+    max_speed_mps, max_turn_rate_radps : prior standard deviation of the velocity of a new track that
+        has no recent predecessor: its first frames are fitted one by one until the filter knows it.
+    capture_m, capture_rad : frames are fitted together from one prediction only as far ahead as its
+        standard deviation stays within a third of these (the ICP's reach from its start pose).
+    gate_chi2 : a fit whose Mahalanobis distance (squared) from its prediction, under the predicted
+        covariance plus the fit's own, exceeds this is a failure (3 dof; 21.1 is p = 1e-4) ...
+    min_jump_m, min_jump_rad : ... unless it is within these of the prediction in position and heading.
     prior_max_gap_s : a previous track at most this old sets the heading of a new one.
     reacquire_gap_s, reacquire_radius_m : a track lost for at most this long is searched for within this
         radius of its last pose, and near its heading.
     forward_motion : the robot drives forwards, so the direction of motion resolves the pi symmetry.
     min_motion_m : displacement needed to use the direction of motion.
     smooth : run the RTS smoother on each track.
-    accel_std_mps2, ang_accel_std_radps2 : white-acceleration process noise of the smoother.
+    accel_std_mps2, ang_accel_std_radps2 : white-acceleration process noise of the smoother (with
+        ``adapt_process_noise``, the least of those searched: up to 100 times these, chosen per track by
+        maximum likelihood of its innovations over ``adapt_window_s`` around each frame,
+        :mod:`gtrig.laser.process_noise`).
     floor_std_m, floor_std_rad : added in quadrature to the smoothed covariance: errors that smoothing
         cannot average out because they persist over many frames (the laser plane cutting a tilted gown,
         reflectivity bias). The scanners' calibration is propagated separately (``scanner_cov``).
+    surface_bias_std_m, side_bias_std_m : range bias of the hull's fabric (its reflectivity: dark
+        ranges long, light short), common to all sides and of each side, propagated into each pose
+        after smoothing (:func:`surface_bias_covariance`); 0 leaves it out.
     """
 
     icp: IcpSettings = field(default_factory=IcpSettings)
@@ -71,17 +97,33 @@ class TrackSettings:
     max_gap_s: float = 0.25
     lost_after: int = 8
     max_rms_m: float = 0.03
-    max_jump_m: float = 0.06
-    max_jump_rad: float = np.radians(5.0)
+    max_jump_m: float = 0.30
+    max_jump_rad: float = np.radians(20.0)
+    predict_accel_std_mps2: float = 1.5
+    predict_ang_accel_std_radps2: float = 3.0
+    max_speed_mps: float = 2.5
+    max_turn_rate_radps: float = 3.0
+    capture_m: float = 0.04
+    capture_rad: float = np.radians(3.0)
+    gate_chi2: float = 21.1
+    min_jump_m: float = 0.015
+    min_jump_rad: float = np.radians(1.0)
     prior_max_gap_s: float = 2.0
     reacquire_gap_s: float = 0.5
     reacquire_radius_m: float = 1.0
     forward_motion: bool = True
     min_motion_m: float = 0.05
     smooth: bool = True
+    adapt_process_noise: bool = True
+    adapt_window_s: float = 1.0
+    smoother_order: int = 3
+    jerk_std_mps3: float = 0.1
+    ang_jerk_std_radps3: float = 0.1
     accel_std_mps2: float = 0.07
     ang_accel_std_radps2: float = 0.07
     floor_std_m: float = 0.0005
+    surface_bias_std_m: float = 0.0015
+    side_bias_std_m: float = 0.001
     floor_std_rad: float = np.radians(0.02)
 
 
@@ -141,6 +183,60 @@ def _velocity(stamps: np.ndarray, poses: np.ndarray) -> np.ndarray:
     return (t @ (poses - poses.mean(axis=0))) / den
 
 
+def _cv_transition(dt: float, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Transition (6, 6) and process noise (6, 6) of the constant-velocity model over ``dt`` seconds,
+    state (x, y, theta, vx, vy, omega), white acceleration of spectral density ``qd`` (3,)."""
+    F = np.eye(6)
+    F[[0, 1, 2], [3, 4, 5]] = dt
+    Q = np.zeros((6, 6))
+    Q[[0, 1, 2], [0, 1, 2]] = qd * dt**3 / 3
+    Q[[0, 1, 2], [3, 4, 5]] = Q[[3, 4, 5], [0, 1, 2]] = qd * dt**2 / 2
+    Q[[3, 4, 5], [3, 4, 5]] = qd * dt
+    return F, Q
+
+
+@dataclass(frozen=True)
+class _Predictor:
+    """The tracking filter's state at ``stamp_s``: mean (6,) and covariance (6, 6) of (x, y, theta,
+    vx, vy, omega), world frame, theta continuous."""
+
+    stamp_s: float
+    x: np.ndarray
+    P: np.ndarray
+
+    def predict(self, stamps_s: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted poses (n, 3) and their covariances (n, 3, 3) at ``stamps_s`` (n,)."""
+        tau = np.asarray(stamps_s, dtype=float) - self.stamp_s
+        pose = self.x[:3] + tau[:, None] * self.x[3:]
+        P = self.P
+        cov = (
+            P[:3, :3]
+            + tau[:, None, None] * (P[:3, 3:] + P[3:, :3])
+            + tau[:, None, None] ** 2 * P[3:, 3:]
+            + np.einsum("n,ij->nij", np.abs(tau) ** 3 / 3, np.diag(qd))
+        )
+        return pose, cov
+
+    def update(self, stamp_s: float, z: np.ndarray, R: np.ndarray, qd: np.ndarray) -> _Predictor:
+        """The state after predicting to ``stamp_s`` and measuring pose ``z`` (3,) with covariance R."""
+        F, Q = _cv_transition(stamp_s - self.stamp_s, qd)
+        x = F @ self.x
+        P = F @ self.P @ F.T + Q
+        K = P[:, :3] @ np.linalg.inv(P[:3, :3] + R)
+        x = x + K @ (z - x[:3])
+        P = P - K @ P[:3, :]
+        return _Predictor(float(stamp_s), x, 0.5 * (P + P.T))
+
+
+def _start_predictor(
+    stamp_s: float, pose: np.ndarray, R: np.ndarray, v0: np.ndarray, Pv0: np.ndarray
+) -> _Predictor:
+    P = np.zeros((6, 6))
+    P[:3, :3] = R
+    P[3:, 3:] = Pv0
+    return _Predictor(float(stamp_s), np.r_[pose, v0], P)
+
+
 def _twin(xytheta: np.ndarray, cov: np.ndarray, centre_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pose whose hull outline coincides with that of ``xytheta`` turned by pi, and its covariance."""
     th = xytheta[2]
@@ -177,6 +273,24 @@ def _resolve_heading(
     return True
 
 
+def _refilter(
+    tid: int,
+    track_id: np.ndarray,
+    status: np.ndarray,
+    stamps: np.ndarray,
+    raw: np.ndarray,
+    raw_cov: np.ndarray,
+    qd: np.ndarray,
+    Pv0: np.ndarray,
+) -> _Predictor:
+    """The tracking filter run afresh over the OK frames of track ``tid`` (after its heading flipped)."""
+    idx = np.flatnonzero((track_id == tid) & (status == OK))
+    state = _start_predictor(stamps[idx[0]], raw[idx[0]], raw_cov[idx[0]], np.zeros(3), Pv0)
+    for j in idx[1:]:
+        state = state.update(stamps[j], raw[j], raw_cov[j], qd)
+    return state
+
+
 def calibration_covariance(
     fp: FramedPoints, model: HullModel, xytheta: np.ndarray, scanner_cov: np.ndarray, icp: IcpSettings
 ) -> np.ndarray:
@@ -205,6 +319,62 @@ def calibration_covariance(
     )
     out[have] = A @ np.asarray(scanner_cov, dtype=float) @ np.swapaxes(A, 1, 2)
     return out
+
+
+def surface_bias_covariance(
+    fp: FramedPoints,
+    model: HullModel,
+    xytheta: np.ndarray,
+    common_std_m: float,
+    side_std_m: float,
+    icp: IcpSettings,
+) -> np.ndarray:
+    """Covariance (F, 3, 3) that an unknown range bias of the hull's fabric induces on each pose
+    ``xytheta`` (F, 3; ``nan`` rows get ``nan``), through
+    :func:`gtrig.laser.hull_icp.side_bias_sensitivity`: a bias common to all sides (standard deviation
+    ``common_std_m``: one fabric of unknown reflectivity) plus one of each side (``side_std_m``:
+    sides of different fabric or wear)."""
+    F = fp.n_frames
+    out = np.full((F, 3, 3), np.nan)
+    have = np.isfinite(xytheta[:, 0])
+    if not have.any():
+        return out
+    counts = np.diff(fp.frame_start)
+    pt = np.repeat(have, counts)
+    fid = np.repeat(np.cumsum(have) - 1, counts)[pt]
+    A = side_bias_sensitivity(
+        model, fp.xy_world[pt], fid, fp.scanner_index[pt], fp.scanner_xy_world, fp.dir_world[pt], fp.sigma_m,
+        xytheta[have], icp,
+    )
+    C = common_std_m**2 * np.ones((4, 4)) + side_std_m**2 * np.eye(4)
+    out[have] = A @ C @ np.swapaxes(A, 1, 2)
+    return out
+
+
+def timing_covariance(fp: FramedPoints, stamps_s: np.ndarray, xytheta: np.ndarray, track_id: np.ndarray) -> np.ndarray:
+    """Covariance (F, 3, 3) of the poses due to the scanners' clock offsets: a frame's fit holds at the
+    mean of its points' true times, off from its stamp by the points' share-weighted mean offset
+    (standard deviation ``sqrt(sum_s w_s^2 sigma_s^2)``, offsets independent between scanners), so the
+    pose is off by that times its velocity (from the smoothed poses of its own track)."""
+    F = fp.n_frames
+    out = np.zeros((F, 3, 3))
+    sig = fp.stamp_sigma_s
+    if sig is None or not np.any(sig > 0):
+        return out
+    counts = np.diff(fp.frame_start)
+    fid = np.repeat(np.arange(F), counts)
+    S = len(sig)
+    n = np.bincount(fid * S + fp.scanner_index, minlength=F * S).reshape(F, S).astype(float)
+    w = n / np.maximum(n.sum(axis=1, keepdims=True), 1.0)
+    var_t = (w**2) @ (sig**2)
+    vel = np.zeros((F, 3))
+    for tid in np.unique(track_id[track_id >= 0]):
+        idx = np.flatnonzero(track_id == tid)
+        if idx.size >= 2:
+            z = xytheta[idx].copy()
+            z[:, 2] = np.unwrap(z[:, 2])
+            vel[idx] = np.gradient(z, stamps_s[idx], axis=0)
+    return var_t[:, None, None] * np.einsum("fi,fj->fij", vel, vel)
 
 
 def track_frames(
@@ -245,8 +415,10 @@ def track_frames(
     reasons = [""] * F
     centre_r = model.corners_xy.mean(axis=0)
     tracks: list[list[int | bool]] = []  # [first frame, heading ambiguous]
+    qd = np.array([st.predict_accel_std_mps2**2] * 2 + [st.predict_ang_accel_std_radps2**2])
+    Pv_unknown = np.diag([st.max_speed_mps**2, st.max_speed_mps**2, st.max_turn_rate_radps**2])
 
-    last_ok: list[int] = []  # frames of the current track fitted OK, for the velocity
+    pred_state: _Predictor | None = None  # the tracking filter of the current track
     tracking = False
     fails = 0
     last_pose_frame = -1  # last OK frame of any track
@@ -255,10 +427,11 @@ def track_frames(
         if not tracking:
             sl = fp.frame(k)
             prior, radius, inherited = None, None, False
-            if last_pose_frame >= 0 and stamps[k] - stamps[last_pose_frame] <= st.prior_max_gap_s:
+            gap = np.inf if last_pose_frame < 0 else stamps[k] - stamps[last_pose_frame]
+            if gap <= st.prior_max_gap_s:
                 prior = raw[last_pose_frame]
                 inherited = bool(tracks[track_id[last_pose_frame]][1])  # the prior's own heading unresolved
-                if stamps[k] - stamps[last_pose_frame] <= st.reacquire_gap_s:
+                if gap <= st.reacquire_gap_s:
                     radius = st.reacquire_radius_m
             acq = None
             if sl.stop - sl.start >= st.icp.min_points:
@@ -286,13 +459,23 @@ def track_frames(
             raw[k], raw_cov[k] = pose, f.cov_xytheta
             status[k], n_points[k], n_sides[k], rms[k] = OK, f.n_points, f.n_sides, f.rms_m
             track_id[k] = len(tracks) - 1
-            last_ok, fails, tracking, last_pose_frame = [k], 0, True, k
+            # the velocity of a new track: that of the track just lost, made uncertain by the robot's
+            # accelerations over the gap, else unknown up to the robot's top speed; its first frames
+            # are then fitted one at a time until the filter has measured it
+            if pred_state is not None and radius is not None and not acq.ambiguous:
+                v0 = pred_state.x[3:].copy()
+                Pv0 = pred_state.P[3:, 3:] + np.diag(qd) * gap + Pv_unknown * min(1.0, gap / st.reacquire_gap_s) ** 2
+            else:
+                v0, Pv0 = np.zeros(3), Pv_unknown
+            pred_state = _start_predictor(stamps[k], pose, f.cov_xytheta, v0, Pv0)
+            fails, tracking, last_pose_frame = 0, True, k
             log.debug(
                 "hull acquired at frame %d (%.3f s)%s", k, stamps[k], " (heading ambiguous)" * acq.ambiguous
             )
             k += 1
             continue
 
+        assert pred_state is not None
         end = min(F, k + st.chunk_frames)
         gaps = np.flatnonzero(np.diff(stamps[k - 1 : end]) > st.max_gap_s)
         if gaps.size:
@@ -300,10 +483,16 @@ def track_frames(
         if end <= k:
             tracking = False
             continue
-        ref = last_ok[-1]
-        recent = [j for j in last_ok[-10:] if stamps[ref] - stamps[j] <= 0.2]
-        vel = _velocity(stamps[recent], raw[recent])
-        pred = raw[ref] + (stamps[k:end] - stamps[ref])[:, None] * vel
+        pred, pred_cov = pred_state.predict(stamps[k:end], qd)
+        # fit together only the frames the prediction reaches: its standard deviation within a third
+        # of the ICP's capture (at least one frame)
+        sd_xy = np.sqrt(np.maximum(pred_cov[:, 0, 0], pred_cov[:, 1, 1]))
+        sd_th = np.sqrt(pred_cov[:, 2, 2])
+        reach = (3 * sd_xy <= st.capture_m) & (3 * sd_th <= st.capture_rad)
+        n_fit = max(1, int(np.argmin(reach)) if not reach.all() else len(reach))
+        end = k + n_fit
+        pred, pred_cov = pred[:n_fit], pred_cov[:n_fit]
+        vel = pred_state.x[3:]
         sl = slice(int(fp.frame_start[k]), int(fp.frame_start[end]))
         fid = np.repeat(np.arange(end - k), np.diff(fp.frame_start[k : end + 1]))
         xy = fp.xy_world[sl]
@@ -329,20 +518,29 @@ def track_frames(
             pred,
             st.icp,
         )
+        next_k = end
         for i in range(end - k):
             j = k + i
             pose = fits.xytheta[i]
-            jump = np.hypot(*(pose[:2] - pred[i, :2]))
+            d = pose - pred[i]
+            jump = float(np.hypot(d[0], d[1]))
             n_points[j], n_sides[j], rms[j] = fits.n_points[i], fits.n_sides[i], fits.rms_m[i]
             bad = ""
             if fits.n_points[i] < st.icp.min_points:
                 bad = f"few points ({fits.n_points[i]})"
             elif not fits.rms_m[i] <= st.max_rms_m:
                 bad = f"residual {1000 * fits.rms_m[i]:.0f} mm"
-            elif jump > st.max_jump_m or abs(pose[2] - pred[i, 2]) > max(
-                st.max_jump_rad, 4.0 * np.sqrt(fits.cov_xytheta[i, 2, 2])
-            ):
-                bad = f"jump of {1000 * jump:.0f} mm from the prediction"
+            elif not fits.degenerate[i]:
+                # the gate scales with what the prediction and the fit can each be off by
+                S = pred_cov[i] + fits.cov_xytheta[i]
+                m2 = float(d @ np.linalg.solve(S, d))
+                small = jump <= st.min_jump_m and abs(d[2]) <= st.min_jump_rad
+                if jump > st.max_jump_m or abs(d[2]) > st.max_jump_rad or (m2 > st.gate_chi2 and not small):
+                    bad = f"jump of {1000 * jump:.0f} mm, {np.degrees(d[2]):.1f} deg from the prediction"
+            if bad and i > 0:
+                # predicted from farther back than the frame before it: try again from a fresh prediction
+                next_k = j
+                break
             if bad:
                 reasons[j] = bad
                 fails += 1
@@ -353,21 +551,23 @@ def track_frames(
                 fails += 1
             else:
                 raw[j], raw_cov[j] = pose, fits.cov_xytheta[i]
-                status[j] = OK
+                status[j], reasons[j] = OK, ""
                 track_id[j] = len(tracks) - 1
-                last_ok.append(j)
+                pred_state = pred_state.update(stamps[j], pose, fits.cov_xytheta[i], qd)
                 last_pose_frame = j
                 fails = 0
             if fails >= st.lost_after:
                 tracking = False
                 log.debug("track lost at frame %d (%.3f s): %s", j, stamps[j], reasons[j])
-                end = j + 1
+                next_k = j + 1
                 break
+        end = next_k
         # resolve the pi symmetry as soon as the robot has moved, before a later track inherits it
         tid = len(tracks) - 1
         if st.forward_motion and tracks[tid][1]:
             if _resolve_heading(tid, track_id, status, raw, raw_cov, centre_r, st.min_motion_m):
                 tracks[tid][1] = False
+                pred_state = _refilter(tid, track_id, status, stamps, raw, raw_cov, qd, Pv_unknown)
         k = end
 
     for tid, (_first, ambiguous) in enumerate(tracks):
@@ -386,11 +586,33 @@ def track_frames(
                 continue
             z = raw[idx].copy()
             z[:, 2] = np.unwrap(z[:, 2])
-            xs, Ps = rts_smooth(stamps[idx], z, raw_cov[idx], st.accel_std_mps2, st.ang_accel_std_radps2)
+            qa, qw = st.accel_std_mps2, st.ang_accel_std_radps2
+            if st.adapt_process_noise and idx.size >= 10:
+                # the robot's own accelerations, from the track's innovations, near each frame
+                # (process_noise): braking into a bend needs a looser model than cruising
+                good = np.isin(status[idx], (OK, AMBIGUOUS))
+                zz = np.where(good[:, None], z, np.nan)
+                if st.smoother_order == 3:
+                    qa, qw = st.jerk_std_mps3, st.ang_jerk_std_radps3
+                qda, qdw = local_ml_process_noise(
+                    stamps[idx], zz, raw_cov[idx], qa * _Q_GRID, qw * _Q_GRID, st.adapt_window_s,
+                    st.smoother_order,
+                )
+                qd = np.column_stack([qda**2, qda**2, qdw**2])
+                xs, Ps = rts_smooth_varying(stamps[idx], z, raw_cov[idx], qd, st.smoother_order)
+            else:
+                xs, Ps = rts_smooth(stamps[idx], z, raw_cov[idx], qa, qw)
             xytheta[idx], cov[idx] = (
                 xs,
                 Ps + np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2]),
             )
+    if st.surface_bias_std_m > 0 or st.side_bias_std_m > 0:
+        # the fabric's range bias moves with the side, not from frame to frame: after smoothing
+        cov = cov + np.nan_to_num(
+            surface_bias_covariance(fp, model, raw, st.surface_bias_std_m, st.side_bias_std_m, st.icp)
+        )
+    # the scanners' clocks: the motion a stamp offset hides (the rig's stamp_sigma_s)
+    cov = cov + timing_covariance(fp, stamps, xytheta, track_id)
     cov_cal = np.zeros((F, 3, 3))
     if scanner_cov is not None:
         cov_cal = calibration_covariance(fp, model, raw, scanner_cov, st.icp)

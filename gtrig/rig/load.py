@@ -49,30 +49,44 @@ def _deep_merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any
     return out
 
 
+class RigErrors(ConfigError):
+    """An invalid rig document. The message is the first problem (one line, with how many more);
+    ``problems`` holds every one of them, each a line naming the file, line and field."""
+
+    def __init__(self, problems: list[str]) -> None:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        super().__init__(problems[0] + more)
+        self.problems = tuple(problems)
+
+
+def _problem(err: Any, source: str, lines: LineMap | None) -> str:
+    # pydantic appends the union/enum branch to the location; keep only real field names
+    loc = tuple(p for p in err["loc"] if isinstance(p, int) or not str(p).startswith(("function-", "tuple[")))
+    line = None
+    if lines:
+        for n in range(len(loc), -1, -1):
+            if loc[:n] in lines:
+                line = lines[loc[:n]]
+                break
+    where = f"{source}:{line}" if line else source
+    msg = err["msg"].removeprefix("Value error, ")
+    if err["type"] == "missing":
+        msg = "missing field"
+    elif err["type"] == "extra_forbidden":
+        msg = "unknown field"
+    return f"{where}: {_format_loc(loc)}: {msg}"
+
+
 def rig_from_dict(data: Any, source: str = "<rig>", lines: LineMap | None = None) -> Rig:
-    """Validate a parsed rig document; raise :class:`ConfigError` with one line on failure."""
+    """Validate a parsed rig document; raise :class:`RigErrors` (a :class:`ConfigError`: one line, the
+    first problem; ``.problems`` lists them all) on failure."""
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: the rig file must be a mapping of sections (world, cameras, ...)")
     try:
         return Rig.model_validate(data)
     except ValidationError as e:
-        err = e.errors()[0]
-        # pydantic appends the union/enum branch to the location; keep only real field names
-        loc = tuple(p for p in err["loc"] if isinstance(p, int) or not str(p).startswith(("function-", "tuple[")))
-        line = None
-        if lines:
-            for n in range(len(loc), -1, -1):
-                if loc[:n] in lines:
-                    line = lines[loc[:n]]
-                    break
-        where = f"{source}:{line}" if line else source
-        msg = err["msg"].removeprefix("Value error, ")
-        if err["type"] == "missing":
-            msg = "missing field"
-        elif err["type"] == "extra_forbidden":
-            msg = "unknown field"
-        more = f" (and {e.error_count() - 1} more)" if e.error_count() > 1 else ""
-        raise ConfigError(f"{where}: {_format_loc(loc)}: {msg}{more}") from None
+        problems = list(dict.fromkeys(_problem(err, source, lines) for err in e.errors()))
+        raise RigErrors(problems) from None
 
 
 def load_rig(path: str | os.PathLike[str], overrides: dict[str, Any] | None = None) -> Rig:

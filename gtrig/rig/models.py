@@ -115,7 +115,8 @@ class Camera(_Strict):
     ]
     dist_coeffs: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
     T_world_cam: Pose
-    rate_hz: float = Field(gt=0, le=1000)
+    #: frame rate of a video camera; ``None`` for a camera that takes stills (calibration, validation)
+    rate_hz: float | None = Field(default=None, gt=0, le=1000)
     #: standard deviation of the image time stamps about the true mid-exposure instants (trigger and
     #: transfer jitter), seconds; GTvision adds the motion it hides to every moving pose's covariance
     stamp_sigma_s: float = Field(default=0.0, ge=0, le=1.0)
@@ -160,9 +161,35 @@ class Camera(_Strict):
         return np.asarray(self.dist_coeffs, dtype=float)
 
 
+class BeamTiming(StrEnum):
+    """How a scanner fires its beams within one scan.
+
+    ``sweep``: a rotating mirror sweeps the beams one after the other, beam ``i`` at
+    ``|angle_i - angle_0| / (2 pi rate_hz)`` after the first (SICK LMS, Hokuyo URG: the mirror turns
+    once per period, so 180 degrees take half a period). ``simultaneous``: every beam of a scan fires
+    at the same instant (flash solid-state devices, and simulators that stamp a whole scan at once).
+    """
+
+    SWEEP = "sweep"
+    SIMULTANEOUS = "simultaneous"
+
+
+class StampAt(StrEnum):
+    """Which instant of the sweep a scan's time stamp refers to (drivers differ: the first beam, the
+    middle of the sweep, or the last beam when the scan is sent). Meaningless for ``simultaneous``."""
+
+    START = "start"
+    MIDDLE = "middle"
+    END = "end"
+
+
 class LaserScanner(_Strict):
     """A 2D laser scanner: beam ``i`` points at ``angle_min_rad + i * angle_increment_rad``
-    in the scanner's x-y plane."""
+    in the scanner's x-y plane.
+
+    ``beam_timing`` and ``stamp_at`` say when each beam fired relative to the scan's stamp
+    (:func:`gtrig.laser.fuse.beam_delays_s`); the default is a mirror sweep stamped at its first beam.
+    """
 
     name: str = Field(min_length=1)
     T_world_scanner: Pose
@@ -172,6 +199,11 @@ class LaserScanner(_Strict):
     range_max_m: float = Field(gt=0)
     rate_hz: float = Field(gt=0, le=1000)
     range_sigma_m: float = Field(default=0.01, ge=0)
+    beam_timing: BeamTiming = BeamTiming.SWEEP
+    stamp_at: StampAt = StampAt.START
+    #: standard deviation of the scan stamps' offset from the recording clock (the logging PC's
+    #: synchronisation, the driver's latency), seconds; GTlaser adds the motion it hides to each pose
+    stamp_sigma_s: float = Field(default=0.0, ge=0, le=1.0)
 
     @field_validator("angle_increment_rad")
     @classmethod
@@ -188,6 +220,15 @@ class LaserScanner(_Strict):
     @property
     def angles_rad(self) -> geo.Array:
         return self.angle_min_rad + self.angle_increment_rad * np.arange(self.beams)
+
+    def beam_delays_s(self) -> geo.Array:
+        """Firing time (B,) of each beam after the scan's stamp, seconds (negative: before it)."""
+        if self.beam_timing == BeamTiming.SIMULTANEOUS:
+            return np.zeros(self.beams)
+        a = self.angles_rad
+        d = np.abs(a - a[0]) / (2 * np.pi) / self.rate_hz
+        ref = {StampAt.START: 0.0, StampAt.MIDDLE: 0.5 * d[-1], StampAt.END: d[-1]}[self.stamp_at]
+        return d - ref
 
 
 class MarkerFamily(StrEnum):
@@ -280,7 +321,8 @@ class OnboardScanner(_Strict):
 
 
 class Robot(_Strict):
-    hull: Hull
+    #: the gown the fixed laser scanners see; GTlaser needs it, a vision-only rig leaves it out
+    hull: Hull | None = None
     markers: tuple[Marker, ...] = ()
     #: covariance (6 x 6) of the error common to every marker: how far the robot frame the markers
     #: realise may be from the robot frame itself (the anchor's measured pose, or what the survey of the

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field
 
 
@@ -26,6 +28,28 @@ class LaserSimConfig(_Cfg):
     mixed_pixels: bool = True
     dropout_prob: float = Field(default=0.003, ge=0, le=1)
     reflectivity_bias_m: float = Field(default=0.008, ge=0, description="range bias between dark and bright")
+    beam_timing: Literal["sweep", "simultaneous"] = Field(
+        default="sweep", description="the fixed scanners' beams sweep over the period or fire together")
+    stamp_at: Literal["start", "middle", "end"] = Field(
+        default="start", description="the instant of the sweep the fixed scanners' stamps refer to")
+    blocked_scanner: int | None = Field(
+        default=None, ge=0, description="index of a fixed scanner partly blocked by clutter next to it")
+    blocked_fraction: float = Field(default=0.5, gt=0, lt=1, description="share of its field of view blocked")
+    gown_reflectivity: tuple[float, float, float, float] | None = Field(
+        default=None, description="per hull side (rear, right, front, left fabric; 0 black, 1 white); "
+                                  "None: one light fabric all round")
+
+
+class MotionSimConfig(_Cfg):
+    """The continuous run's speed profile. ``cruise``: the default, 0.3 m/s with 1 s ramps at the ends.
+    ``agile``: as fast as ``speed_mps`` on straights, slowed in bends by the lateral acceleration and yaw
+    rate limits, accelerating and braking at ``accel_mps2`` (gtrig.sim.motion.agile_path)."""
+
+    profile: Literal["cruise", "agile"] = "cruise"
+    speed_mps: float = Field(default=0.3, gt=0, le=3.0)
+    accel_mps2: float = Field(default=1.0, gt=0, le=5.0)
+    lat_accel_mps2: float = Field(default=1.0, gt=0, le=5.0)
+    yaw_rate_max_radps: float = Field(default=2.0, gt=0, le=6.0)
 
 
 class SimConfig(_Cfg):
@@ -50,6 +74,7 @@ class SimConfig(_Cfg):
         "truth/robot_clock.yaml, for checking time sync")
     camera: CameraSimConfig = CameraSimConfig()
     laser: LaserSimConfig = LaserSimConfig()
+    motion: MotionSimConfig = MotionSimConfig()
 
     @classmethod
     def quick_defaults(cls, seed: int = 0) -> SimConfig:

@@ -15,6 +15,7 @@ quantisation; scan time stamps carry a per-scanner clock offset and jitter.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import os
@@ -27,7 +28,7 @@ from numpy.typing import ArrayLike
 from gtrig import geometry as geo
 from gtrig.errors import InputError
 from gtrig.io.scans import ScanLog, write_scans
-from gtrig.rig.models import Hull
+from gtrig.rig.models import BeamTiming, Hull, LaserScanner, StampAt
 from gtrig.sim.config import SimConfig
 from gtrig.sim.gtroom import Box, Scene
 from gtrig.sim.motion import RobotMotion
@@ -196,6 +197,62 @@ def static_segments(
     return np.concatenate(segs), np.concatenate(z_top), np.concatenate(refl)
 
 
+# ----------------------------------------------------------------------------- scene from settings
+# The clutter that blocks part of a scanner's view: a screen this far in front of the scanner, this
+# thick and this tall (above the scanning plane, so that it hides the robot's gown behind it).
+BLOCK_DISTANCE_M = 0.45
+BLOCK_DEPTH_M = 0.1
+BLOCK_HEIGHT_M = 1.0
+
+
+def blocking_box(scanner: LaserScanner, fraction: float) -> Box:
+    """An upright screen next to ``scanner`` hiding the left ``fraction`` of its field of view (the
+    beams from the last one backwards), as a cabinet or a pile of boxes left by a scanner does."""
+    T = scanner.T_world_scanner.matrix()
+    a = scanner.angles_rad
+    a_hi = float(a[-1]) if scanner.angle_increment_rad > 0 else float(a[0])
+    span = float(abs(a[-1] - a[0]))
+    half = 0.5 * fraction * span  # half-angle of the hidden sector
+    bis = a_hi - half + float(np.arctan2(T[1, 0], T[0, 0]))  # the sector's bisector, world
+    d = BLOCK_DISTANCE_M + BLOCK_DEPTH_M / 2
+    width = 2 * BLOCK_DISTANCE_M * np.tan(min(half, np.radians(75.0))) + 0.04
+    c = T[:2, 3] + d * np.array([np.cos(bis), np.sin(bis)])
+    return Box(f"block_{scanner.name}", (float(c[0]), float(c[1])), (BLOCK_DEPTH_M, float(width), BLOCK_HEIGHT_M),
+               float(bis), 0.5)
+
+
+def with_scanner_stamp_sigma(rig):  # noqa: ANN001, ANN201
+    """``rig`` with its fixed scanners' ``stamp_sigma_s`` set to the simulator's clock model (a fixed
+    offset per scanner plus per-scan jitter): the lab knows how well its logging PCs are synchronised."""
+    sig = float(np.hypot(CLOCK_OFFSET_SIGMA_S, STAMP_JITTER_SIGMA_S))
+    return rig.model_copy(update={"laser_scanners": tuple(
+        s.model_copy(update={"stamp_sigma_s": sig}) for s in rig.laser_scanners)})
+
+
+def configure_scene(scene: Scene, cfg: SimConfig) -> Scene:
+    """The scene as ``cfg.laser`` sets it up: the fixed scanners' beam timing and stamp reference
+    (true and nominal rig: the lab knows its driver), and the clutter blocking a scanner. The default
+    settings return the scene unchanged."""
+    lc = cfg.laser
+    upd = {"beam_timing": BeamTiming(lc.beam_timing), "stamp_at": StampAt(lc.stamp_at)}
+    if all(getattr(s, k) == v for s in scene.rig_true.laser_scanners for k, v in upd.items()) and (
+        lc.blocked_scanner is None
+    ):
+        return scene
+
+    def timed(rig):  # noqa: ANN001, ANN202
+        return rig.model_copy(update={"laser_scanners": tuple(s.model_copy(update=upd) for s in rig.laser_scanners)})
+
+    boxes = scene.boxes
+    if lc.blocked_scanner is not None:
+        scs = scene.rig_true.laser_scanners
+        if lc.blocked_scanner >= len(scs):
+            raise InputError(f"laser.blocked_scanner: {lc.blocked_scanner} but the rig has {len(scs)} scanners")
+        boxes = boxes + (blocking_box(scs[lc.blocked_scanner], lc.blocked_fraction),)
+    return dataclasses.replace(scene, rig_true=timed(scene.rig_true), rig_nominal=timed(scene.rig_nominal),
+                               boxes=boxes)
+
+
 # ------------------------------------------------------------------------------------ sensor model
 def _subray_offsets(mixed: bool) -> np.ndarray:
     if not mixed:
@@ -263,9 +320,17 @@ def _scan_starts(intervals_s: np.ndarray, rate_hz: float, scan_s: float, phase_s
     return np.unique(starts)
 
 
-def _beam_delays(angles: np.ndarray, rate_hz: float) -> np.ndarray:
+def _beam_delays(angles: np.ndarray, rate_hz: float, timing: BeamTiming = BeamTiming.SWEEP) -> np.ndarray:
     # the mirror turns once per scan period; beam i fires when it points at angle i
+    if timing == BeamTiming.SIMULTANEOUS:
+        return np.zeros(len(angles))
     return np.abs(angles - angles[0]) / (2 * math.pi) / rate_hz
+
+
+def _stamp_offset(delays: np.ndarray, stamp_at: StampAt) -> float:
+    """Time from the first beam to the instant the scan's stamp refers to."""
+    return {StampAt.START: 0.0, StampAt.MIDDLE: 0.5 * float(delays[-1]), StampAt.END: float(delays[-1])}[
+        StampAt(stamp_at)]
 
 
 def sequence_people(
@@ -318,6 +383,17 @@ def simulate_fixed_scans(
     J = len(offsets)
     out: dict[str, ScanLog] = {}
     info = ScanSimInfo()
+    side_refl = cfg.laser.gown_reflectivity
+
+    def gown_refl(side: np.ndarray, n_vertices: int) -> np.ndarray | float:
+        # the scanning plane usually cuts the four vertical faces, in the hull's side order; a cut
+        # through the top or bottom (V = 6) takes the fabrics' mean
+        if side_refl is None:
+            return GOWN_REFLECTIVITY
+        if n_vertices != 4:
+            return float(np.mean(side_refl))
+        return np.asarray(side_refl)[np.clip(side, 0, 3)]
+
     for si, sc in enumerate(scene.rig_true.laser_scanners):
         rng = np.random.default_rng([seed, si])
         T_ws = sc.T_world_scanner.matrix()
@@ -325,7 +401,7 @@ def simulate_fixed_scans(
         segs, z_top, seg_refl = static_segments(scene, T_ws[:2, 3])
         ang = sc.angles_rad
         B = len(ang)
-        delays = _beam_delays(ang, sc.rate_hz)
+        delays = _beam_delays(ang, sc.rate_hz, sc.beam_timing)
         offset = 0.0 if ideal else float(rng.normal(0.0, CLOCK_OFFSET_SIGMA_S))
         starts = _scan_starts(iv, sc.rate_hz, delays[-1], float(rng.uniform(0, 1 / sc.rate_hz)))
         K = len(starts)
@@ -368,9 +444,9 @@ def simulate_fixed_scans(
                     T_sr = T_sw @ robot_poses(motion, t_beam)
                     poly = gown_sections(hull, T_sr)  # scanner frame
                     poly_w = np.einsum("ij,nvj->nvi", T_ws[:2, :2], poly) + T_ws[:2, 3]
-                    dg, _ = cast_segments(o, u[b_c], _polygon_segments(poly_w)[:, None])
+                    dg, ig = cast_segments(o, u[b_c], _polygon_segments(poly_w)[:, None])
                     dg = dg * k3[b_c]
-                    d_dyn, r_dyn = dg, np.where(np.isfinite(dg), GOWN_REFLECTIVITY, 0.0)
+                    d_dyn, r_dyn = dg, np.where(np.isfinite(dg), gown_refl(ig, poly.shape[1]), 0.0)
                 if people.count:
                     legs = people.legs_xy(t_beam)  # (n, 2P, 2)
                     dl, _ = cast_circles(o, u[b_c], legs[:, None], LEG_RADIUS_M)
@@ -383,7 +459,8 @@ def simulate_fixed_scans(
                 R[k_c, b_c] = np.where(closer, d_dyn, cur)
                 rho[k_c, b_c] = np.where(closer, r_dyn, rho[k_c, b_c])
         ranges = _sensor_model(R, rho, sc.range_sigma_m, sc.range_max_m, cfg, rng, ideal)
-        stamps = starts + offset
+        # the driver stamps the scan at the start, middle or end of its sweep
+        stamps = starts + offset + _stamp_offset(delays, sc.stamp_at)
         if not ideal:
             stamps = stamps + rng.normal(0.0, STAMP_JITTER_SIGMA_S, K)
         out[sc.name] = ScanLog(stamps, ranges.reshape(K, B))

@@ -26,7 +26,8 @@ from gtrig.rig.load import dump_rig
 from gtrig.rig.models import Rig
 from gtrig.sim.config import SimConfig
 from gtrig.sim.gtroom import VALIDATION_POSES, WORLD_POINT_NAMES, Scene, continuous_path, make_scene
-from gtrig.sim.motion import RobotMotion, static_motion
+from gtrig.sim.motion import RobotMotion, agile_path, static_motion
+from gtrig.sim.lasers import configure_scene, with_scanner_stamp_sigma
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +52,12 @@ class Timeline:
 
 def make_timeline(scene: Scene, cfg: SimConfig) -> Timeline:
     duration = cfg.run_duration_s
-    stamps, xyth = continuous_path(duration_s=duration)
+    m = cfg.motion
+    if m.profile == "agile":
+        stamps, xyth = agile_path(VALIDATION_POSES, m.speed_mps, m.accel_mps2, m.lat_accel_mps2,
+                                  m.yaw_rate_max_radps, duration_s=duration)
+    else:
+        stamps, xyth = continuous_path(speed_mps=m.speed_mps, duration_s=duration)
     run = RobotMotion(stamps + RUN_T0_S, xyth, scene.floor)
     val, intervals = static_motion(VALIDATION_POSES, scene.floor, cfg.static_pose_s)
     val = RobotMotion(val.stamps_s + VALIDATION_T0_S, val.xytheta, scene.floor)
@@ -83,7 +89,7 @@ def _csv(path: Path, header: list[str], rows: list[list[object]]) -> None:
 # ---------------------------------------------------------------------------------------------- steps
 def _with_stamp_sigma(rig: Rig, cfg: SimConfig) -> Rig:
     cams = tuple(c.model_copy(update={"stamp_sigma_s": cfg.camera.stamp_jitter_s}) for c in rig.cameras)
-    return rig.model_copy(update={"cameras": cams})
+    return with_scanner_stamp_sigma(rig.model_copy(update={"cameras": cams}))
 
 
 def _write_rigs_and_truth(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
@@ -243,7 +249,7 @@ def simulate(
     elif any(out.iterdir()):
         raise InputError(f"{out}: folder is not empty and holds no simulated recording; choose another --out")
 
-    scene = make_scene(cfg.seed)
+    scene = configure_scene(make_scene(cfg.seed), cfg)
     tl = make_timeline(scene, cfg)
     timings: dict[str, float] = {}
     for i, (name, step) in enumerate(STEPS):
