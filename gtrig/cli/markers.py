@@ -89,7 +89,7 @@ def detect(
     images = []
     n_det = 0
     for f in track(files, "detecting", total=len(files)):
-        img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+        img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH)  # 16-bit kept: _to_gray scales it
         if img is None:
             raise FormatError(f"{f}: not a readable image")
         if size is not None and (img.shape[1], img.shape[0]) != tuple(size):

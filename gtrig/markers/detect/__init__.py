@@ -214,8 +214,11 @@ class MarkerDetector:
         return out
 
     def detect(self, image: NDArray[np.uint8]) -> list[Detection]:
-        """Detect and decode markers in a grayscale (H, W) or BGR (H, W, 3) 8-bit image."""
+        """Detect and decode markers in a grey (H, W) or colour (H, W, 3 | 4) image of any depth
+        (:func:`_to_gray`). Images too small to hold a marker give no detections."""
         gray = _to_gray(image)
+        if min(gray.shape) < max(8, int(self.params.candidates.min_side_px)):
+            return []
         if not self.params.blurred.enabled:
             return _dedupe(self._detect_sharp(gray))
         if _threads.threads(self.params.threads) < 2:
@@ -405,15 +408,32 @@ def _area(q: NDArray[np.float64]) -> float:
     return 0.5 * abs(float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)))
 
 
-def _to_gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+def _to_gray(image: NDArray[np.generic]) -> NDArray[np.uint8]:
+    """Any image OpenCV reads as the detector's 8-bit grey (H, W).
 
+    Accepts (H, W), (H, W, 1), (H, W, 2) (grey + alpha), (H, W, 3) (BGR) and (H, W, 4) (BGRA) arrays
+    of any integer, float or bool dtype. 8-bit data is used as is; deeper data (16-bit, float) is
+    scaled linearly so that its largest finite value maps to 255, since a 12-bit sensor stored in 16
+    bits would otherwise be nearly black; non-finite values become 0.
+    """
     img = np.asarray(image)
-    if img.dtype != np.uint8:
-        raise InputError(f"expected an 8-bit image, got {img.dtype}")
-    if img.ndim == 3 and img.shape[2] in (3, 4):
-        return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY if img.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
-    if img.ndim != 2:
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    elif img.ndim == 3 and img.shape[2] == 2:
+        img = img[:, :, 0]
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (3, 4)):
         raise InputError(f"expected a grayscale or colour image, got shape {img.shape}")
+    if img.dtype != np.uint8:
+        if img.dtype.kind not in "biuf":
+            raise InputError(f"expected an image of numbers, got dtype {img.dtype}")
+        f = np.nan_to_num(img.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+        lo = min(float(f.min()), 0.0) if f.size else 0.0
+        hi = float(f.max()) if f.size else 1.0
+        scale = 255.0 / (hi - lo) if hi > lo else 0.0
+        img = np.clip((f - lo) * scale + 0.5, 0, 255).astype(np.uint8)
+    if img.ndim == 3:
+        return cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_BGR2GRAY if img.shape[2] == 3
+                            else cv2.COLOR_BGRA2GRAY)
     return np.ascontiguousarray(img)
 
 
