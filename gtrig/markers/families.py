@@ -251,6 +251,9 @@ def decode_batch(
     obs = np.asarray(data).astype(np.uint8).reshape(-1, spec.data_cells * spec.data_cells)
     lim = spec.max_correction if max_hamming is None else int(max_hamming)
     table = _packed_rotations(fam)  # (N, 4)
+    if obs.shape[0] == 0:
+        z = np.zeros(0, np.int64)
+        return z, z.copy(), z.copy()
     words = _pack(obs)  # (K,)
     ham = _popcount(words[:, None, None] ^ table[None, :, :])  # (K, N, 4)
     flat = ham.reshape(ham.shape[0], -1)
