@@ -30,14 +30,17 @@ class CandidateParams:
     min_solidity : contour area / convex hull area.
     max_hole_fraction : total hole area / filled area (the white data area cannot exceed the grid).
     max_holes : bound on the number of holes (Euler number >= 1 - max_holes).
-    looser_thresholds : further ratio thresholds, each giving its own mask and candidates (kept where no
-        candidate of a stricter threshold covers the same square). One ratio cannot suit every marker
+    more_thresholds : further ratio thresholds, each giving its own mask and candidates (kept where no
+        candidate of an earlier threshold covers the same square). One ratio cannot suit every marker
         of a real photo: on the ChArUco photos of ``markers_real`` (19-28 px markers, 2.5 px borders)
         a thin blurred border reaches only 0.6-0.8 of the paper and the white cells break it at 0.6
         (blob solidity 0.56-0.74, 3 of 17 markers of ``img_02.jpg`` lost), while at 0.9 a marker
-        whose quiet zone is dimmed by the next chessboard square merges with it. The ratio stays a
-        ratio, so the set still works under uneven light (OpenCV's detector likewise thresholds at
-        several window sizes).
+        whose quiet zone is dimmed by the next chessboard square merges with it; on a marker in
+        shadow beside a sunlit surface (``tagtest.jpg``, ID 9 on the dark face of a cube) the closing
+        takes the sunlit paper for the background, the shaded white cells and quiet zone sit at
+        0.55-0.65 of it, like the floor behind, and only 0.45 separates the marker from the floor.
+        The ratio stays a ratio, so the set still works under uneven light (OpenCV's detector likewise
+        thresholds at several window sizes).
     scale : downsampling factor of the closing.
     smooth : smooth the dark mask (3 x 3 median) after thresholding. Where flat background sits near
         the threshold (dim light, noise sigma 3) the raw mask breaks into tens of thousands of
@@ -52,7 +55,7 @@ class CandidateParams:
     min_solidity: float = 0.85
     max_hole_fraction: float = 0.6
     max_holes: int = 40
-    looser_thresholds: tuple[float, ...] = (0.75, 0.9)
+    more_thresholds: tuple[float, ...] = (0.45, 0.75, 0.9)
     scale: int = 4
     smooth: bool = True
 
@@ -172,7 +175,7 @@ def find_candidates(
     bg = _closing_background(gray, max_side, params.scale)
     out: list[NDArray[np.float64]] = []
     rejected: list = []
-    for thr in (params.ratio_threshold, *params.looser_thresholds):
+    for thr in (params.ratio_threshold, *params.more_thresholds):
         mask = cv2.compare(gray, cv2.LUT(bg, _ratio_lut(thr)), cv2.CMP_LT)
         if params.smooth:
             mask = cv2.medianBlur(mask, 3)
