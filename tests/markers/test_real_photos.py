@@ -105,3 +105,13 @@ def test_scaled_grid_photo_no_crash() -> None:
     n16 = {d.id for d in det.detect(small.astype(np.uint16) * 257)}
     assert len(n8) >= len(_opencv(cv2.cvtColor(small, cv2.COLOR_BGR2GRAY), "DICT_APRILTAG_36h11"))
     assert n8 <= set(range(1, 41)) and n16 == n8
+
+
+@pytest.mark.parametrize(("name", "family", "mid"), [
+    ("image_320_240_8_marker_id_bch_nr0100.jpg", "artoolkitplus_bch_thin", 100),
+    ("image_320_240_8_marker_id_simple_nr321.png", "artoolkitplus_simple", 321),
+])
+def test_artoolkitplus_photos(name: str, family: str, mid: int) -> None:
+    """ARToolKitPlus' own sample photos read as their IDs (BCH: thin border), and nothing else."""
+    gray = cv2.imread(str(REAL / name), cv2.IMREAD_GRAYSCALE)
+    assert [d.id for d in MarkerDetector(family).detect(gray)] == [mid]
