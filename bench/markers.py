@@ -12,8 +12,8 @@ installed.
 
 ``--hard`` renders what real photos have and the clean renders lack (issue 16; ``synth.render``'s
 realism keywords): JPEG at quality 60-95, half the images through a BGGR Bayer mosaic and OpenCV's
-demosaicing, textured backgrounds (a third pale, merging with the quiet zone, which is 0.5-2 cells
-wide), glare on half the markers, print gain (ink 0.08-0.3, paper 0.7-0.92), paper texture, bent
+demosaicing, textured backgrounds (a third pale, merging with the quiet zone, which is 1-2 cells
+wide; AprilTag prints have 1, ChArUco boards 2), glare on half the markers, print gain (ink 0.08-0.3, paper 0.7-0.92), paper texture, bent
 prints (edges bowed by up to 0.5 px) and markers of 10-70 px, blur 0-1.5 px, noise 2-5. ``--photos``
 runs the real photos of ``../shared/data/markers_real``: markers found by each detector and, on the
 ChArUco photos, the RMS residual of the known board fitted through the lens
@@ -162,7 +162,7 @@ def _hard_scene(rng: np.random.Generator, side: float) -> tuple[np.ndarray, list
     cond = {"background": kind, "bayer": bool(rng.random() < 0.5), "jpeg": int(rng.integers(60, 96)),
             "blur": float(rng.uniform(0.0, 1.5)), "noise": float(rng.uniform(2.0, 5.0)),
             "ink": float(rng.uniform(0.08, 0.3)), "paper": float(rng.uniform(0.7, 0.92)),
-            "quiet": float(rng.uniform(0.5, 2.0)), "bend": float(rng.uniform(0.0, 0.5)),
+            "quiet": float(rng.uniform(1.0, 2.0)), "bend": float(rng.uniform(0.0, 0.5)),
             "gain": float(rng.uniform(120.0, 260.0)), "gradient": float(rng.uniform(0.0, 0.8))}
     img, truths = render(SHAPE, markers, blur_px=cond["blur"], noise=cond["noise"], gain=cond["gain"],
                          gradient=cond["gradient"], quiet_cells=cond["quiet"], background=bg, rng=rng,

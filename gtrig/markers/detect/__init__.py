@@ -226,7 +226,29 @@ class MarkerDetector:
         tol = self.spec.max_correction + 2 if self.params.max_hamming is None else self.params.max_hamming + 2
         ids, rot, ham = decode_batch(self.spec.family, bits[:, bc:-bc, bc:-bc], tol)
         border_white = bits[:, bmask].sum(axis=1)
-        keep = (ids >= 0) & (border_white <= n // 2) & (contrast >= self.params.min_contrast)
+        ok_levels = (border_white <= n // 2) & (contrast >= self.params.min_contrast)
+        retry = np.flatnonzero((ids < 0) & ok_levels)
+        if len(retry):
+            # small blurred markers: a white cell among black ones peaks below the midway threshold, so
+            # the plain reading fails; solve the cells through the blur model instead (as the final
+            # decoder does), at the blur of a sharp-to-soft photo, with the levels of border and ring
+            inner = v[retry, 1:-1, 1:-1]
+            ring = np.concatenate([v[retry, 0, :], v[retry, -1, :], v[retry, 1:-1, 0], v[retry, 1:-1, -1]], axis=1)
+            black = np.median(inner[:, bmask], axis=1)
+            white = np.median(ring, axis=1)
+            for sig in (1.0, 1.5):
+                todo = retry[ids[retry] < 0]
+                if not len(todo):
+                    break
+                sel = np.searchsorted(retry, todo)
+                w = unblur_cells(gray, Q[todo], n, bc, np.full(len(todo), sig), black[sel], (white - black)[sel], und)
+                i2, r2, h2 = decode_batch(self.spec.family, (w > 0.5).astype(np.uint8), tol)
+                hit = i2 >= 0
+                ids[todo[hit]], rot[todo[hit]], ham[todo[hit]] = i2[hit], r2[hit], h2[hit]
+                d = bits[todo[hit]]
+                d[:, bc:-bc, bc:-bc] = (w[hit] > 0.5)
+                bits[todo[hit]] = d
+        keep = (ids >= 0) & ok_levels
         if trace is not None:
             raw = Q if und is None else und.to_raw(Q.reshape(-1, 2)).reshape(-1, 4, 2)
             for k in np.flatnonzero(~keep):

@@ -175,28 +175,32 @@ def find_candidates(
     bg = _closing_background(gray, max_side, params.scale)
     out: list[NDArray[np.float64]] = []
     rejected: list = []
-    for thr in (params.ratio_threshold, *params.more_thresholds):
+    # squares already found, filled: a blob of a later threshold centred in one is the same marker
+    covered = np.zeros(gray.shape, np.uint8)
+    for k, thr in enumerate((params.ratio_threshold, *params.more_thresholds)):
         mask = cv2.compare(gray, cv2.LUT(bg, _ratio_lut(thr)), cv2.CMP_LT)
         if params.smooth:
             mask = cv2.medianBlur(mask, 3)
-        for q in _mask_candidates(mask, params, max_side, max_hole_fraction, None if trace is None else rejected):
-            c = q.mean(axis=0)
-            if not any(cv2.pointPolygonTest(k.astype(np.float32).reshape(-1, 1, 2), (float(c[0]), float(c[1])),
-                                            False) >= 0 for k in out):
-                out.append(q)
+        found = _mask_candidates(mask, params, max_side, max_hole_fraction, None if trace is None else rejected,
+                                 covered if k else None)
+        out.extend(found)
+        if found and k < len(params.more_thresholds):
+            cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
     if trace is not None:
         # a blob that failed at one threshold but gave a candidate at another is not a rejection
+        h, w = gray.shape
         for r in rejected:
-            c = r.quad_px.mean(axis=0)
-            if not any(cv2.pointPolygonTest(k.astype(np.float32).reshape(-1, 1, 2), (float(c[0]), float(c[1])),
-                                            False) >= 0 for k in out):
+            c = np.clip(np.round(r.quad_px.mean(axis=0)).astype(int), 0, [w - 1, h - 1])
+            if not covered[c[1], c[0]]:
                 trace.append(r)
     return out
 
 
 def _mask_candidates(mask: NDArray[np.uint8], params: CandidateParams, max_side: float,
-                     max_hole_fraction: float | None, trace: list | None) -> list[NDArray[np.float64]]:
-    """:func:`find_candidates` on one dark mask (0 / 255)."""
+                     max_hole_fraction: float | None, trace: list | None,
+                     covered: NDArray[np.uint8] | None = None) -> list[NDArray[np.float64]]:
+    """:func:`find_candidates` on one dark mask (0 / 255); blobs whose bounding box is centred on a
+    non-zero pixel of ``covered`` are skipped."""
     contours, hier = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
     if hier is None:
         return []
@@ -216,6 +220,10 @@ def _mask_candidates(mask: NDArray[np.uint8], params: CandidateParams, max_side:
 
     for i in np.flatnonzero((hier[:, 3] < 0) & (lengths >= min_len) & (lengths <= max_len)):
         c = contours[i]
+        if covered is not None:
+            x, y, w, h = cv2.boundingRect(c)
+            if covered[y + h // 2, x + w // 2]:
+                continue
         area = cv2.contourArea(c)
         if area < 0.5 * params.min_side_px**2:
             continue
