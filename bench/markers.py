@@ -10,8 +10,19 @@ interleaved; with ``--repeat R`` the fastest of R runs of each detector on each 
 run with each ``cornerRefinementMethod``. pupil-apriltags (AprilTag 3) is included when it is
 installed.
 
+``--hard`` renders what real photos have and the clean renders lack (issue 16; ``synth.render``'s
+realism keywords): JPEG at quality 60-95, half the images through a BGGR Bayer mosaic and OpenCV's
+demosaicing, textured backgrounds (a third pale, merging with the quiet zone, which is 1-2 cells
+wide; AprilTag prints have 1, ChArUco boards 2), glare on half the markers, print gain (ink 0.08-0.3, paper 0.7-0.92), paper texture, bent
+prints (edges bowed by up to 0.5 px) and markers of 10-70 px, blur 0-1.5 px, noise 2-5. ``--photos``
+runs the real photos of ``../shared/data/markers_real``: markers found by each detector and, on the
+ChArUco photos, the RMS residual of the known board fitted through the lens
+(:mod:`gtrig.markers.detect.boardfit`).
+
 Usage::
 
+    python bench/markers.py --photos        # the real photos
+    python bench/markers.py --hard          # the harder simulated set (300 images)
     python bench/markers.py                 # the full table (about 200 images)
     python bench/markers.py --quick         # a smaller grid
     python bench/markers.py --clutter 1000  # wrong-ID count on 1000 cluttered images
@@ -27,13 +38,14 @@ import argparse
 import itertools
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import cv2
 import numpy as np
 
 from gtrig.markers.detect import DetectorParams, MarkerDetector
 from gtrig.markers.detect.blurred import BlurredParams
-from gtrig.markers.synth import clutter_background, homography_from_pose, render
+from gtrig.markers.synth import clutter_background, homography_from_pose, render, textured_background
 from gtrig.rig.models import MarkerFamily
 
 SHAPE = (768, 1024)
@@ -126,6 +138,135 @@ def _scene(rng: np.random.Generator, side: float, tilt: float, blur: float, ligh
     return render(SHAPE, markers, blur_px=blur, noise=3.0, gain=gain, gradient=grad, background=bg, rng=rng)
 
 
+REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "markers_real"
+
+
+def _hard_scene(rng: np.random.Generator, side: float) -> tuple[np.ndarray, list, dict[str, object]]:
+    """One image of the harder set (module docstring): three markers of about ``side`` px, grey."""
+    centres = [(220, 250), (520, 520), (800, 260)]
+    ids = rng.choice(587, 3, replace=False)
+    markers = []
+    glare = []
+    for c, mid in zip(centres, ids, strict=True):
+        jit = rng.uniform(-40, 40, 2)
+        H = homography_from_pose(side * rng.uniform(0.9, 1.1), (c[0] + jit[0], c[1] + jit[1]), rng.uniform(0, 60),
+                                 rng.uniform(0, 360), rng.uniform(0, 360))
+        markers.append((FAMILY, int(mid), H))
+        if rng.random() < 0.5:  # a highlight somewhere on the marker
+            off = rng.uniform(-0.4, 0.4, 2) * side
+            glare.append((c[0] + jit[0] + off[0], c[1] + jit[1] + off[1], side * rng.uniform(0.2, 0.8),
+                          rng.uniform(0.1, 0.35)))
+    kind = str(rng.choice(["clutter", "textured", "pale"]))
+    bg = (clutter_background(SHAPE, rng, n_shapes=40) if kind == "clutter"
+          else textured_background(SHAPE, rng, light=kind == "pale"))
+    cond = {"background": kind, "bayer": bool(rng.random() < 0.5), "jpeg": int(rng.integers(60, 96)),
+            "blur": float(rng.uniform(0.0, 1.5)), "noise": float(rng.uniform(2.0, 5.0)),
+            "ink": float(rng.uniform(0.08, 0.3)), "paper": float(rng.uniform(0.7, 0.92)),
+            "quiet": float(rng.uniform(1.0, 2.0)), "bend": float(rng.uniform(0.0, 0.5)),
+            "gain": float(rng.uniform(120.0, 260.0)), "gradient": float(rng.uniform(0.0, 0.8))}
+    img, truths = render(SHAPE, markers, blur_px=cond["blur"], noise=cond["noise"], gain=cond["gain"],
+                         gradient=cond["gradient"], quiet_cells=cond["quiet"], background=bg, rng=rng,
+                         ink=cond["ink"], paper=cond["paper"], paper_texture=0.04, bend_px=cond["bend"],
+                         glare=glare, bayer=cond["bayer"], jpeg_quality=cond["jpeg"])
+    if img.ndim == 3:  # every detector gets the same grey image (OpenCV's conversion)
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    return img, truths, cond
+
+
+def _bench_hard(dets: dict[str, object], rng: np.random.Generator, n_per_side: int) -> None:
+    sides = [10, 14, 20, 30, 45, 70]
+    stats: dict[tuple[str, int], Stats] = {}
+    big: dict[str, Stats] = {k: Stats() for k in dets}
+    for side in sides:
+        for _ in range(n_per_side):
+            img, truths, _cond = _hard_scene(rng, side)
+            for name, det in dets.items():
+                out, ms = _run(name, det, img)
+                stats.setdefault((name, side), Stats()).add(out, truths, ms)
+                if side >= 20:
+                    big[name].add(out, truths, ms)
+    print(f"harder simulated set: {n_per_side * len(sides)} images 1024 x 768, 3 AprilTag 36h11 each "
+          "(JPEG 60-95, half Bayer-demosaiced, textured/pale/cluttered backgrounds, glare, print gain, "
+          "paper texture, bent print, blur 0-1.5, noise 2-5)")
+    hdr = f"{'detector':16s} {'side':>5s} {'RMS px':>8s} {'det %':>7s} {'false/img':>9s} {'ms/img':>8s}"
+    print(hdr)
+    for side in sides:
+        for k in dets:
+            st = stats[(k, side)]
+            print(f"{k:16s} {side:5d} {st.rms:8.4f} {100 * st.found / st.total:7.2f} {st.false / st.images:9.3f} "
+                  f"{np.median(st.ms):8.1f}")
+    print("markers >= 20 px:")
+    for k in dets:
+        st = big[k]
+        print(f"{k:16s} {'>=20':>5s} {st.rms:8.4f} {100 * st.found / st.total:7.2f} {st.false / st.images:9.3f} "
+              f"{np.median(st.ms):8.1f}")
+    if "gtrig" in big and "cv2 NONE" in big:
+        r = np.median(np.array(big["gtrig"].ms) / np.array(big["cv2 NONE"].ms))
+        print(f"gtrig detected at >= 20 px: {100 * big['gtrig'].found / big['gtrig'].total:.2f} % (target >= 99), "
+              f"wrong or phantom detections {big['gtrig'].false}; time gtrig / cv2 NONE {r:.2f} (median per image)")
+
+
+def _bench_photos() -> None:
+    """The real photos: markers found per detector, and the ChArUco board-fit residual."""
+    from gtrig.markers.detect.boardfit import charuco_marker_corners, grid_fit_rms, pose_fit_rms
+
+    if not REAL.is_dir():
+        print(f"{REAL}: not found, real photos left out")
+        return
+    K = np.array([[452.51, 0.0, 317.70], [0.0, 456.77, 277.75], [0.0, 0.0, 1.0]])
+    dist = np.array([0.1214, -1.0855, 0.000118, -0.000462, 2.9543])
+    board = charuco_marker_corners((5, 7), 0.04, 0.02)
+    photos = {"img_00.jpg": "aruco_6x6_250", "img_01.jpg": "aruco_6x6_250", "img_02.jpg": "aruco_6x6_250",
+              "img_03.jpg": "aruco_6x6_250", "tagtest.jpg": "apriltag_36h11", "taggridphoto.jpg": "apriltag_36h11"}
+    print("real photos (../shared/data/markers_real): markers found; board-fit RMS px (ChArUco: one planar pose "
+          "through the tutorial's lens model; tag grid: homography of the 8 x 5 grid with two radial terms)")
+    names = ["gtrig"] + [f"cv2 {k}" for k in CV_REFINE] + ["apriltag3"]
+    print(f"{'photo':18s} " + " ".join(f"{n:>14s}" for n in names))
+    for photo, fam in photos.items():
+        gray = cv2.imread(str(REAL / photo), cv2.IMREAD_GRAYSCALE)
+        res: dict[str, dict[int, np.ndarray] | None] = {}
+        t0 = time.perf_counter()
+        res["gtrig"] = {d.id: d.corners_px for d in MarkerDetector(fam).detect(gray)}
+        t_g = time.perf_counter() - t0
+        d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_6X6_250 if fam == "aruco_6x6_250"
+                                              else cv2.aruco.DICT_APRILTAG_36h11)
+        t_cv = 0.0
+        for k, method in CV_REFINE.items():
+            p = cv2.aruco.DetectorParameters()
+            p.cornerRefinementMethod = method
+            t0 = time.perf_counter()
+            c, ids, _ = cv2.aruco.ArucoDetector(d, p).detectMarkers(gray)
+            if k == "NONE":
+                t_cv = time.perf_counter() - t0
+            res[f"cv2 {k}"] = {} if ids is None else {int(i): cc.reshape(4, 2).astype(float)
+                                                      for i, cc in zip(ids.ravel(), c, strict=True)}
+        res["apriltag3"] = None
+        if fam == "apriltag_36h11":
+            try:
+                from pupil_apriltags import Detector  # type: ignore[import-not-found]
+
+                at = Detector(families="tag36h11", quad_decimate=1.0, refine_edges=True)
+                res["apriltag3"] = {r.tag_id: r.corners[[1, 0, 3, 2]] - 0.5 for r in at.detect(gray)}
+            except ImportError:
+                pass
+        cells = []
+        for n in names:
+            r = res[n]
+            if r is None:
+                cells.append(f"{'-':>14s}")
+                continue
+            if fam == "aruco_6x6_250":
+                fit = pose_fit_rms(r, board, K, dist)
+            elif photo == "taggridphoto.jpg":
+                # AprilTagGrid1to40: 8 columns of 5 tags, ID 1 + 5 column + row; homography + radial terms
+                fit = grid_fit_rms(r, {i: ((i - 1) // 5, (i - 1) % 5) for i in range(1, 41)},
+                                   (gray.shape[1], gray.shape[0]))
+            else:
+                fit = float("nan")
+            cells.append(f"{len(r):>4d} {fit:6.3f} px" if np.isfinite(fit) else f"{len(r):>14d}")
+        print(f"{photo:18s} " + " ".join(cells) + f"   (gtrig {1000 * t_g:.0f} ms, cv2 NONE {1000 * t_cv:.0f} ms)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true")
@@ -134,9 +275,19 @@ def main() -> None:
     ap.add_argument("--detectors", default="", help="comma-separated subset, e.g. 'gtrig,cv2 NONE'")
     ap.add_argument("--repeat", type=int, default=1,
                     help="time each detector R times per image and keep the fastest (steadier on a busy machine)")
+    ap.add_argument("--photos", action="store_true", help="the real photos of ../shared/data/markers_real")
+    ap.add_argument("--hard", action="store_true", help="the harder simulated set (JPEG, Bayer, glare, ...)")
+    ap.add_argument("--per-side", type=int, default=50, help="--hard: images per marker side")
     a = ap.parse_args()
     rng = np.random.default_rng(a.seed)
+    if a.photos:
+        _bench_photos()
+        if not a.hard:
+            return
     dets = _detectors([s.strip() for s in a.detectors.split(",") if s.strip()])
+    if a.hard:
+        _bench_hard(dets, rng, a.per_side)
+        return
     if a.clutter:
         wrong = {k: 0 for k in dets}
         n_true = 0

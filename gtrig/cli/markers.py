@@ -64,6 +64,9 @@ def detect(
     camera: Annotated[Path | None, typer.Option("--camera", help="cam.yaml: fit edges undistorted.")] = None,
     blurred: Annotated[bool, typer.Option("--blurred/--no-blurred", help="The second path for small, blurred "
                                           "markers (on by default; off: faster, and those are missed).")] = True,
+    debug: Annotated[Path | None, typer.Option(
+        "--debug", help="Folder for one PNG per image: the detections and every rejected candidate with the "
+        "stage and reason it was dropped.")] = None,
 ) -> None:
     """Detect markers with sub-pixel corners and their covariances; write det.json."""
     import json
@@ -87,19 +90,35 @@ def detect(
     det = MarkerDetector(family, K, dist, params)
     files = _image_files(inputs)
     images = []
+    debug_files: list[tuple[Path, bytes]] = []
     n_det = 0
     for f in track(files, "detecting", total=len(files)):
-        img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+        img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH)  # 16-bit kept: _to_gray scales it
         if img is None:
             raise FormatError(f"{f}: not a readable image")
         if size is not None and (img.shape[1], img.shape[0]) != tuple(size):
             raise InputError(f"{f}: {img.shape[1]} x {img.shape[0]} px but {camera} is for "
                              f"{size[0]} x {size[1]}")
-        dets = det.detect(img)
+        trace: list | None = [] if debug is not None else None
+        dets = det.detect(img, trace)
+        if debug is not None:
+            from gtrig.markers.detect import _to_gray
+            from gtrig.markers.detect.debug import debug_image
+
+            ok, buf = cv2.imencode(".png", debug_image(_to_gray(img), dets, trace or []))
+            if ok:
+                debug_files.append((debug / f"{f.stem}.debug.png", buf.tobytes()))
         n_det += len(dets)
         images.append({"file": str(f), "detections": [d.to_json() for d in dets]})
     doc = {"family": family.value, "camera": None if camera is None else str(camera), "images": images}
     atomic_write_text(out, json.dumps(doc, indent=1) + "\n")
+    if debug is not None:
+        from gtrig.io.atomic import atomic_open
+
+        for path, data in debug_files:
+            with atomic_open(path, "wb") as fh:
+                fh.write(data)
+        console.print(f"{debug}: {len(debug_files)} debug picture(s)", highlight=False)
     console.print(f"{out}: {n_det} detection(s) in {len(files)} image(s)", highlight=False)
 
 

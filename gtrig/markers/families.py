@@ -10,6 +10,8 @@ family                        d     b     n   border/side  codes
 ==========================  ====  ====  ====  ===========  =========================================
 artoolkitplus_simple          6     3    12   0.25         512 "simple ID" (ARToolKitPlus default)
 artoolkitplus_simple_thin     6     1     8   0.125        the same 512, thin border
+artoolkitplus_bch             6     3    12   0.25         4096 "BCH ID" (ARToolKitPlus ``MARKER_ID_BCH``)
+artoolkitplus_bch_thin        6     1     8   0.125        the same 4096, thin border (the official images)
 apriltag_36h11                6     1     8   0.125        587, OpenCV ``DICT_APRILTAG_36h11``
 aruco_4x4_50                  4     1     6   1/6          50, OpenCV ``DICT_4X4_50``
 aruco_5x5_100                 5     1     7   1/7          100, OpenCV ``DICT_5X5_100``
@@ -35,6 +37,23 @@ left to right),
 where ``bit(ID, 0)`` is the least significant bit and ``MASK`` is the pattern of ID 0 (white = 1).
 Each ID bit therefore controls four cells, so two codes differ in at least 4 cells (in any
 rotation); the decoder corrects 1 cell.
+
+ARToolKitPlus BCH ID
+--------------------
+ARToolKitPlus' second ID system holds 12-bit IDs (0..4095) in a BCH code of 36 cells. Analysing all
+4096 official images (``id-markers/bch/BchThin_NNNN.png``, checked bit for bit by ``tests/markers``)
+shows a systematic cyclic code behind a fixed XOR mask: with the data cells numbered ``k = 0..35`` in
+row-major order and read as the coefficients of ``c(x) = sum_k c_k x^(35 - k)``,
+
+    c(x) = ID(x) x^24 + (ID(x) x^24 mod g(x)),    white(k) = c_k XOR MASK_BCH(k)
+
+where ``ID(x)`` has the ID's bits as coefficients (cells 0..11 hold the ID, most significant bit
+first), ``g(x)`` is the degree-24 generator ``0x1DB2777`` (bit ``j`` = coefficient of ``x^j``) and
+``MASK_BCH`` is the pattern of ID 0. Two IDs differ in at least 9 cells as printed, but once the
+four rotations are counted some are only 2 cells apart (IDs whose rotated code is close to another
+ID's code): the decoder's tolerance is therefore set per ID, ``(d_i - 1) // 2`` cells where
+``d_i`` is the distance of ID ``i`` to the nearest other ID in any rotation (3 cells for most IDs,
+0 for the two IDs at distance 2), so that a pattern it accepts has exactly one code that close.
 
 OpenCV dictionaries
 -------------------
@@ -71,6 +90,22 @@ _ARTK_MASK = np.array(
     ],
     dtype=np.uint8,
 )
+
+# Pattern of ARToolKitPlus BCH ID 0 (the mask of the BCH system), white = 1, read from the official
+# BchThin_0000.png; rows top to bottom.
+_BCH_MASK = np.array(
+    [
+        [1, 0, 0, 0, 1, 1],
+        [1, 1, 1, 0, 0, 0],
+        [0, 0, 0, 0, 1, 0],
+        [1, 1, 1, 0, 0, 0],
+        [0, 1, 1, 1, 0, 1],
+        [0, 1, 0, 0, 0, 0],
+    ],
+    dtype=np.uint8,
+)
+#: generator polynomial of the BCH ID code, bit j = coefficient of x^j (degree 24)
+BCH_GENERATOR = 0x1DB2777
 
 _OPENCV_DICTS: dict[str, str] = {
     "apriltag_36h11": "DICT_APRILTAG_36h11",
@@ -127,6 +162,10 @@ def _is_artk(family: MarkerFamily) -> bool:
     return family.value.startswith("artoolkitplus_simple")
 
 
+def _is_bch(family: MarkerFamily) -> bool:
+    return family.value.startswith("artoolkitplus_bch")
+
+
 @functools.cache
 def _opencv_dict(family: MarkerFamily):  # type: ignore[no-untyped-def]
     import cv2
@@ -141,6 +180,10 @@ def family_spec(family: MarkerFamily | str) -> FamilySpec:
     if _is_artk(fam):
         border = 1 if fam.value.endswith("_thin") else 3
         return FamilySpec(fam, 6, border, 512, 1)
+    if _is_bch(fam):
+        # per-ID tolerances (id_correction) are at most 3 cells; see the module docstring
+        border = 1 if fam.value.endswith("_thin") else 3
+        return FamilySpec(fam, 6, border, 4096, 3)
     d = _opencv_dict(fam)
     # ARUCO_ORIGINAL has codes 1 cell apart (in some rotation): correcting would mis-identify.
     corr = 0 if fam is MarkerFamily.ARUCO_ORIGINAL else int(d.maxCorrectionBits)
@@ -154,12 +197,43 @@ def _artk_data(ids: NDArray[np.int64]) -> NDArray[np.uint8]:
     return (bits.astype(np.uint8) ^ _ARTK_MASK.ravel()[None, :]).reshape(-1, 6, 6)
 
 
+def _bch_data(ids: NDArray[np.int64]) -> NDArray[np.uint8]:
+    """Data grids (K, 6, 6) of ARToolKitPlus BCH IDs ``ids`` (K,): the systematic code word
+    ``ID x^24 + (ID x^24 mod g)`` (module docstring), most significant coefficient in cell 0."""
+    ids = np.asarray(ids, np.int64)
+    rem = ids << 24
+    # polynomial long division over GF(2), all IDs at once: clear bits 35..24 from the top
+    for j in range(35, 23, -1):
+        rem = np.where((rem >> j) & 1, rem ^ (BCH_GENERATOR << (j - 24)), rem)
+    word = (ids << 24) | rem
+    bits = (word[:, None] >> (35 - np.arange(36))[None, :]) & 1
+    return (bits.astype(np.uint8) ^ _BCH_MASK.ravel()[None, :]).reshape(-1, 6, 6)
+
+
+@functools.cache
+def id_correction(family: MarkerFamily | str) -> NDArray[np.int64]:
+    """The decoder's tolerance per ID, (n_ids,) cells: the family's ``max_correction`` for every ID,
+    except for the BCH family, where it is ``(d_i - 1) // 2`` with ``d_i`` the distance of ID ``i``
+    to the nearest other ID in any of its four rotations (capped at ``max_correction``)."""
+    fam = _family(family)
+    spec = family_spec(fam)
+    if not _is_bch(fam):
+        return np.full(spec.n_ids, spec.max_correction, np.int64)
+    from gtrig.markers.detect._kernels import nearest_codes
+
+    table = _packed_rotations(fam)  # (N, 4)
+    _, _, d = nearest_codes(np.ascontiguousarray(table[:, 0]), np.ascontiguousarray(table))
+    return np.minimum((d - 1) // 2, spec.max_correction).astype(np.int64)
+
+
 @functools.cache
 def _codebook(family: MarkerFamily) -> NDArray[np.uint8]:
     """All data grids of a family, (n_ids, d, d) uint8, white = 1, as printed."""
     spec = family_spec(family)
     if _is_artk(family):
         return _artk_data(np.arange(512))
+    if _is_bch(family):
+        return _bch_data(np.arange(4096))
     import cv2
 
     d = _opencv_dict(family)
@@ -251,17 +325,19 @@ def decode_batch(
     obs = np.asarray(data).astype(np.uint8).reshape(-1, spec.data_cells * spec.data_cells)
     lim = spec.max_correction if max_hamming is None else int(max_hamming)
     table = _packed_rotations(fam)  # (N, 4)
-    words = _pack(obs)  # (K,)
-    ham = _popcount(words[:, None, None] ^ table[None, :, :])  # (K, N, 4)
-    flat = ham.reshape(ham.shape[0], -1)
-    best = flat.argmin(axis=1)
-    rows = np.arange(flat.shape[0])
-    h = flat[rows, best]
+    if obs.shape[0] == 0:
+        z = np.zeros(0, np.int64)
+        return z, z.copy(), z.copy()
+    from gtrig.markers.detect._kernels import nearest_codes
+
+    best, h, second = nearest_codes(_pack(obs), np.ascontiguousarray(table))
     ids = best // 4
     rot = best % 4
-    per_id = ham.min(axis=2)  # (K, N)
-    per_id[rows, ids] = np.iinfo(np.int64).max
-    ambiguous = per_id.min(axis=1) <= h if per_id.shape[1] > 1 else np.zeros_like(h, bool)
+    # a pattern as close to another ID as to the best is ambiguous
+    ambiguous = second <= h if table.shape[0] > 1 else np.zeros_like(h, bool)
+    if lim <= spec.max_correction:
+        # within the family's tolerance each ID has its own (the BCH family; see id_correction)
+        lim = np.minimum(lim, id_correction(fam)[ids])
     ids = np.where((h <= lim) & ~ambiguous, ids, -1)
     return ids.astype(np.int64), rot.astype(np.int64), h.astype(np.int64)
 

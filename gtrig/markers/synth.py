@@ -100,6 +100,23 @@ def clutter_background(
     return bg.astype(np.float64) / 255.0
 
 
+def textured_background(shape: tuple[int, int], rng: np.random.Generator, light: bool = False
+                        ) -> NDArray[np.float64]:
+    """A reflectance image (in [0, 1]) with texture at every scale (wood, carpet, fabric: noise
+    filtered at 1, 4 and 16 px) under :func:`clutter_background`'s shapes; with ``light`` the scene
+    is pale (0.75-0.97, a white wall or desk) so that it merges with a marker's quiet zone."""
+    h, w = shape
+    tex = np.zeros((h, w), np.float32)
+    for s, a in ((1.0, 0.35), (4.0, 0.35), (16.0, 0.3)):
+        t = cv2.GaussianBlur(rng.normal(0.0, 1.0, (h, w)).astype(np.float32), (0, 0), s)
+        tex += a * t / max(float(t.std()), 1e-9)
+    clutter = clutter_background(shape, rng, n_shapes=30)
+    if light:
+        base = 0.86 + 0.04 * tex + 0.1 * (clutter - 0.5)
+        return np.clip(base, 0.75, 0.97).astype(np.float64)
+    return np.clip(clutter + 0.08 * tex, 0.02, 0.98).astype(np.float64)
+
+
 def render(
     shape: tuple[int, int],
     markers: list[tuple[MarkerFamily, int, NDArray[np.float64]]],
@@ -112,8 +129,18 @@ def render(
     background: NDArray[np.float64] | None = None,
     rng: np.random.Generator | None = None,
     ss: int = 8,
+    ink: float = BLACK,
+    paper: float = WHITE,
+    paper_texture: float = 0.0,
+    bend_px: float = 0.0,
+    glare: list[tuple[float, float, float, float]] | None = None,
+    bayer: bool = False,
+    jpeg_quality: int | None = None,
 ) -> tuple[NDArray[np.uint8], list[SynthMarker]]:
-    """Render markers into an 8-bit grayscale image.
+    """Render markers into an 8-bit grayscale image (or, with ``bayer``, a BGR image).
+
+    The keywords after ``ss`` add what real photos have and clean renders lack (issue 16); their
+    defaults leave the image exactly as without them.
 
     Parameters
     ----------
@@ -126,6 +153,20 @@ def render(
     gradient : relative illumination change across the image width (0 = uniform).
     quiet_cells : width of the white paper margin around the black square, in cells.
     background : reflectance image (H, W) in [0, 1]; default uniform 0.6.
+    ink, paper : reflectance of the printed black and of the paper (print gain: toner is rarely
+        darker than 0.1 and often lighter than 0.2; paper 0.7-0.92).
+    paper_texture : relative SD of the paper's and the ink's texture (fibres, toner grain), a
+        pattern about one image pixel across, multiplying the printed reflectance.
+    bend_px : slight non-flatness of the print: every edge bows by up to this many pixels at its
+        middle (a sheet curled along both axes; the corners stay where the homography puts them).
+    glare : specular highlights ``(x, y, sigma_px, amplitude)`` added to the light (amplitude in
+        units of ``gain``, so 0.5 lifts black and white by half of the paper's brightness; what
+        exceeds 255 clips).
+    bayer : a colour camera: the light has a warm tint (R, G, B gains 1.0, 0.85, 0.6), each pixel
+        records one channel of a BGGR Bayer mosaic (with its own noise), and OpenCV's bilinear
+        demosaicing gives back a BGR image (H, W, 3); the markers stay neutral grey.
+    jpeg_quality : JPEG compression and decompression at this quality (OpenCV's encoder, 4:2:0
+        chroma for colour images).
     """
     rng = np.random.default_rng() if rng is None else rng
     h, w = shape
@@ -136,12 +177,12 @@ def render(
         cells = marker_cells(fam, mid).astype(np.float64)
         n = cells.shape[0]
         q = quiet_cells / n
-        paper = _apply_H(H, np.array([[-q, -q], [1 + q, -q], [1 + q, 1 + q], [-q, 1 + q]]))
+        paper_poly = _apply_H(H, np.array([[-q, -q], [1 + q, -q], [1 + q, 1 + q], [-q, 1 + q]]))
         pad = int(np.ceil(4 * blur_px)) + 3
-        x0 = max(int(np.floor(paper[:, 0].min())) - pad, 0)
-        y0 = max(int(np.floor(paper[:, 1].min())) - pad, 0)
-        x1 = min(int(np.ceil(paper[:, 0].max())) + pad + 1, w)
-        y1 = min(int(np.ceil(paper[:, 1].max())) + pad + 1, h)
+        x0 = max(int(np.floor(paper_poly[:, 0].min())) - pad, 0)
+        y0 = max(int(np.floor(paper_poly[:, 1].min())) - pad, 0)
+        x1 = min(int(np.ceil(paper_poly[:, 0].max())) + pad + 1, w)
+        y1 = min(int(np.ceil(paper_poly[:, 1].max())) + pad + 1, h)
         if x1 <= x0 or y1 <= y0:
             continue
         cw, ch = x1 - x0, y1 - y0
@@ -155,10 +196,21 @@ def render(
         base = cv2.resize(refl[y0:y1, x0:x1].astype(np.float32), (cw * ss, ch * ss),
                           interpolation=cv2.INTER_NEAREST)
         inside_paper = (mx >= -q) & (mx < 1 + q) & (my >= -q) & (my < 1 + q)
+        if bend_px > 0:
+            # the printed point seen at (mx, my): each edge bows by bend_px at its middle, in marker
+            # units of this marker's mean side
+            side = float(np.mean(np.linalg.norm(np.diff(_apply_H(H, np.array([[0.0, 0], [1, 0], [1, 1], [0, 1],
+                                                                               [0, 0]])), axis=0), axis=1)))
+            b = bend_px / max(side, 1e-9)
+            mx, my = mx - b * 4 * my * (1 - my), my - b * 4 * mx * (1 - mx)
         ci = np.clip(np.floor(my * n), 0, n - 1).astype(np.int32)
         cj = np.clip(np.floor(mx * n), 0, n - 1).astype(np.int32)
         in_sq = (mx >= 0) & (mx < 1) & (my >= 0) & (my < 1)
-        val = np.where(in_sq, np.where(cells[ci, cj] > 0, WHITE, BLACK), WHITE).astype(np.float32)
+        val = np.where(in_sq, np.where(cells[ci, cj] > 0, paper, ink), paper).astype(np.float32)
+        if paper_texture > 0:
+            grain = cv2.GaussianBlur(rng.normal(0.0, 1.0, val.shape).astype(np.float32), (0, 0), 0.5 * ss)
+            grain *= paper_texture / max(float(grain.std()), 1e-9)
+            val = val * (1.0 + grain)
         hr = np.where(inside_paper, val, base)
         if blur_px > 0:
             hr = cv2.GaussianBlur(hr, (0, 0), blur_px * ss)
@@ -171,5 +223,19 @@ def render(
         refl[y0:y1, x0:x1] = lo
     yy, xx = np.mgrid[0:h, 0:w]
     light = gain * (1.0 + gradient * (xx / w - 0.5))
-    img = refl * light + rng.normal(0.0, noise, (h, w))
-    return np.clip(np.rint(img), 0, 255).astype(np.uint8), truths
+    img = refl * light
+    for gx, gy, gs, ga in glare or ():
+        img = img + ga * gain * np.exp(-((xx - gx) ** 2 + (yy - gy) ** 2) / (2.0 * gs * gs))
+    if not bayer:
+        img = img + rng.normal(0.0, noise, (h, w))
+        out = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    else:
+        tint = {0: 0.6, 1: 0.85, 2: 1.0}  # B, G, R gains of a warm light
+        chan = np.where((yy % 2 == 0) & (xx % 2 == 0), 0, np.where((yy % 2 == 1) & (xx % 2 == 1), 2, 1))
+        gains = np.choose(chan, [tint[0], tint[1], tint[2]])
+        mosaic = np.clip(np.rint(img * gains + rng.normal(0.0, noise, (h, w))), 0, 255).astype(np.uint8)
+        out = cv2.cvtColor(mosaic, cv2.COLOR_BayerBG2BGR)
+    if jpeg_quality is not None:
+        ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
+        out = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+    return out, truths

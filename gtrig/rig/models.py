@@ -236,6 +236,8 @@ class MarkerFamily(StrEnum):
 
     ARTOOLKITPLUS_SIMPLE = "artoolkitplus_simple"
     ARTOOLKITPLUS_SIMPLE_THIN = "artoolkitplus_simple_thin"
+    ARTOOLKITPLUS_BCH = "artoolkitplus_bch"
+    ARTOOLKITPLUS_BCH_THIN = "artoolkitplus_bch_thin"
     APRILTAG_36H11 = "apriltag_36h11"
     ARUCO_4X4_50 = "aruco_4x4_50"
     ARUCO_5X5_100 = "aruco_5x5_100"

@@ -93,10 +93,13 @@ def test_no_detection_in_clutter() -> None:
 
 
 def test_bad_image_rejected() -> None:
+    """Not an image (5 channels, 4 dimensions): one InputError. Deeper dtypes are images (scaled)."""
     from gtrig.errors import InputError
 
-    with pytest.raises(InputError):
-        detect_markers(np.zeros((10, 10), np.float32), MarkerFamily.APRILTAG_36H11)
+    for bad in (np.zeros((10, 10, 5), np.uint8), np.zeros((2, 10, 10, 3), np.uint8)):
+        with pytest.raises(InputError):
+            detect_markers(bad, MarkerFamily.APRILTAG_36H11)
+    assert detect_markers(np.zeros((10, 10), np.float32), MarkerFamily.APRILTAG_36H11) == []
 
 
 def test_small_blurred_markers_unbiased() -> None:

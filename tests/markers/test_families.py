@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from gtrig.errors import InputError
-from gtrig.markers.families import decode_batch, decode_cells, family_spec, marker_cells
+from gtrig.markers.families import decode_batch, decode_cells, family_spec, id_correction, marker_cells
 from gtrig.rig.models import MarkerFamily
 
 TARBALL = Path(__file__).resolve().parents[2].parent / "shared/data/artoolkitplus/id-markers.tar.gz"
@@ -44,6 +44,54 @@ def test_artoolkitplus_matches_every_official_image() -> None:
         for r in range(4):
             obs = np.rot90(img, -r)
             assert decode_cells(fam, obs) == (mid, r, 0)
+
+
+def _official_bch() -> dict[int, np.ndarray]:
+    out = {}
+    with tarfile.open(TARBALL) as t:
+        for m in t.getmembers():
+            mm = re.search(r"bch/BchThin_(\d+)\.png$", m.name)
+            if mm:
+                f = t.extractfile(m)
+                assert f is not None
+                img = cv2.imdecode(np.frombuffer(f.read(), np.uint8), cv2.IMREAD_GRAYSCALE)
+                out[int(mm.group(1))] = (img > 127).astype(np.uint8)
+    return out
+
+
+@pytest.mark.skipif(not TARBALL.exists(), reason="official ARToolKitPlus images not available")
+def test_artoolkitplus_bch_matches_every_official_image() -> None:
+    """All 4096 official BCH images are the generator's patterns and decode to their IDs in every
+    rotation; the standard-border family has the same data cells inside a 3-cell border."""
+    official = _official_bch()
+    assert sorted(official) == list(range(4096))
+    thin, std = MarkerFamily.ARTOOLKITPLUS_BCH_THIN, MarkerFamily.ARTOOLKITPLUS_BCH
+    data = np.stack([official[i][1:-1, 1:-1] for i in range(4096)])
+    for mid, img in official.items():
+        np.testing.assert_array_equal(marker_cells(thin, mid), img, err_msg=f"bch {mid}")
+        np.testing.assert_array_equal(marker_cells(std, mid)[3:-3, 3:-3], img[1:-1, 1:-1])
+    for r in range(4):
+        ids, rot, ham = decode_batch(thin, np.rot90(data, -r, axes=(1, 2)))
+        np.testing.assert_array_equal(ids, np.arange(4096))
+        assert (rot == r).all() and (ham == 0).all()
+
+
+def test_bch_tolerance_is_unique_per_id() -> None:
+    """Every BCH ID corrects (d_i - 1) // 2 cells: within that radius no other ID (in any rotation)
+    is as close; most IDs correct 3 cells, the two closest pairs none."""
+    fam = MarkerFamily.ARTOOLKITPLUS_BCH
+    t = id_correction(fam)
+    assert t.shape == (4096,) and t.max() == 3 and (t == 3).mean() > 0.6 and t.min() == 0
+    rng = np.random.default_rng(3)
+    ids = rng.choice(4096, 300, replace=False)
+    data = np.stack([marker_cells(fam, i)[3:-3, 3:-3] for i in ids])
+    # t_i errors: always decoded right; t_i + 1 errors on an ID with a neighbour at d_i = 2 t_i + 1
+    # may be decoded wrong, so the decoder must not accept them
+    for o, i in zip(data, ids, strict=True):
+        flat = o.reshape(-1)
+        flat[rng.choice(36, t[i], replace=False)] ^= 1
+    got, _, _ = decode_batch(fam, data)
+    np.testing.assert_array_equal(got, ids)
 
 
 def test_artoolkitplus_geometry() -> None:
@@ -91,15 +139,15 @@ def test_decode_all_ids_rotations_and_errors(family: MarkerFamily) -> None:
     data = np.stack([marker_cells(family, i)[b:-b, b:-b] for i in ids])
     for r in range(4):
         obs = np.rot90(data, -r, axes=(1, 2)).copy()
-        # flip max_correction random cells in each
-        k = spec.max_correction
-        for o in obs:
+        # flip each ID's tolerance of random cells (the family's max_correction; per ID for BCH)
+        tol = id_correction(family)
+        for o, k in zip(obs, tol, strict=True):
             flat = o.reshape(-1)
             idx = rng.choice(flat.size, k, replace=False)
             flat[idx] ^= 1
         got, rot, ham = decode_batch(family, obs)
         np.testing.assert_array_equal(got, ids)
-        assert (ham <= k).all()
+        assert (ham <= tol).all()
         for o, i, rr, h in zip(obs, got, rot, ham, strict=True):
             # the returned rotation maps the observation back onto the printed grid
             assert int((np.rot90(o, rr) != data[i]).sum()) == h

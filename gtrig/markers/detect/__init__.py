@@ -28,6 +28,7 @@ Corners are in OpenCV's pixel convention (pixel centres at integer coordinates) 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -43,11 +44,11 @@ from gtrig.markers.detect.edges import CLIP_HIGH, fit_edges, gather_band, inters
 from gtrig.markers.families import _codebook, decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily
 
-__all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", "detect_markers"]
+__all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", "Rejection", "detect_markers"]
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 3
+DETECTOR_VERSION = 4
 
 
 @dataclass(frozen=True)
@@ -82,6 +83,31 @@ class Detection:
             "hamming": self.hamming,
             "blur_px": float(self.blur_px),
         }
+
+
+#: Stages at which a candidate can be dropped (the ``stage`` of a :class:`Rejection`).
+Stage = Literal["candidate", "predecode", "fit", "decode", "blurred", "duplicate"]
+
+
+@dataclass(frozen=True)
+class Rejection:
+    """Why one candidate did not become a detection (collected by ``MarkerDetector.detect(trace=...)``).
+
+    Attributes
+    ----------
+    quad_px : (4, 2) float
+        The candidate's quadrilateral (or the contour's polygon approximation), raw-image pixels.
+    stage : Stage
+        ``candidate`` (morphological tests of the dark blob), ``predecode`` (cells read through the
+        candidate quad far from every code), ``fit`` (the edge fits: contrast, residual, blur, corner
+        displacement), ``decode`` (cells read through the refined corners), ``blurred`` (the second path).
+    reason : str
+        The first test that failed, in words.
+    """
+
+    quad_px: NDArray[np.float64]
+    stage: Stage
+    reason: str
 
 
 @dataclass(frozen=True)
@@ -181,8 +207,8 @@ class MarkerDetector:
         thr = 0.5 * (black + white)
         return (inner > thr[:, None, None]).astype(np.uint8), white - black
 
-    def _predecode(self, gray: NDArray[np.uint8], Q: NDArray[np.float64], und: Undistorter | None
-                   ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
+    def _predecode(self, gray: NDArray[np.uint8], Q: NDArray[np.float64], und: Undistorter | None,
+                   trace: list[Rejection] | None = None) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
                               NDArray[np.uint8]]:
         """Keep candidates whose cells, sampled through the initial quad, are close to a code.
 
@@ -200,7 +226,37 @@ class MarkerDetector:
         tol = self.spec.max_correction + 2 if self.params.max_hamming is None else self.params.max_hamming + 2
         ids, rot, ham = decode_batch(self.spec.family, bits[:, bc:-bc, bc:-bc], tol)
         border_white = bits[:, bmask].sum(axis=1)
-        keep = (ids >= 0) & (border_white <= n // 2) & (contrast >= self.params.min_contrast)
+        ok_levels = (border_white <= n // 2) & (contrast >= self.params.min_contrast)
+        retry = np.flatnonzero((ids < 0) & ok_levels)
+        if len(retry):
+            # small blurred markers: a white cell among black ones peaks below the midway threshold, so
+            # the plain reading fails; solve the cells through the blur model instead (as the final
+            # decoder does), at the blur of a sharp-to-soft photo, with the levels of border and ring
+            inner = v[retry, 1:-1, 1:-1]
+            ring = np.concatenate([v[retry, 0, :], v[retry, -1, :], v[retry, 1:-1, 0], v[retry, 1:-1, -1]], axis=1)
+            black = np.median(inner[:, bmask], axis=1)
+            white = np.median(ring, axis=1)
+            for sig in (1.0, 1.5):
+                todo = retry[ids[retry] < 0]
+                if not len(todo):
+                    break
+                sel = np.searchsorted(retry, todo)
+                w = unblur_cells(gray, Q[todo], n, bc, np.full(len(todo), sig), black[sel], (white - black)[sel], und)
+                i2, r2, h2 = decode_batch(self.spec.family, (w > 0.5).astype(np.uint8), tol)
+                hit = i2 >= 0
+                ids[todo[hit]], rot[todo[hit]], ham[todo[hit]] = i2[hit], r2[hit], h2[hit]
+                d = bits[todo[hit]]
+                d[:, bc:-bc, bc:-bc] = (w[hit] > 0.5)
+                bits[todo[hit]] = d
+        keep = (ids >= 0) & ok_levels
+        if trace is not None:
+            raw = Q if und is None else und.to_raw(Q.reshape(-1, 2)).reshape(-1, 4, 2)
+            for k in np.flatnonzero(~keep):
+                why = (f"contrast {contrast[k]:.0f} < {self.params.min_contrast:g}"
+                       if contrast[k] < self.params.min_contrast
+                       else f"{border_white[k]} white border cells" if border_white[k] > n // 2
+                       else f"cells {ham[k]} from the nearest code (> {tol})")
+                trace.append(Rejection(raw[k].copy(), "predecode", why))
         return Q[keep], ids[keep], rot[keep], ham[keep], bits[keep]
 
     def _white_cells(self, ids: NDArray[np.int64], bits: NDArray[np.uint8]) -> NDArray[np.float64]:
@@ -213,21 +269,28 @@ class MarkerDetector:
             out[k] = rots[int(np.argmin([np.count_nonzero(r != b) for r in rots]))]
         return out
 
-    def detect(self, image: NDArray[np.uint8]) -> list[Detection]:
-        """Detect and decode markers in a grayscale (H, W) or BGR (H, W, 3) 8-bit image."""
+    def detect(self, image: NDArray[np.generic], trace: list[Rejection] | None = None) -> list[Detection]:
+        """Detect and decode markers in a grey (H, W) or colour (H, W, 3 | 4) image of any depth
+        (:func:`_to_gray`). Images too small to hold a marker give no detections.
+
+        ``trace``, a list, receives a :class:`Rejection` for every candidate dropped on the way (what
+        ``gtrig markers detect --debug DIR`` draws).
+        """
         gray = _to_gray(image)
+        if min(gray.shape) < max(8, int(self.params.candidates.min_side_px)):
+            return []
         if not self.params.blurred.enabled:
-            return _dedupe(self._detect_sharp(gray))
+            return _dedupe(self._detect_sharp(gray, trace))
         if _threads.threads(self.params.threads) < 2:
             cands = self._blurred_candidates(gray)
-            dets = self._detect_sharp(gray)
+            dets = self._detect_sharp(gray, trace)
         else:
             # the second path's candidate stage (OpenCV's filters and contours, which release the GIL)
             # beside the first path
             later = _threads.helper_pool().submit(self._blurred_candidates, gray)
-            dets = self._detect_sharp(gray)
+            dets = self._detect_sharp(gray, trace)
             cands = later.result()
-        return _dedupe(dets + self._detect_blurred(gray, cands, dets))
+        return _dedupe(dets + self._detect_blurred(gray, cands, dets, trace))
 
     def _all_codes(self) -> NDArray[np.uint8]:
         """Every code (C, d, d) of the family in its four rotations, as read in a quad's orientation."""
@@ -244,7 +307,7 @@ class MarkerDetector:
         return quads, image_noise(gray) if quads else float("nan")
 
     def _detect_blurred(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float],
-                        found: list[Detection]) -> list[Detection]:
+                        found: list[Detection], trace: list[Rejection] | None = None) -> list[Detection]:
         """The second path (:mod:`.blurred`) on its candidates ``cands`` (from
         :meth:`_blurred_candidates`) that no detection of the first path (``found``) covers.
 
@@ -263,6 +326,11 @@ class MarkerDetector:
         codes = self._all_codes()
         reads = read_blurred(gray, np.array(quads), codes, self.spec.cells, self.spec.border_cells,
                              self.params.blurred, noise)
+        if trace is not None:
+            read_at = [r.corners.mean(axis=0) for r in reads]
+            for q in quads:
+                if not any(np.linalg.norm(c - q.mean(axis=0)) < 0.3 * np.ptp(q[:, 0]) for c in read_at):
+                    trace.append(Rejection(q.copy(), "blurred", "no code fits the blurred square well enough"))
         out = []
         for r in reads:
             ids, rot, _ = decode_batch(self.spec.family, codes[r.code][None], 0)
@@ -272,17 +340,35 @@ class MarkerDetector:
             out.append(Detection(int(ids[0]), r.corners[order].copy(), r.corner_cov[order].copy(), 0, r.sigma))
         return out
 
-    def _detect_sharp(self, gray: NDArray[np.uint8]) -> list[Detection]:
+    def _trace_fit(self, trace: list[Rejection], bad: NDArray[np.bool_], Q: NDArray[np.float64],
+                   corners: NDArray[np.float64], fit: object, shift: NDArray[np.float64],
+                   und: Undistorter | None) -> None:
+        """Record why the edge fits of the candidates ``bad`` (Q,) were rejected."""
+        p = self.params
+        Qr = Q if und is None else und.to_raw(Q.reshape(-1, 2)).reshape(-1, 4, 2)
+        for k in np.flatnonzero(bad):
+            why = None
+            for e in range(4 * k, 4 * k + 4):
+                why = _fit_reason(bool(fit.ok[e]), float(fit.b[e]), float(fit.rms[e] / max(abs(fit.b[e]), 1e-9)),
+                                  float(fit.sigma[e]), p)
+                if why:
+                    break
+            if why is None:
+                why = (f"corner moved {shift[k]:.1f} px > {p.max_corner_shift_px:g}"
+                       if np.isfinite(shift[k]) else "edges do not intersect")
+            trace.append(Rejection(Qr[k].copy(), "fit", why))
+
+    def _detect_sharp(self, gray: NDArray[np.uint8], trace: list[Rejection] | None = None) -> list[Detection]:
         """The first path: candidates, edge fits and decoding (module docstring, steps 1-5)."""
         p = self.params
-        quads = find_candidates(gray, p.candidates, self._hole_frac)
+        quads = find_candidates(gray, p.candidates, self._hole_frac, trace)
         if not quads:
             return []
         und = self._undistorter(gray.shape)
         Q0 = np.array(quads)  # (Q, 4, 2) raw
         Q = Q0 if und is None else und.to_undistorted(Q0.reshape(-1, 2)).reshape(-1, 4, 2)
         n = self.spec.cells
-        Q, pre_id, pre_rot, pre_ham, pre_bits = self._predecode(gray, Q, und)
+        Q, pre_id, pre_rot, pre_ham, pre_bits = self._predecode(gray, Q, und, trace)
         if not len(Q):
             return []
         side = np.linalg.norm(Q - np.roll(Q, -1, axis=1), axis=2)  # (Q, 4)
@@ -333,6 +419,8 @@ class MarkerDetector:
         shift = np.linalg.norm(corners - Q, axis=2).max(axis=1)
         ok &= np.all(np.isfinite(corners.reshape(len(Q), -1)), axis=1) & (shift <= p.max_corner_shift_px)
         ok &= np.all(np.isfinite(cov.reshape(len(Q), -1)), axis=1)
+        if trace is not None:
+            self._trace_fit(trace, ~ok, Q, corners, fit, shift, und)
         if not ok.any():
             return []
         idx = np.flatnonzero(ok)
@@ -371,6 +459,13 @@ class MarkerDetector:
         rot = np.where(fallback, pre_rot[idx], rot)
         ham = np.where(fallback, pre_ham[idx], ham)
         good |= fallback
+        if trace is not None:
+            Qr = Q[idx] if und is None else und.to_raw(Q[idx].reshape(-1, 2)).reshape(-1, 4, 2)
+            for k in np.flatnonzero(~good):
+                why = (f"{border_white[k]} white border cells" if border_white[k] > max(0, n // 4 - 1)
+                       else f"{mixed[k]} cells not uniform" if ids[k] >= 0
+                       else f"cells {ham[k]} from the nearest code (> {strict})")
+                trace.append(Rejection(Qr[k].copy(), "decode", why))
         if und is not None:
             raw = und.to_raw(corners.reshape(-1, 2)).reshape(-1, 4, 2)
             Jd = und.jacobian_to_raw(corners.reshape(-1, 2)).reshape(-1, 4, 2, 2)
@@ -382,6 +477,21 @@ class MarkerDetector:
             out.append(Detection(int(ids[k]), corners[k][order].copy(), cov[k][order].copy(), int(ham[k]),
                                  float(blur[k])))
         return out
+
+
+def _fit_reason(fit_ok: bool, b: float, rel: float, sigma: float, p: DetectorParams) -> str | None:
+    """The first failed test of one edge fit (None: the edge passes)."""
+    if not fit_ok:
+        return "edge fit did not converge"
+    if b < p.min_contrast:
+        return f"edge contrast {b:.0f} < {p.min_contrast:g}"
+    if rel > p.max_rel_rms:
+        return f"edge residual {rel:.2f} of the contrast > {p.max_rel_rms:g}"
+    if sigma > p.max_blur_px:
+        return f"edge blur {sigma:.1f} px > {p.max_blur_px:g}"
+    if sigma < 0.06:
+        return f"edge blur {sigma:.2f} px < 0.06 (a step sharper than a pixel)"
+    return None
 
 
 def _dedupe(dets: list[Detection]) -> list[Detection]:
@@ -405,15 +515,32 @@ def _area(q: NDArray[np.float64]) -> float:
     return 0.5 * abs(float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)))
 
 
-def _to_gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+def _to_gray(image: NDArray[np.generic]) -> NDArray[np.uint8]:
+    """Any image OpenCV reads as the detector's 8-bit grey (H, W).
 
+    Accepts (H, W), (H, W, 1), (H, W, 2) (grey + alpha), (H, W, 3) (BGR) and (H, W, 4) (BGRA) arrays
+    of any integer, float or bool dtype. 8-bit data is used as is; deeper data (16-bit, float) is
+    scaled linearly so that its largest finite value maps to 255, since a 12-bit sensor stored in 16
+    bits would otherwise be nearly black; non-finite values become 0.
+    """
     img = np.asarray(image)
-    if img.dtype != np.uint8:
-        raise InputError(f"expected an 8-bit image, got {img.dtype}")
-    if img.ndim == 3 and img.shape[2] in (3, 4):
-        return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY if img.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
-    if img.ndim != 2:
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    elif img.ndim == 3 and img.shape[2] == 2:
+        img = img[:, :, 0]
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (3, 4)):
         raise InputError(f"expected a grayscale or colour image, got shape {img.shape}")
+    if img.dtype != np.uint8:
+        if img.dtype.kind not in "biuf":
+            raise InputError(f"expected an image of numbers, got dtype {img.dtype}")
+        f = np.nan_to_num(img.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+        lo = min(float(f.min()), 0.0) if f.size else 0.0
+        hi = float(f.max()) if f.size else 1.0
+        scale = 255.0 / (hi - lo) if hi > lo else 0.0
+        img = np.clip((f - lo) * scale + 0.5, 0, 255).astype(np.uint8)
+    if img.ndim == 3:
+        return cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_BGR2GRAY if img.shape[2] == 3
+                            else cv2.COLOR_BGRA2GRAY)
     return np.ascontiguousarray(img)
 
 

@@ -30,6 +30,17 @@ class CandidateParams:
     min_solidity : contour area / convex hull area.
     max_hole_fraction : total hole area / filled area (the white data area cannot exceed the grid).
     max_holes : bound on the number of holes (Euler number >= 1 - max_holes).
+    more_thresholds : further ratio thresholds, each giving its own mask and candidates (kept where no
+        candidate of an earlier threshold covers the same square). One ratio cannot suit every marker
+        of a real photo: on the ChArUco photos of ``markers_real`` (19-28 px markers, 2.5 px borders)
+        a thin blurred border reaches only 0.6-0.8 of the paper and the white cells break it at 0.6
+        (blob solidity 0.56-0.74, 3 of 17 markers of ``img_02.jpg`` lost), while at 0.9 a marker
+        whose quiet zone is dimmed by the next chessboard square merges with it; on a marker in
+        shadow beside a sunlit surface (``tagtest.jpg``, ID 9 on the dark face of a cube) the closing
+        takes the sunlit paper for the background, the shaded white cells and quiet zone sit at
+        0.55-0.65 of it, like the floor behind, and only 0.45 separates the marker from the floor.
+        The ratio stays a ratio, so the set still works under uneven light (OpenCV's detector likewise
+        thresholds at several window sizes).
     scale : downsampling factor of the closing.
     smooth : smooth the dark mask (3 x 3 median) after thresholding. Where flat background sits near
         the threshold (dim light, noise sigma 3) the raw mask breaks into tens of thousands of
@@ -44,6 +55,7 @@ class CandidateParams:
     min_solidity: float = 0.85
     max_hole_fraction: float = 0.6
     max_holes: int = 40
+    more_thresholds: tuple[float, ...] = (0.45, 0.75, 0.9)
     scale: int = 4
     smooth: bool = True
 
@@ -150,17 +162,45 @@ def robust_quad(contour: NDArray[np.int32], approx: NDArray[np.float64]) -> NDAr
 
 
 def find_candidates(
-    gray: NDArray[np.uint8], params: CandidateParams, max_hole_fraction: float | None = None
+    gray: NDArray[np.uint8], params: CandidateParams, max_hole_fraction: float | None = None,
+    trace: list | None = None,
 ) -> list[NDArray[np.float64]]:
     """Candidate quadrilaterals (each (4, 2), clockwise on screen, pixel coordinates) of dark squares.
 
     Tests, in order of cost: contour length, area, solidity, holes (Euler number and hole fraction),
-    four-vertex convex polygon, robust quadrilateral.
+    four-vertex convex polygon, robust quadrilateral. ``trace`` (a list) receives a
+    :class:`gtrig.markers.detect.Rejection` for each blob of a plausible size that fails a later test.
     """
     max_side = params.max_side_px(gray.shape)
-    mask = dark_mask(gray, max_side, params.scale, params.ratio_threshold)
-    if params.smooth:
-        mask = cv2.medianBlur(mask, 3)
+    bg = _closing_background(gray, max_side, params.scale)
+    out: list[NDArray[np.float64]] = []
+    rejected: list = []
+    # squares already found, filled: a blob of a later threshold centred in one is the same marker
+    covered = np.zeros(gray.shape, np.uint8)
+    for k, thr in enumerate((params.ratio_threshold, *params.more_thresholds)):
+        mask = cv2.compare(gray, cv2.LUT(bg, _ratio_lut(thr)), cv2.CMP_LT)
+        if params.smooth:
+            mask = cv2.medianBlur(mask, 3)
+        found = _mask_candidates(mask, params, max_side, max_hole_fraction, None if trace is None else rejected,
+                                 covered if k else None)
+        out.extend(found)
+        if found and k < len(params.more_thresholds):
+            cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
+    if trace is not None:
+        # a blob that failed at one threshold but gave a candidate at another is not a rejection
+        h, w = gray.shape
+        for r in rejected:
+            c = np.clip(np.round(r.quad_px.mean(axis=0)).astype(int), 0, [w - 1, h - 1])
+            if not covered[c[1], c[0]]:
+                trace.append(r)
+    return out
+
+
+def _mask_candidates(mask: NDArray[np.uint8], params: CandidateParams, max_side: float,
+                     max_hole_fraction: float | None, trace: list | None,
+                     covered: NDArray[np.uint8] | None = None) -> list[NDArray[np.float64]]:
+    """:func:`find_candidates` on one dark mask (0 / 255); blobs whose bounding box is centred on a
+    non-zero pixel of ``covered`` are skipped."""
     contours, hier = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
     if hier is None:
         return []
@@ -170,14 +210,27 @@ def find_candidates(
     hole_frac_max = params.max_hole_fraction if max_hole_fraction is None else max_hole_fraction
     out = []
     lengths = np.fromiter(map(len, contours), int, len(contours))
+    def reject(c: NDArray[np.int32], why: str) -> None:
+        if trace is not None:
+            from gtrig.markers.detect import Rejection
+
+            x, y, w, h = cv2.boundingRect(c)
+            box = np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h]], np.float64)
+            trace.append(Rejection(box, "candidate", why))
+
     for i in np.flatnonzero((hier[:, 3] < 0) & (lengths >= min_len) & (lengths <= max_len)):
         c = contours[i]
+        if covered is not None:
+            x, y, w, h = cv2.boundingRect(c)
+            if covered[y + h // 2, x + w // 2]:
+                continue
         area = cv2.contourArea(c)
         if area < 0.5 * params.min_side_px**2:
             continue
         hull = cv2.convexHull(c)
         hull_area = cv2.contourArea(hull)
         if hull_area <= 0 or area / hull_area < params.min_solidity:
+            reject(c, f"solidity {area / max(hull_area, 1e-9):.2f} < {params.min_solidity:g}")
             continue
         holes = 0
         hole_area = 0.0
@@ -187,17 +240,22 @@ def find_candidates(
             hole_area += cv2.contourArea(contours[j])
             j = hier[j, 0]
         if holes > params.max_holes or hole_area > hole_frac_max * area:
+            reject(c, f"{holes} holes, {hole_area / area:.2f} of the area" if holes > params.max_holes
+                   else f"holes {hole_area / area:.2f} of the area > {hole_frac_max:.2f}")
             continue
         peri = cv2.arcLength(hull, True)
         approx = cv2.approxPolyDP(hull, 0.05 * peri, True)
         if len(approx) != 4 or not cv2.isContourConvex(approx):
+            reject(c, f"outline has {len(approx)} vertices, not 4")
             continue
         a = _ordered_cw(approx.reshape(4, 2).astype(np.float64))
         sides = np.hypot(*(a[_NEXT] - a).T)
         if sides.min() < params.min_side_px * 0.7 or sides.min() < 0.25 * sides.max():
+            reject(c, f"sides {sides.min():.0f}-{sides.max():.0f} px")
             continue
         q = robust_quad(c, a)
         if q is None:
+            reject(c, "no straight sides (robust quad failed)")
             continue
         out.append(_ordered_cw(q))
     return out

@@ -9,6 +9,7 @@ from scipy.special import ndtr
 
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.edges import quad_homographies
+from gtrig.markers.detect.sampling import bilinear
 
 # sub-samples per cell, as offsets from its centre in cell units (the middle half of the cell)
 _OFFS = np.array([-0.25, 0.0, 0.25])
@@ -43,9 +44,7 @@ def sample_cells(
     flat = pts.reshape(-1, 2)
     if undist is not None:
         flat = undist.to_raw(flat)
-    mx = flat[:, 0].astype(np.float32).reshape(1, -1)
-    my = flat[:, 1].astype(np.float32).reshape(1, -1)
-    vals = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
+    vals = bilinear(gray, flat[:, 0], flat[:, 1])
     vals = vals.reshape(Q, m, 3, m, 3).transpose(0, 1, 3, 2, 4).reshape(Q, m, m, 9)
     if return_samples:
         return vals.mean(axis=3), vals
@@ -97,9 +96,7 @@ def unblur_cells(
     flat = px.reshape(-1, 2)
     if undist is not None:
         flat = undist.to_raw(flat)
-    vals = cv2.remap(gray, flat[:, 0].astype(np.float32).reshape(1, -1),
-                     flat[:, 1].astype(np.float32).reshape(1, -1), cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_REPLICATE).astype(np.float64).reshape(Q, -1)
+    vals = bilinear(gray, flat[:, 0], flat[:, 1]).reshape(Q, -1)
     k = np.arange(n + 1, dtype=np.float64)
     out = np.empty((Q, d, d))
     for q in range(Q):

@@ -42,6 +42,7 @@ Coordinates are "fit coordinates": raw pixels, or undistorted pixels when a came
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from dataclasses import dataclass
 
@@ -67,6 +68,12 @@ MAX_CLIPPED_WHITE = 4.0
 _SPLIT_MIN_PX = 2000
 #: share of an edge's band pixels clipped above which the edge is fitted as clipped
 CLIPPED_EDGE_SHARE = 0.1
+#: effective Gaussian blur (px) below which an edge is refitted with the pixel-integrated step: a pixel
+#: integrating the light of its square cannot show a step sharper than its own box (SD 0.29 px), but
+#: aliased or sharpened photos do (the ChArUco photos of ``markers_real`` are nearly binary, edges
+#: within one pixel), and there the Gaussian fit runs to its bound of 0.05 px, where the model is flat
+#: in the line's position between pixel centres
+SHARP_SIGMA_PX = 0.2
 
 
 @dataclass(frozen=True)
@@ -239,6 +246,7 @@ def fit_edges(
     init: EdgeFit | None = None,
     tol: float = 1e-4,
     threads: int = 1,
+    pixel_model: bool = False,
 ) -> EdgeFit:
     """Fit the blurred-step model to every edge (see the module docstring).
 
@@ -258,6 +266,9 @@ def fit_edges(
         angle step weighted by the square root of the edge's pixel count, about its half length);
         the others go on, so well-conditioned edges do not pay for slow ones.
     threads : with 2 the edges are fitted in two groups of about equal pixel counts at once.
+    pixel_model : fit every edge with the pixel-integrated step (:func:`pixel_step`). Otherwise only
+        edges with clipped pixels are, and edges whose Gaussian blur falls below
+        :data:`SHARP_SIGMA_PX` are refitted so (steps sharper than the pixel box).
     """
     E = len(p0)
     t = p1 - p0
@@ -296,11 +307,14 @@ def fit_edges(
     # returned sigma are the effective blur, optics and pixel together)
     slow = (np.bincount(e, weights=clipped, minlength=E) > CLIPPED_EDGE_SHARE * cnt if any_clipped
             else np.zeros(E, bool))
+    saturated = slow
+    if pixel_model:
+        slow = np.ones(E, bool)
     if slow.any():
         P[slow, 4] = np.log(np.sqrt(np.maximum(np.exp(2 * P[slow, 4]) - PIXEL_VAR, 0.05**2)))
         # start the white level above the clip: from there the clipped pixels agree and the ramp's
         # pixels pull it down smoothly; from the clip level the hinge can hold it (a local minimum)
-        P[slow, 3] = np.maximum(P[slow, 3], 2.0 * (CLIP_HIGH - P[slow, 2]))
+        P[saturated, 3] = np.maximum(P[saturated, 3], 2.0 * (CLIP_HIGH - P[saturated, 2]))
     # a clipped edge's white level converges slowly (only the ramp's unclipped pixels set it) and
     # drags the line with it: such edges get more iterations and must also settle their contrast
     bounds = np.concatenate([[0], np.cumsum(cnt.astype(np.int64))])
@@ -323,8 +337,35 @@ def fit_edges(
         cov = np.linalg.pinv(JTJ)[:, :2, :2] * s2[:, None, None]
     ok = has & np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(cov.reshape(E, -1)), axis=1)
     sigma = np.where(slow, np.sqrt(np.exp(2 * P[:, 4]) + PIXEL_VAR), np.exp(P[:, 4]))  # effective blur
-    return EdgeFit(P[:, 0], P[:, 1], mid, P[:, 2], P[:, 3], sigma, P[:, 5:7], cov, np.sqrt(s2),
-                   cnt.astype(np.int64), ok)
+    out = EdgeFit(P[:, 0], P[:, 1], mid, P[:, 2], P[:, 3], sigma, P[:, 5:7], cov, np.sqrt(s2),
+                  cnt.astype(np.int64), ok)
+    sharp = has & ~slow & (sigma < SHARP_SIGMA_PX)
+    if not sharp.any():
+        return out
+    # edges sharper than a pixel: refitted with the pixel-integrated step, from the start
+    sel = sharp[e]
+    remap = np.cumsum(sharp) - 1
+    sub_e = remap[e[sel]]
+    sub = EdgeSamples(samples.xy[sel], v[sel], sub_e, _starts(sub_e, int(sharp.sum())))
+    sub_init = None if init is None else _subset(init, sharp)
+    refit = fit_edges(sub, p0[sharp], p1[sharp], np.asarray(sigma0, np.float64)[sharp], iterations, None
+                      if extra is None else ext[sel], sub_init, tol, threads, pixel_model=True)
+    return _merge(out, sharp, refit)
+
+
+def _subset(fit: EdgeFit, sel: NDArray[np.bool_]) -> EdgeFit:
+    """The edges ``sel`` of ``fit``."""
+    return EdgeFit(*(getattr(fit, f.name)[sel] for f in dataclasses.fields(EdgeFit)))
+
+
+def _merge(fit: EdgeFit, sel: NDArray[np.bool_], part: EdgeFit) -> EdgeFit:
+    """``fit`` with its edges ``sel`` replaced by ``part`` (a new EdgeFit; ``fit`` is unchanged)."""
+    vals = {}
+    for f in dataclasses.fields(EdgeFit):
+        a = getattr(fit, f.name).copy()
+        a[sel] = getattr(part, f.name)
+        vals[f.name] = a
+    return EdgeFit(**vals)
 
 
 def intersect_corners(fit: EdgeFit, n_quads: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
