@@ -150,7 +150,7 @@ def ordered_normals(xy: np.ndarray, valid: np.ndarray, gap_m: np.ndarray, half: 
 @njit(cache=True)
 def icp_point_to_line(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray, cur_xy: np.ndarray,
                       pose0: np.ndarray, cell: float, r_start: float, r_min: float, shrink: float,
-                      trim: float, max_iter: int, tol_m: float, tol_rad: float) -> tuple[np.ndarray, int, int]:
+                      trim: float, max_iter: int, tol_m: float, tol_rad: float) -> tuple[np.ndarray, int, int, float]:
     """Point-to-line ICP (Censi 2008's error metric; Gauss-Newton on the exact rotation).
 
     The current points ``cur_xy`` (N, 2) are moved by ``pose`` = (x, y, theta) onto the reference
@@ -159,8 +159,8 @@ def icp_point_to_line(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray,
     ``r_min``; the ``trim`` fraction of the largest residuals is dropped. Stops when an update is
     below ``tol_m`` / ``tol_rad`` at the final radius.
 
-    Returns the pose (3,), the iterations run and the number of correspondences of the last one
-    (0: too few, the pose is ``pose0``).
+    Returns the pose (3,), the iterations run, the number of correspondences of the last one (0: too
+    few, the pose is ``pose0``) and the last update's size (metres, rotation taken at 1 m).
     """
     origin, shape, start, order = grid_build(ref_xy, cell)
     N = cur_xy.shape[0]
@@ -171,6 +171,7 @@ def icp_point_to_line(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray,
     J = np.empty((N, 3))
     m = 0
     it = 0
+    step = np.inf
     for it in range(1, max_iter + 1):
         c = math.cos(pose[2])
         s = math.sin(pose[2])
@@ -192,7 +193,7 @@ def icp_point_to_line(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray,
             J[m, 2] = -nx_ * qy + ny_ * qx
             m += 1
         if m < 6:
-            return pose0.copy(), it, 0
+            return pose0.copy(), it, 0, np.inf
         thr = np.inf
         if trim > 0.0:
             srt = np.sort(ae[:m])
@@ -212,12 +213,13 @@ def icp_point_to_line(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray,
         pose[0] += d[0]
         pose[1] += d[1]
         pose[2] += d[2]
+        step = math.hypot(d[0], d[1]) + abs(d[2])
         at_min = r <= r_min * 1.0000001
         if at_min and math.hypot(d[0], d[1]) < tol_m and abs(d[2]) < tol_rad:
             break
         r = max(r_min, r * shrink)
     pose[2] = math.atan2(math.sin(pose[2]), math.cos(pose[2]))
-    return pose, it, m
+    return pose, it, m, step
 
 
 @njit(cache=True)

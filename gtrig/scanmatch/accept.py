@@ -37,7 +37,7 @@ class AcceptParams:
     """Thresholds of the acceptance test (see the module docstring)."""
 
     min_explained: float = 0.6
-    min_inlier_share: float = 0.8
+    min_inlier_share: float = 0.7
     max_s_ratio: float = 1.6
     max_sd_m: float = 0.005
     max_sd_rad: float = float(np.radians(0.12))
