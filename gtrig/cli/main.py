@@ -28,6 +28,7 @@ _SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("vision", "vision", "command"),
     ("robot_frame", "robot-frame", "command"),
     ("laser", "laser", "group"),
+    ("scanmatch", "scanmatch", "group"),
 )
 
 
