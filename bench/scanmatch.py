@@ -1,0 +1,186 @@
+"""Onboard scan matching: speed against small_gicp, the genetic matcher's time, the acceptance test
+against truth on simulated pairs, and agreement with the CARMEN logs' corrected poses.
+
+    python bench/scanmatch.py speed --recording REC [--pairs 500]
+    python bench/scanmatch.py accept --recording REC [--recording REC2 ...] [--pairs 400]
+    python bench/scanmatch.py carmen [--every 3]
+
+The machine may be loaded: speed figures are printed with the ratio to the peer measured in the same
+run. small_gicp (PyPI ``small_gicp``) is the peer; without it the speed section says so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gtrig.io.scans import read_scans
+from gtrig.io.tum import read_tum
+from gtrig.rig.load import load_rig
+from gtrig.scanmatch import se2
+from gtrig.scanmatch.accept import AcceptParams
+from gtrig.scanmatch.genetic import GeneticParams, match_genetic
+from gtrig.scanmatch.icp import match_icp
+from gtrig.scanmatch.pairs import Guess, candidate_pairs, match_pairs, sequence_scans
+from gtrig.scanmatch.scan import ranges_to_scan
+from gtrig.scanmatch.validate import ErrorModel, scanner_height_m, scanner_pose_xyth
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def truth_at(rec: Path, stamps: np.ndarray) -> np.ndarray:
+    tr = read_tum(rec / "truth" / "run.tum")
+    return Guess(tr.stamps_s, se2.from_matrix(tr.matrices())).at(stamps)
+
+
+def speed(rec: Path, n_pairs: int) -> None:
+    rig = load_rig(rec / "rig.yaml")
+    sc = rig.robot.onboard_scanners[0]
+    lg = read_scans(rec / "run" / "onboard" / f"{sc.name}.csv", sc)
+    scans = [ranges_to_scan(r, sc.angles_rad, np.zeros(3), 0.01, sc.range_max_m, t)
+             for r, t in zip(lg.ranges_m, lg.stamps_s, strict=True)]
+    mount = scanner_pose_xyth(sc)
+    robot = truth_at(rec, lg.stamps_s)
+    scanner = se2.compose(robot, mount)
+    rng = np.random.default_rng(0)
+    i = rng.integers(0, len(scans) - 10, n_pairs)
+    j = i + rng.integers(1, 10, n_pairs)
+    rel = se2.relative(scanner[i], scanner[j])
+    guess = rel + np.column_stack([rng.normal(0, 0.03, (n_pairs, 2)), rng.normal(0, np.radians(1.5), n_pairs)])
+    match_icp(scans[0], scans[1], np.zeros(3))  # compile
+    t = time.perf_counter()
+    ours = np.array([match_icp(scans[a], scans[b], g).pose for a, b, g in zip(i, j, guess, strict=True)])
+    t_ours = time.perf_counter() - t
+    e = se2.relative(rel, ours)
+    print(f"gtrig point-to-line ICP: {n_pairs / t_ours:.0f} matches/s ({sc.beams} beams, one core); "
+          f"error median {1000 * np.median(np.hypot(e[:, 0], e[:, 1])):.2f} mm, "
+          f"{np.degrees(np.median(np.abs(e[:, 2]))):.3f} deg")
+    try:
+        import small_gicp
+    except ImportError:
+        print("small_gicp not installed (pip install small_gicp): no peer")
+        return
+    pts = [np.column_stack([s.xy, np.zeros(len(s))]) for s in scans]
+    for kind in ("ICP", "GICP"):
+        t = time.perf_counter()
+        out = []
+        for a, b, g in zip(i, j, guess, strict=True):
+            T0 = np.eye(4)
+            c, s_ = np.cos(g[2]), np.sin(g[2])
+            T0[:2, :2] = [[c, -s_], [s_, c]]
+            T0[:2, 3] = g[:2]
+            r = small_gicp.align(pts[a], pts[b], T0, registration_type=kind, downsampling_resolution=0.01,
+                                 max_correspondence_distance=0.5, num_threads=1, max_iterations=40)
+            out.append(se2.from_matrix(r.T_target_source))
+        t_p = time.perf_counter() - t
+        e2 = se2.relative(rel, np.array(out))
+        print(f"small_gicp {kind}: {n_pairs / t_p:.0f} matches/s; error median "
+              f"{1000 * np.median(np.hypot(e2[:, 0], e2[:, 1])):.2f} mm, {np.degrees(np.median(np.abs(e2[:, 2]))):.3f} deg; "
+              f"gtrig / small_gicp: speed x{t_p / t_ours:.2f}, position error x"
+              f"{np.median(np.hypot(e[:, 0], e[:, 1])) / np.median(np.hypot(e2[:, 0], e2[:, 1])):.2f}")
+    t = time.perf_counter()
+    n_ga = 20
+    for a, b, g in zip(i[:n_ga], j[:n_ga], guess[:n_ga], strict=True):
+        match_genetic(scans[a], scans[b], g, GeneticParams())
+    print(f"genetic matcher: {1000 * (time.perf_counter() - t) / n_ga:.0f} ms per pair "
+          f"(population 64, 40 generations, 120 points)")
+
+
+def accept(recs: list[Path], n_pairs: int) -> None:
+    tot = {"right0": 0, "wrong0": 0, "wrong0_rej": 0, "right0_rej": 0, "right": 0, "wrong": 0, "right_rej": 0,
+           "wrong_rej": 0, "n": 0}
+    for s, rec in enumerate(recs):
+        rig = load_rig(rec / "rig.yaml")
+        sc = rig.robot.onboard_scanners
+        logs = {x.name: read_scans(rec / "run" / "onboard" / f"{x.name}.csv", x) for x in sc}
+        from gtrig.io.odometry import read_odometry
+
+        od = read_odometry(rec / "run" / "odometry.csv")
+        scans = sequence_scans(sc, logs, Guess(od.stamps_s, od.xytheta),
+                               {x.name: scanner_pose_xyth(x) for x in sc}, 0.01, every=3)
+        truth = truth_at(rec, np.array([x.stamp_s for x in scans]))
+        pairs = candidate_pairs(truth, 1.0, np.radians(30), min_index_gap=2)
+        rng = np.random.default_rng(s)
+        pairs = pairs[rng.choice(len(pairs), min(n_pairs, len(pairs)), replace=False)]
+        rel = se2.relative(truth[pairs[:, 0]], truth[pairs[:, 1]])
+        r = 0.5 * np.sqrt(rng.uniform(0, 1, len(pairs)))
+        a = rng.uniform(0, 2 * np.pi, len(pairs))
+        rg = rel + np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(-1, 1, len(pairs)) * np.radians(30)])
+        gc = np.diag([0.3**2, 0.3**2, np.radians(20) ** 2])
+        tilt = scanner_height_m(rig) * ErrorModel().floor_tilt_sigma_rad
+        for stage, ga in (("0", None), ("", GeneticParams())):
+            R = match_pairs(scans, truth, pairs, tilt_shift_m=tilt, genetic=ga, guess_cov=gc, rel_guesses=rg,
+                            accept=AcceptParams())
+            E = np.array([se2.relative(rel[n], x.pose) for n, x in enumerate(R)])
+            right = (np.hypot(E[:, 0], E[:, 1]) < 0.02) & (np.degrees(np.abs(E[:, 2])) < 0.5)
+            acc = np.array([x.verdict.accepted for x in R])
+            tot["right" + stage] += int(right.sum())
+            tot["wrong" + stage] += int((~right).sum())
+            tot["right" + stage + "_rej"] += int((right & ~acc).sum())
+            tot["wrong" + stage + "_rej"] += int((~right & ~acc).sum())
+        tot["n"] += len(pairs)
+        print(f"{rec}: {len(pairs)} pairs", {k: v for k, v in tot.items()}, flush=True)
+    print(f"candidate pairs: {tot['n']} over {len(recs)} recordings; guesses off by up to 0.5 m and 30 deg")
+    print(f"local ICP from the guess: {tot['wrong0']} wrong, {tot['wrong0_rej']} rejected "
+          f"({100 * tot['wrong0_rej'] / max(1, tot['wrong0']):.2f} %); {tot['right0']} right, {tot['right0_rej']} "
+          f"rejected ({100 * tot['right0_rej'] / max(1, tot['right0']):.2f} %)")
+    print(f"with the genetic fallback: {tot['wrong']} wrong, {tot['wrong_rej']} rejected; {tot['right']} right, "
+          f"{tot['right_rej']} rejected ({100 * tot['right_rej'] / max(1, tot['right']):.2f} %); accepted "
+          f"{100 * (tot['n'] - tot['wrong_rej'] - tot['right_rej']) / max(1, tot['n']):.1f} % of the pairs")
+
+
+def carmen(every: int, max_pairs: int) -> None:
+    from gtrig.io.carmen import read_carmen
+
+    for name in ("intel-corrected.log.gz", "freiburg-079-corrected.log.gz"):
+        p = ROOT / ".." / "shared" / "data" / "carmen" / name
+        log = read_carmen(p)
+        n = log.laser_ranges.shape[1]
+        ang = -np.pi / 2 + np.arange(n) * np.pi / n
+        idx = np.arange(0, len(log.laser_stamps_s), every)
+        scans = [ranges_to_scan(np.where(log.laser_ranges[k] < 50.0, log.laser_ranges[k], np.nan), ang, np.zeros(3),
+                                0.01, 50.0, float(log.laser_stamps_s[k])) for k in idx]
+        odo = log.laser_odom_xytheta[idx]
+        cor = log.laser_xytheta[idx]
+        pairs = candidate_pairs(odo, 1.0, np.radians(30), min_index_gap=1)
+        if len(pairs) > max_pairs:
+            pairs = pairs[np.linspace(0, len(pairs) - 1, max_pairs).astype(int)]
+        t = time.perf_counter()
+        R = match_pairs(scans, odo, pairs, accept=AcceptParams(), surface_bias_m=0.0)
+        dt = time.perf_counter() - t
+        ref = se2.relative(cor[pairs[:, 0]], cor[pairs[:, 1]])
+        E = np.array([se2.relative(ref[k], x.pose) for k, x in enumerate(R)])
+        acc = np.array([x.verdict.accepted for x in R])
+        agree = (np.hypot(E[:, 0], E[:, 1]) < 0.02) & (np.degrees(np.abs(E[:, 2])) < 1.0)
+        print(f"{name}: {len(R)} pairs within 1 m and 30 deg of the raw odometry ({n} beams, every {every}th scan); "
+              f"accepted {acc.sum()} ({100 * acc.mean():.1f} %); of those, {100 * agree[acc].mean():.1f} % within 2 cm "
+              f"and 1 deg of the corrected poses' relative pose (median {1000 * np.median(np.hypot(E[acc, 0], E[acc, 1])):.1f} mm, "
+              f"{np.degrees(np.median(np.abs(E[acc, 2]))):.3f} deg); {1000 * dt / max(1, len(R)):.1f} ms per pair")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="what", required=True)
+    a = sub.add_parser("speed")
+    a.add_argument("--recording", type=Path, required=True)
+    a.add_argument("--pairs", type=int, default=500)
+    b = sub.add_parser("accept")
+    b.add_argument("--recording", type=Path, action="append", required=True)
+    b.add_argument("--pairs", type=int, default=400)
+    c = sub.add_parser("carmen")
+    c.add_argument("--every", type=int, default=3)
+    c.add_argument("--max-pairs", type=int, default=1500)
+    args = ap.parse_args()
+    if args.what == "speed":
+        speed(args.recording, args.pairs)
+    elif args.what == "accept":
+        accept(args.recording, args.pairs)
+    else:
+        carmen(args.every, args.max_pairs)
+
+
+if __name__ == "__main__":
+    main()
