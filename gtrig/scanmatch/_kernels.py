@@ -255,3 +255,36 @@ def residuals_at(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray, cur_
             J[i, 1] = ny_
             J[i, 2] = -nx_ * qy + ny_ * qx
     return d, e, J, idx
+
+
+@njit(cache=True)
+def evaluate_fit(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray, ref_sigma: np.ndarray,
+                 cur_xy: np.ndarray, cur_sigma: np.ndarray, pose: np.ndarray, cell: float, radius: float,
+                 inlier_sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float]:
+    """:func:`residuals_at` plus the inlier test and the inliers' normal matrix in one pass.
+
+    Returns residuals (N,), expected sigmas (N,) (nan: no association), inlier mask (N,), Jacobian
+    rows (N, 3), ``H = J^T J`` over the inliers (3, 3), the number of associated points and the
+    inliers' sum of squared residuals.
+    """
+    d, e, J, idx = residuals_at(ref_xy, ref_n, ref_ok, cur_xy, pose, cell, radius)
+    N = cur_xy.shape[0]
+    sig = np.full(N, np.nan)
+    inl = np.zeros(N, np.bool_)
+    H = np.zeros((3, 3))
+    n_matched = 0
+    sse = 0.0
+    for i in range(N):
+        j = idx[i]
+        if j < 0:
+            continue
+        n_matched += 1
+        s = math.sqrt(cur_sigma[i] * cur_sigma[i] + ref_sigma[j] * ref_sigma[j])
+        sig[i] = s
+        if np.isfinite(e[i]) and abs(e[i]) <= inlier_sigma * s:
+            inl[i] = True
+            sse += e[i] * e[i]
+            for a in range(3):
+                for b in range(3):
+                    H[a, b] += J[i, a] * J[i, b]
+    return e, sig, inl, J, H, n_matched, sse

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gtrig.scanmatch._kernels import icp_point_to_line, residuals_at
+from gtrig.scanmatch._kernels import evaluate_fit, icp_point_to_line
 from gtrig.scanmatch.scan import PlanarScan
 
 
@@ -91,26 +91,22 @@ def evaluate(ref: PlanarScan, cur: PlanarScan, pose: np.ndarray, params: IcpPara
              iterations: int = 0, converged: bool = True) -> IcpResult:
     """Residuals, inliers and covariance of ``cur`` on ``ref`` at ``pose`` (no optimisation)."""
     pose = np.asarray(pose, dtype=float)
-    d, e, J, idx = residuals_at(ref.xy, ref.normals, ref.normal_ok, cur.xy, pose, params.cell_m, params.r_min_m)
-    has = idx >= 0
-    sig = np.where(has, np.hypot(cur.sigma_m, ref.sigma_m[np.maximum(idx, 0)]), np.nan)
-    with np.errstate(invalid="ignore"):
-        inl = has & np.isfinite(e) & (np.abs(e) <= params.inlier_sigma * sig)
-    m = int(inl.sum())
-    Ji = J[inl]
-    H = Ji.T @ Ji
+    e, sig, inl, J, H, n_matched, sse = evaluate_fit(ref.xy, ref.normals, ref.normal_ok, ref.sigma_m, cur.xy,
+                                                      cur.sigma_m, pose, params.cell_m, params.r_min_m,
+                                                      params.inlier_sigma)
+    m = int(np.count_nonzero(inl))
+    cov = np.full((3, 3), np.inf)
+    s2 = float("nan")
     if m > 3:
-        s2 = float(np.sum(e[inl] ** 2) / (m - 3))
+        s2 = sse / (m - 3)
         try:
-            cov = s2 * np.linalg.inv(H)
-            if not np.all(np.isfinite(cov)) or np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
-                cov = np.full((3, 3), np.inf)
+            # Cholesky both inverts and proves H positive definite (a degenerate fit fails here)
+            L = np.linalg.cholesky(H)
+            Linv = np.linalg.inv(L)
+            cov = s2 * (Linv.T @ Linv)
         except np.linalg.LinAlgError:
-            cov = np.full((3, 3), np.inf)
-    else:
-        s2 = float("nan")
-        cov = np.full((3, 3), np.inf)
-    return IcpResult(pose=pose, cov=cov, iterations=iterations, n_points=len(cur), n_matched=int(has.sum()),
+            pass
+    return IcpResult(pose=pose, cov=cov, iterations=iterations, n_points=len(cur), n_matched=int(n_matched),
                      n_inliers=m, residuals_m=e, expected_sigma_m=sig, inlier=inl, s_m=math.sqrt(s2),
                      converged=converged and m > 3, hessian=H, jacobian=J)
 
