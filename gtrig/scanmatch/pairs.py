@@ -140,7 +140,7 @@ def guess_cov_for(rel_guess: np.ndarray, dist_sigma_frac: float = 0.1, min_sigma
 
 
 def match_pairs(scans: list[PlanarScan], guesses: np.ndarray, pairs: np.ndarray, tilt_shift_m: float = 0.0,
-                surface_bias_m: float = 0.002, icp: IcpParams = IcpParams(), accept: AcceptParams = AcceptParams(),
+                surface_bias_m: float = 0.0015, icp: IcpParams = IcpParams(), accept: AcceptParams = AcceptParams(),
                 genetic: GeneticParams | None = GeneticParams(), guess_cov: np.ndarray | None = None,
                 rel_guesses: np.ndarray | None = None) -> list[Relation]:
     """Match and judge every pair; ``guesses`` (N, 3) are the scans' guessed poses (``rel_guesses``

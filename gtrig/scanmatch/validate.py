@@ -39,14 +39,16 @@ class ErrorModel:
     """The scanners' and the platform's error sizes (metres, radians).
 
     range_sigma_m : one scan's range noise (SICK LMS291 data sheet: about 1 cm indoors).
-    surface_bias_sigma_m : one surface's reflectivity-dependent range bias (a few mm between dark and
-        bright surfaces; its spread over a room's surfaces).
-    floor_tilt_sigma_rad : the floor's tilt under the robot, one standard deviation (a level on a
-        lab floor: a few tenths of a degree); with the scanners' height it shifts a scan sideways.
+    surface_bias_sigma_m : one surface's reflectivity-dependent range bias: the slope of a pulsed
+        scanner's range bias with reflectivity (about 8 mm from black to white) times the spread of a
+        room's surface reflectivities (about 0.2), 1.5 mm.
+    floor_tilt_sigma_rad : the floor's tilt under the robot, one standard deviation per axis (a lab
+        floor within 0.5 deg everywhere: about 0.15 deg); with the scanners' height it shifts a scan
+        sideways.
     """
 
     range_sigma_m: float = 0.01
-    surface_bias_sigma_m: float = 0.002
+    surface_bias_sigma_m: float = 0.0015
     floor_tilt_sigma_rad: float = float(np.radians(0.15))
 
 
@@ -240,12 +242,46 @@ def validate_stops(stops: StopScans, reference: int, rig: Rig, guesses_world: np
                                                  model, tilt, icp, accept, GeneticParams(seed=seed + k))
             name = "genetic+icp"
         matches.append(StopMatch(pid, pose, cov, res, v, name))
+    matches = _chain_rejected(stops, matches, r, survey_rel, model, tilt, icp, accept, seed)
     poses = np.array([m.pose for m in matches])
     status = np.array([PoseStatus.OK if m.verdict.accepted else PoseStatus.REJECTED for m in matches], np.uint8)
     track = PoseTrack.from_xytheta(stops.stamps_s, poses, cov=np.array([m.cov for m in matches]),
                                    status=status, reasons=tuple(m.verdict.reason for m in matches),
                                    source="scanmatch", frame_id=f"stop{reference}", child_frame_id="robot")
     return StopValidation(track, tuple(matches), reference, survey_rel)
+
+
+def compose_cov(a: np.ndarray, b: np.ndarray, cov_a: np.ndarray, cov_b: np.ndarray) -> np.ndarray:
+    """(3, 3) covariance of ``a (+) b`` for independent ``a`` and ``b`` (first-order)."""
+    c, s = np.cos(a[2]), np.sin(a[2])
+    Ja = np.array([[1.0, 0.0, -s * b[0] - c * b[1]], [0.0, 1.0, c * b[0] - s * b[1]], [0.0, 0.0, 1.0]])
+    Jb = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return Ja @ cov_a @ Ja.T + Jb @ cov_b @ Jb.T
+
+
+def _chain_rejected(stops: StopScans, matches: list[StopMatch], r: int, guess_rel: np.ndarray | None,
+                    model: ErrorModel, tilt: float, icp: IcpParams, accept: AcceptParams,
+                    seed: int) -> list[StopMatch]:
+    """A stop whose direct match was refused (too far from the reference: too little in common) is
+    matched on the nearest accepted stop instead and its pose composed through it (one link)."""
+    out = list(matches)
+    est = np.array([m.pose for m in matches]) if guess_rel is None else guess_rel
+    for k, m in enumerate(matches):
+        if m.verdict.accepted:
+            continue
+        cands = [a for a, ma in enumerate(matches) if ma.verdict.accepted and a not in (k, r)]
+        cands.sort(key=lambda a: float(np.hypot(*(est[a, :2] - est[k, :2]))))
+        for a in cands[:3]:
+            g = se2.relative(out[a].pose, est[k])
+            gc = np.diag([0.05**2, 0.05**2, np.radians(2.0) ** 2])
+            pose, cov, res, v, name = match_pair(stops.merged[a], stops.merged[k], g, gc, model, tilt, icp, accept,
+                                                 GeneticParams(seed=seed + 1000 + k))
+            if v.accepted:
+                p = se2.compose(out[a].pose, pose)
+                out[k] = StopMatch(m.pose_id, p, compose_cov(out[a].pose, pose, out[a].cov, cov), res, v,
+                                   f"{name} via stop {matches[a].pose_id}")
+                break
+    return out
 
 
 def validate_recording(rec: str | Path, rig: Rig | None = None, reference: int = 1,
