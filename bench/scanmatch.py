@@ -3,7 +3,8 @@ against truth on simulated pairs, and agreement with the CARMEN logs' corrected 
 
     python bench/scanmatch.py speed --recording REC [--pairs 500]
     python bench/scanmatch.py accept --recording REC [--recording REC2 ...] [--pairs 400]
-    python bench/scanmatch.py carmen [--every 3]
+    python bench/scanmatch.py carmen [--every 4]
+    python bench/scanmatch.py map --recording REC [--recording REC2 ...]
 
 The machine may be loaded: speed figures are printed with the ratio to the peer measured in the same
 run. small_gicp (PyPI ``small_gicp``) is the peer; without it the speed section says so.
@@ -83,8 +84,9 @@ def speed(rec: Path, n_pairs: int) -> None:
         t_p = time.perf_counter() - t
         c_p = time.process_time() - c
         e2 = se2.relative(rel, np.array(out))
-        print(f"small_gicp {kind}: {n_pairs / t_p:.0f} matches/s wall, {n_pairs / c_p:.0f} per CPU second; error median "
-              f"{1000 * np.median(np.hypot(e2[:, 0], e2[:, 1])):.2f} mm, {np.degrees(np.median(np.abs(e2[:, 2]))):.3f} deg; "
+        print(f"small_gicp {kind}: {n_pairs / t_p:.0f} matches/s wall, {n_pairs / c_p:.0f} per CPU second; "
+              f"error median {1000 * np.median(np.hypot(e2[:, 0], e2[:, 1])):.2f} mm, "
+              f"{np.degrees(np.median(np.abs(e2[:, 2]))):.3f} deg; "
               f"gtrig / small_gicp: speed x{t_p / t_ours:.2f} wall, x{c_p / c_ours:.2f} CPU; position error x"
               f"{np.median(np.hypot(e[:, 0], e[:, 1])) / np.median(np.hypot(e2[:, 0], e2[:, 1])):.2f}")
     t = time.perf_counter()
@@ -184,13 +186,56 @@ def carmen(every: int, max_pairs: int) -> None:
             s_ours.append(evaluate(scans[a], scans[b], R[k].pose).s_m)
             s_log.append(evaluate(scans[a], scans[b], ref[k]).s_m)
         s_ours, s_log = np.array(s_ours), np.array(s_log)
-        print(f"{name}: {len(R)} pairs within 1 m and 30 deg, guesses from raw odometry ({n} beams, every {step}th scan); "
+        print(f"{name}: {len(R)} pairs within 1 m and 30 deg, guesses from raw odometry ({n} beams, "
+              f"every {step}th scan); "
               f"accepted {acc.sum()} ({100 * acc.mean():.1f} %); of those within 2 cm and 1 deg of the corrected "
               f"poses' relative pose: {100 * np.mean(((dxy < 0.02) & (dth < 1.0))[acc]):.1f} %, "
-              f"within 5 cm and 1 deg: {100 * np.mean(((dxy < 0.05) & (dth < 1.0))[acc]):.1f} % (median {1000 * np.median(dxy[acc]):.1f} mm, "
-              f"{np.median(dth[acc]):.3f} deg); residual spread at our pose {1000 * np.median(s_ours):.1f} mm, at the log's "
+              f"within 5 cm and 1 deg: {100 * np.mean(((dxy < 0.05) & (dth < 1.0))[acc]):.1f} % "
+              f"(median {1000 * np.median(dxy[acc]):.1f} mm, {np.median(dth[acc]):.3f} deg); "
+              f"residual spread at our pose {1000 * np.median(s_ours):.1f} mm, at the log's "
               f"{1000 * np.median(s_log):.1f} mm (ours lower in {100 * np.mean(s_ours < s_log):.0f} % of the pairs); "
               f"{1000 * dt / max(1, len(R)):.1f} ms per pair", flush=True)
+
+
+def map_validation(recs: list[Path]) -> None:
+    import tempfile
+
+    import yaml
+
+    from gtrig.io.rosmap import read_map
+    from gtrig.scanmatch.mapmatch import map_points, match_to_map
+    from gtrig.scanmatch.validate import load_stop_scans
+    from gtrig.sim.gtroom import make_scene
+    from gtrig.sim.map import write_maps
+
+    for rec in recs:
+        rig = load_rig(rec / "rig.yaml")
+        seed = int(yaml.safe_load((rec / "sim_config.yaml").read_text())["seed"])
+        mdir = rec
+        if not (rec / "map" / "blueprint.yaml").exists():  # recordings made before the map step
+            mdir = Path(tempfile.mkdtemp())
+            write_maps(make_scene(seed), mdir)
+        err = yaml.safe_load((mdir / "truth" / "map_errors.yaml").read_text())["blueprint"]
+        truth = np.loadtxt(rec / "truth" / "validation_poses.csv", delimiter=",", skiprows=1)[:, 1:]
+        stops = load_stop_scans(rec, rig)
+        rng = np.random.default_rng(seed)
+        r = 0.3 * np.sqrt(rng.uniform(0, 1, len(truth)))
+        a = rng.uniform(0, 2 * np.pi, len(truth))
+        init = truth + np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(-1, 1, len(truth)) * np.radians(15)])
+        for which in ("gtroom", "blueprint"):
+            mp = map_points(read_map(mdir / "map" / f"{which}.yaml"))
+            t = time.perf_counter()
+            res = match_to_map(mp, list(stops.merged), init,
+                               tilt_shift_m=scanner_height_m(rig) * ErrorModel().floor_tilt_sigma_rad)
+            e = se2.relative(truth, res.poses)
+            fl = "; ".join(f"{f.name()} {1000 * f.offset_m:+.1f} mm (+-{1000 * f.se_m:.1f})" for f in res.flagged)
+            print(f"{rec} {which}: {sum(v.accepted for v in res.verdicts)}/{len(truth)} accepted; error max "
+                  f"{1000 * np.max(np.hypot(e[:, 0], e[:, 1])):.2f} mm, "
+                  f"mean {1000 * np.mean(np.hypot(e[:, 0], e[:, 1])):.2f} mm, "
+                  f"max {np.degrees(np.max(np.abs(e[:, 2]))):.3f} deg; flagged: {fl or 'none'}"
+                  + (f" (truth: wall {err['wall_from_xy'][0]:.2f}, {err['wall_from_xy'][1]:.2f} - "
+                     f"{err['wall_to_xy'][0]:.2f}, {err['wall_to_xy'][1]:.2f} moved {1000 * err['shift_m']:.0f} mm)"
+                     if which == "blueprint" else "") + f"; {time.perf_counter() - t:.0f} s", flush=True)
 
 
 def main() -> None:
@@ -206,11 +251,15 @@ def main() -> None:
     c = sub.add_parser("carmen")
     c.add_argument("--every", type=int, default=3)
     c.add_argument("--max-pairs", type=int, default=1500)
+    d = sub.add_parser("map")
+    d.add_argument("--recording", type=Path, action="append", required=True)
     args = ap.parse_args()
     if args.what == "speed":
         speed(args.recording, args.pairs)
     elif args.what == "accept":
         accept(args.recording, args.pairs, args.ga_pairs)
+    elif args.what == "map":
+        map_validation(args.recording)
     else:
         carmen(args.every, args.max_pairs)
 

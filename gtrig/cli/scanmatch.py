@@ -44,7 +44,8 @@ def _logs(rig, recording: Path, sequence: str):  # type: ignore[no-untyped-def]
 def pairs(
     recording: Annotated[Path, typer.Option("--recording", help="recording folder")],
     out: Annotated[Path, typer.Option("--out", help="relations.csv to write (and .relations beside it)")],
-    guess: Annotated[str, typer.Option("--guess", help="'odometry' (run/odometry.csv) or a TUM trajectory")] = "odometry",
+    guess: Annotated[str, typer.Option("--guess", help="'odometry' (SEQUENCE/odometry.csv) or a TUM trajectory")
+                     ] = "odometry",
     sequence: Annotated[str, typer.Option("--sequence", help="run or validation")] = "run",
     rig: Annotated[Path | None, typer.Option("--rig", help="rig.yaml (default: the recording's)")] = None,
     max_dist: Annotated[float, typer.Option("--max-dist", help="pair search radius, m")] = 1.0,
@@ -140,7 +141,7 @@ def validate(
 
 def validation_lines(res) -> list[str]:  # type: ignore[no-untyped-def]
     """The per-stop rows as aligned text (also what ``gtrig demo`` prints)."""
-    out = [f"stop  x (m)      y (m)      theta (deg)  sd xy (mm)  sd th (deg)  verdict"
+    out = ["stop  x (m)      y (m)      theta (deg)  sd xy (mm)  sd th (deg)  verdict"
            + ("   vs survey (mm, deg)" if res.survey_rel is not None else "")]
     for row in res.rows():
         s = (f"{row['pose']:>4}  {row['x']:+.4f}   {row['y']:+.4f}   {np.degrees(row['theta']):+9.3f}   "

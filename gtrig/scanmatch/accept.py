@@ -44,6 +44,9 @@ class AcceptParams:
     guess_quantile: float = 0.9999
 
 
+DEFAULT_ACCEPT = AcceptParams()
+
+
 @dataclass(frozen=True)
 class Verdict:
     """The acceptance test's statistics and verdict for one match."""

@@ -44,6 +44,9 @@ class GeneticParams:
     seed: int = 0
 
 
+DEFAULT_GENETIC = GeneticParams()
+
+
 @dataclass(frozen=True)
 class GeneticResult:
     """Best pose (3,) (the current frame in the reference frame), its fitness (trimmed mean squared

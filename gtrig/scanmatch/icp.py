@@ -51,6 +51,9 @@ class IcpParams:
     converged_step_m: float = 2e-3
 
 
+DEFAULT_ICP = IcpParams()
+
+
 @dataclass(frozen=True)
 class IcpResult:
     """A local match: the current scan's frame in the reference scan's frame.

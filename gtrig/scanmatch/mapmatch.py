@@ -35,10 +35,12 @@ from gtrig.io.rosmap import OccupancyMap
 from gtrig.scanmatch import se2
 from gtrig.scanmatch.accept import AcceptParams, Verdict
 from gtrig.scanmatch.genetic import GeneticParams
-from gtrig.scanmatch.icp import IcpParams, match_icp
+from gtrig.scanmatch.icp import DEFAULT_ICP, IcpParams, match_icp
 from gtrig.scanmatch.scan import PlanarScan
 
 FEATURE_MAX_TURN_RAD = np.radians(15.0)
+# a map holds surfaces a scan does not see from one place (and misses clutter it does): a lower share
+MAP_ACCEPT = AcceptParams(min_explained=0.5)
 
 
 @dataclass(frozen=True)
@@ -173,7 +175,7 @@ def feature_offsets(mp: MapPoints, scans: list[PlanarScan], poses: np.ndarray, i
 
 
 def match_to_map(mp: MapPoints, scans: list[PlanarScan], initial: np.ndarray, min_offset_m: float = 0.01,
-                 min_t: float = 5.0, icp: IcpParams = IcpParams(), accept: AcceptParams = AcceptParams(min_explained=0.5),
+                 min_t: float = 5.0, icp: IcpParams = DEFAULT_ICP, accept: AcceptParams = MAP_ACCEPT,
                  tilt_shift_m: float = 0.0, seed: int = 0, max_rounds: int = 3) -> MapMatchResult:
     """Align every scan (in its robot frame) on the map from ``initial`` (K, 3) map-frame poses."""
     from gtrig.scanmatch.validate import ErrorModel, match_pair

@@ -25,9 +25,9 @@ from gtrig.errors import InputError
 from gtrig.io.scans import ScanLog
 from gtrig.rig.models import OnboardScanner
 from gtrig.scanmatch import se2
-from gtrig.scanmatch.accept import AcceptParams, Verdict
-from gtrig.scanmatch.genetic import GeneticParams
-from gtrig.scanmatch.icp import IcpParams
+from gtrig.scanmatch.accept import DEFAULT_ACCEPT, AcceptParams, Verdict
+from gtrig.scanmatch.genetic import DEFAULT_GENETIC, GeneticParams
+from gtrig.scanmatch.icp import DEFAULT_ICP, IcpParams
 from gtrig.scanmatch.scan import PlanarScan, merge, ranges_to_scan
 
 log = logging.getLogger(__name__)
@@ -140,8 +140,8 @@ def guess_cov_for(rel_guess: np.ndarray, dist_sigma_frac: float = 0.1, min_sigma
 
 
 def match_pairs(scans: list[PlanarScan], guesses: np.ndarray, pairs: np.ndarray, tilt_shift_m: float = 0.0,
-                surface_bias_m: float = 0.0015, icp: IcpParams = IcpParams(), accept: AcceptParams = AcceptParams(),
-                genetic: GeneticParams | None = GeneticParams(), guess_cov: np.ndarray | None = None,
+                surface_bias_m: float = 0.0015, icp: IcpParams = DEFAULT_ICP, accept: AcceptParams = DEFAULT_ACCEPT,
+                genetic: GeneticParams | None = DEFAULT_GENETIC, guess_cov: np.ndarray | None = None,
                 rel_guesses: np.ndarray | None = None) -> list[Relation]:
     """Match and judge every pair; ``guesses`` (N, 3) are the scans' guessed poses (``rel_guesses``
     (P, 3), when given, replace their relative poses, e.g. perturbed truth in a measurement)."""

@@ -24,10 +24,10 @@ from gtrig.errors import FormatError, InputError
 from gtrig.io.scans import read_scans
 from gtrig.rig.models import OnboardScanner, Rig
 from gtrig.scanmatch import se2
-from gtrig.scanmatch.accept import AcceptParams, Verdict, judge
+from gtrig.scanmatch.accept import DEFAULT_ACCEPT, AcceptParams, Verdict, judge
 from gtrig.scanmatch.covariance import systematic_cov
-from gtrig.scanmatch.genetic import GeneticParams, match_genetic
-from gtrig.scanmatch.icp import IcpParams, IcpResult, match_icp
+from gtrig.scanmatch.genetic import DEFAULT_GENETIC, GeneticParams, match_genetic
+from gtrig.scanmatch.icp import DEFAULT_ICP, IcpParams, IcpResult, match_icp
 from gtrig.scanmatch.scan import PlanarScan, merge, ranges_to_scan, stop_ranges
 from gtrig.trajectory import PoseStatus, PoseTrack
 
@@ -134,8 +134,8 @@ class StopMatch:
 
 
 def match_pair(ref: PlanarScan, cur: PlanarScan, guess: np.ndarray, guess_cov: np.ndarray,
-               model: ErrorModel, tilt_shift_m: float, icp: IcpParams = IcpParams(),
-               accept: AcceptParams = AcceptParams(), genetic: GeneticParams | None = GeneticParams(),
+               model: ErrorModel, tilt_shift_m: float, icp: IcpParams = DEFAULT_ICP,
+               accept: AcceptParams = DEFAULT_ACCEPT, genetic: GeneticParams | None = DEFAULT_GENETIC,
                ) -> tuple[np.ndarray, np.ndarray, IcpResult, Verdict, str]:
     """Local match from ``guess``; when the acceptance test refuses it, the genetic matcher (seeded
     with the guess) and the local refinement. Returns pose, full covariance, match, verdict, matcher."""
@@ -196,7 +196,7 @@ STOP_ACCEPT = AcceptParams(min_explained=0.3)
 
 def validate_stops(stops: StopScans, reference: int, rig: Rig, guesses_world: np.ndarray | None = None,
                    guess_cov: np.ndarray | None = None, model: ErrorModel = ErrorModel(),
-                   icp: IcpParams = IcpParams(), accept: AcceptParams = STOP_ACCEPT,
+                   icp: IcpParams = DEFAULT_ICP, accept: AcceptParams = STOP_ACCEPT,
                    seed: int = 0) -> StopValidation:
     """Match every stop on the reference stop.
 
