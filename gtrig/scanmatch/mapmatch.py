@@ -212,8 +212,8 @@ def match_to_map(mp: MapPoints, scans: list[PlanarScan], initial: np.ndarray, mi
             break
         flagged_ids |= new
         excluded = np.isin(mp.feature, list(flagged_ids))
-    feats = [MapFeatureError(f.feature, f.ends_xy, f.offset_m, f.se_m, f.n_scans, f.n_points,
-                             f.feature in flagged_ids) for f in feats]
+    # a surface flagged while a moved wall still pulled the poses may be fine at the final poses: the
+    # final test decides what is reported (it stays out of the poses, which costs only its points)
     return MapMatchResult(poses, covs, tuple(verdicts), tuple(feats))
 
 
