@@ -56,28 +56,43 @@ def grid_build(ref_xy: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray,
 @njit(cache=True)
 def grid_nearest(px: float, py: float, ref_xy: np.ndarray, origin: np.ndarray, shape: np.ndarray,
                  start: np.ndarray, order: np.ndarray, cell: float, radius: float) -> tuple[int, float]:
-    """Index and squared distance of the point nearest to (px, py) within ``radius``; (-1, inf) if none."""
+    """Index and squared distance of the point nearest to (px, py) within ``radius``; (-1, inf) if none.
+
+    Rings of cells around the point's cell are searched outwards; the search stops once the best
+    distance is below the nearest possible distance of the next ring (``k * cell``).
+    """
     nx, ny = shape[0], shape[1]
-    k = int(math.ceil(radius / cell))
+    kmax = int(math.ceil(radius / cell))
     fx = (px - origin[0]) / cell
     fy = (py - origin[1]) / cell
-    if fx < -k or fy < -k or fx > nx + k or fy > ny + k:
+    if fx < -kmax or fy < -kmax or fx > nx + kmax or fy > ny + kmax:
         return -1, np.inf
     ix = int(math.floor(fx))
     iy = int(math.floor(fy))
     best = -1
     best_d2 = radius * radius
-    for a in range(max(0, ix - k), min(nx, ix + k + 1)):
-        for b in range(max(0, iy - k), min(ny, iy + k + 1)):
-            c = a * ny + b
-            for q in range(start[c], start[c + 1]):
-                j = order[q]
-                dx = ref_xy[j, 0] - px
-                dy = ref_xy[j, 1] - py
-                d2 = dx * dx + dy * dy
-                if d2 < best_d2:
-                    best_d2 = d2
-                    best = j
+    for k in range(kmax + 1):
+        for a in range(ix - k, ix + k + 1):
+            if a < 0 or a >= nx:
+                continue
+            edge_a = a == ix - k or a == ix + k
+            b = iy - k
+            while b <= iy + k:
+                if 0 <= b < ny:
+                    c = a * ny + b
+                    for q in range(start[c], start[c + 1]):
+                        j = order[q]
+                        dx = ref_xy[j, 0] - px
+                        dy = ref_xy[j, 1] - py
+                        d2 = dx * dx + dy * dy
+                        if d2 < best_d2:
+                            best_d2 = d2
+                            best = j
+                # inside the ring only its top and bottom cells are new
+                b = b + 1 if edge_a or k == 0 else (iy + k if b == iy - k else b + 1)
+        reach = k * cell
+        if best >= 0 and best_d2 <= reach * reach:
+            break
     if best < 0:
         return -1, np.inf
     return best, best_d2

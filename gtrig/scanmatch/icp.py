@@ -39,7 +39,7 @@ class IcpParams:
         ``r_min_m``.
     """
 
-    cell_m: float = 0.25
+    cell_m: float = 0.1
     r_start_m: float = 0.5
     r_min_m: float = 0.08
     shrink: float = 0.7

@@ -15,8 +15,8 @@ building's map from manual initial poses. Here:
    offset is their mean over the scans with its standard error (scans' means are independent); a
    feature off by more than ``min_offset_m`` at more than ``min_t`` standard errors is a map error,
    named by its end points;
-5. the scans are matched again without the flagged features' points, so a moved wall does not pull
-   the poses; step 4 is repeated on the new poses until nothing new is flagged.
+5. the scans are matched again, from their rough poses, without the flagged features' points, so a
+   moved wall does not pull the poses; steps 3-5 repeat until the flagged set no longer changes.
 
 Residual sign: positive when the scanned surface lies on the free side of the map's (the map draws
 the wall too far back).
@@ -35,12 +35,12 @@ from gtrig.io.rosmap import OccupancyMap
 from gtrig.scanmatch import se2
 from gtrig.scanmatch.accept import AcceptParams, Verdict
 from gtrig.scanmatch.genetic import GeneticParams
-from gtrig.scanmatch.icp import DEFAULT_ICP, IcpParams, match_icp
+from gtrig.scanmatch.icp import DEFAULT_ICP, IcpParams
 from gtrig.scanmatch.scan import PlanarScan
 
 FEATURE_MAX_TURN_RAD = np.radians(15.0)
-# a map holds surfaces a scan does not see from one place (and misses clutter it does): a lower share
-MAP_ACCEPT = AcceptParams(min_explained=0.5)
+# a map lacks clutter a scan sees, and a surface found wrong is left out of it: a lower share
+MAP_ACCEPT = AcceptParams(min_explained=0.4)
 
 
 @dataclass(frozen=True)
@@ -176,7 +176,7 @@ def feature_offsets(mp: MapPoints, scans: list[PlanarScan], poses: np.ndarray, i
 
 def match_to_map(mp: MapPoints, scans: list[PlanarScan], initial: np.ndarray, min_offset_m: float = 0.01,
                  min_t: float = 5.0, icp: IcpParams = DEFAULT_ICP, accept: AcceptParams = MAP_ACCEPT,
-                 tilt_shift_m: float = 0.0, seed: int = 0, max_rounds: int = 3) -> MapMatchResult:
+                 tilt_shift_m: float = 0.0, seed: int = 0, max_rounds: int = 4) -> MapMatchResult:
     """Align every scan (in its robot frame) on the map from ``initial`` (K, 3) map-frame poses."""
     from gtrig.scanmatch.validate import ErrorModel, match_pair
 
@@ -195,25 +195,21 @@ def match_to_map(mp: MapPoints, scans: list[PlanarScan], initial: np.ndarray, mi
         ref = PlanarScan(mp.scan.xy[keep], mp.scan.normals[keep], mp.scan.normal_ok[keep], mp.scan.sigma_m[keep])
         verdicts = []
         for k, s in enumerate(scans):
-            start = init[k] if _round == 0 else poses[k]
             gp = GeneticParams(**{**ga.__dict__, "seed": seed + k})
-            pose, cov, _res, v, _name = match_pair(ref, s, start, gc, model, tilt_shift_m, icp, accept, gp)
-            if _round > 0:
-                # guess agreement is judged against the rough initial pose, not the previous round
-                pose2 = match_icp(ref, s, pose, icp).pose
-                pose = pose2
+            # every round starts from the rough pose: the acceptance test judges agreement with it
+            pose, cov, _res, v, _name = match_pair(ref, s, init[k], gc, model, tilt_shift_m, icp, accept, gp)
             poses[k], covs[k] = pose, cov
             verdicts.append(v)
         ok = np.array([v.accepted for v in verdicts])
         feats = feature_offsets(mp, [s for s, o in zip(scans, ok, strict=True) if o], poses[ok], icp,
                                 min_offset_m, min_t)
-        new = {f.feature for f in feats if f.flagged} - flagged_ids
-        if not new:
+        now = {f.feature for f in feats if f.flagged}
+        if now == flagged_ids:
             break
-        flagged_ids |= new
+        # the flagged set is re-decided each round: a surface flagged while a moved wall still pulled
+        # the poses comes back once the wall is out
+        flagged_ids = now
         excluded = np.isin(mp.feature, list(flagged_ids))
-    # a surface flagged while a moved wall still pulled the poses may be fine at the final poses: the
-    # final test decides what is reported (it stays out of the poses, which costs only its points)
     return MapMatchResult(poses, covs, tuple(verdicts), tuple(feats))
 
 
