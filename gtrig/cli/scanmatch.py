@@ -3,24 +3,29 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
 
 from gtrig.cli.common import console, handle_errors
 
+if TYPE_CHECKING:
+    from gtrig.io.scans import ScanLog
+    from gtrig.rig.models import Rig
+    from gtrig.scanmatch.validate import StopValidation
+
 app = typer.Typer(help="Onboard scan matching: relations, validation stops, map validation, mountings.",
                   no_args_is_help=True)
 
 
-def _rig(rig: Path | None, recording: Path):  # type: ignore[no-untyped-def]
+def _rig(rig: Path | None, recording: Path) -> Rig:
     from gtrig.rig import load_rig
 
     return load_rig(rig if rig is not None else recording / "rig.yaml")
 
 
-def _logs(rig, recording: Path, sequence: str):  # type: ignore[no-untyped-def]
+def _logs(rig: Rig, recording: Path, sequence: str) -> dict[str, ScanLog]:
     from gtrig.errors import FormatError, InputError
     from gtrig.io.scans import read_scans
 
@@ -139,7 +144,7 @@ def validate(
     console.print(f"wrote {out}, {tum}, {cov}")
 
 
-def validation_lines(res) -> list[str]:  # type: ignore[no-untyped-def]
+def validation_lines(res: StopValidation) -> list[str]:
     """The per-stop rows as aligned text (also what ``gtrig demo`` prints)."""
     out = ["stop  x (m)      y (m)      theta (deg)  sd xy (mm)  sd th (deg)  verdict"
            + ("   vs survey (mm, deg)" if res.survey_rel is not None else "")]
@@ -182,13 +187,14 @@ def map_(
     scans = [stops.merged[index[int(i)]] for i in ids]
     mp = map_points(m)
     res = match_to_map(mp, scans, init, tilt_shift_m=scanner_height_m(r) * ErrorModel().floor_tilt_sigma_rad)
-    rows = []
+    rows: list[dict[str, object]] = []
     for i, p, c, v in zip(ids, res.poses, res.covs, res.verdicts, strict=True):
         sd = np.sqrt(np.diag(c))
         rows.append({"pose": int(i), "x": p[0], "y": p[1], "theta": p[2], "sd_x": sd[0], "sd_y": sd[1],
                      "sd_theta": sd[2], "verdict": "accepted" if v.accepted else "rejected", "reason": v.reason})
-    frows = [{"surface": f.name(), "offset_m": f.offset_m, "se_m": f.se_m, "scans": f.n_scans, "points": f.n_points,
-              "map_error": "yes" if f.flagged else "no"} for f in res.features]
+    frows: list[dict[str, object]] = [
+        {"surface": f.name(), "offset_m": f.offset_m, "se_m": f.se_m, "scans": f.n_scans, "points": f.n_points,
+         "map_error": "yes" if f.flagged else "no"} for f in res.features]
     ferr = out.with_name(out.stem + "_map_errors.csv")
     with atomic_group(out, ferr) as (a, b):
         a.write_text(stop_poses_text(rows), encoding="utf-8")

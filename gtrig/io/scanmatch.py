@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -78,7 +79,7 @@ def read_planar_poses(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndar
     return a[:, 0].astype(int), a[:, 1:4], cov
 
 
-def stop_poses_text(rows: list[dict[str, object]]) -> str:
+def stop_poses_text(rows: Sequence[Mapping[str, object]]) -> str:
     """The per-stop table of ``gtrig scanmatch validate`` / ``map`` as CSV text (columns of the rows)."""
     buf = io.StringIO()
     if not rows:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -169,12 +170,12 @@ class StopValidation:
     reference: int
     survey_rel: np.ndarray | None = None
 
-    def rows(self) -> list[dict[str, object]]:
+    def rows(self) -> list[dict[str, Any]]:
         """One row per stop: pose, x, y, theta, standard deviations, verdict, and the survey's pose."""
         out = []
         for i, m in enumerate(self.matches):
             sd = np.sqrt(np.diag(m.cov))
-            row: dict[str, object] = {
+            row: dict[str, Any] = {
                 "pose": m.pose_id, "x": m.pose[0], "y": m.pose[1], "theta": m.pose[2],
                 "sd_x": sd[0], "sd_y": sd[1], "sd_theta": sd[2],
                 "verdict": "accepted" if m.verdict.accepted else "rejected", "reason": m.verdict.reason,
