@@ -187,6 +187,7 @@ def icp_point_to_line(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray,
     m = 0
     it = 0
     step = np.inf
+    small = 0
     for it in range(1, max_iter + 1):
         c = math.cos(pose[2])
         s = math.sin(pose[2])
@@ -232,6 +233,10 @@ def icp_point_to_line(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray,
         at_min = r <= r_min * 1.0000001
         if at_min and math.hypot(d[0], d[1]) < tol_m and abs(d[2]) < tol_rad:
             break
+        # an association flipping between two neighbours oscillates below 0.1 mm: stop after three
+        small = small + 1 if at_min and step < 1e-4 else 0
+        if small >= 3:
+            break
         r = max(r_min, r * shrink)
     pose[2] = math.atan2(math.sin(pose[2]), math.cos(pose[2]))
     return pose, it, m, step
@@ -275,12 +280,14 @@ def residuals_at(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray, cur_
 @njit(cache=True)
 def evaluate_fit(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray, ref_sigma: np.ndarray,
                  cur_xy: np.ndarray, cur_sigma: np.ndarray, pose: np.ndarray, cell: float, radius: float,
-                 inlier_sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float]:
-    """:func:`residuals_at` plus the inlier test and the inliers' normal matrix in one pass.
+                 inlier_sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float,
+                                               np.ndarray]:
+    """:func:`residuals_at` plus the inlier test, the inliers' normal matrix and the covariance in one pass.
 
     Returns residuals (N,), expected sigmas (N,) (nan: no association), inlier mask (N,), Jacobian
-    rows (N, 3), ``H = J^T J`` over the inliers (3, 3), the number of associated points and the
-    inliers' sum of squared residuals.
+    rows (N, 3), ``H = J^T J`` over the inliers (3, 3), the number of associated points, the
+    inliers' sum of squared residuals and ``s^2 H^-1`` (3, 3; inf when H is not positive definite or
+    there are 3 inliers or fewer).
     """
     d, e, J, idx = residuals_at(ref_xy, ref_n, ref_ok, cur_xy, pose, cell, radius)
     N = cur_xy.shape[0]
@@ -302,4 +309,43 @@ def evaluate_fit(ref_xy: np.ndarray, ref_n: np.ndarray, ref_ok: np.ndarray, ref_
             for a in range(3):
                 for b in range(3):
                     H[a, b] += J[i, a] * J[i, b]
-    return e, sig, inl, J, H, n_matched, sse
+    m = 0
+    for i in range(N):
+        if inl[i]:
+            m += 1
+    cov = np.full((3, 3), np.inf)
+    if m > 3:
+        # Cholesky by hand: it both inverts and proves H positive definite
+        L = np.zeros((3, 3))
+        ok = True
+        for a in range(3):
+            for b in range(a + 1):
+                acc = H[a, b]
+                for k in range(b):
+                    acc -= L[a, k] * L[b, k]
+                if a == b:
+                    if acc <= 0.0:
+                        ok = False
+                        break
+                    L[a, a] = math.sqrt(acc)
+                else:
+                    L[a, b] = acc / L[b, b]
+            if not ok:
+                break
+        if ok:
+            Li = np.zeros((3, 3))
+            for a in range(3):
+                Li[a, a] = 1.0 / L[a, a]
+                for b in range(a):
+                    acc = 0.0
+                    for k in range(b, a):
+                        acc -= L[a, k] * Li[k, b]
+                    Li[a, b] = acc / L[a, a]
+            s2 = sse / (m - 3)
+            for a in range(3):
+                for b in range(3):
+                    acc = 0.0
+                    for k in range(3):
+                        acc += Li[k, a] * Li[k, b]
+                    cov[a, b] = s2 * acc
+    return e, sig, inl, J, H, n_matched, sse, cov

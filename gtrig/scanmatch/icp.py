@@ -94,21 +94,11 @@ def evaluate(ref: PlanarScan, cur: PlanarScan, pose: np.ndarray, params: IcpPara
              iterations: int = 0, converged: bool = True) -> IcpResult:
     """Residuals, inliers and covariance of ``cur`` on ``ref`` at ``pose`` (no optimisation)."""
     pose = np.asarray(pose, dtype=float)
-    e, sig, inl, J, H, n_matched, sse = evaluate_fit(ref.xy, ref.normals, ref.normal_ok, ref.sigma_m, cur.xy,
-                                                      cur.sigma_m, pose, params.cell_m, params.r_min_m,
-                                                      params.inlier_sigma)
+    e, sig, inl, J, H, n_matched, sse, cov = evaluate_fit(ref.xy, ref.normals, ref.normal_ok, ref.sigma_m, cur.xy,
+                                                           cur.sigma_m, pose, params.cell_m, params.r_min_m,
+                                                           params.inlier_sigma)
     m = int(np.count_nonzero(inl))
-    cov = np.full((3, 3), np.inf)
-    s2 = float("nan")
-    if m > 3:
-        s2 = sse / (m - 3)
-        try:
-            # Cholesky both inverts and proves H positive definite (a degenerate fit fails here)
-            L = np.linalg.cholesky(H)
-            Linv = np.linalg.inv(L)
-            cov = s2 * (Linv.T @ Linv)
-        except np.linalg.LinAlgError:
-            pass
+    s2 = sse / (m - 3) if m > 3 else float("nan")
     return IcpResult(pose=pose, cov=cov, iterations=iterations, n_points=len(cur), n_matched=int(n_matched),
                      n_inliers=m, residuals_m=e, expected_sigma_m=sig, inlier=inl, s_m=math.sqrt(s2),
                      converged=converged and m > 3, hessian=H, jacobian=J)
