@@ -42,6 +42,7 @@ def command(
     with console.status("processing") as status:
         result = pipeline.run(rec, out / "results", on_stage=lambda name: status.update(f"processing: {name}"))
     print_result(result, True)
+    _scanmatch_validate(rec, out / "results")
     from gtrig.report import write_report
 
     with console.status("writing the report"):
@@ -49,3 +50,22 @@ def command(
     console.print(f"demo finished in {time.perf_counter() - t0:.0f} s; outputs in {out}; report: {report}")
     if result.exit_code:
         raise typer.Exit(result.exit_code)
+
+
+def _scanmatch_validate(rec: Path, results: Path) -> None:
+    """The validation stops from the onboard scans (docs/scanmatch.md), seeded by the survey's poses."""
+    from gtrig.cli.scanmatch import validation_lines
+    from gtrig.errors import GtrigError
+    from gtrig.io.scanmatch import read_planar_poses
+    from gtrig.scanmatch.validate import validate_recording
+
+    sv_path = results / "survey" / "validation_poses.csv"
+    try:
+        sv = read_planar_poses(sv_path)[1] if sv_path.exists() else None
+        res = validate_recording(rec, survey_poses=sv)
+    except GtrigError as e:
+        console.print(f"[yellow]skipped[/yellow] scanmatch validate: {e}")
+        return
+    console.print("scanmatch validate: validation stops from the onboard scans, relative to stop 1")
+    for line in validation_lines(res):
+        console.print(line, highlight=False)

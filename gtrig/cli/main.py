@@ -35,6 +35,7 @@ _SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("fuse", "fuse", "command"),
     ("sync", "sync", "command"),
     ("gps", "gps", "command"),
+    ("scanmatch", "scanmatch", "group"),
 )
 
 

@@ -196,6 +196,12 @@ def _step_survey(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
     write_survey(scene, tl.validation.T_world_robot_many(mid), out, cfg, seed=cfg.seed * 10 + 7)
 
 
+def _step_map(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
+    from gtrig.sim.map import write_maps
+
+    write_maps(scene, out)
+
+
 Step = Callable[[Scene, Timeline, Path, SimConfig], None]
 STEPS: tuple[tuple[str, Step], ...] = (
     ("rig and truth", _write_rigs_and_truth),
@@ -205,6 +211,7 @@ STEPS: tuple[tuple[str, Step], ...] = (
     ("calibration images", _step_calibration_images),
     ("validation images", _step_validation_cameras),
     ("run images", _step_run_cameras),
+    ("map", _step_map),
 )
 
 

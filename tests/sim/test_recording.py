@@ -65,7 +65,7 @@ def test_resume_and_refusal(rec: Path, tmp_path: Path) -> None:
     (tmp_path / "x.txt").write_text("mine")
     with pytest.raises(InputError, match="not empty"):
         simulate(tiny(), tmp_path)
-    assert len(STEPS) == 7
+    assert len(STEPS) == 8  # the map step (gtrig.sim.map) is the eighth
 
 
 def test_same_seed_same_truth(rec: Path, tmp_path: Path) -> None:

@@ -1,0 +1,268 @@
+"""Onboard scan matching: speed against small_gicp, the genetic matcher's time, the acceptance test
+against truth on simulated pairs, and agreement with the CARMEN logs' corrected poses.
+
+    python bench/scanmatch.py speed --recording REC [--pairs 500]
+    python bench/scanmatch.py accept --recording REC [--recording REC2 ...] [--pairs 400]
+    python bench/scanmatch.py carmen [--every 4]
+    python bench/scanmatch.py map --recording REC [--recording REC2 ...]
+
+The machine may be loaded: speed figures are printed with the ratio to the peer measured in the same
+run. small_gicp (PyPI ``small_gicp``) is the peer; without it the speed section says so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gtrig.io.scans import read_scans
+from gtrig.io.tum import read_tum
+from gtrig.rig.load import load_rig
+from gtrig.scanmatch import se2
+from gtrig.scanmatch.accept import AcceptParams
+from gtrig.scanmatch.genetic import GeneticParams, match_genetic
+from gtrig.scanmatch.icp import evaluate, match_icp
+from gtrig.scanmatch.pairs import Guess, candidate_pairs, match_pairs, sequence_scans
+from gtrig.scanmatch.scan import ranges_to_scan
+from gtrig.scanmatch.validate import ErrorModel, scanner_height_m, scanner_pose_xyth
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def truth_at(rec: Path, stamps: np.ndarray) -> np.ndarray:
+    tr = read_tum(rec / "truth" / "run.tum")
+    return Guess(tr.stamps_s, se2.from_matrix(tr.matrices())).at(stamps)
+
+
+def speed(rec: Path, n_pairs: int) -> None:
+    rig = load_rig(rec / "rig.yaml")
+    sc = rig.robot.onboard_scanners[0]
+    lg = read_scans(rec / "run" / "onboard" / f"{sc.name}.csv", sc)
+    scans = [ranges_to_scan(r, sc.angles_rad, np.zeros(3), 0.01, sc.range_max_m, t)
+             for r, t in zip(lg.ranges_m, lg.stamps_s, strict=True)]
+    mount = scanner_pose_xyth(sc)
+    robot = truth_at(rec, lg.stamps_s)
+    scanner = se2.compose(robot, mount)
+    rng = np.random.default_rng(0)
+    i = rng.integers(0, len(scans) - 10, n_pairs)
+    j = i + rng.integers(1, 10, n_pairs)
+    rel = se2.relative(scanner[i], scanner[j])
+    guess = rel + np.column_stack([rng.normal(0, 0.03, (n_pairs, 2)), rng.normal(0, np.radians(1.5), n_pairs)])
+    match_icp(scans[0], scans[1], np.zeros(3))  # compile
+    t = time.perf_counter()
+    c = time.process_time()
+    ours = np.array([match_icp(scans[a], scans[b], g).pose for a, b, g in zip(i, j, guess, strict=True)])
+    t_ours = time.perf_counter() - t
+    c_ours = time.process_time() - c
+    e = se2.relative(rel, ours)
+    print(f"gtrig point-to-line ICP: {n_pairs / t_ours:.0f} matches/s wall, {n_pairs / c_ours:.0f} per CPU second "
+          f"({sc.beams} beams, one thread; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores); "
+          f"error median {1000 * np.median(np.hypot(e[:, 0], e[:, 1])):.2f} mm, "
+          f"{np.degrees(np.median(np.abs(e[:, 2]))):.3f} deg")
+    try:
+        import small_gicp
+    except ImportError:
+        print("small_gicp not installed (pip install small_gicp): no peer")
+        return
+    pts = [np.column_stack([s.xy, np.zeros(len(s))]) for s in scans]
+    for kind in ("ICP", "GICP"):
+        t = time.perf_counter()
+        c = time.process_time()
+        out = []
+        for a, b, g in zip(i, j, guess, strict=True):
+            T0 = np.eye(4)
+            c, s_ = np.cos(g[2]), np.sin(g[2])
+            T0[:2, :2] = [[c, -s_], [s_, c]]
+            T0[:2, 3] = g[:2]
+            r = small_gicp.align(pts[a], pts[b], T0, registration_type=kind, downsampling_resolution=0.01,
+                                 max_correspondence_distance=0.5, num_threads=1, max_iterations=40)
+            out.append(se2.from_matrix(r.T_target_source))
+        t_p = time.perf_counter() - t
+        c_p = time.process_time() - c
+        e2 = se2.relative(rel, np.array(out))
+        print(f"small_gicp {kind}: {n_pairs / t_p:.0f} matches/s wall, {n_pairs / c_p:.0f} per CPU second; "
+              f"error median {1000 * np.median(np.hypot(e2[:, 0], e2[:, 1])):.2f} mm, "
+              f"{np.degrees(np.median(np.abs(e2[:, 2]))):.3f} deg; "
+              f"gtrig / small_gicp: speed x{t_p / t_ours:.2f} wall, x{c_p / c_ours:.2f} CPU; position error x"
+              f"{np.median(np.hypot(e[:, 0], e[:, 1])) / np.median(np.hypot(e2[:, 0], e2[:, 1])):.2f}")
+    t = time.perf_counter()
+    n_ga = 20
+    for a, b, g in zip(i[:n_ga], j[:n_ga], guess[:n_ga], strict=True):
+        match_genetic(scans[a], scans[b], g, GeneticParams())
+    print(f"genetic matcher: {1000 * (time.perf_counter() - t) / n_ga:.0f} ms per pair "
+          f"(population 64, 40 generations, 120 points)")
+
+
+def accept(recs: list[Path], n_pairs: int, ga_pairs: int) -> None:
+    tot = {"right0": 0, "wrong0": 0, "wrong0_rej": 0, "right0_rej": 0, "right": 0, "wrong": 0, "right_rej": 0,
+           "wrong_rej": 0, "n": 0}
+    for s, rec in enumerate(recs):
+        rig = load_rig(rec / "rig.yaml")
+        sc = rig.robot.onboard_scanners
+        logs = {x.name: read_scans(rec / "run" / "onboard" / f"{x.name}.csv", x) for x in sc}
+        from gtrig.io.odometry import read_odometry
+
+        od = read_odometry(rec / "run" / "odometry.csv")
+        scans = sequence_scans(sc, logs, Guess(od.stamps_s, od.xytheta),
+                               {x.name: scanner_pose_xyth(x) for x in sc}, 0.01, every=3)
+        truth = truth_at(rec, np.array([x.stamp_s for x in scans]))
+        pairs = candidate_pairs(truth, 1.0, np.radians(30), min_index_gap=2)
+        rng = np.random.default_rng(s)
+        pairs = pairs[rng.choice(len(pairs), min(n_pairs, len(pairs)), replace=False)]
+        rel = se2.relative(truth[pairs[:, 0]], truth[pairs[:, 1]])
+        r = 0.5 * np.sqrt(rng.uniform(0, 1, len(pairs)))
+        a = rng.uniform(0, 2 * np.pi, len(pairs))
+        rg = rel + np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(-1, 1, len(pairs)) * np.radians(30)])
+        gc = np.diag([0.3**2, 0.3**2, np.radians(20) ** 2])
+        tilt = scanner_height_m(rig) * ErrorModel().floor_tilt_sigma_rad
+        for stage, ga in (("0", None), ("", GeneticParams())):
+            # the genetic fallback costs about a second per refused pair: measured on the first ga_pairs
+            m = len(pairs) if ga is None else min(ga_pairs, len(pairs))
+            R = match_pairs(scans, truth, pairs[:m], tilt_shift_m=tilt, genetic=ga, guess_cov=gc, rel_guesses=rg[:m],
+                            accept=AcceptParams())
+            E = np.array([se2.relative(rel[n], x.pose) for n, x in enumerate(R)])
+            right = (np.hypot(E[:, 0], E[:, 1]) < 0.02) & (np.degrees(np.abs(E[:, 2])) < 0.5)
+            acc = np.array([x.verdict.accepted for x in R])
+            tot["right" + stage] += int(right.sum())
+            tot["wrong" + stage] += int((~right).sum())
+            tot["right" + stage + "_rej"] += int((right & ~acc).sum())
+            tot["wrong" + stage + "_rej"] += int((~right & ~acc).sum())
+        tot["n"] += len(pairs)
+        tot["n_ga"] = tot.get("n_ga", 0) + min(ga_pairs, len(pairs))
+        print(f"{rec}: {len(pairs)} pairs", {k: v for k, v in tot.items()}, flush=True)
+    print(f"candidate pairs: {tot['n']} over {len(recs)} recordings; guesses off by up to 0.5 m and 30 deg")
+    print(f"local ICP from the guess: {tot['wrong0']} wrong, {tot['wrong0_rej']} rejected "
+          f"({100 * tot['wrong0_rej'] / max(1, tot['wrong0']):.2f} %); {tot['right0']} right, {tot['right0_rej']} "
+          f"rejected ({100 * tot['right0_rej'] / max(1, tot['right0']):.2f} %)")
+    n_ga = tot["n_ga"]
+    print(f"with the genetic fallback ({n_ga} of the pairs): {tot['wrong']} wrong, {tot['wrong_rej']} rejected; "
+          f"{tot['right']} right, {tot['right_rej']} rejected ({100 * tot['right_rej'] / max(1, tot['right']):.2f} %); "
+          f"accepted {100 * (n_ga - tot['wrong_rej'] - tot['right_rej']) / max(1, n_ga):.1f} % of the pairs")
+
+
+def raw_odometry_at(log, stamps: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The logs' raw wheel odometry (ODOM, re-anchorings removed: CarmenLog.rebuilt_odometry) at the
+    scans' stamps; the FLASER records' own odometry fields hold the corrected poses in these logs."""
+    t, p = log.rebuilt_odometry()
+    return Guess(t, p).at(stamps)
+
+
+def carmen(every: int, max_pairs: int) -> None:
+    from gtrig.io.carmen import read_carmen
+
+    for name in ("intel-corrected.log.gz", "freiburg-079-corrected.log.gz"):
+        p = ROOT / ".." / "shared" / "data" / "carmen" / name
+        log = read_carmen(p)
+        n = log.laser_ranges.shape[1]
+        ang = -np.pi / 2 + np.arange(n) * np.pi / n
+        # the Intel log's 910 scans are far apart (a third of a hertz): every scan there
+        step = 1 if n <= 180 else every
+        idx = np.arange(0, len(log.laser_stamps_s), step)
+        scans = [ranges_to_scan(np.where(log.laser_ranges[k] < 50.0, log.laser_ranges[k], np.nan), ang, np.zeros(3),
+                                0.01, 50.0, float(log.laser_stamps_s[k])) for k in idx]
+        odo = raw_odometry_at(log, log.laser_stamps_s[idx])
+        cor = log.laser_xytheta[idx]
+        # pairs within 1 m and 30 deg by the corrected poses (raw odometry drifts metres over a loop),
+        # matched from the raw odometry's relative pose
+        pairs = candidate_pairs(cor, 1.0, np.radians(30), min_index_gap=1)
+        if len(pairs) > max_pairs:
+            pairs = pairs[np.linspace(0, len(pairs) - 1, max_pairs).astype(int)]
+        t = time.perf_counter()
+        # local matcher only (the odometry is good over 1 m): the genetic fallback would cost a second a pair
+        R = match_pairs(scans, odo, pairs, accept=AcceptParams(), surface_bias_m=0.0, genetic=None)
+        dt = time.perf_counter() - t
+        ref = se2.relative(cor[pairs[:, 0]], cor[pairs[:, 1]])
+        E = np.array([se2.relative(ref[k], x.pose) for k, x in enumerate(R)])
+        acc = np.array([x.verdict.accepted for x in R])
+        dxy, dth = np.hypot(E[:, 0], E[:, 1]), np.degrees(np.abs(E[:, 2]))
+        # the scans' own verdict on the two poses: residual spread at ours and at the log's corrected one
+        s_ours, s_log = [], []
+        for k in np.flatnonzero(acc):
+            a, b = pairs[k]
+            s_ours.append(evaluate(scans[a], scans[b], R[k].pose).s_m)
+            s_log.append(evaluate(scans[a], scans[b], ref[k]).s_m)
+        s_ours, s_log = np.array(s_ours), np.array(s_log)
+        print(f"{name}: {len(R)} pairs within 1 m and 30 deg, guesses from raw odometry ({n} beams, "
+              f"every {step}th scan); "
+              f"accepted {acc.sum()} ({100 * acc.mean():.1f} %); of those within 2 cm and 1 deg of the corrected "
+              f"poses' relative pose: {100 * np.mean(((dxy < 0.02) & (dth < 1.0))[acc]):.1f} %, "
+              f"within 5 cm and 1 deg: {100 * np.mean(((dxy < 0.05) & (dth < 1.0))[acc]):.1f} % "
+              f"(median {1000 * np.median(dxy[acc]):.1f} mm, {np.median(dth[acc]):.3f} deg); "
+              f"residual spread at our pose {1000 * np.median(s_ours):.1f} mm, at the log's "
+              f"{1000 * np.median(s_log):.1f} mm (ours lower in {100 * np.mean(s_ours < s_log):.0f} % of the pairs); "
+              f"{1000 * dt / max(1, len(R)):.1f} ms per pair", flush=True)
+
+
+def map_validation(recs: list[Path]) -> None:
+    import tempfile
+
+    import yaml
+
+    from gtrig.io.rosmap import read_map
+    from gtrig.scanmatch.mapmatch import map_points, match_to_map
+    from gtrig.scanmatch.validate import load_stop_scans
+    from gtrig.sim.gtroom import make_scene
+    from gtrig.sim.map import write_maps
+
+    for rec in recs:
+        rig = load_rig(rec / "rig.yaml")
+        seed = int(yaml.safe_load((rec / "sim_config.yaml").read_text())["seed"])
+        mdir = rec
+        if not (rec / "map" / "blueprint.yaml").exists():  # recordings made before the map step
+            mdir = Path(tempfile.mkdtemp())
+            write_maps(make_scene(seed), mdir)
+        err = yaml.safe_load((mdir / "truth" / "map_errors.yaml").read_text())["blueprint"]
+        truth = np.loadtxt(rec / "truth" / "validation_poses.csv", delimiter=",", skiprows=1)[:, 1:]
+        stops = load_stop_scans(rec, rig)
+        rng = np.random.default_rng(seed)
+        r = 0.3 * np.sqrt(rng.uniform(0, 1, len(truth)))
+        a = rng.uniform(0, 2 * np.pi, len(truth))
+        init = truth + np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(-1, 1, len(truth)) * np.radians(15)])
+        for which in ("gtroom", "blueprint"):
+            mp = map_points(read_map(mdir / "map" / f"{which}.yaml"))
+            t = time.perf_counter()
+            res = match_to_map(mp, list(stops.merged), init,
+                               tilt_shift_m=scanner_height_m(rig) * ErrorModel().floor_tilt_sigma_rad)
+            e = se2.relative(truth, res.poses)
+            fl = "; ".join(f"{f.name()} {1000 * f.offset_m:+.1f} mm (+-{1000 * f.se_m:.1f})" for f in res.flagged)
+            print(f"{rec} {which}: {sum(v.accepted for v in res.verdicts)}/{len(truth)} accepted; error max "
+                  f"{1000 * np.max(np.hypot(e[:, 0], e[:, 1])):.2f} mm, "
+                  f"mean {1000 * np.mean(np.hypot(e[:, 0], e[:, 1])):.2f} mm, "
+                  f"max {np.degrees(np.max(np.abs(e[:, 2]))):.3f} deg; flagged: {fl or 'none'}"
+                  + (f" (truth: wall {err['wall_from_xy'][0]:.2f}, {err['wall_from_xy'][1]:.2f} - "
+                     f"{err['wall_to_xy'][0]:.2f}, {err['wall_to_xy'][1]:.2f} moved {1000 * err['shift_m']:.0f} mm)"
+                     if which == "blueprint" else "") + f"; {time.perf_counter() - t:.0f} s", flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="what", required=True)
+    a = sub.add_parser("speed")
+    a.add_argument("--recording", type=Path, required=True)
+    a.add_argument("--pairs", type=int, default=500)
+    b = sub.add_parser("accept")
+    b.add_argument("--recording", type=Path, action="append", required=True)
+    b.add_argument("--pairs", type=int, default=400)
+    b.add_argument("--ga-pairs", type=int, default=60, help="pairs also run with the genetic fallback")
+    c = sub.add_parser("carmen")
+    c.add_argument("--every", type=int, default=3)
+    c.add_argument("--max-pairs", type=int, default=1500)
+    d = sub.add_parser("map")
+    d.add_argument("--recording", type=Path, action="append", required=True)
+    args = ap.parse_args()
+    if args.what == "speed":
+        speed(args.recording, args.pairs)
+    elif args.what == "accept":
+        accept(args.recording, args.pairs, args.ga_pairs)
+    elif args.what == "map":
+        map_validation(args.recording)
+    else:
+        carmen(args.every, args.max_pairs)
+
+
+if __name__ == "__main__":
+    main()
