@@ -144,6 +144,14 @@ class LaserConfig(Section):
     track: LaserTrackSection = Field(default_factory=LaserTrackSection)  # type: ignore[valid-type]
 
 
+class FusionConfig(Section):
+    """Time sync and fusion (:func:`gtrig.fusion.sync.estimate_offset`, :func:`gtrig.fusion.fuse_tracks`)."""
+
+    estimator: Literal["batch", "ekf"] = "batch"
+    max_gap_s: float | None = Field(default=None, gt=0, description="end a segment after this long without a fix")
+    sync_search_s: float = Field(default=3.0, gt=0, le=60, description="clock offsets searched, both signs (s)")
+
+
 class RunConfig(Section):
     """Everything ``gtrig run`` can be told, one section per stage."""
 
@@ -153,6 +161,7 @@ class RunConfig(Section):
     markers: MarkersConfig = Field(default_factory=MarkersConfig)
     vision: VisionConfig = Field(default_factory=VisionConfig)
     laser: LaserConfig = Field(default_factory=LaserConfig)
+    fusion: FusionConfig = Field(default_factory=FusionConfig)
 
     def to_yaml(self) -> str:
         return yaml.safe_dump(self.model_dump(mode="json"), sort_keys=False)

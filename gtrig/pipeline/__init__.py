@@ -15,7 +15,11 @@ markers        rig                                          rig, marker_calibrat
 robot-frame    rig, survey, marker_calibration              rig, frame_fit, vision_validation, hand_frame_cov
 laser          rig                                          rig, laser_report, laser_result, tracks/GTlaser/run
 vision         rig (marker_calibration, frame_fit, ...)     tracks/GTvision/{validation,run}, vision_results
+sync           tracks/GTvision/run, tracks/GTlaser/run (*)  clock_offsets
+fusion         the same, clock_offsets (*)                  tracks/fusion/run
 =============  ==========================================  ==============================================
+
+(*) used when present: either GT source alone is enough.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from typing import TYPE_CHECKING
 
 from gtrig.pipeline.cameras import camera_calibration
 from gtrig.pipeline.context import AccuracyRow, Products, Stage, StageInput, StageOutput
+from gtrig.pipeline.fusion import fusion, sync
 from gtrig.pipeline.laser import gtlaser
 from gtrig.pipeline.markers import marker_calibration
 from gtrig.pipeline.robot_frame import robot_frame
@@ -62,6 +67,10 @@ STAGES: tuple[Stage, ...] = (
           uses=("marker_calibration", "frame_fit", "vision_validation", "hand_frame_cov", "survey"),
           produces=_VISION_PRODUCTS, reads=("validation/poses.csv", "validation/cameras", "run/cameras"),
           section="vision"),
+    Stage("sync", "time sync", sync, uses=("tracks/GTvision/run", "tracks/GTlaser/run"),
+          produces=("clock_offsets",), reads=("run/odometry.csv",), section="fusion"),
+    Stage("fusion", "fusion", fusion, uses=("tracks/GTvision/run", "tracks/GTlaser/run", "clock_offsets"),
+          produces=("tracks/fusion/run",), reads=("run/odometry.csv",), section="fusion"),
 )
 
 

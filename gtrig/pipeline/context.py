@@ -94,6 +94,7 @@ class Products:
     laser_report : the fixed scanners' calibration report.
     laser_result : GTlaser's per-frame result (every frame, with its diagnostics).
     vision_results : GTvision's per-instant results by sequence ("run", "validation").
+    clock_offsets : each GT source's clock minus odometry's, seconds, where sync could measure it.
     tracks : pose tracks by name, ``"<source>/<sequence>"`` (``"GTvision/run"``, ``"GTlaser/run"``...).
     """
 
@@ -107,6 +108,7 @@ class Products:
     laser_report: LaserCalibrationReport | None = None
     laser_result: TrackResult | None = None
     vision_results: Mapping[str, VisionResult] = field(default_factory=lambda: MappingProxyType({}))
+    clock_offsets: Mapping[str, float] | None = None
     tracks: Mapping[str, PoseTrack] = field(default_factory=lambda: MappingProxyType({}))
 
     def has(self, name: str) -> bool:

@@ -1,0 +1,122 @@
+"""Stages ``sync`` and ``fusion``: each GT source's clock offset to odometry (gtrig.fusion.sync), then one
+smoothed trajectory from GTvision, GTlaser and odometry (gtrig.fusion), written as the pose track
+``gt_fused.tum`` + ``gt_fused_cov.csv`` with ``fusion_report.json`` and ``sync.yaml``."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from gtrig.pipeline.context import AccuracyRow, StageInput, StageOutput
+
+if TYPE_CHECKING:
+    from gtrig.io.odometry import OdometryLog
+    from gtrig.trajectory import PoseTrack
+
+#: the GT sources fusion takes, by their name in the fusion's report
+SOURCES = {"vision": "GTvision/run", "laser": "GTlaser/run"}
+
+
+def _sources(inp: StageInput) -> dict[str, PoseTrack]:
+    return {name: inp.products.tracks[key] for name, key in SOURCES.items() if key in inp.products.tracks}
+
+
+def _odometry(rec: Path) -> OdometryLog:
+    from gtrig.io.odometry import read_odometry
+
+    return read_odometry(rec / "run" / "odometry.csv")
+
+
+def sync(inp: StageInput) -> StageOutput:
+    """Clock offsets of the GT sources to odometry, each with its 95 % interval and verdict."""
+    from gtrig.errors import InputError
+    from gtrig.fusion.measurements import fixes_from_track
+    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.io.offsets import write_offsets
+
+    cfg = inp.config.fusion
+    tracks = _sources(inp)
+    if not tracks:
+        raise InputError("sync needs GTvision's or GTlaser's run track")
+    odo = _odometry(inp.rec)
+    results = {}
+    for name, track in tracks.items():
+        use = track.usable()
+        est = estimate_offset(odo.stamps_s, odo.xytheta[:, 2], use.stamps_s, use.yaw_rad(), name,
+                              search_s=cfg.sync_search_s)
+        if track.cov is not None and est.verdict == "ok":
+            est = refine_by_fusion(est, fixes_from_track(track, name), odo)
+        results[name] = est
+    write_offsets(inp.out / "sync.yaml", "odometry", {k: v.to_dict() for k, v in results.items()})
+    offsets = {k: float(v.offset_s) for k, v in results.items() if v.verdict == "ok"}
+    checks = tuple(AccuracyRow("sync", f"{k} clock offset to odometry ({v.verdict})",
+                               1000 * v.offset_s if v.verdict == "ok" else math.nan, "ms", "", v.verdict == "ok")
+                   for k, v in results.items())
+    rows: tuple[AccuracyRow, ...] = ()
+    if inp.has_truth:
+        true_s = _true_odometry_offset(inp.rec)
+        # the sources' own clocks (cameras', scanners') carry small offsets too: informational, no target
+        rows = tuple(AccuracyRow("sync", f"{k}: offset minus the simulated odometry clock's",
+                                 1000 * abs(offsets[k] - true_s), "ms") for k in offsets)
+    return StageOutput({"clock_offsets": offsets}, rows, checks, ("sync.yaml",))
+
+
+def _true_odometry_offset(rec: Path) -> float:
+    """The simulated odometry clock minus the GT clock (truth/robot_clock.yaml; 0 when absent). A source's
+    offset to odometry is then its own clock (the GT clock) minus odometry's: ``-offset``."""
+    from gtrig.io.yamlfile import load_yaml
+
+    p = rec / "truth" / "robot_clock.yaml"
+    if not p.is_file():
+        return 0.0
+    doc = load_yaml(p) or {}
+    return -float(doc.get("offset_s", 0.0)) if isinstance(doc, dict) else 0.0
+
+
+def fusion(inp: StageInput) -> StageOutput:
+    """GTvision and GTlaser smoothed with odometry: one pose per odometry stamp, bridged poses flagged."""
+    from gtrig.errors import InputError
+    from gtrig.evaluate.truth import score_on_recording
+    from gtrig.fusion import FusionOptions, fuse_tracks
+    from gtrig.io.atomic import atomic_group
+    from gtrig.io.posetrack import covariance_text
+    from gtrig.io.tum import tum_text
+
+    cfg = inp.config.fusion
+    tracks = _sources(inp)
+    if not tracks:
+        raise InputError("fusion needs GTvision's or GTlaser's run track")
+    offsets = dict(inp.products.clock_offsets or {})
+    opts = FusionOptions(estimator=cfg.estimator, max_gap_s=cfg.max_gap_s, offsets_s=offsets)
+    fused, report = fuse_tracks(tracks, _odometry(inp.rec), opts)
+    names = ("gt_fused.tum", "gt_fused_cov.csv", "fusion_report.json")
+    texts = (tum_text(fused), covariance_text(fused), json.dumps(report.to_dict(), indent=1, default=float) + "\n")
+    with atomic_group(*(inp.out / n for n in names)) as tmps:
+        for tmp, text in zip(tmps, texts, strict=True):
+            tmp.write_text(text, encoding="utf-8")
+    counts = fused.counts()
+    n_out = len(report.outliers)
+    checks = (
+        AccuracyRow("fusion", "poses", len(fused), ""),
+        AccuracyRow("fusion", "poses bridged by odometry", 100 * counts["bridged"] / max(len(fused), 1), "%"),
+        AccuracyRow("fusion", "fixes rejected or down-weighted", n_out, ""),
+    )
+    prod = {"tracks/fusion/run": fused}
+    if not inp.has_truth:
+        return StageOutput(prod, checks=checks, outputs=names)
+    acc = score_on_recording(fused, inp.rec, "run")
+    pos_mm, yaw_deg = acc.mean_pos_m * 1000, math.degrees(acc.mean_abs_yaw_rad)
+    rows = [
+        AccuracyRow("fusion", "run, mean position error", pos_mm, "mm", "<= 1.0", pos_mm <= 1.0),
+        AccuracyRow("fusion", "run, max position error", acc.max_pos_m * 1000, "mm"),
+        AccuracyRow("fusion", "run, mean |yaw| error", yaw_deg, "deg", "<= 0.05", yaw_deg <= 0.05),
+        AccuracyRow("fusion", "run, mean NEES / dof", acc.mean_nees / acc.nees_dof, "", "0.5-2",
+                    0.5 <= acc.mean_nees / acc.nees_dof <= 2),
+    ]
+    for name, track in tracks.items():
+        single = score_on_recording(track.usable(), inp.rec, "run")
+        rows.append(AccuracyRow("fusion", f"run, mean position error / {name}'s", pos_mm / max(
+            single.mean_pos_m * 1000, 1e-9), "x", "< 1", pos_mm < single.mean_pos_m * 1000))
+    return StageOutput(prod, tuple(rows), checks, names)
