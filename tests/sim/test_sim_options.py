@@ -107,3 +107,19 @@ def test_two_fabrics_range_apart():
     near_dark, near_light = np.abs(d - dark) <= 0.0011, np.abs(d - light) <= 0.0011  # 1 mm quantisation
     assert d.size > 200 and np.mean(near_dark | near_light) > 0.97
     assert near_dark.mean() > 0.2 and near_light.mean() > 0.2
+
+
+def test_sim_settings_file_and_its_errors(tmp_path):
+    from typer.testing import CliRunner
+
+    from gtrig.cli.main import app
+    from gtrig.cli.sim import _with_file
+
+    p = tmp_path / "sim.yaml"
+    p.write_text("motion: {profile: agile, speed_mps: 1.5}\nlaser: {blocked_scanner: 0}\n")
+    cfg = _with_file(SimConfig(seed=4), p)
+    assert cfg.seed == 4 and cfg.motion.profile == "agile" and cfg.laser.blocked_scanner == 0
+    p.write_text("motion: {profile: rocket}\n")
+    r = CliRunner().invoke(app, ["sim", "--out", str(tmp_path / "rec"), "--config", str(p)])
+    lines = [x for x in r.output.splitlines() if x.strip()]
+    assert r.exit_code == 2 and len(lines) == 1 and "motion.profile" in lines[0], r.output
