@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from gtrig.laser.fuse import scan_points_world
-from gtrig.laser.synth import hull_segments_world
 from gtrig.sim.config import LaserSimConfig, SimConfig
 from gtrig.sim.gtroom import VALIDATION_POSES, continuous_path, make_scene
 from gtrig.sim.lasers import configure_scene, simulate_fixed_scans
@@ -74,7 +73,8 @@ def test_stamps_and_beam_timing_are_what_the_rig_says(timing, stamp_at):
         log = scans[s.name]
         pts = scan_points_world(log.ranges_m, s)  # (N, B, 2)
         # the wrong belief: a sweep taken for a flash, or a flash for a sweep
-        other = np.zeros(s.beams) if timing == "sweep" else s.model_copy(update={"beam_timing": "sweep"}).beam_delays_s()
+        swept = s.model_copy(update={"beam_timing": "sweep"}).beam_delays_s()
+        other = np.zeros(s.beams) if timing == "sweep" else swept
         for told, out in ((s.beam_delays_s(), right), (other, wrong)):
             tb = log.stamps_s[:, None] + told[None, :]
             hit = np.isfinite(pts[..., 0])
