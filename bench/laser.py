@@ -246,7 +246,8 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
             "raw_pos_mm": 1000 * er.mean(),
             "raw_yaw_deg": np.degrees(eyr.mean()),
             "nees": nees.mean(),
-            "nees_xy": float(np.mean(np.einsum("ni,nij,nj->n", z[:, :2], np.linalg.inv(res.cov_xytheta[ok][:, :2, :2]), z[:, :2]))),
+            "nees_xy": float(np.mean(np.einsum(
+                "ni,nij,nj->n", z[:, :2], np.linalg.inv(res.cov_xytheta[ok][:, :2, :2]), z[:, :2]))),
             "nees_th": float(np.mean(z[:, 2] ** 2 / res.cov_xytheta[ok][:, 2, 2])),
             "ok_max_mm": 1000 * float(e.max()) if e.size else float("nan"),
             "speed_max": float(np.max(np.hypot(*np.gradient(xyth[:, :2], ts, axis=0).T))),
@@ -270,7 +271,8 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
                 "yaw_deg": np.degrees(eyb.mean()),
                 "yaw_mod_pi_deg": np.degrees(ebb.mean()),
                 "n": int(m.sum()),
-                "share_5cm": float(np.mean(np.where(np.isfinite(bl[ok, 0]), np.hypot(*(bl[ok, :2] - tru[ok, :2]).T), np.inf) < 0.05)),
+                "share_5cm": float(np.mean(np.where(
+                    np.isfinite(bl[ok, 0]), np.hypot(*(bl[ok, :2] - tru[ok, :2]).T), np.inf) < 0.05)),
                 "frames_track_per_s": len(res) / dt,
             }
     return out
@@ -294,11 +296,12 @@ def main() -> None:
     ap.add_argument("--scenarios", nargs="+", default=["cruise", "agile", "agile-blocked"], choices=SCENARIOS)
     ap.add_argument("--blocked-seeds", type=int, nargs="+", default=[0])
     a = ap.parse_args()
-    print(f"GTlaser benchmark: 4 scanners x 75 Hz, people walking, uneven floor; the whole run unless --duration")
+    print("GTlaser benchmark: 4 scanners x 75 Hz, people walking, uneven floor; the whole run unless --duration")
     print("Same foreground points for both methods; Open3D is started from GTlaser's first pose and then")
     print("from its own previous one (no prediction); its yaw is taken modulo 180 deg.")
     print()
-    print("| scenario | seed | max speed (m/s) | frames | localized, >=2 sides | pos mean / max OK (mm) | yaw mean (deg) "
+    print("| scenario | seed | max speed (m/s) | frames | localized, >=2 sides | pos mean / max OK (mm) "
+          "| yaw mean (deg) "
           "| NEES/dof calibrated (true) | OK > 5 cm | peer pos (mm) | peer yaw mod 180 (deg) | peer share < 5 cm |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in a.scenarios:

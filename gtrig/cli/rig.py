@@ -20,14 +20,13 @@ def check(rig: Path = typer.Argument(..., help="rig.yaml")) -> None:
     from rich.table import Table
 
     from gtrig import geometry as geo
-    from gtrig.rig import load_rig
-
     from gtrig.cli.common import err_console
-    from gtrig.rig.load import RigErrors
+    from gtrig.rig import load_rig
+    from gtrig.rig.load import RigValidationError
 
     try:
         r = load_rig(rig)
-    except RigErrors as e:
+    except RigValidationError as e:
         # every problem of the file at once, one line each: a new rig is fixed in one pass
         for p in e.problems[:-1]:
             err_console.print(f"[red]error:[/red] {p}", highlight=False, soft_wrap=True)
@@ -38,7 +37,8 @@ def check(rig: Path = typer.Argument(..., help="rig.yaml")) -> None:
         T = c.T_world_cam.matrix()
         tilt = np.degrees(np.arcsin(-T[2, 2]))
         t.add_row(c.name, f"{c.resolution[0]} x {c.resolution[1]}", f"{c.K[0, 0]:.1f}, {c.K[1, 1]:.1f}",
-                  ", ".join(f"{v:.3f}" for v in c.T_world_cam.xyz), f"{tilt:.1f}", "stills" if c.rate_hz is None else f"{c.rate_hz:g}")
+                  ", ".join(f"{v:.3f}" for v in c.T_world_cam.xyz), f"{tilt:.1f}",
+                  "stills" if c.rate_hz is None else f"{c.rate_hz:g}")
     if r.cameras:
         console.print(t)
     t = Table("scanner", "position (m)", "yaw (deg)", "beams", "fov (deg)", "rate (Hz)")

@@ -49,7 +49,7 @@ def _deep_merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any
     return out
 
 
-class RigErrors(ConfigError):
+class RigValidationError(ConfigError):
     """An invalid rig document. The message is the first problem (one line, with how many more);
     ``problems`` holds every one of them, each a line naming the file, line and field."""
 
@@ -78,7 +78,7 @@ def _problem(err: Any, source: str, lines: LineMap | None) -> str:
 
 
 def rig_from_dict(data: Any, source: str = "<rig>", lines: LineMap | None = None) -> Rig:
-    """Validate a parsed rig document; raise :class:`RigErrors` (a :class:`ConfigError`: one line, the
+    """Validate a parsed rig document; raise :class:`RigValidationError` (a :class:`ConfigError`: one line, the
     first problem; ``.problems`` lists them all) on failure."""
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: the rig file must be a mapping of sections (world, cameras, ...)")
@@ -86,7 +86,7 @@ def rig_from_dict(data: Any, source: str = "<rig>", lines: LineMap | None = None
         return Rig.model_validate(data)
     except ValidationError as e:
         problems = list(dict.fromkeys(_problem(err, source, lines) for err in e.errors()))
-        raise RigErrors(problems) from None
+        raise RigValidationError(problems) from None
 
 
 def load_rig(path: str | os.PathLike[str], overrides: dict[str, Any] | None = None) -> Rig:

@@ -26,8 +26,8 @@ from gtrig.rig.load import dump_rig
 from gtrig.rig.models import Rig
 from gtrig.sim.config import SimConfig
 from gtrig.sim.gtroom import VALIDATION_POSES, WORLD_POINT_NAMES, Scene, continuous_path, make_scene
-from gtrig.sim.motion import RobotMotion, agile_path, static_motion
 from gtrig.sim.lasers import configure_scene, with_scanner_stamp_sigma
+from gtrig.sim.motion import RobotMotion, agile_path, static_motion
 
 log = logging.getLogger(__name__)
 

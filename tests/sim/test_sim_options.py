@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from gtrig.laser.fuse import scan_points_world
-from gtrig.laser.synth import hull_segments_world
 from gtrig.sim.config import LaserSimConfig, SimConfig
 from gtrig.sim.gtroom import VALIDATION_POSES, continuous_path, make_scene
 from gtrig.sim.lasers import configure_scene, simulate_fixed_scans
@@ -74,7 +73,8 @@ def test_stamps_and_beam_timing_are_what_the_rig_says(timing, stamp_at):
         log = scans[s.name]
         pts = scan_points_world(log.ranges_m, s)  # (N, B, 2)
         # the wrong belief: a sweep taken for a flash, or a flash for a sweep
-        other = np.zeros(s.beams) if timing == "sweep" else s.model_copy(update={"beam_timing": "sweep"}).beam_delays_s()
+        swept = s.model_copy(update={"beam_timing": "sweep"}).beam_delays_s()
+        other = np.zeros(s.beams) if timing == "sweep" else swept
         for told, out in ((s.beam_delays_s(), right), (other, wrong)):
             tb = log.stamps_s[:, None] + told[None, :]
             hit = np.isfinite(pts[..., 0])
@@ -107,3 +107,19 @@ def test_two_fabrics_range_apart():
     near_dark, near_light = np.abs(d - dark) <= 0.0011, np.abs(d - light) <= 0.0011  # 1 mm quantisation
     assert d.size > 200 and np.mean(near_dark | near_light) > 0.97
     assert near_dark.mean() > 0.2 and near_light.mean() > 0.2
+
+
+def test_sim_settings_file_and_its_errors(tmp_path):
+    from typer.testing import CliRunner
+
+    from gtrig.cli.main import app
+    from gtrig.cli.sim import _with_file
+
+    p = tmp_path / "sim.yaml"
+    p.write_text("motion: {profile: agile, speed_mps: 1.5}\nlaser: {blocked_scanner: 0}\n")
+    cfg = _with_file(SimConfig(seed=4), p)
+    assert cfg.seed == 4 and cfg.motion.profile == "agile" and cfg.laser.blocked_scanner == 0
+    p.write_text("motion: {profile: rocket}\n")
+    r = CliRunner().invoke(app, ["sim", "--out", str(tmp_path / "rec"), "--config", str(p)])
+    lines = [x for x in r.output.splitlines() if x.strip()]
+    assert r.exit_code == 2 and len(lines) == 1 and "motion.profile" in lines[0], r.output
