@@ -49,6 +49,9 @@ def rows_markdown(ev: SlamEvaluation) -> str:
     lines = [f"paired {a['matched']} poses ({a['method']}, max dt {a['max_dt_s']:g} s, offset "
              f"{a['t_offset_s']:.6g} s); GT skipped: {a['gt_skipped_outside']} outside, {a['gt_skipped_in_gaps']} "
              f"in {a['gaps']} gaps; alignment {ev.alignment.kind} (scale {ev.alignment.scale:.6f})", ""]
+    if ev.time_offset is not None:
+        to = ev.time_offset
+        lines += [f"time offset estimated: {to.offset_s:+.5f} s (95 % {to.low_s:+.5f} .. {to.high_s:+.5f})", ""]
     m = evo_matrix(ev)
     if m:
         lines += ["| evo | rmse | mean | median | std | min | max |", "|---|---|---|---|---|---|---|"]
