@@ -1,6 +1,7 @@
 """Onboard scan matching: speed against small_gicp, the genetic matcher's time, the acceptance test
 against truth on simulated pairs, and agreement with the CARMEN logs' corrected poses.
 
+    python bench/scanmatch.py record --seed N --out DIR   (a recording without camera images)
     python bench/scanmatch.py speed --recording REC [--pairs 500]
     python bench/scanmatch.py accept --recording REC [--recording REC2 ...] [--pairs 400]
     python bench/scanmatch.py carmen [--every 4]
@@ -238,6 +239,26 @@ def map_validation(recs: list[Path]) -> None:
                      if which == "blueprint" else "") + f"; {time.perf_counter() - t:.0f} s", flush=True)
 
 
+def record(seed: int, out: Path) -> None:
+    """A recording for this bench without camera images: the simulator's rig, truth, survey,
+    odometry, laser and map steps, then the survey's poses (``OUT/results/survey``)."""
+    from gtrig.sim import recording as simrec
+    from gtrig.sim.config import SimConfig
+    from gtrig.sim.gtroom import make_scene
+    from gtrig.survey import run_recording_survey
+
+    rec = out / "recording"
+    rec.mkdir(parents=True, exist_ok=True)
+    cfg = SimConfig(seed=seed, workers=1)
+    scene = make_scene(seed)
+    tl = simrec.make_timeline(scene, cfg)
+    for name, step in simrec.STEPS:
+        if "images" not in name:
+            step(scene, tl, rec, cfg)
+    run_recording_survey(rec, out / "results" / "survey")
+    print(f"wrote {rec} and {out / 'results' / 'survey'}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="what", required=True)
@@ -251,6 +272,9 @@ def main() -> None:
     c = sub.add_parser("carmen")
     c.add_argument("--every", type=int, default=3)
     c.add_argument("--max-pairs", type=int, default=1500)
+    e = sub.add_parser("record")
+    e.add_argument("--seed", type=int, required=True)
+    e.add_argument("--out", type=Path, required=True)
     d = sub.add_parser("map")
     d.add_argument("--recording", type=Path, action="append", required=True)
     args = ap.parse_args()
@@ -258,6 +282,8 @@ def main() -> None:
         speed(args.recording, args.pairs)
     elif args.what == "accept":
         accept(args.recording, args.pairs, args.ga_pairs)
+    elif args.what == "record":
+        record(args.seed, args.out)
     elif args.what == "map":
         map_validation(args.recording)
     else:
