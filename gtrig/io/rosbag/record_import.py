@@ -197,6 +197,7 @@ def import_bag(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
             streams[topic] = _Stream(kind, name, topic, sensor=known[name])
     if cfg.odometry:
         streams[cfg.odometry] = _Stream("odometry", "odometry", cfg.odometry)
+    created_root = not root.exists()
     root.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{cfg.sequence}.import.", dir=root))
     try:
@@ -214,6 +215,9 @@ def import_bag(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
         os.replace(tmp, seq_dir)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        if created_root:  # a failed import into a new folder leaves no folder
+            with contextlib.suppress(OSError):
+                root.rmdir()
         raise
     return ImportReport(seq_dir, counts, names)
 
