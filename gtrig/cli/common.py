@@ -6,6 +6,7 @@ import functools
 import logging
 import sys
 from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
 from typing import Any, TypeVar
 
 from rich.console import Console
@@ -27,21 +28,98 @@ def setup_logging(verbose: bool = False) -> None:
     )
 
 
+def _one_line(msg: object) -> str:
+    return " ".join(str(msg).split())
+
+
+def _print_error(msg: str) -> None:
+    # plain text: a file or point name holding Rich markup ("x[/b].yaml") must print as it is
+    err_console.print("error: " + _one_line(msg), markup=False, highlight=False, soft_wrap=True)
+
+
+def _os_error_message(e: OSError) -> str:
+    where = e.filename if e.filename is not None else ""
+    what = e.strerror or type(e).__name__
+    if isinstance(e, IsADirectoryError):
+        what = "is a folder, expected a file"
+    elif isinstance(e, NotADirectoryError):
+        what = "a part of this path is a file, expected a folder"
+    elif isinstance(e, FileExistsError):
+        what = "exists and is in the way (a file where a folder is needed, or the reverse)"
+    extra = f" -> {e.filename2}" if getattr(e, "filename2", None) else ""
+    return f"{where}{extra}: {what}" if where else what
+
+
+def _validation_message(e: Exception) -> str:
+    errors: list[dict[str, Any]] = getattr(e, "errors", list)()
+    if not errors:
+        return _one_line(e)
+    first = errors[0]
+    loc = ".".join(str(x) for x in first.get("loc", ()))
+    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+    return f"{loc}: {first.get('msg', 'invalid')}{more}"
+
+
+def crash_log_path() -> Path:
+    """Where an unexpected exception's traceback is written (``$GTRIG_LOG_DIR`` or the temp folder)."""
+    import os
+    import tempfile
+
+    folder = Path(os.environ.get("GTRIG_LOG_DIR") or tempfile.gettempdir())
+    return folder / f"gtrig-crash-{os.getpid()}.log"
+
+
+def _write_crash_log(e: BaseException) -> Path | None:
+    import traceback
+
+    path = crash_log_path()
+    try:
+        path.write_text("".join(traceback.format_exception(e)), encoding="utf-8")
+    except OSError:
+        return None
+    return path
+
+
 def handle_errors(fn: F) -> F:
-    """Turn user mistakes into ``error: <one line>`` on stderr and a non-zero exit, never a traceback."""
+    """Turn every failure into ``error: <one line>`` on stderr and a non-zero exit, never a traceback.
+
+    Exit codes: 2 a user error (bad input, missing or unwritable file, invalid value), 3 a stage that
+    could not reach a result (``ConvergenceError``), 130 interrupted, 1 an unexpected error (one line and
+    the path of a log holding the traceback; ``--verbose`` prints it)."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from pydantic import ValidationError
+
         from gtrig.errors import GtrigError
 
         try:
             return fn(*args, **kwargs)
         except GtrigError as e:
-            err_console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+            _print_error(str(e))
             sys.exit(e.exit_code)
         except KeyboardInterrupt:
-            err_console.print("interrupted; rerun the same command to resume where possible")
+            err_console.print("interrupted; rerun the same command to resume where possible", markup=False)
             sys.exit(130)
+        except OSError as e:
+            _print_error(_os_error_message(e))
+            sys.exit(2)
+        except UnicodeDecodeError as e:
+            _print_error(f"an input is not text ({e.reason} at byte {e.start})")
+            sys.exit(2)
+        except ValidationError as e:
+            _print_error(_validation_message(e))
+            sys.exit(2)
+        except MemoryError:
+            _print_error("out of memory: the input is larger than this machine can hold")
+            sys.exit(2)
+        except Exception as e:
+            if logging.getLogger().isEnabledFor(logging.DEBUG):
+                raise
+            log_path = _write_crash_log(e)
+            where = f"; traceback in {log_path}" if log_path else ""
+            _print_error(f"unexpected {type(e).__name__}: {_one_line(e)[:300]}{where} (please report it)")
+            sys.exit(1)
 
     return wrapper  # type: ignore[return-value]
 

@@ -63,7 +63,15 @@ def _root(
 _register()
 
 
+def _terminate(signum: int, frame: object) -> None:
+    # SIGTERM unwinds like an interrupt, so that temporaries are removed and nothing is half-written
+    raise SystemExit(128 + signum)
+
+
 def main() -> None:
+    import signal
+
+    signal.signal(signal.SIGTERM, _terminate)
     app()
 
 

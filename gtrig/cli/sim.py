@@ -16,6 +16,8 @@ def command(
     seed: int = typer.Option(0, help="Random seed: the same seed gives identical output."),
     quick: bool = typer.Option(False, "--quick", help="Short sequences, for tests."),
     workers: int = typer.Option(0, help="Processes for rendering; 0 = one per core."),
+    odometry_offset_s: float = typer.Option(0.0, "--odometry-offset-s",
+                                            help="The robot's clock (odometry, onboard scans) minus the GT clock."),
 ) -> None:
     """Simulate a recording of the instrumented room, with its truth, in the real on-disk layout."""
     import time
@@ -24,7 +26,8 @@ def command(
     from gtrig.sim.recording import simulate
 
     base = SimConfig.quick_defaults(seed) if quick else SimConfig(seed=seed)
-    cfg = base.model_copy(update={"scenario": scenario, "workers": workers})
+    cfg = base.model_copy(update={"scenario": scenario, "workers": workers,
+                                  "odometry_clock_offset_s": odometry_offset_s})
     t0 = time.perf_counter()
     with console.status("simulating") as status:
         timings = simulate(cfg, out, on_step=lambda name, i, n: status.update(f"[{i + 1}/{n}] {name}"))

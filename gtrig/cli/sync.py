@@ -12,7 +12,9 @@ from gtrig.cli.common import console, handle_errors
 @handle_errors
 def command(
     recording: Path | None = typer.Option(None, "--recording", help="The recording folder (for run/odometry.csv)."),
-    reference: str = typer.Option("odometry", "--reference", help="The reference clock: odometry or a CSV path."),
+    reference: str = typer.Option("odometry", "--reference",
+                                  help="The reference clock: odometry, an odometry CSV path, or the NAME of one "
+                                  "of the sources (a GT source pins time better than odometry's slip)."),
     source: list[str] = typer.Option(..., "--source", help="NAME=track.tum[,cov.csv] (repeatable)."),
     out: Path = typer.Option(..., "--out", help="Output sync.yaml."),
     search_s: float = typer.Option(3.0, "--search-s", help="Lags searched, both signs, seconds."),
@@ -28,24 +30,37 @@ def command(
     from gtrig.io.offsets import CONVENTION, write_offsets
     from gtrig.io.posetrack import read_pose_track
 
-    if reference == "odometry":
-        if recording is None:
-            raise InputError("--reference odometry needs --recording (its run/odometry.csv)")
-        odo_path = recording / "run" / "odometry.csv"
-    else:
-        odo_path = Path(reference)
-    odo = read_odometry(odo_path)
-    results = {}
+    tracks = {}
     for spec in source:
         if "=" not in spec:
             raise InputError(f"--source {spec!r}: expected NAME=track.tum[,cov.csv]")
         name, files = spec.split("=", 1)
         parts = files.split(",")
-        track = read_pose_track(parts[0], parts[1] if len(parts) > 1 else None, source=name)
+        tracks[name] = read_pose_track(parts[0], parts[1] if len(parts) > 1 else None, source=name)
+    ref_track = tracks.get(reference)
+    if reference == "odometry" or ref_track is not None:
+        if recording is None:
+            raise InputError(f"--reference {reference} needs --recording (its run/odometry.csv)")
+        odo_path = recording / "run" / "odometry.csv"
+    else:
+        odo_path = Path(reference)
+    odo = read_odometry(odo_path)
+    if ref_track is not None:
+        ru = ref_track.usable()
+        ref_t, ref_yaw = ru.stamps_s, ru.yaw_rad()
+        if refine and ref_track.cov is None:
+            raise InputError(f"--reference {reference}: the refinement needs its covariance (NAME=track.tum,cov.csv)")
+    else:
+        ref_t, ref_yaw = odo.stamps_s, odo.xytheta[:, 2]
+    results = {}
+    for name, track in tracks.items():
+        if name == reference:
+            continue
         use = track.usable()
-        est = estimate_offset(odo.stamps_s, odo.xytheta[:, 2], use.stamps_s, use.yaw_rad(), name, search_s=search_s)
+        est = estimate_offset(ref_t, ref_yaw, use.stamps_s, use.yaw_rad(), name, search_s=search_s)
         if refine and track.cov is not None:
-            est = refine_by_fusion(est, fixes_from_track(track, name), odo)
+            anchors = (fixes_from_track(ref_track, reference),) if ref_track is not None else ()
+            est = refine_by_fusion(est, fixes_from_track(track, name), odo, anchors=anchors)
         results[name] = est
         ci = "" if est.verdict != "ok" else f" [{est.ci95_s[0] * 1e3:+.2f}, {est.ci95_s[1] * 1e3:+.2f}] ms"
         num = "" if est.verdict != "ok" else f" {est.offset_s * 1e3:+.3f} ms"
@@ -54,6 +69,11 @@ def command(
         from gtrig.fusion.plots import correlation_figure
 
         correlation_figure(list(results.values()), figure)
-    write_offsets(out, str(odo_path) if reference != "odometry" else "odometry",
-                  {k: v.to_dict() for k, v in results.items()})
-    console.print(f"{out}: {len(results)} source(s); {CONVENTION}", highlight=False)
+    if ref_track is not None:
+        results_doc = {reference: {"verdict": "ok", "offset_s": 0.0, "ci95_s": [0.0, 0.0], "reason": "the reference"}}
+    else:
+        results_doc = {}
+    results_doc.update({k: v.to_dict() for k, v in results.items()})
+    write_offsets(out, reference if (ref_track is not None or reference == "odometry") else str(odo_path),
+                  results_doc)
+    console.print(f"{out}: {len(results)} source(s) against {reference}; {CONVENTION}", highlight=False)

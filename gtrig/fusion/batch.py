@@ -91,9 +91,13 @@ def smooth_batch(chain: FactorChain, X_init: np.ndarray, K_init: np.ndarray, fix
         cost_new, sys_new, chi2_new, rw_new = _normal_equations(chain, X_new, K_new, use, huber_k)
         if cost_new <= cost:
             rel = (cost - cost_new) / max(cost, 1e-300)
+            cost_old = cost
             X, K, cost, sys, chi2, rw = X_new, K_new, cost_new, sys_new, chi2_new, rw_new
             lam = max(lam / 10.0, 1e-12)
-            if rel < tol:
+            # converged: the cost stalls (by a thousandth of one chi-square unit: far below any statistical
+            # meaning), or the step is far below any pose's precision (0.1 um / urad)
+            if (rel < tol or cost_old - cost < 1e-3
+                    or max(float(np.abs(dx).max()), float(np.abs(dk).max(initial=0.0))) < 1e-7):
                 converged = True
                 break
         else:

@@ -180,10 +180,12 @@ def assemble(X, K, process, proc_u, proc_W, dts, fix_node, fix_alpha, fix_kind, 
     Fa = np.zeros((3, d))
     Fb = np.zeros((3, d))
     Fk = np.zeros((3, p))
+    qb = np.empty(3)
+    hb = np.empty(3)
     for j in range(fix_node.shape[0]):
         i = fix_node[j]
         al = fix_alpha[j]
-        fix_residual(X[i], X[i + 1], al, fix_kind[j], fix_z[j], fix_lever[j], r3, Jq)
+        fix_residual(X[i], X[i + 1], al, fix_kind[j], fix_z[j], fix_lever[j], r3, Jq, qb, hb)
         _mul(fix_W[j], r3, Jq, e3, E3)
         s2 = e3[0] * e3[0] + e3[1] * e3[1] + e3[2] * e3[2]
         fix_chi2[j] = s2
@@ -216,6 +218,12 @@ def assemble(X, K, process, proc_u, proc_W, dts, fix_node, fix_alpha, fix_kind, 
         for a in range(p):
             cost += ek[a] * ek[a]
             for b in range(p):
-                C[a, b] += np.dot(Ekk[:, a], Ekk[:, b])
-            gk[a] -= np.dot(Ekk[:, a], ek)
+                t = 0.0
+                for r_ in range(p):
+                    t += Ekk[r_, a] * Ekk[r_, b]
+                C[a, b] += t
+            t = 0.0
+            for r_ in range(p):
+                t += Ekk[r_, a] * ek[r_]
+            gk[a] -= t
     return cost

@@ -39,6 +39,23 @@ class EkfResult:
 
 
 @nb.njit(cache=True, nogil=True)
+def _mm(A, B, out, transpose_b=False):  # noqa: ANN001, ANN202
+    """out = A @ B (or A @ B^T), small blocks, no allocation."""
+    n, k = A.shape
+    m = B.shape[0] if transpose_b else B.shape[1]
+    for a in range(n):
+        for b in range(m):
+            t = 0.0
+            if transpose_b:
+                for c in range(k):
+                    t += A[a, c] * B[b, c]
+            else:
+                for c in range(k):
+                    t += A[a, c] * B[c, b]
+            out[a, b] = t
+
+
+@nb.njit(cache=True, nogil=True)
 def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z, fix_cov, fix_lever, fix_use,  # noqa: ANN001, ANN201, PLR0913, C901
              gate, x0, P0, k0, Pk, Xs, Xf, Ps, Ks, Pks, accept, nis):
     N, d = Xs.shape
@@ -73,6 +90,18 @@ def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z,
     r = np.empty(3)
     Jq = np.empty((3, 3))
     Xf[0] = x0
+    FP = np.empty((d, n))
+    GQ = np.empty((d, d))
+    FPF = np.empty((d, d))
+    Pbb = np.empty((n, n))
+    Pab = np.empty((d, n))
+    Pbb_inv = np.empty((n, n))
+    PHt = np.empty((nj, 3))
+    Kg = np.empty((nj, 3))
+    S = np.empty((3, 3))
+    nu = np.empty(3)
+    qb = np.empty(3)
+    hb = np.empty(3)
     j = 0
     M = fix_node.shape[0]
     for i in range(N - 1):
@@ -93,13 +122,19 @@ def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z,
                 for b in range(d):
                     f[a] += F[a, b] * m[b]
             Gm[:, :] = np.eye(d)
-        FP = F @ P
+        _mm(F, P, FP)
         for a in range(n):
             mu[zi[a]] = m[a]
             for b in range(n):
                 Pj[zi[a], zi[b]] = P[a, b]
-        Qw = Gm @ proc_Q[i] @ Gm.T
-        FPF = FP @ F.T + Qw
+        _mm(Gm, proc_Q[i], GQ)
+        _mm(GQ, Gm, FPF, True)
+        for a in range(d):
+            for b in range(d):
+                t = FPF[a, b]
+                for c in range(n):
+                    t += FP[a, c] * F[b, c]
+                FPF[a, b] = t
         for a in range(d):
             mu[d + a] = f[a]
             for b in range(n):
@@ -115,48 +150,72 @@ def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z,
                 j += 1
                 continue
             al = fix_alpha[j]
-            mdim = fix_residual(mu[:d], mu[d:2 * d], al, fix_kind[j], fix_z[j], fix_lever[j], r, Jq)
-            H = np.zeros((mdim, nj))
+            mdim = fix_residual(mu[:d], mu[d:2 * d], al, fix_kind[j], fix_z[j], fix_lever[j], r, Jq, qb, hb)
+            # P H^T with H = [(1 - al) Jq, al Jq, 0] on (x_i[:3], x_{i+1}[:3], K)
+            for a in range(nj):
+                for b in range(mdim):
+                    t = 0.0
+                    for c in range(3):
+                        t += ((1.0 - al) * Pj[a, c] + al * Pj[a, d + c]) * Jq[b, c]
+                    PHt[a, b] = t
             for a in range(mdim):
-                for b in range(3):
-                    H[a, b] = (1.0 - al) * Jq[a, b]
-                    H[a, d + b] = al * Jq[a, b]
-            PHt = Pj @ H.T
-            S = H @ PHt + fix_cov[j, :mdim, :mdim]
+                for b in range(mdim):
+                    t = fix_cov[j, a, b]
+                    for c in range(3):
+                        t += Jq[a, c] * ((1.0 - al) * PHt[c, b] + al * PHt[d + c, b])
+                    S[a, b] = t
+            Sm = S[:mdim, :mdim].copy()
             Si = np.empty((mdim, mdim))
-            if not chol_inv(S, Si):
+            if not chol_inv(Sm, Si):
                 accept[j] = False
                 nis[j] = np.nan
                 j += 1
                 continue
-            nu = -r[:mdim]
-            q = nu @ Si @ nu
+            for a in range(mdim):
+                nu[a] = -r[a]
+            q = 0.0
+            for a in range(mdim):
+                for b in range(mdim):
+                    q += nu[a] * Si[a, b] * nu[b]
             nis[j] = q
             if q > gate[mdim]:
                 accept[j] = False
                 j += 1
                 continue
             accept[j] = True
-            Kg = PHt @ Si
-            mu += Kg @ nu
-            IKH = np.eye(nj) - Kg @ H
-            Pj = IKH @ Pj @ IKH.T + Kg @ fix_cov[j, :mdim, :mdim] @ Kg.T
+            # K = P H^T S^-1;  mean += K nu;  P -= K S K^T = PHt S^-1 PHt^T (symmetric update)
+            for a in range(nj):
+                t = 0.0
+                for b in range(mdim):
+                    kab = 0.0
+                    for c in range(mdim):
+                        kab += PHt[a, c] * Si[c, b]
+                    Kg[a, b] = kab
+                    t += kab * nu[b]
+                mu[a] += t
+            for a in range(nj):
+                for b in range(a + 1):
+                    t = 0.0
+                    for c in range(mdim):
+                        t += Kg[a, c] * PHt[b, c]
+                    Pj[a, b] -= t
+                    if b != a:
+                        Pj[b, a] -= t
             j += 1
         # --- condition x_i on (x_{i+1}, K) for the backward pass; keep (x_{i+1}, K)
-        Pbb = np.empty((n, n))
-        Pab = np.empty((d, n))
         for a in range(n):
             for b in range(n):
                 Pbb[a, b] = Pj[bi[a], bi[b]]
         for a in range(d):
             for b in range(n):
                 Pab[a, b] = Pj[a, bi[b]]
-        Pbb_inv = np.empty((n, n))
         if not chol_inv(Pbb, Pbb_inv):
             return i
-        G = Pab @ Pbb_inv
-        Cs[i] = Pj[:d, :d] - G @ Pab.T
-        Gs[i] = G
+        _mm(Pab, Pbb_inv, Gs[i])
+        _mm(Gs[i], Pab, Cs[i], True)
+        for a in range(d):
+            for b in range(d):
+                Cs[i, a, b] = Pj[a, b] - Cs[i, a, b]
         mu_a[i] = mu[:d]
         for a in range(n):
             mu_b[i, a] = mu[bi[a]]
@@ -168,20 +227,28 @@ def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z,
     Ps[N - 1] = P[:d, :d]
     Pz = P.copy()
     mz = m.copy()
+    GP = np.empty((d, n))
+    Pxi = np.empty((d, d))
     for i in range(N - 2, -1, -1):
         G = Gs[i]
-        dz = mz - mu_b[i]
-        xi = mu_a[i] + G @ dz
-        Pxi = Cs[i] + G @ Pz @ G.T
-        cross = G @ Pz[:, d:]
-        Pn = np.empty((n, n))
-        Pn[:d, :d] = Pxi
-        Pn[:d, d:] = cross
-        Pn[d:, :d] = cross.T
-        Pn[d:, d:] = Pz[d:, d:]
-        Pz = Pn
-        mz[:d] = xi
-        Xs[i] = xi
+        # x_i = mu_a + G (z_{i+1} - mu_b);  P_i = C + G Pz G^T;  cross with K = G Pz[:, K]
+        for a in range(d):
+            t = mu_a[i, a]
+            for c in range(n):
+                t += G[a, c] * (mz[c] - mu_b[i, c])
+            Xs[i, a] = t
+        _mm(G, Pz, GP)
+        _mm(GP, G, Pxi, True)
+        for a in range(d):
+            for b in range(d):
+                Pxi[a, b] += Cs[i, a, b]
+        for a in range(d):
+            for b in range(p):
+                Pz[a, d + b] = GP[a, d + b]
+                Pz[d + b, a] = GP[a, d + b]
+            for b in range(d):
+                Pz[a, b] = Pxi[a, b]
+            mz[a] = Xs[i, a]
         Ps[i] = Pxi
     Ks[:] = mz[d:]
     Pks[:, :] = Pz[d:, d:]

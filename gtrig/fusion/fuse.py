@@ -131,6 +131,28 @@ def _decorrelated(f: Fixes, window_s: float) -> Fixes:
     return Fixes(f.source, f.stamps_s, f.model, f.value, cov, f.lever_xy)
 
 
+def _check_units(fixes: Sequence[Fixes], odometry: OdometryLog) -> None:
+    """Odometry in another unit (mm, degrees) travels or turns a multiple of what the sources see."""
+    f = max(fixes, key=len)
+    if len(f) < 3:
+        return
+    # compare over spans of about a second: the fixes' noise stays below the motion, and no span turns by pi
+    step = max(1, int(round(1.0 / max(float(np.median(np.diff(f.stamps_s))), 1e-6))))
+    z = f.value[::step]
+    path_fix = float(np.sum(np.hypot(*np.diff(z[:, :2], axis=0).T)))
+    o = interpolate_odometry(odometry, f.stamps_s[::step])
+    path_odo = float(np.sum(np.hypot(*np.diff(o[:, :2], axis=0).T)))
+    if path_fix > 0.5 and not 0.5 < path_odo / path_fix < 2.0:
+        raise InputError(f"fusion: the odometry travels {path_odo:.3g} where {f.source} travels {path_fix:.3g} m: "
+                         "is the odometry in another unit (mm? feet?)")
+    if f.model is FixModel.POSE:
+        turn_fix = float(np.sum(np.abs(np.diff(np.unwrap(z[:, 2])))))
+        turn_odo = float(np.sum(np.abs(np.diff(o[:, 2]))))
+        if turn_fix > 1.0 and not 0.5 < turn_odo / turn_fix < 2.0:
+            raise InputError(f"fusion: the odometry turns {turn_odo:.3g} where {f.source} turns {turn_fix:.3g} rad: "
+                             "is its heading in another unit (degrees?)")
+
+
 def _merge(fixes: Sequence[Fixes]) -> dict[str, np.ndarray]:
     st = np.concatenate([f.stamps_s for f in fixes])
     order = np.argsort(st, kind="stable")
@@ -265,14 +287,15 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
         if len(odometry) < 2:
             raise InputError("fusion: the odometry has fewer than two records")
         o0, o1 = float(odometry.stamps_s[0]), float(odometry.stamps_s[-1])
-        inside = []
+        kept: list[Fixes] = []
         for f in fixes:
             keep = (f.stamps_s >= o0) & (f.stamps_s <= o1)
             if not np.any(keep):
                 raise InputError(f"fusion: {f.source} ({f.stamps_s[0]:.3f}-{f.stamps_s[-1]:.3f} s) does not overlap "
                                  f"the odometry ({o0:.3f}-{o1:.3f} s); wrong clock or offset?")
-            inside.append(Fixes(f.source, f.stamps_s[keep], f.model, f.value[keep], f.cov[keep], f.lever_xy))
-        fixes = inside
+            kept.append(Fixes(f.source, f.stamps_s[keep], f.model, f.value[keep], f.cov[keep], f.lever_xy))
+        fixes = kept
+        _check_units(fixes, odometry)
     fx = _merge([_decorrelated(f, opts.correlation_s) for f in fixes])
     per_source = {s: {"offered": float(len(f)), "used": 0.0, "rejected": 0.0, "downweighted": 0.0,
                       "offset_s": float(opts.offsets_s.get(s, 0.0))} for s, f in zip(sources, fixes, strict=True)}
@@ -307,17 +330,17 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
             per_source[s]["used"] += float(np.sum(use[m]))
             per_source[s]["rejected"] += float(np.sum(~use[m]))
             per_source[s]["downweighted"] += float(np.sum(use[m] & (huber_w[m] < 1.0)))
-        inside = (stamps >= t0) & (stamps <= t1)
+        in_span = (stamps >= t0) & (stamps <= t1)
         br, gap = _bridged(stamps, np.unique(seg["stamps"][use]), opts.bridge_after_s)
-        br = br[inside]
-        gap = gap[inside]
-        out_st.append(stamps[inside])
-        out_xyt.append(X[inside, :3])
-        out_cov.append(cov[inside, :3, :3])
+        br = br[in_span]
+        gap = gap[in_span]
+        out_st.append(stamps[in_span])
+        out_xyt.append(X[in_span, :3])
+        out_cov.append(cov[in_span, :3, :3])
         out_status.append(np.where(br, PoseStatus.BRIDGED, PoseStatus.OK).astype(np.uint8))
         out_reason += [f"bridged: {g:.2f} s without a fix" if f else "" for f, g in zip(br, gap, strict=True)]
         sig = np.sqrt(np.diag(cov_k)) if cov_k.size else np.zeros(0)
-        segments.append(Segment(t0, t1, int(inside.sum()), int(br.sum()), float(gap[br].max()) if br.any() else 0.0,
+        segments.append(Segment(t0, t1, int(in_span.sum()), int(br.sum()), float(gap[br].max()) if br.any() else 0.0,
                                 tuple(float(v) for v in K), tuple(float(v) for v in sig), int(iters)))
     if not out_st:
         raise InputError("fusion: no segment with at least three fixes")

@@ -100,13 +100,12 @@ def fix_predict(q: np.ndarray, kind: int, lever: np.ndarray, h: np.ndarray, Jq: 
 
 @_jit
 def fix_residual(Xa: np.ndarray, Xb: np.ndarray, alpha: float, kind: int, z: np.ndarray, lever: np.ndarray,
-                 r: np.ndarray, Jq: np.ndarray) -> int:
+                 r: np.ndarray, Jq: np.ndarray, q: np.ndarray, h: np.ndarray) -> int:
     """Residual ``r = h(q) - z`` (yaw wrapped) of a fix between two node states; ``Jq`` is d r / d q, the
-    interpolated pose's Jacobian (multiply by 1 - alpha and alpha for the two nodes); returns m."""
-    q = np.empty(3)
+    interpolated pose's Jacobian (multiply by 1 - alpha and alpha for the two nodes); ``q``, ``h`` (3,)
+    are work buffers; returns m."""
     for a in range(3):
         q[a] = (1.0 - alpha) * Xa[a] + alpha * Xb[a]
-    h = np.empty(3)
     m = fix_predict(q, kind, lever, h, Jq)
     for a in range(3):
         r[a] = h[a] - z[a]

@@ -6,12 +6,15 @@ it). A source whose clock runs 0.3 s late has ``offset_s = +0.3``.
 
 Method (the seeds' check made quantitative, deliverable "Synchronization validation"):
 
-1. coarse: normalised cross-correlation of the heading rates, both on a 100 Hz grid (the source's only
-   where it has samples), over lags in ``[-search_s, search_s]``; its peak;
-2. fine: a 1-D minimisation (Brent) of the least-squares misfit between the source's headings at their
-   own stamps and the reference heading interpolated at ``stamp - offset``, with a gain and a level per
-   10 s window (odometry's turn-scale error and heading drift), around the coarse peak;
-3. interval: a jackknife over those windows (each left out in turn), Student's t with W - 1 dof.
+1. coarse: normalised cross-correlation of the heading rates on a grid of half the faster stream's
+   period (at most 100 Hz; the source's rate only where it has samples), over lags in
+   ``[-search_s, search_s]``; its peak;
+2. fine: a 1-D minimisation (a fine grid, then a parabola) of the least-squares misfit between the
+   source's headings at their own stamps and the reference heading interpolated at ``stamp - offset``,
+   with a gain and a level per window of at least 10 s (odometry's turn-scale error and heading drift);
+3. interval: a jackknife over those windows (each left out in turn), Student's t with W - 1 dof;
+4. optionally (:func:`refine_by_fusion`) the offset as a parameter of the fusion's own fit of the
+   source with the odometry (positions and headings): the most precise where covariances exist.
 
 Verdicts: ``unobservable`` when the robot turns too little (heading-rate spread under 0.02 rad/s, or
 fewer than 3 windows with turns); ``ambiguous`` when a second correlation peak, away from the first by
@@ -86,21 +89,30 @@ def _rate_on_grid(stamps: np.ndarray, yaw: np.ndarray, grid: np.ndarray, max_dt:
     return rate, valid
 
 
-def _misfit(offset: float, src_t: np.ndarray, src_th: np.ndarray, ref_t: np.ndarray, ref_th: np.ndarray,
-            win: np.ndarray, n_win: int, mask: np.ndarray | None = None) -> float:
-    """Sum over windows of the least-squares misfit of ``src_th ~ a_w + b_w ref_th(t - offset)``."""
-    r = np.interp(src_t - offset, ref_t, ref_th)
-    total = 0.0
-    for w in range(n_win):
-        m = win == w
-        if mask is not None:
-            m &= mask
-        if m.sum() < 3:
-            continue
-        A = np.column_stack([np.ones(m.sum()), r[m]])
-        coef, *_ = np.linalg.lstsq(A, src_th[m], rcond=None)
-        total += float(np.sum((src_th[m] - A @ coef) ** 2))
-    return total
+def _window_misfits(offset: float, src_t: np.ndarray, src_th: np.ndarray, ref_t: np.ndarray, ref_th: np.ndarray,
+                    win: np.ndarray, n_win: int) -> np.ndarray:
+    """(W,) per window, the least-squares misfit of ``src_th ~ a_w + b_w ref_th(t - offset)`` (closed form
+    from the windows' sums, one pass)."""
+    x = np.interp(src_t - offset, ref_t, ref_th)
+    y = src_th
+    n = np.bincount(win, minlength=n_win).astype(float)
+    sx, sy = np.bincount(win, x, n_win), np.bincount(win, y, n_win)
+    nn = np.maximum(n, 1.0)
+    xm, ym = sx / nn, sy / nn
+    dx, dy = x - xm[win], y - ym[win]
+    sxx, sxy, syy = np.bincount(win, dx * dx, n_win), np.bincount(win, dx * dy, n_win), np.bincount(win, dy * dy, n_win)
+    return np.where(sxx > 0, syy - sxy**2 / np.where(sxx > 0, sxx, 1.0), syy)
+
+
+def _parabolic_min(taus: np.ndarray, cost: np.ndarray) -> np.ndarray:
+    """Minimum of each column of ``cost`` (G, K) over the grid ``taus`` (G,), refined by a parabola."""
+    k = np.clip(np.argmin(cost, axis=0), 1, taus.size - 2)
+    cols = np.arange(cost.shape[1])
+    c0, c1, c2 = cost[k - 1, cols], cost[k, cols], cost[k + 1, cols]
+    den = c0 - 2 * c1 + c2
+    h = taus[1] - taus[0]
+    shift = np.where(den > 0, 0.5 * (c0 - c2) / np.where(den > 0, den, 1.0), 0.0)
+    return taus[k] + np.clip(shift, -1.0, 1.0) * h
 
 
 def estimate_offset(ref_stamps_s: np.ndarray, ref_yaw: np.ndarray, src_stamps_s: np.ndarray, src_yaw: np.ndarray,
@@ -122,7 +134,6 @@ def estimate_offset(ref_stamps_s: np.ndarray, ref_yaw: np.ndarray, src_stamps_s:
     """
     rt, ry = np.asarray(ref_stamps_s, float), np.asarray(ref_yaw, float)
     st, sy = np.asarray(src_stamps_s, float), np.asarray(src_yaw, float)
-    step = 1.0 / grid_hz
     nan2 = (float("nan"), float("nan"))
 
     def verdict(v: Verdict, reason: str, coarse: float = float("nan"), peak: float = float("nan"),
@@ -138,6 +149,9 @@ def estimate_offset(ref_stamps_s: np.ndarray, ref_yaw: np.ndarray, src_stamps_s:
     if t1 - t0 < 4 * search_s:
         return verdict("unobservable", f"the overlap ({max(t1 - t0, 0):.1f} s) is shorter than 4 x the search window")
     src_dt = float(np.median(np.diff(st)))
+    ref_dt = float(np.median(np.diff(rt)))
+    # the grid resolves the faster of the two streams, at most grid_hz
+    step = max(1.0 / grid_hz, 0.5 * min(src_dt, ref_dt))
     grid = np.arange(t0, t1, step)
     s_rate, s_valid = _rate_on_grid(st, sy, grid, max(2.5 * src_dt, 2 * step))
     ref_grid = np.arange(rt[0], rt[-1], step)
@@ -145,7 +159,7 @@ def estimate_offset(ref_stamps_s: np.ndarray, ref_yaw: np.ndarray, src_stamps_s:
     if np.std(s_rate[s_valid]) < min_rate_std or np.std(r_rate) < min_rate_std:
         return verdict("unobservable", "the robot hardly turns: no heading-rate signal to align")
     # --- coarse: normalised cross-correlation over the lags
-    lags = np.arange(-round(search_s * grid_hz), round(search_s * grid_hz) + 1) * step
+    lags = np.arange(-round(search_s / step), round(search_s / step) + 1) * step
     corr = np.full(lags.size, np.nan)
     for k, lag in enumerate(lags):
         g = grid - lag
@@ -185,27 +199,35 @@ def estimate_offset(ref_stamps_s: np.ndarray, ref_yaw: np.ndarray, src_stamps_s:
     keep = (st >= t0 + search_s) & (st <= t1 - search_s)
     sts, sys_ = st[keep], np.unwrap(sy)[keep]
     ref_th = np.unwrap(ry)
+    window_s = max(window_s, 10.0 * src_dt)  # at least ~10 samples of the source per window
     win = np.floor((sts - sts[0]) / window_s).astype(int)
     n_win = int(win.max()) + 1 if win.size else 0
     # windows where the robot turns: the source's heading moves by more than 2 deg
-    turning = np.array([np.ptp(sys_[win == w]) > np.deg2rad(2.0) if np.any(win == w) else False for w in range(n_win)])
+    lo_w = np.full(n_win, np.inf)
+    hi_w = np.full(n_win, -np.inf)
+    np.minimum.at(lo_w, win, sys_)
+    np.maximum.at(hi_w, win, sys_)
+    turning = (hi_w - lo_w > np.deg2rad(2.0)) & (np.bincount(win, minlength=n_win) >= 4)
     if turning.sum() < 3:
         return verdict("unobservable", f"only {int(turning.sum())} windows of {window_s:.0f} s with turns",
                        coarse, peak, second, lags, corr, int(turning.sum()))
     use = turning[win]
-    bounds = (coarse - 2 * step, coarse + 2 * step)
-
-    def fit(mask: np.ndarray) -> float:
-        res = minimize_scalar(_misfit, bounds=bounds, method="bounded",
-                              args=(sts, sys_, rt, ref_th, win, n_win, mask), options={"xatol": 1e-6})
-        return float(res.x)
-
-    best = fit(use)
+    sts, sys_ = sts[use], sys_[use]
     ids = np.flatnonzero(turning)
-    jack = np.array([fit(use & (win != w)) for w in ids])
+    win = np.searchsorted(ids, win[use])
     W = ids.size
+    # the misfit of every window on a 0.25-step grid around the peak; the jackknife leaves one out
+    reach = max(4 * step, src_dt, ref_dt)
+    taus = coarse + np.linspace(-reach, reach, 161)
+    per_win = np.stack([_window_misfits(tau, sts, sys_, rt, ref_th, win, W) for tau in taus])  # (G, W)
+    total = per_win.sum(axis=1)
+    best = float(_parabolic_min(taus, total[:, None])[0])
+    jack = _parabolic_min(taus, total[:, None] - per_win)
     se = float(np.sqrt((W - 1) / W * np.sum((jack - jack.mean()) ** 2)))
     half = float(student_t.ppf(0.975, W - 1)) * max(se, 1e-6)
+    if abs(best - coarse) > 0.98 * reach:
+        return verdict("ambiguous", f"the heading fit's minimum lies past {reach * 1e3:.0f} ms from the correlation "
+                       "peak", coarse, peak, second, lags, corr, W)
     ci = (best - half, best + half)
     if max_ci_s is not None and 2 * half > max_ci_s:
         return OffsetEstimate(source, "ambiguous", float("nan"), nan2, coarse, peak, second, lags, corr, W,
@@ -215,7 +237,8 @@ def estimate_offset(ref_stamps_s: np.ndarray, ref_yaw: np.ndarray, src_stamps_s:
 
 
 def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryLog,
-                     options: FusionOptions | None = None, half_width_s: float = 0.015) -> OffsetEstimate:
+                     options: FusionOptions | None = None, half_width_s: float = 0.015,
+                     anchors: tuple[Fixes, ...] = ()) -> OffsetEstimate:
     """Refine an ``ok`` (or coarse) estimate with the offset as a parameter of the fusion's own fit.
 
     The source's fixes (positions and headings, each weighed by its covariance) are smoothed with the
@@ -223,6 +246,10 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
     offset within ``half_width_s`` of the coarse peak, and the 95 % interval comes from the cost's curvature
     (Fisher information = cost'' / 2). The fixes' decorrelation (FusionOptions.correlation_s) keeps that
     curvature honest for time-correlated errors.
+
+    ``anchors``: other sources fused unshifted (their clock then is the reference: a mm-accurate GT
+    source pins the time far better than the odometry's slipping heading); ``estimate`` must then be
+    relative to them too.
     """
     from gtrig.fusion.batch import smooth_batch
     from gtrig.fusion.ekf import smooth_ekf
@@ -239,18 +266,33 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
         return estimate
     f = Fixes(fixes.source, fixes.stamps_s[keep], fixes.model, fixes.value[keep], fixes.cov[keep], fixes.lever_xy)
     f = _decorrelated(f, opts.correlation_s)
-    base = _merge([f])
+    anc = []
+    for a in anchors:
+        m = (a.stamps_s >= f.stamps_s[0] - c - margin) & (a.stamps_s <= f.stamps_s[-1] - c + margin)
+        anc.append(_decorrelated(Fixes(a.source, a.stamps_s[m], a.model, a.value[m], a.cov[m], a.lever_xy),
+                                 opts.correlation_s))
+    base = _merge([f, *anc])
+    names = (f.source, *(a.source for a in anc))
+
+    def shifted(offset: float) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        st_ = base["stamps"] - np.where(base["source"] == 0, offset, 0.0)
+        order = np.argsort(st_, kind="stable")
+        return {**{k: v[order] for k, v in base.items()}, "stamps": st_[order]}, order
+
     i0 = max(int(np.searchsorted(odometry.stamps_s, base["stamps"][0] - c - margin)) - 1, 0)
     i1 = min(int(np.searchsorted(odometry.stamps_s, base["stamps"][-1] - c + margin)), len(odometry) - 1)
     stamps = odometry.stamps_s[i0:i1 + 1]
-    chain0, _, _, P0 = _chain(stamps, {**base, "stamps": base["stamps"] - c}, odometry, opts, (f.source,))
+    fx0, order0 = shifted(c)
+    chain0, _, _, P0 = _chain(stamps, fx0, odometry, opts, names)
     ekf = smooth_ekf(chain0, P0, opts.odometry.prior()[1], gate_prob=opts.gate_prob)
-    use = ekf.accept
+    use = np.zeros(order0.size, bool)
+    use[order0] = ekf.accept  # the gate's verdict per fix, in the unshifted order
     state = {"X": ekf.X, "K": ekf.K}
 
     def cost(offset: float) -> float:
-        ch, _, _, _ = _chain(stamps, {**base, "stamps": base["stamps"] - offset}, odometry, opts, (f.source,))
-        res = smooth_batch(ch, state["X"], state["K"], fix_use=use, huber_k=opts.huber_k, max_iter=8)
+        fx, order = shifted(offset)
+        ch, _, _, _ = _chain(stamps, fx, odometry, opts, names)
+        res = smooth_batch(ch, state["X"], state["K"], fix_use=use[order], huber_k=opts.huber_k, max_iter=8)
         state["X"], state["K"] = res.X, res.K
         return res.cost
 
@@ -265,8 +307,7 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
                               "the fusion cost has no minimum near the correlation peak")
     half = 1.96 * float(np.sqrt(2.0 / curv))
     verdict: Verdict = estimate.verdict if estimate.verdict != "ok" else "ok"
-    src_dt = float(np.median(np.diff(f.stamps_s)))
-    if abs(best - c) > half_width_s * 0.95 or 2 * half > 0.5 * src_dt:
+    if abs(best - c) > half_width_s * 0.95 or 2 * half > 2 * half_width_s:
         verdict = "ambiguous"
     if verdict != "ok":
         return OffsetEstimate(estimate.source, verdict, float("nan"), (float("nan"),) * 2, estimate.coarse_s,

@@ -1,4 +1,15 @@
-"""Reading a YAML file with one-line errors that name it."""
+"""Reading YAML with limits, and with one-line errors that name the file.
+
+Every YAML document gtrig reads (rig files, run configurations, topic maps, calibration files) goes
+through :func:`parse_yaml`, which refuses what no real configuration needs and what would make a
+loader hang or exhaust memory:
+
+- more than :data:`MAX_BYTES` of text;
+- more than :data:`MAX_ALIASES` alias references (``*name``): the "billion laughs" document expands a
+  few hundred bytes into 10^9 nodes through nested aliases;
+- more than :data:`MAX_NODES` nodes once aliases are expanded;
+- nesting deeper than :data:`MAX_DEPTH` (a deeply nested list would otherwise overflow the stack).
+"""
 
 from __future__ import annotations
 
@@ -10,14 +21,118 @@ import yaml
 
 from gtrig.errors import FormatError, InputError
 
+MAX_BYTES = 64 * 2**20
+MAX_ALIASES = 1000
+MAX_NODES = 5_000_000
+MAX_DEPTH = 100
+
+
+class _LimitedLoader(yaml.SafeLoader):
+    """A safe loader that counts aliases and depth while composing."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._aliases = 0
+        self._depth = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: int) -> yaml.Node | None:
+        if self.check_event(yaml.AliasEvent):
+            self._aliases += 1
+            if self._aliases > MAX_ALIASES:
+                raise _RefusedError(f"more than {MAX_ALIASES} aliases")
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise _RefusedError(f"nested deeper than {MAX_DEPTH} levels")
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+class _RefusedError(Exception):
+    pass
+
+
+def _expanded_size(node: yaml.Node, memo: dict[int, int], stack: set[int]) -> int:
+    """Nodes of the document with every alias expanded (the shared sub-trees counted each time)."""
+    key = id(node)
+    if key in memo:
+        return memo[key]
+    if key in stack:
+        raise _RefusedError("a recursive alias")
+    stack.add(key)
+    n = 1
+    if isinstance(node, yaml.SequenceNode):
+        n += sum(_expanded_size(c, memo, stack) for c in node.value)
+    elif isinstance(node, yaml.MappingNode):
+        n += sum(_expanded_size(k, memo, stack) + _expanded_size(v, memo, stack) for k, v in node.value)
+    stack.discard(key)
+    memo[key] = n
+    if n > MAX_NODES:
+        raise _RefusedError(f"more than {MAX_NODES} nodes once its aliases are expanded")
+    return n
+
+
+def compose_yaml(text: str, source: str) -> yaml.Node | None:
+    """The node tree of ``text`` (for line numbers), within the module's limits."""
+    if len(text) > MAX_BYTES:
+        raise FormatError(f"{source}: {len(text) / 2**20:.0f} MiB of YAML, more than the {MAX_BYTES >> 20} MiB "
+                          "a configuration may have")
+    loader = _LimitedLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is not None:
+            _expanded_size(node, {}, set())
+        return node
+    except _RefusedError as e:
+        raise FormatError(f"{source}: refused: {e}") from None
+    except RecursionError:
+        raise FormatError(f"{source}: refused: nested too deeply") from None
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f"{source}:{mark.line + 1}" if mark else source
+        raise FormatError(f"{where}: not valid YAML ({getattr(e, 'problem', None) or e})") from None
+    finally:
+        loader.dispose()
+
+
+def construct_yaml(node: yaml.Node | None, source: str) -> Any:
+    """The Python document of a node tree from :func:`compose_yaml`."""
+    if node is None:
+        return None
+    loader = _LimitedLoader("")
+    try:
+        return loader.construct_document(node)
+    except RecursionError:
+        raise FormatError(f"{source}: refused: nested too deeply") from None
+    except yaml.YAMLError as e:
+        raise FormatError(f"{source}: not valid YAML ({getattr(e, 'problem', None) or e})") from None
+    finally:
+        loader.dispose()
+
+
+def parse_yaml(text: str, source: str) -> Any:
+    """The document in ``text`` (``source`` names it in errors), within the module's limits."""
+    return construct_yaml(compose_yaml(text, source), source)
+
+
+def read_text_file(path: str | os.PathLike[str], what: str = "file") -> str:
+    """The text of ``path``, with one-line errors: missing, a folder, not text, unreadable."""
+    p = Path(path)
+    try:
+        return p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{p}: no such {what}") from None
+    except IsADirectoryError:
+        raise InputError(f"{p}: is a folder, expected a {what}") from None
+    except UnicodeDecodeError:
+        raise FormatError(f"{p}: not a text {what} (undecodable bytes)") from None
+    except OSError as e:
+        raise InputError(f"{p}: cannot read ({e.strerror or e})") from None
+
 
 def load_yaml(path: str | os.PathLike[str]) -> Any:
     """The document in ``path``; :class:`InputError` when the file is missing, :class:`FormatError` when
-    it is not valid YAML (with the parser's problem, not its multi-line report)."""
+    it is not valid YAML (with the parser's problem, not its multi-line report) or beyond the limits."""
     p = Path(path)
-    try:
-        return yaml.safe_load(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{p}: no such file") from None
-    except yaml.YAMLError as e:
-        raise FormatError(f"{p}: not valid YAML ({getattr(e, 'problem', e)})") from None
+    return parse_yaml(read_text_file(p, "YAML file"), str(p))

@@ -9,8 +9,9 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
-from gtrig.errors import ConfigError
+from gtrig.errors import ConfigError, FormatError
 from gtrig.io.atomic import atomic_write_text
+from gtrig.io.yamlfile import compose_yaml, construct_yaml
 from gtrig.rig.models import Rig
 
 LineMap = dict[tuple[str | int, ...], int]
@@ -92,12 +93,10 @@ def load_rig(path: str | os.PathLike[str], overrides: dict[str, Any] | None = No
     except (IsADirectoryError, UnicodeDecodeError) as e:
         raise ConfigError(f"{p}: cannot read the rig file ({type(e).__name__})") from None
     try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f"{p}:{mark.line + 1}" if mark else str(p)
-        raise ConfigError(f"{where}: not valid YAML: {getattr(e, 'problem', e)}") from None
+        node = compose_yaml(text, str(p))
+        data = construct_yaml(node, str(p))
+    except FormatError as e:
+        raise ConfigError(str(e)) from None
     lines = _line_map(node) if node is not None else {}
     if overrides:
         data = _deep_merge(data if isinstance(data, dict) else {}, overrides)

@@ -44,6 +44,10 @@ class SimConfig(_Cfg):
     n_world_board_views: int = Field(default=3, ge=1)
     n_handheld_views: int = Field(default=30, ge=2)
     workers: int = Field(default=0, ge=0, description="processes; 0 = one per core")
+    odometry_clock_offset_s: float = Field(
+        default=0.0, ge=-60, le=60,
+        description="the robot's clock (odometry, onboard scanners) minus the GT room's clock; written to "
+        "truth/robot_clock.yaml, for checking time sync")
     camera: CameraSimConfig = CameraSimConfig()
     laser: LaserSimConfig = LaserSimConfig()
 

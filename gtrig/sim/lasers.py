@@ -493,6 +493,8 @@ def write_onboard_scans(
     """Write ``out_dir/<scanner>.csv`` for every onboard scanner (see :func:`simulate_onboard_scans`)."""
     scans, info = simulate_onboard_scans(scene, motion, intervals_s, cfg, seed)
     for name, s in scans.items():
+        if cfg.odometry_clock_offset_s:  # onboard scanners share the robot's clock
+            s = ScanLog(s.stamps_s + cfg.odometry_clock_offset_s, s.ranges_m)
         write_scans(Path(out_dir) / f"{name}.csv", s)
     log.info("onboard scans: %s", info.n_scans)
     return info

@@ -119,10 +119,15 @@ def write_odometry(
 ) -> OdometryErrors:
     """Write the run's odometry CSV (``stamp_s,x,y,theta,v,omega``) at ``rig.robot.odometry.rate_hz``.
 
-    Returns the errors drawn from ``seed`` (the same seed gives the same file).
+    The stamps are on the robot's clock: the GT clock plus ``cfg.odometry_clock_offset_s`` (the samples
+    themselves are taken at the same true instants). Returns the errors drawn from ``seed`` (the same seed
+    gives the same file).
     """
     rng = np.random.default_rng([seed, 0x0D0])
     errors = OdometryErrors.draw(rng)
     rate = scene.rig_true.robot.odometry.rate_hz
-    write_odometry_csv(path, simulate_odometry(motion, t0, t1, rate, errors, rng))
+    log = simulate_odometry(motion, t0, t1, rate, errors, rng)
+    if cfg.odometry_clock_offset_s:
+        log = OdometryLog(log.stamps_s + cfg.odometry_clock_offset_s, log.xytheta, log.v_mps, log.omega_radps)
+    write_odometry_csv(path, log)
     return errors

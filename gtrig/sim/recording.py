@@ -165,6 +165,9 @@ def _step_odometry(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> Non
     t0, t1 = tl.run_interval_s[0]
     errors = write_odometry(scene, tl.run, t0, t1, out / "run" / "odometry.csv", cfg, seed=cfg.seed * 10 + 6)
     atomic_write_text(out / "truth" / "odometry_errors.yaml", yaml.safe_dump(dataclasses.asdict(errors)))
+    atomic_write_text(out / "truth" / "robot_clock.yaml", yaml.safe_dump(
+        {"offset_s": float(cfg.odometry_clock_offset_s),
+         "convention": "robot stamp (odometry, onboard scans) - GT clock stamp of the same instant"}))
 
 
 def _step_survey(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
@@ -188,7 +191,9 @@ STEPS: tuple[tuple[str, Step], ...] = (
 
 def _config_key(cfg: SimConfig) -> str:
     # workers change speed, never output
-    doc = cfg.model_dump(mode="json", exclude={"workers"})
+    # the robot clock's offset joined the settings later: at its default it leaves the key unchanged
+    skip = {"workers"} | ({"odometry_clock_offset_s"} if cfg.odometry_clock_offset_s == 0 else set())
+    doc = cfg.model_dump(mode="json", exclude=skip)
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 

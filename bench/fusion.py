@@ -1,0 +1,258 @@
+"""Fusion bench: one hour of odometry (50 Hz), GTvision (40 Hz) and GTlaser (75 Hz) smoothed with marginal
+covariances, and GTSAM (Levenberg-Marquardt, Marginals) on the same factors side by side.
+
+    python bench/fusion.py [--hours 1] [--no-gtsam] [--seeds-root /work/recs]
+
+Part 1 (speed): gtrig.fusion.fuse on the full hour (fixes at their own stamps: EKF + RTS, then the batch MAP
+with marginal covariances), wall time and peak memory. Part 2 (peer): the same hour with each fix snapped to
+its nearest node and the odometry parameters held at their true values (Pose2 factors GTSAM has: a
+BetweenFactorPose2 per increment, a PriorFactorPose2 per fix, the world-frame covariance rotated into the
+fix's frame); both solvers on those factors, the largest position difference and the time ratio. Part 3
+(with --seeds-root): the acceptance rows on simulated recordings (the pipeline's GTvision and GTlaser).
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gtrig.fusion import FusionOptions, fixes_from_track, fuse
+from gtrig.fusion.batch import smooth_batch
+from gtrig.fusion.chain import PROCESS_ODOMETRY, FactorChain
+from gtrig.fusion.process import OdometryNoise, odometry_increments, whitening
+from gtrig.io.odometry import OdometryLog
+from gtrig.trajectory import PoseTrack
+
+
+def synthetic_hour(hours: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray, OdometryLog, list[PoseTrack]]:
+    """A robot wandering for ``hours``: truth at 50 Hz, odometry with scale errors and slip, two fix streams."""
+    rng = np.random.default_rng(seed)
+    dt = 0.02
+    n = int(hours * 3600 / dt) + 1
+    t = 1000.0 + np.arange(n) * dt
+    v = 0.4 + 0.2 * np.sin(t / 17.0)
+    w = 0.6 * np.sin(t / 5.3) + 0.3 * np.sin(t / 2.1)
+    th = np.cumsum(w) * dt
+    x = np.cumsum(v * np.cos(th)) * dt
+    y = np.cumsum(v * np.sin(th)) * dt
+    truth = np.column_stack([x, y, th])
+    # odometry: robot-frame increments scaled and slipped, integrated in its own frame
+    d = np.diff(truth, axis=0)
+    c, s = np.cos(truth[:-1, 2]), np.sin(truth[:-1, 2])
+    u = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
+    _, qcov = odometry_increments(truth, t, OdometryNoise())
+    noise = np.einsum("nij,nj->ni", np.linalg.cholesky(qcov), rng.normal(size=u.shape))
+    um = (u + noise) * [1.007, 1.007, 0.995]
+    o = np.zeros_like(truth)
+    for i in range(len(um)):  # dead reckoning; sequential by nature
+        ci, si = np.cos(o[i, 2]), np.sin(o[i, 2])
+        o[i + 1] = o[i] + [ci * um[i, 0] - si * um[i, 1], si * um[i, 0] + ci * um[i, 1], um[i, 2]]
+    odo = OdometryLog(t, o, np.r_[0, um[:, 0] / dt], np.r_[0, um[:, 2] / dt])
+    tracks = []
+    for name, rate, sig in (("vision", 40.0, (0.002, 0.002, 0.0007)), ("laser", 75.0, (0.0012, 0.0012, 0.0025))):
+        st = np.arange(t[0] + 0.003, t[-1] - 0.003, 1 / rate)
+        tru = np.column_stack([np.interp(st, t, truth[:, k]) for k in range(3)])
+        cov = np.diag(np.square(sig))
+        z = tru + rng.multivariate_normal(np.zeros(3), cov, st.size)
+        tracks.append(PoseTrack.from_xytheta(st, z, cov=np.tile(cov, (st.size, 1, 1)), source=name))
+    return t, truth, odo, tracks
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def part_speed(hours: float) -> tuple[np.ndarray, np.ndarray, OdometryLog, list[PoseTrack]]:
+    t, truth, odo, tracks = synthetic_hour(hours)
+    n_meas = len(odo) - 1 + sum(len(tr) for tr in tracks)
+    fixes = [fixes_from_track(tr) for tr in tracks]
+    small = synthetic_hour(0.01)  # compile / load the kernels outside the timing
+    fuse([fixes_from_track(tr) for tr in small[3]], small[2])
+    rss0 = peak_rss_mb()
+    t0 = time.perf_counter()
+    track, rep = fuse(fixes, odo, FusionOptions(correlation_s=0.0))
+    secs = time.perf_counter() - t0
+    e = track.xytheta() - np.column_stack([np.interp(track.stamps_s, t, truth[:, k]) for k in range(3)])
+    e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    nees = float(np.mean(np.einsum("ni,nij,nj->n", e, np.linalg.inv(track.cov), e)) / 3)
+    print(f"## speed: {hours:g} h, {len(track)} poses, {n_meas} measurements "
+          f"({len(odo) - 1} odometry, {len(tracks[0])} vision, {len(tracks[1])} laser)")
+    print(f"gtrig fuse (EKF + RTS, batch MAP, marginals): {secs:.2f} s, {n_meas / secs / 1e3:.0f} k measurements/s, "
+          f"peak RSS {peak_rss_mb():.0f} MB (+{peak_rss_mb() - rss0:.0f} MB); batch iterations "
+          f"{rep.segments[0].iterations}")
+    print(f"accuracy vs truth: mean position {np.hypot(e[:, 0], e[:, 1]).mean() * 1e3:.3f} mm, "
+          f"NEES/dof {nees:.3f}")
+    return t, truth, odo, tracks
+
+
+def snapped_chain(odo: OdometryLog, tracks: list[PoseTrack]) -> tuple[FactorChain, np.ndarray, np.ndarray]:
+    """Fixes snapped to their nearest odometry node, parameters held (a tight prior at the true values)."""
+    st = odo.stamps_s
+    u, qcov = odometry_increments(odo.xytheta, st, OdometryNoise())
+    k_true = np.array([1 / 1.007, 1 / 0.995, 0.0])
+    node, z, cov = [], [], []
+    for tr in tracks:
+        k = np.clip(np.round((tr.stamps_s - st[0]) / (st[1] - st[0])).astype(int), 0, st.size - 1)
+        node.append(k)
+        z.append(tr.xytheta())
+        cov.append(tr.cov_xytheta())
+    node_a, z_a, cov_a = np.concatenate(node), np.concatenate(z), np.concatenate(cov)
+    order = np.argsort(node_a, kind="stable")
+    node_a, z_a, cov_a = node_a[order], z_a[order], cov_a[order]
+    left = np.minimum(node_a, st.size - 2)
+    alpha = (node_a - left).astype(float)
+    M = node_a.size
+    x0 = z_a[0]
+    chain = FactorChain(st, PROCESS_ODOMETRY, u, whitening(qcov), left.astype(np.int64), alpha, np.zeros(M, np.int64),
+                        z_a, cov_a, whitening(cov_a), np.zeros((M, 2)), np.zeros(M, np.int64), st[node_a],
+                        ("fix",), x0, whitening(np.diag([1e-2, 1e-2, 1e-2])[None])[0], k_true,
+                        whitening(np.diag([1e-16, 1e-16, 1e-16])[None])[0])
+    # start: dead reckoning with the true parameters from the first fix
+    X = np.zeros((st.size, 3))
+    X[0] = x0
+    for i in range(st.size - 1):
+        c, s = np.cos(X[i, 2]), np.sin(X[i, 2])
+        a = k_true[0] * u[i]
+        X[i + 1] = X[i] + [c * a[0] - s * a[1], s * a[0] + c * a[1], k_true[1] * u[i, 2] + k_true[2] * u[i, 0]]
+    return chain, X, k_true
+
+
+def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
+    chain, X0, k = snapped_chain(odo, tracks)
+    t0 = time.perf_counter()
+    res = smooth_batch(chain, X0, k, huber_k=0.0)
+    ours_s = time.perf_counter() - t0
+    print(f"## peer: the same factors, fixes snapped to nodes ({len(chain)} nodes, {chain.fix_node.size} fixes)")
+    print(f"gtrig batch (Gauss-Newton/LM + all marginals): {ours_s:.2f} s, {res.iterations} iterations")
+    try:
+        import gtsam
+    except ImportError:
+        print("gtsam: not installed (pip install gtsam); peer skipped")
+        return
+    graph = gtsam.NonlinearFactorGraph()
+    init = gtsam.Values()
+    Q = np.linalg.inv(np.einsum("nki,nkj->nij", chain.proc_W, chain.proc_W))
+    inc = chain.proc_u * [k[0], k[0], 0.0]
+    inc[:, 2] = k[1] * chain.proc_u[:, 2] + k[2] * chain.proc_u[:, 0]
+    t0 = time.perf_counter()
+    for i in range(len(chain) - 1):
+        # Pose2's between error is the residual rotated by the increment's own turn: rotate its noise alike
+        c, s = np.cos(inc[i, 2]), np.sin(inc[i, 2])
+        Rm = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1.0]])
+        graph.add(gtsam.BetweenFactorPose2(i, i + 1, gtsam.Pose2(*inc[i]),
+                                           gtsam.noiseModel.Gaussian.Covariance(Rm @ Q[i] @ Rm.T)))
+    for j in range(chain.fix_node.size):
+        n = int(chain.fix_node[j] + chain.fix_alpha[j])
+        z = chain.fix_z[j]
+        c, s = np.cos(z[2]), np.sin(z[2])
+        J = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1.0]])  # world-frame perturbation -> Pose2's local one
+        graph.add(gtsam.PriorFactorPose2(n, gtsam.Pose2(*z), gtsam.noiseModel.Gaussian.Covariance(J @ chain.fix_cov[j] @ J.T)))
+    x0p = chain.x0
+    graph.add(gtsam.PriorFactorPose2(0, gtsam.Pose2(*x0p), gtsam.noiseModel.Gaussian.Covariance(np.diag([1e-2] * 3))))
+    for i in range(len(chain)):
+        init.insert(i, gtsam.Pose2(*X0[i]))
+    build_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-12)
+    params.setAbsoluteErrorTol(1e-12)
+    result = gtsam.LevenbergMarquardtOptimizer(graph, init, params).optimize()
+    solve_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    marg = gtsam.Marginals(graph, result)
+    probe = np.linspace(0, len(chain) - 1, 50).astype(int)
+    cov_g = [marg.marginalCovariance(int(i)) for i in probe]
+    marg_s = time.perf_counter() - t0
+    xy = np.array([[result.atPose2(i).x(), result.atPose2(i).y(), result.atPose2(i).theta()] for i in range(len(chain))])
+    dpos = float(np.max(np.hypot(*(xy[:, :2] - res.X[:, :2]).T)))
+    dyaw = float(np.max(np.abs((xy[:, 2] - res.X[:, 2] + np.pi) % (2 * np.pi) - np.pi)))
+    # GTSAM's marginal is in each pose's local frame: rotate ours into it
+    rel = []
+    for i, cg in zip(probe, cov_g, strict=True):
+        c, s = np.cos(res.X[i, 2]), np.sin(res.X[i, 2])
+        J = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1.0]])
+        co = J @ res.cov_x[i] @ J.T
+        rel.append(np.max(np.abs(np.sqrt(np.diag(co)) / np.sqrt(np.diag(cg)) - 1)))
+    print(f"gtsam {gtsam.__version__ if hasattr(gtsam, '__version__') else ''} LM: build {build_s:.2f} s, solve "
+          f"{solve_s:.2f} s, 50 marginals {marg_s:.2f} s")
+    print(f"largest difference: position {dpos:.2e} m, yaw {dyaw:.2e} rad; sigma ratio at 50 nodes within "
+          f"{max(rel) * 100:.3f} %")
+    print(f"time ratio gtsam solve / gtrig (solve + every marginal): {solve_s / ours_s:.2f}")
+
+
+def part_seeds(root: Path) -> None:
+    from gtrig.io.odometry import read_odometry
+    from gtrig.io.posetrack import read_pose_track
+    from gtrig.io.tum import read_tum
+
+    print("## acceptance on simulated recordings (the pipeline's GTvision and GTlaser)")
+    print("| seed | source | mean pos (mm) | p95 pos (mm) | max pos (mm) | mean yaw (deg) | NEES/dof |")
+    print("|---|---|---|---|---|---|---|")
+    for rec in sorted(root.glob("s*")):
+        res = rec / "results"
+        if not (res / "gt_laser.tum").exists() or not (res / "gt_vision_run.tum").exists():
+            continue
+        vis = read_pose_track(res / "gt_vision_run.tum", res / "gt_vision_run_cov.csv", "vision")
+        las = read_pose_track(res / "gt_laser.tum", res / "gt_laser_cov.csv", "laser")
+        odo = read_odometry(rec / "recording" / "run" / "odometry.csv")
+        truth = read_tum(rec / "recording" / "truth" / "run.tum")
+        th = np.unwrap(truth.yaw_rad())
+
+        def errs(tr: PoseTrack) -> np.ndarray:
+            g = np.column_stack([np.interp(tr.stamps_s, truth.stamps_s, truth.xyz[:, 0]),
+                                 np.interp(tr.stamps_s, truth.stamps_s, truth.xyz[:, 1]),
+                                 np.interp(tr.stamps_s, truth.stamps_s, th)])
+            e = tr.xytheta() - g
+            e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
+            return e
+
+        fused, rep = fuse([fixes_from_track(vis), fixes_from_track(las)], odo)
+        for name, tr in (("vision", vis.usable()), ("laser", las.usable()), ("fused", fused)):
+            e = errs(tr)
+            p = np.hypot(e[:, 0], e[:, 1]) * 1e3
+            c = tr.cov_xytheta()
+            q = np.einsum("ni,nij,nj->n", e, np.linalg.inv(c), e) / 3
+            print(f"| {rec.name} | {name} | {p.mean():.3f} | {np.percentile(p, 95):.3f} | {p.max():.3f} | "
+                  f"{np.degrees(np.abs(e[:, 2])).mean():.4f} | {q.mean():.3f} |")
+        print(f"|  | fused: {rep.seconds:.2f} s, {sum(int(v['rejected']) for v in rep.sources.values())} fixes "
+              f"rejected, {len(fused)} poses | | | | | |")
+        # a 3 s gap cut out of both sources, mid-run: the bridged poses against their ellipses
+        g0 = float(odo.stamps_s[0]) + 30.0
+        cut = {n: t.select((t.stamps_s < g0) | (t.stamps_s > g0 + 3.0)) for n, t in (("vision", vis), ("laser", las))}
+        bridged, _ = fuse([fixes_from_track(t, n) for n, t in cut.items()], odo)
+        b = bridged.status == 2
+        e = errs(bridged)[b]
+        q = np.einsum("ni,nij,nj->n", e, np.linalg.inv(bridged.cov[b]), e)
+        p = np.hypot(e[:, 0], e[:, 1]) * 1e3
+        print(f"|  | 3 s gap: {int(b.sum())} bridged poses, max error {p.max():.2f} mm, NEES/dof {q.mean() / 3:.2f}, "
+              f"inside 3 sigma {np.mean(q < 14.16) * 100:.1f} % | | | | | |")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--hours", type=float, default=1.0)
+    ap.add_argument("--no-gtsam", action="store_true")
+    ap.add_argument("--gtsam-hours", type=float, default=None,
+                    help="the peer on a shorter synthetic run (GTSAM's Python graph of 6e5 factors needs > 4 GB)")
+    ap.add_argument("--seeds-root", type=Path, default=None)
+    a = ap.parse_args(argv)
+    if a.seeds_root is not None:
+        part_seeds(a.seeds_root)
+    _, _, odo, tracks = part_speed(a.hours)
+    if not a.no_gtsam:
+        if a.gtsam_hours is not None:
+            _, _, odo, tracks = synthetic_hour(a.gtsam_hours)
+            small = synthetic_hour(0.005)  # compile the kernels for the snapped chain outside the timing
+            sc, sx, sk = snapped_chain(small[2], small[3])
+            smooth_batch(sc, sx, sk, huber_k=0.0)
+        part_gtsam(odo, tracks)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

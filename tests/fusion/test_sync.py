@@ -1,0 +1,37 @@
+"""Clock offsets: injected odometry offsets recovered with intervals covering them; no turning -> unobservable."""
+
+import numpy as np
+import pytest
+
+from gtrig.fusion import FusionOptions, fixes_from_track
+from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+from gtrig.io.odometry import OdometryLog
+
+
+@pytest.mark.parametrize("lag", [0.05, 0.3, 2.0])
+def test_injected_odometry_offset_recovered(run, lag: float) -> None:
+    o = run.odometry
+    odo = OdometryLog(o.stamps_s + lag, o.xytheta, o.v_mps, o.omega_radps)
+    est = estimate_offset(odo.stamps_s, odo.xytheta[:, 2], run.laser.stamps_s, run.laser.yaw_rad(), "laser")
+    assert est.verdict == "ok" and abs(est.coarse_s + lag) <= 0.011
+    fine = refine_by_fusion(est, fixes_from_track(run.laser), odo, FusionOptions(correlation_s=0.0))
+    assert fine.verdict == "ok"
+    assert abs(fine.offset_s + lag) < 0.002  # the source runs `lag` early relative to the odometry
+    assert fine.ci95_s[0] <= -lag <= fine.ci95_s[1]
+    assert fine.ci95_s[1] - fine.ci95_s[0] < 0.01
+
+
+def test_no_turning_is_unobservable() -> None:
+    t = np.arange(0, 60, 0.02)
+    yaw = np.full(t.size, 0.3) + np.random.default_rng(1).normal(0, 1e-4, t.size)
+    est = estimate_offset(t, yaw, t[::5] + 0.1, yaw[::5], "straight")
+    assert est.verdict == "unobservable" and np.isnan(est.offset_s)
+
+
+def test_offset_between_two_gt_sources(run) -> None:
+    """A GT source as the reference (its fixes anchor the fit): a 3 ms camera offset to the laser's clock."""
+    vision = run.vision.shifted(0.003)  # the camera clock reads 3 ms late
+    coarse = estimate_offset(run.laser.stamps_s, run.laser.yaw_rad(), vision.stamps_s, vision.yaw_rad(), "vision")
+    fine = refine_by_fusion(coarse, fixes_from_track(vision), run.odometry, anchors=(fixes_from_track(run.laser),))
+    assert fine.verdict == "ok" and abs(fine.offset_s - 0.003) < 0.001
+    assert fine.ci95_s[0] <= 0.003 <= fine.ci95_s[1]
