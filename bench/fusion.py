@@ -141,7 +141,11 @@ def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
     inc[:, 2] = k[1] * chain.proc_u[:, 2] + k[2] * chain.proc_u[:, 0]
     t0 = time.perf_counter()
     for i in range(len(chain) - 1):
-        graph.add(gtsam.BetweenFactorPose2(i, i + 1, gtsam.Pose2(*inc[i]), gtsam.noiseModel.Gaussian.Covariance(Q[i])))
+        # Pose2's between error is the residual rotated by the increment's own turn: rotate its noise alike
+        c, s = np.cos(inc[i, 2]), np.sin(inc[i, 2])
+        Rm = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1.0]])
+        graph.add(gtsam.BetweenFactorPose2(i, i + 1, gtsam.Pose2(*inc[i]),
+                                           gtsam.noiseModel.Gaussian.Covariance(Rm @ Q[i] @ Rm.T)))
     for j in range(chain.fix_node.size):
         n = int(chain.fix_node[j] + chain.fix_alpha[j])
         z = chain.fix_z[j]

@@ -287,14 +287,14 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
         if len(odometry) < 2:
             raise InputError("fusion: the odometry has fewer than two records")
         o0, o1 = float(odometry.stamps_s[0]), float(odometry.stamps_s[-1])
-        inside = []
+        kept: list[Fixes] = []
         for f in fixes:
             keep = (f.stamps_s >= o0) & (f.stamps_s <= o1)
             if not np.any(keep):
                 raise InputError(f"fusion: {f.source} ({f.stamps_s[0]:.3f}-{f.stamps_s[-1]:.3f} s) does not overlap "
                                  f"the odometry ({o0:.3f}-{o1:.3f} s); wrong clock or offset?")
-            inside.append(Fixes(f.source, f.stamps_s[keep], f.model, f.value[keep], f.cov[keep], f.lever_xy))
-        fixes = inside
+            kept.append(Fixes(f.source, f.stamps_s[keep], f.model, f.value[keep], f.cov[keep], f.lever_xy))
+        fixes = kept
         _check_units(fixes, odometry)
     fx = _merge([_decorrelated(f, opts.correlation_s) for f in fixes])
     per_source = {s: {"offered": float(len(f)), "used": 0.0, "rejected": 0.0, "downweighted": 0.0,
@@ -330,17 +330,17 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
             per_source[s]["used"] += float(np.sum(use[m]))
             per_source[s]["rejected"] += float(np.sum(~use[m]))
             per_source[s]["downweighted"] += float(np.sum(use[m] & (huber_w[m] < 1.0)))
-        inside = (stamps >= t0) & (stamps <= t1)
+        in_span = (stamps >= t0) & (stamps <= t1)
         br, gap = _bridged(stamps, np.unique(seg["stamps"][use]), opts.bridge_after_s)
-        br = br[inside]
-        gap = gap[inside]
-        out_st.append(stamps[inside])
-        out_xyt.append(X[inside, :3])
-        out_cov.append(cov[inside, :3, :3])
+        br = br[in_span]
+        gap = gap[in_span]
+        out_st.append(stamps[in_span])
+        out_xyt.append(X[in_span, :3])
+        out_cov.append(cov[in_span, :3, :3])
         out_status.append(np.where(br, PoseStatus.BRIDGED, PoseStatus.OK).astype(np.uint8))
         out_reason += [f"bridged: {g:.2f} s without a fix" if f else "" for f, g in zip(br, gap, strict=True)]
         sig = np.sqrt(np.diag(cov_k)) if cov_k.size else np.zeros(0)
-        segments.append(Segment(t0, t1, int(inside.sum()), int(br.sum()), float(gap[br].max()) if br.any() else 0.0,
+        segments.append(Segment(t0, t1, int(in_span.sum()), int(br.sum()), float(gap[br].max()) if br.any() else 0.0,
                                 tuple(float(v) for v in K), tuple(float(v) for v in sig), int(iters)))
     if not out_st:
         raise InputError("fusion: no segment with at least three fixes")

@@ -65,3 +65,13 @@ def test_same_seed_same_file(tmp_path, scene, run) -> None:  # type: ignore[no-u
     assert (tmp_path / "a.csv").read_bytes() != (tmp_path / "c.csv").read_bytes()
     log = read_odometry(tmp_path / "a.csv")
     assert len(log) == 251
+
+
+def test_robot_clock_offset_shifts_only_the_stamps(tmp_path, scene, run) -> None:  # type: ignore[no-untyped-def]
+    """--odometry-offset-s: the same samples, stamped on the robot's clock (GT clock + offset)."""
+    t0, t1 = run.stamps_s[0], run.stamps_s[0] + 5.0
+    write_odometry(scene, run, t0, t1, tmp_path / "a.csv", SimConfig(), 3)
+    write_odometry(scene, run, t0, t1, tmp_path / "b.csv", SimConfig(odometry_clock_offset_s=0.3), 3)
+    a, b = read_odometry(tmp_path / "a.csv"), read_odometry(tmp_path / "b.csv")
+    np.testing.assert_allclose(b.stamps_s - a.stamps_s, 0.3, atol=1e-6)
+    np.testing.assert_array_equal(a.xytheta, b.xytheta)
