@@ -14,6 +14,8 @@ from gtrig.config import RunConfig, apply_to_dataclass, load_config, write_confi
 from gtrig.errors import ConfigError
 from gtrig.laser.track import TrackSettings
 from gtrig.markers.robotcal.calibrate import RobotCalOptions
+from gtrig.rig import dump_rig
+from gtrig.rig.models import Hull, Rig, Robot
 from gtrig.vision.covariance import UNCALIBRATED_MARKERS
 from gtrig.vision.estimate import VisionOptions
 
@@ -69,6 +71,15 @@ def test_cli_print_config_and_bad_inputs(tmp_path: Path) -> None:
     assert RunConfig.model_validate(yaml.safe_load(r.output)) == RunConfig()
     r = runner.invoke(app, ["run", "--print-config", "--workers", "3"])
     assert yaml.safe_load(r.output)["workers"] == 3
+    # a recording with only its rig: the first stage asked for names what it lacks
+    only_rig = tmp_path / "only_rig"
+    hull = Hull(length_m=0.78, width_m=0.57, z_min_m=0.05, z_max_m=0.55)
+    dump_rig(Rig(robot=Robot(hull=hull)), only_rig / "rig.yaml")
+    r = runner.invoke(app, ["run", "--recording", str(only_rig), "--out", str(tmp_path / "o2")])
+    assert r.exit_code == 2 and "stage survey needs" in r.output and "reference_points.csv" in r.output, r.output
+    assert len([ln for ln in r.output.splitlines() if ln.strip()]) == 1
+    r = runner.invoke(app, ["run", "--recording", str(only_rig), "--out", str(tmp_path / "o2"), "--stages", "laser"])
+    assert r.exit_code == 2 and "stage laser needs" in r.output and "lasers" in r.output, r.output
     bad = tmp_path / "bad.yaml"
     bad.write_text("survey: {alpha: 2}\n")
     (tmp_path / "folder").mkdir()
