@@ -234,7 +234,9 @@ def render(
         chan = np.where((yy % 2 == 0) & (xx % 2 == 0), 0, np.where((yy % 2 == 1) & (xx % 2 == 1), 2, 1))
         gains = np.choose(chan, [tint[0], tint[1], tint[2]])
         mosaic = np.clip(np.rint(img * gains + rng.normal(0.0, noise, (h, w))), 0, 255).astype(np.uint8)
-        out = cv2.cvtColor(mosaic, cv2.COLOR_BayerBG2BGR)
+        # B at (even, even), R at (odd, odd): OpenCV names this layout BayerRG (its names are those of
+        # the second row and column)
+        out = cv2.cvtColor(mosaic, cv2.COLOR_BayerRG2BGR)
     if jpeg_quality is not None:
         ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
         out = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)

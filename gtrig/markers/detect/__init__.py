@@ -228,6 +228,7 @@ class MarkerDetector:
         border_white = bits[:, bmask].sum(axis=1)
         ok_levels = (border_white <= n // 2) & (contrast >= self.params.min_contrast)
         retry = np.flatnonzero((ids < 0) & ok_levels)
+        retried = np.zeros(len(Q), bool)
         if len(retry):
             # small blurred markers: a white cell among black ones peaks below the midway threshold, so
             # the plain reading fails; solve the cells through the blur model instead (as the final
@@ -245,6 +246,7 @@ class MarkerDetector:
                 i2, r2, h2 = decode_batch(self.spec.family, (w > 0.5).astype(np.uint8), tol)
                 hit = i2 >= 0
                 ids[todo[hit]], rot[todo[hit]], ham[todo[hit]] = i2[hit], r2[hit], h2[hit]
+                retried[todo[hit]] = True
                 d = bits[todo[hit]]
                 d[:, bc:-bc, bc:-bc] = (w[hit] > 0.5)
                 bits[todo[hit]] = d
@@ -257,6 +259,7 @@ class MarkerDetector:
                        else f"{border_white[k]} white border cells" if border_white[k] > n // 2
                        else f"cells {ham[k]} from the nearest code (> {tol})")
                 trace.append(Rejection(raw[k].copy(), "predecode", why))
+        self._retried = retried[keep]
         return Q[keep], ids[keep], rot[keep], ham[keep], bits[keep]
 
     def _white_cells(self, ids: NDArray[np.int64], bits: NDArray[np.uint8]) -> NDArray[np.float64]:
@@ -279,8 +282,11 @@ class MarkerDetector:
         gray = _to_gray(image)
         if min(gray.shape) < max(8, int(self.params.candidates.min_side_px)):
             return []
+        self._provisional: set[int] = set()
         if not self.params.blurred.enabled:
-            return _dedupe(self._detect_sharp(gray, trace))
+            # without the second path the first path keeps to the markers it reads plainly (those read
+            # only through the blur model are the second path's regime, where its corners are better)
+            return _dedupe([d for d in self._detect_sharp(gray, trace) if id(d) not in self._provisional])
         if _threads.threads(self.params.threads) < 2:
             cands = self._blurred_candidates(gray)
             dets = self._detect_sharp(gray, trace)
@@ -290,7 +296,15 @@ class MarkerDetector:
             later = _threads.helper_pool().submit(self._blurred_candidates, gray)
             dets = self._detect_sharp(gray, trace)
             cands = later.result()
-        return _dedupe(dets + self._detect_blurred(gray, cands, dets, trace))
+        # markers read only through the blur model in the pre-decoder are small and blurred: the second
+        # path, whose model is made for them, reads them too, and its reading replaces the first's
+        prov = [d for d in dets if id(d) in self._provisional]
+        sure = [d for d in dets if id(d) not in self._provisional]
+        blurred = self._detect_blurred(gray, cands, sure, trace)
+        keep = [d for d in prov
+                if not any(b.id == d.id and np.linalg.norm(b.corners_px.mean(axis=0) - d.corners_px.mean(axis=0))
+                           < 0.25 * np.sqrt(_area(d.corners_px)) for b in blurred)]
+        return _dedupe(sure + keep + blurred)
 
     def _all_codes(self) -> NDArray[np.uint8]:
         """Every code (C, d, d) of the family in its four rotations, as read in a quad's orientation."""
@@ -369,6 +383,7 @@ class MarkerDetector:
         Q = Q0 if und is None else und.to_undistorted(Q0.reshape(-1, 2)).reshape(-1, 4, 2)
         n = self.spec.cells
         Q, pre_id, pre_rot, pre_ham, pre_bits = self._predecode(gray, Q, und, trace)
+        retried = self._retried
         if not len(Q):
             return []
         side = np.linalg.norm(Q - np.roll(Q, -1, axis=1), axis=2)  # (Q, 4)
@@ -476,6 +491,8 @@ class MarkerDetector:
             order = (np.arange(4) + rot[k]) % 4
             out.append(Detection(int(ids[k]), corners[k][order].copy(), cov[k][order].copy(), int(ham[k]),
                                  float(blur[k])))
+            if retried[idx[k]]:
+                self._provisional.add(id(out[-1]))
         return out
 
 
