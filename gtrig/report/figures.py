@@ -9,13 +9,13 @@ from typing import Any
 
 import numpy as np
 
-from gtrig.survey.plots import _figure, ellipse_xy
+from gtrig.plotting import ellipse_xy, figure
 from gtrig.trajectory import PoseStatus, PoseTrack
 
 
 def status_figure(track: PoseTrack, title: str) -> Any:
     """Status per pose over time, and the per-pose position sigma (mm) and gaps between poses."""
-    fig, (a0, a1) = _figure(nrows=2, sharex=True, figsize=(9, 3.6))
+    fig, (a0, a1) = figure(nrows=2, sharex=True, figsize=(9, 3.6))
     t = track.stamps_s - track.stamps_s[0]
     colors = {PoseStatus.OK: "g", PoseStatus.FLAGGED: "orange", PoseStatus.BRIDGED: "purple",
               PoseStatus.REJECTED: "r"}
@@ -42,7 +42,7 @@ def status_figure(track: PoseTrack, title: str) -> Any:
 def camera_figure(per_camera: dict[str, dict[str, list[float]]], title: str) -> Any:
     """Per camera: where in the image markers were detected (corner scatter) and detections over time."""
     cams = sorted(per_camera)
-    fig, axs = _figure(nrows=2, ncols=max(len(cams), 1), figsize=(3.2 * max(len(cams), 1), 5.6), squeeze=False)
+    fig, axs = figure(nrows=2, ncols=max(len(cams), 1), figsize=(3.2 * max(len(cams), 1), 5.6), squeeze=False)
     t0 = min((min(v["t"]) for v in per_camera.values() if v["t"]), default=0.0)
     for j, cam in enumerate(cams):
         d = per_camera[cam]
@@ -65,7 +65,7 @@ def survey_figure(points: dict[str, np.ndarray], cov: np.ndarray | None, truth: 
                   poses: np.ndarray | None, pose_cov: np.ndarray | None, scale: float) -> Any:
     """Surveyed world points and validation poses with their 3-sigma ellipses magnified ``scale`` times;
     with truth, the error of each point magnified alike."""
-    fig, ax = _figure(figsize=(7.5, 6.5))
+    fig, ax = figure(figsize=(7.5, 6.5))
     names = list(points)
     P = np.array([points[n] for n in names])
     ax.plot(P[:, 0], P[:, 1], "b+", label="world points")
@@ -97,7 +97,7 @@ def bars_figure(groups: dict[str, dict[str, float]], ylabel: str, title: str) ->
     """Grouped bars: ``groups[series][camera] = value``."""
     series = list(groups)
     cams = sorted({c for g in groups.values() for c in g})
-    fig, ax = _figure(figsize=(8, 3.5))
+    fig, ax = figure(figsize=(8, 3.5))
     w = 0.8 / max(len(series), 1)
     for k, s in enumerate(series):
         ax.bar(np.arange(len(cams)) + k * w, [groups[s].get(c, np.nan) for c in cams], w, label=s)
@@ -111,7 +111,7 @@ def bars_figure(groups: dict[str, dict[str, float]], ylabel: str, title: str) ->
 
 def curves_figure(curves: dict[str, tuple[np.ndarray, np.ndarray]], xlabel: str, ylabel: str, title: str) -> Any:
     """One line per curve, its maximum marked (the sync correlation curves)."""
-    fig, ax = _figure(figsize=(8, 3.5))
+    fig, ax = figure(figsize=(8, 3.5))
     for name, (x, y) in curves.items():
         ax.plot(x, y, "-", lw=0.8, label=name)
         i = int(np.nanargmax(y))

@@ -11,8 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from gtrig.cli.main import app
-from gtrig.markers.detect import MarkerDetector
-from gtrig.markers.detect import sampling
+from gtrig.markers.detect import MarkerDetector, sampling
 from gtrig.markers.synth import homography_from_pose, render, textured_background
 
 FAMILY = "apriltag_36h11"

@@ -87,7 +87,7 @@ def test_cli_print_config_and_bad_inputs(tmp_path: Path) -> None:
         (["--config", str(bad)], "survey.alpha: Input should be less than 1"),
         (["--config", str(tmp_path / "none.yaml")], "no such file"),
         ([], "not a recording (no rig.yaml"),
-        (["--stages", "survey,fusion"], "unknown stage 'fusion'"),
+        (["--stages", "survey,teleport"], "unknown stage 'teleport'"),
     ):
         r = runner.invoke(app, ["run", "--recording", str(tmp_path / "folder"), "--out", str(tmp_path / "o"), *args])
         assert r.exit_code == 2, (args, r.output)
