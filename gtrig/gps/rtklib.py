@@ -22,6 +22,7 @@ from gtrig.errors import FormatError
 from gtrig.gps.covariance import CovSource
 from gtrig.gps.epochs import DAY_S, Epochs
 from gtrig.gps.nmea import days_from_civil
+from gtrig.io.text import read_text
 
 Q_TO_GGA = {1: 4, 2: 5, 3: 9, 4: 2, 5: 1, 6: 2}
 #: (UTC instant from which it holds, GPS - UTC seconds)
@@ -42,13 +43,7 @@ def gps_minus_utc_s(gps_unix_s: np.ndarray) -> np.ndarray:
 def read_rtklib_pos(path: str | os.PathLike[str]) -> Epochs:
     """Epochs from an RTKLIB ``.pos`` file (module docstring). One-line :class:`FormatError` on bad input."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="ascii")
-    except FileNotFoundError:
-        raise FormatError(f"{p}: no such file") from None
-    except UnicodeDecodeError:
-        raise FormatError(f"{p}: a binary file, not an RTKLIB .pos text file") from None
-    lines = text.splitlines()
+    lines = read_text(p, "RTKLIB .pos text file", encoding="ascii").splitlines()
     header = [ln for ln in lines if ln.startswith("%")]
     cols_line = next((ln for ln in reversed(header) if "latitude" in ln or "x-ecef" in ln), None)
     if cols_line is None:

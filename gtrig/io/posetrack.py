@@ -26,6 +26,7 @@ import numpy as np
 
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_group
+from gtrig.io.text import read_text
 from gtrig.io.tum import read_tum, tum_text
 from gtrig.trajectory import COV_AXES, CovKind, PoseStatus, PoseTrack
 
@@ -90,13 +91,7 @@ def read_covariance_csv(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.nd
                                                                  np.ndarray, tuple[str, ...], dict[str, str]]:
     """``(stamps_s, cov or None, cov_kind, status, reasons, meta)`` from a covariance CSV of any layout."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FormatError(f"{p}: no such file") from None
-    except UnicodeDecodeError:
-        raise FormatError(f"{p}: not a text file") from None
-    lines = text.splitlines()
+    lines = read_text(p, "pose covariance CSV").splitlines()
     meta = _header_meta(lines[0]) if lines and lines[0].startswith(_MAGIC) else {}
     rows = [(i + 1, r) for i, r in enumerate(csv.reader(lines)) if r and not r[0].startswith("#")]
     if not rows:

@@ -9,19 +9,13 @@ from pathlib import Path
 import numpy as np
 
 from gtrig.errors import FormatError
+from gtrig.io.text import read_text
 
 
 def read_lines(path: str | os.PathLike[str]) -> tuple[Path, list[str]]:
     """The lines of a text file; a missing or binary file is one :class:`FormatError`."""
     p = Path(path)
-    try:
-        return p, p.read_text(encoding="utf-8-sig").splitlines()
-    except FileNotFoundError:
-        raise FormatError(f"{p}: no such file") from None
-    except IsADirectoryError:
-        raise FormatError(f"{p}: is a folder, not a trajectory file") from None
-    except UnicodeDecodeError:
-        raise FormatError(f"{p}: not a text file") from None
+    return p, read_text(p, "trajectory file", encoding="utf-8-sig").splitlines()
 
 
 def numeric_rows(p: Path, lines: list[str], ncols: tuple[int, ...], sep: str | None, what: str,
