@@ -343,6 +343,27 @@ def fit_hull_batch(
     return HullFitBatch(pose, cov, n_in, side_points, n_sides, rms, chi2_dof, it, degenerate, tuple(reasons))
 
 
+def _fit_normal_equations(
+    model: HullModel, xy_world: np.ndarray, frame_index: np.ndarray, scanner_index: np.ndarray,
+    scanner_xy_world: np.ndarray, dir_world: np.ndarray, sigma_range_m: np.ndarray, xytheta: np.ndarray,
+    st: IcpSettings,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, _Linearisation, np.ndarray]:
+    """The fit linearised at ``xytheta`` and its (K, 3, 3) normal matrix with the prior, as the
+    sensitivities need them: ``(points, frame index, scanner index, scanner positions, beam directions,
+    linearisation, H)``."""
+    p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
+    fid = np.asarray(frame_index, dtype=np.intp)
+    sid = np.asarray(scanner_index, dtype=np.intp)
+    pose = np.asarray(xytheta, dtype=float).reshape(-1, 3)
+    S = np.asarray(scanner_xy_world, dtype=float)
+    d = np.asarray(dir_world, dtype=float)
+    var_r = (np.asarray(sigma_range_m, dtype=float) ** 2)[sid]
+    lin = _linearise(model, p, fid, sid, S, d, var_r, pose, st.gate_m, st)
+    H = _normal_matrix(fid, lin.w, lin.J, pose.shape[0])
+    H[:, [0, 1, 2], [0, 1, 2]] += [1 / st.prior_std_m**2, 1 / st.prior_std_m**2, 1 / st.prior_std_rad**2]
+    return p, fid, sid, S, d, lin, H
+
+
 def scanner_sensitivity(
     model: HullModel,
     xy_world: np.ndarray,
@@ -376,17 +397,9 @@ def scanner_sensitivity(
     (K, 3, 3 S) ``d xytheta_k / d (x_s, y_s, theta_s)``, scanner blocks in scanner order; zero for
     frames without points.
     """
-    st = settings
-    p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
-    fid = np.asarray(frame_index, dtype=np.intp)
-    sid = np.asarray(scanner_index, dtype=np.intp)
-    pose = np.asarray(xytheta, dtype=float).reshape(-1, 3)
-    S = np.asarray(scanner_xy_world, dtype=float)
-    K, n_s = pose.shape[0], S.shape[0]
-    var_r = (np.asarray(sigma_range_m, dtype=float) ** 2)[sid]
-    lin = _linearise(model, p, fid, sid, S, dir_world, var_r, pose, st.gate_m, st)
-    H = _normal_matrix(fid, lin.w, lin.J, K)
-    H[:, [0, 1, 2], [0, 1, 2]] += [1 / st.prior_std_m**2, 1 / st.prior_std_m**2, 1 / st.prior_std_rad**2]
+    p, fid, sid, S, d, lin, H = _fit_normal_equations(model, xy_world, frame_index, scanner_index,
+                                                      scanner_xy_world, dir_world, sigma_range_m, xytheta, settings)
+    K, n_s = H.shape[0], S.shape[0]
     lever = p - S[sid]
     Jc = (lin.nw[:, 0], lin.nw[:, 1], lin.nw[:, 1] * lever[:, 0] - lin.nw[:, 0] * lever[:, 1])
     cell = fid * n_s + sid
@@ -427,18 +440,9 @@ def side_bias_sensitivity(
     (K, 3, 4) ``d xytheta_k / d b_side`` (m/m, rad/m), sides in the hull's order; zero for frames
     without points.
     """
-    st = settings
-    p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
-    fid = np.asarray(frame_index, dtype=np.intp)
-    sid = np.asarray(scanner_index, dtype=np.intp)
-    pose = np.asarray(xytheta, dtype=float).reshape(-1, 3)
-    S = np.asarray(scanner_xy_world, dtype=float)
-    K = pose.shape[0]
-    var_r = (np.asarray(sigma_range_m, dtype=float) ** 2)[sid]
-    d = np.asarray(dir_world, dtype=float)
-    lin = _linearise(model, p, fid, sid, S, d, var_r, pose, st.gate_m, st)
-    H = _normal_matrix(fid, lin.w, lin.J, K)
-    H[:, [0, 1, 2], [0, 1, 2]] += [1 / st.prior_std_m**2, 1 / st.prior_std_m**2, 1 / st.prior_std_rad**2]
+    _, fid, _, _, d, lin, H = _fit_normal_equations(model, xy_world, frame_index, scanner_index, scanner_xy_world,
+                                                    dir_world, sigma_range_m, xytheta, settings)
+    K = H.shape[0]
     dr_db = lin.nw[:, 0] * d[:, 0] + lin.nw[:, 1] * d[:, 1]
     cell = fid * 4 + lin.side
     B = np.zeros((K, 3, 4))
