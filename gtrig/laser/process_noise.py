@@ -89,38 +89,6 @@ def innovation_loglik_terms(
         P = P - K @ P[:, :3, :]
         P = 0.5 * (P + np.swapaxes(P, 1, 2))
     return terms.reshape(-1, A, B)
-    first = meas[0]
-    x = np.zeros((G, 6))
-    x[:, :3] = z_xytheta[first]
-    P = np.zeros((G, 6, 6))
-    P[:, :3, :3] = R_z[first]
-    P[:, 3:, 3:] = np.eye(3)
-    t_prev = stamps_s[first]
-    idx3 = np.arange(3)
-    for k in meas[1:]:
-        dt = float(stamps_s[k] - t_prev)
-        t_prev = stamps_s[k]
-        # x <- F x, P <- F P F^T + Q with F = [[I, dt I], [0, I]]
-        x[:, :3] += dt * x[:, 3:]
-        Pxx, Pxv, Pvv = P[:, :3, :3], P[:, :3, 3:], P[:, 3:, 3:]
-        nPxx = Pxx + dt * (Pxv + np.swapaxes(Pxv, 1, 2)) + dt * dt * Pvv
-        nPxv = Pxv + dt * Pvv
-        P = np.concatenate(
-            [np.concatenate([nPxx, nPxv], 2), np.concatenate([np.swapaxes(nPxv, 1, 2), Pvv], 2)], 1
-        )
-        P[:, idx3, idx3] += qd * dt**3 / 3
-        P[:, idx3, idx3 + 3] += qd * dt**2 / 2
-        P[:, idx3 + 3, idx3] += qd * dt**2 / 2
-        P[:, idx3 + 3, idx3 + 3] += qd * dt
-        S = P[:, :3, :3] + R_z[k]
-        Si = np.linalg.inv(S)
-        nu = z_xytheta[k] - x[:, :3]
-        terms[k] = -0.5 * (np.einsum("gi,gij,gj->g", nu, Si, nu) + np.linalg.slogdet(S)[1])
-        K = P[:, :, :3] @ Si
-        x = x + np.einsum("gij,gj->gi", K, nu)
-        P = P - K @ P[:, :3, :]
-        P = 0.5 * (P + np.swapaxes(P, 1, 2))
-    return terms.reshape(-1, A, B)
 
 
 def ml_process_noise(
