@@ -52,16 +52,18 @@ def _inside_draws(z: np.ndarray, cov: np.ndarray, test: Test) -> np.ndarray:
     return np.all(np.abs(e) <= 3.0 * sig[:, None, :], axis=-1)
 
 
-def expected_rate(cov: np.ndarray, test: Test = "region", n_draws: int = 200,
+def expected_rate(cov: np.ndarray, test: Test = "region", n_samples: int = 400_000,
                   rng: np.random.Generator | None = None) -> float:
-    """The rate a correct covariance gives: Gaussian errors drawn from ``cov`` (N, n, n)."""
+    """The rate a correct covariance gives: exact for ``region`` and ``d3``; for ``axes``, Gaussian
+    errors drawn from ``cov`` (N, n, n), about ``n_samples`` in all (binomial sd 1.4e-4 at 99.2 %)."""
     n = cov.shape[1]
     if test == "region":
         return P_3SIGMA
     if test == "d3":
         return float(stats.chi2.cdf(9.0, n))
     rng = rng or np.random.default_rng(0)
-    return float(_inside_draws(rng.standard_normal((cov.shape[0], n_draws, n)), cov, "axes").mean())
+    draws = max(1, -(-n_samples // cov.shape[0]))
+    return float(_inside_draws(rng.standard_normal((cov.shape[0], draws, n)), cov, "axes").mean())
 
 
 def binomial_interval(n: int, p: float, level: float = 0.95) -> tuple[float, float]:
