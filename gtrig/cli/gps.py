@@ -91,9 +91,12 @@ def command(
     write_pose_track(track, out, covariance)
     figures: list[Path] = []
     if plot is not None:
-        from gtrig.gps.plots import coverage_map, time_series
+        from gtrig.gps.plots import coverage_figure, lost_since_first, time_series_figure
+        from gtrig.plotting import save
 
-        figures = [coverage_map(res, plot / "gps_coverage.png"), time_series(res, plot / "gps_time.png")]
+        figures = [plot / "gps_coverage.png", plot / "gps_time.png"]
+        save(coverage_figure(rep["coverage"]), figures[0])
+        save(time_series_figure(rep["series_1hz"], lost_since_first(rep)), figures[1])
         outs += figures
     if report is not None:
         import os

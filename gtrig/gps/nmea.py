@@ -406,6 +406,7 @@ def read_nmea(path: str | os.PathLike[str]) -> NmeaLog:
     log = decode_nmea(data, str(p))
     if sum(log.account.decoded.values()) + log.account.ignored == 0:
         first = log.account.malformed_lines[0] if log.account.malformed_lines else (1, "no sentence")
-        raise FormatError(f"{p}: no valid NMEA sentence in {log.account.n_lines} lines "
+        n = log.account.n_lines
+        raise FormatError(f"{p}: no valid NMEA sentence in {n} line{'s' if n != 1 else ''} "
                           f"(line {first[0]}: {first[1]})")
     return log

@@ -47,8 +47,24 @@ def lost_intervals(t_all: np.ndarray, t_kept: np.ndarray, min_s: float = 1.0) ->
     return [(float(edges[k]), float(edges[k + 1])) for k in i]
 
 
-def gps_report(res: GpsResult, log_span_utc: tuple[float, float] | None = None) -> dict[str, Any]:
-    """The report of one run (module docstring); every count adds up to the lines of the log."""
+def coverage_data(res: GpsResult, ellipse_every: int = 50) -> dict[str, Any]:
+    """What the coverage map draws: every epoch's horizontal position in the output frame (m, to the
+    millimetre), its GGA quality and whether it was kept, and ``[x, y, cov_xx, cov_xy, cov_yy]``
+    (m, m^2) of every ``ellipse_every``-th kept fix."""
+    xy = res.all_epochs.xyz[:, :2]
+    kept = res.track
+    every = max(1, int(ellipse_every))
+    ell = ([[round(float(v), 9) for v in (p[0], p[1], c[0, 0], c[0, 1], c[1, 1])]
+            for p, c in zip(kept.xyz[::every], kept.cov[::every], strict=True)] if kept.cov is not None else [])
+    return {"frame": res.frame, "x_m": np.round(xy[:, 0], 3).tolist(), "y_m": np.round(xy[:, 1], 3).tolist(),
+            "quality": res.epochs.quality.astype(int).tolist(), "kept": res.all_epochs.ok.astype(int).tolist(),
+            "ellipse_every": every, "ellipses": ell}
+
+
+def gps_report(res: GpsResult, log_span_utc: tuple[float, float] | None = None,
+               ellipse_every: int = 50) -> dict[str, Any]:
+    """The report of one run (module docstring); every count adds up to the lines of the log. Its
+    ``series_1hz`` and ``coverage`` are what the figures draw (:mod:`gtrig.gps.plots`)."""
     ep = res.epochs
     t0, t1 = log_span_utc or (float(ep.utc_s[0]), float(ep.utc_s[-1]))
     _, period = epoch_durations(ep.utc_s)
@@ -88,6 +104,7 @@ def gps_report(res: GpsResult, log_span_utc: tuple[float, float] | None = None) 
                          "n_sat": np.nan_to_num(ep.n_sat[::step], nan=-1).astype(int).tolist(),
                          "hdop": [None if not np.isfinite(v) else float(v) for v in ep.hdop[::step]],
                          "quality": ep.quality[::step].astype(int).tolist()}
+    rep["coverage"] = coverage_data(res, ellipse_every)
     if res.account is not None:
         a = res.account
         rep["lines"] = {"total": a.n_lines, "decoded": a.decoded, "ignored": a.ignored, "blank": a.blank,

@@ -21,6 +21,7 @@ class ResultsInventory:
     vision_checkpoints : GTvision's detection logs (``gt_vision_*.checkpoint``, NDJSON).
     world_points, validation_poses : the survey's outputs.
     sync : CSVs of time-sync correlation curves (a ``sync`` folder or ``*sync*.csv``).
+    gps_reports : ``gtrig gps --report`` JSONs (``*gps*.json``: a name holding "gps").
     """
 
     root: Path
@@ -33,6 +34,7 @@ class ResultsInventory:
     world_points: Path | None
     validation_poses: Path | None
     sync: list[Path] = field(default_factory=list)
+    gps_reports: list[Path] = field(default_factory=list)
 
 
 def _opt(p: Path) -> Path | None:
@@ -57,4 +59,5 @@ def inventory(root: str | Path, truth: str | Path | None = None) -> ResultsInven
     return ResultsInventory(
         r, t, tracks, _opt(r / "accuracy.csv"), sorted(list(r.glob("*.md")) + list(r.glob("*/*.md"))),
         _opt(r / "calibration" / "calibration_report.yaml"), sorted(r.glob("gt_vision_*.checkpoint")),
-        _opt(r / "survey" / "world_points.csv"), _opt(r / "survey" / "validation_poses.csv"), sync)
+        _opt(r / "survey" / "world_points.csv"), _opt(r / "survey" / "validation_poses.csv"), sync,
+        sorted(set(r.glob("*gps*.json")) | set(r.glob("*/*gps*.json"))))

@@ -3,7 +3,9 @@ small script that checks the figures decoded), nothing fetched from the network.
 
 Sections, each shown only when its files are present (the others are named as skipped, with why):
 accuracy against truth (``accuracy.csv``), the pose tracks (summary, path with ellipses and flagged poses,
-errors with 3-sigma bounds against truth, status over time, NEES histogram), the consistency of two GT
+errors with 3-sigma bounds against truth, status over time, NEES histogram), RTK-GPS (``gtrig gps --report``'s
+JSON: fix-type shares, lost-fix intervals, the coverage map, satellites and HDOP over time; shown only when
+present, as it is no pipeline stage's), the consistency of two GT
 sources (without truth too), GTvision's per-camera coverage and detections, the survey, the calibration
 (its summary and residuals), time sync, and every stage's Markdown summary.
 """
@@ -347,21 +349,75 @@ def _sync(inv: ResultsInventory) -> Section | None:
     return s
 
 
+def _gps_section(inv: ResultsInventory, path: Path, key: str) -> Section | None:
+    """One ``gtrig gps --report`` JSON: its summary lines, the fix-type shares, the lost-fix intervals,
+    the coverage map and satellites / HDOP / fix type over time (drawn from the JSON itself)."""
+    from gtrig.gps.plots import coverage_figure, lost_since_first, time_series_figure
+    from gtrig.gps.report import report_lines
+
+    name = str(path.relative_to(inv.root))
+    try:
+        rep = json.loads(path.read_text(encoding="utf-8"))
+    except ValueError as e:  # undecodable or not JSON
+        s = Section(key, f"RTK-GPS: {name}")
+        s.add(f'<p class="warn">{html.escape(name)}: not read ({html.escape(str(e))})</p>')
+        return s
+    if not isinstance(rep, dict) or "fix_share_time" not in rep:
+        return None  # a JSON of another kind whose name holds "gps"
+    s = Section(key, f"RTK-GPS: {name}")
+    s.add('<ul class="note">' + "".join(f"<li>{html.escape(x)}</li>" for x in report_lines(rep)) + "</ul>")
+    shares = sorted(rep["fix_share_time"].items(), key=lambda kv: -kv[1])
+    s.add("<h3>Fix types over time</h3>")
+    s.table(["fix type", "share of the time (%)"], [[k, f"{100 * v:.1f}"] for k, v in shares]
+            + [["kept as ground truth", f"{100 * rep['kept_share_time']:.1f}"]])
+    lost = rep["lost_fix_intervals"]
+    rel = lost_since_first(rep)
+    s.add(f"<h3>Lost-fix intervals: {lost['count']} ({lost['total_s']:.0f} s, longest {lost['longest_s']:.0f} s)</h3>")
+    if rel:
+        shown = rel[:50]
+        s.table(["interval", "start (s from the first epoch)", "end (s)", "length (s)"],
+                [[str(i + 1), f"{a:.1f}", f"{b:.1f}", f"{b - a:.1f}"] for i, (a, b) in enumerate(shown)])
+        if len(rel) > len(shown):
+            s.add(f'<p class="note">{len(rel) - len(shown)} more in {html.escape(name)}</p>')
+    if "coverage" in rep:
+        c = rep["coverage"]
+        s.figure(coverage_figure(c), f"{name}: coverage map, each epoch coloured by its fix type, the kept fixes on "
+                                     f"grey, 1-sigma ellipses (magnified as the title says) every {c['ellipse_every']} "
+                                     "kept fixes")
+    else:
+        s.add(f'<p class="warn">{html.escape(name)} has no coverage data (written by an older gtrig): run '
+              "gtrig gps again for the coverage map</p>")
+    s.figure(time_series_figure(rep["series_1hz"], rel),
+             f"{name}: satellites, HDOP and fix type over time, lost-fix intervals shaded")
+    return s
+
+
+def _gps(inv: ResultsInventory) -> list[Section]:
+    out: list[Section] = []
+    for p in inv.gps_reports:
+        got = _gps_section(inv, p, "gps" if not out else f"gps-{len(out) + 1}")
+        if got is not None:
+            out.append(got)
+    return out
+
+
 def _summaries(inv: ResultsInventory) -> Section | None:
     from gtrig.report.markdown import markdown_to_html
 
     if not inv.summaries:
         return None
     s = Section("summaries", "Stage summaries")
-    for p in inv.summaries:
+    shown_by_gps = {g.with_suffix(".md") for g in inv.gps_reports}  # the GPS section shows those
+    for p in (p for p in inv.summaries if p not in shown_by_gps):
         s.add(f"<h3>{html.escape(str(p.relative_to(inv.root)))}</h3>")
         s.add(markdown_to_html(p.read_text(encoding="utf-8")))
-    return s
+    return s if s.parts else None
 
 
 SECTIONS: tuple[tuple[str, Callable[[ResultsInventory], Any]], ...] = (
     ("accuracy against truth", _accuracy),
     ("pose tracks", _tracks),
+    ("RTK-GPS", _gps),
     ("consistency of GT sources", _consistency),
     ("cameras", _cameras),
     ("survey", _survey),
@@ -369,6 +425,10 @@ SECTIONS: tuple[tuple[str, Callable[[ResultsInventory], Any]], ...] = (
     ("time sync", _sync),
     ("stage summaries", _summaries),
 )
+
+
+#: sections of verbs outside the pipeline (``gtrig gps``): shown when their files are there, not named when absent
+OPTIONAL_SECTIONS = frozenset({"RTK-GPS"})
 
 
 def build_report(results_dir: str | Path, truth_dir: str | Path | None = None) -> str:
@@ -393,7 +453,7 @@ def build_report(results_dir: str | Path, truth_dir: str | Path | None = None) -
             skipped.append(f"{label}: could not be read ({e})")
             continue
         got = [got] if isinstance(got, Section) else (got or [])
-        if not got:
+        if not got and label not in OPTIONAL_SECTIONS:
             skipped.append(f"{label}: no input in the folder")
         sections += got
     n_fig = sum(s.n_figures for s in sections)

@@ -207,8 +207,12 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
     base = np.where(quality == 4, prm.sigma_fixed_m, prm.sigma_float_m) * geom
     aniso = 1.4  # semi-axes 1.4 and 1/1.4 of the base sigma; N-S worse than E-W (the northern sky hole)
     orient = np.radians(np.interp(t_g, [0, t_g[-1] + 1], rng.uniform(-30, 30, 2)))  # major axis near north
-    a_m, b_m = base * aniso, base / aniso
-    sig_alt = 1.8 * base
+    # the covariance the error is drawn from is the one the GST sentence states, to its printed digits
+    # (mm, 0.1 deg): with the unrounded one a 7.4 mm semi-minor axis printed as 7 mm under-reports
+    # by 6 %, a bias of the simulated receiver, not of its physics
+    a_m, b_m = np.round(base * aniso, 3), np.round(base / aniso, 3)
+    orient = np.radians(np.round(np.degrees(orient) % 180.0, 1))
+    sig_alt = np.round(1.8 * base, 3)
     uE, uN = np.sin(orient), np.cos(orient)
     cov = np.zeros((t_g.size, 3, 3))
     cov[:, 0, 0] = a_m**2 * uE**2 + b_m**2 * uN**2
