@@ -4,7 +4,7 @@ against truth on simulated pairs, and agreement with the CARMEN logs' corrected 
     python bench/scanmatch.py record --seed N --out DIR   (a recording without camera images)
     python bench/scanmatch.py speed --recording REC [--pairs 500]
     python bench/scanmatch.py accept --recording REC [--recording REC2 ...] [--pairs 400]
-    python bench/scanmatch.py carmen [--every 4]
+    python bench/scanmatch.py carmen [--every 8] [--perturbed 600]
     python bench/scanmatch.py map --recording REC [--recording REC2 ...]
 
 The machine may be loaded: speed figures are printed with the ratio to the peer measured in the same
@@ -145,57 +145,78 @@ def accept(recs: list[Path], n_pairs: int, ga_pairs: int) -> None:
           f"accepted {100 * (n_ga - tot['wrong_rej'] - tot['right_rej']) / max(1, n_ga):.1f} % of the pairs")
 
 
-def raw_odometry_at(log, stamps: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """The logs' raw wheel odometry (ODOM, re-anchorings removed: CarmenLog.rebuilt_odometry) at the
-    scans' stamps; the FLASER records' own odometry fields hold the corrected poses in these logs."""
-    t, p = log.rebuilt_odometry()
-    return Guess(t, p).at(stamps)
+def _share(mask: np.ndarray, sel: np.ndarray) -> str:
+    return f"{100 * np.mean(mask[sel]):.1f} %" if np.any(sel) else "-"
 
 
-def carmen(every: int, max_pairs: int) -> None:
+def _within(a: np.ndarray, b: np.ndarray, m: float, deg: float) -> np.ndarray:
+    e = se2.relative(a, b)
+    return (np.hypot(e[:, 0], e[:, 1]) < m) & (np.degrees(np.abs(e[:, 2])) < deg)
+
+
+def carmen(every_freiburg: int, perturbed: int) -> None:
+    """Both CARMEN logs: every pair within 1 m and 30 deg (the logs' corrected poses) among every scan
+    (intel) or every ``every_freiburg``-th scan (freiburg), matched from the raw odometry; against the
+    logs' poses, against the scans' own match near them, the scans' fit and loop closure at both."""
     from gtrig.io.carmen import read_carmen
+    from gtrig.scanmatch.carmen import log_scans, odometry_at_scans, scans_own_match, triplet_closures
 
-    for name in ("intel-corrected.log.gz", "freiburg-079-corrected.log.gz"):
-        p = ROOT / ".." / "shared" / "data" / "carmen" / name
-        log = read_carmen(p)
-        n = log.laser_ranges.shape[1]
-        ang = -np.pi / 2 + np.arange(n) * np.pi / n
-        # the Intel log's 910 scans are far apart (a third of a hertz): every scan there
-        step = 1 if n <= 180 else every
-        idx = np.arange(0, len(log.laser_stamps_s), step)
-        scans = [ranges_to_scan(np.where(log.laser_ranges[k] < 50.0, log.laser_ranges[k], np.nan), ang, np.zeros(3),
-                                0.01, 50.0, float(log.laser_stamps_s[k])) for k in idx]
-        odo = raw_odometry_at(log, log.laser_stamps_s[idx])
-        cor = log.laser_xytheta[idx]
-        # pairs within 1 m and 30 deg by the corrected poses (raw odometry drifts metres over a loop),
-        # matched from the raw odometry's relative pose
-        pairs = candidate_pairs(cor, 1.0, np.radians(30), min_index_gap=1)
-        if len(pairs) > max_pairs:
-            pairs = pairs[np.linspace(0, len(pairs) - 1, max_pairs).astype(int)]
-        t = time.perf_counter()
-        # local matcher only (the odometry is good over 1 m): the genetic fallback would cost a second a pair
-        R = match_pairs(scans, odo, pairs, accept=AcceptParams(), surface_bias_m=0.0, genetic=None)
-        dt = time.perf_counter() - t
-        ref = se2.relative(cor[pairs[:, 0]], cor[pairs[:, 1]])
-        E = np.array([se2.relative(ref[k], x.pose) for k, x in enumerate(R)])
-        acc = np.array([x.verdict.accepted for x in R])
-        dxy, dth = np.hypot(E[:, 0], E[:, 1]), np.degrees(np.abs(E[:, 2]))
-        # the scans' own verdict on the two poses: residual spread at ours and at the log's corrected one
-        s_ours, s_log = [], []
-        for k in np.flatnonzero(acc):
-            a, b = pairs[k]
-            s_ours.append(evaluate(scans[a], scans[b], R[k].pose).s_m)
-            s_log.append(evaluate(scans[a], scans[b], ref[k]).s_m)
-        s_ours, s_log = np.array(s_ours), np.array(s_log)
-        print(f"{name}: {len(R)} pairs within 1 m and 30 deg, guesses from raw odometry ({n} beams, "
-              f"every {step}th scan); "
-              f"accepted {acc.sum()} ({100 * acc.mean():.1f} %); of those within 2 cm and 1 deg of the corrected "
-              f"poses' relative pose: {100 * np.mean(((dxy < 0.02) & (dth < 1.0))[acc]):.1f} %, "
-              f"within 5 cm and 1 deg: {100 * np.mean(((dxy < 0.05) & (dth < 1.0))[acc]):.1f} % "
-              f"(median {1000 * np.median(dxy[acc]):.1f} mm, {np.median(dth[acc]):.3f} deg); "
-              f"residual spread at our pose {1000 * np.median(s_ours):.1f} mm, at the log's "
-              f"{1000 * np.median(s_log):.1f} mm (ours lower in {100 * np.mean(s_ours < s_log):.0f} % of the pairs); "
-              f"{1000 * dt / max(1, len(R)):.1f} ms per pair", flush=True)
+    for name, every in (("intel-corrected.log.gz", 1), ("freiburg-079-corrected.log.gz", every_freiburg)):
+        log = read_carmen(ROOT / ".." / "shared" / "data" / "carmen" / name)
+        rows = np.arange(0, len(log.laser_stamps_s), every)
+        scans, odo, cor = log_scans(log, rows), odometry_at_scans(log, rows), log.laser_xytheta[rows]
+        pairs = candidate_pairs(cor, 1.0, np.radians(30))
+        t = time.process_time()
+        R = match_pairs(scans, odo, pairs, surface_bias_m=0.0, genetic=None)
+        dt = time.process_time() - t
+        ours, acc = np.array([x.pose for x in R]), np.array([x.verdict.accepted for x in R])
+        logrel = se2.relative(cor[pairs[:, 0]], cor[pairs[:, 1]])
+        own = scans_own_match(scans, cor, pairs)
+        reach = _within(own, np.array([x.guess for x in R]), 0.3, 10.0)
+        print(f"{name}: {len(scans)} scans ({log.laser_ranges.shape[1]} beams, every {every}), {len(pairs)} pairs "
+              f"within 1 m and 30 deg, matched from the raw odometry in {1000 * dt / len(pairs):.2f} ms CPU each; "
+              f"accepted {acc.sum()} ({100 * acc.mean():.1f} %): {_share(acc, reach)} of the {reach.sum()} pairs whose "
+              f"odometry guess is within 0.3 m and 10 deg, {_share(acc, ~reach)} of the {(~reach).sum()} others "
+              f"(metres and up to 180 deg of odometry drift)")
+        print(f"  accepted pairs within 2 cm and 1 deg of the logs' relative pose: {_share(_within(logrel, ours, .02, 1), acc)}"
+              f"; within 5 cm and 1 deg: {_share(_within(logrel, ours, .05, 1), acc)}; within 2 cm and 0.5 deg of "
+              f"the scans' own match near the logs' pose: {_share(_within(own, ours, .02, .5), acc)}")
+        s_ours = np.array([evaluate(scans[a], scans[b], ours[k]).s_m for k, (a, b) in enumerate(pairs) if acc[k]])
+        s_log = np.array([evaluate(scans[a], scans[b], logrel[k]).s_m for k, (a, b) in enumerate(pairs) if acc[k]])
+        print(f"  the scans' fit (residual spread, accepted pairs): {1000 * np.median(s_ours):.1f} mm at ours, "
+              f"{1000 * np.median(s_log):.1f} mm at the logs' (ours lower in {100 * np.mean(s_ours < s_log):.1f} %)")
+        cl = triplet_closures(pairs[acc], ours[acc])
+        e = se2.relative(logrel[acc], ours[acc])
+        print(f"  loop closure of {len(cl)} triplets of accepted pairs: median {1000 * np.median(np.hypot(cl[:, 0], cl[:, 1])):.1f} mm"
+              f" and {np.degrees(np.median(np.abs(cl[:, 2]))):.3f} deg (p95 {1000 * np.percentile(np.hypot(cl[:, 0], cl[:, 1]), 95):.1f} mm);"
+              f" ours against the logs' on those pairs: median {1000 * np.median(np.hypot(e[:, 0], e[:, 1])):.1f} mm and "
+              f"{np.degrees(np.median(np.abs(e[:, 2]))):.3f} deg (p95 {1000 * np.percentile(np.hypot(e[:, 0], e[:, 1]), 95):.1f} mm)")
+        k = rows[:-1][np.diff(rows) == 1] if every == 1 else np.arange(len(log.laser_stamps_s) - 1)
+        k = k[:: max(1, len(k) // 1500)]
+        all_scans = scans if every == 1 else log_scans(log)
+        all_odo = odo if every == 1 else odometry_at_scans(log)
+        ro = se2.relative(all_odo[k], all_odo[k + 1])
+        rl = se2.relative(log.laser_xytheta[k], log.laser_xytheta[k + 1])
+        rs = np.array([match_icp(all_scans[a], all_scans[a + 1], g).pose for a, g in zip(k, ro, strict=True)])
+        eo, el = se2.relative(ro, rs), se2.relative(ro, rl)
+        print(f"  {len(k)} consecutive scans ({1000 * np.median(np.hypot(ro[:, 0], ro[:, 1])):.0f} mm median step): "
+              f"wheel odometry against ours {1000 * np.median(np.hypot(eo[:, 0], eo[:, 1])):.1f} mm, "
+              f"{np.degrees(np.median(np.abs(eo[:, 2]))):.3f} deg; against the logs' "
+              f"{1000 * np.median(np.hypot(el[:, 0], el[:, 1])):.1f} mm, {np.degrees(np.median(np.abs(el[:, 2]))):.3f} deg (medians)")
+        if perturbed:
+            rng = np.random.default_rng(0)
+            sel = rng.choice(len(pairs), min(perturbed, len(pairs)), replace=False)
+            r = 0.5 * np.sqrt(rng.uniform(0, 1, len(sel)))
+            a = rng.uniform(0, 2 * np.pi, len(sel))
+            rg = own[sel] + np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(-1, 1, len(sel)) * np.radians(30)])
+            gc = np.diag([0.3**2, 0.3**2, np.radians(20) ** 2])
+            P = match_pairs(scans, cor, pairs[sel], surface_bias_m=0.0, genetic=None, guess_cov=gc, rel_guesses=rg)
+            right = _within(own[sel], np.array([x.pose for x in P]), 0.02, 0.5)
+            pacc = np.array([x.verdict.accepted for x in P])
+            print(f"  acceptance test on {len(sel)} pairs from guesses off the scans' own match by up to 0.5 m and 30 deg:"
+                  f" {(~right).sum()} wrong (2 cm, 0.5 deg), {(~right & ~pacc).sum()} rejected "
+                  f"({_share(~pacc, ~right)}); {right.sum()} right, {(right & ~pacc).sum()} rejected ({_share(~pacc, right)})")
+        print(flush=True)
 
 
 def map_validation(recs: list[Path]) -> None:
@@ -270,8 +291,8 @@ def main() -> None:
     b.add_argument("--pairs", type=int, default=400)
     b.add_argument("--ga-pairs", type=int, default=60, help="pairs also run with the genetic fallback")
     c = sub.add_parser("carmen")
-    c.add_argument("--every", type=int, default=3)
-    c.add_argument("--max-pairs", type=int, default=1500)
+    c.add_argument("--every", type=int, default=8, help="freiburg: every n-th scan (intel: every scan)")
+    c.add_argument("--perturbed", type=int, default=600, help="pairs for the acceptance test's verdicts")
     e = sub.add_parser("record")
     e.add_argument("--seed", type=int, required=True)
     e.add_argument("--out", type=Path, required=True)
@@ -287,7 +308,7 @@ def main() -> None:
     elif args.what == "map":
         map_validation(args.recording)
     else:
-        carmen(args.every, args.max_pairs)
+        carmen(args.every, args.perturbed)
 
 
 if __name__ == "__main__":
