@@ -5,6 +5,7 @@ against truth on simulated pairs, and agreement with the CARMEN logs' corrected 
     python bench/scanmatch.py speed --recording REC [--pairs 500]
     python bench/scanmatch.py accept --recording REC [--recording REC2 ...] [--pairs 400]
     python bench/scanmatch.py carmen [--every 8] [--perturbed 600]
+    python bench/scanmatch.py carmen-figure --out docs/figures/scanmatch_carmen.png
     python bench/scanmatch.py map --recording REC [--recording REC2 ...]
 
 The machine may be loaded: speed figures are printed with the ratio to the peer measured in the same
@@ -167,7 +168,7 @@ def carmen(every_freiburg: int, perturbed: int) -> None:
         scans, odo, cor = log_scans(log, rows), odometry_at_scans(log, rows), log.laser_xytheta[rows]
         pairs = candidate_pairs(cor, 1.0, np.radians(30))
         t = time.process_time()
-        R = match_pairs(scans, odo, pairs, surface_bias_m=0.0, genetic=None)
+        R = match_pairs(scans, odo, pairs, genetic=None)
         dt = time.process_time() - t
         ours, acc = np.array([x.pose for x in R]), np.array([x.verdict.accepted for x in R])
         logrel = se2.relative(cor[pairs[:, 0]], cor[pairs[:, 1]])
@@ -191,6 +192,16 @@ def carmen(every_freiburg: int, perturbed: int) -> None:
               f" and {np.degrees(np.median(np.abs(cl[:, 2]))):.3f} deg (p95 {1000 * np.percentile(np.hypot(cl[:, 0], cl[:, 1]), 95):.1f} mm);"
               f" ours against the logs' on those pairs: median {1000 * np.median(np.hypot(e[:, 0], e[:, 1])):.1f} mm and "
               f"{np.degrees(np.median(np.abs(e[:, 2]))):.3f} deg (p95 {1000 * np.percentile(np.hypot(e[:, 0], e[:, 1]), 95):.1f} mm)")
+        # the scanner's mounting in the frame of the logs' poses (planar hand-eye over the accepted pairs):
+        # identity when the logs' poses are the scanner's
+        from scipy.optimize import least_squares
+
+        def he(m: np.ndarray) -> np.ndarray:
+            return se2.relative(se2.compose(se2.compose(se2.inverse(m), logrel[acc]), m), ours[acc]).ravel()
+
+        m = least_squares(he, np.zeros(3), loss="soft_l1", f_scale=0.01).x
+        print(f"  the scanner in the frame of the logs' poses: x {1000 * m[0]:+.1f} mm, y {1000 * m[1]:+.1f} mm, "
+              f"yaw {np.degrees(m[2]):+.3f} deg")
         k = rows[:-1][np.diff(rows) == 1] if every == 1 else np.arange(len(log.laser_stamps_s) - 1)
         k = k[:: max(1, len(k) // 1500)]
         all_scans = scans if every == 1 else log_scans(log)
@@ -210,13 +221,68 @@ def carmen(every_freiburg: int, perturbed: int) -> None:
             a = rng.uniform(0, 2 * np.pi, len(sel))
             rg = own[sel] + np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(-1, 1, len(sel)) * np.radians(30)])
             gc = np.diag([0.3**2, 0.3**2, np.radians(20) ** 2])
-            P = match_pairs(scans, cor, pairs[sel], surface_bias_m=0.0, genetic=None, guess_cov=gc, rel_guesses=rg)
+            P = match_pairs(scans, cor, pairs[sel], genetic=None, guess_cov=gc, rel_guesses=rg)
             right = _within(own[sel], np.array([x.pose for x in P]), 0.02, 0.5)
             pacc = np.array([x.verdict.accepted for x in P])
             print(f"  acceptance test on {len(sel)} pairs from guesses off the scans' own match by up to 0.5 m and 30 deg:"
                   f" {(~right).sum()} wrong (2 cm, 0.5 deg), {(~right & ~pacc).sum()} rejected "
                   f"({_share(~pacc, ~right)}); {right.sum()} right, {(right & ~pacc).sum()} rejected ({_share(~pacc, right)})")
         print(flush=True)
+
+
+def carmen_figure(out: Path, n_pairs: int = 3) -> None:
+    """Consecutive freiburg-079 scans where our match and the log's relative pose differ by 3-6 cm: the
+    second scan drawn on the first under each, zoomed where the two placements differ most."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from gtrig.io.carmen import read_carmen
+    from gtrig.scanmatch.carmen import log_scans, odometry_at_scans
+
+    log = read_carmen(ROOT / ".." / "shared" / "data" / "carmen" / "freiburg-079-corrected.log.gz")
+    rows = np.arange(0, len(log.laser_stamps_s), 40)
+    scans = log_scans(log, np.sort(np.r_[rows, rows + 1]))
+    odo, cor = odometry_at_scans(log), log.laser_xytheta
+    chosen = []
+    for n, k in enumerate(rows):
+        a, b = scans[2 * n], scans[2 * n + 1]
+        m = match_icp(a, b, se2.relative(odo[k], odo[k + 1]))
+        lg = se2.relative(cor[k], cor[k + 1])
+        d = float(np.hypot(*se2.relative(lg, m.pose)[:2]))
+        if 0.03 < d < 0.06 and m.s_m < 0.012:
+            chosen.append((k, a, b, m.pose, lg, d))
+        if len(chosen) == n_pairs:
+            break
+    fig, axs = plt.subplots(len(chosen), 3, figsize=(13, 4.3 * len(chosen)), squeeze=False)
+    for r, (k, a, b, ours, lg, d) in enumerate(chosen):
+        pa, po, pl = a.xy, se2.apply(ours, b.xy), se2.apply(lg, b.xy)
+        # the zoom: where the placements differ most, among points on a wall with neighbours around
+        dense = np.array([np.sum(np.linalg.norm(pa - q, axis=1) < 0.2) >= 12 for q in po])
+        near = (np.linalg.norm(b.xy, axis=1) < 3.0) & b.normal_ok & dense
+        c = po[np.argmax(np.where(near, np.linalg.norm(po - pl, axis=1), -1))]
+        s_o, s_l = evaluate(a, b, ours).s_m, evaluate(a, b, lg).s_m
+        for ax, pts, lab, col, sv in ((axs[r, 1], po, "our match", "r", s_o), (axs[r, 2], pl, "the log's poses", "g", s_l)):
+            ax.plot(pa[:, 0], pa[:, 1], "o", ms=6, mfc="none", color="b", label=f"scan {k}")
+            ax.plot(pts[:, 0], pts[:, 1], "+", ms=8, color=col, label=f"scan {k + 1}, {lab}")
+            ax.set_xlim(c[0] - 0.3, c[0] + 0.3)
+            ax.set_ylim(c[1] - 0.3, c[1] + 0.3)
+            ax.set_aspect("equal")
+            ax.grid(True)
+            ax.legend(loc="upper left", fontsize=8)
+            ax.set_title(f"{lab}: residual spread {1000 * sv:.1f} mm", fontsize=10)
+        ax = axs[r, 0]
+        ax.plot(pa[:, 0], pa[:, 1], ".", ms=2, color="b")
+        ax.plot(pl[:, 0], pl[:, 1], ".", ms=2, color="g")
+        ax.add_patch(plt.Rectangle((c[0] - 0.3, c[1] - 0.3), 0.6, 0.6, fill=False, color="k"))
+        ax.set_xlim(-1.0, 6.0)
+        ax.set_ylim(-3.5, 3.5)
+        ax.set_aspect("equal")
+        ax.set_title(f"freiburg-079 scans {k}, {k + 1}: ours and the log's differ by {1000 * d:.0f} mm", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=70)
+    print(f"wrote {out}")
 
 
 def map_validation(recs: list[Path]) -> None:
@@ -293,6 +359,8 @@ def main() -> None:
     c = sub.add_parser("carmen")
     c.add_argument("--every", type=int, default=8, help="freiburg: every n-th scan (intel: every scan)")
     c.add_argument("--perturbed", type=int, default=600, help="pairs for the acceptance test's verdicts")
+    f = sub.add_parser("carmen-figure")
+    f.add_argument("--out", type=Path, required=True)
     e = sub.add_parser("record")
     e.add_argument("--seed", type=int, required=True)
     e.add_argument("--out", type=Path, required=True)
@@ -305,6 +373,8 @@ def main() -> None:
         accept(args.recording, args.pairs, args.ga_pairs)
     elif args.what == "record":
         record(args.seed, args.out)
+    elif args.what == "carmen-figure":
+        carmen_figure(args.out)
     elif args.what == "map":
         map_validation(args.recording)
     else:
