@@ -192,6 +192,16 @@ def carmen(every_freiburg: int, perturbed: int) -> None:
               f" and {np.degrees(np.median(np.abs(cl[:, 2]))):.3f} deg (p95 {1000 * np.percentile(np.hypot(cl[:, 0], cl[:, 1]), 95):.1f} mm);"
               f" ours against the logs' on those pairs: median {1000 * np.median(np.hypot(e[:, 0], e[:, 1])):.1f} mm and "
               f"{np.degrees(np.median(np.abs(e[:, 2]))):.3f} deg (p95 {1000 * np.percentile(np.hypot(e[:, 0], e[:, 1]), 95):.1f} mm)")
+        # the verb's own population: pairs within 1 m and 30 deg by the raw odometry itself
+        po = candidate_pairs(odo, 1.0, np.radians(30))
+        Ro = match_pairs(scans, odo, po, genetic=None)
+        oo, ao = np.array([x.pose for x in Ro]), np.array([x.verdict.accepted for x in Ro])
+        lo = se2.relative(cor[po[:, 0]], cor[po[:, 1]])
+        own_o = scans_own_match(scans, cor, po)
+        print(f"  pairs within 1 m and 30 deg by the raw odometry instead: {len(po)}, accepted {100 * ao.mean():.1f} %; "
+              f"of those within 2 cm and 1 deg of the logs' {_share(_within(lo, oo, .02, 1), ao)}, 5 cm and 1 deg "
+              f"{_share(_within(lo, oo, .05, 1), ao)}, 2 cm and 0.5 deg of the scans' own match "
+              f"{_share(_within(own_o, oo, .02, .5), ao)}")
         # the scanner's mounting in the frame of the logs' poses (planar hand-eye over the accepted pairs):
         # identity when the logs' poses are the scanner's
         from scipy.optimize import least_squares
