@@ -155,12 +155,84 @@ def _within(a: np.ndarray, b: np.ndarray, m: float, deg: float) -> np.ndarray:
     return (np.hypot(e[:, 0], e[:, 1]) < m) & (np.degrees(np.abs(e[:, 2])) < deg)
 
 
+def _mm(e: np.ndarray, q: float = 50) -> str:
+    """Percentile ``q`` of the position part of (P, 3) pose differences, in mm."""
+    return f"{1000 * np.percentile(np.hypot(e[:, 0], e[:, 1]), q):.1f} mm"
+
+
+def _deg(e: np.ndarray) -> str:
+    return f"{np.degrees(np.median(np.abs(e[:, 2]))):.3f} deg"
+
+
+def _carmen_agreement(label: str, logrel: np.ndarray, own: np.ndarray, ours: np.ndarray, acc: np.ndarray) -> None:
+    print(f"  {label}within 2 cm and 1 deg of the logs' relative pose: {_share(_within(logrel, ours, .02, 1), acc)}; "
+          f"within 5 cm and 1 deg: {_share(_within(logrel, ours, .05, 1), acc)}; within 2 cm and 0.5 deg of the "
+          f"scans' own match near the logs' pose: {_share(_within(own, ours, .02, .5), acc)}")
+
+
+def _carmen_evidence(scans: list, pairs: np.ndarray, ours: np.ndarray, logrel: np.ndarray,  # type: ignore[type-arg]
+                     acc: np.ndarray) -> None:
+    """The scans' fit at both relative poses, loop closure of ours, and the scanner's mounting in the
+    frame of the logs' poses (planar hand-eye: identity when the logs' poses are the scanner's)."""
+    from scipy.optimize import least_squares
+
+    from gtrig.scanmatch.carmen import triplet_closures
+
+    s_o = np.array([evaluate(scans[a], scans[b], ours[k]).s_m for k, (a, b) in enumerate(pairs) if acc[k]])
+    s_l = np.array([evaluate(scans[a], scans[b], logrel[k]).s_m for k, (a, b) in enumerate(pairs) if acc[k]])
+    print(f"  the scans' fit (residual spread, accepted pairs): {1000 * np.median(s_o):.1f} mm at ours, "
+          f"{1000 * np.median(s_l):.1f} mm at the logs' (ours lower in {100 * np.mean(s_o < s_l):.1f} %)")
+    cl = triplet_closures(pairs[acc], ours[acc])
+    e = se2.relative(logrel[acc], ours[acc])
+    print(f"  loop closure of {len(cl)} triplets of accepted pairs: median {_mm(cl)} and {_deg(cl)} (p95 "
+          f"{_mm(cl, 95)}); ours against the logs' on those pairs: median {_mm(e)} and {_deg(e)} (p95 {_mm(e, 95)})")
+    la, oa = logrel[acc], ours[acc]
+    m = least_squares(lambda m: se2.relative(se2.compose(se2.compose(se2.inverse(m), la), m), oa).ravel(),
+                      np.zeros(3), loss="soft_l1", f_scale=0.01).x
+    print(f"  the scanner in the frame of the logs' poses: x {1000 * m[0]:+.1f} mm, y {1000 * m[1]:+.1f} mm, "
+          f"yaw {np.degrees(m[2]):+.3f} deg")
+
+
+def _carmen_odometry(log, n_max: int = 1500) -> None:  # type: ignore[no-untyped-def]
+    """Consecutive scans: the wheel odometry, a third sensor, against our match and the logs' poses."""
+    from gtrig.scanmatch.carmen import log_scans, odometry_at_scans
+
+    k = np.arange(len(log.laser_stamps_s) - 1)
+    k = k[:: max(1, len(k) // n_max)]
+    rows = np.unique(np.r_[k, k + 1])
+    pos = {int(r): n for n, r in enumerate(rows)}
+    scans, odo = log_scans(log, rows), odometry_at_scans(log, rows)
+    ro = se2.relative(odo[[pos[a] for a in k]], odo[[pos[a + 1] for a in k]])
+    rl = se2.relative(log.laser_xytheta[k], log.laser_xytheta[k + 1])
+    rs = np.array([match_icp(scans[pos[a]], scans[pos[a + 1]], g).pose for a, g in zip(k, ro, strict=True)])
+    eo, el = se2.relative(ro, rs), se2.relative(ro, rl)
+    print(f"  {len(k)} consecutive scans ({_mm(ro)} median step): wheel odometry against ours {_mm(eo)}, "
+          f"{_deg(eo)}; against the logs' {_mm(el)}, {_deg(el)} (medians)")
+
+
+def _carmen_perturbed(scans: list, cor: np.ndarray, pairs: np.ndarray, own: np.ndarray,  # type: ignore[type-arg]
+                      n: int) -> None:
+    """The acceptance test's verdicts from guesses off the scans' own match by up to 0.5 m and 30 deg."""
+    rng = np.random.default_rng(0)
+    sel = rng.choice(len(pairs), min(n, len(pairs)), replace=False)
+    r = 0.5 * np.sqrt(rng.uniform(0, 1, len(sel)))
+    a = rng.uniform(0, 2 * np.pi, len(sel))
+    off = np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(-1, 1, len(sel)) * np.radians(30)])
+    gc = np.diag([0.3**2, 0.3**2, np.radians(20) ** 2])
+    P = match_pairs(scans, cor, pairs[sel], genetic=None, guess_cov=gc, rel_guesses=own[sel] + off)
+    right = _within(own[sel], np.array([x.pose for x in P]), 0.02, 0.5)
+    acc = np.array([x.verdict.accepted for x in P])
+    print(f"  acceptance test on {len(sel)} pairs from guesses off the scans' own match by up to 0.5 m and "
+          f"30 deg: {(~right).sum()} wrong (2 cm, 0.5 deg), {(~right & ~acc).sum()} rejected ({_share(~acc, ~right)}); "
+          f"{right.sum()} right, {(right & ~acc).sum()} rejected ({_share(~acc, right)})")
+
+
 def carmen(every_freiburg: int, perturbed: int) -> None:
     """Both CARMEN logs: every pair within 1 m and 30 deg (the logs' corrected poses) among every scan
     (intel) or every ``every_freiburg``-th scan (freiburg), matched from the raw odometry; against the
     logs' poses, against the scans' own match near them, the scans' fit and loop closure at both."""
     from gtrig.io.carmen import read_carmen
-    from gtrig.scanmatch.carmen import log_scans, odometry_at_scans, scans_own_match, triplet_closures
+    from gtrig.scanmatch.carmen import log_scans, odometry_at_scans, scans_own_match
 
     for name, every in (("intel-corrected.log.gz", 1), ("freiburg-079-corrected.log.gz", every_freiburg)):
         log = read_carmen(ROOT / ".." / "shared" / "data" / "carmen" / name)
@@ -176,67 +248,21 @@ def carmen(every_freiburg: int, perturbed: int) -> None:
         reach = _within(own, np.array([x.guess for x in R]), 0.3, 10.0)
         print(f"{name}: {len(scans)} scans ({log.laser_ranges.shape[1]} beams, every {every}), {len(pairs)} pairs "
               f"within 1 m and 30 deg, matched from the raw odometry in {1000 * dt / len(pairs):.2f} ms CPU each; "
-              f"accepted {acc.sum()} ({100 * acc.mean():.1f} %): {_share(acc, reach)} of the {reach.sum()} pairs whose "
-              f"odometry guess is within 0.3 m and 10 deg, {_share(acc, ~reach)} of the {(~reach).sum()} others "
-              f"(metres and up to 180 deg of odometry drift)")
-        print(f"  accepted pairs within 2 cm and 1 deg of the logs' relative pose: {_share(_within(logrel, ours, .02, 1), acc)}"
-              f"; within 5 cm and 1 deg: {_share(_within(logrel, ours, .05, 1), acc)}; within 2 cm and 0.5 deg of "
-              f"the scans' own match near the logs' pose: {_share(_within(own, ours, .02, .5), acc)}")
-        s_ours = np.array([evaluate(scans[a], scans[b], ours[k]).s_m for k, (a, b) in enumerate(pairs) if acc[k]])
-        s_log = np.array([evaluate(scans[a], scans[b], logrel[k]).s_m for k, (a, b) in enumerate(pairs) if acc[k]])
-        print(f"  the scans' fit (residual spread, accepted pairs): {1000 * np.median(s_ours):.1f} mm at ours, "
-              f"{1000 * np.median(s_log):.1f} mm at the logs' (ours lower in {100 * np.mean(s_ours < s_log):.1f} %)")
-        cl = triplet_closures(pairs[acc], ours[acc])
-        e = se2.relative(logrel[acc], ours[acc])
-        print(f"  loop closure of {len(cl)} triplets of accepted pairs: median {1000 * np.median(np.hypot(cl[:, 0], cl[:, 1])):.1f} mm"
-              f" and {np.degrees(np.median(np.abs(cl[:, 2]))):.3f} deg (p95 {1000 * np.percentile(np.hypot(cl[:, 0], cl[:, 1]), 95):.1f} mm);"
-              f" ours against the logs' on those pairs: median {1000 * np.median(np.hypot(e[:, 0], e[:, 1])):.1f} mm and "
-              f"{np.degrees(np.median(np.abs(e[:, 2]))):.3f} deg (p95 {1000 * np.percentile(np.hypot(e[:, 0], e[:, 1]), 95):.1f} mm)")
+              f"accepted {acc.sum()} ({100 * acc.mean():.1f} %): {_share(acc, reach)} of the {reach.sum()} pairs "
+              f"whose odometry guess is within 0.3 m and 10 deg, {_share(acc, ~reach)} of the {(~reach).sum()} "
+              f"others (metres and up to 180 deg of odometry drift)")
+        _carmen_agreement("accepted pairs ", logrel, own, ours, acc)
+        _carmen_evidence(scans, pairs, ours, logrel, acc)
         # the verb's own population: pairs within 1 m and 30 deg by the raw odometry itself
         po = candidate_pairs(odo, 1.0, np.radians(30))
         Ro = match_pairs(scans, odo, po, genetic=None)
-        oo, ao = np.array([x.pose for x in Ro]), np.array([x.verdict.accepted for x in Ro])
-        lo = se2.relative(cor[po[:, 0]], cor[po[:, 1]])
-        own_o = scans_own_match(scans, cor, po)
-        print(f"  pairs within 1 m and 30 deg by the raw odometry instead: {len(po)}, accepted {100 * ao.mean():.1f} %; "
-              f"of those within 2 cm and 1 deg of the logs' {_share(_within(lo, oo, .02, 1), ao)}, 5 cm and 1 deg "
-              f"{_share(_within(lo, oo, .05, 1), ao)}, 2 cm and 0.5 deg of the scans' own match "
-              f"{_share(_within(own_o, oo, .02, .5), ao)}")
-        # the scanner's mounting in the frame of the logs' poses (planar hand-eye over the accepted pairs):
-        # identity when the logs' poses are the scanner's
-        from scipy.optimize import least_squares
-
-        def he(m: np.ndarray) -> np.ndarray:
-            return se2.relative(se2.compose(se2.compose(se2.inverse(m), logrel[acc]), m), ours[acc]).ravel()
-
-        m = least_squares(he, np.zeros(3), loss="soft_l1", f_scale=0.01).x
-        print(f"  the scanner in the frame of the logs' poses: x {1000 * m[0]:+.1f} mm, y {1000 * m[1]:+.1f} mm, "
-              f"yaw {np.degrees(m[2]):+.3f} deg")
-        k = rows[:-1][np.diff(rows) == 1] if every == 1 else np.arange(len(log.laser_stamps_s) - 1)
-        k = k[:: max(1, len(k) // 1500)]
-        all_scans = scans if every == 1 else log_scans(log)
-        all_odo = odo if every == 1 else odometry_at_scans(log)
-        ro = se2.relative(all_odo[k], all_odo[k + 1])
-        rl = se2.relative(log.laser_xytheta[k], log.laser_xytheta[k + 1])
-        rs = np.array([match_icp(all_scans[a], all_scans[a + 1], g).pose for a, g in zip(k, ro, strict=True)])
-        eo, el = se2.relative(ro, rs), se2.relative(ro, rl)
-        print(f"  {len(k)} consecutive scans ({1000 * np.median(np.hypot(ro[:, 0], ro[:, 1])):.0f} mm median step): "
-              f"wheel odometry against ours {1000 * np.median(np.hypot(eo[:, 0], eo[:, 1])):.1f} mm, "
-              f"{np.degrees(np.median(np.abs(eo[:, 2]))):.3f} deg; against the logs' "
-              f"{1000 * np.median(np.hypot(el[:, 0], el[:, 1])):.1f} mm, {np.degrees(np.median(np.abs(el[:, 2]))):.3f} deg (medians)")
+        ao = np.array([x.verdict.accepted for x in Ro])
+        print(f"  pairs within 1 m and 30 deg by the raw odometry instead: {len(po)}, accepted {100 * ao.mean():.1f} %")
+        _carmen_agreement("of those ", se2.relative(cor[po[:, 0]], cor[po[:, 1]]), scans_own_match(scans, cor, po),
+                          np.array([x.pose for x in Ro]), ao)
+        _carmen_odometry(log)
         if perturbed:
-            rng = np.random.default_rng(0)
-            sel = rng.choice(len(pairs), min(perturbed, len(pairs)), replace=False)
-            r = 0.5 * np.sqrt(rng.uniform(0, 1, len(sel)))
-            a = rng.uniform(0, 2 * np.pi, len(sel))
-            rg = own[sel] + np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(-1, 1, len(sel)) * np.radians(30)])
-            gc = np.diag([0.3**2, 0.3**2, np.radians(20) ** 2])
-            P = match_pairs(scans, cor, pairs[sel], genetic=None, guess_cov=gc, rel_guesses=rg)
-            right = _within(own[sel], np.array([x.pose for x in P]), 0.02, 0.5)
-            pacc = np.array([x.verdict.accepted for x in P])
-            print(f"  acceptance test on {len(sel)} pairs from guesses off the scans' own match by up to 0.5 m and 30 deg:"
-                  f" {(~right).sum()} wrong (2 cm, 0.5 deg), {(~right & ~pacc).sum()} rejected "
-                  f"({_share(~pacc, ~right)}); {right.sum()} right, {(right & ~pacc).sum()} rejected ({_share(~pacc, right)})")
+            _carmen_perturbed(scans, cor, pairs, own, perturbed)
         print(flush=True)
 
 
@@ -273,7 +299,8 @@ def carmen_figure(out: Path, n_pairs: int = 3) -> None:
         near = (np.linalg.norm(b.xy, axis=1) < 3.0) & b.normal_ok & dense
         c = po[np.argmax(np.where(near, np.linalg.norm(po - pl, axis=1), -1))]
         s_o, s_l = evaluate(a, b, ours).s_m, evaluate(a, b, lg).s_m
-        for ax, pts, lab, col, sv in ((axs[r, 1], po, "our match", "r", s_o), (axs[r, 2], pl, "the log's poses", "g", s_l)):
+        views = ((axs[r, 1], po, "our match", "r", s_o), (axs[r, 2], pl, "the log's poses", "g", s_l))
+        for ax, pts, lab, col, sv in views:
             ax.plot(pa[:, 0], pa[:, 1], "o", ms=6, mfc="none", color="b", label=f"scan {k}")
             ax.plot(pts[:, 0], pts[:, 1], "+", ms=8, color=col, label=f"scan {k + 1}, {lab}")
             ax.set_xlim(c[0] - 0.3, c[0] + 0.3)

@@ -15,6 +15,7 @@ reference stop, with its covariance (statistical, surface bias, floor tilt:
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -158,27 +159,30 @@ def match_pair(ref: PlanarScan, cur: PlanarScan, guess: np.ndarray, guess_cov: n
     return res.pose, cov, res, v, name
 
 
-def _probe(local: Any, res: IcpResult, cov: np.ndarray, v: Verdict, name: str, accept: AcceptParams,
-           ) -> tuple[IcpResult, np.ndarray, Verdict, str]:
+def _probe(local: Callable[[np.ndarray], tuple[IcpResult, np.ndarray, Verdict]], res: IcpResult,
+           cov: np.ndarray, v: Verdict, name: str, accept: AcceptParams) -> tuple[IcpResult, np.ndarray, Verdict, str]:
     """The uniqueness check of an accepted match: the local matcher restarted ``accept.probe_m`` either
-    side along the match's least determined direction (a corridor's axis). A restart that ends on
-    another pose (beyond the chi-square(3) 0.9999 gate of the match's covariance) explaining at least as
-    many points is a second solution: the scans cannot tell the two apart, the match is refused; one
-    explaining clearly more (``probe_margin``) replaces the match (the guess led to a local minimum)."""
+    side along the match's least determined direction (a corridor's axis).
+
+    A restart that ends on another pose (outside the chi-square(3) ``guess_quantile`` gate of the
+    match's covariance), fits within the noise (inlier share, residual spread), agrees with the guess
+    and explains at least as many points (within ``probe_margin``) is a second solution that neither
+    the scans nor the guess can tell from the first: the match is refused. One that explains clearly
+    more and passes the whole test replaces the match (the guess led to a local minimum)."""
     u = np.linalg.eigh(cov[:2, :2])[1][:, -1]
     gate = chi2.ppf(accept.guess_quantile, 3)
     best = (res, cov, v)
     for sgn in (1.0, -1.0):
-        start = res.pose + np.r_[sgn * accept.probe_m * u, 0.0]
-        r2, c2, v2 = local(start)
-        d = se2.relative(res.pose, r2.pose)
+        r2, c2, v2 = local(res.pose + np.r_[sgn * accept.probe_m * u, 0.0])
+        d = se2.compose(r2.pose, se2.inverse(res.pose))  # world-frame perturbation, as the covariance's
         if not r2.converged or d @ np.linalg.solve(cov, d) <= gate:
             continue
         if v2.accepted and v2.explained > best[2].explained + accept.probe_margin:
             best = (r2, c2, v2)
-        elif v2.explained >= v.explained - accept.probe_margin:
-            why = f"ambiguous: a second match {1000 * float(np.hypot(d[0], d[1])):.0f} mm away explains " \
-                  f"{v2.explained:.2f} of the points (this one {v.explained:.2f})"
+        elif (v2.explained >= v.explained - accept.probe_margin and v2.inlier_share >= accept.min_inlier_share
+              and v2.s_ratio <= accept.max_s_ratio and v2.mahalanobis2 <= gate):
+            why = (f"ambiguous: a second match {1000 * float(np.hypot(d[0], d[1])):.0f} mm away explains "
+                   f"{v2.explained:.2f} of the points (this one {v.explained:.2f})")
             return res, cov, replace(v, accepted=False, reason=why), name
     if best[0] is not res:
         return best[0], best[1], best[2], name + "+probe"
