@@ -23,6 +23,7 @@ import numpy as np
 
 from gtrig.io.carmen import CarmenLog
 from gtrig.scanmatch import se2
+from gtrig.scanmatch.genetic import GeneticParams
 from gtrig.scanmatch.icp import DEFAULT_ICP, IcpParams, match_icp
 from gtrig.scanmatch.pairs import Guess
 from gtrig.scanmatch.scan import PlanarScan, ranges_to_scan
@@ -31,6 +32,10 @@ from gtrig.scanmatch.scan import PlanarScan, ranges_to_scan
 NO_ECHO_M = 80.0
 # A SICK LMS's range noise indoors (data sheet: about 1 cm; the logs round to 1 cm).
 RANGE_SIGMA_M = 0.01
+# The global search for pairs the local matcher refuses: the logs' raw odometry drifts by metres and
+# any heading around a loop, so the window spans every heading and 1.5 m either way (a wider one
+# holds more look-alike places than 96 x 60 candidates can tell apart).
+LOOP_GENETIC = GeneticParams(half_width=(1.5, 1.5, float(np.pi)), population=96, generations=60)
 
 
 def beam_angles_rad(n_beams: int) -> np.ndarray:
@@ -53,6 +58,14 @@ def odometry_at_scans(log: CarmenLog, rows: np.ndarray | None = None) -> np.ndar
     rows = np.arange(len(log.laser_stamps_s)) if rows is None else np.asarray(rows)
     t, p = log.rebuilt_odometry()
     return Guess(t, p).at(log.laser_stamps_s[rows])
+
+
+def odometry_path_m(log: CarmenLog, rows: np.ndarray | None = None) -> np.ndarray:
+    """(M,) the distance the raw odometry travelled from the first scan to each scan (metres)."""
+    rows = np.arange(len(log.laser_stamps_s)) if rows is None else np.asarray(rows)
+    t, p = log.rebuilt_odometry()
+    run = np.r_[0.0, np.cumsum(np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1])))]
+    return np.interp(log.laser_stamps_s[rows], t, run)
 
 
 def scans_own_match(scans: list[PlanarScan], poses: np.ndarray, pairs: np.ndarray,
