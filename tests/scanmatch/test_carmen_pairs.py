@@ -3,7 +3,7 @@ poses and against what the scans themselves say (their fit, loop closure).
 
 The logs' corrected poses are a few centimetres off scan to scan (docs/scanmatch.md: at them the
 same scans fit with a residual spread of 16-17 mm against 9-10 mm at our matches, and our matches
-close around triplets within 2-7 mm while differing from the logs' by 20-23 mm): they check our
+close around triplets within 2-4 mm while differing from the logs' by 20-25 mm): they check our
 matches at 5 cm, and the scans' own match near the logs' pose checks them at 2 cm.
 """
 
