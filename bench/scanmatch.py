@@ -4,7 +4,8 @@ against truth on simulated pairs, and agreement with the CARMEN logs' corrected 
     python bench/scanmatch.py record --seed N --out DIR   (a recording without camera images)
     python bench/scanmatch.py speed --recording REC [--pairs 500]
     python bench/scanmatch.py accept --recording REC [--recording REC2 ...] [--pairs 400]
-    python bench/scanmatch.py carmen [--every 4]
+    python bench/scanmatch.py carmen [--every 8] [--perturbed 600]
+    python bench/scanmatch.py carmen-figure --out docs/figures/scanmatch_carmen.png
     python bench/scanmatch.py map --recording REC [--recording REC2 ...]
 
 The machine may be loaded: speed figures are printed with the ratio to the peer measured in the same
@@ -145,57 +146,194 @@ def accept(recs: list[Path], n_pairs: int, ga_pairs: int) -> None:
           f"accepted {100 * (n_ga - tot['wrong_rej'] - tot['right_rej']) / max(1, n_ga):.1f} % of the pairs")
 
 
-def raw_odometry_at(log, stamps: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """The logs' raw wheel odometry (ODOM, re-anchorings removed: CarmenLog.rebuilt_odometry) at the
-    scans' stamps; the FLASER records' own odometry fields hold the corrected poses in these logs."""
-    t, p = log.rebuilt_odometry()
-    return Guess(t, p).at(stamps)
+def _share(mask: np.ndarray, sel: np.ndarray) -> str:
+    return f"{100 * np.mean(mask[sel]):.1f} %" if np.any(sel) else "-"
 
 
-def carmen(every: int, max_pairs: int) -> None:
+def _within(a: np.ndarray, b: np.ndarray, m: float, deg: float) -> np.ndarray:
+    e = se2.relative(a, b)
+    return (np.hypot(e[:, 0], e[:, 1]) < m) & (np.degrees(np.abs(e[:, 2])) < deg)
+
+
+def _mm(e: np.ndarray, q: float = 50) -> str:
+    """Percentile ``q`` of the position part of (P, 3) pose differences, in mm."""
+    return f"{1000 * np.percentile(np.hypot(e[:, 0], e[:, 1]), q):.1f} mm"
+
+
+def _deg(e: np.ndarray) -> str:
+    return f"{np.degrees(np.median(np.abs(e[:, 2]))):.3f} deg"
+
+
+def _carmen_agreement(label: str, logrel: np.ndarray, own: np.ndarray, ours: np.ndarray, acc: np.ndarray) -> None:
+    print(f"  {label}within 2 cm and 1 deg of the logs' relative pose: {_share(_within(logrel, ours, .02, 1), acc)}; "
+          f"within 5 cm and 1 deg: {_share(_within(logrel, ours, .05, 1), acc)}; within 2 cm and 0.5 deg of the "
+          f"scans' own match near the logs' pose: {_share(_within(own, ours, .02, .5), acc)}")
+
+
+def _carmen_evidence(scans: list, pairs: np.ndarray, ours: np.ndarray, logrel: np.ndarray,  # type: ignore[type-arg]
+                     acc: np.ndarray) -> None:
+    """The scans' fit at both relative poses, loop closure of ours, and the scanner's mounting in the
+    frame of the logs' poses (planar hand-eye: identity when the logs' poses are the scanner's)."""
+    from scipy.optimize import least_squares
+
+    from gtrig.scanmatch.carmen import triplet_closures
+
+    s_o = np.array([evaluate(scans[a], scans[b], ours[k]).s_m for k, (a, b) in enumerate(pairs) if acc[k]])
+    s_l = np.array([evaluate(scans[a], scans[b], logrel[k]).s_m for k, (a, b) in enumerate(pairs) if acc[k]])
+    print(f"  the scans' fit (residual spread, accepted pairs): {1000 * np.median(s_o):.1f} mm at ours, "
+          f"{1000 * np.median(s_l):.1f} mm at the logs' (ours lower in {100 * np.mean(s_o < s_l):.1f} %)")
+    cl = triplet_closures(pairs[acc], ours[acc])
+    e = se2.relative(logrel[acc], ours[acc])
+    print(f"  loop closure of {len(cl)} triplets of accepted pairs: median {_mm(cl)} and {_deg(cl)} (p95 "
+          f"{_mm(cl, 95)}); ours against the logs' on those pairs: median {_mm(e)} and {_deg(e)} (p95 {_mm(e, 95)})")
+    la, oa = logrel[acc], ours[acc]
+    m = least_squares(lambda m: se2.relative(se2.compose(se2.compose(se2.inverse(m), la), m), oa).ravel(),
+                      np.zeros(3), loss="soft_l1", f_scale=0.01).x
+    print(f"  the scanner in the frame of the logs' poses: x {1000 * m[0]:+.1f} mm, y {1000 * m[1]:+.1f} mm, "
+          f"yaw {np.degrees(m[2]):+.3f} deg")
+
+
+def _carmen_odometry(log, n_max: int = 1500) -> None:  # type: ignore[no-untyped-def]
+    """Consecutive scans: the wheel odometry, a third sensor, against our match and the logs' poses."""
+    from gtrig.scanmatch.carmen import log_scans, odometry_at_scans
+
+    k = np.arange(len(log.laser_stamps_s) - 1)
+    k = k[:: max(1, len(k) // n_max)]
+    rows = np.unique(np.r_[k, k + 1])
+    pos = {int(r): n for n, r in enumerate(rows)}
+    scans, odo = log_scans(log, rows), odometry_at_scans(log, rows)
+    ro = se2.relative(odo[[pos[a] for a in k]], odo[[pos[a + 1] for a in k]])
+    rl = se2.relative(log.laser_xytheta[k], log.laser_xytheta[k + 1])
+    rs = np.array([match_icp(scans[pos[a]], scans[pos[a + 1]], g).pose for a, g in zip(k, ro, strict=True)])
+    eo, el = se2.relative(ro, rs), se2.relative(ro, rl)
+    print(f"  {len(k)} consecutive scans ({_mm(ro)} median step): wheel odometry against ours {_mm(eo)}, "
+          f"{_deg(eo)}; against the logs' {_mm(el)}, {_deg(el)} (medians)")
+
+
+def _carmen_perturbed(scans: list, cor: np.ndarray, pairs: np.ndarray, own: np.ndarray,  # type: ignore[type-arg]
+                      n: int) -> None:
+    """The acceptance test's verdicts from guesses off the scans' own match by up to 0.5 m and 30 deg."""
+    rng = np.random.default_rng(0)
+    sel = rng.choice(len(pairs), min(n, len(pairs)), replace=False)
+    r = 0.5 * np.sqrt(rng.uniform(0, 1, len(sel)))
+    a = rng.uniform(0, 2 * np.pi, len(sel))
+    off = np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(-1, 1, len(sel)) * np.radians(30)])
+    gc = np.diag([0.3**2, 0.3**2, np.radians(20) ** 2])
+    P = match_pairs(scans, cor, pairs[sel], genetic=None, guess_cov=gc, rel_guesses=own[sel] + off)
+    right = _within(own[sel], np.array([x.pose for x in P]), 0.02, 0.5)
+    acc = np.array([x.verdict.accepted for x in P])
+    print(f"  acceptance test on {len(sel)} pairs from guesses off the scans' own match by up to 0.5 m and "
+          f"30 deg: {(~right).sum()} wrong (2 cm, 0.5 deg), {(~right & ~acc).sum()} rejected ({_share(~acc, ~right)}); "
+          f"{right.sum()} right, {(right & ~acc).sum()} rejected ({_share(~acc, right)})")
+
+
+def carmen(every_freiburg: int, perturbed: int) -> None:
+    """Both CARMEN logs: every pair within 1 m and 30 deg (the logs' corrected poses) among every scan
+    (intel) or every ``every_freiburg``-th scan (freiburg), matched from the raw odometry; against the
+    logs' poses, against the scans' own match near them, the scans' fit and loop closure at both."""
     from gtrig.io.carmen import read_carmen
+    from gtrig.scanmatch.carmen import LOOP_GENETIC, log_scans, odometry_at_scans, odometry_path_m, scans_own_match
 
-    for name in ("intel-corrected.log.gz", "freiburg-079-corrected.log.gz"):
-        p = ROOT / ".." / "shared" / "data" / "carmen" / name
-        log = read_carmen(p)
-        n = log.laser_ranges.shape[1]
-        ang = -np.pi / 2 + np.arange(n) * np.pi / n
-        # the Intel log's 910 scans are far apart (a third of a hertz): every scan there
-        step = 1 if n <= 180 else every
-        idx = np.arange(0, len(log.laser_stamps_s), step)
-        scans = [ranges_to_scan(np.where(log.laser_ranges[k] < 50.0, log.laser_ranges[k], np.nan), ang, np.zeros(3),
-                                0.01, 50.0, float(log.laser_stamps_s[k])) for k in idx]
-        odo = raw_odometry_at(log, log.laser_stamps_s[idx])
-        cor = log.laser_xytheta[idx]
-        # pairs within 1 m and 30 deg by the corrected poses (raw odometry drifts metres over a loop),
-        # matched from the raw odometry's relative pose
-        pairs = candidate_pairs(cor, 1.0, np.radians(30), min_index_gap=1)
-        if len(pairs) > max_pairs:
-            pairs = pairs[np.linspace(0, len(pairs) - 1, max_pairs).astype(int)]
-        t = time.perf_counter()
-        # local matcher only (the odometry is good over 1 m): the genetic fallback would cost a second a pair
-        R = match_pairs(scans, odo, pairs, accept=AcceptParams(), surface_bias_m=0.0, genetic=None)
-        dt = time.perf_counter() - t
-        ref = se2.relative(cor[pairs[:, 0]], cor[pairs[:, 1]])
-        E = np.array([se2.relative(ref[k], x.pose) for k, x in enumerate(R)])
-        acc = np.array([x.verdict.accepted for x in R])
-        dxy, dth = np.hypot(E[:, 0], E[:, 1]), np.degrees(np.abs(E[:, 2]))
-        # the scans' own verdict on the two poses: residual spread at ours and at the log's corrected one
-        s_ours, s_log = [], []
-        for k in np.flatnonzero(acc):
-            a, b = pairs[k]
-            s_ours.append(evaluate(scans[a], scans[b], R[k].pose).s_m)
-            s_log.append(evaluate(scans[a], scans[b], ref[k]).s_m)
-        s_ours, s_log = np.array(s_ours), np.array(s_log)
-        print(f"{name}: {len(R)} pairs within 1 m and 30 deg, guesses from raw odometry ({n} beams, "
-              f"every {step}th scan); "
-              f"accepted {acc.sum()} ({100 * acc.mean():.1f} %); of those within 2 cm and 1 deg of the corrected "
-              f"poses' relative pose: {100 * np.mean(((dxy < 0.02) & (dth < 1.0))[acc]):.1f} %, "
-              f"within 5 cm and 1 deg: {100 * np.mean(((dxy < 0.05) & (dth < 1.0))[acc]):.1f} % "
-              f"(median {1000 * np.median(dxy[acc]):.1f} mm, {np.median(dth[acc]):.3f} deg); "
-              f"residual spread at our pose {1000 * np.median(s_ours):.1f} mm, at the log's "
-              f"{1000 * np.median(s_log):.1f} mm (ours lower in {100 * np.mean(s_ours < s_log):.0f} % of the pairs); "
-              f"{1000 * dt / max(1, len(R)):.1f} ms per pair", flush=True)
+    for name, every in (("intel-corrected.log.gz", 1), ("freiburg-079-corrected.log.gz", every_freiburg)):
+        log = read_carmen(ROOT / ".." / "shared" / "data" / "carmen" / name)
+        rows = np.arange(0, len(log.laser_stamps_s), every)
+        scans, odo, cor = log_scans(log, rows), odometry_at_scans(log, rows), log.laser_xytheta[rows]
+        pairs = candidate_pairs(cor, 1.0, np.radians(30))
+        t = time.process_time()
+        R = match_pairs(scans, odo, pairs, genetic=None)
+        dt = time.process_time() - t
+        ours, acc = np.array([x.pose for x in R]), np.array([x.verdict.accepted for x in R])
+        logrel = se2.relative(cor[pairs[:, 0]], cor[pairs[:, 1]])
+        own = scans_own_match(scans, cor, pairs)
+        reach = _within(own, np.array([x.guess for x in R]), 0.3, 10.0)
+        print(f"{name}: {len(scans)} scans ({log.laser_ranges.shape[1]} beams, every {every}), {len(pairs)} pairs "
+              f"within 1 m and 30 deg, matched from the raw odometry in {1000 * dt / len(pairs):.2f} ms CPU each; "
+              f"accepted {acc.sum()} ({100 * acc.mean():.1f} %): {_share(acc, reach)} of the {reach.sum()} pairs "
+              f"whose odometry guess is within 0.3 m and 10 deg, {_share(acc, ~reach)} of the {(~reach).sum()} "
+              f"others (metres and up to 180 deg of odometry drift)")
+        _carmen_agreement("accepted pairs ", logrel, own, ours, acc)
+        # the refused pairs again, with the genetic matcher over +-1.5 m and every heading, the guess's
+        # covariance from the path the odometry travelled between the scans
+        ref = np.flatnonzero(~acc)
+        path = odometry_path_m(log, rows)
+        t = time.process_time()
+        travelled = np.abs(path[pairs[ref, 1]] - path[pairs[ref, 0]])
+        Rg = match_pairs(scans, odo, pairs[ref], genetic=LOOP_GENETIC, path_m=travelled)
+        dt = time.process_time() - t
+        ag = np.array([x.verdict.accepted for x in Rg])
+        ours[ref[ag]], acc[ref[ag]] = np.array([x.pose for x in Rg]).reshape(-1, 3)[ag], True
+        print(f"  with the genetic fallback for the {len(ref)} refused pairs ({1000 * dt / max(1, len(ref)):.0f} ms "
+              f"CPU each): accepted {acc.sum()} ({100 * acc.mean():.1f} %): {_share(acc, reach)} of the pairs within "
+              f"reach, {_share(acc, ~reach)} of the others")
+        _carmen_agreement("accepted pairs ", logrel, own, ours, acc)
+        _carmen_evidence(scans, pairs, ours, logrel, acc)
+        # the verb's own population: pairs within 1 m and 30 deg by the raw odometry itself
+        po = candidate_pairs(odo, 1.0, np.radians(30))
+        Ro = match_pairs(scans, odo, po, genetic=None)
+        ao = np.array([x.verdict.accepted for x in Ro])
+        print(f"  pairs within 1 m and 30 deg by the raw odometry instead: {len(po)}, accepted {100 * ao.mean():.1f} %")
+        _carmen_agreement("of those ", se2.relative(cor[po[:, 0]], cor[po[:, 1]]), scans_own_match(scans, cor, po),
+                          np.array([x.pose for x in Ro]), ao)
+        _carmen_odometry(log)
+        if perturbed:
+            _carmen_perturbed(scans, cor, pairs, own, perturbed)
+        print(flush=True)
+
+
+def carmen_figure(out: Path, n_pairs: int = 3) -> None:
+    """Consecutive freiburg-079 scans where our match and the log's relative pose differ by 3-6 cm: the
+    second scan drawn on the first under each, zoomed where the two placements differ most."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from gtrig.io.carmen import read_carmen
+    from gtrig.scanmatch.carmen import log_scans, odometry_at_scans
+
+    log = read_carmen(ROOT / ".." / "shared" / "data" / "carmen" / "freiburg-079-corrected.log.gz")
+    rows = np.arange(0, len(log.laser_stamps_s), 40)
+    scans = log_scans(log, np.sort(np.r_[rows, rows + 1]))
+    odo, cor = odometry_at_scans(log), log.laser_xytheta
+    chosen = []
+    for n, k in enumerate(rows):
+        a, b = scans[2 * n], scans[2 * n + 1]
+        m = match_icp(a, b, se2.relative(odo[k], odo[k + 1]))
+        lg = se2.relative(cor[k], cor[k + 1])
+        d = float(np.hypot(*se2.relative(lg, m.pose)[:2]))
+        if 0.03 < d < 0.06 and m.s_m < 0.012:
+            chosen.append((k, a, b, m.pose, lg, d))
+        if len(chosen) == n_pairs:
+            break
+    fig, axs = plt.subplots(len(chosen), 3, figsize=(13, 4.3 * len(chosen)), squeeze=False)
+    for r, (k, a, b, ours, lg, d) in enumerate(chosen):
+        pa, po, pl = a.xy, se2.apply(ours, b.xy), se2.apply(lg, b.xy)
+        # the zoom: where the placements differ most, among points on a wall with neighbours around
+        dense = np.array([np.sum(np.linalg.norm(pa - q, axis=1) < 0.2) >= 12 for q in po])
+        near = (np.linalg.norm(b.xy, axis=1) < 3.0) & b.normal_ok & dense
+        c = po[np.argmax(np.where(near, np.linalg.norm(po - pl, axis=1), -1))]
+        s_o, s_l = evaluate(a, b, ours).s_m, evaluate(a, b, lg).s_m
+        views = ((axs[r, 1], po, "our match", "r", s_o), (axs[r, 2], pl, "the log's poses", "g", s_l))
+        for ax, pts, lab, col, sv in views:
+            ax.plot(pa[:, 0], pa[:, 1], "o", ms=6, mfc="none", color="b", label=f"scan {k}")
+            ax.plot(pts[:, 0], pts[:, 1], "+", ms=8, color=col, label=f"scan {k + 1}, {lab}")
+            ax.set_xlim(c[0] - 0.3, c[0] + 0.3)
+            ax.set_ylim(c[1] - 0.3, c[1] + 0.3)
+            ax.set_aspect("equal")
+            ax.grid(True)
+            ax.legend(loc="upper left", fontsize=8)
+            ax.set_title(f"{lab}: residual spread {1000 * sv:.1f} mm", fontsize=10)
+        ax = axs[r, 0]
+        ax.plot(pa[:, 0], pa[:, 1], ".", ms=2, color="b")
+        ax.plot(pl[:, 0], pl[:, 1], ".", ms=2, color="g")
+        ax.add_patch(plt.Rectangle((c[0] - 0.3, c[1] - 0.3), 0.6, 0.6, fill=False, color="k"))
+        ax.set_xlim(-1.0, 6.0)
+        ax.set_ylim(-3.5, 3.5)
+        ax.set_aspect("equal")
+        ax.set_title(f"freiburg-079 scans {k}, {k + 1}: ours and the log's differ by {1000 * d:.0f} mm", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=70)
+    print(f"wrote {out}")
 
 
 def map_validation(recs: list[Path]) -> None:
@@ -270,8 +408,10 @@ def main() -> None:
     b.add_argument("--pairs", type=int, default=400)
     b.add_argument("--ga-pairs", type=int, default=60, help="pairs also run with the genetic fallback")
     c = sub.add_parser("carmen")
-    c.add_argument("--every", type=int, default=3)
-    c.add_argument("--max-pairs", type=int, default=1500)
+    c.add_argument("--every", type=int, default=8, help="freiburg: every n-th scan (intel: every scan)")
+    c.add_argument("--perturbed", type=int, default=600, help="pairs for the acceptance test's verdicts")
+    f = sub.add_parser("carmen-figure")
+    f.add_argument("--out", type=Path, required=True)
     e = sub.add_parser("record")
     e.add_argument("--seed", type=int, required=True)
     e.add_argument("--out", type=Path, required=True)
@@ -284,10 +424,12 @@ def main() -> None:
         accept(args.recording, args.pairs, args.ga_pairs)
     elif args.what == "record":
         record(args.seed, args.out)
+    elif args.what == "carmen-figure":
+        carmen_figure(args.out)
     elif args.what == "map":
         map_validation(args.recording)
     else:
-        carmen(args.every, args.max_pairs)
+        carmen(args.every, args.perturbed)
 
 
 if __name__ == "__main__":

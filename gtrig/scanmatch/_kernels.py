@@ -100,10 +100,15 @@ def grid_nearest(px: float, py: float, ref_xy: np.ndarray, origin: np.ndarray, s
 
 @njit(cache=True)
 def ordered_normals(xy: np.ndarray, valid: np.ndarray, gap_m: np.ndarray, half: int,
-                    max_flatness: float) -> tuple[np.ndarray, np.ndarray]:
+                    max_flatness: float, noise_var: np.ndarray, chi2_95: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals of an ordered scan's points (N, 2) by a line fit over the neighbours ``i - half ..
-    i + half`` closer than ``gap_m[i]``; ``ok[i]`` when at least 3 points fit a line whose smaller
-    spread / larger spread ratio (eigenvalues) is below ``max_flatness``."""
+    i + half`` closer than ``gap_m[i]``; ``ok[i]`` when at least 3 points fit a line: its smaller
+    spread / larger spread ratio (eigenvalues) is below ``max_flatness``, or (4 points or more) the
+    points' scatter across the line is what their noise explains: the smaller eigenvalue of the scatter
+    matrix is within ``chi2_95[cnt - 2] * noise_var[i]`` (the chi-square 95 % quantile of a line's
+    ``cnt - 2`` degrees of freedom times the point's variance). The second test keeps the normals of
+    densely sampled walls (0.5-degree scans at a metre or two: a 5-point window spans a few
+    centimetres, comparable to the noise) that the ratio alone refuses."""
     N = xy.shape[0]
     nrm = np.zeros((N, 2))
     ok = np.zeros(N, np.bool_)
@@ -158,7 +163,7 @@ def ordered_normals(xy: np.ndarray, valid: np.ndarray, gap_m: np.ndarray, half: 
         n = math.hypot(vx, vy)
         nrm[i, 0] = vx / n
         nrm[i, 1] = vy / n
-        ok[i] = lmin <= max_flatness * lmax
+        ok[i] = lmin <= max_flatness * lmax or (cnt >= 4 and lmin <= chi2_95[cnt - 2] * noise_var[i])
     return nrm, ok
 
 

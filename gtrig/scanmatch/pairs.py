@@ -130,10 +130,12 @@ class Relation:
 
 
 def guess_cov_for(rel_guess: np.ndarray, dist_sigma_frac: float = 0.1, min_sigma_m: float = 0.05,
-                  min_sigma_rad: float = float(np.radians(3.0))) -> np.ndarray:
+                  min_sigma_rad: float = float(np.radians(3.0)), path_m: float | None = None) -> np.ndarray:
     """A wheel-odometry guess's covariance over a relative motion: 10 % of the distance and of the
-    turn, not below 5 cm and 3 deg (the slip and scale errors of the seeds' platforms)."""
-    d = float(np.hypot(rel_guess[0], rel_guess[1]))
+    turn, not below 5 cm and 3 deg (the slip and scale errors of the seeds' platforms). The distance is
+    the path the odometry integrated between the two scans when ``path_m`` is given (a loop's two ends
+    are close, but the odometry drifted over the whole loop), else the relative pose's length."""
+    d = float(np.hypot(rel_guess[0], rel_guess[1])) if path_m is None else float(path_m)
     s_t = max(min_sigma_m, dist_sigma_frac * d)
     s_r = max(min_sigma_rad, dist_sigma_frac * abs(float(rel_guess[2])) + 0.02 * d)
     return np.diag([s_t**2, s_t**2, s_r**2])
@@ -142,16 +144,18 @@ def guess_cov_for(rel_guess: np.ndarray, dist_sigma_frac: float = 0.1, min_sigma
 def match_pairs(scans: list[PlanarScan], guesses: np.ndarray, pairs: np.ndarray, tilt_shift_m: float = 0.0,
                 surface_bias_m: float = 0.0015, icp: IcpParams = DEFAULT_ICP, accept: AcceptParams = DEFAULT_ACCEPT,
                 genetic: GeneticParams | None = DEFAULT_GENETIC, guess_cov: np.ndarray | None = None,
-                rel_guesses: np.ndarray | None = None) -> list[Relation]:
+                rel_guesses: np.ndarray | None = None, path_m: np.ndarray | None = None) -> list[Relation]:
     """Match and judge every pair; ``guesses`` (N, 3) are the scans' guessed poses (``rel_guesses``
-    (P, 3), when given, replace their relative poses, e.g. perturbed truth in a measurement)."""
+    (P, 3), when given, replace their relative poses, e.g. perturbed truth in a measurement).
+    ``path_m`` (P,): the distance the odometry travelled between each pair's scans, for the guess's
+    covariance (:func:`guess_cov_for`) when ``guess_cov`` is not given."""
     from gtrig.scanmatch.validate import ErrorModel, match_pair
 
     model = ErrorModel(surface_bias_sigma_m=surface_bias_m)
     out = []
     for n, (i, j) in enumerate(pairs):
         g = se2.relative(guesses[i], guesses[j]) if rel_guesses is None else rel_guesses[n]
-        gc = guess_cov_for(g) if guess_cov is None else guess_cov
+        gc = guess_cov if guess_cov is not None else guess_cov_for(g, path_m=None if path_m is None else path_m[n])
         gp = None if genetic is None else GeneticParams(**{**genetic.__dict__, "seed": genetic.seed + n})
         pose, cov, _res, v, name = match_pair(scans[i], scans[j], g, gc, model, tilt_shift_m, icp, accept, gp)
         out.append(Relation(scans[i].stamp_s, scans[j].stamp_s, pose, cov, g, name, v))

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 
 from gtrig.errors import InputError
 from gtrig.scanmatch import se2
@@ -22,8 +23,9 @@ NORMAL_HALF_WINDOW = 2
 # the spacing of a surface seen at grazing incidence grows with range.
 NORMAL_GAP_M = 0.06
 # A fit is a line when its smaller spread is under this fraction of the larger one (a corner or a leg
-# arc is not).
+# arc is not), or when its scatter across the line is within the points' range noise (chi-square 95 %).
 NORMAL_MAX_FLATNESS = 0.05
+_CHI2_95 = np.array([np.inf] + [float(chi2.ppf(0.95, k)) for k in range(1, 2 * NORMAL_HALF_WINDOW + 2)])
 
 
 @dataclass(frozen=True)
@@ -89,7 +91,7 @@ def ranges_to_scan(ranges_m: np.ndarray, angles_rad: np.ndarray, beam_pose: np.n
     inc = float(np.median(np.abs(np.diff(a)))) if a.size > 1 else 0.0
     gap = NORMAL_GAP_M + 3.5 * r[ok] * inc
     nrm, nok = ordered_normals(np.ascontiguousarray(xy), np.ones(len(xy), np.bool_), gap, NORMAL_HALF_WINDOW,
-                               NORMAL_MAX_FLATNESS)
+                               NORMAL_MAX_FLATNESS, np.ascontiguousarray(sig[ok] ** 2), _CHI2_95)
     return PlanarScan(xy, nrm, nok, np.ascontiguousarray(sig[ok]), stamp_s)
 
 

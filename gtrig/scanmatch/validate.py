@@ -15,11 +15,13 @@ reference stop, with its covariance (statistical, surface bias, floor tilt:
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.stats import chi2
 
 from gtrig.errors import FormatError, InputError
 from gtrig.io.scans import read_scans
@@ -140,18 +142,51 @@ def match_pair(ref: PlanarScan, cur: PlanarScan, guess: np.ndarray, guess_cov: n
                ) -> tuple[np.ndarray, np.ndarray, IcpResult, Verdict, str]:
     """Local match from ``guess``; when the acceptance test refuses it, the genetic matcher (seeded
     with the guess) and the local refinement. Returns pose, full covariance, match, verdict, matcher."""
-    res = match_icp(ref, cur, guess, icp)
-    cov = res.cov + systematic_cov(res, cur, model.surface_bias_sigma_m, tilt_shift_m)
-    v = judge(res, cov, guess, guess_cov, accept)
+    def local(start: np.ndarray) -> tuple[IcpResult, np.ndarray, Verdict]:
+        r = match_icp(ref, cur, start, icp)
+        c = r.cov + systematic_cov(r, cur, model.surface_bias_sigma_m, tilt_shift_m)
+        return r, c, judge(r, c, guess, guess_cov, accept)
+
+    res, cov, v = local(guess)
     name = "icp"
     if not v.accepted and genetic is not None:
         ga = match_genetic(ref, cur, guess, genetic)
-        res2 = match_icp(ref, cur, ga.pose, icp)
-        cov2 = res2.cov + systematic_cov(res2, cur, model.surface_bias_sigma_m, tilt_shift_m)
-        v2 = judge(res2, cov2, guess, guess_cov, accept)
+        res2, cov2, v2 = local(ga.pose)
         if v2.accepted or v2.score > v.score:
             res, cov, v, name = res2, cov2, v2, "genetic+icp"
+    if v.accepted and accept.probe_m > 0:
+        res, cov, v, name = _probe(local, res, cov, v, name, accept)
     return res.pose, cov, res, v, name
+
+
+def _probe(local: Callable[[np.ndarray], tuple[IcpResult, np.ndarray, Verdict]], res: IcpResult,
+           cov: np.ndarray, v: Verdict, name: str, accept: AcceptParams) -> tuple[IcpResult, np.ndarray, Verdict, str]:
+    """The uniqueness check of an accepted match: the local matcher restarted ``accept.probe_m`` either
+    side along the match's least determined direction (a corridor's axis).
+
+    A restart that ends on another pose (outside the chi-square(3) ``guess_quantile`` gate of the
+    match's covariance), fits within the noise (inlier share, residual spread), agrees with the guess
+    and explains at least as many points (within ``probe_margin``) is a second solution that neither
+    the scans nor the guess can tell from the first: the match is refused. One that explains clearly
+    more and passes the whole test replaces the match (the guess led to a local minimum)."""
+    u = np.linalg.eigh(cov[:2, :2])[1][:, -1]
+    gate = chi2.ppf(accept.guess_quantile, 3)
+    best = (res, cov, v)
+    for sgn in (1.0, -1.0):
+        r2, c2, v2 = local(res.pose + np.r_[sgn * accept.probe_m * u, 0.0])
+        d = se2.compose(r2.pose, se2.inverse(res.pose))  # world-frame perturbation, as the covariance's
+        if not r2.converged or d @ np.linalg.solve(cov, d) <= gate:
+            continue
+        if v2.accepted and v2.explained > best[2].explained + accept.probe_margin:
+            best = (r2, c2, v2)
+        elif (v2.explained >= v.explained - accept.probe_margin and v2.inlier_share >= accept.min_inlier_share
+              and v2.s_ratio <= accept.max_s_ratio and v2.mahalanobis2 <= gate):
+            why = (f"ambiguous: a second match {1000 * float(np.hypot(d[0], d[1])):.0f} mm away explains "
+                   f"{v2.explained:.2f} of the points (this one {v.explained:.2f})")
+            return res, cov, replace(v, accepted=False, reason=why), name
+    if best[0] is not res:
+        return best[0], best[1], best[2], name + "+probe"
+    return res, cov, v, name
 
 
 @dataclass(frozen=True)
