@@ -7,7 +7,9 @@ Part 1 (speed): gtrig.fusion.fuse on the full hour (fixes at their own stamps: E
 with marginal covariances), wall time and peak memory. Part 2 (peer): the same hour with each fix snapped to
 its nearest node and the odometry parameters held at their true values (Pose2 factors GTSAM has: a
 BetweenFactorPose2 per increment, a PriorFactorPose2 per fix, the world-frame covariance rotated into the
-fix's frame); both solvers on those factors, the largest position difference and the time ratio. Part 3
+fix's frame, gtrig's whitening handed over as is); both solvers on those factors, the largest position
+difference and the time ratio. Part 2b (``--custom-hours``, 0.01 h by default): GTSAM on exactly gtrig's
+factors (``gtsam.CustomFactor`` calling gtrig's compiled residuals), like for like. Part 3
 (with --seeds-root): the acceptance rows on simulated recordings (the pipeline's GTvision and GTlaser).
 """
 
@@ -136,7 +138,6 @@ def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
         return
     graph = gtsam.NonlinearFactorGraph()
     init = gtsam.Values()
-    Q = np.linalg.inv(np.einsum("nki,nkj->nij", chain.proc_W, chain.proc_W))
     inc = chain.proc_u * [k[0], k[0], 0.0]
     inc[:, 2] = k[1] * chain.proc_u[:, 2] + k[2] * chain.proc_u[:, 0]
     t0 = time.perf_counter()
@@ -144,14 +145,17 @@ def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
         # Pose2's between error is the residual rotated by the increment's own turn: rotate its noise alike
         c, s = np.cos(inc[i, 2]), np.sin(inc[i, 2])
         Rm = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1.0]])
+        # gtrig's whitening rotated alike (W R^T): GTSAM's Covariance() would factor the ill-conditioned
+        # slip covariance again and lose digits (that alone moved the solution by 2e-6 m)
         graph.add(gtsam.BetweenFactorPose2(i, i + 1, gtsam.Pose2(*inc[i]),
-                                           gtsam.noiseModel.Gaussian.Covariance(Rm @ Q[i] @ Rm.T)))
+                                           gtsam.noiseModel.Gaussian.SqrtInformation(chain.proc_W[i] @ Rm.T)))
     for j in range(chain.fix_node.size):
         n = int(chain.fix_node[j] + chain.fix_alpha[j])
         z = chain.fix_z[j]
         c, s = np.cos(z[2]), np.sin(z[2])
         J = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1.0]])  # world-frame perturbation -> Pose2's local one
-        graph.add(gtsam.PriorFactorPose2(n, gtsam.Pose2(*z), gtsam.noiseModel.Gaussian.Covariance(J @ chain.fix_cov[j] @ J.T)))
+        graph.add(gtsam.PriorFactorPose2(n, gtsam.Pose2(*z),
+                                         gtsam.noiseModel.Gaussian.SqrtInformation(chain.fix_W[j] @ J.T)))
     x0p = chain.x0
     graph.add(gtsam.PriorFactorPose2(0, gtsam.Pose2(*x0p), gtsam.noiseModel.Gaussian.Covariance(np.diag([1e-2] * 3))))
     for i in range(len(chain)):
@@ -183,6 +187,111 @@ def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
     print(f"largest difference: position {dpos:.2e} m, yaw {dyaw:.2e} rad; sigma ratio at 50 nodes within "
           f"{max(rel) * 100:.3f} %")
     print(f"time ratio gtsam solve / gtrig (solve + every marginal): {solve_s / ours_s:.2f}")
+
+
+def _local_jacobian(theta: float) -> np.ndarray:
+    """d (x, y, yaw) / d (Pose2's local tangent) at a pose of heading ``theta``: GTSAM retracts a Pose2 by
+    ``pose * Expmap(delta)``, whose first-order effect is the translation rotated into the world."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def gtsam_custom_graph(chain: FactorChain, k: np.ndarray):  # noqa: ANN201
+    """GTSAM's graph of exactly gtrig's factors: ``gtsam.CustomFactor`` s whose errors are gtrig's own
+    compiled residuals (kernels.odo_residual, kernels.fix_residual, the additive prior) with gtrig's
+    noise, the Jacobians mapped into Pose2's tangent space. Only the angle representation differs (Pose2
+    wraps yaw; the odometry residual's yaw difference is wrapped alike)."""
+    import gtsam
+
+    from gtrig.fusion.kernels import fix_residual, odo_residual, wrap
+
+    graph = gtsam.NonlinearFactorGraph()
+    buf = {n: np.empty((3, 3)) for n in ("Ja", "Jb", "Jk", "Jq")}
+
+    def xyt(values: gtsam.Values, key: int) -> np.ndarray:
+        p = values.atPose2(key)
+        return np.array([p.x(), p.y(), p.theta()])
+
+    def odo_error(i: int):  # noqa: ANN202
+        def err(this: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+            a, b = xyt(values, i), xyt(values, i + 1)
+            r = np.empty(3)
+            odo_residual(a, b, k, chain.proc_u[i], r, buf["Ja"], buf["Jb"], buf["Jk"])
+            r[2] = wrap(r[2])
+            if H is not None:
+                H[0] = buf["Ja"] @ _local_jacobian(a[2])
+                H[1] = buf["Jb"] @ _local_jacobian(b[2])
+            return r
+        return err
+
+    def fix_error(j: int, key: int):  # noqa: ANN202
+        def err(this: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+            q = xyt(values, key)
+            r = np.empty(3)
+            fix_residual(q, q, 0.0, int(chain.fix_kind[j]), chain.fix_z[j], chain.fix_lever[j], r, buf["Jq"],
+                         np.empty(3), np.empty(3))
+            if H is not None:
+                H[0] = buf["Jq"] @ _local_jacobian(q[2])
+            return r
+        return err
+
+    def prior_error(this: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+        q = xyt(values, 0)
+        r = q - chain.x0
+        r[2] = wrap(r[2])
+        if H is not None:
+            H[0] = _local_jacobian(q[2])
+        return r
+
+    for i in range(len(chain) - 1):
+        # gtrig's own whitening (W^T W = information), not a covariance GTSAM would factor again
+        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Gaussian.SqrtInformation(chain.proc_W[i]), [i, i + 1],
+                                     odo_error(i)))
+    for j in range(chain.fix_node.size):
+        key = int(chain.fix_node[j] + chain.fix_alpha[j])  # snapped: alpha is 0 or 1
+        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Gaussian.SqrtInformation(chain.fix_W[j]), [key],
+                                     fix_error(j, key)))
+    graph.add(gtsam.CustomFactor(gtsam.noiseModel.Gaussian.SqrtInformation(chain.W0), [0], prior_error))
+    return graph
+
+
+def part_gtsam_custom(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
+    """GTSAM on exactly gtrig's factors (CustomFactor): the like-for-like answer and time ratio."""
+    import gtsam
+
+    chain, X0, k = snapped_chain(odo, tracks)
+    t0 = time.perf_counter()
+    res = smooth_batch(chain, X0, k, huber_k=0.0)
+    ours_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    graph = gtsam_custom_graph(chain, k)
+    init = gtsam.Values()
+    for i in range(len(chain)):
+        init.insert(i, gtsam.Pose2(*X0[i]))
+    build_s = time.perf_counter() - t0
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-14)
+    params.setAbsoluteErrorTol(1e-14)
+    t0 = time.perf_counter()
+    result = gtsam.LevenbergMarquardtOptimizer(graph, init, params).optimize()
+    solve_s = time.perf_counter() - t0
+    marg = gtsam.Marginals(graph, result)
+    probe = np.linspace(0, len(chain) - 1, 50).astype(int)
+    xy = np.array([[result.atPose2(i).x(), result.atPose2(i).y(), result.atPose2(i).theta()] for i in range(len(chain))])
+    dpos = float(np.max(np.hypot(*(xy[:, :2] - res.X[:, :2]).T)))
+    dyaw = float(np.max(np.abs((xy[:, 2] - res.X[:, 2] + np.pi) % (2 * np.pi) - np.pi)))
+    rel = []
+    for i in probe:  # GTSAM's marginal is over the local tangent: map ours (world-frame) into it
+        Jl = np.linalg.inv(_local_jacobian(res.X[i, 2]))
+        co = Jl @ res.cov_x[i] @ Jl.T
+        rel.append(np.max(np.abs(np.sqrt(np.diag(co)) / np.sqrt(np.diag(marg.marginalCovariance(int(i)))) - 1)))
+    print(f"## peer, exactly gtrig's factors (gtsam.CustomFactor calling gtrig's compiled residuals; "
+          f"{len(chain)} nodes, {chain.fix_node.size} fixes)")
+    print(f"gtrig batch + every marginal {ours_s:.2f} s; gtsam LM with Python factors: build {build_s:.2f} s, "
+          f"solve {solve_s:.2f} s")
+    print(f"largest difference: position {dpos:.2e} m, yaw {dyaw:.2e} rad; sigma ratio at 50 nodes within "
+          f"{max(rel) * 100:.4f} %")
+    print(f"time ratio gtsam solve (Python factors) / gtrig (solve + every marginal): {solve_s / ours_s:.2f}")
 
 
 def part_seeds(root: Path) -> None:
@@ -239,6 +348,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-gtsam", action="store_true")
     ap.add_argument("--gtsam-hours", type=float, default=None,
                     help="the peer on a shorter synthetic run (GTSAM's Python graph of 6e5 factors needs > 4 GB)")
+    ap.add_argument("--custom-hours", type=float, default=0.01,
+                    help="GTSAM on exactly gtrig's factors (Python CustomFactor: slow) on a run this long")
     ap.add_argument("--seeds-root", type=Path, default=None)
     a = ap.parse_args(argv)
     if a.seeds_root is not None:
@@ -251,6 +362,9 @@ def main(argv: list[str] | None = None) -> int:
             sc, sx, sk = snapped_chain(small[2], small[3])
             smooth_batch(sc, sx, sk, huber_k=0.0)
         part_gtsam(odo, tracks)
+        if a.custom_hours > 0:
+            _, _, odo, tracks = synthetic_hour(a.custom_hours)
+            part_gtsam_custom(odo, tracks)
     return 0
 
 
