@@ -51,11 +51,12 @@ _NAN2 = (float("nan"), float("nan"))
 @dataclass(frozen=True)
 class Reference:
     """A smoothed trajectory to time sensors against: stamps (N,) on its sources' clock, poses (N, 3)
-    world (x, y m, yaw rad unwrapped), velocities (N, 3) per second."""
+    world (x, y m, yaw rad unwrapped), velocities (N, 3) per second, covariances (N, 3, 3)."""
 
     stamps_s: np.ndarray
     xytheta: np.ndarray
     velocity: np.ndarray
+    cov: np.ndarray
 
     def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Poses and velocities (M, 3) at ``t`` (M,), linearly interpolated."""
@@ -75,7 +76,7 @@ def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float 
     xyt = track.xytheta()
     xyt[:, 2] = np.unwrap(xyt[:, 2])
     vel = np.gradient(xyt, track.stamps_s, axis=0)
-    return Reference(track.stamps_s, xyt, vel)
+    return Reference(track.stamps_s, xyt, vel, track.cov_xytheta())
 
 
 def _near_reference(ref: Reference, t: np.ndarray, tol_s: float) -> np.ndarray:
@@ -85,12 +86,16 @@ def _near_reference(ref: Reference, t: np.ndarray, tol_s: float) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------ the fit
+def _ridge(H: np.ndarray) -> np.ndarray:
+    """A ridge far below any informed direction of ``H``: what nobody informs (a hull side never seen, the
+    difference of two cameras always seen together) stays at zero, and its variance comes out huge."""
+    return 1e-12 * max(float(np.trace(H)) / H.shape[0], 1e-300) * np.eye(H.shape[0])
+
+
 def _jackknife(H_b: np.ndarray, g_b: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """Solve ``sum_b H_b x = -sum_b g_b`` (blocks (B, n, n), (B, n)) and the jackknife standard error of
     ``x[cols]``; returns (x, se (len(cols),), number of blocks with data)."""
-    n = H_b.shape[1]
-    ridge = 1e-9 * np.eye(n)  # columns nobody informs (a hull side never seen) stay at zero
-    H, g = H_b.sum(axis=0) + ridge, g_b.sum(axis=0)
+    H, g = H_b.sum(axis=0) + _ridge(H_b.sum(axis=0)), g_b.sum(axis=0)
     x = -np.linalg.solve(H, g)
     used = np.flatnonzero(np.abs(g_b).sum(axis=1) > 0)
     B = used.size
@@ -141,7 +146,7 @@ def camera_membership(stamps_s: np.ndarray, camera_stamps_s: Mapping[str, np.nda
 
 def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray], ref: Reference,
                    block_s: float = 5.0, max_ci_s: float = 0.004, search_s: float = 0.02, min_instants: int = 20,
-                   ) -> list[OffsetEstimate]:
+                   huber_k: float = 3.0) -> list[OffsetEstimate]:
     """Every camera's clock offset to the reference's clock, one fit over GTvision's instants.
 
     An instant of cameras ``c`` sees the reference at its stamp minus ``sum_c share_c tau_c``
@@ -157,6 +162,7 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
     block_s : the jackknife's blocks of time.
     max_ci_s : a wider 95 % interval is ``ambiguous`` (``unobservable`` if the information alone is).
     search_s : the cost curve spans this either side of each estimate.
+    huber_k : Huber threshold of each instant's whitened residual (sigmas).
 
     Returns
     -------
@@ -166,7 +172,10 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
     u = vision.usable()
     share = camera_membership(u.stamps_s, camera_stamps_s)
     keep = _near_reference(ref, u.stamps_s, 0.05) & (share.sum(axis=1) > 0)
-    t, z, W, share = u.stamps_s[keep], u.xytheta()[keep], np.linalg.inv(u.cov_xytheta()[keep]), share[keep]
+    t, z, share = u.stamps_s[keep], u.xytheta()[keep], share[keep]
+    # GTvision's own covariance weighs each instant (the reference's errors, correlated over time and
+    # inflated by fusion's decorrelation, are left to the jackknife)
+    W = np.linalg.inv(u.cov_xytheta()[keep])
     C = len(names)
     if t.size < min_instants:
         return [_verdict(f"vision/{c}", float("nan"), float("inf"), float("inf"), 0, np.zeros(0), np.zeros(0),
@@ -178,26 +187,34 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
     blocks = np.floor((t - t.min()) / block_s).astype(int)
     B = int(blocks.max()) + 1
     tau = np.zeros(C)
+    bias = np.zeros((G, 3))
     rows = np.arange(t.size)
-    for _ in range(3):
+    hub = np.ones(t.size)
+    for it in range(4):
         P, V = ref.at(t - share @ tau)
         e = z - P
         e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        if it:  # Huber weights on each instant's whitened residual (a GTvision pose off by a centimetre)
+            r = e - bias[group]
+            z2 = np.einsum("mi,mij,mj->m", r, W, r)
+            hub = np.where(z2 <= huber_k**2, 1.0, huber_k / np.sqrt(np.maximum(z2, 1e-24)))
         # z = ref(t - share . tau) + b_group: the residual e + V (share . dtau) - b is linear in (dtau, b)
         A = np.zeros((t.size, 3, n))
         A[:, :, :C] = V[:, :, None] * share[:, None, :]
         for i in range(3):
             A[rows, i, C + 3 * group + i] = -1.0
-        Hn = np.einsum("mia,mij,mjb->mab", A, W, A)
-        gn = np.einsum("mia,mij,mj->ma", A, W, e)
+        Hn = np.einsum("m,mia,mij,mjb->mab", hub, A, W, A)
+        gn = np.einsum("m,mia,mij,mj->ma", hub, A, W, e)
         H_b = np.zeros((B, n, n))
         g_b = np.zeros((B, n))
         np.add.at(H_b, blocks, Hn)
         np.add.at(g_b, blocks, gn)
         x, se, _ = _jackknife(H_b, g_b, np.arange(C))
         tau = tau + x[:C]
-    bias = x[C:].reshape(G, 3)
-    white = np.sqrt(np.diag(np.linalg.inv(H_b.sum(axis=0) + 1e-9 * np.eye(n)))[:C])
+        bias = x[C:].reshape(G, 3)
+    W = W * hub[:, None, None]
+    H = H_b.sum(axis=0)
+    white = np.sqrt(np.diag(np.linalg.inv(H + _ridge(H)))[:C])
     out = []
     for c, name in enumerate(names):
         m = share[:, c] > 0
@@ -363,12 +380,13 @@ def scanner_offsets(ret: ScannerReturns, ref: Reference, corners_xy: np.ndarray,
         H_b, g_b = _block_sums(blocks, B, A, w, f)
         x, se, nb = _jackknife(H_b, g_b, np.arange(S))
         tau, bias, dth = tau + x[:S], bias + x[S:S + C], dth + float(x[-1])
-    white = np.sqrt(np.diag(np.linalg.inv(H_b.sum(axis=0) + 1e-9 * np.eye(n)))[:S])
+    H = H_b.sum(axis=0)
+    white = np.sqrt(np.diag(np.linalg.inv(H + _ridge(H)))[:S])
     out = []
     for s, nm in enumerate(ret.names):
         m = (sid == s) & (w > 0)
         nb_s = int(np.unique(blocks[m]).size)
-        taus = tau[s] + np.linspace(-search_s, search_s, 81)
+        taus = tau[s] + np.linspace(-search_s, search_s, 41)
         cost = np.empty(taus.size)
         for j, ts in enumerate(taus):  # the fit's cost over trial offsets of this scanner, the rest held
             P, _ = ref.at(t[m] - ts)
@@ -405,3 +423,52 @@ def camera_frame_stamps(rec_dir, rig, sequence: str = "run") -> dict[str, np.nda
     from gtrig.vision.sequence import camera_indices
 
     return {name: ix.stamps_s for name, ix in camera_indices(Path(rec_dir), sequence, rig).items()}
+
+
+# ------------------------------------------------------------------------------------------ together
+def sensor_offsets(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = None,  # noqa: ANN001
+                   cameras: bool = True, scanners: bool = True, sequence: str = "run") -> list[OffsetEstimate]:
+    """Each scanner's and each camera's clock offset to GTvision's clock (the cameras' share-weighted mean).
+
+    Scanners against GTvision smoothed alone (:func:`scanner_offsets`); then GTlaser restamped with the
+    scanners' offsets (:func:`restamp_laser`: it is then on GTvision's clock too) is the reference of the
+    cameras (:func:`camera_offsets`), which needs ``laser``. ``rig`` holds the calibrated scanners, the hull
+    and the cameras. Add GTvision's own offset to a reference (:func:`to_reference`) for offsets to it.
+    """
+    from gtrig.fusion.measurements import fixes_from_track
+
+    out: list[OffsetEstimate] = []
+    if not (cameras or scanners):
+        return out
+    if rig.robot.hull is None or not rig.laser_scanners:
+        from gtrig.errors import ConfigError
+
+        raise ConfigError("rig: per-scanner offsets need the fixed scanners and robot.hull")
+    ret = recording_returns(rec_dir, rig, sequence)
+    sc = scanner_offsets(ret, reference_track([fixes_from_track(vision, "vision")]), rig.robot.hull.corners_xy())
+    if scanners:
+        out += sc
+    if cameras:
+        if laser is None:
+            from gtrig.errors import InputError
+
+            raise InputError("per-camera offsets need GTlaser's track (the cameras' reference)")
+        off = {e.source.split("/", 1)[1]: e.offset_s for e in sc if e.verdict == "ok"}
+        ref = reference_track([fixes_from_track(restamp_laser(laser.usable(), ret, off), "laser")])
+        out += camera_offsets(vision, camera_frame_stamps(rec_dir, rig, sequence), ref)
+    return out
+
+
+def to_reference(sensor: OffsetEstimate, vision: OffsetEstimate) -> dict[str, object]:
+    """``sensor`` (an offset to GTvision's clock, :func:`sensor_offsets`) as a ``sync.yaml`` entry: that
+    offset and interval (``offset_to_vision_s``, ``ci95_to_vision_s``) and, when GTvision's own offset to the
+    reference is ``ok``, the sum as ``offset_s`` with the two half-widths added in quadrature (independent
+    fits)."""
+    d = sensor.to_dict()
+    d["offset_to_vision_s"], d["ci95_to_vision_s"] = d.pop("offset_s"), d.pop("ci95_s")
+    d["offset_s"] = d["ci95_s"] = None
+    if sensor.verdict == "ok" and vision.verdict == "ok":
+        h = float(np.hypot(sensor.ci95_s[1] - sensor.ci95_s[0], vision.ci95_s[1] - vision.ci95_s[0])) / 2
+        o = sensor.offset_s + vision.offset_s
+        d["offset_s"], d["ci95_s"] = float(o), [float(o - h), float(o + h)]
+    return d
