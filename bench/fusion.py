@@ -10,7 +10,9 @@ BetweenFactorPose2 per increment, a PriorFactorPose2 per fix, the world-frame co
 fix's frame, gtrig's whitening handed over as is); both solvers on those factors, the largest position
 difference and the time ratio. Part 2b (``--custom-hours``, 0.01 h by default): GTSAM on exactly gtrig's
 factors (``gtsam.CustomFactor`` calling gtrig's compiled residuals), like for like. Part 3
-(with --seeds-root): the acceptance rows on simulated recordings (the pipeline's GTvision and GTlaser).
+(with --seeds-root): the acceptance rows on simulated recordings (the pipeline's GTvision and GTlaser); with
+--sync also every clock offset against the simulator's truth (sources to odometry, injected odometry
+offsets, each camera and scanner to GTvision's clock).
 """
 
 from __future__ import annotations
@@ -124,6 +126,13 @@ def snapped_chain(odo: OdometryLog, tracks: list[PoseTrack]) -> tuple[FactorChai
     return chain, X, k_true
 
 
+def _difference(result, X: np.ndarray) -> tuple[float, float]:  # noqa: ANN001 (gtsam.Values)
+    """Largest position (m) and yaw (rad) difference between GTSAM's Pose2 values and gtrig's states."""
+    xy = np.array([[result.atPose2(i).x(), result.atPose2(i).y(), result.atPose2(i).theta()] for i in range(len(X))])
+    dpos = float(np.max(np.hypot(*(xy[:, :2] - X[:, :2]).T)))
+    return dpos, float(np.max(np.abs((xy[:, 2] - X[:, 2] + np.pi) % (2 * np.pi) - np.pi)))
+
+
 def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
     chain, X0, k = snapped_chain(odo, tracks)
     t0 = time.perf_counter()
@@ -172,9 +181,7 @@ def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
     probe = np.linspace(0, len(chain) - 1, 50).astype(int)
     cov_g = [marg.marginalCovariance(int(i)) for i in probe]
     marg_s = time.perf_counter() - t0
-    xy = np.array([[result.atPose2(i).x(), result.atPose2(i).y(), result.atPose2(i).theta()] for i in range(len(chain))])
-    dpos = float(np.max(np.hypot(*(xy[:, :2] - res.X[:, :2]).T)))
-    dyaw = float(np.max(np.abs((xy[:, 2] - res.X[:, 2] + np.pi) % (2 * np.pi) - np.pi)))
+    dpos, dyaw = _difference(result, res.X)
     # GTSAM's marginal is in each pose's local frame: rotate ours into it
     rel = []
     for i, cg in zip(probe, cov_g, strict=True):
@@ -277,9 +284,7 @@ def part_gtsam_custom(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
     solve_s = time.perf_counter() - t0
     marg = gtsam.Marginals(graph, result)
     probe = np.linspace(0, len(chain) - 1, 50).astype(int)
-    xy = np.array([[result.atPose2(i).x(), result.atPose2(i).y(), result.atPose2(i).theta()] for i in range(len(chain))])
-    dpos = float(np.max(np.hypot(*(xy[:, :2] - res.X[:, :2]).T)))
-    dyaw = float(np.max(np.abs((xy[:, 2] - res.X[:, 2] + np.pi) % (2 * np.pi) - np.pi)))
+    dpos, dyaw = _difference(result, res.X)
     rel = []
     for i in probe:  # GTSAM's marginal is over the local tangent: map ours (world-frame) into it
         Jl = np.linalg.inv(_local_jacobian(res.X[i, 2]))
@@ -312,7 +317,7 @@ def part_seeds(root: Path) -> None:
         truth = read_tum(rec / "recording" / "truth" / "run.tum")
         th = np.unwrap(truth.yaw_rad())
 
-        def errs(tr: PoseTrack) -> np.ndarray:
+        def errs(tr: PoseTrack, truth=truth, th=th) -> np.ndarray:  # noqa: ANN001
             g = np.column_stack([np.interp(tr.stamps_s, truth.stamps_s, truth.xyz[:, 0]),
                                  np.interp(tr.stamps_s, truth.stamps_s, truth.xyz[:, 1]),
                                  np.interp(tr.stamps_s, truth.stamps_s, th)])
@@ -342,6 +347,73 @@ def part_seeds(root: Path) -> None:
               f"inside 3 sigma {np.mean(q < 14.16) * 100:.1f} % | | | | | |")
 
 
+def _ms(e) -> str:  # noqa: ANN001
+    if e.verdict != "ok":
+        return f"{e.verdict} ({e.reason})"
+    return f"{e.offset_s * 1e3:+.3f} ms [{e.ci95_s[0] * 1e3:+.2f}, {e.ci95_s[1] * 1e3:+.2f}]"
+
+
+def _row(name: str, e, truth_s: float) -> str:  # noqa: ANN001
+    if e.verdict != "ok":
+        return f"| {name} | {truth_s * 1e3:+.3f} | {_ms(e)} | | |"
+    err = (e.offset_s - truth_s) * 1e3
+    cover = "yes" if e.ci95_s[0] <= truth_s <= e.ci95_s[1] else "**no**"
+    return f"| {name} | {truth_s * 1e3:+.3f} | {_ms(e)} | {err:+.3f} | {cover} |"
+
+
+def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
+    """Clock offsets on the simulated recordings against their truth (truth/laser_clocks.yaml,
+    truth/robot_clock.yaml; cameras are on the GT clock, with per-frame jitter only)."""
+    import yaml
+
+    from gtrig.fusion.sensor_sync import recording_returns, sensor_offsets
+    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.io.odometry import read_odometry
+    from gtrig.io.posetrack import read_pose_track
+    from gtrig.rig import load_rig
+
+    for rec in sorted(root.glob("s*")):
+        res, rdir = rec / "results", rec / "recording"
+        if not (res / "gt_laser.tum").exists() or not (res / "gt_vision_run.tum").exists():
+            continue
+        vis = read_pose_track(res / "gt_vision_run.tum", res / "gt_vision_run_cov.csv", "vision")
+        las = read_pose_track(res / "gt_laser.tum", res / "gt_laser_cov.csv", "laser")
+        odo = read_odometry(rdir / "run" / "odometry.csv")
+        rig = load_rig(res / "rig.calibrated.yaml")
+        scan_truth = yaml.safe_load((rdir / "truth" / "laser_clocks.yaml").read_text())["run"]["clock_offsets_s"]
+        odo_off = float(yaml.safe_load((rdir / "truth" / "robot_clock.yaml").read_text()).get("offset_s", 0.0))
+        # GTlaser's clock: its OK frames' share-weighted mean of the scanners' offsets (a scanner's share of a
+        # frame is its share of that frame's returns)
+        ret = recording_returns(rdir, rig)
+        sh = ret.frame_shares()
+        k = np.clip(np.searchsorted(ret.frame_stamps_s, las.usable().stamps_s), 0, ret.frame_stamps_s.size - 1)
+        laser_truth = float(np.mean(sh[k] @ np.array([scan_truth[n] for n in ret.names])))
+        scan = ", ".join(f"{n} {v * 1e3:+.2f}" for n, v in scan_truth.items())
+        print(f"## clock offsets, {rec.name} (truth: cameras 0, scanners {scan} ms; GTlaser's share-weighted "
+              f"{laser_truth * 1e3:+.3f} ms; odometry {odo_off * 1e3:+.3f} ms)")
+        print("| offset | truth (ms) | estimate, 95 % interval | error (ms) | covers |")
+        print("|---|---|---|---|---|")
+        src = {}
+        for name, tr, truth in (("vision", vis, 0.0), ("laser", las, laser_truth)):
+            for lag in (0.0, *lags):
+                o = OdometryLog(odo.stamps_s + lag, odo.xytheta, odo.v_mps, odo.omega_radps)
+                u = tr.usable()
+                e = estimate_offset(o.stamps_s, o.xytheta[:, 2], u.stamps_s, u.yaw_rad(), name)
+                e = refine_by_fusion(e, fixes_from_track(tr, name), o)
+                if lag == 0.0:
+                    src[name] = e
+                print(_row(f"{name} to odometry" + (f" + {lag:g} s injected" if lag else ""), e,
+                           truth - odo_off - lag))
+        t0 = time.perf_counter()
+        sensors = sensor_offsets(rdir, rig, vis, las)
+        secs = time.perf_counter() - t0
+        for e in sensors:
+            kind, name = e.source.split("/", 1)
+            truth = scan_truth[name] if kind == "laser" else 0.0
+            print(_row(f"{e.source} to GTvision's clock", e, truth))
+        print(f"(per-camera and per-scanner fits: {secs:.1f} s wall, loaded machine)")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=1.0)
@@ -351,9 +423,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--custom-hours", type=float, default=0.01,
                     help="GTSAM on exactly gtrig's factors (Python CustomFactor: slow) on a run this long")
     ap.add_argument("--seeds-root", type=Path, default=None)
+    ap.add_argument("--sync", action="store_true", help="with --seeds-root: the clock offsets against the truth")
     a = ap.parse_args(argv)
     if a.seeds_root is not None:
         part_seeds(a.seeds_root)
+        if a.sync:
+            part_sync(a.seeds_root)
     _, _, odo, tracks = part_speed(a.hours)
     if not a.no_gtsam:
         if a.gtsam_hours is not None:
