@@ -35,6 +35,8 @@ def command(
     from gtrig.io.offsets import CONVENTION, write_offsets
     from gtrig.io.posetrack import read_pose_track
 
+    if (per_camera or per_scanner) and (recording is None or rig_path is None):
+        raise InputError("--per-camera / --per-scanner need --recording and --rig (the calibrated rig)")
     tracks = {}
     for spec in source:
         if "=" not in spec:
@@ -100,8 +102,7 @@ def _per_sensor(recording: Path | None, rig_path: Path | None, tracks: dict, res
     from gtrig.fusion.sensor_sync import sensor_offsets
     from gtrig.rig import load_rig
 
-    if recording is None or rig_path is None:
-        raise InputError("--per-camera / --per-scanner need --recording and --rig (the calibrated rig)")
+    assert recording is not None and rig_path is not None  # checked before any work
     for need in ("vision", "laser") if per_camera else ("vision",):
         if need not in tracks or need not in results:
             raise InputError(f"--per-camera / --per-scanner need --source {need}=track.tum,cov.csv (not the reference)")
