@@ -12,7 +12,8 @@ difference and the time ratio. Part 2b (``--custom-hours``, 0.01 h by default): 
 factors (``gtsam.CustomFactor`` calling gtrig's compiled residuals), like for like. Part 3
 (with --seeds-root): the acceptance rows on simulated recordings (the pipeline's GTvision and GTlaser); with
 --sync also every clock offset against the simulator's truth (sources to odometry, injected odometry
-offsets, each camera and scanner to GTvision's clock).
+offsets, each camera and scanner to GTvision's clock). ``--sync-mc N``: the offset to odometry on N
+synthetic runs of the simulator's path and odometry model (bias, scatter, coverage).
 """
 
 from __future__ import annotations
@@ -414,6 +415,41 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
         print(f"(per-camera and per-scanner fits: {secs:.1f} s wall, loaded machine)")
 
 
+def part_sync_mc(runs: int, duration_s: float = 75.0) -> None:
+    """Offsets to odometry on ``runs`` synthetic runs of the simulator's path and odometry model (errors
+    drawn per run, slip 2 mm per sqrt(m) and wheel), GTlaser-like white fixes (1.2 mm, 1.2 mrad, 75 Hz)
+    on the true clock: the estimator's bias, scatter and coverage against odometry."""
+    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.sim.floor import Floor
+    from gtrig.sim.gtroom import continuous_path
+    from gtrig.sim.motion import RobotMotion
+    from gtrig.sim.odometry import OdometryErrors, simulate_odometry
+
+    st, xyth = continuous_path(duration_s=duration_s)
+    motion = RobotMotion(st + 100.0, xyth, Floor.flat())
+    t0, t1 = motion.stamps_s[0], motion.stamps_s[-1]
+    err, cover, half, verdicts = [], [], [], []
+    for k in range(runs):
+        rng = np.random.default_rng(100 + k)
+        odo = simulate_odometry(motion, t0, t1, 50.0, OdometryErrors.draw(rng), rng)
+        ts = np.arange(t0 + 0.007, t1 - 0.01, 1 / 75)
+        cov = np.diag([0.0012**2, 0.0012**2, 0.0012**2])
+        z = motion.planar(ts) + rng.multivariate_normal(np.zeros(3), cov, ts.size)
+        las = PoseTrack.from_xytheta(ts, z, cov=np.tile(cov, (ts.size, 1, 1)), source="laser")
+        e = estimate_offset(odo.stamps_s, odo.xytheta[:, 2], las.stamps_s, las.yaw_rad(), "laser")
+        f = refine_by_fusion(e, fixes_from_track(las), odo)
+        verdicts.append(f.verdict)
+        if f.verdict == "ok":
+            err.append(f.offset_s * 1e3)
+            cover.append(f.ci95_s[0] <= 0.0 <= f.ci95_s[1])
+            half.append((f.ci95_s[1] - f.ci95_s[0]) / 2 * 1e3)
+    e_ms = np.array(err)
+    print(f"## offsets to odometry, {runs} synthetic {duration_s:.0f} s runs (truth 0): {verdicts.count('ok')} ok; "
+          f"error mean {e_ms.mean():+.3f} ms (its standard error {e_ms.std(ddof=1) / np.sqrt(e_ms.size):.3f}), "
+          f"sd {e_ms.std(ddof=1):.3f} ms, max |error| {np.abs(e_ms).max():.3f} ms; mean 95 % half-width "
+          f"{np.mean(half):.2f} ms, covering {100 * np.mean(cover):.0f} %")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=1.0)
@@ -424,11 +460,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="GTSAM on exactly gtrig's factors (Python CustomFactor: slow) on a run this long")
     ap.add_argument("--seeds-root", type=Path, default=None)
     ap.add_argument("--sync", action="store_true", help="with --seeds-root: the clock offsets against the truth")
+    ap.add_argument("--sync-mc", type=int, default=0, help="offsets to odometry on this many synthetic runs")
     a = ap.parse_args(argv)
     if a.seeds_root is not None:
         part_seeds(a.seeds_root)
         if a.sync:
             part_sync(a.seeds_root)
+    if a.sync_mc:
+        part_sync_mc(a.sync_mc)
     _, _, odo, tracks = part_speed(a.hours)
     if not a.no_gtsam:
         if a.gtsam_hours is not None:
