@@ -145,7 +145,7 @@ def camera_membership(stamps_s: np.ndarray, camera_stamps_s: Mapping[str, np.nda
 
 
 def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray], ref: Reference,
-                   block_s: float = 5.0, max_ci_s: float = 0.004, search_s: float = 0.02, min_instants: int = 20,
+                   block_s: float = 5.0, max_ci_s: float = 0.01, search_s: float = 0.02, min_instants: int = 20,
                    huber_k: float = 3.0) -> list[OffsetEstimate]:
     """Every camera's clock offset to the reference's clock, one fit over GTvision's instants.
 
@@ -333,7 +333,7 @@ def _block_sums(blocks: np.ndarray, B: int, A: np.ndarray, w: np.ndarray, f: np.
 
 def scanner_offsets(ret: ScannerReturns, ref: Reference, corners_xy: np.ndarray, block_s: float = 5.0,
                     gate_m: float = 0.02, sigma_model_m: float = 0.002, huber_k: float = 3.0,
-                    max_ci_s: float = 0.004, search_s: float = 0.02, min_returns: int = 200,
+                    max_ci_s: float = 0.01, search_s: float = 0.02, min_returns: int = 200,
                     ) -> list[OffsetEstimate]:
     """Every scanner's clock offset to the reference's clock (see the module docstring), one fit.
 
