@@ -413,8 +413,9 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
         from gtrig.io.tum import read_tum
 
         true_run = read_tum(rdir / "truth" / "run.tum")
-        print(f"(diagnostic with the true trajectory: GTvision's errors look like {apparent_offset(vis, true_run) * 1e3:+.3f}"
-              f" ms, GTlaser's like {apparent_offset(las, true_run) * 1e3:+.3f} ms)")
+        a_v, a_l = apparent_offset(vis, true_run) * 1e3, apparent_offset(las, true_run) * 1e3
+        print(f"(diagnostic with the true trajectory: GTvision's errors look like {a_v:+.3f} ms, GTlaser's like "
+              f"{a_l:+.3f} ms)")
         print("| offset | truth (ms) | estimate, 95 % interval | error (ms) | covers |")
         print("|---|---|---|---|---|")
         src = {}
