@@ -70,8 +70,8 @@ class Reference:
 
 def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float = 0.5) -> Reference:
     """The fixes smoothed by the constant-velocity model (robust batch MAP, no odometry) on a ``rate_hz``
-    grid; segments split at gaps over ``max_gap_s`` are joined back (their gaps are never sampled by
-    :meth:`Reference.covers` users, who drop times more than half a node away from any pose)."""
+    grid, one segment per stretch without a gap over ``max_gap_s``; the fits use only times with poses of
+    the reference within 50 ms on both sides, so no gap is interpolated across."""
     track, _ = fuse(fixes, None, FusionOptions(rate_hz=rate_hz, max_gap_s=max_gap_s))
     xyt = track.xytheta()
     xyt[:, 2] = np.unwrap(xyt[:, 2])
@@ -212,25 +212,30 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
         x, se, _ = _jackknife(H_b, g_b, np.arange(C))
         tau = tau + x[:C]
         bias = x[C:].reshape(G, 3)
-    W = W * hub[:, None, None]
     H = H_b.sum(axis=0)
     white = np.sqrt(np.diag(np.linalg.inv(H + _ridge(H)))[:C])
-    out = []
-    for c, name in enumerate(names):
-        m = share[:, c] > 0
-        taus = tau[c] + np.linspace(-search_s, search_s, 81)
-        cost = np.empty(taus.size)
-        for j, tc in enumerate(taus):  # the fit's cost over trial offsets of this camera, the rest held
-            tt = tau.copy()
-            tt[c] = tc
-            P, _ = ref.at(t[m] - share[m] @ tt)
-            r = z[m] - P - bias[group[m]]
-            r[:, 2] = (r[:, 2] + np.pi) % (2 * np.pi) - np.pi
-            cost[j] = float(np.einsum("mi,mij,mj->", r, W[m], r))
-        out.append(_verdict(f"vision/{name}", float(tau[c]), float(se[c]), float(white[c]),
-                            int(np.unique(blocks[m]).size), taus, cost.min() / cost, max_ci_s, int(m.sum()),
-                            min_instants))
-    return out
+    fit = (t, z, W * hub[:, None, None], share, bias[group])
+    return [_verdict(f"vision/{name}", float(tau[c]), float(se[c]), float(white[c]),
+                     int(np.unique(blocks[share[:, c] > 0]).size), *_camera_curve(fit, ref, tau, c, search_s),
+                     max_ci_s, int(np.sum(share[:, c] > 0)), min_instants) for c, name in enumerate(names)]
+
+
+def _camera_curve(fit: tuple[np.ndarray, ...], ref: Reference, tau: np.ndarray, c: int, search_s: float,
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Trial offsets of camera ``c`` around its estimate (the others held) and the fit's min cost / cost;
+    ``fit`` = (stamps, poses, weights, shares, biases) of the instants."""
+    t, z, W, share, bias = fit
+    m = share[:, c] > 0
+    taus = tau[c] + np.linspace(-search_s, search_s, 81)
+    cost = np.empty(taus.size)
+    for j, tc in enumerate(taus):
+        tt = tau.copy()
+        tt[c] = tc
+        P, _ = ref.at(t[m] - share[m] @ tt)
+        r = z[m] - P - bias[m]
+        r[:, 2] = (r[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        cost[j] = float(np.einsum("mi,mij,mj->", r, W[m], r))
+    return taus, cost.min() / cost
 
 
 # ------------------------------------------------------------------------------------------ scanners
