@@ -86,6 +86,11 @@ def _near_reference(ref: Reference, t: np.ndarray, tol_s: float) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------ the fit
+def _score(cost: np.ndarray) -> np.ndarray:
+    """``min cost / cost`` of a cost curve: 1 at its minimum; 0 where the cost is 0 (no observation)."""
+    return np.divide(cost.min(), cost, out=np.zeros_like(cost), where=cost > 0)
+
+
 def _ridge(H: np.ndarray) -> np.ndarray:
     """A ridge far below any informed direction of ``H``: what nobody informs (a hull side never seen, the
     difference of two cameras always seen together) stays at zero, and its variance comes out huge."""
@@ -235,7 +240,7 @@ def _camera_curve(fit: tuple[np.ndarray, ...], ref: Reference, tau: np.ndarray, 
         r = z[m] - P - bias[m]
         r[:, 2] = (r[:, 2] + np.pi) % (2 * np.pi) - np.pi
         cost[j] = float(np.einsum("mi,mij,mj->", r, W[m], r))
-    return taus, cost.min() / cost
+    return taus, _score(cost)
 
 
 # ------------------------------------------------------------------------------------------ scanners
@@ -399,7 +404,7 @@ def scanner_offsets(ret: ScannerReturns, ref: Reference, corners_xy: np.ndarray,
             dd, kk, _, _ = hull_distances(corners_xy, P, p[m], org[m])
             cost[j] = float(np.sum(w[m] * (dd - bias[kk]) ** 2))
         out.append(_verdict(f"laser/{nm}", float(tau[s]), float(se[s]), float(white[s]), nb_s, taus,
-                            cost.min() / cost, max_ci_s, int(m.sum()), min_returns))
+                            _score(cost), max_ci_s, int(m.sum()), min_returns))
     return out
 
 
