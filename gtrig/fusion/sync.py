@@ -244,8 +244,8 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
     The source's fixes (positions and headings, each weighed by its covariance) are smoothed with the
     odometry alone at trial offsets; Brent's method minimises the batch cost (-2 log-likelihood) over the
     offset within ``half_width_s`` of the estimate (of the coarse peak when the estimate is not ``ok``),
-    and the 95 % interval comes from the cost's curvature (Fisher information = cost'' / 2). The fixes' decorrelation (FusionOptions.correlation_s) keeps that
-    curvature honest for time-correlated errors.
+    and the 95 % interval comes from the cost's curvature (Fisher information = cost'' / 2). The fixes'
+    decorrelation (FusionOptions.correlation_s) keeps that curvature honest for time-correlated errors.
 
     ``anchors``: other sources fused unshifted (their clock then is the reference: a mm-accurate GT
     source pins the time far better than the odometry's slipping heading); ``estimate`` must then be
