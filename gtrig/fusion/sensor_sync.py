@@ -76,7 +76,9 @@ def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float 
     xyt = track.xytheta()
     xyt[:, 2] = np.unwrap(xyt[:, 2])
     vel = np.gradient(xyt, track.stamps_s, axis=0)
-    return Reference(track.stamps_s, xyt, vel, track.cov_xytheta())
+    cov = track.cov_xytheta()
+    assert cov is not None  # fusion always gives one
+    return Reference(track.stamps_s, xyt, vel, cov)
 
 
 def _near_reference(ref: Reference, t: np.ndarray, tol_s: float) -> np.ndarray:
@@ -175,12 +177,17 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
     """
     names = list(camera_stamps_s)
     u = vision.usable()
+    cov = u.cov_xytheta()
+    if cov is None:
+        from gtrig.errors import InputError
+
+        raise InputError("per-camera offsets need GTvision's covariances (track.tum,cov.csv)")
     share = camera_membership(u.stamps_s, camera_stamps_s)
     keep = _near_reference(ref, u.stamps_s, 0.05) & (share.sum(axis=1) > 0)
     t, z, share = u.stamps_s[keep], u.xytheta()[keep], share[keep]
     # GTvision's own covariance weighs each instant (the reference's errors, correlated over time and
     # inflated by fusion's decorrelation, are left to the jackknife)
-    W = np.linalg.inv(u.cov_xytheta()[keep])
+    W = np.linalg.inv(cov[keep])
     C = len(names)
     if t.size < min_instants:
         return [_verdict(f"vision/{c}", float("nan"), float("inf"), float("inf"), 0, np.zeros(0), np.zeros(0),
