@@ -430,7 +430,7 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
                 print(_row(f"{name} to odometry" + (f" + {lag:g} s injected" if lag else ""), e,
                            truth - odo_off - lag))
         t0 = time.perf_counter()
-        sensors = sensor_offsets(rdir, rig, vis, las)
+        sensors = sensor_offsets(rdir, rig, vis, las, checkpoint=res / "gt_vision_run.checkpoint")
         secs = time.perf_counter() - t0
         for e in sensors:
             kind, name = e.source.split("/", 1)

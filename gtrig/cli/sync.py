@@ -72,7 +72,7 @@ def command(
         ci = "" if est.verdict != "ok" else f" [{est.ci95_s[0] * 1e3:+.2f}, {est.ci95_s[1] * 1e3:+.2f}] ms"
         num = "" if est.verdict != "ok" else f" {est.offset_s * 1e3:+.3f} ms"
         console.print(f"{name}: {est.verdict}{num}{ci} ({est.reason})", highlight=False)
-    sensors = _per_sensor(recording, rig_path, tracks, results, per_camera, per_scanner)
+    sensors = _per_sensor(recording, rig_path, tracks, results, per_camera, per_scanner, source)
     if figure is not None:
         from gtrig.fusion.plots import correlation_figure
 
@@ -94,7 +94,7 @@ def command(
 
 
 def _per_sensor(recording: Path | None, rig_path: Path | None, tracks: dict, results: dict,  # noqa: ANN001
-                per_camera: bool, per_scanner: bool) -> list:
+                per_camera: bool, per_scanner: bool, sources: list[str]) -> list:
     """Each camera's / scanner's offset to GTvision's clock (gtrig.fusion.sensor_sync), printed."""
     if not (per_camera or per_scanner):
         return []
@@ -106,8 +106,15 @@ def _per_sensor(recording: Path | None, rig_path: Path | None, tracks: dict, res
     for need in ("vision", "laser") if per_camera else ("vision",):
         if need not in tracks or need not in results:
             raise InputError(f"--per-camera / --per-scanner need --source {need}=track.tum,cov.csv (not the reference)")
+    # GTvision's checkpoint of detections beside its track (gt_vision_run.tum -> gt_vision_run.checkpoint)
+    ck = next((Path(s.split("=", 1)[1].split(",")[0]).with_suffix(".checkpoint") for s in sources
+               if s.startswith("vision=")), None)
+    if ck is not None and not ck.is_file():
+        console.print(f"{ck}: no GTvision checkpoint; each pose is taken at its stamp (up to 2.5 ms off for a "
+                      "one-camera pose of a multi-camera instant)", highlight=False)
+        ck = None
     out = sensor_offsets(recording, load_rig(rig_path), tracks["vision"], tracks.get("laser"), per_camera,
-                         per_scanner)
+                         per_scanner, checkpoint=ck)
     for e in out:
         num = "" if e.verdict != "ok" else (f" {e.offset_s * 1e3:+.3f} ms [{e.ci95_s[0] * 1e3:+.2f}, "
                                             f"{e.ci95_s[1] * 1e3:+.2f}] to GTvision's clock")

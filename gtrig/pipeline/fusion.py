@@ -80,7 +80,8 @@ def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict
         return []
     if not rig.laser_scanners or "vision" not in results:
         return []
-    return sensor_offsets(inp.rec, rig, tracks["vision"], tracks["laser"])
+    ck = inp.out / "gt_vision_run.checkpoint"  # GTvision's detections: which camera made each pose
+    return sensor_offsets(inp.rec, rig, tracks["vision"], tracks["laser"], checkpoint=ck if ck.is_file() else None)
 
 
 def _sensor_truth_rows(rec: Path, sensors: list) -> tuple[AccuracyRow, ...]:  # noqa: ANN001
