@@ -10,6 +10,7 @@ from gtrig.fusion.sensor_sync import (
     ScannerReturns,
     camera_membership,
     camera_offsets,
+    checkpoint_membership,
     hull_distances,
     reference_track,
     restamp_laser,
@@ -136,3 +137,22 @@ def test_restamp_laser_by_the_frames_shares() -> None:
     shares = ret.frame_shares()
     assert np.allclose(shares, [[1.0, 0.0], [0.5, 0.5], [0.0, 0.0]])
     assert np.allclose(out.stamps_s, [10.0 - 0.004, 10.1 - 0.001, 10.2])
+
+
+def test_checkpoint_membership_takes_a_one_camera_pose_at_its_camera_stamp(tmp_path) -> None:
+    """GTvision stamps an instant at its images' mean; a pose from one camera's view holds at that camera's
+    stamp, a pose of two cameras' views at the instant's stamp (GTvision moves the views there)."""
+    import json
+
+    cams = {"a": np.array([10.000, 10.100]), "b": np.array([10.004, 10.104])}
+    view = [[0.0, 0.0]] * 4
+    obs = [{"stamp_s": 10.002, "cameras": ["a", "b"], "frames": [["a", 0], ["b", 0]],
+            "views": [["b", 3, view, None, 0]]},
+           {"stamp_s": 10.102, "cameras": ["a", "b"], "frames": [["a", 1], ["b", 1]],
+            "views": [["a", 3, view, None, 1], ["b", 5, view, None, 1]]}]
+    p = tmp_path / "gt_vision_run.checkpoint"
+    p.write_text(json.dumps({"key": "k", "version": 4}) + "\n"
+                 + json.dumps({"chunk": 0, "items": [{"obs": o} for o in obs]}) + "\n")
+    when, share = checkpoint_membership(np.array([10.002, 10.102, 11.0]), p, cams)
+    assert when == pytest.approx([10.004, 10.102, 11.0], abs=1e-9)
+    assert np.allclose(share, [[0.0, 1.0], [0.5, 0.5], [0.0, 0.0]])
