@@ -7,16 +7,18 @@ timed far better against each other, because the reference is then millimetre-ac
 
 * the **reference** is a smoothing of other GT fixes with the constant-velocity model (no odometry, so
   the odometry's clock never leaks into it: :func:`reference_track`); its clock is theirs;
-* a **camera** (:func:`camera_offset`): its own instants (GTvision's poses that came from that camera
-  alone, :func:`camera_tracks`) against the reference of the *other* cameras: the pose difference
-  ``z(t) - ref(t - tau)`` linearised in ``tau`` (the reference's velocity), with a constant world
-  position and heading bias (the camera's own calibration error) as nuisance parameters;
-* a **scanner** (:func:`scanner_offsets`): each foreground return, fired at ``t`` on the scanner's clock,
-  lies on the robot's hull at the reference pose of ``t - tau_s``; its signed distance to the nearest
-  visible side moves by ``-J . v`` per second of ``tau_s`` (``J`` the distance's derivative by the pose,
-  ``v`` the reference's velocity). One weighted least-squares fit over every scanner's returns: per
-  scanner ``tau_s``, per hull side a bias (the fabric's range bias, the hull's size, the reference
-  frame's offset from the hull) and one yaw offset between the reference's robot frame and the hull.
+* a **scanner** (:func:`scanner_offsets`), against GTvision smoothed: each foreground return, fired at
+  ``t`` on the scanner's clock, lies on the robot's hull at the reference pose of ``t - tau_s``; its
+  signed distance to the nearest visible side moves by ``-J . v`` per second of ``tau_s`` (``J`` the
+  distance's derivative by the pose, ``v`` the reference's velocity). One weighted least-squares fit
+  over every scanner's returns: per scanner ``tau_s``, per hull side a bias (the fabric's range bias, the
+  hull's size, the reference frame's offset from the hull) and one yaw offset between the reference's
+  robot frame and the hull;
+* a **camera** (:func:`camera_offsets`), against GTlaser restamped by those scanner offsets
+  (:func:`restamp_laser`) and smoothed: each GTvision pose minus the reference at its time minus the
+  share-weighted offsets of the cameras that made it (:func:`checkpoint_membership`), linearised in the
+  offsets (the reference's velocity), with a constant (x, y, yaw) bias per set of cameras (their
+  calibration's error) as nuisance parameters; one fit for all cameras.
 
 Why not the GTlaser track itself: it fits all scanners' points in one pose per frame, so its time is the
 point-weighted mean of the scanners' clocks (shares that change with the robot's position), not any one
