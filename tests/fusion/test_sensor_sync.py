@@ -31,10 +31,10 @@ def _truth_reference(run) -> Reference:  # noqa: ANN001
 
 
 def _returns(run, rng: np.random.Generator, offsets: np.ndarray, static: bool = False) -> ScannerReturns:  # noqa: ANN001
-    """Returns of the hull's visible sides, 40 per side and scan, 3 mm range noise, 75 Hz per scanner."""
+    """Returns of the hull's visible sides, 15 per side and scan, 3 mm range noise, 75 Hz per scanner."""
     t0, t1 = run.motion.stamps_s[0] + 1.0, run.motion.stamps_s[-1] - 1.0
     pts, st, sid, dirs = [], [], [], []
-    u = np.linspace(0.05, 0.95, 40)
+    u = np.linspace(0.05, 0.95, 15)
     for s, (o, tau) in enumerate(zip(SCANNERS, offsets, strict=True)):
         tt = np.arange(t0 + 0.003 * s, t1, 1 / 75)
         P = run.motion.planar(np.full(tt.size, t0) if static else tt)
@@ -53,8 +53,8 @@ def _returns(run, rng: np.random.Generator, offsets: np.ndarray, static: bool = 
             w = w + d * rng.normal(0, 0.003, w.shape[:2])[..., None]
             pts.append(w.reshape(-1, 2))
             dirs.append(d.reshape(-1, 2))
-            st.append(np.repeat(tt[facing] + tau, 40))
-            sid.append(np.full(w.shape[0] * 40, s))
+            st.append(np.repeat(tt[facing] + tau, u.size))
+            sid.append(np.full(w.shape[0] * u.size, s))
     p = np.concatenate(pts)
     n = p.shape[0]
     return ScannerReturns(("a", "b", "c"), np.concatenate(st), p, np.concatenate(sid), np.concatenate(dirs), SCANNERS,
