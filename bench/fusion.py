@@ -7,8 +7,13 @@ Part 1 (speed): gtrig.fusion.fuse on the full hour (fixes at their own stamps: E
 with marginal covariances), wall time and peak memory. Part 2 (peer): the same hour with each fix snapped to
 its nearest node and the odometry parameters held at their true values (Pose2 factors GTSAM has: a
 BetweenFactorPose2 per increment, a PriorFactorPose2 per fix, the world-frame covariance rotated into the
-fix's frame); both solvers on those factors, the largest position difference and the time ratio. Part 3
-(with --seeds-root): the acceptance rows on simulated recordings (the pipeline's GTvision and GTlaser).
+fix's frame, gtrig's whitening handed over as is); both solvers on those factors, the largest position
+difference and the time ratio. Part 2b (``--custom-hours``, 0.01 h by default): GTSAM on exactly gtrig's
+factors (``gtsam.CustomFactor`` calling gtrig's compiled residuals), like for like. Part 3
+(with --seeds-root): the acceptance rows on simulated recordings (the pipeline's GTvision and GTlaser); with
+--sync also every clock offset against the simulator's truth (sources to odometry, injected odometry
+offsets, each camera and scanner to GTvision's clock). ``--sync-mc N``: the offset to odometry on N
+synthetic runs of the simulator's path and odometry model (bias, scatter, coverage).
 """
 
 from __future__ import annotations
@@ -122,6 +127,13 @@ def snapped_chain(odo: OdometryLog, tracks: list[PoseTrack]) -> tuple[FactorChai
     return chain, X, k_true
 
 
+def _difference(result, X: np.ndarray) -> tuple[float, float]:  # noqa: ANN001 (gtsam.Values)
+    """Largest position (m) and yaw (rad) difference between GTSAM's Pose2 values and gtrig's states."""
+    xy = np.array([[result.atPose2(i).x(), result.atPose2(i).y(), result.atPose2(i).theta()] for i in range(len(X))])
+    dpos = float(np.max(np.hypot(*(xy[:, :2] - X[:, :2]).T)))
+    return dpos, float(np.max(np.abs((xy[:, 2] - X[:, 2] + np.pi) % (2 * np.pi) - np.pi)))
+
+
 def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
     chain, X0, k = snapped_chain(odo, tracks)
     t0 = time.perf_counter()
@@ -136,7 +148,6 @@ def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
         return
     graph = gtsam.NonlinearFactorGraph()
     init = gtsam.Values()
-    Q = np.linalg.inv(np.einsum("nki,nkj->nij", chain.proc_W, chain.proc_W))
     inc = chain.proc_u * [k[0], k[0], 0.0]
     inc[:, 2] = k[1] * chain.proc_u[:, 2] + k[2] * chain.proc_u[:, 0]
     t0 = time.perf_counter()
@@ -144,14 +155,17 @@ def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
         # Pose2's between error is the residual rotated by the increment's own turn: rotate its noise alike
         c, s = np.cos(inc[i, 2]), np.sin(inc[i, 2])
         Rm = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1.0]])
+        # gtrig's whitening rotated alike (W R^T): GTSAM's Covariance() would factor the ill-conditioned
+        # slip covariance again and lose digits (that alone moved the solution by 2e-6 m)
         graph.add(gtsam.BetweenFactorPose2(i, i + 1, gtsam.Pose2(*inc[i]),
-                                           gtsam.noiseModel.Gaussian.Covariance(Rm @ Q[i] @ Rm.T)))
+                                           gtsam.noiseModel.Gaussian.SqrtInformation(chain.proc_W[i] @ Rm.T)))
     for j in range(chain.fix_node.size):
         n = int(chain.fix_node[j] + chain.fix_alpha[j])
         z = chain.fix_z[j]
         c, s = np.cos(z[2]), np.sin(z[2])
         J = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1.0]])  # world-frame perturbation -> Pose2's local one
-        graph.add(gtsam.PriorFactorPose2(n, gtsam.Pose2(*z), gtsam.noiseModel.Gaussian.Covariance(J @ chain.fix_cov[j] @ J.T)))
+        graph.add(gtsam.PriorFactorPose2(n, gtsam.Pose2(*z),
+                                         gtsam.noiseModel.Gaussian.SqrtInformation(chain.fix_W[j] @ J.T)))
     x0p = chain.x0
     graph.add(gtsam.PriorFactorPose2(0, gtsam.Pose2(*x0p), gtsam.noiseModel.Gaussian.Covariance(np.diag([1e-2] * 3))))
     for i in range(len(chain)):
@@ -168,9 +182,7 @@ def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
     probe = np.linspace(0, len(chain) - 1, 50).astype(int)
     cov_g = [marg.marginalCovariance(int(i)) for i in probe]
     marg_s = time.perf_counter() - t0
-    xy = np.array([[result.atPose2(i).x(), result.atPose2(i).y(), result.atPose2(i).theta()] for i in range(len(chain))])
-    dpos = float(np.max(np.hypot(*(xy[:, :2] - res.X[:, :2]).T)))
-    dyaw = float(np.max(np.abs((xy[:, 2] - res.X[:, 2] + np.pi) % (2 * np.pi) - np.pi)))
+    dpos, dyaw = _difference(result, res.X)
     # GTSAM's marginal is in each pose's local frame: rotate ours into it
     rel = []
     for i, cg in zip(probe, cov_g, strict=True):
@@ -183,6 +195,109 @@ def part_gtsam(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
     print(f"largest difference: position {dpos:.2e} m, yaw {dyaw:.2e} rad; sigma ratio at 50 nodes within "
           f"{max(rel) * 100:.3f} %")
     print(f"time ratio gtsam solve / gtrig (solve + every marginal): {solve_s / ours_s:.2f}")
+
+
+def _local_jacobian(theta: float) -> np.ndarray:
+    """d (x, y, yaw) / d (Pose2's local tangent) at a pose of heading ``theta``: GTSAM retracts a Pose2 by
+    ``pose * Expmap(delta)``, whose first-order effect is the translation rotated into the world."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def gtsam_custom_graph(chain: FactorChain, k: np.ndarray):  # noqa: ANN201
+    """GTSAM's graph of exactly gtrig's factors: ``gtsam.CustomFactor`` s whose errors are gtrig's own
+    compiled residuals (kernels.odo_residual, kernels.fix_residual, the additive prior) with gtrig's
+    noise, the Jacobians mapped into Pose2's tangent space. Only the angle representation differs (Pose2
+    wraps yaw; the odometry residual's yaw difference is wrapped alike)."""
+    import gtsam
+
+    from gtrig.fusion.kernels import fix_residual, odo_residual, wrap
+
+    graph = gtsam.NonlinearFactorGraph()
+    buf = {n: np.empty((3, 3)) for n in ("Ja", "Jb", "Jk", "Jq")}
+
+    def xyt(values: gtsam.Values, key: int) -> np.ndarray:
+        p = values.atPose2(key)
+        return np.array([p.x(), p.y(), p.theta()])
+
+    def odo_error(i: int):  # noqa: ANN202
+        def err(this: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+            a, b = xyt(values, i), xyt(values, i + 1)
+            r = np.empty(3)
+            odo_residual(a, b, k, chain.proc_u[i], r, buf["Ja"], buf["Jb"], buf["Jk"])
+            r[2] = wrap(r[2])
+            if H is not None:
+                H[0] = buf["Ja"] @ _local_jacobian(a[2])
+                H[1] = buf["Jb"] @ _local_jacobian(b[2])
+            return r
+        return err
+
+    def fix_error(j: int, key: int):  # noqa: ANN202
+        def err(this: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+            q = xyt(values, key)
+            r = np.empty(3)
+            fix_residual(q, q, 0.0, int(chain.fix_kind[j]), chain.fix_z[j], chain.fix_lever[j], r, buf["Jq"],
+                         np.empty(3), np.empty(3))
+            if H is not None:
+                H[0] = buf["Jq"] @ _local_jacobian(q[2])
+            return r
+        return err
+
+    def prior_error(this: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+        q = xyt(values, 0)
+        r = q - chain.x0
+        r[2] = wrap(r[2])
+        if H is not None:
+            H[0] = _local_jacobian(q[2])
+        return r
+
+    for i in range(len(chain) - 1):
+        # gtrig's own whitening (W^T W = information), not a covariance GTSAM would factor again
+        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Gaussian.SqrtInformation(chain.proc_W[i]), [i, i + 1],
+                                     odo_error(i)))
+    for j in range(chain.fix_node.size):
+        key = int(chain.fix_node[j] + chain.fix_alpha[j])  # snapped: alpha is 0 or 1
+        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Gaussian.SqrtInformation(chain.fix_W[j]), [key],
+                                     fix_error(j, key)))
+    graph.add(gtsam.CustomFactor(gtsam.noiseModel.Gaussian.SqrtInformation(chain.W0), [0], prior_error))
+    return graph
+
+
+def part_gtsam_custom(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
+    """GTSAM on exactly gtrig's factors (CustomFactor): the like-for-like answer and time ratio."""
+    import gtsam
+
+    chain, X0, k = snapped_chain(odo, tracks)
+    t0 = time.perf_counter()
+    res = smooth_batch(chain, X0, k, huber_k=0.0)
+    ours_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    graph = gtsam_custom_graph(chain, k)
+    init = gtsam.Values()
+    for i in range(len(chain)):
+        init.insert(i, gtsam.Pose2(*X0[i]))
+    build_s = time.perf_counter() - t0
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-14)
+    params.setAbsoluteErrorTol(1e-14)
+    t0 = time.perf_counter()
+    result = gtsam.LevenbergMarquardtOptimizer(graph, init, params).optimize()
+    solve_s = time.perf_counter() - t0
+    marg = gtsam.Marginals(graph, result)
+    probe = np.linspace(0, len(chain) - 1, 50).astype(int)
+    dpos, dyaw = _difference(result, res.X)
+    rel = []
+    for i in probe:  # GTSAM's marginal is over the local tangent: map ours (world-frame) into it
+        Jl = np.linalg.inv(_local_jacobian(res.X[i, 2]))
+        co = Jl @ res.cov_x[i] @ Jl.T
+        rel.append(np.max(np.abs(np.sqrt(np.diag(co)) / np.sqrt(np.diag(marg.marginalCovariance(int(i)))) - 1)))
+    print(f"## peer, exactly gtrig's factors (gtsam.CustomFactor calling gtrig's compiled residuals; "
+          f"{len(chain)} nodes, {chain.fix_node.size} fixes)")
+    print(f"gtrig batch + every marginal {ours_s:.2f} s; gtsam LM with Python factors: build {build_s:.2f} s, "
+          f"solve {solve_s:.2f} s")
+    print(f"largest difference: position {dpos:.2e} m, yaw {dyaw:.2e} rad; sigma ratio at 50 nodes within "
+          f"{max(rel) * 100:.4f} %")
+    print(f"time ratio gtsam solve (Python factors) / gtrig (solve + every marginal): {solve_s / ours_s:.2f}")
 
 
 def part_seeds(root: Path) -> None:
@@ -203,7 +318,7 @@ def part_seeds(root: Path) -> None:
         truth = read_tum(rec / "recording" / "truth" / "run.tum")
         th = np.unwrap(truth.yaw_rad())
 
-        def errs(tr: PoseTrack) -> np.ndarray:
+        def errs(tr: PoseTrack, truth=truth, th=th) -> np.ndarray:  # noqa: ANN001
             g = np.column_stack([np.interp(tr.stamps_s, truth.stamps_s, truth.xyz[:, 0]),
                                  np.interp(tr.stamps_s, truth.stamps_s, truth.xyz[:, 1]),
                                  np.interp(tr.stamps_s, truth.stamps_s, th)])
@@ -233,16 +348,150 @@ def part_seeds(root: Path) -> None:
               f"inside 3 sigma {np.mean(q < 14.16) * 100:.1f} % | | | | | |")
 
 
+def _ms(e) -> str:  # noqa: ANN001
+    if e.verdict != "ok":
+        return f"{e.verdict} ({e.reason})"
+    return f"{e.offset_s * 1e3:+.3f} ms [{e.ci95_s[0] * 1e3:+.2f}, {e.ci95_s[1] * 1e3:+.2f}]"
+
+
+def _row(name: str, e, truth_s: float) -> str:  # noqa: ANN001
+    if e.verdict != "ok":
+        return f"| {name} | {truth_s * 1e3:+.3f} | {_ms(e)} | | |"
+    err = (e.offset_s - truth_s) * 1e3
+    cover = "yes" if e.ci95_s[0] <= truth_s <= e.ci95_s[1] else "**no**"
+    return f"| {name} | {truth_s * 1e3:+.3f} | {_ms(e)} | {err:+.3f} | {cover} |"
+
+
+def apparent_offset(track: PoseTrack, truth) -> float:  # noqa: ANN001 (gtrig Trajectory)
+    """A diagnostic with the truth: the time offset that best explains ``track``'s errors against the true
+    trajectory (least squares of ``z(t) - p(t) = -v(t) tau + b``, positions and 0.3 m/rad-weighted yaw), s."""
+    T = truth.stamps_s
+    X = np.column_stack([truth.xyz[:, 0], truth.xyz[:, 1], np.unwrap(truth.yaw_rad())])
+    V = np.gradient(X, T, axis=0)
+    u = track.usable()
+    g = np.column_stack([np.interp(u.stamps_s, T, X[:, k]) for k in range(3)])
+    v = np.column_stack([np.interp(u.stamps_s, T, V[:, k]) for k in range(3)])
+    e = u.xytheta() - g
+    e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    w = np.array([1.0, 1.0, 0.3])
+    A = np.zeros((u.stamps_s.size, 3, 4))
+    A[:, :, 0] = -v * w
+    A[:, [0, 1, 2], [1, 2, 3]] = w
+    return float(np.linalg.lstsq(A.reshape(-1, 4), (e * w).ravel(), rcond=None)[0][0])
+
+
+def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
+    """Clock offsets on the simulated recordings against their truth (truth/laser_clocks.yaml,
+    truth/robot_clock.yaml; cameras are on the GT clock, with per-frame jitter only)."""
+    import yaml
+
+    from gtrig.fusion.sensor_sync import recording_returns, sensor_offsets
+    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.io.odometry import read_odometry
+    from gtrig.io.posetrack import read_pose_track
+    from gtrig.rig import load_rig
+
+    for rec in sorted(root.glob("s*")):
+        res, rdir = rec / "results", rec / "recording"
+        if not (res / "gt_laser.tum").exists() or not (res / "gt_vision_run.tum").exists():
+            continue
+        vis = read_pose_track(res / "gt_vision_run.tum", res / "gt_vision_run_cov.csv", "vision")
+        las = read_pose_track(res / "gt_laser.tum", res / "gt_laser_cov.csv", "laser")
+        odo = read_odometry(rdir / "run" / "odometry.csv")
+        rig = load_rig(res / "rig.calibrated.yaml")
+        scan_truth = yaml.safe_load((rdir / "truth" / "laser_clocks.yaml").read_text())["run"]["clock_offsets_s"]
+        odo_off = float(yaml.safe_load((rdir / "truth" / "robot_clock.yaml").read_text()).get("offset_s", 0.0))
+        # GTlaser's clock: its OK frames' share-weighted mean of the scanners' offsets (a scanner's share of a
+        # frame is its share of that frame's returns)
+        ret = recording_returns(rdir, rig)
+        sh = ret.frame_shares()
+        k = np.clip(np.searchsorted(ret.frame_stamps_s, las.usable().stamps_s), 0, ret.frame_stamps_s.size - 1)
+        laser_truth = float(np.mean(sh[k] @ np.array([scan_truth[n] for n in ret.names])))
+        scan = ", ".join(f"{n} {v * 1e3:+.2f}" for n, v in scan_truth.items())
+        print(f"## clock offsets, {rec.name} (truth: cameras 0, scanners {scan} ms; GTlaser's share-weighted "
+              f"{laser_truth * 1e3:+.3f} ms; odometry {odo_off * 1e3:+.3f} ms)")
+        from gtrig.io.tum import read_tum
+
+        true_run = read_tum(rdir / "truth" / "run.tum")
+        a_v, a_l = apparent_offset(vis, true_run) * 1e3, apparent_offset(las, true_run) * 1e3
+        print(f"(diagnostic with the true trajectory: GTvision's errors look like {a_v:+.3f} ms, GTlaser's like "
+              f"{a_l:+.3f} ms)")
+        print("| offset | truth (ms) | estimate, 95 % interval | error (ms) | covers |")
+        print("|---|---|---|---|---|")
+        src = {}
+        for name, tr, truth in (("vision", vis, 0.0), ("laser", las, laser_truth)):
+            for lag in (0.0, *lags):
+                o = OdometryLog(odo.stamps_s + lag, odo.xytheta, odo.v_mps, odo.omega_radps)
+                u = tr.usable()
+                e = estimate_offset(o.stamps_s, o.xytheta[:, 2], u.stamps_s, u.yaw_rad(), name)
+                e = refine_by_fusion(e, fixes_from_track(tr, name), o)
+                if lag == 0.0:
+                    src[name] = e
+                print(_row(f"{name} to odometry" + (f" + {lag:g} s injected" if lag else ""), e,
+                           truth - odo_off - lag))
+        t0 = time.perf_counter()
+        sensors = sensor_offsets(rdir, rig, vis, las, checkpoint=res / "gt_vision_run.checkpoint")
+        secs = time.perf_counter() - t0
+        for e in sensors:
+            kind, name = e.source.split("/", 1)
+            truth = scan_truth[name] if kind == "laser" else 0.0
+            print(_row(f"{e.source} to GTvision's clock", e, truth))
+        print(f"(per-camera and per-scanner fits: {secs:.1f} s wall, loaded machine)")
+
+
+def part_sync_mc(runs: int, duration_s: float = 75.0) -> None:
+    """Offsets to odometry on ``runs`` synthetic runs of the simulator's path and odometry model (errors
+    drawn per run, slip 2 mm per sqrt(m) and wheel), GTlaser-like white fixes (1.2 mm, 1.2 mrad, 75 Hz)
+    on the true clock: the estimator's bias, scatter and coverage against odometry."""
+    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.sim.floor import Floor
+    from gtrig.sim.gtroom import continuous_path
+    from gtrig.sim.motion import RobotMotion
+    from gtrig.sim.odometry import OdometryErrors, simulate_odometry
+
+    st, xyth = continuous_path(duration_s=duration_s)
+    motion = RobotMotion(st + 100.0, xyth, Floor.flat())
+    t0, t1 = motion.stamps_s[0], motion.stamps_s[-1]
+    err, cover, half, verdicts = [], [], [], []
+    for k in range(runs):
+        rng = np.random.default_rng(100 + k)
+        odo = simulate_odometry(motion, t0, t1, 50.0, OdometryErrors.draw(rng), rng)
+        ts = np.arange(t0 + 0.007, t1 - 0.01, 1 / 75)
+        cov = np.diag([0.0012**2, 0.0012**2, 0.0012**2])
+        z = motion.planar(ts) + rng.multivariate_normal(np.zeros(3), cov, ts.size)
+        las = PoseTrack.from_xytheta(ts, z, cov=np.tile(cov, (ts.size, 1, 1)), source="laser")
+        e = estimate_offset(odo.stamps_s, odo.xytheta[:, 2], las.stamps_s, las.yaw_rad(), "laser")
+        f = refine_by_fusion(e, fixes_from_track(las), odo)
+        verdicts.append(f.verdict)
+        if f.verdict == "ok":
+            err.append(f.offset_s * 1e3)
+            cover.append(f.ci95_s[0] <= 0.0 <= f.ci95_s[1])
+            half.append((f.ci95_s[1] - f.ci95_s[0]) / 2 * 1e3)
+    e_ms = np.array(err)
+    print(f"## offsets to odometry, {runs} synthetic {duration_s:.0f} s runs (truth 0): {verdicts.count('ok')} ok; "
+          f"error mean {e_ms.mean():+.3f} ms (its standard error {e_ms.std(ddof=1) / np.sqrt(e_ms.size):.3f}), "
+          f"sd {e_ms.std(ddof=1):.3f} ms, max |error| {np.abs(e_ms).max():.3f} ms; mean 95 % half-width "
+          f"{np.mean(half):.2f} ms, covering {100 * np.mean(cover):.0f} %")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=1.0)
     ap.add_argument("--no-gtsam", action="store_true")
     ap.add_argument("--gtsam-hours", type=float, default=None,
                     help="the peer on a shorter synthetic run (GTSAM's Python graph of 6e5 factors needs > 4 GB)")
+    ap.add_argument("--custom-hours", type=float, default=0.01,
+                    help="GTSAM on exactly gtrig's factors (Python CustomFactor: slow) on a run this long")
     ap.add_argument("--seeds-root", type=Path, default=None)
+    ap.add_argument("--sync", action="store_true", help="with --seeds-root: the clock offsets against the truth")
+    ap.add_argument("--sync-mc", type=int, default=0, help="offsets to odometry on this many synthetic runs")
     a = ap.parse_args(argv)
     if a.seeds_root is not None:
         part_seeds(a.seeds_root)
+        if a.sync:
+            part_sync(a.seeds_root)
+    if a.sync_mc:
+        part_sync_mc(a.sync_mc)
     _, _, odo, tracks = part_speed(a.hours)
     if not a.no_gtsam:
         if a.gtsam_hours is not None:
@@ -251,6 +500,9 @@ def main(argv: list[str] | None = None) -> int:
             sc, sx, sk = snapped_chain(small[2], small[3])
             smooth_batch(sc, sx, sk, huber_k=0.0)
         part_gtsam(odo, tracks)
+        if a.custom_hours > 0:
+            _, _, odo, tracks = synthetic_hour(a.custom_hours)
+            part_gtsam_custom(odo, tracks)
     return 0
 
 

@@ -150,6 +150,8 @@ class FusionConfig(Section):
     estimator: Literal["batch", "ekf"] = "batch"
     max_gap_s: float | None = Field(default=None, gt=0, description="end a segment after this long without a fix")
     sync_search_s: float = Field(default=3.0, gt=0, le=60, description="clock offsets searched, both signs (s)")
+    sync_per_sensor: bool = Field(default=True, description="also each camera's and scanner's clock offset "
+                                  "(gtrig.fusion.sensor_sync)")
 
 
 class RunConfig(Section):

@@ -21,6 +21,11 @@ def command(
     figure: Path | None = typer.Option(None, "--figure", help="PNG of the correlation curves."),
     refine: bool = typer.Option(True, "--refine/--no-refine",
                                 help="Refine with the offset as a parameter of the fusion's fit (needs covariances)."),
+    per_camera: bool = typer.Option(False, "--per-camera",
+                                    help="Also each camera's offset (needs --rig, sources vision and laser)."),
+    per_scanner: bool = typer.Option(False, "--per-scanner",
+                                     help="Also each fixed scanner's offset (needs --rig and source vision)."),
+    rig_path: Path | None = typer.Option(None, "--rig", help="rig.calibrated.yaml (cameras, scanners, hull)."),
 ) -> None:
     """Clock offsets of GT sources to odometry: cross-correlation of heading rates, then a sub-sample fit."""
     from gtrig.errors import InputError
@@ -30,6 +35,8 @@ def command(
     from gtrig.io.offsets import CONVENTION, write_offsets
     from gtrig.io.posetrack import read_pose_track
 
+    if (per_camera or per_scanner) and (recording is None or rig_path is None):
+        raise InputError("--per-camera / --per-scanner need --recording and --rig (the calibrated rig)")
     tracks = {}
     for spec in source:
         if "=" not in spec:
@@ -65,15 +72,51 @@ def command(
         ci = "" if est.verdict != "ok" else f" [{est.ci95_s[0] * 1e3:+.2f}, {est.ci95_s[1] * 1e3:+.2f}] ms"
         num = "" if est.verdict != "ok" else f" {est.offset_s * 1e3:+.3f} ms"
         console.print(f"{name}: {est.verdict}{num}{ci} ({est.reason})", highlight=False)
+    sensors = _per_sensor(recording, rig_path, tracks, results, per_camera, per_scanner, source)
     if figure is not None:
         from gtrig.fusion.plots import correlation_figure
 
         correlation_figure(list(results.values()), figure)
+        if sensors:
+            correlation_figure(sensors, figure.with_name(figure.stem + "_sensors.png"))
     if ref_track is not None:
         results_doc = {reference: {"verdict": "ok", "offset_s": 0.0, "ci95_s": [0.0, 0.0], "reason": "the reference"}}
     else:
         results_doc = {}
     results_doc.update({k: v.to_dict() for k, v in results.items()})
+    from gtrig.fusion.sensor_sync import to_reference
+
+    for e in sensors:
+        results_doc[e.source] = to_reference(e, results["vision"])
     write_offsets(out, reference if (ref_track is not None or reference == "odometry") else str(odo_path),
                   results_doc)
     console.print(f"{out}: {len(results)} source(s) against {reference}; {CONVENTION}", highlight=False)
+
+
+def _per_sensor(recording: Path | None, rig_path: Path | None, tracks: dict, results: dict,  # noqa: ANN001
+                per_camera: bool, per_scanner: bool, sources: list[str]) -> list:
+    """Each camera's / scanner's offset to GTvision's clock (gtrig.fusion.sensor_sync), printed."""
+    if not (per_camera or per_scanner):
+        return []
+    from gtrig.errors import InputError
+    from gtrig.fusion.sensor_sync import sensor_offsets
+    from gtrig.rig import load_rig
+
+    assert recording is not None and rig_path is not None  # checked before any work
+    for need in ("vision", "laser") if per_camera else ("vision",):
+        if need not in tracks or need not in results:
+            raise InputError(f"--per-camera / --per-scanner need --source {need}=track.tum,cov.csv (not the reference)")
+    # GTvision's checkpoint of detections beside its track (gt_vision_run.tum -> gt_vision_run.checkpoint)
+    ck = next((Path(s.split("=", 1)[1].split(",")[0]).with_suffix(".checkpoint") for s in sources
+               if s.startswith("vision=")), None)
+    if ck is not None and not ck.is_file():
+        console.print(f"{ck}: no GTvision checkpoint; each pose is taken at its stamp (up to 2.5 ms off for a "
+                      "one-camera pose of a multi-camera instant)", highlight=False)
+        ck = None
+    out = sensor_offsets(recording, load_rig(rig_path), tracks["vision"], tracks.get("laser"), per_camera,
+                         per_scanner, checkpoint=ck)
+    for e in out:
+        num = "" if e.verdict != "ok" else (f" {e.offset_s * 1e3:+.3f} ms [{e.ci95_s[0] * 1e3:+.2f}, "
+                                            f"{e.ci95_s[1] * 1e3:+.2f}] to GTvision's clock")
+        console.print(f"{e.source}: {e.verdict}{num} ({e.reason})", highlight=False)
+    return out

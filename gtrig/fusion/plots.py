@@ -8,7 +8,8 @@ from gtrig.fusion.sync import OffsetEstimate
 
 
 def correlation_figure(estimates: list[OffsetEstimate], path: str | os.PathLike[str]) -> None:
-    """One panel per source: normalised heading-rate correlation against the lag, the estimate marked."""
+    """One panel per source (normalised heading-rate correlation against the lag) or per camera / scanner
+    (the timing fit's min cost / cost against the trial offset), the estimate marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -23,7 +24,8 @@ def correlation_figure(estimates: list[OffsetEstimate], path: str | os.PathLike[
             ax.axvline(e.offset_s, color="r", lw=0.8)
         ax.set_title(f"{e.source}: {e.verdict}" + (f", {e.offset_s * 1e3:+.2f} ms" if e.verdict == "ok" else ""))
         ax.set_xlabel("offset (s): source stamp - reference stamp")
-        ax.set_ylabel("correlation")
+        # heading-rate correlation (a source) or min cost / cost of the timing fit (a camera, a scanner)
+        ax.set_ylabel("correlation" if "/" not in e.source else "min cost / cost")
     fig.tight_layout()
     with atomic_open(path, "wb") as f:
         fig.savefig(f, format="png", dpi=110)

@@ -243,9 +243,9 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
 
     The source's fixes (positions and headings, each weighed by its covariance) are smoothed with the
     odometry alone at trial offsets; Brent's method minimises the batch cost (-2 log-likelihood) over the
-    offset within ``half_width_s`` of the coarse peak, and the 95 % interval comes from the cost's curvature
-    (Fisher information = cost'' / 2). The fixes' decorrelation (FusionOptions.correlation_s) keeps that
-    curvature honest for time-correlated errors.
+    offset within ``half_width_s`` of the estimate (of the coarse peak when the estimate is not ``ok``),
+    and the 95 % interval comes from the cost's curvature (Fisher information = cost'' / 2). The fixes'
+    decorrelation (FusionOptions.correlation_s) keeps that curvature honest for time-correlated errors.
 
     ``anchors``: other sources fused unshifted (their clock then is the reference: a mm-accurate GT
     source pins the time far better than the odometry's slipping heading); ``estimate`` must then be
@@ -258,7 +258,10 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
     if estimate.verdict == "unobservable" or not np.isfinite(estimate.coarse_s):
         return estimate
     opts = options or FusionOptions()
-    c = float(estimate.coarse_s)
+    # centred on the heading fit's estimate when there is one: the correlation's peak lies on a grid of
+    # half the faster stream's period and, with noisy heading rates, a step or two off (a search around it
+    # alone then missed the minimum and reported a good estimate as ambiguous)
+    c = float(estimate.offset_s) if estimate.verdict == "ok" else float(estimate.coarse_s)
     o0, o1 = float(odometry.stamps_s[0]), float(odometry.stamps_s[-1])
     margin = 2 * half_width_s + 0.1
     keep = (fixes.stamps_s - c >= o0 + margin) & (fixes.stamps_s - c <= o1 - margin)
@@ -315,5 +318,5 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
                               estimate.reason)
     return OffsetEstimate(estimate.source, "ok", best, (best - half, best + half), estimate.coarse_s, estimate.peak,
                           estimate.second_peak, estimate.lags_s, estimate.corr, estimate.windows,
-                          f"peak {estimate.peak:.3f} at {c:+.3f} s; refined by the fusion's fit "
-                          f"({int(use.sum())} fixes)")
+                          f"peak {estimate.peak:.3f} at {estimate.coarse_s:+.3f} s, heading fit {c * 1e3:+.2f} ms; "
+                          f"refined by the fusion's fit ({int(use.sum())} fixes)")

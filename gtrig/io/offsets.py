@@ -42,7 +42,8 @@ def read_offsets(path: str | os.PathLike[str]) -> dict[str, float]:
     for name, v in doc["sources"].items():
         if not isinstance(v, dict) or "verdict" not in v:
             raise FormatError(f"{p}: sources.{name}: needs a verdict")
-        if v["verdict"] == "ok":
+        if v["verdict"] == "ok" and not (v.get("offset_s") is None and "offset_to_vision_s" in v):
+            # (a camera's or scanner's entry without an offset to the reference is no source's offset)
             try:
                 out[str(name)] = float(v["offset_s"])
             except (TypeError, ValueError, KeyError):

@@ -15,7 +15,7 @@ markers        rig                                          rig, marker_calibrat
 robot-frame    rig, survey, marker_calibration              rig, frame_fit, vision_validation, hand_frame_cov
 laser          rig                                          rig, laser_report, laser_result, tracks/GTlaser/run
 vision         rig (marker_calibration, frame_fit, ...)     tracks/GTvision/{validation,run}, vision_results
-sync           tracks/GTvision/run, tracks/GTlaser/run (*)  clock_offsets
+sync           tracks/GTvision/run, tracks/GTlaser/run, rig  clock_offsets (per camera and scanner too)
 fusion         the same, clock_offsets (*)                  tracks/fusion/run
 =============  ==========================================  ==============================================
 
@@ -67,8 +67,9 @@ STAGES: tuple[Stage, ...] = (
           uses=("marker_calibration", "frame_fit", "vision_validation", "hand_frame_cov", "survey"),
           produces=_VISION_PRODUCTS, reads=("validation/poses.csv", "validation/cameras", "run/cameras"),
           section="vision"),
-    Stage("sync", "time sync", sync, uses=("tracks/GTvision/run", "tracks/GTlaser/run"),
-          produces=("clock_offsets",), reads=("run/odometry.csv",), section="fusion"),
+    Stage("sync", "time sync", sync, uses=("tracks/GTvision/run", "tracks/GTlaser/run", "rig"),
+          produces=("clock_offsets",), reads=("run/odometry.csv", "run/cameras", "run/lasers", "background/lasers"),
+          section="fusion"),
     Stage("fusion", "fusion", fusion, uses=("tracks/GTvision/run", "tracks/GTlaser/run", "clock_offsets"),
           produces=("tracks/fusion/run",), reads=("run/odometry.csv",), section="fusion"),
 )

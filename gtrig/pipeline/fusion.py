@@ -33,6 +33,7 @@ def sync(inp: StageInput) -> StageOutput:
     """Clock offsets of the GT sources to odometry, each with its 95 % interval and verdict."""
     from gtrig.errors import InputError
     from gtrig.fusion.measurements import fixes_from_track
+    from gtrig.fusion.sensor_sync import to_reference
     from gtrig.fusion.sync import estimate_offset, refine_by_fusion
     from gtrig.io.offsets import write_offsets
 
@@ -49,18 +50,57 @@ def sync(inp: StageInput) -> StageOutput:
         if track.cov is not None and est.verdict == "ok":
             est = refine_by_fusion(est, fixes_from_track(track, name), odo)
         results[name] = est
-    write_offsets(inp.out / "sync.yaml", "odometry", {k: v.to_dict() for k, v in results.items()})
+    doc = {k: v.to_dict() for k, v in results.items()}
+    sensors = _sensor_offsets(inp, tracks, results) if cfg.sync_per_sensor else []
+    for e in sensors:
+        doc[e.source] = to_reference(e, results["vision"])
+    write_offsets(inp.out / "sync.yaml", "odometry", doc)
     offsets = {k: float(v.offset_s) for k, v in results.items() if v.verdict == "ok"}
     checks = tuple(AccuracyRow("sync", f"{k} clock offset to odometry ({v.verdict})",
                                1000 * v.offset_s if v.verdict == "ok" else math.nan, "ms", "", v.verdict == "ok")
                    for k, v in results.items())
+    checks += tuple(AccuracyRow("sync", f"{e.source} clock offset to GTvision's ({e.verdict})",
+                                1000 * e.offset_s if e.verdict == "ok" else math.nan, "ms") for e in sensors)
     rows: tuple[AccuracyRow, ...] = ()
     if inp.has_truth:
         true_s = _true_odometry_offset(inp.rec)
         # the sources' own clocks (cameras', scanners') carry small offsets too: informational, no target
         rows = tuple(AccuracyRow("sync", f"{k}: offset minus the simulated odometry clock's",
                                  1000 * abs(offsets[k] - true_s), "ms") for k in offsets)
+        rows += _sensor_truth_rows(inp.rec, sensors)
     return StageOutput({"clock_offsets": offsets}, rows, checks, ("sync.yaml",))
+
+
+def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict) -> list:  # noqa: ANN001
+    """Each camera's and scanner's offset to GTvision's clock, when both GT sources and the scanners exist."""
+    from gtrig.fusion.sensor_sync import sensor_offsets
+
+    rig = inp.products.rig
+    if rig is None or "vision" not in tracks or "laser" not in tracks or rig.robot.hull is None:
+        return []
+    if not rig.laser_scanners or "vision" not in results:
+        return []
+    ck = inp.out / "gt_vision_run.checkpoint"  # GTvision's detections: which camera made each pose
+    return sensor_offsets(inp.rec, rig, tracks["vision"], tracks["laser"], checkpoint=ck if ck.is_file() else None)
+
+
+def _sensor_truth_rows(rec: Path, sensors: list) -> tuple[AccuracyRow, ...]:  # noqa: ANN001
+    """|estimate - truth| of each camera's (truth 0: the simulated cameras are on the GT clock, with
+    per-frame jitter) and scanner's (truth/laser_clocks.yaml) offset to GTvision's clock, target 1 ms."""
+    from gtrig.io.yamlfile import load_yaml
+
+    p = rec / "truth" / "laser_clocks.yaml"
+    doc = load_yaml(p) if p.is_file() else {}
+    scan = ((doc or {}).get("run") or {}).get("clock_offsets_s") or {}
+    rows = []
+    for e in sensors:
+        kind, name = e.source.split("/", 1)
+        if e.verdict != "ok" or (kind == "laser" and name not in scan):
+            continue
+        err = 1000 * abs(e.offset_s - (float(scan[name]) if kind == "laser" else 0.0))
+        rows.append(AccuracyRow("sync", f"{e.source}: offset to GTvision's minus the simulated one", err, "ms",
+                                "<= 1", err <= 1.0))
+    return tuple(rows)
 
 
 def _true_odometry_offset(rec: Path) -> float:

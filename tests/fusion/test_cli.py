@@ -57,3 +57,13 @@ def test_bad_inputs(tmp_path, run) -> None:
                                                          o.omega_radps))
     r = CliRunner().invoke(app, ["fuse", *args, *out])
     assert r.exit_code == 2 and "unit" in r.output and not (tmp_path / "gt.tum").exists()
+
+
+def test_per_sensor_sync_needs_the_rig(tmp_path, run) -> None:
+    _files(tmp_path, run)
+    src = ["--source", f"vision={tmp_path / 'v.tum'},{tmp_path / 'v.csv'}",
+           "--source", f"laser={tmp_path / 'l.tum'},{tmp_path / 'l.csv'}"]
+    r = CliRunner().invoke(app, ["sync", "--reference", str(tmp_path / "odo.csv"), *src, "--per-camera",
+                                 "--out", str(tmp_path / "s.yaml")])
+    assert r.exit_code == 2 and "--rig" in r.output and len(r.output.strip().splitlines()) == 1
+    assert not (tmp_path / "s.yaml").exists()

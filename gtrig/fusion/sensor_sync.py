@@ -1,0 +1,563 @@
+"""Each camera's and each fixed scanner's clock offset, from that sensor's own observations against a
+reference trajectory on the other sensors' clock.
+
+A source's offset to odometry (:mod:`gtrig.fusion.sync`) is limited by the odometry: its slip is a heading
+random walk, so on a 75 s run the interval is a few milliseconds wide. The sensors *of* a GT system are
+timed far better against each other, because the reference is then millimetre-accurate. Here:
+
+* the **reference** is a smoothing of other GT fixes with the constant-velocity model (no odometry, so
+  the odometry's clock never leaks into it: :func:`reference_track`); its clock is theirs;
+* a **scanner** (:func:`scanner_offsets`), against GTvision smoothed: each foreground return, fired at
+  ``t`` on the scanner's clock, lies on the robot's hull at the reference pose of ``t - tau_s``; its
+  signed distance to the nearest visible side moves by ``-J . v`` per second of ``tau_s`` (``J`` the
+  distance's derivative by the pose, ``v`` the reference's velocity). One weighted least-squares fit
+  over every scanner's returns: per scanner ``tau_s``, per hull side a bias (the fabric's range bias, the
+  hull's size, the reference frame's offset from the hull) and one yaw offset between the reference's
+  robot frame and the hull;
+* a **camera** (:func:`camera_offsets`), against GTlaser restamped by those scanner offsets
+  (:func:`restamp_laser`) and smoothed: each GTvision pose minus the reference at its time minus the
+  share-weighted offsets of the cameras that made it (:func:`checkpoint_membership`), linearised in the
+  offsets (the reference's velocity), with a constant (x, y, yaw) bias per set of cameras (their
+  calibration's error) as nuisance parameters; one fit for all cameras.
+
+Why not the GTlaser track itself: it fits all scanners' points in one pose per frame, so its time is the
+point-weighted mean of the scanners' clocks (shares that change with the robot's position), not any one
+scanner's.
+
+Intervals: a jackknife over blocks of ``block_s`` (the reference's errors stay correlated for about half
+a second, so neither the points nor the instants are independent), Student's t with B - 1 dof.
+Verdicts as in :mod:`gtrig.fusion.sync`: ``unobservable`` (too few observations, or the robot hardly
+moves in the sensor's view: the white-noise interval alone is wider than ``max_ci_s``), ``ambiguous``
+(the jackknife interval wider than ``max_ci_s``, or the fit's cost has its minimum elsewhere than the
+solution), else ``ok``. The curve of each estimate (``lags_s``, ``corr``) is the fit's ``min cost /
+cost`` over trial offsets: 1 at the estimate.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.stats import t as student_t
+
+from gtrig.fusion.fuse import FusionOptions, fuse
+from gtrig.fusion.measurements import Fixes
+from gtrig.fusion.sync import OffsetEstimate, Verdict
+from gtrig.trajectory import PoseTrack
+
+_NAN2 = (float("nan"), float("nan"))
+
+
+# ------------------------------------------------------------------------------------------ reference
+@dataclass(frozen=True)
+class Reference:
+    """A smoothed trajectory to time sensors against: stamps (N,) on its sources' clock, poses (N, 3)
+    world (x, y m, yaw rad unwrapped), velocities (N, 3) per second, covariances (N, 3, 3)."""
+
+    stamps_s: np.ndarray
+    xytheta: np.ndarray
+    velocity: np.ndarray
+    cov: np.ndarray
+
+    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Poses and velocities (M, 3) at ``t`` (M,), linearly interpolated."""
+        P = np.column_stack([np.interp(t, self.stamps_s, self.xytheta[:, k]) for k in range(3)])
+        V = np.column_stack([np.interp(t, self.stamps_s, self.velocity[:, k]) for k in range(3)])
+        return P, V
+
+    def covers(self, t: np.ndarray, margin_s: float) -> np.ndarray:
+        return (t >= self.stamps_s[0] + margin_s) & (t <= self.stamps_s[-1] - margin_s)
+
+
+def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float = 0.5) -> Reference:
+    """The fixes smoothed by the constant-velocity model (robust batch MAP, no odometry) on a ``rate_hz``
+    grid, one segment per stretch without a gap over ``max_gap_s``; the fits use only times with poses of
+    the reference within 50 ms on both sides, so no gap is interpolated across."""
+    track, _ = fuse(fixes, None, FusionOptions(rate_hz=rate_hz, max_gap_s=max_gap_s))
+    xyt = track.xytheta()
+    xyt[:, 2] = np.unwrap(xyt[:, 2])
+    vel = np.gradient(xyt, track.stamps_s, axis=0)
+    cov = track.cov_xytheta()
+    assert cov is not None  # fusion always gives one
+    return Reference(track.stamps_s, xyt, vel, cov)
+
+
+def _near_reference(ref: Reference, t: np.ndarray, tol_s: float) -> np.ndarray:
+    """True where ``t`` has reference poses within ``tol_s`` on both sides (no interpolation over gaps)."""
+    k = np.clip(np.searchsorted(ref.stamps_s, t), 1, ref.stamps_s.size - 1)
+    return (t - ref.stamps_s[k - 1] <= tol_s) & (ref.stamps_s[k] - t <= tol_s) & ref.covers(t, 0.0)
+
+
+# ------------------------------------------------------------------------------------------ the fit
+def _score(cost: np.ndarray) -> np.ndarray:
+    """``min cost / cost`` of a cost curve: 1 at its minimum; 0 where the cost is 0 (no observation)."""
+    return np.divide(cost.min(), cost, out=np.zeros_like(cost), where=cost > 0)
+
+
+def _ridge(H: np.ndarray) -> np.ndarray:
+    """A ridge far below any informed direction of ``H``: what nobody informs (a hull side never seen, the
+    difference of two cameras always seen together) stays at zero, and its variance comes out huge."""
+    return 1e-12 * max(float(np.trace(H)) / H.shape[0], 1e-300) * np.eye(H.shape[0])
+
+
+def _jackknife(H_b: np.ndarray, g_b: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Solve ``sum_b H_b x = -sum_b g_b`` (blocks (B, n, n), (B, n)) and the jackknife standard error of
+    ``x[cols]``; returns (x, se (len(cols),), number of blocks with data)."""
+    H, g = H_b.sum(axis=0) + _ridge(H_b.sum(axis=0)), g_b.sum(axis=0)
+    x = -np.linalg.solve(H, g)
+    used = np.flatnonzero(np.abs(g_b).sum(axis=1) > 0)
+    B = used.size
+    if B < 3:
+        return x, np.full(cols.size, np.inf), B
+    loo = np.array([-np.linalg.solve(H - H_b[b], g - g_b[b])[cols] for b in used])
+    se = np.sqrt((B - 1) / B * np.sum((loo - loo.mean(axis=0)) ** 2, axis=0))
+    return x, se, B
+
+
+def _verdict(name: str, tau: float, se: float, white_se: float, B: int, taus: np.ndarray, curve: np.ndarray,
+             max_ci_s: float, n_obs: int, min_obs: int) -> OffsetEstimate:
+    half = float(student_t.ppf(0.975, max(B - 1, 1))) * se if np.isfinite(se) else float("inf")
+    v: Verdict = "ok"
+    if n_obs < min_obs or B < 3:
+        v, reason = "unobservable", f"{n_obs} observations in {B} blocks of time"
+    elif 2 * 1.96 * white_se > max_ci_s:
+        v, reason = "unobservable", "the robot hardly moves in this sensor's view"
+    elif 2 * half > max_ci_s:
+        v, reason = "ambiguous", f"the 95 % interval ({2 * half * 1e3:.1f} ms) is wider than {max_ci_s * 1e3:.1f} ms"
+    elif curve.size and abs(taus[int(np.argmax(curve))] - tau) > 2 * (taus[1] - taus[0]) + half:
+        v, reason = "ambiguous", "the fit's cost has its minimum away from the estimate"
+    else:
+        reason = f"{n_obs} observations, {B} blocks of time"
+    if v != "ok":
+        return OffsetEstimate(name, v, float("nan"), _NAN2, float("nan"), float("nan"), float("nan"), taus, curve,
+                              B, reason)
+    return OffsetEstimate(name, "ok", tau, (tau - half, tau + half), float("nan"), 1.0, float("nan"), taus, curve,
+                          B, reason)
+
+
+# ------------------------------------------------------------------------------------------ cameras
+def camera_membership(stamps_s: np.ndarray, camera_stamps_s: Mapping[str, np.ndarray], sync_tol_s: float = 0.005,
+                      ) -> np.ndarray:
+    """(N, C) share of each camera in each GTvision instant: an instant is the images of the cameras whose
+    frame stamps lie within ``sync_tol_s`` of it (GTvision stamps a group at its images' mean stamp,
+    gtrig.vision.sequence.make_instants); its time is their mean, so each member has the share 1 / count.
+    A row of zeros: no camera frame near that stamp."""
+    st = np.asarray(stamps_s, float)
+    M = np.zeros((st.size, len(camera_stamps_s)))
+    for j, cs in enumerate(camera_stamps_s.values()):
+        cs = np.r_[-np.inf, np.sort(np.asarray(cs, float)), np.inf]
+        k = np.searchsorted(cs, st)
+        M[:, j] = np.minimum(st - cs[k - 1], cs[k] - st) <= sync_tol_s
+    n = M.sum(axis=1, keepdims=True)
+    return np.divide(M, n, out=np.zeros_like(M), where=n > 0)
+
+
+def checkpoint_membership(stamps_s: np.ndarray, checkpoint: str | os.PathLike[str],
+                          camera_stamps_s: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Which cameras made each GTvision pose, and when, from GTvision's checkpoint of detections.
+
+    GTvision groups the images of cameras within 5 ms into one instant stamped at their mean stamp, but
+    when only one of those images shows markers the pose is that camera's alone, taken at *its* stamp:
+    such a pose is stamped up to 2.5 ms off (on the simulated runs, 352 of 902 and 673 of 916 poses). A
+    pose of several cameras' views is moved to the instant's stamp by GTvision (``compensate_motion``).
+
+    Parameters
+    ----------
+    stamps_s : (N,) GTvision's pose stamps. checkpoint : ``gt_vision_<sequence>.checkpoint`` (JSON lines).
+    camera_stamps_s : per camera, its frame stamps (the rows the checkpoint's frames name).
+
+    Returns
+    -------
+    times : (N,) when each pose was taken on the cameras' clocks (the single view's frame stamp, else the
+        instant's stamp); share : (N, C) each camera's share of the pose (1 / number of cameras with views);
+        a row of zeros where the checkpoint has no instant at that stamp.
+    """
+    import json
+
+    names = list(camera_stamps_s)
+    col = {n: j for j, n in enumerate(names)}
+    by_stamp: dict[float, tuple[float, list[str]]] = {}
+    with open(checkpoint, encoding="utf-8") as f:
+        f.readline()  # the header: the detections' key
+        for line in f:
+            try:
+                items = json.loads(line)["items"]
+            except (json.JSONDecodeError, KeyError):
+                break  # a line cut by an interruption
+            for it in items:
+                o = it["obs"]
+                seen = sorted({v[0] for v in o["views"] if v[0] in col})
+                rows = {c: int(r) for c, r in o["frames"]}
+                t = float(o["stamp_s"])
+                if len(seen) == 1 and seen[0] in rows:
+                    t = float(np.asarray(camera_stamps_s[seen[0]])[rows[seen[0]]])
+                by_stamp[round(float(o["stamp_s"]), 6)] = (t, seen)
+    st = np.asarray(stamps_s, float)
+    times, share = st.copy(), np.zeros((st.size, len(names)))
+    for i, s_ in enumerate(st):
+        hit = by_stamp.get(round(float(s_), 6))
+        if hit is None or not hit[1]:
+            continue
+        times[i] = hit[0]
+        share[i, [col[c] for c in hit[1]]] = 1.0 / len(hit[1])
+    return times, share
+
+
+def restamp_vision(track: PoseTrack, checkpoint: str | os.PathLike[str],
+                   camera_stamps_s: Mapping[str, np.ndarray]) -> PoseTrack:
+    """GTvision's track with each one-camera pose at its camera's frame stamp (:func:`checkpoint_membership`)."""
+    when, _ = checkpoint_membership(track.stamps_s, checkpoint, camera_stamps_s)
+    order = np.argsort(when, kind="stable")
+    keep = np.r_[True, np.diff(when[order]) > 0]
+    return replace(track.select(order[keep]), stamps_s=when[order][keep])
+
+
+def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray], ref: Reference,
+                   block_s: float = 5.0, max_ci_s: float = 0.01, search_s: float = 0.02, min_instants: int = 20,
+                   huber_k: float = 3.0, checkpoint: str | os.PathLike[str] | None = None,
+                   ) -> list[OffsetEstimate]:
+    """Every camera's clock offset to the reference's clock, one fit over GTvision's instants.
+
+    An instant of cameras ``c`` sees the reference at its stamp minus ``sum_c share_c tau_c``
+    (:func:`camera_membership`); its pose minus the reference, linearised in the offsets (the reference's
+    velocity), with a constant (x, y, yaw) bias per set of cameras (their calibration's error) as nuisance
+    parameters, weighted by GTvision's covariance.
+
+    Parameters
+    ----------
+    vision : GTvision's track (with covariances), the cameras' clock.
+    camera_stamps_s : per camera, its frame stamps (:func:`camera_frame_stamps`).
+    ref : the reference (:func:`reference_track` of GTlaser restamped by :func:`restamp_laser`).
+    block_s : the jackknife's blocks of time.
+    max_ci_s : a wider 95 % interval is ``ambiguous`` (``unobservable`` if the information alone is).
+    search_s : the cost curve spans this either side of each estimate.
+    huber_k : Huber threshold of each instant's whitened residual (sigmas).
+    checkpoint : GTvision's checkpoint of detections: which cameras saw the markers in each instant and
+        when (:func:`checkpoint_membership`); without it every camera with a frame within 5 ms of a pose's
+        stamp shares it.
+
+    Returns
+    -------
+    One :class:`OffsetEstimate` per camera, named ``vision/<camera>``.
+    """
+    names = list(camera_stamps_s)
+    u = vision.usable()
+    cov = u.cov_xytheta()
+    if cov is None:
+        from gtrig.errors import InputError
+
+        raise InputError("per-camera offsets need GTvision's covariances (track.tum,cov.csv)")
+    if checkpoint is not None:
+        when, share = checkpoint_membership(u.stamps_s, checkpoint, camera_stamps_s)
+    else:
+        when, share = u.stamps_s, camera_membership(u.stamps_s, camera_stamps_s)
+    keep = _near_reference(ref, when, 0.05) & (share.sum(axis=1) > 0)
+    t, z, share = when[keep], u.xytheta()[keep], share[keep]
+    # GTvision's own covariance weighs each instant (the reference's errors, correlated over time and
+    # inflated by fusion's decorrelation, are left to the jackknife)
+    W = np.linalg.inv(cov[keep])
+    C = len(names)
+    if t.size < min_instants:
+        return [_verdict(f"vision/{c}", float("nan"), float("inf"), float("inf"), 0, np.zeros(0), np.zeros(0),
+                         max_ci_s, int(t.size), min_instants) for c in names]
+    _, group = np.unique(share > 0, axis=0, return_inverse=True)
+    group = group.ravel()
+    G = int(group.max()) + 1
+    n = C + 3 * G
+    blocks = np.floor((t - t.min()) / block_s).astype(int)
+    B = int(blocks.max()) + 1
+    tau = np.zeros(C)
+    bias = np.zeros((G, 3))
+    rows = np.arange(t.size)
+    hub = np.ones(t.size)
+    for it in range(4):
+        P, V = ref.at(t - share @ tau)
+        e = z - P
+        e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        if it:  # Huber weights on each instant's whitened residual (a GTvision pose off by a centimetre)
+            r = e - bias[group]
+            z2 = np.einsum("mi,mij,mj->m", r, W, r)
+            hub = np.where(z2 <= huber_k**2, 1.0, huber_k / np.sqrt(np.maximum(z2, 1e-24)))
+        # z = ref(t - share . tau) + b_group: the residual e + V (share . dtau) - b is linear in (dtau, b)
+        A = np.zeros((t.size, 3, n))
+        A[:, :, :C] = V[:, :, None] * share[:, None, :]
+        for i in range(3):
+            A[rows, i, C + 3 * group + i] = -1.0
+        Hn = np.einsum("m,mia,mij,mjb->mab", hub, A, W, A)
+        gn = np.einsum("m,mia,mij,mj->ma", hub, A, W, e)
+        H_b = np.zeros((B, n, n))
+        g_b = np.zeros((B, n))
+        np.add.at(H_b, blocks, Hn)
+        np.add.at(g_b, blocks, gn)
+        x, se, _ = _jackknife(H_b, g_b, np.arange(C))
+        tau = tau + x[:C]
+        bias = x[C:].reshape(G, 3)
+    H = H_b.sum(axis=0)
+    white = np.sqrt(np.diag(np.linalg.inv(H + _ridge(H)))[:C])
+    fit = (t, z, W * hub[:, None, None], share, bias[group])
+    return [_verdict(f"vision/{name}", float(tau[c]), float(se[c]), float(white[c]),
+                     int(np.unique(blocks[share[:, c] > 0]).size), *_camera_curve(fit, ref, tau, c, search_s),
+                     max_ci_s, int(np.sum(share[:, c] > 0)), min_instants) for c, name in enumerate(names)]
+
+
+def _camera_curve(fit: tuple[np.ndarray, ...], ref: Reference, tau: np.ndarray, c: int, search_s: float,
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Trial offsets of camera ``c`` around its estimate (the others held) and the fit's min cost / cost;
+    ``fit`` = (stamps, poses, weights, shares, biases) of the instants."""
+    t, z, W, share, bias = fit
+    m = share[:, c] > 0
+    taus = tau[c] + np.linspace(-search_s, search_s, 81)
+    cost = np.empty(taus.size)
+    for j, tc in enumerate(taus):
+        tt = tau.copy()
+        tt[c] = tc
+        P, _ = ref.at(t[m] - share[m] @ tt)
+        r = z[m] - P - bias[m]
+        r[:, 2] = (r[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        cost[j] = float(np.einsum("mi,mij,mj->", r, W[m], r))
+    return taus, _score(cost)
+
+
+# ------------------------------------------------------------------------------------------ scanners
+@dataclass(frozen=True)
+class ScannerReturns:
+    """The foreground returns of every fixed scanner (what GTlaser fits), each with its firing time.
+
+    Attributes
+    ----------
+    names : (S,) scanner names. stamps_s : (P,) each return's firing time on its scanner's clock.
+    xy_world : (P, 2) the returns, world frame, metres. scanner_index : (P,) into ``names``.
+    dir_world : (P, 2) unit beam directions. origin_xy : (S, 2) scanner origins. sigma_m : (S,) range noise.
+    frame_index : (P,) GTlaser's frame of each return; frame_stamps_s : (F,) the frames' stamps (GTlaser's
+        pose stamps).
+    """
+
+    names: tuple[str, ...]
+    stamps_s: np.ndarray
+    xy_world: np.ndarray
+    scanner_index: np.ndarray
+    dir_world: np.ndarray
+    origin_xy: np.ndarray
+    sigma_m: np.ndarray
+    frame_index: np.ndarray
+    frame_stamps_s: np.ndarray
+
+    @staticmethod
+    def from_framed(fp) -> ScannerReturns:  # noqa: ANN001 (gtrig.laser.fuse.FramedPoints)
+        """From GTlaser's framed points: a return's firing time is its frame's stamp plus its ``dt_s``."""
+        fid = np.repeat(np.arange(fp.n_frames), np.diff(fp.frame_start))
+        return ScannerReturns(tuple(fp.scanner_names), fp.frame_stamps_s[fid] + fp.dt_s, fp.xy_world,
+                              np.asarray(fp.scanner_index, np.int64), fp.dir_world, fp.scanner_xy_world,
+                              np.asarray(fp.sigma_m, float), fid, fp.frame_stamps_s)
+
+    def frame_shares(self) -> np.ndarray:
+        """(F, S) each scanner's share of each frame's returns."""
+        F, S = self.frame_stamps_s.size, len(self.names)
+        n = np.bincount(self.frame_index * S + self.scanner_index, minlength=F * S).reshape(F, S).astype(float)
+        tot = n.sum(axis=1, keepdims=True)
+        return np.divide(n, tot, out=np.zeros_like(n), where=tot > 0)
+
+
+def restamp_laser(track: PoseTrack, ret: ScannerReturns, offsets_s: Mapping[str, float]) -> PoseTrack:
+    """GTlaser's track on the clock the scanners' offsets refer to: GTlaser fits a frame's returns of all
+    scanners in one pose, so that pose holds at the frame stamp minus the share-weighted mean of their
+    offsets (each scanner's share of the frame's returns; a scanner without an offset counts as 0).
+    Poses whose stamp is no frame of ``ret`` keep their stamp."""
+    tau = np.array([float(offsets_s.get(n, 0.0)) for n in ret.names])
+    shift = ret.frame_shares() @ tau
+    k = np.clip(np.searchsorted(ret.frame_stamps_s, track.stamps_s), 0, ret.frame_stamps_s.size - 1)
+    hit = np.abs(ret.frame_stamps_s[k] - track.stamps_s) < 1e-6
+    st = track.stamps_s - np.where(hit, shift[k], 0.0)
+    order = np.argsort(st, kind="stable")
+    out = track.select(order)
+    return replace(out, stamps_s=st[order])
+
+
+def hull_distances(corners_xy: np.ndarray, pose: np.ndarray, p: np.ndarray, origin: np.ndarray,
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Signed distance of world points ``p`` (M, 2) to the nearest side of the hull (corners (C, 2),
+    counter-clockwise, robot frame) at ``pose`` (M, 3) that faces the point's scanner at ``origin``
+    (M, 2); returns (distance (M,), side index (M,), its derivative by the pose (M, 3), the overshoot
+    past the side's ends (M,))."""
+    c0 = np.asarray(corners_xy, float)
+    e = np.roll(c0, -1, axis=0) - c0
+    L = np.linalg.norm(e, axis=1)
+    tng = e / L[:, None]
+    nrm = np.column_stack([tng[:, 1], -tng[:, 0]])
+    off = np.einsum("ij,ij->i", nrm, c0)
+    a0 = np.einsum("ij,ij->i", tng, c0)
+    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    q = p - pose[:, :2]
+    pr = np.column_stack([c * q[:, 0] + s * q[:, 1], c * q[:, 1] - s * q[:, 0]])
+    o = origin - pose[:, :2]
+    orr = np.column_stack([c * o[:, 0] + s * o[:, 1], c * o[:, 1] - s * o[:, 0]])
+    sd = pr @ nrm.T - off
+    along = pr @ tng.T - a0
+    over = np.maximum(0.0, np.maximum(-along, along - L))
+    d2 = np.where((orr @ nrm.T - off) > 0, sd * sd + over * over, np.inf)
+    k = np.argmin(d2, axis=1)
+    rows = np.arange(p.shape[0])
+    nw = np.column_stack([c * nrm[k, 0] - s * nrm[k, 1], s * nrm[k, 0] + c * nrm[k, 1]])
+    J = np.column_stack([-nw[:, 0], -nw[:, 1], nw[:, 0] * q[:, 1] - nw[:, 1] * q[:, 0]])
+    return sd[rows, k], k, J, over[rows, k]
+
+
+def _block_sums(blocks: np.ndarray, B: int, A: np.ndarray, w: np.ndarray, f: np.ndarray,
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Per block of time, ``sum w A^T A`` (B, n, n) and ``sum w A^T f`` (B, n) of rows A (M, n)."""
+    n = A.shape[1]
+    H_b = np.zeros((B, n, n))
+    g_b = np.zeros((B, n))
+    for a in range(n):
+        wa = w * A[:, a]
+        g_b[:, a] = np.bincount(blocks, wa * f, minlength=B)
+        for b in range(a, n):
+            H_b[:, a, b] = H_b[:, b, a] = np.bincount(blocks, wa * A[:, b], minlength=B)
+    return H_b, g_b
+
+
+def scanner_offsets(ret: ScannerReturns, ref: Reference, corners_xy: np.ndarray, block_s: float = 5.0,
+                    gate_m: float = 0.02, sigma_model_m: float = 0.002, huber_k: float = 3.0,
+                    max_ci_s: float = 0.01, search_s: float = 0.02, min_returns: int = 200,
+                    ) -> list[OffsetEstimate]:
+    """Every scanner's clock offset to the reference's clock (see the module docstring), one fit.
+
+    Parameters
+    ----------
+    ret : the scanners' foreground returns (:meth:`ScannerReturns.from_framed`).
+    ref : the reference trajectory (:func:`reference_track` of GTvision's poses), its clock.
+    corners_xy : (C, 2) the hull's corners, counter-clockwise, robot frame (``rig.robot.hull.corners_xy()``).
+    gate_m : returns farther than this from the hull are not the hull's (a leg, a reflection).
+    sigma_model_m : the hull model's own error, added to each return's range noise (as GTlaser does).
+    huber_k : Huber threshold of the whitened residuals, sigmas.
+    max_ci_s, search_s, block_s : as in :func:`camera_offset`.
+
+    Returns
+    -------
+    One :class:`OffsetEstimate` per scanner, named ``laser/<scanner>``, in ``ret.names`` order.
+    """
+    keep = _near_reference(ref, ret.stamps_s, 0.05)
+    t, p, sid = ret.stamps_s[keep], ret.xy_world[keep], ret.scanner_index[keep]
+    dirs, org = ret.dir_world[keep], ret.origin_xy[ret.scanner_index[keep]]
+    S, C = len(ret.names), int(np.asarray(corners_xy).shape[0])
+    n = S + C + 1  # tau per scanner, a bias per hull side, the hull's yaw in the reference's robot frame
+    tau, bias, dth = np.zeros(S), np.zeros(C), 0.0
+    if t.size == 0:
+        return [_verdict(f"laser/{nm}", float("nan"), float("inf"), float("inf"), 0, np.zeros(0), np.zeros(0),
+                         max_ci_s, 0, min_returns) for nm in ret.names]
+    blocks = np.floor((t - t.min()) / block_s).astype(int)
+    B = int(blocks.max()) + 1
+    for _ in range(4):
+        P, V = ref.at(t - tau[sid])
+        P[:, 2] += dth
+        d, k, J, over = hull_distances(corners_xy, P, p, org)
+        f = d - bias[k]
+        cos_i = -(dirs[:, 0] * J[:, 0] + dirs[:, 1] * J[:, 1])
+        var = ret.sigma_m[sid] ** 2 * cos_i**2 + sigma_model_m**2
+        z = np.abs(f) / np.sqrt(var)
+        inl = np.isfinite(f) & (np.abs(f) < gate_m) & (over <= 0.05)
+        w = np.where(inl, np.where(z <= huber_k, 1.0, huber_k / np.maximum(z, 1e-12)) / var, 0.0)
+        f = np.where(inl, f, 0.0)
+        A = np.zeros((t.size, n))
+        A[np.arange(t.size), sid] = -(J * V).sum(axis=1)  # d f / d tau_s
+        A[np.arange(t.size), S + k] = -1.0
+        A[:, -1] = J[:, 2]
+        H_b, g_b = _block_sums(blocks, B, A, w, f)
+        x, se, nb = _jackknife(H_b, g_b, np.arange(S))
+        tau, bias, dth = tau + x[:S], bias + x[S:S + C], dth + float(x[-1])
+    H = H_b.sum(axis=0)
+    white = np.sqrt(np.diag(np.linalg.inv(H + _ridge(H)))[:S])
+    out = []
+    for s, nm in enumerate(ret.names):
+        m = (sid == s) & (w > 0)
+        nb_s = int(np.unique(blocks[m]).size)
+        taus = tau[s] + np.linspace(-search_s, search_s, 41)
+        cost = np.empty(taus.size)
+        for j, ts in enumerate(taus):  # the fit's cost over trial offsets of this scanner, the rest held
+            P, _ = ref.at(t[m] - ts)
+            P[:, 2] += dth
+            dd, kk, _, _ = hull_distances(corners_xy, P, p[m], org[m])
+            cost[j] = float(np.sum(w[m] * (dd - bias[kk]) ** 2))
+        out.append(_verdict(f"laser/{nm}", float(tau[s]), float(se[s]), float(white[s]), nb_s, taus,
+                            _score(cost), max_ci_s, int(m.sum()), min_returns))
+    return out
+
+
+def recording_returns(rec_dir, rig, sequence: str = "run") -> ScannerReturns:  # noqa: ANN001
+    """The foreground returns GTlaser fits on ``rec_dir/<sequence>``: the fixed scanners' logs, the
+    background models of ``rec_dir/background`` and the scanners' calibrated poses in ``rig``."""
+    from pathlib import Path
+
+    from gtrig.laser.foreground import foreground_mask, foreground_threshold
+    from gtrig.laser.fuse import frame_points
+    from gtrig.laser.recording import load_backgrounds, read_scanner_logs
+
+    rec = Path(rec_dir)
+    scs = rig.laser_scanners
+    logs = read_scanner_logs(rec / sequence / "lasers", rig, "sequence")
+    bgs = load_backgrounds(rec / "background", rig)
+    masks = [foreground_mask(logs[s.name].ranges_m, foreground_threshold(b)) for s, b in zip(scs, bgs, strict=True)]
+    fp = frame_points(scs, [logs[s.name].stamps_s for s in scs], [logs[s.name].ranges_m for s in scs], masks)
+    return ScannerReturns.from_framed(fp)
+
+
+def camera_frame_stamps(rec_dir, rig, sequence: str = "run") -> dict[str, np.ndarray]:  # noqa: ANN001
+    """Each camera's frame stamps (its ``timestamps.csv``) on ``rec_dir/<sequence>``."""
+    from pathlib import Path
+
+    from gtrig.vision.sequence import camera_indices
+
+    return {name: ix.stamps_s for name, ix in camera_indices(Path(rec_dir), sequence, rig).items()}
+
+
+# ------------------------------------------------------------------------------------------ together
+def sensor_offsets(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = None,  # noqa: ANN001
+                   cameras: bool = True, scanners: bool = True, sequence: str = "run",
+                   checkpoint: str | os.PathLike[str] | None = None) -> list[OffsetEstimate]:
+    """Each scanner's and each camera's clock offset to GTvision's clock (the cameras' share-weighted mean).
+
+    Scanners against GTvision smoothed alone (:func:`scanner_offsets`); then GTlaser restamped with the
+    scanners' offsets (:func:`restamp_laser`: it is then on GTvision's clock too) is the reference of the
+    cameras (:func:`camera_offsets`), which needs ``laser``. ``rig`` holds the calibrated scanners, the hull
+    and the cameras. ``checkpoint``: GTvision's checkpoint of detections, which puts each one-camera pose
+    at its camera's stamp (:func:`checkpoint_membership`; strongly advised). Add GTvision's own offset to a
+    reference (:func:`to_reference`) for offsets to it.
+    """
+    from gtrig.errors import ConfigError, InputError
+    from gtrig.fusion.measurements import fixes_from_track
+
+    out: list[OffsetEstimate] = []
+    if not (cameras or scanners):
+        return out
+    if rig.robot.hull is None or not rig.laser_scanners:
+        raise ConfigError("rig: per-scanner offsets need the fixed scanners and robot.hull")
+    cam_stamps = camera_frame_stamps(rec_dir, rig, sequence)
+    timed = vision if checkpoint is None else restamp_vision(vision.usable(), checkpoint, cam_stamps)
+    ret = recording_returns(rec_dir, rig, sequence)
+    sc = scanner_offsets(ret, reference_track([fixes_from_track(timed, "vision")]), rig.robot.hull.corners_xy())
+    if scanners:
+        out += sc
+    if cameras:
+        if laser is None:
+            raise InputError("per-camera offsets need GTlaser's track (the cameras' reference)")
+        off = {e.source.split("/", 1)[1]: e.offset_s for e in sc if e.verdict == "ok"}
+        ref = reference_track([fixes_from_track(restamp_laser(laser.usable(), ret, off), "laser")])
+        out += camera_offsets(vision, cam_stamps, ref, checkpoint=checkpoint)
+    return out
+
+
+def to_reference(sensor: OffsetEstimate, vision: OffsetEstimate) -> dict[str, object]:
+    """``sensor`` (an offset to GTvision's clock, :func:`sensor_offsets`) as a ``sync.yaml`` entry: that
+    offset and interval (``offset_to_vision_s``, ``ci95_to_vision_s``) and, when GTvision's own offset to the
+    reference is ``ok``, the sum as ``offset_s`` with the two half-widths added in quadrature (independent
+    fits)."""
+    d = sensor.to_dict()
+    d["offset_to_vision_s"], d["ci95_to_vision_s"] = d.pop("offset_s"), d.pop("ci95_s")
+    d["offset_s"] = d["ci95_s"] = None
+    if sensor.verdict == "ok" and vision.verdict == "ok":
+        h = float(np.hypot(sensor.ci95_s[1] - sensor.ci95_s[0], vision.ci95_s[1] - vision.ci95_s[0])) / 2
+        o = sensor.offset_s + vision.offset_s
+        d["offset_s"], d["ci95_s"] = float(o), [float(o - h), float(o + h)]
+    return d

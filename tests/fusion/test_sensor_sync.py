@@ -1,0 +1,158 @@
+"""Per-scanner and per-camera clock offsets: known offsets recovered within 1 ms from synthetic returns
+and poses, intervals covering them; a sensor that never sees the robot move is refused."""
+
+import numpy as np
+import pytest
+
+from gtrig.fusion.measurements import fixes_from_track
+from gtrig.fusion.sensor_sync import (
+    Reference,
+    ScannerReturns,
+    camera_membership,
+    camera_offsets,
+    checkpoint_membership,
+    hull_distances,
+    reference_track,
+    restamp_laser,
+    scanner_offsets,
+)
+from gtrig.trajectory import PoseTrack
+
+HULL = np.array([[-0.3, -0.25], [0.3, -0.25], [0.3, 0.25], [-0.3, 0.25]])  # counter-clockwise, robot frame
+SCANNERS = np.array([[-4.0, -4.0], [5.0, -3.0], [0.0, 6.0]])
+OFFSETS = np.array([0.004, 0.0, -0.0035])  # each scanner's stamps minus the true firing times
+
+
+def _truth_reference(run) -> Reference:  # noqa: ANN001
+    t = np.arange(run.motion.stamps_s[0], run.motion.stamps_s[-1], 0.005)
+    xyt = run.motion.planar(t)
+    xyt[:, 2] = np.unwrap(xyt[:, 2])
+    return Reference(t, xyt, np.gradient(xyt, t, axis=0), np.zeros((t.size, 3, 3)))
+
+
+def _returns(run, rng: np.random.Generator, offsets: np.ndarray, static: bool = False) -> ScannerReturns:  # noqa: ANN001
+    """Returns of the hull's visible sides, 15 per side and scan, 3 mm range noise, 75 Hz per scanner."""
+    t0, t1 = run.motion.stamps_s[0] + 1.0, run.motion.stamps_s[-1] - 1.0
+    pts, st, sid, dirs = [], [], [], []
+    u = np.linspace(0.05, 0.95, 15)
+    for s, (o, tau) in enumerate(zip(SCANNERS, offsets, strict=True)):
+        tt = np.arange(t0 + 0.003 * s, t1, 1 / 75)
+        P = run.motion.planar(np.full(tt.size, t0) if static else tt)
+        for k in range(4):
+            a, b = HULL[k], HULL[(k + 1) % 4]
+            c, sn = np.cos(P[:, 2]), np.sin(P[:, 2])
+            R = np.stack([np.stack([c, -sn], -1), np.stack([sn, c], -1)], -2)  # (T, 2, 2)
+            local = a + u[:, None] * (b - a)  # (40, 2)
+            w = P[:, None, :2] + np.einsum("tij,uj->tui", R, local)
+            n_r = np.array([(b - a)[1], -(b - a)[0]])
+            n_w = np.einsum("tij,j->ti", R, n_r)
+            facing = np.einsum("ti,ti->t", n_w, o - P[:, :2]) > 0
+            w = w[facing]
+            d = w - o
+            d /= np.linalg.norm(d, axis=-1, keepdims=True)
+            w = w + d * rng.normal(0, 0.003, w.shape[:2])[..., None]
+            pts.append(w.reshape(-1, 2))
+            dirs.append(d.reshape(-1, 2))
+            st.append(np.repeat(tt[facing] + tau, u.size))
+            sid.append(np.full(w.shape[0] * u.size, s))
+    p = np.concatenate(pts)
+    n = p.shape[0]
+    return ScannerReturns(("a", "b", "c"), np.concatenate(st), p, np.concatenate(sid), np.concatenate(dirs), SCANNERS,
+                          np.full(3, 0.003), np.zeros(n, np.int64), np.zeros(1))
+
+
+def test_hull_distance_of_a_point_on_a_side_is_zero() -> None:
+    pose = np.array([[1.0, 2.0, 0.3]])
+    c, s = np.cos(0.3), np.sin(0.3)
+    p = pose[:, :2] + np.array([[c * 0.3 - s * 0.1, s * 0.3 + c * 0.1]])  # on the front side (x = 0.3)
+    d, k, J, over = hull_distances(HULL, pose, p + 0.01 * np.array([[c, s]]), np.array([[10.0, 2.0]]))
+    assert k[0] == 1 and d[0] == pytest.approx(0.01, abs=1e-12) and over[0] == 0.0
+    # the derivative by the pose: moving the robot forward by 1 mm brings the side 1 mm closer
+    d2, _, _, _ = hull_distances(HULL, pose + [[c * 1e-3, s * 1e-3, 0]], p + 0.01 * np.array([[c, s]]),
+                                 np.array([[10.0, 2.0]]))
+    assert d2[0] - d[0] == pytest.approx(J[0] @ [c * 1e-3, s * 1e-3, 0], abs=1e-9)
+
+
+def test_scanner_offsets_recovered(run) -> None:  # noqa: ANN001
+    ret = _returns(run, np.random.default_rng(3), OFFSETS)
+    # the reference: poses with 1 mm / 1 mrad noise at 30 Hz, smoothed (as GTvision's would be)
+    rng = np.random.default_rng(4)
+    t = np.arange(run.motion.stamps_s[0], run.motion.stamps_s[-1], 1 / 30)
+    z = run.motion.planar(t) + rng.normal(0, 1, (t.size, 3)) * [0.001, 0.001, 0.001]
+    cov = np.tile(np.diag([1e-6, 1e-6, 1e-6]), (t.size, 1, 1))
+    ref = reference_track([fixes_from_track(PoseTrack.from_xytheta(t, z, cov=cov, source="v"), "v")])
+    est = scanner_offsets(ret, ref, HULL, block_s=3.0)
+    for e, tau in zip(est, OFFSETS, strict=True):
+        assert e.verdict == "ok", e.reason
+        assert abs(e.offset_s - tau) < 0.001
+        assert e.ci95_s[0] <= tau <= e.ci95_s[1]
+        assert e.ci95_s[1] - e.ci95_s[0] < 0.003
+        assert e.lags_s.size == e.corr.size and np.nanmax(e.corr) == pytest.approx(1.0)
+
+
+def test_scanner_that_never_sees_motion_is_unobservable(run) -> None:  # noqa: ANN001
+    ret = _returns(run, np.random.default_rng(3), OFFSETS, static=True)
+    est = scanner_offsets(ret, _truth_reference(run), HULL, block_s=3.0)
+    assert all(e.verdict == "unobservable" and np.isnan(e.offset_s) for e in est)
+
+
+def test_camera_offsets_recovered(run) -> None:  # noqa: ANN001
+    """Three free-running 10 Hz cameras, +2 / 0 / -1.5 ms, each with its own bias; some instants shared."""
+    rng = np.random.default_rng(8)
+    t0, t1 = run.motion.stamps_s[0] + 0.5, run.motion.stamps_s[-1] - 0.5
+    taus = {"c0": 0.002, "c1": 0.0, "c2": -0.0015}
+    phase = {"c0": 0.0, "c1": 0.033, "c2": 0.0351}  # c1 and c2 within 5 ms: their instants are shared
+    stamps = {c: np.arange(t0 + phase[c], t1, 0.1) + taus[c] for c in taus}
+    bias = {"c0": [0.002, -0.001, 0.001], "c1": [0.0, 0.001, -0.0005], "c2": [-0.001, 0.0, 0.0]}
+    inst_t, inst_z = [], []
+    for c in ("c0",):
+        inst_t.append(stamps[c])
+        inst_z.append(run.motion.planar(stamps[c] - taus[c]) + bias[c])
+    pair = 0.5 * (stamps["c1"] + stamps["c2"])  # GTvision stamps a group at its images' mean
+    inst_t.append(pair)
+    inst_z.append(0.5 * (run.motion.planar(stamps["c1"] - taus["c1"]) + run.motion.planar(stamps["c2"] - taus["c2"]))
+                  + 0.5 * (np.array(bias["c1"]) + bias["c2"]))
+    t = np.concatenate(inst_t)
+    z = np.concatenate(inst_z)
+    order = np.argsort(t)
+    t, z = t[order], z[order] + rng.normal(0, 1, z.shape) * [0.0005, 0.0005, 0.0003]
+    cov = np.tile(np.diag([0.0005**2, 0.0005**2, 0.0003**2]), (t.size, 1, 1))
+    vision = PoseTrack.from_xytheta(t, z, cov=cov, source="vision")
+    share = camera_membership(t, stamps)
+    assert np.allclose(share[np.isin(t, pair)], [0.0, 0.5, 0.5]) and np.allclose(share.sum(axis=1), 1.0)
+    est = camera_offsets(vision, stamps, _truth_reference(run), block_s=3.0)
+    e0 = est[0]
+    assert e0.verdict == "ok" and abs(e0.offset_s - taus["c0"]) < 0.001 and e0.ci95_s[0] <= taus["c0"] <= e0.ci95_s[1]
+    # c1 and c2 only ever appear together: only their mean is observable, so neither gets a number
+    assert [e.verdict for e in est[1:]] == ["unobservable", "unobservable"]
+
+
+def test_restamp_laser_by_the_frames_shares() -> None:
+    frames = np.array([10.0, 10.1, 10.2])
+    # frame 0: only scanner a; frame 1: a and b half each; frame 2: none
+    ret = ScannerReturns(("a", "b"), np.zeros(4), np.zeros((4, 2)), np.array([0, 0, 1, 0]), np.zeros((4, 2)),
+                         np.zeros((2, 2)), np.ones(2), np.array([0, 1, 1, 0]), frames)
+    track = PoseTrack.from_xytheta(frames, np.zeros((3, 3)), source="laser")
+    out = restamp_laser(track, ret, {"a": 0.004, "b": -0.002})
+    shares = ret.frame_shares()
+    assert np.allclose(shares, [[1.0, 0.0], [0.5, 0.5], [0.0, 0.0]])
+    assert np.allclose(out.stamps_s, [10.0 - 0.004, 10.1 - 0.001, 10.2])
+
+
+def test_checkpoint_membership_takes_a_one_camera_pose_at_its_camera_stamp(tmp_path) -> None:
+    """GTvision stamps an instant at its images' mean; a pose from one camera's view holds at that camera's
+    stamp, a pose of two cameras' views at the instant's stamp (GTvision moves the views there)."""
+    import json
+
+    cams = {"a": np.array([10.000, 10.100]), "b": np.array([10.004, 10.104])}
+    view = [[0.0, 0.0]] * 4
+    obs = [{"stamp_s": 10.002, "cameras": ["a", "b"], "frames": [["a", 0], ["b", 0]],
+            "views": [["b", 3, view, None, 0]]},
+           {"stamp_s": 10.102, "cameras": ["a", "b"], "frames": [["a", 1], ["b", 1]],
+            "views": [["a", 3, view, None, 1], ["b", 5, view, None, 1]]}]
+    p = tmp_path / "gt_vision_run.checkpoint"
+    p.write_text(json.dumps({"key": "k", "version": 4}) + "\n"
+                 + json.dumps({"chunk": 0, "items": [{"obs": o} for o in obs]}) + "\n")
+    when, share = checkpoint_membership(np.array([10.002, 10.102, 11.0]), p, cams)
+    assert when == pytest.approx([10.004, 10.102, 11.0], abs=1e-9)
+    assert np.allclose(share, [[0.0, 1.0], [0.5, 0.5], [0.0, 0.0]])
