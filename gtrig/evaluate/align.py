@@ -25,7 +25,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig.errors import InputError
-from gtrig.evaluate import quat
+from gtrig.evaluate import _kernels
 from gtrig.trajectory import PLANAR_INDEX, PoseTrack
 
 AlignKind = Literal["none", "se3", "sim3", "yaw", "se2", "sim2"]
@@ -119,9 +119,7 @@ def apply_alignment(track: PoseTrack, a: Alignment) -> PoseTrack:
     if a.kind == "none":
         return track
     xyz = a.scale * track.xyz @ a.R.T + a.t
-    q = quat.mul(Rotation.from_matrix(a.R).as_quat()[None, :], track.quat_xyzw)
-    q /= np.linalg.norm(q, axis=1)[:, None]
-    q[q[:, 3] < 0] *= -1
+    q = _kernels.rotate_quats(Rotation.from_matrix(a.R).as_quat(), np.ascontiguousarray(track.quat_xyzw))
     cov = None
     if track.cov is not None:
         if track.cov_kind == "se3":

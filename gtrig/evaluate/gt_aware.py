@@ -35,12 +35,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from gtrig.evaluate import quat
 from gtrig.trajectory import PoseTrack
 
-Z95 = float(stats.norm.ppf(0.975))
+#: scipy.stats.norm.ppf(0.975), written out: importing scipy.stats costs a CLI call half a second
+Z95 = 1.959963984540054
 #: the upper end of gtrig's NEES-per-dof consistency band (docs/vision.md, the accuracy tables' 0.5-2)
 NEES_MAX = 2.0
 
@@ -118,6 +118,8 @@ def batch_interval(x: np.ndarray, n_batches: int = N_BATCHES) -> Interval:
     m = float(np.mean(x))
     if n < 2:
         return Interval(m, float("-inf"), float("inf"))
+    from scipy import stats
+
     if n < 2 * n_batches:
         h = float(stats.t.ppf(0.975, n - 1) * np.std(x, ddof=1) / np.sqrt(n))
         return Interval(m, m - h, m + h)
@@ -139,6 +141,8 @@ def score(gt: PoseTrack, est: PoseTrack) -> GTAwareScores | None:
     carries no covariance."""
     if gt.cov is None or gt.cov_kind not in ("se3", "xyyaw", "xyz"):
         return None
+    from scipy import stats
+
     from gtrig.trajectory import COV_AXES
 
     e_all = world_errors(gt, est)
