@@ -84,17 +84,44 @@ def rpe_errors(q_gt: np.ndarray, t_gt: np.ndarray, q_est: np.ndarray, t_est: np.
 
 
 @njit(cache=True)
-def rotate_quats(r: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """(n, 4) ``r q_i`` for one quaternion ``r`` (4,), renormalised, scalar part made non-negative."""
+def transform_poses(scale: float, R: np.ndarray, t: np.ndarray, r: np.ndarray, xyz: np.ndarray, q: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Poses moved by a similarity: positions ``s R p_i + t`` (R (3, 3), t (3,)) and rotations ``r q_i`` (r the
+    quaternion of R), renormalised with the scalar part made non-negative. (n, 3) and (n, 4) out."""
     n = q.shape[0]
-    out = np.empty((n, 4))
+    p_out = np.empty((n, 3))
+    q_out = np.empty((n, 4))
     for i in range(n):
-        x, y, z, w = _mul(r[0], r[1], r[2], r[3], q[i, 0], q[i, 1], q[i, 2], q[i, 3])
-        s = math.sqrt(x * x + y * y + z * z + w * w)
-        if w < 0:
+        x, y, z = xyz[i, 0], xyz[i, 1], xyz[i, 2]
+        for k in range(3):
+            p_out[i, k] = scale * (R[k, 0] * x + R[k, 1] * y + R[k, 2] * z) + t[k]
+        a, b, c, d = _mul(r[0], r[1], r[2], r[3], q[i, 0], q[i, 1], q[i, 2], q[i, 3])
+        s = math.sqrt(a * a + b * b + c * c + d * d)
+        if d < 0:
             s = -s
-        out[i, 0] = x / s
-        out[i, 1] = y / s
-        out[i, 2] = z / s
-        out[i, 3] = w / s
-    return out
+        q_out[i, 0] = a / s
+        q_out[i, 1] = b / s
+        q_out[i, 2] = c / s
+        q_out[i, 3] = d / s
+    return p_out, q_out
+
+
+@njit(cache=True)
+def heading_cos_sin(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) ``cos`` and ``sin`` of the heading (the body x axis projected on the world x-y plane) of unit
+    quaternions, without the angle: ``(R00, R10) / |(R00, R10)|``; ``(1, 0)`` for a body x axis straight up."""
+    n = q.shape[0]
+    c = np.empty(n)
+    s = np.empty(n)
+    for i in range(n):
+        x, y, z, w = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+        r00 = 1.0 - 2.0 * (y * y + z * z)
+        r10 = 2.0 * (x * y + w * z)
+        h = math.hypot(r00, r10)
+        if h > 0:
+            c[i] = r00 / h
+            s[i] = r10 / h
+        else:
+            c[i] = 1.0
+            s[i] = 0.0
+    return c, s
