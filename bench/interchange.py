@@ -32,7 +32,7 @@ import numpy as np
 
 from gtrig.io.rosbag._bag import BagWriter, header
 from gtrig.io.rosbag.record_export import export_recording
-from gtrig.io.rosbag.record_import import import_bag
+from gtrig.io.rosbag.record_import import PNG_PARAMS, import_bag
 from gtrig.rig.load import dump_rig
 from gtrig.sim.gtroom import make_scene
 
@@ -96,7 +96,7 @@ def throughput(work: Path, n_images: int, n_scans: int) -> None:
             peer_dir = work / f"peer_{fmt}"
             shutil.rmtree(peer_dir, ignore_errors=True)
             peer_dir.mkdir()
-            params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if fmt == "png" else []
+            params = PNG_PARAMS if fmt == "png" else []
             t0, c0 = time.perf_counter(), time.process_time()
             with ThreadPoolExecutor(2) as pool:
                 list(pool.map(lambda a, d=peer_dir, f=fmt, p=params: cv2.imwrite(str(d / f"{a[0]:06d}.{f}"), a[1], p),
