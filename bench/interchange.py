@@ -10,11 +10,11 @@ recording.
 2. Round trip. A ``gtrig sim --quick`` recording (``--rec``, or simulated into ``--work``) has its run,
    validation and background sequences exported to a bag (images, fixed and onboard scans,
    odometry), imported into a new recording (the parts no bag holds, survey, calibration images and
-   rig, copied), and GTlaser (``gtrig.laser.recording.track_recording``) and GTvision
-   (``gtrig.vision.sequence.run_recording`` with the truth rig) run on both. Printed: whether every
-   imported file is byte-identical (text) or pixel-identical (images), and the largest difference of
-   the stages' poses and covariances; GTvision once more on the validation sequence imported as one
-   lossless FFV1 video per camera.
+   rig, copied), and the whole pipeline (``gtrig run``: GTlaser, GTvision, sync, fusion) run on both.
+   Printed: whether every imported file is byte-identical (text) or pixel-identical (images), whether
+   the GTlaser, GTvision and fusion pose tracks are byte-identical, and the largest difference of their
+   poses and covariances; GTvision (``gtrig.vision.sequence.run_recording``, truth rig) once more on the
+   validation sequence imported as one lossless FFV1 video per camera.
 
     python bench/interchange.py [--images 200] [--scans 20000] [--rec REC] [--work /tmp/gtrig_bench_interchange]
 """
@@ -140,7 +140,7 @@ def _same_files(a: Path, b: Path) -> tuple[int, list[str]]:
 
 def round_trip(rec: Path, work: Path) -> None:
     from gtrig.io.posetrack import read_pose_track
-    from gtrig.laser.recording import track_recording
+    from gtrig.pipeline import run as run_pipeline
     from gtrig.rig import load_rig
     from gtrig.vision.sequence import run_recording
 
@@ -169,17 +169,28 @@ def round_trip(rec: Path, work: Path) -> None:
         if (rec / seq).is_dir():
             n, diff = _same_files(rec / seq, back / seq)
             print(f"  {seq}: {n} files, {'all identical' if not diff else str(len(diff)) + ' differ: ' + diff[0]}")
+    # the whole pipeline (survey ... GTlaser, GTvision, sync, fusion) on both recordings: the same outputs
+    outs = {}
     for name, r in (("original", rec), ("imported", back)):
-        track_recording(r, "run", out_tum=work / f"laser_{name}.tum", out_cov=work / f"laser_{name}_cov.csv")
-    a = read_pose_track(work / "laser_original.tum", work / "laser_original_cov.csv")
-    b = read_pose_track(work / "laser_imported.tum", work / "laser_imported_cov.csv")
-    _compare("GTlaser run", a.stamps_s, b.stamps_s, a.xyz, b.xyz, a.quat_xyzw, b.quat_xyzw, a.cov, b.cov)
+        outs[name] = work / f"pipeline_{name}"
+        shutil.rmtree(outs[name], ignore_errors=True)
+        t1 = time.perf_counter()
+        run_pipeline(r, outs[name], reuse=False)
+        print(f"  gtrig run on the {name} recording: {time.perf_counter() - t1:.0f} s")
+    for stem, what in (("gt_laser", "GTlaser run"), ("gt_vision_validation", "GTvision validation"),
+                       ("gt_vision_run", "GTvision run"), ("gt_fused", "fusion run")):
+        files = [f"{stem}.tum", f"{stem}_cov.csv"]
+        if not all((outs["original"] / f).is_file() for f in files):
+            print(f"  {what}: not produced")
+            continue
+        same = all((outs["original"] / f).read_bytes() == (outs["imported"] / f).read_bytes() for f in files)
+        a = read_pose_track(outs["original"] / files[0], outs["original"] / files[1])
+        b = read_pose_track(outs["imported"] / files[0], outs["imported"] / files[1])
+        _compare(f"{what} ({'TUM and covariance files byte-identical' if same else 'files differ'})", a.stamps_s,
+                 b.stamps_s, a.xyz, b.xyz, a.quat_xyzw, b.quat_xyzw, a.cov, b.cov)
     rig = load_rig(rec / "truth" / "rig.yaml")
     va = run_recording(rec, rig, "validation", workers=1)
-    vb = run_recording(back, rig, "validation", workers=1)
-    ta, tb = va.trajectory(), vb.trajectory()
-    _compare("GTvision validation", ta.stamps_s, tb.stamps_s, ta.xyz, tb.xyz, ta.quat_xyzw, tb.quat_xyzw,
-             va.covariances(), vb.covariances())
+    ta = va.trajectory()
     # the same bag imported with one lossless video per camera, decoded by GTvision's workers
     vid = work / "imported_video"
     shutil.rmtree(vid, ignore_errors=True)

@@ -74,7 +74,7 @@ def read_tum(path: str | os.PathLike[str]) -> Trajectory:
     data = read_bytes_file(p)
     fast = parse_numeric(data, (8,), comma=False)
     if fast is not None:
-        return _trajectory(p, fast[0])
+        return _trajectory(p, fast.values)
     lines = decode_text_file(p, data).splitlines()
     a = _fast_rows(lines)
     if a is None:

@@ -48,7 +48,7 @@ def test_every_number_equals_float_bit_for_bit(comma: bool) -> None:
         text = "# a comment\n\n" + eol.join("  " + sep.join(r) + " " for r in rows) + rng.choice(["", eol])
         got = parse_numeric(text.encode(), (w,), comma)
         assert got is not None, text[:200]
-        values, lines, _ = got
+        values, lines = got.values, got.line_numbers
         assert np.array_equal(_bits(values), _bits(np.array([[float(c) for c in r] for r in rows])))
         assert lines.tolist() == list(range(3, 3 + len(rows)))
 
@@ -65,17 +65,36 @@ def test_the_slow_reader_decides_whatever_is_unusual() -> None:
         assert parse_numeric(text, (2,), comma=False) is None, text
     for text in (b"1,2,\n", b"1,,2\n", b"1 2,3\n"):
         assert parse_numeric(text, (2, 3), comma=True) is None, text
-    many = b"".join(b"1e-30 2\n" for _ in range(MAX_SLOW + 1))
-    assert parse_numeric(many, (2,), comma=False) is None
     # a byte-order mark is skipped, as the utf-8-sig readers do
-    assert parse_numeric(b"\xef\xbb\xbf1 2\n", (2,), comma=False)[0].tolist() == [[1.0, 2.0]]  # type: ignore[index]
+    assert parse_numeric(b"\xef\xbb\xbf1 2\n", (2,), comma=False).values.tolist() == [[1.0, 2.0]]  # type: ignore[union-attr]
+
+
+def test_many_cells_past_the_exact_grammar() -> None:
+    """17-digit reprs (covariances) by NumPy's conversion, more than one pass stores: float()'s bits."""
+    rng = np.random.default_rng(5)
+    v = rng.normal(size=(MAX_SLOW, 3)) * 10.0 ** rng.integers(-12, 3, (MAX_SLOW, 3))
+    got = parse_numeric("".join(",".join(repr(float(x)) for x in row) + "\n" for row in v).encode(), (3,), comma=True)
+    assert got is not None and np.array_equal(_bits(got.values), _bits(v))
+    bad = "".join(",".join(repr(float(x)) for x in row) + "\n" for row in v[:5000]) + "1,2,1e-30x\n"
+    assert parse_numeric(bad.encode(), (3,), comma=True) is None
+
+
+def test_word_columns() -> None:
+    got = parse_numeric(b"1.5,ok,,2\n2.5,flagged,too far,3\n3.5,ok,\n", (4,), comma=True, text_cols=(1, 2))
+    assert got is None  # the last line lacks a cell
+    got = parse_numeric(b"1.5,ok,,2\n2.5,flagged,far,3\n", (4,), comma=True, text_cols=(1, 2))
+    assert got is not None
+    words = [[got.buf[a:b].tobytes() for a, b in row] for row in got.spans]
+    assert words == [[b"ok", b""], [b"flagged", b"far"]] and got.values[:, [0, 3]].tolist() == [[1.5, 2], [2.5, 3]]
+    for text in (b'1,"ok",,2\n', b"1, ok,,2\n", b"1,ok,a b,2\n"):  # quotes and blanks: csv.reader decides
+        assert parse_numeric(text, (4,), comma=True, text_cols=(1, 2)) is None, text
 
 
 def test_first_column_exact_integers() -> None:
     got = parse_numeric(b"1403636579758555392,1\n1403636579758555393,2\n", (2,), comma=True)
-    assert got is not None and got[2] is not None
-    assert got[2].tolist() == [1403636579758555392, 1403636579758555393]
-    assert parse_numeric(b"1.5,1\n2,2\n", (2,), comma=True)[2] is None  # type: ignore[index]
+    assert got is not None and got.first_int is not None
+    assert got.first_int.tolist() == [1403636579758555392, 1403636579758555393]
+    assert parse_numeric(b"1.5,1\n2,2\n", (2,), comma=True).first_int is None  # type: ignore[union-attr]
 
 
 def _tum_lines(n: int) -> list[str]:
@@ -127,3 +146,30 @@ def test_euroc_nanosecond_stamps_as_the_line_loop_reads_them(tmp_path: Path) -> 
     track = read_trajectory(p)
     expect = [t // 1_000_000_000 + (t % 1_000_000_000) * 1e-9 for t in ns]
     assert track.stamps_s.tolist() == expect
+
+
+def test_covariance_csv_fast_path_equals_the_line_loop(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from gtrig.io import posetrack
+    from gtrig.trajectory import PoseStatus, PoseTrack
+
+    n = 3000
+    rng = np.random.default_rng(2)
+    A = rng.normal(size=(n, 6, 6)) * 1e-3
+    status = rng.choice([int(s) for s in PoseStatus], n).astype(np.uint8)
+    reasons = tuple("gap of 0.4 s" if s == PoseStatus.BRIDGED else "" for s in status)
+    track = PoseTrack(100 + 0.01 * np.arange(n), rng.normal(size=(n, 3)), np.tile([0, 0, 0, 1.0], (n, 1)),
+                      A @ np.swapaxes(A, 1, 2), "se3", status, reasons, "GTfused")
+    posetrack.write_pose_track(track, tmp_path / "a.tum", tmp_path / "a_cov.csv")
+    fast = posetrack.read_covariance_csv(tmp_path / "a_cov.csv")
+    monkeypatch.setattr(posetrack, "_fast_covariances", lambda p, d: None)
+    slow = posetrack.read_covariance_csv(tmp_path / "a_cov.csv")
+    for a, b in zip(fast, slow, strict=True):
+        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b
+    assert np.array_equal(fast[1], track.cov) and fast[4] == reasons
+    monkeypatch.undo()
+    text = (tmp_path / "a_cov.csv").read_text().splitlines()
+    text[1502] = text[1502].replace(",ok,", ",fine,").replace(",flagged,", ",fine,").replace(
+        ",bridged,", ",fine,").replace(",rejected,", ",fine,")
+    (tmp_path / "a_cov.csv").write_text("\n".join(text) + "\n")
+    with pytest.raises(FormatError, match=r"a_cov.csv:1503: status 'fine' is none of"):
+        posetrack.read_covariance_csv(tmp_path / "a_cov.csv")

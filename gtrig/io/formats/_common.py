@@ -37,9 +37,8 @@ def read_numeric(path: str | os.PathLike[str], ncols: tuple[int, ...], sep: str 
         lines = decode_text(p, data, _WHAT, encoding="utf-8-sig").splitlines()
         a, numbers = numeric_rows(p, lines, ncols, sep, what)
         return p, a, np.asarray(numbers, np.int64), None
-    a, numbers, first_int = fast
-    _check_finite(p, a, numbers)
-    return p, a, numbers, first_int
+    _check_finite(p, fast.values, fast.line_numbers)
+    return p, fast.values, fast.line_numbers, fast.first_int
 
 
 def numeric_rows(p: Path, lines: list[str], ncols: tuple[int, ...], sep: str | None, what: str
