@@ -27,7 +27,7 @@ def _ranges(n: int, b: int) -> np.ndarray:
 def test_the_characters_of_python_percent_formatting(decimals: int) -> None:
     r = _ranges(300, 20)
     st = 1.7e9 + np.arange(len(r)) / 75.0
-    want = "".join(f"{t:.9f}" + "".join(f",{v:.{decimals}f}" for v in row) + "\n" for t, row in zip(st, r))
+    want = "".join(f"{t:.9f}" + "".join(f",{v:.{decimals}f}" for v in row) + "\n" for t, row in zip(st, r, strict=True))
     got = scan_body(st, r, decimals)
     assert got is not None and got.decode() == want
 
@@ -38,7 +38,7 @@ def test_other_decimals_and_huge_ranges_take_the_numpy_path(tmp_path: Path) -> N
     assert scan_body(st, r, 5) is None and scan_body(st, r, 4) is None
     write_scans(tmp_path / "a.csv", ScanLog(st, r), range_decimals=5)
     lines = (tmp_path / "a.csv").read_text().splitlines()
-    assert lines[1:] == [f"{t:.9f}," + ",".join(f"{v:.5f}" for v in row) for t, row in zip(st, r)]
+    assert lines[1:] == [f"{t:.9f}," + ",".join(f"{v:.5f}" for v in row) for t, row in zip(st, r, strict=True)]
 
 
 def test_written_scans_read_back(tmp_path: Path) -> None:
