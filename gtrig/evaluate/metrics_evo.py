@@ -93,7 +93,8 @@ def rpe(stamps_s: np.ndarray, q_gt: np.ndarray, t_gt: np.ndarray, q_est: np.ndar
 
     ``|trans(E)| = |t_P - t_Q|`` (a rotation keeps lengths), ``angle(E) = angle(R_Q^-1 R_P)``."""
     delta = max(int(delta), 1)
-    trans, angle = _kernels.rpe_errors(*_c(q_gt, t_gt, q_est, t_est), delta)
+    qg, tg, qe, te = _c(q_gt, t_gt, q_est, t_est)
+    trans, angle = _kernels.rpe_errors(qg, tg, qe, te, delta)
     s = np.asarray(stamps_s, float)[delta::delta][:trans.size]
     return {
         "trans": ErrorSeries("RPE trans", "m", s, trans),
