@@ -179,7 +179,7 @@ def bench_gt_aware(recs: Path) -> None:
     for run in runs:
         truth = read_trajectory(run / "recording" / "truth" / "run.tum")
         biased = PoseTrack(truth.stamps_s, truth.xyz + [0.01, 0, 0], truth.quat_xyzw)
-        for gname in ("gt_laser", "gt_vision_run", "gt_fusion"):
+        for gname in ("gt_laser", "gt_vision_run", "gt_fused"):
             p = run / "results" / f"{gname}.tum"
             if not p.is_file():
                 continue
