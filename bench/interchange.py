@@ -120,6 +120,29 @@ def throughput(work: Path, n_images: int, n_scans: int) -> None:
               f"import / peer time {dt / dp:.2f})")
 
 
+def png_settings(n: int = 20) -> None:
+    """OpenCV's PNG encoder settings on the bench's frames, one thread: frames per CPU-second and size."""
+    rng = np.random.default_rng(0)
+    base = cv2.GaussianBlur(rng.integers(0, 255, (768, 1024), dtype=np.uint8), (0, 0), 3)
+    imgs = [np.roll(base, 7 * i, axis=1) for i in range(n)]
+    C, S = cv2.IMWRITE_PNG_COMPRESSION, cv2.IMWRITE_PNG_STRATEGY
+    settings = {"OpenCV's default (no options)": [], "level 1": [C, 1],
+                "level 1, Huffman only": [C, 1, S, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY],
+                "level 1, Huffman only, SUB filter (gtrig's)": PNG_PARAMS,
+                "level 0 (stored)": [C, 0]}
+    if hasattr(cv2, "IMWRITE_PNG_FILTER"):
+        settings["level 0 (stored), no filter"] = [C, 0, cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    print(f"PNG encoder settings, {n} frames 1024 x 768 mono8, OpenCV {cv2.__version__}, one thread:")
+    for name, params in settings.items():
+        c0 = time.process_time()
+        size = [len(cv2.imencode(".png", im, params)[1]) for im in imgs]
+        dc = time.process_time() - c0
+        print(f"  {name}: {n / dc:7.1f} frames per CPU-second, {np.mean(size) / 1e3:.0f} kB")
+    cv2.setNumThreads(threads)
+
+
 def _same_files(a: Path, b: Path) -> tuple[int, list[str]]:
     n, diff = 0, []
     for f in sorted(a.rglob("*")):
@@ -228,6 +251,7 @@ def main() -> None:
         tp = a.work / "throughput"
         shutil.rmtree(tp, ignore_errors=True)
         tp.mkdir()
+        png_settings()
         throughput(tp, a.images, a.scans)
     if not a.skip_round_trip:
         rec = a.rec
