@@ -133,10 +133,11 @@ def _image(msg: Any, where: str, n: int) -> np.ndarray:
 
 
 def _png_params() -> list[int]:
-    """OpenCV's fastest lossless PNG: deflate level 1 with Huffman coding only (no string matching) over
-    the SUB filter (each byte minus its left neighbour: what makes a camera image compressible). On
-    1024 x 768 camera frames it encodes 2.2x as fast as level 1 with OpenCV's adaptive filters, to files
-    of about the same size (bench/interchange.py). The filter option exists from OpenCV 4.11."""
+    """OpenCV's fastest lossless PNG that compresses: deflate level 1 with Huffman coding only (no string
+    matching) over the SUB filter (each byte minus its left neighbour: what makes a camera image
+    compressible). On 1024 x 768 camera frames it encodes about twice as fast as level 1 with OpenCV's
+    adaptive filters, to files of about the same size (bench/interchange.py). The filter option exists
+    from OpenCV 4.11."""
     params = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
     if hasattr(cv2, "IMWRITE_PNG_FILTER"):
         params += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_SUB]
