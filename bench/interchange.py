@@ -10,11 +10,11 @@ recording.
 2. Round trip. A ``gtrig sim --quick`` recording (``--rec``, or simulated into ``--work``) has its run,
    validation and background sequences exported to a bag (images, fixed and onboard scans,
    odometry), imported into a new recording (the parts no bag holds, survey, calibration images and
-   rig, copied), and GTlaser (``gtrig.laser.recording.track_recording``) and GTvision
-   (``gtrig.vision.sequence.run_recording`` with the truth rig) run on both. Printed: whether every
-   imported file is byte-identical (text) or pixel-identical (images), and the largest difference of
-   the stages' poses and covariances; GTvision once more on the validation sequence imported as one
-   lossless FFV1 video per camera.
+   rig, copied), and the whole pipeline (``gtrig run``: GTlaser, GTvision, sync, fusion) run on both.
+   Printed: whether every imported file is byte-identical (text) or pixel-identical (images), whether
+   the GTlaser, GTvision and fusion pose tracks are byte-identical, and the largest difference of their
+   poses and covariances; GTvision (``gtrig.vision.sequence.run_recording``, truth rig) once more on the
+   validation sequence imported as one lossless FFV1 video per camera.
 
     python bench/interchange.py [--images 200] [--scans 20000] [--rec REC] [--work /tmp/gtrig_bench_interchange]
 """
@@ -32,7 +32,7 @@ import numpy as np
 
 from gtrig.io.rosbag._bag import BagWriter, header
 from gtrig.io.rosbag.record_export import export_recording
-from gtrig.io.rosbag.record_import import import_bag
+from gtrig.io.rosbag.record_import import PNG_PARAMS, import_bag
 from gtrig.rig.load import dump_rig
 from gtrig.sim.gtroom import make_scene
 
@@ -96,7 +96,7 @@ def throughput(work: Path, n_images: int, n_scans: int) -> None:
             peer_dir = work / f"peer_{fmt}"
             shutil.rmtree(peer_dir, ignore_errors=True)
             peer_dir.mkdir()
-            params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if fmt == "png" else []
+            params = PNG_PARAMS if fmt == "png" else []
             t0, c0 = time.perf_counter(), time.process_time()
             with ThreadPoolExecutor(2) as pool:
                 list(pool.map(lambda a, d=peer_dir, f=fmt, p=params: cv2.imwrite(str(d / f"{a[0]:06d}.{f}"), a[1], p),
@@ -120,6 +120,29 @@ def throughput(work: Path, n_images: int, n_scans: int) -> None:
               f"import / peer time {dt / dp:.2f})")
 
 
+def png_settings(n: int = 20) -> None:
+    """OpenCV's PNG encoder settings on the bench's frames, one thread: frames per CPU-second and size."""
+    rng = np.random.default_rng(0)
+    base = cv2.GaussianBlur(rng.integers(0, 255, (768, 1024), dtype=np.uint8), (0, 0), 3)
+    imgs = [np.roll(base, 7 * i, axis=1) for i in range(n)]
+    C, S = cv2.IMWRITE_PNG_COMPRESSION, cv2.IMWRITE_PNG_STRATEGY
+    settings = {"OpenCV's default (no options)": [], "level 1": [C, 1],
+                "level 1, Huffman only": [C, 1, S, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY],
+                "level 1, Huffman only, SUB filter (gtrig's)": PNG_PARAMS,
+                "level 0 (stored)": [C, 0]}
+    if hasattr(cv2, "IMWRITE_PNG_FILTER"):
+        settings["level 0 (stored), no filter"] = [C, 0, cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    print(f"PNG encoder settings, {n} frames 1024 x 768 mono8, OpenCV {cv2.__version__}, one thread:")
+    for name, params in settings.items():
+        c0 = time.process_time()
+        size = [len(cv2.imencode(".png", im, params)[1]) for im in imgs]
+        dc = time.process_time() - c0
+        print(f"  {name}: {n / dc:7.1f} frames per CPU-second, {np.mean(size) / 1e3:.0f} kB")
+    cv2.setNumThreads(threads)
+
+
 def _same_files(a: Path, b: Path) -> tuple[int, list[str]]:
     n, diff = 0, []
     for f in sorted(a.rglob("*")):
@@ -140,7 +163,7 @@ def _same_files(a: Path, b: Path) -> tuple[int, list[str]]:
 
 def round_trip(rec: Path, work: Path) -> None:
     from gtrig.io.posetrack import read_pose_track
-    from gtrig.laser.recording import track_recording
+    from gtrig.pipeline import run as run_pipeline
     from gtrig.rig import load_rig
     from gtrig.vision.sequence import run_recording
 
@@ -169,17 +192,28 @@ def round_trip(rec: Path, work: Path) -> None:
         if (rec / seq).is_dir():
             n, diff = _same_files(rec / seq, back / seq)
             print(f"  {seq}: {n} files, {'all identical' if not diff else str(len(diff)) + ' differ: ' + diff[0]}")
+    # the whole pipeline (survey ... GTlaser, GTvision, sync, fusion) on both recordings: the same outputs
+    outs = {}
     for name, r in (("original", rec), ("imported", back)):
-        track_recording(r, "run", out_tum=work / f"laser_{name}.tum", out_cov=work / f"laser_{name}_cov.csv")
-    a = read_pose_track(work / "laser_original.tum", work / "laser_original_cov.csv")
-    b = read_pose_track(work / "laser_imported.tum", work / "laser_imported_cov.csv")
-    _compare("GTlaser run", a.stamps_s, b.stamps_s, a.xyz, b.xyz, a.quat_xyzw, b.quat_xyzw, a.cov, b.cov)
+        outs[name] = work / f"pipeline_{name}"
+        shutil.rmtree(outs[name], ignore_errors=True)
+        t1 = time.perf_counter()
+        run_pipeline(r, outs[name], reuse=False)
+        print(f"  gtrig run on the {name} recording: {time.perf_counter() - t1:.0f} s")
+    for stem, what in (("gt_laser", "GTlaser run"), ("gt_vision_validation", "GTvision validation"),
+                       ("gt_vision_run", "GTvision run"), ("gt_fused", "fusion run")):
+        files = [f"{stem}.tum", f"{stem}_cov.csv"]
+        if not all((outs["original"] / f).is_file() for f in files):
+            print(f"  {what}: not produced")
+            continue
+        same = all((outs["original"] / f).read_bytes() == (outs["imported"] / f).read_bytes() for f in files)
+        a = read_pose_track(outs["original"] / files[0], outs["original"] / files[1])
+        b = read_pose_track(outs["imported"] / files[0], outs["imported"] / files[1])
+        _compare(f"{what} ({'TUM and covariance files byte-identical' if same else 'files differ'})", a.stamps_s,
+                 b.stamps_s, a.xyz, b.xyz, a.quat_xyzw, b.quat_xyzw, a.cov, b.cov)
     rig = load_rig(rec / "truth" / "rig.yaml")
     va = run_recording(rec, rig, "validation", workers=1)
-    vb = run_recording(back, rig, "validation", workers=1)
-    ta, tb = va.trajectory(), vb.trajectory()
-    _compare("GTvision validation", ta.stamps_s, tb.stamps_s, ta.xyz, tb.xyz, ta.quat_xyzw, tb.quat_xyzw,
-             va.covariances(), vb.covariances())
+    ta = va.trajectory()
     # the same bag imported with one lossless video per camera, decoded by GTvision's workers
     vid = work / "imported_video"
     shutil.rmtree(vid, ignore_errors=True)
@@ -217,6 +251,7 @@ def main() -> None:
         tp = a.work / "throughput"
         shutil.rmtree(tp, ignore_errors=True)
         tp.mkdir()
+        png_settings()
         throughput(tp, a.images, a.scans)
     if not a.skip_round_trip:
         rec = a.rec

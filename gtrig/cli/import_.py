@@ -22,8 +22,8 @@ def rosbag(
     list_: bool = typer.Option(False, "--list", help="Print the topics (type, count, rate) and a topics.yaml."),
     stamp: str | None = typer.Option(None, "--stamp", help="header or receive (default: topics.yaml's, header)."),
     video: bool = typer.Option(False, "--video", help="One lossless FFV1 video.mkv per camera instead of images."),
-    image_format: str = typer.Option("pgm", "--image-format", help="pgm (uncompressed, fastest) or png (level 1, "
-                                     "half the disk, 5x slower)."),
+    image_format: str = typer.Option("pgm", "--image-format", help="pgm (uncompressed, fastest) or png (lossless, "
+                                     "under half the disk, about 10x slower)."),
     force: bool = typer.Option(False, "--force", help="Replace the sequence folder if it exists."),
 ) -> None:
     """Import a bag: images, laser scans, odometry and trajectories, checked against the rig."""

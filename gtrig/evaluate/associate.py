@@ -117,6 +117,9 @@ def _n_distinct(idx: np.ndarray, n: int) -> int:
 
 def _take(track: PoseTrack, idx: np.ndarray, stamps_s: np.ndarray) -> PoseTrack:
     """The poses ``idx`` of ``track`` (repeats allowed) stamped ``stamps_s``."""
+    n = len(track)
+    if idx.size == n and (n == 0 or (idx[0] == 0 and idx[-1] == n - 1 and bool(np.all(np.diff(idx) == 1)))):
+        return replace(track, stamps_s=stamps_s)  # every pose once, in order: no copy of 10^6 poses
     reasons = tuple(track.reasons[i] for i in idx) if any(track.reasons) else ("",) * len(idx)
     return replace(track, stamps_s=stamps_s, xyz=track.xyz[idx], quat_xyzw=track.quat_xyzw[idx],
                    cov=None if track.cov is None else track.cov[idx], status=track.status[idx], reasons=reasons)

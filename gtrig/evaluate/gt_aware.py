@@ -35,12 +35,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
-from gtrig.evaluate import quat
+from gtrig.evaluate import _kernels, quat
 from gtrig.trajectory import PoseTrack
 
-Z95 = float(stats.norm.ppf(0.975))
+#: scipy.stats.norm.ppf(0.975), written out: importing scipy.stats costs a CLI call half a second
+Z95 = 1.959963984540054
 #: the upper end of gtrig's NEES-per-dof consistency band (docs/vision.md, the accuracy tables' 0.5-2)
 NEES_MAX = 2.0
 
@@ -118,6 +118,8 @@ def batch_interval(x: np.ndarray, n_batches: int = N_BATCHES) -> Interval:
     m = float(np.mean(x))
     if n < 2:
         return Interval(m, float("-inf"), float("inf"))
+    from scipy import stats
+
     if n < 2 * n_batches:
         h = float(stats.t.ppf(0.975, n - 1) * np.std(x, ddof=1) / np.sqrt(n))
         return Interval(m, m - h, m + h)
@@ -139,6 +141,8 @@ def score(gt: PoseTrack, est: PoseTrack) -> GTAwareScores | None:
     carries no covariance."""
     if gt.cov is None or gt.cov_kind not in ("se3", "xyyaw", "xyz"):
         return None
+    from scipy import stats
+
     from gtrig.trajectory import COV_AXES
 
     e_all = world_errors(gt, est)
@@ -192,15 +196,14 @@ class LeverArm:
 def lever_arm(gt: PoseTrack, est: PoseTrack) -> LeverArm | None:
     """Fit ``e_xy,i = R(yaw_gt,i) L + c`` (least squares) to the planar position errors; None when the heading
     does not vary enough (under 90 degrees of spread) to separate ``L`` from ``c``."""
-    yaw = gt.yaw_rad()
-    if len(yaw) < 10:
+    n = len(gt)
+    if n < 10:
         return None
+    c, s = _kernels.heading_cos_sin(np.ascontiguousarray(gt.quat_xyzw))
     # the spread of headings: the resultant length of unit heading vectors is 1 for a constant heading
-    if np.hypot(np.mean(np.cos(yaw)), np.mean(np.sin(yaw))) > 0.9:
+    if np.hypot(np.mean(c), np.mean(s)) > 0.9:
         return None
     e = (est.xyz - gt.xyz)[:, :2]
-    c, s = np.cos(yaw), np.sin(yaw)
-    n = len(yaw)
     # e_x = c Lx - s Ly + cx, e_y = s Lx + c Ly + cy: the 4 x 4 normal equations, built without the 2n x 4 matrix
     sc, ss = float(np.sum(c)), float(np.sum(s))
     AtA = np.array([[n, 0.0, sc, ss], [0.0, n, -ss, sc], [sc, -ss, n, 0.0], [ss, sc, 0.0, n]])

@@ -17,7 +17,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, signal
 
 from gtrig.errors import InputError
 from gtrig.evaluate.align import AlignKind, apply_alignment, fit_alignment
@@ -56,6 +55,8 @@ def _residual(gt: PoseTrack, est: PoseTrack, tau: float, align: AlignKind, max_g
 def estimate_time_offset(gt: PoseTrack, est: PoseTrack, align: AlignKind = "se3", max_offset_s: float = 5.0,
                          max_gap_s: float = 0.2) -> TimeOffset:
     """The offset to add to the estimate's stamps (module docstring)."""
+    from scipy import optimize, signal  # here: a CLI call without --t-offset auto need not import them
+
     lo = max(gt.stamps_s[0], est.stamps_s[0] - max_offset_s)
     hi = min(gt.stamps_s[-1], est.stamps_s[-1] + max_offset_s)
     if hi - lo < 4 * max_offset_s:

@@ -26,7 +26,7 @@ import numpy as np
 
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_group
-from gtrig.io.text import read_text
+from gtrig.io.text import decode_text, read_bytes
 from gtrig.io.tum import read_tum, tum_text
 from gtrig.trajectory import COV_AXES, CovKind, PoseStatus, PoseTrack
 
@@ -87,11 +87,21 @@ def _floats(p: Path, line: int, cells: list[str]) -> list[float]:
         raise FormatError(f"{p}:{line}: not a number in {cells!r}") from None
 
 
-def read_covariance_csv(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray | None, CovKind,
-                                                                 np.ndarray, tuple[str, ...], dict[str, str]]:
-    """``(stamps_s, cov or None, cov_kind, status, reasons, meta)`` from a covariance CSV of any layout."""
+_Covariances = tuple[np.ndarray, "np.ndarray | None", CovKind, np.ndarray, tuple[str, ...], dict[str, str]]
+
+
+def read_covariance_csv(path: str | os.PathLike[str]) -> _Covariances:
+    """``(stamps_s, cov or None, cov_kind, status, reasons, meta)`` from a covariance CSV of any layout.
+
+    The current layout is read by the compiled parser (gtrig.io._numtext: 10^6 rows in a few seconds);
+    anything it does not take (an old layout, quotes, a bad row) by the csv module's line loop, whose
+    one-line errors name the file and line."""
     p = Path(path)
-    lines = read_text(p, "pose covariance CSV").splitlines()
+    data = read_bytes(p, "pose covariance CSV")
+    fast = _fast_covariances(p, data)
+    if fast is not None:
+        return fast
+    lines = decode_text(p, data, "pose covariance CSV").splitlines()
     meta = _header_meta(lines[0]) if lines and lines[0].startswith(_MAGIC) else {}
     rows = [(i + 1, r) for i, r in enumerate(csv.reader(lines)) if r and not r[0].startswith("#")]
     if not rows:
@@ -130,6 +140,60 @@ def read_covariance_csv(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.nd
     return (np.array(stamps, float), cov, kind or "se3", np.array(status, np.uint8), tuple(reasons), meta)
 
 
+def _fast_covariances(p: Path, data: bytes) -> _Covariances | None:
+    """The current layout by the compiled parser, or None (the line loop decides)."""
+    from gtrig.io._numtext import parse_numeric
+
+    meta: dict[str, str] = {}
+    pos = 0
+    header = None
+    while pos < len(data) and header is None:
+        end = data.find(b"\n", pos)
+        end = len(data) if end < 0 else end
+        try:
+            line = data[pos:end].decode("ascii").removesuffix("\r")
+        except UnicodeDecodeError:
+            return None
+        if pos == 0 and line.startswith(_MAGIC):
+            meta = _header_meta(line)
+        pos = end + 1
+        if line and not line.startswith("#"):
+            header = line.split(",")  # as csv.reader splits an unquoted line
+    if header is None or header[:3] != ["stamp_s", "status", "reason"] or any('"' in h for h in header):
+        return None
+    kind = _kind_from_axes(p, header[3:], "cov_")
+    t = parse_numeric(data[pos:], (len(header),), comma=True, text_cols=(1, 2))
+    if t is None:
+        return None
+    status = _statuses(t.buf, t.spans[:, 0])
+    if status is None:
+        return None
+    n = len(t.values)
+    empty = t.spans[:, 1, 1] == t.spans[:, 1, 0]
+    reasons = [""] * n
+    raw = t.buf.tobytes() if not empty.all() else b""
+    for i in np.flatnonzero(~empty).tolist():  # reasons are rare: most poses are fine
+        a, b = t.spans[i, 1]
+        reasons[i] = raw[a:b].decode("ascii")
+    k = 0 if kind is None else len(COV_AXES[kind])
+    cov = np.ascontiguousarray(t.values[:, 3:]).reshape(n, k, k) if kind is not None else None
+    return t.values[:, 0].copy(), cov, kind or "se3", status, tuple(reasons), meta
+
+
+def _statuses(buf: np.ndarray, spans: np.ndarray) -> np.ndarray | None:
+    """(n,) uint8 :class:`PoseStatus` of the words at ``spans`` (n, 2) in ``buf``, written in lower case;
+    None when one is not (the line loop then names it)."""
+    start, length = spans[:, 0], spans[:, 1] - spans[:, 0]
+    out = np.full(len(spans), 255, np.uint8)
+    for st in PoseStatus:
+        word = np.frombuffer(st.name.lower().encode(), np.uint8)
+        idx = np.flatnonzero(length == word.size)
+        if idx.size:
+            match = np.all(buf[start[idx, None] + np.arange(word.size)] == word, axis=1)
+            out[idx[match]] = int(st)
+    return None if bool((out == 255).any()) else out
+
+
 def _read_laser_v0(p: Path, header: list[str], body: list[tuple[int, list[str]]]) -> tuple[
         np.ndarray, np.ndarray, CovKind, np.ndarray, tuple[str, ...], dict[str, str]]:
     stamps, covs = [], []
@@ -143,6 +207,17 @@ def _read_laser_v0(p: Path, header: list[str], body: list[tuple[int, list[str]]]
     n = len(body)
     return (np.array(stamps, float), np.array(covs, float).reshape(n, 3, 3), "xyyaw", np.zeros(n, np.uint8),
             ("",) * n, {"source": "GTlaser"})
+
+
+def _symmetric(cov: np.ndarray) -> bool:
+    """Every finite (n, k, k) covariance equals its transpose as ``np.allclose(C, C^T, rtol=1e-6,
+    atol=1e-15)`` says, checked on the k (k - 1) / 2 pairs off the diagonal only (no (n, k, k) temporaries)."""
+    i, j = np.triu_indices(cov.shape[1], 1)
+    a, b = cov[:, i, j], cov[:, j, i]
+    d = np.abs(a - b)
+    ok = (d <= 1e-15 + 1e-6 * np.abs(b)) & (d <= 1e-15 + 1e-6 * np.abs(a))
+    finite = np.isfinite(cov).all(axis=(1, 2))
+    return bool(ok[finite].all())
 
 
 def read_pose_track(tum_path: str | os.PathLike[str], cov_path: str | os.PathLike[str] | None = None,
@@ -159,11 +234,8 @@ def read_pose_track(tum_path: str | os.PathLike[str], cov_path: str | os.PathLik
         i = int(np.argmax(bad))
         raise FormatError(f"{cov_path}: row {i + 1} is stamped {stamps[i]:.6f}, pose {i + 1} of {tum_path} "
                           f"{traj.stamps_s[i]:.6f}")
-    if cov is not None:
-        finite = np.all(np.isfinite(cov), axis=(1, 2))
-        sym_ok = np.allclose(cov[finite], np.swapaxes(cov[finite], 1, 2), rtol=1e-6, atol=1e-15)
-        if not sym_ok:
-            raise FormatError(f"{cov_path}: a covariance is not symmetric")
+    if cov is not None and not _symmetric(cov):
+        raise FormatError(f"{cov_path}: a covariance is not symmetric")
     return PoseTrack(traj.stamps_s, traj.xyz, traj.quat_xyzw, cov, kind, status, reasons,
                      source or meta.get("source", ""), meta.get("frame_id", "world"),
                      meta.get("child_frame_id", "robot"))

@@ -124,17 +124,22 @@ def parse_yaml(text: str, source: str) -> Any:
 
 def read_text_file(path: str | os.PathLike[str], what: str = "file") -> str:
     """The text of ``path``, with one-line errors: missing, a folder, not text, unreadable."""
-    p = Path(path)
+    return decode_text_file(path, read_bytes_file(path, what), what)
+
+
+def read_bytes_file(path: str | os.PathLike[str], what: str = "file") -> bytes:
+    """The bytes of ``path``, with :func:`read_text_file`'s messages: missing, a folder, unreadable."""
+    from gtrig.io.text import read_bytes
+
+    return read_bytes(path, what, InputError, missing=f"no such {what}")
+
+
+def decode_text_file(path: str | os.PathLike[str], data: bytes, what: str = "file") -> str:
+    """``data``, the bytes of ``path``, as UTF-8 text; undecodable bytes are one :class:`FormatError`."""
     try:
-        return p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{p}: no such {what}") from None
-    except IsADirectoryError:
-        raise InputError(f"{p}: is a folder, expected a {what}") from None
+        return data.decode("utf-8")
     except UnicodeDecodeError:
-        raise FormatError(f"{p}: not a text {what} (undecodable bytes)") from None
-    except OSError as e:
-        raise InputError(f"{p}: cannot read ({e.strerror or e})") from None
+        raise FormatError(f"{Path(path)}: not a text {what} (undecodable bytes)") from None
 
 
 def load_yaml(path: str | os.PathLike[str]) -> Any:

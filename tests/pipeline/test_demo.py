@@ -32,6 +32,8 @@ def test_demo_quick_runs_every_stage_against_truth(demo: Path, tmp_path: Path) -
     for name in ("rig.calibrated.yaml", "markers.yaml", "gt_laser.tum", "gt_laser_cov.csv",
                  "gt_vision_validation.tum", "gt_vision_run.tum", "survey/world_points.csv", "accuracy.csv"):
         assert (res / name).is_file(), name
+    # the demo ends with the one-page report (its content is tests/report's)
+    assert 'src="data:image/png;base64,' in (out / "report.html").read_text(encoding="utf-8")
 
     # the calibrated rig carries every calibrated part, not the operator's nominal values
     nominal, cal = load_rig(out / "recording" / "rig.yaml"), load_rig(res / "rig.calibrated.yaml")

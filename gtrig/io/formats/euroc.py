@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from gtrig.io.atomic import atomic_write_text
-from gtrig.io.formats._common import check_stamps, numeric_rows, read_lines, unit_quaternions
+from gtrig.io.formats._common import LineNumbers, check_stamps, read_lines, read_numeric, unit_quaternions
 from gtrig.trajectory import PoseTrack
 
 HEADER = ("#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], "
@@ -29,16 +29,19 @@ HEADER = ("#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS
 
 def read_euroc(path: str | os.PathLike[str]) -> PoseTrack:
     """A EuRoC ground-truth CSV as a pose track (no covariance)."""
-    p, lines = read_lines(path)
-    a, numbers = numeric_rows(p, lines, (8, 17), ",", "8 or 17 comma-separated values (EuRoC "
-                              "'#timestamp, p_RS_R_x, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z, ...')")
-    stamps = _stamps_s(p, lines, numbers)
+    p, a, numbers, stamps_ns = read_numeric(path, (8, 17), ",", "8 or 17 comma-separated values (EuRoC "
+                                            "'#timestamp, p_RS_R_x, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z, ...')")
+    if stamps_ns is not None:
+        stamps = stamps_ns // 1_000_000_000 + (stamps_ns % 1_000_000_000) * 1e-9
+    else:
+        stamps = _stamps_s(p, read_lines(p)[1], numbers)
     check_stamps(p, stamps, numbers)
     q = unit_quaternions(p, a[:, [5, 6, 7, 4]], numbers)
     return PoseTrack(stamps, a[:, 1:4], q, source=p.parent.name if p.name == "data.csv" else p.stem)
 
 
-def _stamps_s(p: Path, lines: list[str], numbers: list[int]) -> np.ndarray:
+def _stamps_s(p: Path, lines: list[str], numbers: LineNumbers) -> np.ndarray:
+    """Seconds from the first cells, line by line (stamps not all plain integers)."""
     # integer nanoseconds (1.4e18 is past float64's 2^53): seconds and the rest split as integers first
     out = np.empty(len(numbers))
     for k, n in enumerate(numbers):

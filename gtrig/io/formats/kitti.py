@@ -21,7 +21,7 @@ import numpy as np
 
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_group
-from gtrig.io.formats._common import check_stamps, numeric_rows, read_lines, rotation_matrices
+from gtrig.io.formats._common import check_stamps, read_numeric, rotation_matrices
 from gtrig.trajectory import PoseTrack
 
 log = logging.getLogger(__name__)
@@ -34,8 +34,7 @@ def times_path_for(path: str | os.PathLike[str]) -> Path:
 
 def read_kitti(path: str | os.PathLike[str], times_path: str | os.PathLike[str] | None = None) -> PoseTrack:
     """KITTI poses (and their times) as a pose track without covariance."""
-    p, lines = read_lines(path)
-    a, numbers = numeric_rows(p, lines, (12,), None, "12 values (a 3x4 pose matrix, row-major)")
+    p, a, numbers, _ = read_numeric(path, (12,), None, "12 values (a 3x4 pose matrix, row-major)")
     T = np.tile(np.eye(4), (len(a), 1, 1))
     T[:, :3, :] = a.reshape(-1, 3, 4)
     rotation_matrices(p, T[:, :3, :3], numbers)
@@ -45,8 +44,7 @@ def read_kitti(path: str | os.PathLike[str], times_path: str | os.PathLike[str] 
     candidates = [Path(times_path)] if times_path is not None else [times_path_for(p), p.with_name("times.txt")]
     for tp in candidates:
         if tp.is_file() or times_path is not None:
-            tpp, tl = read_lines(tp)
-            t, tn = numeric_rows(tpp, tl, (1,), None, "one time stamp per line")
+            tpp, t, tn, _ = read_numeric(tp, (1,), None, "one time stamp per line")
             if len(t) != len(a):
                 if times_path is None and tp.name == "times.txt":
                     continue

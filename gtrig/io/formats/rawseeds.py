@@ -24,15 +24,14 @@ from pathlib import Path
 import numpy as np
 
 from gtrig.io.atomic import atomic_write_text
-from gtrig.io.formats._common import check_stamps, numeric_rows, read_lines
+from gtrig.io.formats._common import check_stamps, read_numeric
 from gtrig.trajectory import PoseTrack
 
 
 def read_rawseeds_rows(path: str | os.PathLike[str]) -> np.ndarray:
     """(N, 4) or (N, 13) the numbers of a RAWSEEDS file as printed (theta on the file's own branch)."""
-    p, lines = read_lines(path)
-    a, numbers = numeric_rows(p, lines, (4, 13), ",", "4 ('t,x,y,theta') or 13 (plus a 3x3 covariance) "
-                              "comma-separated values")
+    p, a, numbers, _ = read_numeric(path, (4, 13), ",", "4 ('t,x,y,theta') or 13 (plus a 3x3 covariance) "
+                                    "comma-separated values")
     check_stamps(p, a[:, 0], numbers)
     return a
 

@@ -60,7 +60,7 @@ def decode_scans(raws: Sequence[bytes], ros2: bool, deserialize: Callable[[bytes
     lengths = np.fromiter((len(r) for r in raws), dtype=np.int64, count=k)
     stamps = np.empty(k)
     geometry = np.empty((k, 7), np.float32)
-    ranges: list[np.ndarray | None] = [None] * k
+    blocks: list[tuple[np.ndarray, np.ndarray]] = []  # (message indices, their (m, beams) ranges)
     slow: list[int] = []
     for L in np.unique(lengths):
         idx = np.flatnonzero(lengths == L)
@@ -83,21 +83,19 @@ def decode_scans(raws: Sequence[bytes], ros2: bool, deserialize: Callable[[bytes
         nsec = G[:, 8:12].copy().view("<u4").reshape(-1).astype(np.int64)
         stamps[good] = sec + nsec * 1e-9
         geometry[good] = G[:, off - 32:off - 4].copy().view("<f4").reshape(-1, 7)
-        R = G[:, off:off + 4 * n].copy().view("<f4").reshape(-1, n)
-        for j, i in enumerate(good):
-            ranges[int(i)] = R[j]
+        blocks.append((good, G[:, off:off + 4 * n].copy().view("<f4").reshape(-1, n)))
         slow.extend(int(i) for i in idx[~same])
     for i in slow:
         msg = deserialize(raws[i])
         stamps[i] = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         geometry[i] = [getattr(msg, g) for g in GEOMETRY]
-        ranges[i] = np.asarray(msg.ranges, dtype=np.float32)
-    beams = np.array([r.size for r in ranges if r is not None], dtype=np.int64)
-    if np.all(beams == beams[0]):
-        out = np.vstack(ranges)  # type: ignore[arg-type]
-    else:
-        out = np.full((k, int(beams.max())), np.nan, np.float32)
-        for i, r in enumerate(ranges):
-            assert r is not None
-            out[i, :r.size] = r
+        blocks.append((np.array([i]), np.asarray(msg.ranges, dtype=np.float32)[None, :]))
+    beams = np.empty(k, np.int64)
+    for idx, R in blocks:
+        beams[idx] = R.shape[1]
+    if len(blocks) == 1:
+        return ScanBatch(stamps, geometry, beams, blocks[0][1])  # one layout, in bag order: no copy
+    out = np.full((k, int(beams.max())), np.nan, np.float32)
+    for idx, R in blocks:
+        out[idx, :R.shape[1]] = R
     return ScanBatch(stamps, geometry, beams, out)
