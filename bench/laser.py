@@ -5,7 +5,8 @@ reflectivity bias, scanner clock offsets of 2 ms), a background sequence, and th
 driven as the scenario says (``cruise``: 0.3 m/s; ``agile``: up to 1.5 m/s, 1 m/s^2, 2 rad/s;
 ``agile-blocked``: scanner 0 half blocked by clutter; ``agile-end-stamps``: scans stamped at the end of
 the sweep; ``agile-two-fabrics``: a hull with dark and light sides; ``agile-2mps``: up to 2 m/s at
-1.5 m/s^2). The scanners are calibrated from the background sequence (nominal poses 3 cm / 2 deg off),
+1.5 m/s^2; ``agile-one-clock``: the scanners' clock offsets zeroed, the yaw budget; ``agile-glossy-fabrics``:
+dark and light sides 3 cm apart in range bias; ``like-issue-19``: those fabrics, 1 % dropouts, up to 0.9 m/s). The scanners are calibrated from the background sequence (nominal poses 3 cm / 2 deg off),
 then the run is tracked with the calibrated poses and with the true ones. The peer is Open3D's
 point-to-point ``registration_icp`` (outline points of the hull to the same foreground points, started
 from its own previous pose), else a SciPy KD-tree ICP; the table says which.
@@ -286,6 +287,14 @@ SCENARIOS = {
     "agile-end-stamps": ({"stamp_at": "end"}, {"profile": "agile", "speed_mps": 1.5}),
     "agile-two-fabrics": ({"gown_reflectivity": (0.15, 0.9, 0.15, 0.9)}, {"profile": "agile", "speed_mps": 1.5}),
     "agile-2mps": ({}, {"profile": "agile", "speed_mps": 2.0, "accel_mps2": 1.5}),
+    # the yaw budget: the scanners on one clock (no offsets; the same noise otherwise)
+    "agile-one-clock": ({"clock_offset_sigma_s": 0.0}, {"profile": "agile", "speed_mps": 1.5}),
+    # glossy dark and light fabrics, 3 cm between black and white: the sides' range bias estimated
+    "agile-glossy-fabrics": ({"gown_reflectivity": (0.1, 0.9, 0.1, 0.9), "reflectivity_bias_m": 0.03},
+                             {"profile": "agile", "speed_mps": 1.5}),
+    # the other simulator of issue 19: up to 0.9 m/s, 1 % dropouts, fabrics of different bias
+    "like-issue-19": ({"gown_reflectivity": (0.1, 0.9, 0.1, 0.9), "reflectivity_bias_m": 0.03, "dropout_prob": 0.01},
+                      {"profile": "agile", "speed_mps": 0.9}),
 }
 
 

@@ -92,6 +92,11 @@ class VisionOptions:
         exactly as noisy as its camera's model has a factor above 1 half of the time, and charging
         that to it made the covariances of homogeneous data cautious by 10-40 % (E max(1, F) at 2-10
         dof); 0.5 charges every factor above 1 (the behaviour before issue 19).
+    rig_variance_component : bool
+        The recording's noise calibration splits its residuals between the corners and the rig's
+        stated uncertainty (:func:`gtrig.vision.sequence.calibrate_noise` with ``rig_component``),
+        so that a rig calibrated better or worse than it says gets the covariance its residuals show;
+        False: everything is charged to the corners, in one step.
     """
 
     planar: bool = True
@@ -105,6 +110,7 @@ class VisionOptions:
     max_variance_factor: float = 100.0
     previous_max_gap_s: float = 1.0
     frame_scale_level: float = 0.05
+    rig_variance_component: bool = True
 
     @property
     def planar_prior(self) -> PlanarPrior | None:
@@ -146,7 +152,13 @@ class FrameEstimate:
         input of the variance-factor estimate (:mod:`gtrig.vision.noise`).
     variance_factor : float
         The corners' chi-square over their redundancy (``chi2 / dof`` with the share of the dof that
-        the corners own); ``cov_6x6`` of an OK frame is the fit's covariance times ``max(1, factor)``.
+        the corners own); ``cov_6x6`` of an OK frame is the fit's covariance times this factor where
+        it is significantly above 1 (``VisionOptions.frame_scale_level``).
+    corner_noise : tuple of (camera, chi-square, redundancy)
+        The corners' own chi-square and redundancy per camera (the rig's nuisance priors left out).
+    rig_noise : (chi-square, redundancy)
+        The rig's nuisance priors' (:attr:`gtrig.vision.refine.RefineResult.chi2_rig`): with
+        ``corner_noise``, the input of the two-component estimate (:func:`gtrig.vision.sequence.calibrate_noise`).
     """
 
     stamp_s: float
@@ -164,6 +176,8 @@ class FrameEstimate:
     alternatives: tuple[np.ndarray, ...] = field(default=(), repr=False)
     noise: tuple[tuple[str, float, float], ...] = ()
     variance_factor: float = math.nan
+    corner_noise: tuple[tuple[str, float, float], ...] = ()
+    rig_noise: tuple[float, float] = (0.0, 0.0)
 
     @property
     def ok(self) -> bool:
@@ -265,9 +279,12 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
     share = red / red.sum() if np.all(np.isfinite(red)) and red.sum() > 0 else np.full(len(red), np.nan)
     noise = tuple((name, float(fit.chi2 * share[i]), float(fit.dof * share[i]))
                   for i, name in enumerate(sc.camera_names))
+    corner_noise = tuple((name, float(np.sum(fit.whitened[sc.cam == i] ** 2)), float(red[i]))
+                         for i, name in enumerate(sc.camera_names))
     common: dict[str, Any] = dict(
         T_world_robot=fit.T_world_robot, cov_6x6=fit.cov_6x6, views=used, rejected=tuple(rejected), rms_px=rms,
-        view_rms_px=view_rms, chi2=fit.chi2, dof=fit.dof, flip_margin=margin, noise=noise)
+        view_rms_px=view_rms, chi2=fit.chi2, dof=fit.dof, flip_margin=margin, noise=noise,
+        corner_noise=corner_noise, rig_noise=(fit.chi2_rig, fit.redundancy_rig))
     if margin < options.init.ambiguity_margin:
         return FrameEstimate(obs.stamp_s, Status.AMBIGUOUS,
                              f"flip ambiguous: runner-up costs only {margin:.1f} more "
