@@ -5,9 +5,10 @@ reflectivity bias, scanner clock offsets of 2 ms), a background sequence, and th
 driven as the scenario says (``cruise``: 0.3 m/s; ``agile``: up to 1.5 m/s, 1 m/s^2, 2 rad/s;
 ``agile-blocked``: scanner 0 half blocked by clutter; ``agile-end-stamps``: scans stamped at the end of
 the sweep; ``agile-two-fabrics``: a hull with dark and light sides; ``agile-2mps``: up to 2 m/s at
-1.5 m/s^2; ``agile-one-clock``: the scanners' clock offsets zeroed, the yaw budget; ``agile-glossy-fabrics``:
-dark and light sides 3 cm apart in range bias; ``like-issue-19``: those fabrics, 1 % dropouts, up to 0.9 m/s). The scanners are calibrated from the background sequence (nominal poses 3 cm / 2 deg off),
-then the run is tracked with the calibrated poses and with the true ones. The peer is Open3D's
+1.5 m/s^2; ``agile-one-clock``: the scanners' clock offsets zeroed, the yaw budget;
+``agile-glossy-fabrics``: dark and light sides 3 cm apart in range bias; ``like-issue-19``: those fabrics,
+1 % dropouts, up to 0.9 m/s). The scanners are calibrated from the background sequence (nominal poses
+3 cm / 2 deg off), then the run is tracked with the calibrated poses and with the true ones. The peer is Open3D's
 point-to-point ``registration_icp`` (outline points of the hull to the same foreground points, started
 from its own previous pose), else a SciPy KD-tree ICP; the table says which.
 

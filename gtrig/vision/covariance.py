@@ -92,7 +92,8 @@ class RigUncertainty:
             if base is None:
                 base = np.diag([self.camera_xyz_m**2] * 3 + [self.camera_rot_rad**2] * 3)
             C = np.array(base, dtype=float)
-            C[:6, :6] += np.asarray(E, dtype=float)
+            # the rig's variance factor scales its calibration, not the exposure time's motion
+            C[:6, :6] += np.asarray(E, dtype=float) / self.variance_factor
             cams[name] = C
         return replace(self, camera_cov=cams, _sqrt_info={}, _derived={})
 

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from gtrig.rig.models import Pose
 from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
-from gtrig.vision.covariance import RigUncertainty, nees, pose_error_xi
+from gtrig.vision.covariance import UNCALIBRATED_MARKERS, RigUncertainty, nees, pose_error_xi
 from gtrig.vision.estimate import VisionOptions, estimate_frame
 from gtrig.vision.observations import VisionModel
 from gtrig.vision.sequence import calibrate_noise
@@ -36,27 +36,29 @@ def rig_with_errors():
                   for m in rig.robot.markers)
     bad = rig.model_copy(update={"cameras": cams, "robot": rig.robot.model_copy(update={"markers": marks})})
     truth, obs = [], []
-    for k in range(0, 26, 2):
+    for k in range(26):
         T = scene.T_world_robot(*VALIDATION_POSES[k])
         o = synthetic_observations(rig, T, float(k), rng, CornerNoise(0.1))
         if o.views:
             truth.append(T)
             obs.append(o)
-    return VisionModel.from_rig(bad), sorted(c.name for c in rig.cameras), truth, obs
+    return VisionModel.from_rig(bad), sorted(c.name for c in rig.cameras), truth, obs, VisionModel.from_rig(rig)
+
+
+def _nees(model, cams, truth, obs, ru, two):
+    opts, _ = calibrate_noise(obs, VisionOptions(planar=False, rig_uncertainty=ru), cams,
+                              lambda o, x: [estimate_frame(model, v, o) for v in x],
+                              max_rounds=10 if two else 1, rig_component=two)
+    ests = [estimate_frame(model, o, opts) for o in obs]
+    ne = [nees(pose_error_xi(e.T_world_robot, T), e.cov_6x6) for e, T in zip(ests, truth, strict=True) if e.ok]
+    return np.mean(ne) / 6, opts.rig_uncertainty.variance_factor
 
 
 @pytest.mark.parametrize("stated", [1 / 4, 4.0])
 def test_rig_stated_wrong_by_four(rig_with_errors, stated):
-    model, cams, truth, obs = rig_with_errors
+    model, cams, truth, obs, _ = rig_with_errors
     ru = RigUncertainty(*(stated * s for s in SIGMAS))
-    out = {}
-    for two in (False, True):
-        opts, hist = calibrate_noise(obs, VisionOptions(planar=False, rig_uncertainty=ru), cams,
-                                     lambda o, x: [estimate_frame(model, v, o) for v in x],
-                                     max_rounds=10 if two else 1, rig_component=two)
-        ests = [estimate_frame(model, o, opts) for o in obs]
-        ne = [nees(pose_error_xi(e.T_world_robot, T), e.cov_6x6) for e, T in zip(ests, truth, strict=True) if e.ok]
-        out[two] = (np.mean(ne) / 6, opts.rig_uncertainty.variance_factor)
+    out = {two: _nees(model, cams, truth, obs, ru, two) for two in (False, True)}
     print(f"rig stated x{stated:.2f}: NEES/dof one component {out[False][0]:.2f}, two {out[True][0]:.2f} "
           f"(rig factor {out[True][1]:.3f})")
     assert 0.5 <= out[True][0] <= 2.0
@@ -64,3 +66,14 @@ def test_rig_stated_wrong_by_four(rig_with_errors, stated):
     assert 0.2 < out[True][1] * stated**2 < 2.0
     # charged to the corners alone, the misstatement stays in the covariance
     assert abs(np.log(out[True][0])) < 0.5 * abs(np.log(out[False][0]))
+
+
+def test_exact_rig_stated_by_hand(rig_with_errors):
+    # another simulator's exact calibration, given without its uncertainty: gtrig vision assumes
+    # hand-measured sigmas (cameras 3 mm / 0.05 deg, markers 2 mm / 0.5 deg)
+    _, cams, truth, obs, exact = rig_with_errors
+    one, _ = _nees(exact, cams, truth, obs, UNCALIBRATED_MARKERS, False)
+    two, factor = _nees(exact, cams, truth, obs, UNCALIBRATED_MARKERS, True)
+    print(f"exact rig, hand-measured sigmas: NEES/dof one component {one:.2f}, two {two:.2f} (rig factor {factor:.3g})")
+    assert one < 0.2
+    assert 0.5 <= two <= 2.0
