@@ -89,7 +89,9 @@ def estimate_rig_scale(rig_noise: Iterable[tuple[float, float]], min_redundancy:
     covariance then dominates every pose's, which comes out cautious by as much as the rig was
     understated. Estimated jointly with the corners' factors (:func:`gtrig.vision.sequence.calibrate_noise`)
     the two components settle at the split the residuals support (Foerstner 1979, variance components
-    from redundancy numbers)."""
+    from redundancy numbers), provided the fits over-determine the rig's nuisances (several markers per
+    camera); frame by frame, one marker in one camera cannot tell its corners' noise from its camera's
+    error."""
     chi = red = 0.0
     for c, r in rig_noise:
         if math.isfinite(c) and math.isfinite(r) and r > 0:

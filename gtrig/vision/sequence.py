@@ -287,7 +287,9 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
     :func:`gtrig.vision.noise.estimate_rig_scale`), iterated together until neither moves by more than
     ``tol``; the history's entries then end with ``("rig", factor)``, the rig's total factor. Charging
     everything to the corners (one component) kept a rig stated ten times worse than it is dominating
-    every pose's covariance.
+    every pose's covariance. The split needs instants that over-determine the rig's nuisances (several
+    markers per camera, as static validation stops have); on moving instants that show one marker to
+    one camera it runs away (:attr:`gtrig.vision.estimate.VisionOptions.rig_variance_component`).
     """
     from gtrig.vision.noise import estimate_corner_scale, estimate_rig_scale, scale_change
 

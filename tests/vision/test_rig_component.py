@@ -36,7 +36,7 @@ def rig_with_errors():
                   for m in rig.robot.markers)
     bad = rig.model_copy(update={"cameras": cams, "robot": rig.robot.model_copy(update={"markers": marks})})
     truth, obs = [], []
-    for k in range(26):
+    for k in range(0, 26, 2):
         T = scene.T_world_robot(*VALIDATION_POSES[k])
         o = synthetic_observations(rig, T, float(k), rng, CornerNoise(0.1))
         if o.views:
@@ -76,4 +76,6 @@ def test_exact_rig_stated_by_hand(rig_with_errors):
     two, factor = _nees(exact, cams, truth, obs, UNCALIBRATED_MARKERS, True)
     print(f"exact rig, hand-measured sigmas: NEES/dof one component {one:.2f}, two {two:.2f} (rig factor {factor:.3g})")
     assert one < 0.2
-    assert 0.5 <= two <= 2.0
+    # 0.54 here, 0.62 on all 26 poses: the rig's factor is still shrinking geometrically after 10
+    # rounds (7e-4), its markers' rotation nuisance not quite negligible yet
+    assert 0.45 <= two <= 2.0 and two > 3 * one
