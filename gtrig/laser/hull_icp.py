@@ -457,6 +457,18 @@ def side_bias_normal_equations(
     return H, H_pb, H_bb, g_p.astype(float), g_b
 
 
+def assigned_sides(
+    model: HullModel, xy_world: np.ndarray, frame_index: np.ndarray, scanner_index: np.ndarray,
+    scanner_xy_world: np.ndarray, dir_world: np.ndarray, sigma_range_m: np.ndarray, xytheta: np.ndarray,
+    settings: IcpSettings,
+) -> np.ndarray:
+    """(M,) the hull side each point is assigned to by the fit at ``xytheta`` (arguments as
+    :func:`scanner_sensitivity`): the nearest side facing its scanner."""
+    *_, lin, _ = _fit_normal_equations(model, xy_world, frame_index, scanner_index, scanner_xy_world, dir_world,
+                                       sigma_range_m, xytheta, settings)
+    return lin.side
+
+
 def side_bias_sensitivity(
     model: HullModel,
     xy_world: np.ndarray,

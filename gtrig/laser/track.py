@@ -38,6 +38,7 @@ from gtrig.laser.fuse import FramedPoints
 from gtrig.laser.hull_icp import (
     HullModel,
     IcpSettings,
+    assigned_sides,
     fit_hull_batch,
     scanner_sensitivity,
     side_bias_normal_equations,
@@ -410,7 +411,7 @@ def _refine_with_side_bias(
         # the prior holds the total bias: solve for it with the points' current correction undone
         u = u - np.einsum("kab,b->ka", N, beta)
         bias = estimate_side_bias(N, u, stamps[ok], prior)
-        side = _assigned_side(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
+        side = assigned_sides(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
         xy = xy - ((bias.bias_m - beta)[side])[:, None] * d
         beta = bias.bias_m
         fits = fit_hull_batch(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
@@ -422,14 +423,6 @@ def _refine_with_side_bias(
              np.array2string(1000 * bias.bias_m, precision=1),
              np.array2string(1000 * np.sqrt(np.diag(bias.cov)), precision=2), bias.variance_factor, bias.n_blocks)
     return bias
-
-
-def _assigned_side(model: HullModel, xy: np.ndarray, fid: np.ndarray, sid: np.ndarray, S: np.ndarray,
-                   d: np.ndarray, sigma_m: np.ndarray, pose: np.ndarray, icp: IcpSettings) -> np.ndarray:
-    """(M,) the hull side each point is assigned to by the fit at ``pose``."""
-    from gtrig.laser.hull_icp import _linearise
-
-    return _linearise(model, xy, fid, sid, S, d, sigma_m[sid] ** 2, pose, icp.gate_m, icp).side
 
 
 def _smooth_tracks(
