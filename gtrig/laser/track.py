@@ -396,7 +396,7 @@ def _refine_with_side_bias(
     symmetry) are left out."""
     ok = (status == OK) & np.isfinite(raw[:, 0])
     prior = _bias_prior(st)
-    if ok.sum() < 10:
+    if ok.sum() < 10 or not np.any(prior):  # (a zero prior: the bias is known to be nil)
         return SideBias.prior(prior)
     pt, fid = _frame_points_of(fp, ok)
     vel = _track_velocities(stamps, smoothed, track_id)[ok][fid]
