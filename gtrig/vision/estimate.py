@@ -27,7 +27,8 @@ corners than the camera's mean, and a chi-square test at the mean noise refused 
 frames of a simulated run (residual RMS 0.15-0.2 px against 0.1 px) while the accepted ones had a
 covariance too small by 2.2 (NEES). Scaling each frame by its own factor keeps those frames with an
 honest covariance; frames with few degrees of freedom get a noisy factor, which is why it never
-lowers the covariance.
+lowers the covariance, and why it is charged only where a chi-square test finds it significant
+(``frame_scale_level``): by chance alone half the frames have a factor above 1.
 """
 
 from __future__ import annotations
