@@ -5,8 +5,12 @@ reflectivity bias, scanner clock offsets of 2 ms), a background sequence, and th
 driven as the scenario says (``cruise``: 0.3 m/s; ``agile``: up to 1.5 m/s, 1 m/s^2, 2 rad/s;
 ``agile-blocked``: scanner 0 half blocked by clutter; ``agile-end-stamps``: scans stamped at the end of
 the sweep; ``agile-two-fabrics``: a hull with dark and light sides; ``agile-2mps``: up to 2 m/s at
-1.5 m/s^2). The scanners are calibrated from the background sequence (nominal poses 3 cm / 2 deg off),
-then the run is tracked with the calibrated poses and with the true ones. The peer is Open3D's
+1.5 m/s^2; ``agile-one-clock``: the scanners' clock offsets zeroed; ``agile-common-clock``,
+``agile-clock-differences``: only their mean, only their differences; ``agile-noise-only``: 1 cm range
+noise and nothing else; ``agile-ideal``: exact scans (the yaw budget);
+``agile-glossy-fabrics``: dark and light sides 3 cm apart in range bias; ``like-issue-19``: those fabrics,
+1 % dropouts, up to 0.9 m/s). The scanners are calibrated from the background sequence (nominal poses
+3 cm / 2 deg off), then the run is tracked with the calibrated poses and with the true ones. The peer is Open3D's
 point-to-point ``registration_icp`` (outline points of the hull to the same foreground points, started
 from its own previous pose), else a SciPy KD-tree ICP; the table says which.
 
@@ -22,6 +26,7 @@ import time
 import numpy as np
 
 from gtrig.geometry import wrap_angle
+from gtrig.io.scans import ScanLog
 from gtrig.laser.background import build_background
 from gtrig.laser.calibrate import calibrate_scanners
 from gtrig.laser.foreground import foreground_mask, foreground_threshold
@@ -171,7 +176,10 @@ def validation(vals, motion, intervals, scs, bgm, model: HullModel) -> dict:
 
 def run_seed(seed: int, duration: float | None, laser: dict | None = None, motion: dict | None = None,
              calibrate: bool = True, validate: bool = True, peer: bool = True) -> dict:
-    cfg = SimConfig(seed=seed, laser=LaserSimConfig(**(laser or {})), motion=MotionSimConfig(**(motion or {})))
+    laser = dict(laser or {})
+    ideal = bool(laser.pop("ideal", False))  # exact geometry: no noise, bias, mixed pixels, clock offsets
+    clocks = laser.pop("clocks", None)  # "common": the offsets' mean only; "differences": mean removed
+    cfg = SimConfig(seed=seed, laser=LaserSimConfig(**laser), motion=MotionSimConfig(**(motion or {})))
     sc = configure_scene(make_scene(seed), cfg)
     # the rigs say how well the scanners' clocks are synchronised, as a recording's rig.yaml does
     sc = dataclasses.replace(sc, rig_true=with_scanner_stamp_sigma(sc.rig_true),
@@ -184,7 +192,12 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
         ts, xyth = continuous_path(speed_mps=cfg.motion.speed_mps, duration_s=duration)
     mot = RobotMotion(ts, xyth, sc.floor)
     bgs, _ = simulate_fixed_scans(sc, None, np.array([[-10.0, -10.0 + cfg.background_s]]), cfg, seed * 10 + 1)
-    runs, _ = simulate_fixed_scans(sc, mot, np.array([[0.0, ts[-1]]]), cfg, seed * 10 + 3)
+    runs, info = simulate_fixed_scans(sc, mot, np.array([[0.0, ts[-1]]]), cfg, seed * 10 + 3, ideal=ideal)
+    if clocks is not None:  # the same scans re-stamped: an offset only shifts a scanner's stamps
+        off = info.clock_offsets_s
+        mean = float(np.mean(list(off.values())))
+        runs = {k: ScanLog(v.stamps_s - off[k] + (mean if clocks == "common" else off[k] - mean), v.ranges_m)
+                for k, v in runs.items()}
     if validate:
         val, val_iv = static_motion(VALIDATION_POSES, sc.floor, cfg.static_pose_s)
         vals, _ = simulate_fixed_scans(sc, val, val_iv, cfg, seed * 10 + 2)
@@ -286,6 +299,19 @@ SCENARIOS = {
     "agile-end-stamps": ({"stamp_at": "end"}, {"profile": "agile", "speed_mps": 1.5}),
     "agile-two-fabrics": ({"gown_reflectivity": (0.15, 0.9, 0.15, 0.9)}, {"profile": "agile", "speed_mps": 1.5}),
     "agile-2mps": ({}, {"profile": "agile", "speed_mps": 2.0, "accel_mps2": 1.5}),
+    # the yaw budget: the scanners on one clock (no offsets; the same noise otherwise)
+    "agile-one-clock": ({"clock_offset_sigma_s": 0.0}, {"profile": "agile", "speed_mps": 1.5}),
+    "agile-common-clock": ({"clocks": "common"}, {"profile": "agile", "speed_mps": 1.5}),
+    "agile-clock-differences": ({"clocks": "differences"}, {"profile": "agile", "speed_mps": 1.5}),
+    "agile-noise-only": ({"clock_offset_sigma_s": 0.0, "people": 0, "dropout_prob": 0.0, "mixed_pixels": False,
+                          "reflectivity_bias_m": 0.0}, {"profile": "agile", "speed_mps": 1.5}),
+    "agile-ideal": ({"ideal": True}, {"profile": "agile", "speed_mps": 1.5}),
+    # glossy dark and light fabrics, 3 cm between black and white: the sides' range bias estimated
+    "agile-glossy-fabrics": ({"gown_reflectivity": (0.1, 0.9, 0.1, 0.9), "reflectivity_bias_m": 0.03},
+                             {"profile": "agile", "speed_mps": 1.5}),
+    # the other simulator of issue 19: up to 0.9 m/s, 1 % dropouts, fabrics of different bias
+    "like-issue-19": ({"gown_reflectivity": (0.1, 0.9, 0.1, 0.9), "reflectivity_bias_m": 0.03, "dropout_prob": 0.01},
+                      {"profile": "agile", "speed_mps": 0.9}),
 }
 
 

@@ -411,6 +411,64 @@ def scanner_sensitivity(
     return -np.linalg.solve(H, B.reshape(K, 3, 3 * n_s))
 
 
+def side_bias_normal_equations(
+    model: HullModel,
+    xy_world: np.ndarray,
+    frame_index: np.ndarray,
+    scanner_index: np.ndarray,
+    scanner_xy_world: np.ndarray,
+    dir_world: np.ndarray,
+    sigma_range_m: np.ndarray,
+    xytheta: np.ndarray,
+    settings: IcpSettings,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The fits' normal equations extended by a range bias of each hull side, linearised at ``xytheta``.
+
+    A dark fabric returns weaker pulses that a scanner ranges long, a light one short (a few
+    millimetres between black and white, centimetres on glossy or very dark cloth): a point seen on
+    side ``k`` lies ``beta_k`` farther along its beam ``u`` than the fabric. Correcting it by
+    ``-beta_k u`` changes its residual by ``c = -(n . u) beta_k``, so each frame's least squares in
+    ``(pose, beta)`` has the blocks below (weights, gates and side assignments of the fit at ``xytheta``).
+
+    Parameters
+    ----------
+    As :func:`scanner_sensitivity`.
+
+    Returns
+    -------
+    H_pp : (K, 3, 3) ``sum w J J^T`` with the fit's weak prior.
+    H_pb : (K, 3, 4) ``sum w J c`` per side.
+    H_bb : (K, 4) ``sum w c^2`` per side (the block is diagonal: a point lies on one side).
+    g_p : (K, 3) ``sum w J r``.
+    g_b : (K, 4) ``sum w c r`` per side.
+    Residuals in metres, pose in (m, m, rad), biases in metres.
+    """
+    _, fid, _, _, d, lin, H = _fit_normal_equations(model, xy_world, frame_index, scanner_index, scanner_xy_world,
+                                                    dir_world, sigma_range_m, xytheta, settings)
+    K = H.shape[0]
+    c = -(lin.nw[:, 0] * d[:, 0] + lin.nw[:, 1] * d[:, 1])
+    cell = fid * 4 + lin.side
+    H_pb = np.zeros((K, 3, 4))
+    for i in range(3):
+        H_pb[:, i, :] = np.bincount(cell, lin.w * lin.J[i] * c, minlength=K * 4).reshape(K, 4)
+    H_bb = np.bincount(cell, lin.w * c * c, minlength=K * 4).reshape(K, 4)
+    g_p = np.column_stack([np.bincount(fid, lin.w * lin.J[i] * lin.r, minlength=K) for i in range(3)])
+    g_b = np.bincount(cell, lin.w * c * lin.r, minlength=K * 4).reshape(K, 4)
+    return H, H_pb, H_bb, g_p.astype(float), g_b
+
+
+def assigned_sides(
+    model: HullModel, xy_world: np.ndarray, frame_index: np.ndarray, scanner_index: np.ndarray,
+    scanner_xy_world: np.ndarray, dir_world: np.ndarray, sigma_range_m: np.ndarray, xytheta: np.ndarray,
+    settings: IcpSettings,
+) -> np.ndarray:
+    """(M,) the hull side each point is assigned to by the fit at ``xytheta`` (arguments as
+    :func:`scanner_sensitivity`): the nearest side facing its scanner."""
+    *_, lin, _ = _fit_normal_equations(model, xy_world, frame_index, scanner_index, scanner_xy_world, dir_world,
+                                       sigma_range_m, xytheta, settings)
+    return lin.side
+
+
 def side_bias_sensitivity(
     model: HullModel,
     xy_world: np.ndarray,
@@ -424,12 +482,12 @@ def side_bias_sensitivity(
 ) -> np.ndarray:
     """How the fitted robot poses move with a range bias of each hull side, to first order.
 
-    A dark fabric returns weaker pulses that a scanner ranges long, a light one short (a few
-    millimetres between black and white, more on glossy cloth): every point on side ``k`` then moves
-    by ``b_k`` along its beam ``u``, its residual by ``b_k (n . u)``, and the least-squares pose by
-    ``-H^-1 sum_i w_i J_i^T (n_i . u_i)`` over that side's points. The bias stays with the side while
-    the robot moves, so smoothing cannot average it out; :func:`gtrig.laser.track.track_frames` adds
-    ``A diag(sigma_b^2) A^T`` after smoothing.
+    Every point on side ``k`` seen ``b_k`` too far along its beam ``u`` moves its residual by
+    ``b_k (n . u)``, and the least-squares pose by ``-H^-1 sum_i w_i J_i^T (n_i . u_i)`` over that
+    side's points (:func:`side_bias_normal_equations`: ``H^-1 H_pb``). The bias stays with the side
+    while the robot moves, so smoothing cannot average it out; :func:`gtrig.laser.track.track_frames`
+    estimates it over the sequence (:mod:`gtrig.laser.side_bias`) and adds what is left of its
+    uncertainty as ``A C A^T`` after smoothing.
 
     Parameters
     ----------
@@ -440,15 +498,9 @@ def side_bias_sensitivity(
     (K, 3, 4) ``d xytheta_k / d b_side`` (m/m, rad/m), sides in the hull's order; zero for frames
     without points.
     """
-    _, fid, _, _, d, lin, H = _fit_normal_equations(model, xy_world, frame_index, scanner_index, scanner_xy_world,
-                                                    dir_world, sigma_range_m, xytheta, settings)
-    K = H.shape[0]
-    dr_db = lin.nw[:, 0] * d[:, 0] + lin.nw[:, 1] * d[:, 1]
-    cell = fid * 4 + lin.side
-    B = np.zeros((K, 3, 4))
-    for i in range(3):
-        B[:, i, :] = np.bincount(cell, lin.w * lin.J[i] * dr_db, minlength=K * 4).reshape(K, 4)
-    return -np.linalg.solve(H, B)
+    H, H_pb, _, _, _ = side_bias_normal_equations(model, xy_world, frame_index, scanner_index, scanner_xy_world,
+                                                  dir_world, sigma_range_m, xytheta, settings)
+    return np.linalg.solve(H, H_pb)
 
 
 def fit_hull(

@@ -35,8 +35,17 @@ import numpy as np
 from gtrig.geometry import wrap_angle
 from gtrig.laser.acquire import acquire
 from gtrig.laser.fuse import FramedPoints
-from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull_batch, scanner_sensitivity, side_bias_sensitivity
+from gtrig.laser.hull_icp import (
+    HullModel,
+    IcpSettings,
+    assigned_sides,
+    fit_hull_batch,
+    scanner_sensitivity,
+    side_bias_normal_equations,
+    side_bias_sensitivity,
+)
 from gtrig.laser.process_noise import local_ml_process_noise
+from gtrig.laser.side_bias import SideBias, estimate_side_bias, reduced_normal_equations
 from gtrig.smoothing import rts_smooth, rts_smooth_varying  # the core's smoother (re-exported for old callers)
 from gtrig.trajectory import PoseStatus, PoseTrack
 
@@ -88,8 +97,12 @@ class TrackSettings:
         cannot average out because they persist over many frames (the laser plane cutting a tilted gown,
         reflectivity bias). The scanners' calibration is propagated separately (``scanner_cov``).
     surface_bias_std_m, side_bias_std_m : range bias of the hull's fabric (its reflectivity: dark
-        ranges long, light short), common to all sides and of each side, propagated into each pose
-        after smoothing (:func:`surface_bias_covariance`); 0 leaves it out.
+        ranges long, light short), common to all sides and of each side: the prior of its estimate
+        (``estimate_side_bias``), and what remains of it is propagated into each pose after smoothing
+        (:func:`surface_bias_covariance`); 0 leaves it out.
+    estimate_side_bias : estimate each side's range bias over the sequence (:mod:`gtrig.laser.side_bias`)
+        and fit the OK frames again with their points corrected by it and de-skewed with the smoothed
+        velocity, then smooth again.
     """
 
     icp: IcpSettings = field(default_factory=IcpSettings)
@@ -124,6 +137,7 @@ class TrackSettings:
     floor_std_m: float = 0.0005
     surface_bias_std_m: float = 0.0015
     side_bias_std_m: float = 0.001
+    estimate_side_bias: bool = True
     floor_std_rad: float = np.radians(0.02)
 
 
@@ -160,6 +174,7 @@ class TrackResult:
     track_id: np.ndarray
     reasons: tuple[str, ...]
     cov_calibration: np.ndarray
+    side_bias: SideBias | None = None
 
     def __len__(self) -> int:
         return int(self.stamps_s.size)
@@ -300,12 +315,9 @@ def calibration_covariance(
     F = fp.n_frames
     out = np.full((F, 3, 3), np.nan)
     have = np.isfinite(xytheta[:, 0])
-    counts = np.diff(fp.frame_start)
-    pt = np.repeat(have, counts)
     if not have.any():
         return out
-    # frame index among the localized frames, for every point of a localized frame
-    fid = np.repeat(np.cumsum(have) - 1, counts)[pt]
+    pt, fid = _frame_points_of(fp, have)
     A = scanner_sensitivity(
         model,
         fp.xy_world[pt],
@@ -322,33 +334,130 @@ def calibration_covariance(
 
 
 def surface_bias_covariance(
-    fp: FramedPoints,
-    model: HullModel,
-    xytheta: np.ndarray,
-    common_std_m: float,
-    side_std_m: float,
-    icp: IcpSettings,
+    fp: FramedPoints, model: HullModel, xytheta: np.ndarray, cov_bias: np.ndarray, icp: IcpSettings
 ) -> np.ndarray:
-    """Covariance (F, 3, 3) that an unknown range bias of the hull's fabric induces on each pose
-    ``xytheta`` (F, 3; ``nan`` rows get ``nan``), through
-    :func:`gtrig.laser.hull_icp.side_bias_sensitivity`: a bias common to all sides (standard deviation
-    ``common_std_m``: one fabric of unknown reflectivity) plus one of each side (``side_std_m``:
-    sides of different fabric or wear)."""
-    F = fp.n_frames
-    out = np.full((F, 3, 3), np.nan)
+    """Covariance (F, 3, 3) that an unknown range bias of the hull's sides (covariance ``cov_bias``
+    (4, 4), m^2, sides in the hull's order) induces on each pose ``xytheta`` (F, 3; ``nan`` rows get
+    ``nan``), through :func:`gtrig.laser.hull_icp.side_bias_sensitivity`."""
+    out = np.full((fp.n_frames, 3, 3), np.nan)
     have = np.isfinite(xytheta[:, 0])
     if not have.any():
         return out
-    counts = np.diff(fp.frame_start)
-    pt = np.repeat(have, counts)
-    fid = np.repeat(np.cumsum(have) - 1, counts)[pt]
+    pt, fid = _frame_points_of(fp, have)
     A = side_bias_sensitivity(
         model, fp.xy_world[pt], fid, fp.scanner_index[pt], fp.scanner_xy_world, fp.dir_world[pt], fp.sigma_m,
         xytheta[have], icp,
     )
-    C = common_std_m**2 * np.ones((4, 4)) + side_std_m**2 * np.eye(4)
-    out[have] = A @ C @ np.swapaxes(A, 1, 2)
+    out[have] = A @ np.asarray(cov_bias, dtype=float) @ np.swapaxes(A, 1, 2)
     return out
+
+
+def _frame_points_of(fp: FramedPoints, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The points (mask (P,)) of the frames selected by ``frames`` (F,) and, for each of them, the
+    index of its frame among the selected ones."""
+    counts = np.diff(fp.frame_start)
+    pt = np.repeat(frames, counts)
+    return pt, np.repeat(np.cumsum(frames) - 1, counts)[pt]
+
+
+def _bias_prior(st: TrackSettings) -> np.ndarray:
+    """(4, 4) prior covariance of the sides' range bias: one fabric common to all sides plus each side's."""
+    return st.surface_bias_std_m**2 * np.ones((4, 4)) + st.side_bias_std_m**2 * np.eye(4)
+
+
+def compensate_motion(xy: np.ndarray, dt_s: np.ndarray, velocity: np.ndarray, centre_xy: np.ndarray) -> np.ndarray:
+    """Points (M, 2, world) brought back by ``dt_s`` (M,) seconds of the robot's motion: velocity
+    (M, 3) ``(vx, vy, omega)`` about ``centre_xy`` (M, 2), to first order in ``dt``."""
+    v = np.broadcast_to(velocity, (len(xy), 3))
+    return xy - dt_s[:, None] * (
+        v[:, :2] + v[:, 2:3] * np.column_stack([-(xy[:, 1] - centre_xy[:, 1]), xy[:, 0] - centre_xy[:, 0]])
+    )
+
+
+def _track_velocities(stamps_s: np.ndarray, xytheta: np.ndarray, track_id: np.ndarray) -> np.ndarray:
+    """(F, 3) velocity of each frame from the poses of its own track (zero where it has none)."""
+    vel = np.zeros((len(stamps_s), 3))
+    for tid in np.unique(track_id[track_id >= 0]):
+        idx = np.flatnonzero(track_id == tid)
+        if idx.size >= 2:
+            z = xytheta[idx].copy()
+            z[:, 2] = np.unwrap(z[:, 2])
+            vel[idx] = np.gradient(z, stamps_s[idx], axis=0)
+    return vel
+
+
+def _refine_with_side_bias(
+    fp: FramedPoints, model: HullModel, st: TrackSettings, stamps: np.ndarray, smoothed: np.ndarray,
+    track_id: np.ndarray, status: np.ndarray, raw: np.ndarray, raw_cov: np.ndarray, iterations: int = 2,
+) -> SideBias:
+    """Estimate the sides' range bias over the OK frames (:mod:`gtrig.laser.side_bias`) and fit those
+    frames again with their points corrected by it and de-skewed with the smoothed velocity; ``raw``
+    and ``raw_cov`` are updated in place. Ambiguous frames (their sides may be swapped by the pi
+    symmetry) are left out."""
+    ok = (status == OK) & np.isfinite(raw[:, 0])
+    prior = _bias_prior(st)
+    if ok.sum() < 10 or not np.any(prior):  # (a zero prior: the bias is known to be nil)
+        return SideBias.prior(prior)
+    pt, fid = _frame_points_of(fp, ok)
+    vel = _track_velocities(stamps, smoothed, track_id)[ok][fid]
+    xy = compensate_motion(fp.xy_world[pt], fp.dt_s[pt], vel, smoothed[ok][fid, :2])
+    sid, d = fp.scanner_index[pt], fp.dir_world[pt]
+    beta = np.zeros(4)
+    bias = SideBias.prior(prior)
+    pose, cov = raw[ok], raw_cov[ok]
+    for _ in range(iterations):
+        eqs = side_bias_normal_equations(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
+        N, u = reduced_normal_equations(*eqs)
+        # the prior holds the total bias: solve for it with the points' current correction undone
+        u = u - np.einsum("kab,b->ka", N, beta)
+        bias = estimate_side_bias(N, u, stamps[ok], prior)
+        side = assigned_sides(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
+        xy = xy - ((bias.bias_m - beta)[side])[:, None] * d
+        beta = bias.bias_m
+        fits = fit_hull_batch(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
+        good = ~fits.degenerate & (fits.n_points >= st.icp.min_points)
+        pose = np.where(good[:, None], fits.xytheta, pose)
+        cov = np.where(good[:, None, None], fits.cov_xytheta, cov)
+    raw[ok], raw_cov[ok] = pose, cov
+    log.info("hull sides' range bias %s mm (std %s mm, variance factor %.2f over %d blocks)",
+             np.array2string(1000 * bias.bias_m, precision=1),
+             np.array2string(1000 * np.sqrt(np.diag(bias.cov)), precision=2), bias.variance_factor, bias.n_blocks)
+    return bias
+
+
+def _smooth_tracks(
+    stamps: np.ndarray, raw: np.ndarray, raw_cov: np.ndarray, status: np.ndarray, track_id: np.ndarray,
+    n_tracks: int, st: TrackSettings,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each track smoothed (``st.smooth``), with the floor added; (F, 3) poses and (F, 3, 3) covariances
+    (the raw fits where a track is not smoothed)."""
+    xytheta = raw.copy()
+    cov = raw_cov.copy()
+    if not st.smooth:
+        return xytheta, cov
+    for tid in range(n_tracks):
+        idx = np.flatnonzero(track_id == tid)
+        if idx.size < 2:
+            continue
+        z = raw[idx].copy()
+        z[:, 2] = np.unwrap(z[:, 2])
+        qa, qw = st.accel_std_mps2, st.ang_accel_std_radps2
+        if st.adapt_process_noise and idx.size >= 10:
+            # the robot's own accelerations, from the track's innovations, near each frame
+            # (process_noise): braking into a bend needs a looser model than cruising
+            good = np.isin(status[idx], (OK, AMBIGUOUS))
+            zz = np.where(good[:, None], z, np.nan)
+            if st.smoother_order == 3:
+                qa, qw = st.jerk_std_mps3, st.ang_jerk_std_radps3
+            qda, qdw = local_ml_process_noise(
+                stamps[idx], zz, raw_cov[idx], qa * _Q_GRID, qw * _Q_GRID, st.adapt_window_s, st.smoother_order,
+            )
+            qd = np.column_stack([qda**2, qda**2, qdw**2])
+            xs, Ps = rts_smooth_varying(stamps[idx], z, raw_cov[idx], qd, st.smoother_order)
+        else:
+            xs, Ps = rts_smooth(stamps[idx], z, raw_cov[idx], qa, qw)
+        xytheta[idx], cov[idx] = xs, Ps + np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2])
+    return xytheta, cov
 
 
 def timing_covariance(fp: FramedPoints, stamps_s: np.ndarray, xytheta: np.ndarray, track_id: np.ndarray) -> np.ndarray:
@@ -367,13 +476,7 @@ def timing_covariance(fp: FramedPoints, stamps_s: np.ndarray, xytheta: np.ndarra
     n = np.bincount(fid * S + fp.scanner_index, minlength=F * S).reshape(F, S).astype(float)
     w = n / np.maximum(n.sum(axis=1, keepdims=True), 1.0)
     var_t = (w**2) @ (sig**2)
-    vel = np.zeros((F, 3))
-    for tid in np.unique(track_id[track_id >= 0]):
-        idx = np.flatnonzero(track_id == tid)
-        if idx.size >= 2:
-            z = xytheta[idx].copy()
-            z[:, 2] = np.unwrap(z[:, 2])
-            vel[idx] = np.gradient(z, stamps_s[idx], axis=0)
+    vel = _track_velocities(stamps_s, xytheta, track_id)
     return var_t[:, None, None] * np.einsum("fi,fj->fij", vel, vel)
 
 
@@ -499,9 +602,7 @@ def track_frames(
         dt = fp.dt_s[sl]
         # motion within the frame: bring each point back to the frame time
         pc = pred[fid]
-        xy = xy - dt[:, None] * (
-            vel[:2] + vel[2] * np.column_stack([-(xy[:, 1] - pc[:, 1]), xy[:, 0] - pc[:, 0]])
-        )
+        xy = compensate_motion(xy, dt, vel, pc)
         # gate: only points near the predicted outline
         near = (
             np.hypot(xy[:, 0] - pc[:, 0], xy[:, 1] - pc[:, 1])
@@ -577,40 +678,17 @@ def track_frames(
             for j in idx:
                 reasons[j] = reasons[j] or "heading ambiguous (pi symmetry, no motion, no recent pose)"
 
-    xytheta = raw.copy()
-    cov = raw_cov.copy()
-    if st.smooth:
-        for tid in range(len(tracks)):
-            idx = np.flatnonzero(track_id == tid)
-            if idx.size < 2:
-                continue
-            z = raw[idx].copy()
-            z[:, 2] = np.unwrap(z[:, 2])
-            qa, qw = st.accel_std_mps2, st.ang_accel_std_radps2
-            if st.adapt_process_noise and idx.size >= 10:
-                # the robot's own accelerations, from the track's innovations, near each frame
-                # (process_noise): braking into a bend needs a looser model than cruising
-                good = np.isin(status[idx], (OK, AMBIGUOUS))
-                zz = np.where(good[:, None], z, np.nan)
-                if st.smoother_order == 3:
-                    qa, qw = st.jerk_std_mps3, st.ang_jerk_std_radps3
-                qda, qdw = local_ml_process_noise(
-                    stamps[idx], zz, raw_cov[idx], qa * _Q_GRID, qw * _Q_GRID, st.adapt_window_s,
-                    st.smoother_order,
-                )
-                qd = np.column_stack([qda**2, qda**2, qdw**2])
-                xs, Ps = rts_smooth_varying(stamps[idx], z, raw_cov[idx], qd, st.smoother_order)
-            else:
-                xs, Ps = rts_smooth(stamps[idx], z, raw_cov[idx], qa, qw)
-            xytheta[idx], cov[idx] = (
-                xs,
-                Ps + np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2]),
-            )
-    if st.surface_bias_std_m > 0 or st.side_bias_std_m > 0:
-        # the fabric's range bias moves with the side, not from frame to frame: after smoothing
-        cov = cov + np.nan_to_num(
-            surface_bias_covariance(fp, model, raw, st.surface_bias_std_m, st.side_bias_std_m, st.icp)
-        )
+    xytheta, cov = _smooth_tracks(stamps, raw, raw_cov, status, track_id, len(tracks), st)
+    bias = SideBias.prior(_bias_prior(st))
+    if st.estimate_side_bias and st.smooth:
+        # the fabric's range bias over the whole sequence, then every OK frame fitted again with its
+        # points corrected and de-skewed with the smoothed velocity, and smoothed again
+        bias = _refine_with_side_bias(fp, model, st, stamps, xytheta, track_id, status, raw, raw_cov)
+        xytheta, cov = _smooth_tracks(stamps, raw, raw_cov, status, track_id, len(tracks), st)
+    if np.any(bias.cov != 0):
+        # what is left unknown of the fabric's range bias moves with the side, not from frame to
+        # frame: after smoothing
+        cov = cov + np.nan_to_num(surface_bias_covariance(fp, model, raw, bias.cov, st.icp))
     # the scanners' clocks: the motion a stamp offset hides (the rig's stamp_sigma_s)
     cov = cov + timing_covariance(fp, stamps, xytheta, track_id)
     cov_cal = np.zeros((F, 3, 3))
@@ -622,7 +700,7 @@ def track_frames(
     raw_w[:, 2] = wrap_angle(raw_w[:, 2])
     return TrackResult(
         stamps.copy(), xytheta, cov, status, raw_w, raw_cov, n_points, n_sides, rms, track_id, tuple(reasons),
-        cov_cal,
+        cov_cal, bias,
     )
 
 

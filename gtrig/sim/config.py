@@ -28,6 +28,9 @@ class LaserSimConfig(_Cfg):
     mixed_pixels: bool = True
     dropout_prob: float = Field(default=0.003, ge=0, le=1)
     reflectivity_bias_m: float = Field(default=0.008, ge=0, description="range bias between dark and bright")
+    clock_offset_sigma_s: float = Field(
+        default=0.002, ge=0, description="standard deviation of each fixed scanner's fixed clock offset, seconds "
+                                         "(0: scanners on one clock; the same noise otherwise)")
     beam_timing: Literal["sweep", "simultaneous"] = Field(
         default="sweep", description="the fixed scanners' beams sweep over the period or fire together")
     stamp_at: Literal["start", "middle", "end"] = Field(

@@ -402,7 +402,7 @@ def simulate_fixed_scans(
         ang = sc.angles_rad
         B = len(ang)
         delays = _beam_delays(ang, sc.rate_hz, sc.beam_timing)
-        offset = 0.0 if ideal else float(rng.normal(0.0, CLOCK_OFFSET_SIGMA_S))
+        offset = 0.0 if ideal else float(rng.normal(0.0, cfg.laser.clock_offset_sigma_s))
         starts = _scan_starts(iv, sc.rate_hz, delays[-1], float(rng.uniform(0, 1 / sc.rate_hz)))
         K = len(starts)
         sub_ang = ang[:, None] + offsets[None, :]  # (B, J)
@@ -507,7 +507,7 @@ def simulate_onboard_scans(
         ang = sc.angles_rad
         B = len(ang)
         delays = _beam_delays(ang, sc.rate_hz)
-        offset = 0.0 if ideal else float(rng.normal(0.0, CLOCK_OFFSET_SIGMA_S))
+        offset = 0.0 if ideal else float(rng.normal(0.0, cfg.laser.clock_offset_sigma_s))
         starts = _scan_starts(iv, sc.rate_hz, delays[-1], float(rng.uniform(0, 1 / sc.rate_hz)))
         K = len(starts)
         t_beam = (starts[:, None] + delays[None, :]).ravel()  # (K B,)

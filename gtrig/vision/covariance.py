@@ -49,6 +49,8 @@ class RigUncertainty:
         rad), then the first n lens parameters (``gtrig.rig.models.LENS_PARAMETERS``), jointly.
     marker_cov : {marker ID: (6, 6)} over the centre's move and the rotation, robot axes (m, rad); an
         all-zero matrix (the anchor marker) means no nuisance at all.
+    variance_factor : every one of these covariances times this (the rig's variance component, estimated
+        from a recording's own residuals by :func:`gtrig.vision.noise.estimate_rig_scale`).
     """
 
     camera_xyz_m: float = 0.002
@@ -57,6 +59,7 @@ class RigUncertainty:
     marker_rot_rad: float = math.radians(0.05)
     camera_cov: Mapping[str, np.ndarray] = field(default_factory=dict)
     marker_cov: Mapping[int, np.ndarray] = field(default_factory=dict)
+    variance_factor: float = 1.0
     # square-root informations already computed (every frame asks for the same few)
     _sqrt_info: dict[tuple[str, str | int], np.ndarray | None] = field(
         default_factory=dict, compare=False, repr=False)
@@ -89,7 +92,8 @@ class RigUncertainty:
             if base is None:
                 base = np.diag([self.camera_xyz_m**2] * 3 + [self.camera_rot_rad**2] * 3)
             C = np.array(base, dtype=float)
-            C[:6, :6] += np.asarray(E, dtype=float)
+            # the rig's variance factor scales its calibration, not the exposure time's motion
+            C[:6, :6] += np.asarray(E, dtype=float) / self.variance_factor
             cams[name] = C
         return replace(self, camera_cov=cams, _sqrt_info={}, _derived={})
 
@@ -107,8 +111,13 @@ class RigUncertainty:
         ``key`` (k = 6, or 6 + n for a camera whose lens is included), or None when it has no
         uncertainty (then no nuisance is added for it)."""
         if (kind, key) not in self._sqrt_info:
-            self._sqrt_info[(kind, key)] = self._sqrt_information(kind, key)
+            S = self._sqrt_information(kind, key)
+            self._sqrt_info[(kind, key)] = S if S is None else S / np.sqrt(self.variance_factor)
         return self._sqrt_info[(kind, key)]
+
+    def scaled(self, factor: float) -> RigUncertainty:
+        """The same with every covariance times ``factor`` more."""
+        return replace(self, variance_factor=self.variance_factor * float(factor), _sqrt_info={}, _derived={})
 
     def _sqrt_information(self, kind: str, key: str | int) -> np.ndarray | None:
         cov = self.camera_cov.get(str(key)) if kind == "camera" else self.marker_cov.get(int(key))

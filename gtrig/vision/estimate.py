@@ -27,7 +27,8 @@ corners than the camera's mean, and a chi-square test at the mean noise refused 
 frames of a simulated run (residual RMS 0.15-0.2 px against 0.1 px) while the accepted ones had a
 covariance too small by 2.2 (NEES). Scaling each frame by its own factor keeps those frames with an
 honest covariance; frames with few degrees of freedom get a noisy factor, which is why it never
-lowers the covariance.
+lowers the covariance, and why it is charged only where a chi-square test finds it significant
+(``frame_scale_level``): by chance alone half the frames have a factor above 1.
 """
 
 from __future__ import annotations
@@ -86,6 +87,20 @@ class VisionOptions:
         and 5 % of the run's frames with a visible marker went unlocalized.
     previous_max_gap_s : float
         A previous pose older than this is not used to break flips.
+    frame_scale_level : float
+        A frame's own variance factor scales its covariance only when it is significantly above 1 at
+        this level (chi-square test with the frame's redundancy): by chance a frame whose corners are
+        exactly as noisy as its camera's model has a factor above 1 half of the time, and charging
+        that to it made the covariances of homogeneous data cautious by 10-40 % (E max(1, F) at 2-10
+        dof); 0.5 charges every factor above 1 (the behaviour before issue 19).
+    rig_variance_component : bool
+        The recording's noise calibration splits its residuals between the corners and the rig's
+        stated uncertainty (:func:`gtrig.vision.sequence.calibrate_noise` with ``rig_component``),
+        so that a rig calibrated better or worse than it says gets the covariance its residuals show
+        (static instants seen with several markers per camera: ``tests/vision/test_rig_component.py``).
+        Off by default: on a simulated run, whose moving instants mostly show one marker to one camera
+        (8 corner coordinates against that camera's 6 pose nuisances), the two components are not
+        separable and ran away (seed 0, planar: corner factors 0.05-0.22 instead of 0.5-0.9, NEES/dof 9.5).
     """
 
     planar: bool = True
@@ -98,6 +113,8 @@ class VisionOptions:
     view_gate: float = 60.0
     max_variance_factor: float = 100.0
     previous_max_gap_s: float = 1.0
+    frame_scale_level: float = 0.05
+    rig_variance_component: bool = False
 
     @property
     def planar_prior(self) -> PlanarPrior | None:
@@ -139,7 +156,13 @@ class FrameEstimate:
         input of the variance-factor estimate (:mod:`gtrig.vision.noise`).
     variance_factor : float
         The corners' chi-square over their redundancy (``chi2 / dof`` with the share of the dof that
-        the corners own); ``cov_6x6`` of an OK frame is the fit's covariance times ``max(1, factor)``.
+        the corners own); ``cov_6x6`` of an OK frame is the fit's covariance times this factor where
+        it is significantly above 1 (``VisionOptions.frame_scale_level``).
+    corner_noise : tuple of (camera, chi-square, redundancy)
+        The corners' own chi-square and redundancy per camera (the rig's nuisance priors left out).
+    rig_noise : (chi-square, redundancy)
+        The rig's nuisance priors' (:attr:`gtrig.vision.refine.RefineResult.chi2_rig`): with
+        ``corner_noise``, the input of the two-component estimate (:func:`gtrig.vision.sequence.calibrate_noise`).
     """
 
     stamp_s: float
@@ -157,6 +180,8 @@ class FrameEstimate:
     alternatives: tuple[np.ndarray, ...] = field(default=(), repr=False)
     noise: tuple[tuple[str, float, float], ...] = ()
     variance_factor: float = math.nan
+    corner_noise: tuple[tuple[str, float, float], ...] = ()
+    rig_noise: tuple[float, float] = (0.0, 0.0)
 
     @property
     def ok(self) -> bool:
@@ -258,9 +283,12 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
     share = red / red.sum() if np.all(np.isfinite(red)) and red.sum() > 0 else np.full(len(red), np.nan)
     noise = tuple((name, float(fit.chi2 * share[i]), float(fit.dof * share[i]))
                   for i, name in enumerate(sc.camera_names))
+    corner_noise = tuple((name, float(np.sum(fit.whitened[sc.cam == i] ** 2)), float(red[i]))
+                         for i, name in enumerate(sc.camera_names))
     common: dict[str, Any] = dict(
         T_world_robot=fit.T_world_robot, cov_6x6=fit.cov_6x6, views=used, rejected=tuple(rejected), rms_px=rms,
-        view_rms_px=view_rms, chi2=fit.chi2, dof=fit.dof, flip_margin=margin, noise=noise)
+        view_rms_px=view_rms, chi2=fit.chi2, dof=fit.dof, flip_margin=margin, noise=noise,
+        corner_noise=corner_noise, rig_noise=(fit.chi2_rig, fit.redundancy_rig))
     if margin < options.init.ambiguity_margin:
         return FrameEstimate(obs.stamp_s, Status.AMBIGUOUS,
                              f"flip ambiguous: runner-up costs only {margin:.1f} more "
@@ -274,5 +302,15 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
         return FrameEstimate(obs.stamp_s, Status.INCONSISTENT,
                              f"variance factor {factor:.1f} > {options.max_variance_factor:g} "
                              f"(rms {rms:.2f} px)", variance_factor=factor, **common)
-    common["cov_6x6"] = fit.cov_6x6 * max(1.0, factor)
+    common["cov_6x6"] = fit.cov_6x6 * _frame_scale(factor, red_sum, options.frame_scale_level)
     return FrameEstimate(obs.stamp_s, Status.OK, variance_factor=factor, **common)
+
+
+def _frame_scale(factor: float, redundancy: float, level: float) -> float:
+    """The factor that scales a frame's covariance: its own variance factor where the chi-square test
+    (``redundancy`` dof) says its corners are noisier than the camera's model at ``level``, else 1."""
+    from scipy.stats import chi2
+
+    if factor <= 1.0:
+        return 1.0
+    return factor if factor * redundancy > float(chi2.ppf(1.0 - level, redundancy)) else 1.0

@@ -78,6 +78,28 @@ def estimate_corner_scale(noise: Iterable[tuple[tuple[str, float, float], ...]],
     return tuple(out)
 
 
+def estimate_rig_scale(rig_noise: Iterable[tuple[float, float]], min_redundancy: float = 20.0,
+                       cap: float = 3.0) -> float | None:
+    """The variance factor of the rig's stated uncertainty (its cameras' and markers' covariances, one
+    component for all of them): ``sum chi2_rig / sum r_rig`` over the fits, each fit's share capped at
+    ``cap`` times its redundancy; None when the corners checked less than ``min_redundancy`` of it.
+
+    A rig calibrated better than it says (an exact calibration given with a hand-measured sigma, the
+    independent renderer of issue 19) leaves its nuisance corrections far inside their priors; its
+    covariance then dominates every pose's, which comes out cautious by as much as the rig was
+    understated. Estimated jointly with the corners' factors (:func:`gtrig.vision.sequence.calibrate_noise`)
+    the two components settle at the split the residuals support (Foerstner 1979, variance components
+    from redundancy numbers), provided the fits over-determine the rig's nuisances (several markers per
+    camera); frame by frame, one marker in one camera cannot tell its corners' noise from its camera's
+    error."""
+    chi = red = 0.0
+    for c, r in rig_noise:
+        if math.isfinite(c) and math.isfinite(r) and r > 0:
+            chi += min(c, cap * r)
+            red += r
+    return chi / red if red >= min_redundancy else None
+
+
 def scale_change(a: tuple[tuple[str, float], ...], b: tuple[tuple[str, float], ...]) -> float:
     """Largest relative change of a factor between two estimates (missing factors count as 1)."""
     da, db = dict(a), dict(b)
@@ -124,4 +146,4 @@ def limit_blas_threads(n: int = 1) -> int | None:
     return first
 
 
-__all__ = ["estimate_corner_scale", "scale_change", "limit_blas_threads", "MIN_DOF"]
+__all__ = ["estimate_corner_scale", "estimate_rig_scale", "scale_change", "limit_blas_threads", "MIN_DOF"]

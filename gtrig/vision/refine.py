@@ -91,6 +91,11 @@ class RefineResult:
         rows (Foerstner's redundancy numbers; they sum to ``2 N`` minus the parameters the corners
         determine); they share a fit's chi-square among its cameras for the corner-noise estimate
         (:mod:`gtrig.vision.noise`).
+    chi2_rig : float
+        The rig's nuisance priors' share of ``chi2`` (``|S eta|^2``).
+    redundancy_rig : float
+        Their redundancy, ``P - tr(Lambda Q_eta)`` over the P nuisance parameters: what of the rig's
+        stated uncertainty the corners checked (0 without nuisances).
     """
 
     T_world_robot: np.ndarray
@@ -106,6 +111,8 @@ class RefineResult:
     converged: bool
     min_depth_m: float
     redundancy: np.ndarray
+    chi2_rig: float = 0.0
+    redundancy_rig: float = 0.0
 
 
 def _sq(v: np.ndarray) -> float:
@@ -312,11 +319,13 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
         # leverage of each whitened row, robust weight included: diag(w A H^-1 A^T)
         lev = np.repeat(w, 2) * np.einsum("ij,ij->i", A @ Hinv, A)
         red = 2.0 - lev.reshape(N, 2).sum(axis=1)
+        red_rig = float(P - 6 - np.sum(Lam * Hinv[6:, 6:])) if P > 6 else 0.0
     except np.linalg.LinAlgError:
         cov = np.full((6, 6), np.nan)
         red = np.full(N, np.nan)
+        red_rig = float("nan")
     return RefineResult(T, cov, Jw, w, r, e, chi2, cost, dof, it, converged,
-                        float(np.min(z)) if z.size else 0.0, red)
+                        float(np.min(z)) if z.size else 0.0, red, _sq(S_eta @ eta), red_rig)
 
 
 def whitened_cost(sc: StackedCorners, T: np.ndarray) -> float:

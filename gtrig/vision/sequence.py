@@ -270,7 +270,7 @@ def _estimate_all(model: VisionModel, obs: list[FrameObservations], options: Vis
 
 def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, cameras: Sequence[str],
                     estimate: Callable[[VisionOptions, list[FrameObservations]], list[FrameEstimate]],
-                    max_rounds: int = 1, tol: float = 0.05, sample: int = 300
+                    max_rounds: int = 1, tol: float = 0.05, sample: int = 300, rig_component: bool = False,
                     ) -> tuple[VisionOptions, list[tuple[tuple[str, float], ...]]]:
     """Variance factors of the corner covariances from the residuals of the sequence's instants
     (:mod:`gtrig.vision.noise`; one step by default, see there why).
@@ -281,8 +281,17 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
     estimates a list of instants. With ``max_rounds`` > 1 the factors are re-estimated with the new
     ones until none moves by more than ``tol`` (relative). Returns the options with the final factors and the history of
     factors (one entry per round).
+
+    With ``rig_component`` the residuals are split between two components: the corners of each camera
+    (their own chi-square over their redundancy) and the rig's stated uncertainty (its nuisance priors',
+    :func:`gtrig.vision.noise.estimate_rig_scale`), iterated together until neither moves by more than
+    ``tol``; the history's entries then end with ``("rig", factor)``, the rig's total factor. Charging
+    everything to the corners (one component) kept a rig stated ten times worse than it is dominating
+    every pose's covariance. The split needs instants that over-determine the rig's nuisances (several
+    markers per camera, as static validation stops have); on moving instants that show one marker to
+    one camera it runs away (:attr:`gtrig.vision.estimate.VisionOptions.rig_variance_component`).
     """
-    from gtrig.vision.noise import estimate_corner_scale, scale_change
+    from gtrig.vision.noise import estimate_corner_scale, estimate_rig_scale, scale_change
 
     with_views = [i for i, o in enumerate(obs) if o.views]
     if len(with_views) > sample:
@@ -293,14 +302,20 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
         return options, history
     ests = estimate(options, sub)
     for k in range(max_rounds):
-        fits = [e.noise for e in ests if e.status in (Status.OK, Status.INCONSISTENT)]
+        good = [e for e in ests if e.status in (Status.OK, Status.INCONSISTENT)]
+        fits = [e.corner_noise if rig_component else e.noise for e in good]
         scale = estimate_corner_scale(fits, cameras, dict(options.corner_scale))
         if not scale:
             break
-        history.append(scale)
-        done = scale_change(options.corner_scale, scale) <= tol or k == max_rounds - 1
+        change = scale_change(options.corner_scale, scale)
         options = replace(options, corner_scale=scale)
-        if done:
+        s_rig = estimate_rig_scale([e.rig_noise for e in good]) if rig_component else None
+        if s_rig is not None:
+            options = replace(options, rig_uncertainty=options.rig_uncertainty.scaled(s_rig))
+            change = max(change, abs(s_rig - 1.0))
+            scale = scale + (("rig", options.rig_uncertainty.variance_factor),)
+        history.append(scale)
+        if change <= tol or k == max_rounds - 1:
             break
         ests = estimate(options, sub)
     return options, history
@@ -582,7 +597,9 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     t_noise = time.perf_counter()
     if estimate_noise and not opts.corner_scale:
         opts, history = calibrate_noise(obs, opts, sorted(indices),
-                                        lambda o, x: _estimate_all(model, x, o, nproc, chunk_size, init_args))
+                                        lambda o, x: _estimate_all(model, x, o, nproc, chunk_size, init_args),
+                                        max_rounds=10 if opts.rig_variance_component else 1,
+                                        rig_component=opts.rig_variance_component)
         for k, sc in enumerate(history):
             log.info("corner noise, round %d: variance factors %s", k + 1,
                      ", ".join(f"{c} {f:.3g}" for c, f in sc))

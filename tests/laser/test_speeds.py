@@ -70,6 +70,8 @@ def _track(room, speed_mps, stamp_at=StampAt.START, told=None, seed=5, hidden_s=
 @pytest.mark.parametrize("speed_mps", [0.3, 1.0, 2.0])
 def test_tracks_at_robot_speeds(room, speed_mps):
     share, e, ey, nees = _track(room, speed_mps)
+    print(f"{speed_mps} m/s: localized {100 * share:.1f} %, {1000 * e.mean():.2f} / {1000 * e.max():.1f} mm, "
+          f"yaw {np.degrees(ey.mean()):.3f} deg, NEES/dof {nees:.2f}")
     # every frame but the first few (acquisition, heading from motion) localized, millimetres
     assert share >= 0.97
     assert e.mean() < 0.004 and e.max() < 0.02
