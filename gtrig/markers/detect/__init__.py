@@ -375,6 +375,7 @@ class MarkerDetector:
     def _detect_sharp(self, gray: NDArray[np.uint8], trace: list[Rejection] | None = None) -> list[Detection]:
         """The first path: candidates, edge fits and decoding (module docstring, steps 1-5)."""
         p = self.params
+        nt = _threads.threads(p.threads)
         quads = find_candidates(gray, p.candidates, self._hole_frac, trace)
         if not quads:
             return []
@@ -394,7 +395,6 @@ class MarkerDetector:
         p1 = np.roll(Q, -1, axis=1).reshape(-1, 2)
         L = side.ravel()
         sigma = np.full(len(p0), 1.0)
-        nt = _threads.threads(p.threads)
         fit = None
         for _pass in range(p.passes):
             w = 3.0 * sigma + p.band_px
