@@ -28,6 +28,10 @@ Usage::
     python bench/markers.py --clutter 1000  # wrong-ID count on 1000 cluttered images
     python bench/markers.py --quick --repeat 5  # times: the fastest of 5 runs per image
 
+The main table ends with the CPU time per image of gtrig and cv2 NONE (process time, every thread),
+with one thread and with OpenCV's default threads, and their ratio: on a loaded machine the
+wall-clock ratio is not the code's, the CPU ratio nearly is.
+
 "gtrig" is the default detector (both paths), "gtrig first path" the same without the second path for
 small blurred markers (``DetectorParams(blurred=BlurredParams(enabled=False))``).
 """
@@ -108,6 +112,13 @@ def _detectors(only: list[str] | None = None) -> dict[str, object]:
 
 
 def _run(name: str, det: object, img: np.ndarray) -> tuple[list[tuple[int, np.ndarray]], float]:
+    out, ms, _cpu = _run_cpu(name, det, img)
+    return out, ms
+
+
+def _run_cpu(name: str, det: object, img: np.ndarray) -> tuple[list[tuple[int, np.ndarray]], float, float]:
+    """Detections, wall-clock ms and CPU ms (every thread of the process) of one detector on one image."""
+    c0 = time.process_time()
     t0 = time.perf_counter()
     if name.startswith("gtrig"):
         out = [(d.id, d.corners_px) for d in det.detect(img)]  # type: ignore[attr-defined]
@@ -120,7 +131,38 @@ def _run(name: str, det: object, img: np.ndarray) -> tuple[list[tuple[int, np.nd
         corners, ids, _ = det.detectMarkers(img)  # type: ignore[attr-defined]
         out = [] if ids is None else [(int(i), c.reshape(4, 2).astype(float))
                                       for i, c in zip(ids.ravel(), corners, strict=True)]
-    return out, (time.perf_counter() - t0) * 1000.0
+    return out, (time.perf_counter() - t0) * 1000.0, (time.process_time() - c0) * 1000.0
+
+
+def _bench_cpu(dets: dict[str, object], images: list[np.ndarray], repeat: int) -> None:
+    """CPU time per image of gtrig and OpenCV (NONE), with one thread and with OpenCV's default
+    threads, on the same images in one run: a figure that a loaded machine distorts far less than the
+    wall-clock ratio (there, OpenCV's threads starve and its wall time grows more than ours)."""
+    pair = [k for k in ("gtrig", "cv2 NONE") if k in dets]
+    if len(pair) < 2 or not images:
+        return
+    default = cv2.getNumThreads()
+    print(f"\nCPU time per image (process time, all threads; fastest of {repeat}); "
+          f"{images[0].shape[1]} x {images[0].shape[0]} = {images[0].size / 1e6:.2f} MP")
+    try:
+        for nt in (1, default):
+            cv2.setNumThreads(nt)
+            cpu = {k: [] for k in pair}
+            wall = {k: [] for k in pair}
+            for img in images:
+                for k in pair:
+                    runs = [_run_cpu(k, dets[k], img) for _ in range(repeat)]
+                    wall[k].append(min(r[1] for r in runs))
+                    cpu[k].append(min(r[2] for r in runs))
+            c = {k: float(np.median(v)) for k, v in cpu.items()}
+            w = {k: float(np.median(v)) for k, v in wall.items()}
+            mp = images[0].size / 1e6
+            print(f"threads {nt}: CPU ms/img gtrig {c['gtrig']:.1f} ({c['gtrig'] / mp:.1f} ms/MP), cv2 NONE "
+                  f"{c['cv2 NONE']:.1f} ({c['cv2 NONE'] / mp:.1f} ms/MP): gtrig / cv2 NONE CPU = "
+                  f"{c['gtrig'] / c['cv2 NONE']:.2f} (medians); wall {w['gtrig']:.1f} / {w['cv2 NONE']:.1f} ms = "
+                  f"{w['gtrig'] / w['cv2 NONE']:.2f}")
+    finally:
+        cv2.setNumThreads(default)
 
 
 def _scene(rng: np.random.Generator, side: float, tilt: float, blur: float, light: str
@@ -310,8 +352,10 @@ def main() -> None:
     by_blur: dict[tuple[str, float], Stats] = {}
     small: dict[str, Stats] = {k: Stats() for k in dets}
     by_side: dict[tuple[str, int], Stats] = {}
+    images = []
     for side, tilt, blur, light in itertools.product(sides, tilts, blurs, lights):
         img, truths = _scene(rng, side, tilt, blur, light)
+        images.append(img)
         for name, det in dets.items():
             out, ms = _run(name, det, img)
             for _ in range(a.repeat - 1):
@@ -366,6 +410,7 @@ def main() -> None:
               f"{means:.2f} (means; target <= 1.5)")
         print(f"{g} RMS at blur <= 1: {max(acc):.4f} px (target <= 0.10); "
               f"best OpenCV / {g} >= {min(c / r for c, r in zip(cv_acc, acc, strict=True)):.2f} (target >= 3)")
+    _bench_cpu(dets, images, a.repeat)
 
 
 if __name__ == "__main__":

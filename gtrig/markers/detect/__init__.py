@@ -227,7 +227,10 @@ class MarkerDetector:
         ids, rot, ham = decode_batch(self.spec.family, bits[:, bc:-bc, bc:-bc], tol)
         border_white = bits[:, bmask].sum(axis=1)
         ok_levels = (border_white <= n // 2) & (contrast >= self.params.min_contrast)
-        retry = np.flatnonzero((ids < 0) & ok_levels)
+        # the blur model only matters where the blur is a good part of a cell (a 1.5 px blur leaves the
+        # cells of 5 px and more readable one by one): larger candidates that read as no code are clutter
+        cell_px = np.sqrt(np.abs(_shoelace(Q))) / n
+        retry = np.flatnonzero((ids < 0) & ok_levels & (cell_px < 5.0))
         retried = np.zeros(len(Q), bool)
         if len(retry):
             # small blurred markers: a white cell among black ones peaks below the midway threshold, so
@@ -525,6 +528,12 @@ def _dedupe(dets: list[Detection]) -> list[Detection]:
             continue
         keep.append(d)
     return keep
+
+
+def _shoelace(Q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Signed areas (Q,) of quads (Q, 4, 2), square pixels."""
+    x, y = Q[..., 0], Q[..., 1]
+    return 0.5 * np.sum(x * np.roll(y, -1, axis=-1) - np.roll(x, -1, axis=-1) * y, axis=-1)
 
 
 def _area(q: NDArray[np.float64]) -> float:
