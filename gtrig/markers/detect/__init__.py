@@ -27,6 +27,8 @@ Corners are in OpenCV's pixel convention (pixel centres at integer coordinates) 
 
 from __future__ import annotations
 
+import dataclasses
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -36,7 +38,8 @@ from numpy.typing import NDArray
 
 from gtrig.errors import InputError
 from gtrig.markers.detect import _threads
-from gtrig.markers.detect.blurred import BlurredParams, find_blurred_candidates, image_noise, read_blurred
+from gtrig.markers.detect.blurred import (BlurredParams, BlurredRead, find_blurred_candidates, image_noise,
+                                          read_blurred)
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
 from gtrig.markers.detect.decode import sample_cells, unblur_cells
@@ -290,20 +293,28 @@ class MarkerDetector:
             # without the second path the first path keeps to the markers it reads plainly (those read
             # only through the blur model are the second path's regime, where its corners are better)
             return _dedupe([d for d in self._detect_sharp(gray, trace) if id(d) not in self._provisional])
+        early: list[BlurredRead] | None = None
         if _threads.threads(self.params.threads) < 2:
             cands = self._blurred_candidates(gray)
             dets = self._detect_sharp(gray, trace)
         else:
-            # the second path's candidate stage (OpenCV's filters and contours, which release the GIL)
-            # beside the first path
-            later = _threads.helper_pool().submit(self._blurred_candidates, gray)
-            dets = self._detect_sharp(gray, trace)
-            cands = later.result()
+            # the second path beside the first: its candidate stage (OpenCV's filters and contours,
+            # which release the GIL), then, once the first path's candidates are known, the reading of
+            # those of its candidates that no first-path candidate covers (the others wait for the
+            # first path's detections)
+            first: Future[list[NDArray[np.float64]]] = Future()
+            later = _threads.helper_pool().submit(self._blurred_early, gray, first)
+            try:
+                dets = self._detect_sharp(gray, trace, first)
+            finally:
+                if not first.done():
+                    first.set_result([])
+            cands, early = later.result()
         # markers read only through the blur model in the pre-decoder are small and blurred: the second
         # path, whose model is made for them, reads them too, and its reading replaces the first's
         prov = [d for d in dets if id(d) in self._provisional]
         sure = [d for d in dets if id(d) not in self._provisional]
-        blurred = self._detect_blurred(gray, cands, sure, trace)
+        blurred = self._detect_blurred(gray, cands, sure, trace, early)
         keep = [d for d in prov
                 if not any(b.id == d.id and np.linalg.norm(b.corners_px.mean(axis=0) - d.corners_px.mean(axis=0))
                            < 0.25 * np.sqrt(_area(d.corners_px)) for b in blurred)]
@@ -323,26 +334,44 @@ class MarkerDetector:
         quads = find_blurred_candidates(gray, p.blurred, p.candidates.max_side_px(gray.shape), p.candidates.scale)
         return quads, image_noise(gray) if quads else float("nan")
 
+    def _blurred_early(self, gray: NDArray[np.uint8], first: Future[list[NDArray[np.float64]]]
+                       ) -> tuple[tuple[list[NDArray[np.float64]], float], list[BlurredRead]]:
+        """The second path's candidates (:meth:`_blurred_candidates`) and the reads of those whose
+        centre lies in no quad of ``first`` (the first path's candidates, raw pixels, once known)."""
+        cands = self._blurred_candidates(gray)
+        quads, noise = cands
+        idx = _outside(quads, first.result())
+        if not idx:
+            return cands, []
+        reads = read_blurred(gray, np.array([quads[i] for i in idx]), self._all_codes(), self.spec.cells,
+                             self.spec.border_cells, self.params.blurred, noise)
+        return cands, [dataclasses.replace(r, index=idx[r.index]) for r in reads]
+
     def _detect_blurred(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float],
-                        found: list[Detection], trace: list[Rejection] | None = None) -> list[Detection]:
+                        found: list[Detection], trace: list[Rejection] | None = None,
+                        early: list[BlurredRead] | None = None) -> list[Detection]:
         """The second path (:mod:`.blurred`) on its candidates ``cands`` (from
         :meth:`_blurred_candidates`) that no detection of the first path (``found``) covers.
+        ``early`` are reads already made (:meth:`_blurred_early`): their candidates are not read again.
 
         It works in raw pixels: over a marker of at most ``max_side_px`` the lens distortion is close
         to a homography.
         """
-        quads, noise = cands
-        if found:
-            # a candidate whose centre lies inside a detection is that marker (or a part of it)
-            polys = [d.corners_px.astype(np.float32).reshape(-1, 1, 2) for d in found]
-            quads = [q for q in quads
-                     if all(cv2.pointPolygonTest(poly, tuple(map(float, q.mean(axis=0))), False) < 0
-                            for poly in polys)]
+        quads_all, noise = cands
+        # a candidate whose centre lies inside a detection is that marker (or a part of it)
+        todo = _outside(quads_all, [d.corners_px for d in found])
+        done = set() if early is None else set(_outside(quads_all, self._first_quads))
+        quads = [quads_all[i] for i in todo]
         if not quads:
             return []
         codes = self._all_codes()
-        reads = read_blurred(gray, np.array(quads), codes, self.spec.cells, self.spec.border_cells,
-                             self.params.blurred, noise)
+        late = [i for i in todo if i not in done]
+        reads = [] if not late else read_blurred(
+            gray, np.array([quads_all[i] for i in late]), codes, self.spec.cells, self.spec.border_cells,
+            self.params.blurred, noise)
+        reads = [dataclasses.replace(r, index=late[r.index]) for r in reads]
+        keep = set(todo)
+        reads = sorted(reads + [r for r in early or [] if r.index in keep], key=lambda r: r.index)
         if trace is not None:
             read_at = [r.corners.mean(axis=0) for r in reads]
             for q in quads:
@@ -375,11 +404,16 @@ class MarkerDetector:
                        if np.isfinite(shift[k]) else "edges do not intersect")
             trace.append(Rejection(Qr[k].copy(), "fit", why))
 
-    def _detect_sharp(self, gray: NDArray[np.uint8], trace: list[Rejection] | None = None) -> list[Detection]:
-        """The first path: candidates, edge fits and decoding (module docstring, steps 1-5)."""
+    def _detect_sharp(self, gray: NDArray[np.uint8], trace: list[Rejection] | None = None,
+                      first: Future[list[NDArray[np.float64]]] | None = None) -> list[Detection]:
+        """The first path: candidates, edge fits and decoding (module docstring, steps 1-5); ``first``
+        receives the candidates (raw pixels) as soon as they are found."""
         p = self.params
         nt = _threads.threads(p.threads)
         quads = find_candidates(gray, p.candidates, self._hole_frac, trace)
+        self._first_quads = quads
+        if first is not None:
+            first.set_result(quads)
         if not quads:
             return []
         und = self._undistorter(gray.shape)
@@ -512,6 +546,13 @@ def _fit_reason(fit_ok: bool, b: float, rel: float, sigma: float, p: DetectorPar
     if sigma < 0.06:
         return f"edge blur {sigma:.2f} px < 0.06 (a step sharper than a pixel)"
     return None
+
+
+def _outside(quads: list[NDArray[np.float64]], polys: list[NDArray[np.float64]]) -> list[int]:
+    """Indices of the ``quads`` (each (4, 2)) whose centre lies inside none of ``polys`` (each (4, 2))."""
+    cv_polys = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in polys]
+    return [i for i, q in enumerate(quads)
+            if all(cv2.pointPolygonTest(p, tuple(map(float, q.mean(axis=0))), False) < 0 for p in cv_polys)]
 
 
 def _dedupe(dets: list[Detection]) -> list[Detection]:
