@@ -13,10 +13,10 @@ installed.
 ``--hard`` renders what real photos have and the clean renders lack (issue 16; ``synth.render``'s
 realism keywords): JPEG at quality 60-95, half the images through a BGGR Bayer mosaic and OpenCV's
 demosaicing, textured backgrounds (a third pale, merging with the quiet zone, which is 1-2 cells
-wide; AprilTag prints have 1, ChArUco boards 2), glare on half the markers, print gain (ink 0.08-0.3, paper 0.7-0.92), paper texture, bent
-prints (edges bowed by up to 0.5 px) and markers of 10-70 px, blur 0-1.5 px, noise 2-5. ``--photos``
-runs the real photos of ``../shared/data/markers_real``: markers found by each detector and, on the
-ChArUco photos, the RMS residual of the known board fitted through the lens
+wide; AprilTag prints have 1, ChArUco boards 2), glare on half the markers, print gain (ink 0.08-0.3,
+paper 0.7-0.92), paper texture, bent prints (edges bowed by up to 0.5 px) and markers of 10-70 px, blur
+0-1.5 px, noise 2-5. ``--photos`` runs the real photos of ``../shared/data/markers_real``: markers found
+by each detector and, on the ChArUco photos, the RMS residual of the known board fitted through the lens
 (:mod:`gtrig.markers.detect.boardfit`).
 
 Usage::

@@ -38,12 +38,12 @@ from numpy.typing import NDArray
 
 from gtrig.errors import InputError
 from gtrig.markers.detect import _threads
-from gtrig.markers.detect.blurred import (BlurredParams, BlurredRead, find_blurred_candidates, image_noise,
-                                          read_blurred)
+from gtrig.markers.detect.blurred import BlurredParams, BlurredRead, find_blurred_candidates, image_noise, read_blurred
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
 from gtrig.markers.detect.decode import sample_cells, unblur_cells
 from gtrig.markers.detect.edges import CLIP_HIGH, fit_edges, gather_band, intersect_corners, marker_context
+from gtrig.markers.detect.tone import Tone, to_levels, to_light
 from gtrig.markers.families import _codebook, decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily
 
@@ -141,6 +141,9 @@ class DetectorParams:
         With two or more the second path's candidate stage runs in a helper thread beside the first
         path, and the edge fits are split between two threads (:mod:`._threads`); the output is the
         same.
+    tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
+        simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored
+        levels back to light, where the blurred-step model holds.
     """
 
     candidates: CandidateParams = field(default_factory=CandidateParams)
@@ -157,6 +160,7 @@ class DetectorParams:
 
     unblur: bool = True
     blurred: BlurredParams = field(default_factory=BlurredParams)
+    tone: Tone = "linear"
 
 
 class MarkerDetector:
@@ -211,7 +215,8 @@ class MarkerDetector:
         return (inner > thr[:, None, None]).astype(np.uint8), white - black
 
     def _predecode(self, gray: NDArray[np.uint8], Q: NDArray[np.float64], und: Undistorter | None,
-                   trace: list[Rejection] | None = None) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
+                   trace: list[Rejection] | None = None
+                   ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
                               NDArray[np.uint8]]:
         """Keep candidates whose cells, sampled through the initial quad, are close to a code.
 
@@ -446,6 +451,8 @@ class MarkerDetector:
                 w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
                 excl = np.minimum(sigma, 0.3 * L)
             samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
+            if p.tone != "linear":
+                samples = dataclasses.replace(samples, val=to_light(samples.val, p.tone))
             if fit is None:
                 fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, tol=p.tol, threads=nt)
             else:
@@ -497,6 +504,10 @@ class MarkerDetector:
             # an over-exposed white level lies beyond 255 (edges.py censors clipped pixels): the cells
             # are read against the contrast the image can show
             ab = ab[0], np.minimum(ab[1], CLIP_HIGH + 0.5 - ab[0])
+            if p.tone != "linear":
+                # the cells are read in the stored levels
+                black_lv = to_levels(ab[0], p.tone)
+                ab = black_lv, to_levels(ab[0] + ab[1], p.tone) - black_lv
             wls = unblur_cells(gray, corners, n, bc, np.clip(blur, 0.3, p.max_blur_px), ab[0], ab[1], und)
             data = (wls > 0.5).astype(np.uint8)
         ids, rot, ham = decode_batch(self.spec.family, data, p.max_hamming)
