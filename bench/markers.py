@@ -250,7 +250,7 @@ def _bench_hard(dets: dict[str, object], rng: np.random.Generator, n_per_side: i
 
 def _bench_photos() -> None:
     """The real photos: markers found per detector, and the ChArUco board-fit residual."""
-    from gtrig.markers.detect.boardfit import charuco_marker_corners, grid_fit_rms, pose_fit_rms
+    from gtrig.markers.detect.boardfit import charuco_marker_corners, grid_fit_rms, grid_local_rms, pose_fit_rms
 
     if not REAL.is_dir():
         print(f"{REAL}: not found, real photos left out")
@@ -261,15 +261,18 @@ def _bench_photos() -> None:
     photos = {"img_00.jpg": "aruco_6x6_250", "img_01.jpg": "aruco_6x6_250", "img_02.jpg": "aruco_6x6_250",
               "img_03.jpg": "aruco_6x6_250", "tagtest.jpg": "apriltag_36h11", "taggridphoto.jpg": "apriltag_36h11"}
     print("real photos (../shared/data/markers_real): markers found; board-fit RMS px (ChArUco: one planar pose "
-          "through the tutorial's lens model; tag grid: homography of the 8 x 5 grid with two radial terms)")
-    names = ["gtrig"] + [f"cv2 {k}" for k in CV_REFINE] + ["apriltag3"]
-    print(f"{'photo':18s} " + " ".join(f"{n:>14s}" for n in names))
+          "through the tutorial's lens model; tag grid: homography of the 8 x 5 grid with two radial terms / "
+          "a homography per 2 x 2 block of tags); 'gtrig srgb': DetectorParams(tone='srgb'), edges fitted in light")
+    names = ["gtrig", "gtrig srgb"] + [f"cv2 {k}" for k in CV_REFINE] + ["apriltag3"]
+    print(f"{'photo':18s} " + " ".join(f"{n:>20s}" for n in names))
     for photo, fam in photos.items():
         gray = cv2.imread(str(REAL / photo), cv2.IMREAD_GRAYSCALE)
         res: dict[str, dict[int, np.ndarray] | None] = {}
         t0 = time.perf_counter()
         res["gtrig"] = {d.id: d.corners_px for d in MarkerDetector(fam).detect(gray)}
         t_g = time.perf_counter() - t0
+        res["gtrig srgb"] = {d.id: d.corners_px
+                             for d in MarkerDetector(fam, params=DetectorParams(tone="srgb")).detect(gray)}
         d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_6X6_250 if fam == "aruco_6x6_250"
                                               else cv2.aruco.DICT_APRILTAG_36h11)
         t_cv = 0.0
@@ -292,20 +295,19 @@ def _bench_photos() -> None:
             except ImportError:
                 pass
         cells = []
+        # AprilTagGrid1to40: 8 columns of 5 tags, ID 1 + 5 column + row
+        grid = {i: ((i - 1) // 5, (i - 1) % 5) for i in range(1, 41)}
         for n in names:
             r = res[n]
             if r is None:
-                cells.append(f"{'-':>14s}")
-                continue
-            if fam == "aruco_6x6_250":
-                fit = pose_fit_rms(r, board, K, dist)
+                cells.append(f"{'-':>20s}")
+            elif fam == "aruco_6x6_250":
+                cells.append(f"{len(r):>4d} {pose_fit_rms(r, board, K, dist):6.3f} px".rjust(20))
             elif photo == "taggridphoto.jpg":
-                # AprilTagGrid1to40: 8 columns of 5 tags, ID 1 + 5 column + row; homography + radial terms
-                fit = grid_fit_rms(r, {i: ((i - 1) // 5, (i - 1) % 5) for i in range(1, 41)},
-                                   (gray.shape[1], gray.shape[0]))
+                cells.append(f"{len(r):>3d} {grid_fit_rms(r, grid, (gray.shape[1], gray.shape[0])):.3f}/"
+                             f"{grid_local_rms(r, grid):.3f} px".rjust(20))
             else:
-                fit = float("nan")
-            cells.append(f"{len(r):>4d} {fit:6.3f} px" if np.isfinite(fit) else f"{len(r):>14d}")
+                cells.append(f"{len(r):>20d}")
         print(f"{photo:18s} " + " ".join(cells) + f"   (gtrig {1000 * t_g:.0f} ms, cv2 NONE {1000 * t_cv:.0f} ms)")
 
 
