@@ -28,8 +28,7 @@ def test_srgb_stored_marker_fits_better_in_light() -> None:
     are back on the truth."""
     shape = (260, 260)
     H = homography_from_pose(150, (130, 130), 20, 30, 10)
-    img, truths = render(shape, [(FAMILY, 7, H)], blur_px=2.0, noise=0.5, rng=np.random.default_rng(3))
-    stored = np.clip(np.rint(linear_to_srgb(img.astype(np.float64))), 0, 255).astype(np.uint8)
+    stored, truths = render(shape, [(FAMILY, 7, H)], blur_px=2.0, noise=0.5, rng=np.random.default_rng(3), srgb=True)
     err = {}
     for tone in ("linear", "srgb"):
         dets = MarkerDetector(FAMILY, params=DetectorParams(tone=tone)).detect(stored)
