@@ -191,18 +191,17 @@ def find_candidates(
         # squares already found, filled: a blob of a later threshold centred in one is the same marker
         if out:
             cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in out], 255)
-        for k, thr in enumerate(more):
+        for thr in more:
             region, boxes = regions[thr > params.ratio_threshold]
-            found = []
             for box in boxes:
-                found += _mask_candidates(_contours_at(gray, bg, thr, params.smooth, box), params, max_side,
-                                          max_hole_fraction, None if trace is None else rejected, covered, region)
-            out.extend(found)
-            if found and k < len(more) - 1:
-                cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
+                found = _mask_candidates(_contours_at(gray, bg, thr, params.smooth, box), params, max_side,
+                                         max_hole_fraction, None if trace is None else rejected, covered, region)
+                out.extend(found)
+                if found:  # (the boxes may overlap: a blob in two of them is one candidate)
+                    cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
     if trace is not None:
         # a blob that failed at one threshold but gave a candidate at another is not a rejection
-        if out:
+        if out and not (more and seeds):
             cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in out], 255)
         h, w = gray.shape
         for r in rejected:
