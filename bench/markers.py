@@ -13,10 +13,10 @@ installed.
 ``--hard`` renders what real photos have and the clean renders lack (issue 16; ``synth.render``'s
 realism keywords): JPEG at quality 60-95, half the images through a BGGR Bayer mosaic and OpenCV's
 demosaicing, textured backgrounds (a third pale, merging with the quiet zone, which is 1-2 cells
-wide; AprilTag prints have 1, ChArUco boards 2), glare on half the markers, print gain (ink 0.08-0.3, paper 0.7-0.92), paper texture, bent
-prints (edges bowed by up to 0.5 px) and markers of 10-70 px, blur 0-1.5 px, noise 2-5. ``--photos``
-runs the real photos of ``../shared/data/markers_real``: markers found by each detector and, on the
-ChArUco photos, the RMS residual of the known board fitted through the lens
+wide; AprilTag prints have 1, ChArUco boards 2), glare on half the markers, print gain (ink 0.08-0.3,
+paper 0.7-0.92), paper texture, bent prints (edges bowed by up to 0.5 px) and markers of 10-70 px, blur
+0-1.5 px, noise 2-5. ``--photos`` runs the real photos of ``../shared/data/markers_real``: markers found
+by each detector and, on the ChArUco photos, the RMS residual of the known board fitted through the lens
 (:mod:`gtrig.markers.detect.boardfit`).
 
 Usage::
@@ -27,6 +27,10 @@ Usage::
     python bench/markers.py --quick         # a smaller grid
     python bench/markers.py --clutter 1000  # wrong-ID count on 1000 cluttered images
     python bench/markers.py --quick --repeat 5  # times: the fastest of 5 runs per image
+
+The main table ends with the CPU time per image of gtrig and cv2 NONE (process time, every thread),
+with one thread and with OpenCV's default threads, and their ratio: on a loaded machine the
+wall-clock ratio is not the code's, the CPU ratio nearly is.
 
 "gtrig" is the default detector (both paths), "gtrig first path" the same without the second path for
 small blurred markers (``DetectorParams(blurred=BlurredParams(enabled=False))``).
@@ -108,6 +112,13 @@ def _detectors(only: list[str] | None = None) -> dict[str, object]:
 
 
 def _run(name: str, det: object, img: np.ndarray) -> tuple[list[tuple[int, np.ndarray]], float]:
+    out, ms, _cpu = _run_cpu(name, det, img)
+    return out, ms
+
+
+def _run_cpu(name: str, det: object, img: np.ndarray) -> tuple[list[tuple[int, np.ndarray]], float, float]:
+    """Detections, wall-clock ms and CPU ms (every thread of the process) of one detector on one image."""
+    c0 = time.process_time()
     t0 = time.perf_counter()
     if name.startswith("gtrig"):
         out = [(d.id, d.corners_px) for d in det.detect(img)]  # type: ignore[attr-defined]
@@ -120,7 +131,38 @@ def _run(name: str, det: object, img: np.ndarray) -> tuple[list[tuple[int, np.nd
         corners, ids, _ = det.detectMarkers(img)  # type: ignore[attr-defined]
         out = [] if ids is None else [(int(i), c.reshape(4, 2).astype(float))
                                       for i, c in zip(ids.ravel(), corners, strict=True)]
-    return out, (time.perf_counter() - t0) * 1000.0
+    return out, (time.perf_counter() - t0) * 1000.0, (time.process_time() - c0) * 1000.0
+
+
+def _bench_cpu(dets: dict[str, object], images: list[np.ndarray], repeat: int) -> None:
+    """CPU time per image of gtrig and OpenCV (NONE), with one thread and with OpenCV's default
+    threads, on the same images in one run: a figure that a loaded machine distorts far less than the
+    wall-clock ratio (there, OpenCV's threads starve and its wall time grows more than ours)."""
+    pair = [k for k in ("gtrig", "cv2 NONE") if k in dets]
+    if len(pair) < 2 or not images:
+        return
+    default = cv2.getNumThreads()
+    print(f"\nCPU time per image (process time, all threads; fastest of {repeat}); "
+          f"{images[0].shape[1]} x {images[0].shape[0]} = {images[0].size / 1e6:.2f} MP")
+    try:
+        for nt in (1, default):
+            cv2.setNumThreads(nt)
+            cpu = {k: [] for k in pair}
+            wall = {k: [] for k in pair}
+            for img in images:
+                for k in pair:
+                    runs = [_run_cpu(k, dets[k], img) for _ in range(repeat)]
+                    wall[k].append(min(r[1] for r in runs))
+                    cpu[k].append(min(r[2] for r in runs))
+            c = {k: float(np.median(v)) for k, v in cpu.items()}
+            w = {k: float(np.median(v)) for k, v in wall.items()}
+            mp = images[0].size / 1e6
+            print(f"threads {nt}: CPU ms/img gtrig {c['gtrig']:.1f} ({c['gtrig'] / mp:.1f} ms/MP), cv2 NONE "
+                  f"{c['cv2 NONE']:.1f} ({c['cv2 NONE'] / mp:.1f} ms/MP): gtrig / cv2 NONE CPU = "
+                  f"{c['gtrig'] / c['cv2 NONE']:.2f} (medians); wall {w['gtrig']:.1f} / {w['cv2 NONE']:.1f} ms = "
+                  f"{w['gtrig'] / w['cv2 NONE']:.2f}")
+    finally:
+        cv2.setNumThreads(default)
 
 
 def _scene(rng: np.random.Generator, side: float, tilt: float, blur: float, light: str
@@ -208,7 +250,7 @@ def _bench_hard(dets: dict[str, object], rng: np.random.Generator, n_per_side: i
 
 def _bench_photos() -> None:
     """The real photos: markers found per detector, and the ChArUco board-fit residual."""
-    from gtrig.markers.detect.boardfit import charuco_marker_corners, grid_fit_rms, pose_fit_rms
+    from gtrig.markers.detect.boardfit import charuco_marker_corners, grid_fit_rms, grid_local_rms, pose_fit_rms
 
     if not REAL.is_dir():
         print(f"{REAL}: not found, real photos left out")
@@ -219,15 +261,18 @@ def _bench_photos() -> None:
     photos = {"img_00.jpg": "aruco_6x6_250", "img_01.jpg": "aruco_6x6_250", "img_02.jpg": "aruco_6x6_250",
               "img_03.jpg": "aruco_6x6_250", "tagtest.jpg": "apriltag_36h11", "taggridphoto.jpg": "apriltag_36h11"}
     print("real photos (../shared/data/markers_real): markers found; board-fit RMS px (ChArUco: one planar pose "
-          "through the tutorial's lens model; tag grid: homography of the 8 x 5 grid with two radial terms)")
-    names = ["gtrig"] + [f"cv2 {k}" for k in CV_REFINE] + ["apriltag3"]
-    print(f"{'photo':18s} " + " ".join(f"{n:>14s}" for n in names))
+          "through the tutorial's lens model; tag grid: homography of the 8 x 5 grid with two radial terms / "
+          "a homography per 2 x 2 block of tags); 'gtrig srgb': DetectorParams(tone='srgb'), edges fitted in light")
+    names = ["gtrig", "gtrig srgb"] + [f"cv2 {k}" for k in CV_REFINE] + ["apriltag3"]
+    print(f"{'photo':18s} " + " ".join(f"{n:>20s}" for n in names))
     for photo, fam in photos.items():
         gray = cv2.imread(str(REAL / photo), cv2.IMREAD_GRAYSCALE)
         res: dict[str, dict[int, np.ndarray] | None] = {}
         t0 = time.perf_counter()
         res["gtrig"] = {d.id: d.corners_px for d in MarkerDetector(fam).detect(gray)}
         t_g = time.perf_counter() - t0
+        res["gtrig srgb"] = {d.id: d.corners_px
+                             for d in MarkerDetector(fam, params=DetectorParams(tone="srgb")).detect(gray)}
         d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_6X6_250 if fam == "aruco_6x6_250"
                                               else cv2.aruco.DICT_APRILTAG_36h11)
         t_cv = 0.0
@@ -250,20 +295,19 @@ def _bench_photos() -> None:
             except ImportError:
                 pass
         cells = []
+        # AprilTagGrid1to40: 8 columns of 5 tags, ID 1 + 5 column + row
+        grid = {i: ((i - 1) // 5, (i - 1) % 5) for i in range(1, 41)}
         for n in names:
             r = res[n]
             if r is None:
-                cells.append(f"{'-':>14s}")
-                continue
-            if fam == "aruco_6x6_250":
-                fit = pose_fit_rms(r, board, K, dist)
+                cells.append(f"{'-':>20s}")
+            elif fam == "aruco_6x6_250":
+                cells.append(f"{len(r):>4d} {pose_fit_rms(r, board, K, dist):6.3f} px".rjust(20))
             elif photo == "taggridphoto.jpg":
-                # AprilTagGrid1to40: 8 columns of 5 tags, ID 1 + 5 column + row; homography + radial terms
-                fit = grid_fit_rms(r, {i: ((i - 1) // 5, (i - 1) % 5) for i in range(1, 41)},
-                                   (gray.shape[1], gray.shape[0]))
+                cells.append(f"{len(r):>3d} {grid_fit_rms(r, grid, (gray.shape[1], gray.shape[0])):.3f}/"
+                             f"{grid_local_rms(r, grid):.3f} px".rjust(20))
             else:
-                fit = float("nan")
-            cells.append(f"{len(r):>4d} {fit:6.3f} px" if np.isfinite(fit) else f"{len(r):>14d}")
+                cells.append(f"{len(r):>20d}")
         print(f"{photo:18s} " + " ".join(cells) + f"   (gtrig {1000 * t_g:.0f} ms, cv2 NONE {1000 * t_cv:.0f} ms)")
 
 
@@ -310,8 +354,10 @@ def main() -> None:
     by_blur: dict[tuple[str, float], Stats] = {}
     small: dict[str, Stats] = {k: Stats() for k in dets}
     by_side: dict[tuple[str, int], Stats] = {}
+    images = []
     for side, tilt, blur, light in itertools.product(sides, tilts, blurs, lights):
         img, truths = _scene(rng, side, tilt, blur, light)
+        images.append(img)
         for name, det in dets.items():
             out, ms = _run(name, det, img)
             for _ in range(a.repeat - 1):
@@ -366,6 +412,7 @@ def main() -> None:
               f"{means:.2f} (means; target <= 1.5)")
         print(f"{g} RMS at blur <= 1: {max(acc):.4f} px (target <= 0.10); "
               f"best OpenCV / {g} >= {min(c / r for c, r in zip(cv_acc, acc, strict=True)):.2f} (target >= 3)")
+    _bench_cpu(dets, images, a.repeat)
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from gtrig.markers.detect.tone import linear_to_srgb
 from gtrig.markers.families import marker_cells
 from gtrig.rig.models import MarkerFamily
 
@@ -136,6 +137,7 @@ def render(
     glare: list[tuple[float, float, float, float]] | None = None,
     bayer: bool = False,
     jpeg_quality: int | None = None,
+    srgb: bool = False,
 ) -> tuple[NDArray[np.uint8], list[SynthMarker]]:
     """Render markers into an 8-bit grayscale image (or, with ``bayer``, a BGR image).
 
@@ -167,6 +169,10 @@ def render(
         demosaicing gives back a BGR image (H, W, 3); the markers stay neutral grey.
     jpeg_quality : JPEG compression and decompression at this quality (OpenCV's encoder, 4:2:0
         chroma for colour images).
+    srgb : store the light through sRGB's tone curve, as phones and webcams do (after the noise and
+        the demosaicing, before the JPEG compression); without it the stored levels are proportional
+        to the light, as a machine-vision camera's are. A blurred edge's midpoint between the stored
+        black and white then lies inside the black (``DetectorParams(tone="srgb")`` undoes it).
     """
     rng = np.random.default_rng() if rng is None else rng
     h, w = shape
@@ -228,6 +234,8 @@ def render(
         img = img + ga * gain * np.exp(-((xx - gx) ** 2 + (yy - gy) ** 2) / (2.0 * gs * gs))
     if not bayer:
         img = img + rng.normal(0.0, noise, (h, w))
+        if srgb:
+            img = linear_to_srgb(img)
         out = np.clip(np.rint(img), 0, 255).astype(np.uint8)
     else:
         tint = {0: 0.6, 1: 0.85, 2: 1.0}  # B, G, R gains of a warm light
@@ -237,6 +245,8 @@ def render(
         # B at (even, even), R at (odd, odd): OpenCV names this layout BayerRG (its names are those of
         # the second row and column)
         out = cv2.cvtColor(mosaic, cv2.COLOR_BayerRG2BGR)
+        if srgb:
+            out = cv2.LUT(out, np.clip(np.rint(linear_to_srgb(np.arange(256.0))), 0, 255).astype(np.uint8))
     if jpeg_quality is not None:
         ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
         out = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)

@@ -161,8 +161,9 @@ def test_cell_jacobian_matches_finite_differences_of_the_profiles() -> None:
 
 
 def test_helper_thread_gives_the_same_detections() -> None:
-    """The second path's candidate stage in a helper thread (``threads=2``) changes nothing in the
-    output (``threads=1`` runs both paths in turn)."""
+    """The second path's candidate stage and its early reads (the candidates no first-path candidate
+    covers) in a helper thread (``threads=2``) change nothing in the output (``threads=1`` runs both
+    paths in turn)."""
     rng = np.random.default_rng(2)
     fam = MarkerFamily.APRILTAG_36H11
     shape = (300, 400)

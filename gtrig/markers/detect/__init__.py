@@ -27,6 +27,8 @@ Corners are in OpenCV's pixel convention (pixel centres at integer coordinates) 
 
 from __future__ import annotations
 
+import dataclasses
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -36,11 +38,12 @@ from numpy.typing import NDArray
 
 from gtrig.errors import InputError
 from gtrig.markers.detect import _threads
-from gtrig.markers.detect.blurred import BlurredParams, find_blurred_candidates, image_noise, read_blurred
+from gtrig.markers.detect.blurred import BlurredParams, BlurredRead, find_blurred_candidates, image_noise, read_blurred
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
 from gtrig.markers.detect.decode import sample_cells, unblur_cells
 from gtrig.markers.detect.edges import CLIP_HIGH, fit_edges, gather_band, intersect_corners, marker_context
+from gtrig.markers.detect.tone import Tone, to_levels, to_light
 from gtrig.markers.families import _codebook, decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily
 
@@ -48,7 +51,7 @@ __all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", 
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 4
+DETECTOR_VERSION = 5
 
 
 @dataclass(frozen=True)
@@ -138,6 +141,9 @@ class DetectorParams:
         With two or more the second path's candidate stage runs in a helper thread beside the first
         path, and the edge fits are split between two threads (:mod:`._threads`); the output is the
         same.
+    tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
+        simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored
+        levels back to light, where the blurred-step model holds.
     """
 
     candidates: CandidateParams = field(default_factory=CandidateParams)
@@ -154,6 +160,7 @@ class DetectorParams:
 
     unblur: bool = True
     blurred: BlurredParams = field(default_factory=BlurredParams)
+    tone: Tone = "linear"
 
 
 class MarkerDetector:
@@ -208,7 +215,8 @@ class MarkerDetector:
         return (inner > thr[:, None, None]).astype(np.uint8), white - black
 
     def _predecode(self, gray: NDArray[np.uint8], Q: NDArray[np.float64], und: Undistorter | None,
-                   trace: list[Rejection] | None = None) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
+                   trace: list[Rejection] | None = None
+                   ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
                               NDArray[np.uint8]]:
         """Keep candidates whose cells, sampled through the initial quad, are close to a code.
 
@@ -227,7 +235,10 @@ class MarkerDetector:
         ids, rot, ham = decode_batch(self.spec.family, bits[:, bc:-bc, bc:-bc], tol)
         border_white = bits[:, bmask].sum(axis=1)
         ok_levels = (border_white <= n // 2) & (contrast >= self.params.min_contrast)
-        retry = np.flatnonzero((ids < 0) & ok_levels)
+        # the blur model only matters where the blur is a good part of a cell (a 1.5 px blur leaves the
+        # cells of 5 px and more readable one by one): larger candidates that read as no code are clutter
+        cell_px = np.sqrt(np.abs(_shoelace(Q))) / n
+        retry = np.flatnonzero((ids < 0) & ok_levels & (cell_px < 5.0))
         retried = np.zeros(len(Q), bool)
         if len(retry):
             # small blurred markers: a white cell among black ones peaks below the midway threshold, so
@@ -287,20 +298,28 @@ class MarkerDetector:
             # without the second path the first path keeps to the markers it reads plainly (those read
             # only through the blur model are the second path's regime, where its corners are better)
             return _dedupe([d for d in self._detect_sharp(gray, trace) if id(d) not in self._provisional])
+        early: list[BlurredRead] | None = None
         if _threads.threads(self.params.threads) < 2:
             cands = self._blurred_candidates(gray)
             dets = self._detect_sharp(gray, trace)
         else:
-            # the second path's candidate stage (OpenCV's filters and contours, which release the GIL)
-            # beside the first path
-            later = _threads.helper_pool().submit(self._blurred_candidates, gray)
-            dets = self._detect_sharp(gray, trace)
-            cands = later.result()
+            # the second path beside the first: its candidate stage (OpenCV's filters and contours,
+            # which release the GIL), then, once the first path's candidates are known, the reading of
+            # those of its candidates that no first-path candidate covers (the others wait for the
+            # first path's detections)
+            first: Future[list[NDArray[np.float64]]] = Future()
+            later = _threads.helper_pool().submit(self._blurred_early, gray, first)
+            try:
+                dets = self._detect_sharp(gray, trace, first)
+            finally:
+                if not first.done():
+                    first.set_result([])
+            cands, early = later.result()
         # markers read only through the blur model in the pre-decoder are small and blurred: the second
         # path, whose model is made for them, reads them too, and its reading replaces the first's
         prov = [d for d in dets if id(d) in self._provisional]
         sure = [d for d in dets if id(d) not in self._provisional]
-        blurred = self._detect_blurred(gray, cands, sure, trace)
+        blurred = self._detect_blurred(gray, cands, sure, trace, early)
         keep = [d for d in prov
                 if not any(b.id == d.id and np.linalg.norm(b.corners_px.mean(axis=0) - d.corners_px.mean(axis=0))
                            < 0.25 * np.sqrt(_area(d.corners_px)) for b in blurred)]
@@ -320,26 +339,44 @@ class MarkerDetector:
         quads = find_blurred_candidates(gray, p.blurred, p.candidates.max_side_px(gray.shape), p.candidates.scale)
         return quads, image_noise(gray) if quads else float("nan")
 
+    def _blurred_early(self, gray: NDArray[np.uint8], first: Future[list[NDArray[np.float64]]]
+                       ) -> tuple[tuple[list[NDArray[np.float64]], float], list[BlurredRead]]:
+        """The second path's candidates (:meth:`_blurred_candidates`) and the reads of those whose
+        centre lies in no quad of ``first`` (the first path's candidates, raw pixels, once known)."""
+        cands = self._blurred_candidates(gray)
+        quads, noise = cands
+        idx = _outside(quads, first.result())
+        if not idx:
+            return cands, []
+        reads = read_blurred(gray, np.array([quads[i] for i in idx]), self._all_codes(), self.spec.cells,
+                             self.spec.border_cells, self.params.blurred, noise)
+        return cands, [dataclasses.replace(r, index=idx[r.index]) for r in reads]
+
     def _detect_blurred(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float],
-                        found: list[Detection], trace: list[Rejection] | None = None) -> list[Detection]:
+                        found: list[Detection], trace: list[Rejection] | None = None,
+                        early: list[BlurredRead] | None = None) -> list[Detection]:
         """The second path (:mod:`.blurred`) on its candidates ``cands`` (from
         :meth:`_blurred_candidates`) that no detection of the first path (``found``) covers.
+        ``early`` are reads already made (:meth:`_blurred_early`): their candidates are not read again.
 
         It works in raw pixels: over a marker of at most ``max_side_px`` the lens distortion is close
         to a homography.
         """
-        quads, noise = cands
-        if found:
-            # a candidate whose centre lies inside a detection is that marker (or a part of it)
-            polys = [d.corners_px.astype(np.float32).reshape(-1, 1, 2) for d in found]
-            quads = [q for q in quads
-                     if all(cv2.pointPolygonTest(poly, tuple(map(float, q.mean(axis=0))), False) < 0
-                            for poly in polys)]
+        quads_all, noise = cands
+        # a candidate whose centre lies inside a detection is that marker (or a part of it)
+        todo = _outside(quads_all, [d.corners_px for d in found])
+        done = set() if early is None else set(_outside(quads_all, self._first_quads))
+        quads = [quads_all[i] for i in todo]
         if not quads:
             return []
         codes = self._all_codes()
-        reads = read_blurred(gray, np.array(quads), codes, self.spec.cells, self.spec.border_cells,
-                             self.params.blurred, noise)
+        late = [i for i in todo if i not in done]
+        reads = [] if not late else read_blurred(
+            gray, np.array([quads_all[i] for i in late]), codes, self.spec.cells, self.spec.border_cells,
+            self.params.blurred, noise)
+        reads = [dataclasses.replace(r, index=late[r.index]) for r in reads]
+        keep = set(todo)
+        reads = sorted(reads + [r for r in early or [] if r.index in keep], key=lambda r: r.index)
         if trace is not None:
             read_at = [r.corners.mean(axis=0) for r in reads]
             for q in quads:
@@ -372,10 +409,16 @@ class MarkerDetector:
                        if np.isfinite(shift[k]) else "edges do not intersect")
             trace.append(Rejection(Qr[k].copy(), "fit", why))
 
-    def _detect_sharp(self, gray: NDArray[np.uint8], trace: list[Rejection] | None = None) -> list[Detection]:
-        """The first path: candidates, edge fits and decoding (module docstring, steps 1-5)."""
+    def _detect_sharp(self, gray: NDArray[np.uint8], trace: list[Rejection] | None = None,
+                      first: Future[list[NDArray[np.float64]]] | None = None) -> list[Detection]:
+        """The first path: candidates, edge fits and decoding (module docstring, steps 1-5); ``first``
+        receives the candidates (raw pixels) as soon as they are found."""
         p = self.params
+        nt = _threads.threads(p.threads)
         quads = find_candidates(gray, p.candidates, self._hole_frac, trace)
+        self._first_quads = quads
+        if first is not None:
+            first.set_result(quads)
         if not quads:
             return []
         und = self._undistorter(gray.shape)
@@ -394,7 +437,6 @@ class MarkerDetector:
         p1 = np.roll(Q, -1, axis=1).reshape(-1, 2)
         L = side.ravel()
         sigma = np.full(len(p0), 1.0)
-        nt = _threads.threads(p.threads)
         fit = None
         for _pass in range(p.passes):
             w = 3.0 * sigma + p.band_px
@@ -409,6 +451,8 @@ class MarkerDetector:
                 w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
                 excl = np.minimum(sigma, 0.3 * L)
             samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
+            if p.tone != "linear":
+                samples = dataclasses.replace(samples, val=to_light(samples.val, p.tone))
             if fit is None:
                 fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, tol=p.tol, threads=nt)
             else:
@@ -460,6 +504,10 @@ class MarkerDetector:
             # an over-exposed white level lies beyond 255 (edges.py censors clipped pixels): the cells
             # are read against the contrast the image can show
             ab = ab[0], np.minimum(ab[1], CLIP_HIGH + 0.5 - ab[0])
+            if p.tone != "linear":
+                # the cells are read in the stored levels
+                black_lv = to_levels(ab[0], p.tone)
+                ab = black_lv, to_levels(ab[0] + ab[1], p.tone) - black_lv
             wls = unblur_cells(gray, corners, n, bc, np.clip(blur, 0.3, p.max_blur_px), ab[0], ab[1], und)
             data = (wls > 0.5).astype(np.uint8)
         ids, rot, ham = decode_batch(self.spec.family, data, p.max_hamming)
@@ -511,6 +559,13 @@ def _fit_reason(fit_ok: bool, b: float, rel: float, sigma: float, p: DetectorPar
     return None
 
 
+def _outside(quads: list[NDArray[np.float64]], polys: list[NDArray[np.float64]]) -> list[int]:
+    """Indices of the ``quads`` (each (4, 2)) whose centre lies inside none of ``polys`` (each (4, 2))."""
+    cv_polys = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in polys]
+    return [i for i, q in enumerate(quads)
+            if all(cv2.pointPolygonTest(p, tuple(map(float, q.mean(axis=0))), False) < 0 for p in cv_polys)]
+
+
 def _dedupe(dets: list[Detection]) -> list[Detection]:
     """Drop detections whose centre lies within another detection of the same ID (keeps the larger)."""
     if len(dets) < 2:
@@ -525,6 +580,12 @@ def _dedupe(dets: list[Detection]) -> list[Detection]:
             continue
         keep.append(d)
     return keep
+
+
+def _shoelace(Q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Signed areas (Q,) of quads (Q, 4, 2), square pixels."""
+    x, y = Q[..., 0], Q[..., 1]
+    return 0.5 * np.sum(x * np.roll(y, -1, axis=-1) - np.roll(x, -1, axis=-1) * y, axis=-1)
 
 
 def _area(q: NDArray[np.float64]) -> float:

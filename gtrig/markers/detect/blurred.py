@@ -129,6 +129,7 @@ class BlurredRead:
     sigma : fitted blur, pixels.
     rms : residual SD of the best code, grey levels.
     margin : chi-square margin over the runner-up hypothesis.
+    index : the candidate's index among the ``quads`` given to :func:`read_blurred`.
     """
 
     code: int
@@ -137,6 +138,7 @@ class BlurredRead:
     sigma: float
     rms: float
     margin: float
+    index: int = -1
 
 
 _NEXT = np.array([1, 2, 3, 0])
@@ -434,7 +436,7 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
     # the right code's excess residual is chi-square(d2): mean d2, SD sqrt(2 d2)
     max_excess = d2 + params.max_excess_sd * np.sqrt(2.0 * d2)
     out = []
-    for quad in quads:
+    for index, quad in enumerate(quads):
         px, I = _pixels(gray, quad, n, 0.5)
         N = len(I)
         if N < 3 * d2:
@@ -518,5 +520,5 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
             with np.errstate(all="ignore"):
                 cov = s2b * np.linalg.pinv(JtJ)[:8, :8]
             cov = np.stack([cov[2 * k:2 * k + 2, 2 * k:2 * k + 2] for k in range(4)])
-            out.append(BlurredRead(best, qb, cov, sb, float(np.sqrt(s2b)), float(margin)))
+            out.append(BlurredRead(best, qb, cov, sb, float(np.sqrt(s2b)), float(margin), index))
     return out
