@@ -109,8 +109,7 @@ def _import_distributed() -> Any:
 
 
 @contextlib.contextmanager
-def open_executor(dask: str | None = None, *, connect_timeout_s: float = CONNECT_TIMEOUT_S
-                  ) -> Iterator[Any]:
+def open_executor(dask: str | None = None, *, connect_timeout_s: float | None = None) -> Iterator[Any]:
     """The executor ``--dask`` asks for, closed on exit; ``None`` when ``dask`` is None (each map
     then opens its own local process pool).
 
@@ -122,7 +121,7 @@ def open_executor(dask: str | None = None, *, connect_timeout_s: float = CONNECT
     ------
     InputError
         Dask not installed, a malformed spec, or a scheduler that does not answer within
-        ``connect_timeout_s`` (one line).
+        ``connect_timeout_s`` (default :data:`CONNECT_TIMEOUT_S`; one line).
     """
     if dask is None:
         yield None
@@ -138,10 +137,11 @@ def open_executor(dask: str | None = None, *, connect_timeout_s: float = CONNECT
                 dashboard_address="127.0.0.1:0" if _has_dashboard() else None, silence_logs=logging.WARNING))
             client = stack.enter_context(distributed.Client(cluster))
         else:
+            wait_s = CONNECT_TIMEOUT_S if connect_timeout_s is None else connect_timeout_s
             try:
-                client = distributed.Client(str(value), timeout=f"{connect_timeout_s}s")
+                client = distributed.Client(str(value), timeout=f"{wait_s}s")
             except (OSError, TimeoutError) as e:
-                raise InputError(f"--dask {value}: no Dask scheduler answers there within {connect_timeout_s:g} s "
+                raise InputError(f"--dask {value}: no Dask scheduler answers there within {wait_s:g} s "
                                  f"({type(e).__name__}); start one with 'dask scheduler' or check the address"
                                  ) from None
             stack.callback(client.close)
