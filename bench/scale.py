@@ -97,13 +97,15 @@ def child_vision(rec: Path, rig_path: Path, mode: str, checkpoint: Path | None) 
     rig = load_rig(rig_path)
     out: dict[str, object] = {"mode": mode}
     with open_executor(f"local:{n}" if kind == "dask" else None) as ex:
-        before = _worker_stats(ex)
+        before, me0 = _worker_stats(ex), _self_stats()
         chunks = [0]
         t0 = time.perf_counter()
         res = run_recording(rec, rig, "run", True, workers=int(n), executor=ex, checkpoint=checkpoint,
                             progress=lambda d, total: chunks.__setitem__(0, total))
         wall = time.perf_counter() - t0
-        after = _worker_stats(ex)
+        after, me1 = _worker_stats(ex), _self_stats()
+        if kind == "pool" and int(n) == 1:  # in this process: the client is the worker
+            before, after = {"cpu_s": me0["cpu_s"]}, {"cpu_s": me1["cpu_s"], "peak_mb": me1["peak_mb"]}
         if ex is not None:  # Dask's own cost per chunk: empty chunks, round trip through the scheduler
             t = time.perf_counter()
             map_chunks(_noop, [Chunk((i,), str(i)) for i in range(200)], lambda i, r: None, executor=ex)

@@ -25,6 +25,7 @@ import contextlib
 import logging
 import os
 import re
+import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -48,9 +49,17 @@ Progress = Callable[[int, int], None]
 
 
 class ChunkError(GtrigError):
-    """Chunks that failed after their retries; the others finished (and were checkpointed)."""
+    """Chunks that failed after their retries; the others finished (and were checkpointed). Exit code 2
+    when every one failed on bad input (an unreadable image: never retried), else 1."""
 
     exit_code = 1
+
+
+@dataclass(frozen=True)
+class _Failure:
+    index: int
+    message: str
+    bad_input: bool
 
 
 @dataclass(frozen=True)
@@ -201,21 +210,34 @@ class _Pending:
 
 
 def _in_process(fn: Callable[..., Any], chunks: Sequence[Chunk], todo: Sequence[int], retries: int,
-                on_result: Callable[[int, Any], None], failed: list[str], tick: Callable[[], None]) -> None:
+                on_result: Callable[[int, Any], None], failed: list[_Failure], tick: Callable[[], None]) -> None:
     for i in todo:
         for attempt in range(retries + 1):
             try:
                 res = fn(*chunks[i].args)
-            except (GtrigError, MemoryError):
-                raise  # bad input or no memory: the same again, so not a chunk's transient failure
+            except MemoryError:
+                raise
             except Exception as e:
-                log.warning("chunk %s failed (attempt %d of %d): %s", chunks[i].label, attempt + 1, retries + 1, e)
-                if attempt == retries:
-                    failed.append(f"{chunks[i].label}: {type(e).__name__}: {e}")
+                if _give_up(chunks[i].label, i, e, attempt + 1, retries, failed):
+                    break
                 continue
             on_result(i, res)
             break
         tick()
+
+
+def _give_up(label: str, i: int, e: Exception, attempt: int, retries: int, failed: list[_Failure]) -> bool:
+    """Log a chunk's failure; True (and recorded in ``failed``) when it is not to be submitted again: its
+    retries are used up, or its input is bad (a GtrigError: the same again)."""
+    bad_input = isinstance(e, GtrigError)
+    if attempt <= retries and not bad_input:
+        log.warning("chunk %s failed (attempt %d of %d), submitted again: %s: %s", label, attempt, retries + 1,
+                    type(e).__name__, e)
+        return False
+    log.error("chunk %s failed%s; going on without it: %s: %s", label, "" if bad_input else f" {attempt} times",
+              type(e).__name__, e)
+    failed.append(_Failure(i, f"{label}: {e}" if bad_input else f"{label}: {type(e).__name__}: {e}", bad_input))
+    return True
 
 
 def map_chunks(fn: Callable[..., Any], chunks: Sequence[Chunk], on_result: Callable[[int, Any], None], *,
@@ -241,7 +263,7 @@ def map_chunks(fn: Callable[..., Any], chunks: Sequence[Chunk], on_result: Calla
     """
     todo = list(range(len(chunks))) if todo is None else list(todo)
     n_done = len(chunks) - len(todo)
-    failed: list[str] = []
+    failed: list[_Failure] = []
 
     def tick() -> None:
         nonlocal n_done
@@ -258,13 +280,16 @@ def map_chunks(fn: Callable[..., Any], chunks: Sequence[Chunk], on_result: Calla
     else:
         _distributed_map(fn, chunks, todo, executor, retries, on_result, failed, tick, window)
     if failed:
-        raise ChunkError(f"{len(failed)} chunk(s) failed after {retries + 1} attempts (the rest are "
-                           f"checkpointed; rerun to retry them): " + "; ".join(failed[:5])
-                           + (" ..." if len(failed) > 5 else ""))
+        err = ChunkError(f"{len(failed)} chunk(s) failed (after up to {retries + 1} attempts; the rest are "
+                         "checkpointed, rerun to retry them): " + "; ".join(f.message for f in failed[:5])
+                         + (" ..." if len(failed) > 5 else ""))
+        if all(f.bad_input for f in failed):
+            err.exit_code = 2
+        raise err
 
 
 def _local_pool_map(fn: Callable[..., Any], chunks: Sequence[Chunk], todo: list[int], nproc: int, retries: int,
-                    on_result: Callable[[int, Any], None], failed: list[str], tick: Callable[[], None],
+                    on_result: Callable[[int, Any], None], failed: list[_Failure], tick: Callable[[], None],
                     window: int | None) -> None:
     """A pool of our own: a worker that died (killed, out of memory) breaks a ``ProcessPoolExecutor``
     for good, so a new pool takes over the chunks that were not finished."""
@@ -279,7 +304,8 @@ def _local_pool_map(fn: Callable[..., Any], chunks: Sequence[Chunk], todo: list[
         on_result(i, res)
 
     for attempt in range(retries + 1):
-        rest = [i for i in todo if i not in finished]
+        gave_up = {f.index for f in failed}
+        rest = [i for i in todo if i not in finished and i not in gave_up]
         try:
             with process_pool(nproc) as ex:
                 _distributed_map(fn, chunks, rest, ex, retries, keep, failed, tick, window)
@@ -292,16 +318,18 @@ def _local_pool_map(fn: Callable[..., Any], chunks: Sequence[Chunk], todo: list[
 
 
 def _distributed_map(fn: Callable[..., Any], chunks: Sequence[Chunk], todo: list[int], ex: Any, retries: int,
-                     on_result: Callable[[int, Any], None], failed: list[str], tick: Callable[[], None],
+                     on_result: Callable[[int, Any], None], failed: list[_Failure], tick: Callable[[], None],
                      window: int | None) -> None:
     from concurrent.futures.process import BrokenProcessPool
 
     pending = _Pending(ex)
     attempts = dict.fromkeys(todo, 0)
     queue = list(reversed(todo))  # popped from the end: submitted in order
+    limit, asked = window or 4 * slots(ex), time.monotonic()
     try:
         while queue or pending.futures:
-            limit = window or 4 * slots(ex)
+            if window is None and time.monotonic() - asked > 5.0:  # a cluster may grow (or shrink)
+                limit, asked = 4 * slots(ex), time.monotonic()
             while queue and len(pending.futures) < limit:
                 i = queue.pop()
                 attempts[i] += 1
@@ -309,21 +337,13 @@ def _distributed_map(fn: Callable[..., Any], chunks: Sequence[Chunk], todo: list
             for i, fut in pending.wait():
                 try:
                     res = fut.result()
-                except (GtrigError, MemoryError):
-                    raise
-                except BrokenProcessPool:
-                    raise  # the local pool cannot take more: its owner reruns (the done chunks are kept)
+                except (MemoryError, BrokenProcessPool):
+                    raise  # a broken local pool cannot take more: its owner starts another (done chunks kept)
                 except Exception as e:
-                    label = chunks[i].label
-                    if attempts[i] <= retries:
-                        log.warning("chunk %s failed (attempt %d of %d), submitted again: %s: %s", label,
-                                    attempts[i], retries + 1, type(e).__name__, e)
+                    if not _give_up(chunks[i].label, i, e, attempts[i], retries, failed):
                         queue.append(i)
-                        continue
-                    log.error("chunk %s failed %d times; going on without it: %s: %s", label, attempts[i],
-                              type(e).__name__, e)
-                    failed.append(f"{label}: {type(e).__name__}: {e}")
-                    tick()
+                    else:
+                        tick()
                     continue
                 del fut  # a Dask result is released on the cluster as soon as it is handed on
                 on_result(i, res)

@@ -78,8 +78,15 @@ def square_or_die(i: int, flag: str) -> tuple[int, int]:
     return i * i, os.getpid()
 
 
-def fail_on(i: int, bad: int) -> int:
-    """``i`` squared, except that chunk ``bad`` always raises."""
+def fail_on(i: int, bad: int, counts: str | None = None) -> int:
+    """``i`` squared, except that chunk ``bad`` always raises (ValueError; with ``counts``, a file to
+    count its attempts in, an InputError: bad input)."""
     if i == bad:
+        if counts is not None:
+            from gtrig.errors import InputError
+
+            with open(counts, "a") as f:
+                f.write("x")
+            raise InputError(f"image {i}.png: not an image")
         raise ValueError(f"chunk {i} is broken")
     return i * i

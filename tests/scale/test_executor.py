@@ -56,12 +56,23 @@ def test_failing_chunk_is_retried_then_reported_while_the_rest_finishes(workers:
     chunks = [Chunk((i, 2), f"camera c{i}, {i}.000-{i}.900 s") for i in range(6)]
     got: dict[int, int] = {}
     seen: list[tuple[int, int]] = []
-    with pytest.raises(ChunkError, match=r"1 chunk\(s\) failed after 3 attempts.*camera c2, 2.000-2.900 s: "
-                                         r"ValueError: chunk 2 is broken"):
+    with pytest.raises(ChunkError, match=r"1 chunk\(s\) failed \(after up to 3 attempts.*camera c2, 2.000-2.900 s: "
+                                         r"ValueError: chunk 2 is broken") as err:
         map_chunks(fail_on, chunks, got.__setitem__, workers=workers, retries=2,
                    progress=lambda d, n: seen.append((d, n)))
     assert got == {i: i * i for i in range(6) if i != 2}
     assert seen[0] == (0, 6) and seen[-1] == (6, 6)  # the failed chunk counts as done for the bar
+    assert err.value.exit_code == 1
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_bad_input_in_a_chunk_is_not_retried_and_exits_2(workers: int, tmp_path: Path) -> None:
+    counts = tmp_path / "attempts"
+    got: dict[int, int] = {}
+    with pytest.raises(ChunkError, match=r"camera c1, 1.000-1.900 s: image 1.png: not an image") as err:
+        map_chunks(fail_on, [Chunk((i, 1, str(counts)), f"camera c{i}, {i}.000-{i}.900 s") for i in range(4)],
+                   got.__setitem__, workers=workers)
+    assert got == {0: 0, 2: 4, 3: 9} and counts.read_text() == "x" and err.value.exit_code == 2
 
 
 def test_worker_killed_mid_chunk_is_replaced_in_the_local_pool(tmp_path: Path) -> None:
