@@ -208,6 +208,8 @@ def main() -> None:
             print(f"  {n} worker(s): Dask / pool detection rate {float(p['detect_s']) / float(d['detect_s']):.2f} "
                   f"(wall), {float(p['worker_cpu_s']) / float(d['worker_cpu_s']):.2f} (CPU); Dask's wall overhead "
                   f"{1000 * per:.0f} ms per chunk", flush=True)
+    if not a.fractions:
+        return
     # memory over the long run: detections of one cycle checkpointed, repeated through the hour
     cycle_ck = a.work / "cycle.ck"
     cyc = a.work / "cycle"
@@ -222,8 +224,8 @@ def main() -> None:
         r = _child([str(rec), str(rig), "dask:2", str(ck)])
         print(f"{minutes:g} min: {sum(counts.values())} images ({len(counts)} cameras), {r['instants']} instants, "
               f"{lines} detection chunks from the checkpoint; end to end {r['wall_s']:.0f} s wall, client CPU "
-              f"{r['client_cpu_s']:.0f} s; client peak {r['client_peak_mb']:.0f} MB, worker peak "
-              f"{r['worker_peak_mb']:.0f} MB", flush=True)
+              f"{r['client_cpu_s']:.0f} s, workers' CPU {r['worker_cpu_s']:.0f} s; client peak "
+              f"{r['client_peak_mb']:.0f} MB, worker peak {r['worker_peak_mb']:.0f} MB", flush=True)
 
 
 if __name__ == "__main__":

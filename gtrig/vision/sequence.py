@@ -415,7 +415,7 @@ def detection_chunks(instants: Sequence[Instant], indices: dict[str, FrameIndex]
     for ins in instants:
         for cam, i in ins.images:
             rows.setdefault(cam, set()).add(i)
-    out = []
+    out: list[tuple[str, list[int]]] = []
     for cam in sorted(rows):
         r = sorted(rows[cam])
         out.extend((cam, r[k:k + chunk_size]) for k in range(0, len(r), chunk_size))
