@@ -87,6 +87,14 @@ def _noop(i: int) -> int:
     return i
 
 
+def _warm(ctx: object, camera: str, path: str) -> None:
+    """Imports, the detector's compiled kernels and one image: what a new worker pays once, kept out of
+    the per-image CPU figures."""
+    from gtrig.vision.sequence import _process_chunk
+
+    _process_chunk(ctx, camera, [0], [path])  # type: ignore[arg-type]
+
+
 def child_vision(rec: Path, rig_path: Path, mode: str, checkpoint: Path | None) -> dict[str, object]:
     """One GTvision run in this process: ``mode`` ``pool:N`` or ``dask:N``."""
     from gtrig.executor import Chunk, map_chunks, open_executor
@@ -97,6 +105,13 @@ def child_vision(rec: Path, rig_path: Path, mode: str, checkpoint: Path | None) 
     rig = load_rig(rig_path)
     out: dict[str, object] = {"mode": mode}
     with open_executor(f"local:{n}" if kind == "dask" else None) as ex:
+        from gtrig.vision.sequence import WorkerContext, camera_indices
+
+        ix = next(iter(camera_indices(rec, "run", rig).values()))
+        warm = (WorkerContext.of(rig, "auto"), ix.camera, ix.source(0))
+        if ex is not None:
+            ex.run(_warm, *warm)  # type: ignore[attr-defined]
+        _warm(*warm)  # the client (forked into the local pool's workers)
         before, me0 = _worker_stats(ex), _self_stats()
         chunks = [0]
         t0 = time.perf_counter()

@@ -26,6 +26,7 @@ import logging
 import os
 import re
 import time
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -139,12 +140,18 @@ def open_executor(dask: str | None = None, *, connect_timeout_s: float | None = 
     distributed = _import_distributed()
     with contextlib.ExitStack() as stack:
         if kind == "local":
-            # one thread per worker: the stages are CPU-bound Python/NumPy; OpenCV and BLAS are kept to
-            # one thread inside each task too
-            cluster = stack.enter_context(distributed.LocalCluster(
-                n_workers=int(value), threads_per_worker=1, processes=True, host="127.0.0.1",
-                dashboard_address="127.0.0.1:0" if _has_dashboard() else None, silence_logs=logging.WARNING))
-            client = stack.enter_context(distributed.Client(cluster))
+            # our cluster's own chatter (scheduler, nannies, a dashboard port taken) is not the user's news
+            quiet = logging.getLogger("distributed")
+            stack.callback(quiet.setLevel, quiet.level)
+            quiet.setLevel(logging.WARNING)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)
+                # one thread per worker: the stages are CPU-bound Python/NumPy; OpenCV and BLAS are kept to
+                # one thread inside each task too
+                cluster = stack.enter_context(distributed.LocalCluster(
+                    n_workers=int(value), threads_per_worker=1, processes=True, host="127.0.0.1",
+                    dashboard_address="127.0.0.1:0" if _has_dashboard() else None, silence_logs=logging.WARNING))
+                client = stack.enter_context(distributed.Client(cluster))
         else:
             wait_s = CONNECT_TIMEOUT_S if connect_timeout_s is None else connect_timeout_s
             try:
@@ -155,7 +162,7 @@ def open_executor(dask: str | None = None, *, connect_timeout_s: float | None = 
                                  ) from None
             stack.callback(client.close)
         link = dashboard_link(client)
-        log.info("Dask: %s, %d worker thread(s)%s", getattr(client, "scheduler", None) and
+        log.debug("Dask: %s, %d worker thread(s)%s", getattr(client, "scheduler", None) and
                  client.scheduler.address, slots(client), f"; dashboard {link}" if link else "")
         yield client
 
