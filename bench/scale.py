@@ -96,7 +96,11 @@ def _warm(ctx: object, camera: str, path: str) -> None:
 
 
 def child_vision(rec: Path, rig_path: Path, mode: str, checkpoint: Path | None) -> dict[str, object]:
-    """One GTvision run in this process: ``mode`` ``pool:N`` or ``dask:N``."""
+    """One GTvision run in this process: ``mode`` ``pool:N``, ``dask:N`` (``--dask local:N``: the
+    scheduler in this process) or ``tcp:N`` (a scheduler and N workers started as their own processes on
+    127.0.0.1, as on a cluster: this process is only the client)."""
+    import contextlib
+
     from gtrig.executor import Chunk, map_chunks, open_executor
     from gtrig.rig import load_rig
     from gtrig.vision.sequence import run_recording, write_pose_track_files
@@ -104,7 +108,14 @@ def child_vision(rec: Path, rig_path: Path, mode: str, checkpoint: Path | None) 
     kind, n = mode.split(":")
     rig = load_rig(rig_path)
     out: dict[str, object] = {"mode": mode}
-    with open_executor(f"local:{n}" if kind == "dask" else None) as ex:
+    with contextlib.ExitStack() as stack:
+        spec = {"dask": f"local:{n}", "pool": None}.get(kind)
+        if kind == "tcp":
+            sys.path.insert(0, str(REPO))
+            from tests.scale.cluster import dask_cluster
+
+            spec = stack.enter_context(dask_cluster(rec.parent / f"{rec.name}_cluster", int(n)))
+        ex = stack.enter_context(open_executor(spec))
         from gtrig.vision.sequence import WorkerContext, camera_indices
 
         ix = next(iter(camera_indices(rec, "run", rig).values()))

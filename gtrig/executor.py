@@ -188,6 +188,16 @@ def dashboard_link(executor: Any) -> str | None:
 
 
 # ------------------------------------------------------------------------------------- the map
+def _pickled_call(fn: Callable[..., Any], *args: Any) -> bytes:
+    """``fn(*args)`` pickled on the worker. Dask hands NumPy arrays back as views into the message that
+    carried them, so one small array kept (a pose) would pin its whole chunk's message in the client:
+    with the result pickled in-band, every array owns its own memory (measured: 18 kB per GTvision
+    instant kept otherwise, bench/scale.py)."""
+    import pickle
+
+    return pickle.dumps(fn(*args), protocol=pickle.HIGHEST_PROTOCOL)
+
+
 class _Pending:
     """The chunks in flight on one executor, waited on the way that executor's futures need."""
 
@@ -198,8 +208,15 @@ class _Pending:
 
     def submit(self, fn: Callable[..., Any], i: int, args: tuple[Any, ...]) -> None:
         # pure=False: a chunk submitted again after a failure must run again, not reuse the failed key
-        fut = self.ex.submit(fn, *args, pure=False) if self.dask else self.ex.submit(fn, *args)
+        fut = self.ex.submit(_pickled_call, fn, *args, pure=False) if self.dask else self.ex.submit(fn, *args)
         self.futures[fut] = i
+
+    def result(self, fut: Any) -> Any:
+        if self.dask:
+            import pickle
+
+            return pickle.loads(fut.result())
+        return fut.result()
 
     def wait(self) -> list[tuple[int, Any]]:
         """Block until one or more chunks finish; their (index, future), removed from the pending."""
@@ -343,7 +360,7 @@ def _distributed_map(fn: Callable[..., Any], chunks: Sequence[Chunk], todo: list
                 pending.submit(fn, i, chunks[i].args)
             for i, fut in pending.wait():
                 try:
-                    res = fut.result()
+                    res = pending.result(fut)
                 except (MemoryError, BrokenProcessPool):
                     raise  # a broken local pool cannot take more: its owner starts another (done chunks kept)
                 except Exception as e:
