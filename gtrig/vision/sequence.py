@@ -20,8 +20,13 @@ not depend on the number of workers or on the order chunks finish; the noise fac
 a fixed sample, and the only sequential step (the previous pose breaking a flip) runs afterwards, in
 time order, in the main process.
 
+Chunks: detection runs over one camera's consecutive images (a camera and a time window), estimation
+over consecutive instants, on a local process pool or any executor (a Dask client: :mod:`gtrig.executor`);
+the workers read their chunk's images themselves, the client never holds an image.
+
 Resuming: every finished chunk of detections (the expensive part) is appended to a checkpoint file
-(JSON lines; floats are written with ``repr``, so a resumed run's output is bit-identical). A
+by the client as it completes (JSON lines; floats are written with ``repr``, so a resumed run's output
+is bit-identical; a line cut by a crash is dropped and its chunk detected again). A
 checkpoint of other images, another detector, other lenses or other markers is refused; one written
 before the camera or marker poses were calibrated again, or with other estimator settings, is reused
 (detection does not depend on them).
