@@ -8,6 +8,7 @@ import typer
 
 from gtrig.cli.common import console, handle_errors
 from gtrig.cli.run import print_result
+from gtrig.cli.scale import chunk_bar, dask_option, executor
 
 
 @handle_errors
@@ -15,6 +16,8 @@ def command(
     out: Path = typer.Option(Path("demo_out"), "--out", help="Folder for the recording and every output."),
     seed: int = typer.Option(0, help="Simulator seed."),
     quick: bool = typer.Option(False, "--quick", help="Short sequences (a smoke test)."),
+    workers: int = typer.Option(0, "--workers", "-j", min=0, help="Processes (0 = one per core)."),
+    dask: str = dask_option(),
 ) -> None:
     """Simulate the GT room, then run every stage on it (what `gtrig run` does) and print the accuracy against
     truth."""
@@ -39,8 +42,11 @@ def command(
         table.add_row(item.what, f"{item.count} {item.unit}", f"{item.bytes / 1e6:.1f}")
     console.print(table)
 
-    with console.status("processing") as status:
-        result = pipeline.run(rec, out / "results", on_stage=lambda name: status.update(f"processing: {name}"))
+    from gtrig.config import RunConfig
+
+    with executor(dask) as ex, chunk_bar() as bar:
+        result = pipeline.run(rec, out / "results", on_stage=bar.on_stage, config=RunConfig(workers=workers),
+                              executor=ex, progress=bar.progress)
     print_result(result, True)
     _scanmatch_validate(rec, out / "results")
     from gtrig.report import write_report

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from gtrig.cli.common import console, handle_errors
+from gtrig.cli.scale import chunk_bar, dask_option, executor
 
 app = typer.Typer(help="GTlaser: fixed-scanner calibration and hull tracking.", no_args_is_help=True)
 
@@ -66,6 +67,8 @@ def track(
         typer.Option("--calibration-cov", help="scanners' calibration covariance "
                      "(default: <rig stem>.laser_cov.yaml next to --rig, when present)"),
     ] = None,
+    workers: Annotated[int, typer.Option("--workers", min=0, help="Processes (0: one per core).")] = 0,
+    dask: Annotated[str | None, dask_option(annotated=True)] = None,
 ) -> None:
     """Track the robot's hull through a sequence and write its poses and covariances."""
     import time
@@ -87,7 +90,9 @@ def track(
         console.print("no calibration covariance: pose covariances leave out the scanners' calibration")
     t0 = time.perf_counter()
     bgs = load_backgrounds(recording / "background", r)
-    res = track_sequence(r, recording / sequence, bgs, scanner_cov=cov_cal)
+    with executor(dask) as ex, chunk_bar("GTlaser") as bar:
+        res = track_sequence(r, recording / sequence, bgs, scanner_cov=cov_cal, executor=ex, workers=workers,
+                             progress=bar.progress)
     dt = time.perf_counter() - t0
     n = write_track(res, out, covariance, include_flagged=include_flagged)
     c = res.counts()

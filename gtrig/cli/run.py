@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from gtrig.cli.common import console, handle_errors
+from gtrig.cli.scale import chunk_bar, dask_option, executor
 
 
 def print_result(result: object, has_truth: bool) -> None:
@@ -49,6 +50,7 @@ def command(
     stages: str = typer.Option(None, "--stages", help="Comma-separated stages to run (default: all)."),
     from_stage: str = typer.Option(None, "--from", help="Run this stage and every later one again."),
     workers: int = typer.Option(None, "--workers", "-j", min=0, help="Processes (0 = one per core)."),
+    dask: str = dask_option(),
     no_reuse: bool = typer.Option(False, "--no-reuse", help="Run every stage, even a finished one."),
     print_config: bool = typer.Option(False, "--print-config", help="Print the effective configuration and exit."),
 ) -> None:
@@ -69,9 +71,9 @@ def command(
         raise InputError("gtrig run needs --recording REC and --out DIR (or --print-config)")
     only = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
     t0 = time.perf_counter()
-    with console.status("processing") as status:
-        result = pipeline.run(recording, out, on_stage=lambda name: status.update(f"processing: {name}"),
-                              config=cfg, only=only, from_stage=from_stage, reuse=not no_reuse)
+    with executor(dask) as ex, chunk_bar() as bar:
+        result = pipeline.run(recording, out, on_stage=bar.on_stage, config=cfg, only=only, from_stage=from_stage,
+                              reuse=not no_reuse, executor=ex, progress=bar.progress)
     print_result(result, (recording / "truth").is_dir())
     console.print(f"finished in {time.perf_counter() - t0:.0f} s; outputs in {out}", highlight=False)
     if result.exit_code:

@@ -9,6 +9,7 @@ import numpy as np
 import typer
 
 from gtrig.cli.common import console, handle_errors
+from gtrig.cli.scale import chunk_bar, dask_option, executor
 
 if TYPE_CHECKING:
     from gtrig.io.scans import ScanLog
@@ -58,6 +59,8 @@ def pairs(
     every: Annotated[int, typer.Option("--every", help="use every N-th scan")] = 5,
     max_pairs: Annotated[int, typer.Option("--max-pairs", help="at most this many pairs (evenly thinned)")] = 2000,
     review: Annotated[Path | None, typer.Option("--review", help="HTML page with an overlay of every match")] = None,
+    workers: Annotated[int, typer.Option("--workers", min=0, help="Processes (0: one per core).")] = 0,
+    dask: Annotated[str | None, dask_option(annotated=True)] = None,
 ) -> None:
     """Candidate scan pairs near the guessed trajectory, matched and judged by the acceptance test."""
     from gtrig.errors import InputError
@@ -88,7 +91,9 @@ def pairs(
     pr = candidate_pairs(poses, max_dist, np.radians(max_angle), min_index_gap=1)
     if len(pr) > max_pairs:
         pr = pr[np.linspace(0, len(pr) - 1, max_pairs).astype(int)]
-    rels = match_pairs(scans, poses, pr, tilt_shift_m=scanner_height_m(r) * model.floor_tilt_sigma_rad)
+    with executor(dask) as ex, chunk_bar("scan pairs") as bar:
+        rels = match_pairs(scans, poses, pr, tilt_shift_m=scanner_height_m(r) * model.floor_tilt_sigma_rad,
+                           executor=ex, workers=workers, progress=bar.progress)
     raw = out.with_suffix(".relations")
     write_relations(rels, out, raw)
     n_acc = sum(1 for x in rels if x.verdict.accepted)

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from gtrig.cli.common import console, err_console, handle_errors
+from gtrig.cli.scale import chunk_bar, dask_option, executor
 
 
 @handle_errors
@@ -20,6 +21,7 @@ def command(
                                 "covariances over x, y, yaw."),
     sequence: str = typer.Option("run", "--sequence", help="run or validation."),
     workers: int = typer.Option(0, "--workers", help="Processes (0: one per core)."),
+    dask: str = dask_option(),
     detector: str = typer.Option("auto", "--detector", help="auto, gtrig or aruco."),
     floor_sigma_mm: float = typer.Option(3.0, "--floor-sigma-mm", help="Floor height deviation (planar)."),
     floor_tilt_deg: float = typer.Option(0.3, "--floor-tilt-deg", help="Floor tilt deviation (planar)."),
@@ -37,7 +39,6 @@ def command(
     """Robot poses from the markers seen by all cameras at each instant, with covariances."""
     import math
 
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
     from rich.table import Table
 
     from gtrig.rig import load_rig
@@ -73,12 +74,9 @@ def command(
     opts = VisionOptions(planar=planar, prior=PlanarPrior(0.0, floor_sigma_mm / 1000,
                                                           math.radians(floor_tilt_deg)), rig_uncertainty=ru)
     checkpoint = out.with_name(out.name + ".checkpoint.jsonl")
-    with Progress(TextColumn("GTvision"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                  console=err_console, transient=True) as prog:
-        task = prog.add_task("instants", total=None)
+    with executor(dask) as ex, chunk_bar("GTvision") as bar:
         result = run_recording(recording, r, sequence, planar, workers, options=opts, detector=detector,
-                               checkpoint=checkpoint,
-                               progress=lambda d, n: prog.update(task, completed=d, total=n))
+                               checkpoint=checkpoint, progress=bar.progress, executor=ex)
     write_pose_track_files(result, out, covariance)
     checkpoint.unlink(missing_ok=True)
     rep = summarize(result)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -177,9 +178,11 @@ def track_sequence(
     backgrounds: list[BackgroundModel],
     settings: TrackSettings | None = None,
     scanner_cov: np.ndarray | None = None,
+    **parallel: Any,
 ) -> TrackResult:
     """Track the hull through ``seq_dir/lasers/<scanner>.csv`` with the given background models;
-    ``scanner_cov`` (3 S, 3 S) is the scanners' calibration covariance, propagated into each pose."""
+    ``scanner_cov`` (3 S, 3 S) is the scanners' calibration covariance, propagated into each pose;
+    ``parallel``: ``executor``, ``workers``, ``progress`` of :func:`gtrig.laser.track.track_frames`."""
     if not rig.laser_scanners:
         raise InputError("the rig has no laser scanners")
     if rig.robot.hull is None:
@@ -192,7 +195,7 @@ def track_sequence(
         for s, b in zip(scs, backgrounds, strict=True)
     ]
     fp = frame_points(scs, [logs[s.name].stamps_s for s in scs], [logs[s.name].ranges_m for s in scs], masks)
-    return track_frames(fp, HullModel.from_hull(rig.robot.hull), settings or TrackSettings(), scanner_cov)
+    return track_frames(fp, HullModel.from_hull(rig.robot.hull), settings or TrackSettings(), scanner_cov, **parallel)
 
 
 def track_recording(
@@ -203,6 +206,7 @@ def track_recording(
     out_cov: str | os.PathLike[str] | None = None,
     settings: TrackSettings | None = None,
     scanner_cov: np.ndarray | None = None,
+    **parallel: Any,
 ) -> TrackResult:
     """Run GTlaser on one sequence of a recording.
 
@@ -221,6 +225,9 @@ def track_recording(
     scanner_cov
         (3 S, 3 S) the scanners' calibration covariance (``CalibrationReport.cov_xytheta``), propagated into
         each pose's covariance; when ``rig`` is ``None`` the recording's own calibration provides it.
+    parallel
+        ``executor``, ``workers`` and ``progress`` of :func:`gtrig.laser.track.track_frames` (where the
+        per-frame covariance terms run; the output does not depend on them).
     """
     rec = Path(rec_dir)
     if sequence not in ("run", "validation"):
@@ -229,7 +236,7 @@ def track_recording(
         rig, report = calibrate_recording(rec)
         scanner_cov = report.cov_xytheta if scanner_cov is None else scanner_cov
     bgs = load_backgrounds(rec / "background", rig)
-    res = track_sequence(rig, rec / sequence, bgs, settings, scanner_cov)
+    res = track_sequence(rig, rec / sequence, bgs, settings, scanner_cov, **parallel)
     if out_tum is not None:
         write_track(res, out_tum, out_cov)
     return res

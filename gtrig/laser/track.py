@@ -28,7 +28,9 @@ The loop (journal paper, section 6, with the additions of issue 7):
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -460,6 +462,53 @@ def _smooth_tracks(
     return xytheta, cov
 
 
+#: frames per chunk of the per-frame covariance terms (a time window of the run)
+COVARIANCE_WINDOW_FRAMES = 256
+
+
+def _window(fp: FramedPoints, a: int, b: int) -> FramedPoints:
+    """Frames ``[a, b)`` of ``fp``: their points, without the raw scans (only the fits' points travel)."""
+    p0, p1 = int(fp.frame_start[a]), int(fp.frame_start[b])
+    return replace(fp, frame_stamps_s=fp.frame_stamps_s[a:b], frame_start=fp.frame_start[a:b + 1] - p0,
+                   xy_world=fp.xy_world[p0:p1], scanner_index=fp.scanner_index[p0:p1],
+                   dir_world=fp.dir_world[p0:p1], dt_s=fp.dt_s[p0:p1], scan_of_frame=fp.scan_of_frame[:, a:b],
+                   ranges_m=(), masks=(), beam_dirs=())
+
+
+def _window_covariances(fp: FramedPoints, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
+                        scanner_cov: np.ndarray | None, st: TrackSettings
+                        ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    bias = None if cov_bias is None else surface_bias_covariance(fp, model, raw, cov_bias, st.icp)
+    cal = None if scanner_cov is None else calibration_covariance(fp, model, raw, scanner_cov, st.icp)
+    return bias, cal
+
+
+def frame_covariances(fp: FramedPoints, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
+                      scanner_cov: np.ndarray | None, st: TrackSettings, executor: Any = None, workers: int = 1,
+                      progress: Callable[[int, int], None] | None = None
+                      ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The hull-surface bias and the scanners' calibration terms of every frame's covariance, (F, 3, 3)
+    each (None when not asked for), computed in windows of :data:`COVARIANCE_WINDOW_FRAMES` frames over
+    ``executor`` (:mod:`gtrig.executor`). Each frame's term depends on its own points and pose only, so
+    the windows give the same bits as one pass."""
+    from gtrig.executor import Chunk, map_chunks
+
+    F = fp.n_frames
+    edges = list(range(0, F, COVARIANCE_WINDOW_FRAMES)) + [F]
+    chunks = [Chunk((_window(fp, a, b), model, raw[a:b], cov_bias, scanner_cov, st),
+                    f"frames {a}-{b - 1} ({fp.frame_stamps_s[a]:.3f}-{fp.frame_stamps_s[b - 1]:.3f} s)")
+              for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
+    parts: dict[int, tuple[np.ndarray | None, np.ndarray | None]] = {}
+    map_chunks(_window_covariances, chunks, parts.__setitem__, executor=executor, workers=workers, progress=progress)
+    if not parts:
+        return _window_covariances(fp, model, raw, cov_bias, scanner_cov, st)
+    out: list[np.ndarray | None] = []
+    for k in (0, 1):
+        pieces = [parts[i][k] for i in range(len(chunks))]
+        out.append(None if pieces[0] is None else np.concatenate(pieces))  # type: ignore[arg-type]
+    return out[0], out[1]
+
+
 def timing_covariance(fp: FramedPoints, stamps_s: np.ndarray, xytheta: np.ndarray, track_id: np.ndarray) -> np.ndarray:
     """Covariance (F, 3, 3) of the poses due to the scanners' clock offsets: a frame's fit holds at the
     mean of its points' true times, off from its stamp by the points' share-weighted mean offset
@@ -485,6 +534,10 @@ def track_frames(
     model: HullModel,
     settings: TrackSettings = TrackSettings(),
     scanner_cov: np.ndarray | None = None,
+    *,
+    executor: Any = None,
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
 ) -> TrackResult:
     """Track the hull through the frames of ``fp``.
 
@@ -500,6 +553,10 @@ def track_frames(
         (3 S, 3 S) covariance of the scanners' calibrated planar poses (``CalibrationReport.cov_xytheta``),
         scanners in ``fp``'s order. Its effect on each pose is added to the reported covariance *after*
         smoothing: a calibration error is common to every frame, so smoothing cannot average it out.
+    executor, workers, progress
+        Where the per-frame covariance terms run, in time windows (:func:`frame_covariances`); the
+        tracking filter itself is sequential (each fit starts from the previous frames' prediction) and
+        runs here. The output does not depend on them.
 
     Returns
     -------
@@ -685,16 +742,18 @@ def track_frames(
         # points corrected and de-skewed with the smoothed velocity, and smoothed again
         bias = _refine_with_side_bias(fp, model, st, stamps, xytheta, track_id, status, raw, raw_cov)
         xytheta, cov = _smooth_tracks(stamps, raw, raw_cov, status, track_id, len(tracks), st)
-    if np.any(bias.cov != 0):
+    cov_bias, cov_cal = frame_covariances(fp, model, raw, bias.cov if np.any(bias.cov != 0) else None, scanner_cov,
+                                          st, executor, workers, progress)
+    if cov_bias is not None:
         # what is left unknown of the fabric's range bias moves with the side, not from frame to
         # frame: after smoothing
-        cov = cov + np.nan_to_num(surface_bias_covariance(fp, model, raw, bias.cov, st.icp))
+        cov = cov + np.nan_to_num(cov_bias)
     # the scanners' clocks: the motion a stamp offset hides (the rig's stamp_sigma_s)
     cov = cov + timing_covariance(fp, stamps, xytheta, track_id)
-    cov_cal = np.zeros((F, 3, 3))
-    if scanner_cov is not None:
-        cov_cal = calibration_covariance(fp, model, raw, scanner_cov, st.icp)
+    if cov_cal is not None:
         cov = cov + cov_cal
+    else:
+        cov_cal = np.zeros((F, 3, 3))
     xytheta[:, 2] = wrap_angle(xytheta[:, 2])
     raw_w = raw.copy()
     raw_w[:, 2] = wrap_angle(raw_w[:, 2])

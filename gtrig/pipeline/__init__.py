@@ -25,7 +25,7 @@ fusion         the same, clock_offsets (*)                  tracks/fusion/run
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from gtrig.pipeline.cameras import camera_calibration
 from gtrig.pipeline.context import AccuracyRow, Products, Stage, StageInput, StageOutput
@@ -77,10 +77,14 @@ STAGES: tuple[Stage, ...] = (
 
 def run(rec: str | Path, out: str | Path, on_stage: Callable[[str], None] | None = None, *,
         config: RunConfig | None = None, only: Sequence[str] | None = None, from_stage: str | None = None,
-        reuse: bool = True) -> PipelineResult:
+        reuse: bool = True, executor: Any = None, progress: Callable[[int, int], None] | None = None
+        ) -> PipelineResult:
     """Run every available stage on the recording ``rec``, writing under ``out``
-    (:func:`gtrig.pipeline.runner.run_stages` with :data:`STAGES`)."""
-    return run_stages(STAGES, rec, out, config, only=only, from_stage=from_stage, reuse=reuse, on_stage=on_stage)
+    (:func:`gtrig.pipeline.runner.run_stages` with :data:`STAGES`). ``executor``: a
+    ``concurrent.futures.Executor`` or a Dask ``distributed.Client`` to run the chunks on (default: local
+    processes, ``config.workers``); the outputs do not depend on it."""
+    return run_stages(STAGES, rec, out, config, only=only, from_stage=from_stage, reuse=reuse, on_stage=on_stage,
+                      executor=executor, progress=progress)
 
 
 __all__ = ["STAGES", "AccuracyRow", "PipelineResult", "Products", "Stage", "StageInput", "StageOutput",

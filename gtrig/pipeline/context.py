@@ -156,6 +156,9 @@ class StageInput:
     products : the earlier stages' products.
     has_truth : the recording carries ``truth/`` (simulated): the stage may measure itself against it.
     workers : processes for parallel steps (0 = one per core); results do not depend on it.
+    executor : where chunks run instead of a local pool of ``workers``: a ``concurrent.futures.Executor``
+        or a Dask client (:mod:`gtrig.executor`); results do not depend on it.
+    progress : ``progress(done_chunks, total_chunks)`` of the stage's chunk map, for a progress bar.
     """
 
     rec: Path
@@ -164,6 +167,8 @@ class StageInput:
     products: Products
     has_truth: bool
     workers: int = 0
+    executor: Any = None
+    progress: Callable[[int, int], None] | None = None
 
 
 @dataclass(frozen=True)

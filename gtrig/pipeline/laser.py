@@ -19,7 +19,8 @@ def gtlaser(inp: StageInput) -> StageOutput:
     rig = inp.products.rig.model_copy(update={"laser_scanners": rig_scanners.laser_scanners})
     settings = apply_to_dataclass(inp.config.laser.track, TrackSettings())
     res = track_recording(inp.rec, sequence="run", rig=rig, out_tum=inp.out / "gt_laser.tum",
-                          out_cov=inp.out / "gt_laser_cov.csv", settings=settings, scanner_cov=report.cov_xytheta)
+                          out_cov=inp.out / "gt_laser_cov.csv", settings=settings, scanner_cov=report.cov_xytheta,
+                          executor=inp.executor, workers=inp.workers, progress=inp.progress)
     track = to_pose_track(res)
     counts = res.counts()
     share = 100 * counts["ok"] / max(len(res), 1)

@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from gtrig.config import RunConfig, write_config
 from gtrig.errors import ConfigError, GtrigError, InputError
@@ -77,8 +78,11 @@ def _check_names(stages: Sequence[Stage], names: Sequence[str], what: str) -> No
 
 def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config: RunConfig | None = None, *,
                only: Sequence[str] | None = None, from_stage: str | None = None, reuse: bool = True,
-               on_stage: Callable[[str], None] | None = None) -> PipelineResult:
-    """Run ``stages`` on the recording ``rec``, writing under ``out`` (module docstring)."""
+               on_stage: Callable[[str], None] | None = None, executor: Any = None,
+               progress: Callable[[int, int], None] | None = None) -> PipelineResult:
+    """Run ``stages`` on the recording ``rec``, writing under ``out`` (module docstring); chunks run on
+    ``executor`` (:mod:`gtrig.executor`; None: local processes, ``config.workers``), ``progress`` follows
+    them."""
     from gtrig.rig import load_rig
     from gtrig.rig.load import dump_rig
 
@@ -137,7 +141,7 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
             if on_stage:
                 on_stage(st.title)
             cache.forget(out_p, st.name)
-            inp = StageInput(rec_p, out_p, cfg, products, has_truth, cfg.workers)
+            inp = StageInput(rec_p, out_p, cfg, products, has_truth, cfg.workers, executor, progress)
             try:
                 result = st.fn(inp)
             except GtrigError as e:

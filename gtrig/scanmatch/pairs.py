@@ -16,7 +16,9 @@ joins the front scanner's at the front scan's stamp.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -141,22 +143,51 @@ def guess_cov_for(rel_guess: np.ndarray, dist_sigma_frac: float = 0.1, min_sigma
     return np.diag([s_t**2, s_t**2, s_r**2])
 
 
-def match_pairs(scans: list[PlanarScan], guesses: np.ndarray, pairs: np.ndarray, tilt_shift_m: float = 0.0,
-                surface_bias_m: float = 0.0015, icp: IcpParams = DEFAULT_ICP, accept: AcceptParams = DEFAULT_ACCEPT,
-                genetic: GeneticParams | None = DEFAULT_GENETIC, guess_cov: np.ndarray | None = None,
-                rel_guesses: np.ndarray | None = None, path_m: np.ndarray | None = None) -> list[Relation]:
-    """Match and judge every pair; ``guesses`` (N, 3) are the scans' guessed poses (``rel_guesses``
-    (P, 3), when given, replace their relative poses, e.g. perturbed truth in a measurement).
-    ``path_m`` (P,): the distance the odometry travelled between each pair's scans, for the guess's
-    covariance (:func:`guess_cov_for`) when ``guess_cov`` is not given."""
+#: scan pairs per chunk of :func:`match_pairs`
+PAIRS_PER_CHUNK = 32
+
+
+def _match_chunk(first: int, items: list[tuple[PlanarScan, PlanarScan, np.ndarray, np.ndarray]],
+                 tilt_shift_m: float, surface_bias_m: float, icp: IcpParams, accept: AcceptParams,
+                 genetic: GeneticParams | None) -> list[Relation]:
+    """Pairs ``first, first + 1, ...``: each ``(scan i, scan j, guess, guess covariance)``."""
     from gtrig.scanmatch.validate import ErrorModel, match_pair
 
     model = ErrorModel(surface_bias_sigma_m=surface_bias_m)
     out = []
+    for n, (a, b, g, gc) in enumerate(items, first):
+        # each pair's own seed: the result does not depend on how pairs are cut into chunks
+        gp = None if genetic is None else GeneticParams(**{**genetic.__dict__, "seed": genetic.seed + n})
+        pose, cov, _res, v, name = match_pair(a, b, g, gc, model, tilt_shift_m, icp, accept, gp)
+        out.append(Relation(a.stamp_s, b.stamp_s, pose, cov, g, name, v))
+    return out
+
+
+def match_pairs(scans: list[PlanarScan], guesses: np.ndarray, pairs: np.ndarray, tilt_shift_m: float = 0.0,
+                surface_bias_m: float = 0.0015, icp: IcpParams = DEFAULT_ICP, accept: AcceptParams = DEFAULT_ACCEPT,
+                genetic: GeneticParams | None = DEFAULT_GENETIC, guess_cov: np.ndarray | None = None,
+                rel_guesses: np.ndarray | None = None, path_m: np.ndarray | None = None, *, executor: Any = None,
+                workers: int = 1, progress: Callable[[int, int], None] | None = None) -> list[Relation]:
+    """Match and judge every pair; ``guesses`` (N, 3) are the scans' guessed poses (``rel_guesses``
+    (P, 3), when given, replace their relative poses, e.g. perturbed truth in a measurement).
+    ``path_m`` (P,): the distance the odometry travelled between each pair's scans, for the guess's
+    covariance (:func:`guess_cov_for`) when ``guess_cov`` is not given.
+
+    The pairs run in chunks of :data:`PAIRS_PER_CHUNK` over ``executor`` (:mod:`gtrig.executor`; None:
+    ``workers`` local processes, 1 = here); each chunk carries its own scans. The output does not
+    depend on them."""
+    from gtrig.executor import Chunk, map_chunks
+
+    items = []
     for n, (i, j) in enumerate(pairs):
         g = se2.relative(guesses[i], guesses[j]) if rel_guesses is None else rel_guesses[n]
         gc = guess_cov if guess_cov is not None else guess_cov_for(g, path_m=None if path_m is None else path_m[n])
-        gp = None if genetic is None else GeneticParams(**{**genetic.__dict__, "seed": genetic.seed + n})
-        pose, cov, _res, v, name = match_pair(scans[i], scans[j], g, gc, model, tilt_shift_m, icp, accept, gp)
-        out.append(Relation(scans[i].stamp_s, scans[j].stamp_s, pose, cov, g, name, v))
-    return out
+        items.append((scans[i], scans[j], g, gc))
+    chunks = []
+    for k in range(0, len(items), PAIRS_PER_CHUNK):
+        part = items[k:k + PAIRS_PER_CHUNK]
+        chunks.append(Chunk((k, part, tilt_shift_m, surface_bias_m, icp, accept, genetic),
+                            f"pairs {k}-{k + len(part) - 1} ({part[0][0].stamp_s:.3f}-{part[-1][1].stamp_s:.3f} s)"))
+    done: dict[int, list[Relation]] = {}
+    map_chunks(_match_chunk, chunks, done.__setitem__, executor=executor, workers=workers, progress=progress)
+    return [r for c in range(len(chunks)) for r in done[c]]

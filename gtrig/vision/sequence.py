@@ -20,8 +20,13 @@ not depend on the number of workers or on the order chunks finish; the noise fac
 a fixed sample, and the only sequential step (the previous pose breaking a flip) runs afterwards, in
 time order, in the main process.
 
+Chunks: detection runs over one camera's consecutive images (a camera and a time window), estimation
+over consecutive instants, on a local process pool or any executor (a Dask client: :mod:`gtrig.executor`);
+the workers read their chunk's images themselves, the client never holds an image.
+
 Resuming: every finished chunk of detections (the expensive part) is appended to a checkpoint file
-(JSON lines; floats are written with ``repr``, so a resumed run's output is bit-identical). A
+by the client as it completes (JSON lines; floats are written with ``repr``, so a resumed run's output
+is bit-identical; a line cut by a crash is dropped and its chunk detected again). A
 checkpoint of other images, another detector, other lenses or other markers is refused; one written
 before the camera or marker poses were calibrated again, or with other estimator settings, is reused
 (detection does not depend on them).
@@ -47,7 +52,6 @@ from gtrig.errors import FormatError, InputError
 from gtrig.io.frames import FrameIndex, read_frame_index, read_image
 from gtrig.io.tum import Trajectory
 from gtrig.kinematics import pose_velocities  # moved to the core; re-exported for its callers
-from gtrig.parallel import process_pool
 from gtrig.rig.load import rig_to_dict
 from gtrig.rig.models import Rig
 from gtrig.trajectory import PoseTrack
@@ -57,7 +61,7 @@ from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel
 
 log = logging.getLogger(__name__)
 
-CHECKPOINT_VERSION = 4
+CHECKPOINT_VERSION = 5
 SEQUENCES = ("run", "validation")
 
 
@@ -200,72 +204,97 @@ def _arr(a: np.ndarray | None) -> Any:
     return None if a is None else np.asarray(a, dtype=float).tolist()
 
 
-def _obs_to_json(o: FrameObservations) -> dict[str, Any]:
-    return {"stamp_s": o.stamp_s, "cameras": list(o.cameras), "frames": [list(f) for f in o.frames],
-            "views": [[v.camera, v.marker_id, _arr(v.corners_px), _arr(v.corner_cov), v.frame]
-                      for v in o.views]}
-
-
-def _obs_from_json(d: dict[str, Any]) -> FrameObservations:
-    views = tuple(MarkerView(c, int(m), np.array(uv), np.array(cov), int(f))
-                  for c, m, uv, cov, f in d["views"])
-    return FrameObservations(d["stamp_s"], views, tuple(d["cameras"]),
-                             tuple((str(a), int(b)) for a, b in d["frames"]))
-
-
 # --------------------------------------------------------------------------------------- the workers
+@dataclass(frozen=True)
+class WorkerContext:
+    """What a worker needs besides its chunk: the rig (as its YAML document) and the detector's name.
+    Small (a few kB), so it travels with every chunk, to a local process or a Dask worker alike; each
+    process builds the model and the detector from it once (``token`` names it)."""
+
+    token: str
+    rig_doc: dict[str, Any] = field(repr=False)
+    detector: str
+
+    @staticmethod
+    def of(rig: Rig, detector: str) -> WorkerContext:
+        doc = rig_to_dict(rig)
+        token = hashlib.sha256(json.dumps([doc, detector], sort_keys=True, default=str).encode()).hexdigest()[:16]
+        return WorkerContext(token, doc, detector)
+
+
 _W: dict[str, Any] = {}
 
 
-def _worker_init(rig_doc: dict[str, Any], detector: str, options: VisionOptions,
-                 paths: dict[str, list[str]], folders: dict[str, str]) -> None:
-    import cv2
+def _state(ctx: WorkerContext) -> dict[str, Any]:
+    """This process's model and detector for ``ctx`` (built on first use; the client seeds its own)."""
+    if _W.get("token") != ctx.token:
+        import cv2
 
-    from gtrig.rig.load import rig_from_dict
-    from gtrig.vision.detect import make_detector
-    from gtrig.vision.noise import limit_blas_threads
+        from gtrig.rig.load import rig_from_dict
+        from gtrig.vision.detect import make_detector
+        from gtrig.vision.noise import limit_blas_threads
 
-    cv2.setNumThreads(1)
-    limit_blas_threads(1)
-    rig = rig_from_dict(rig_doc)
-    _W.update(model=VisionModel.from_rig(rig), detect=make_detector(rig, detector), options=options,
-              paths=paths, folders=folders)
+        cv2.setNumThreads(1)
+        limit_blas_threads(1)
+        rig = rig_from_dict(ctx.rig_doc)
+        _W.clear()
+        _W.update(token=ctx.token, model=VisionModel.from_rig(rig), detect=make_detector(rig, ctx.detector))
+    return _W
 
 
-def _process_chunk(chunk_id: int, instants: Sequence[Instant]) -> tuple[int, list[dict[str, Any]]]:
+def _seed(ctx: WorkerContext, model: VisionModel, detect: Any) -> None:
+    """The client's own model and detector under ``ctx`` (in-process chunks and forked workers use them)."""
+    _W.clear()
+    _W.update(token=ctx.token, model=model, detect=detect)
 
-    model: VisionModel = _W["model"]
+
+def _views_to_json(views: Sequence[MarkerView]) -> list[list[Any]]:
+    return [[v.marker_id, _arr(v.corners_px), _arr(v.corner_cov)] for v in views]
+
+
+def _views_from_json(camera: str, row: int, d: list[list[Any]]) -> tuple[MarkerView, ...]:
+    return tuple(MarkerView(camera, int(m), np.array(uv), np.array(cov), row) for m, uv, cov in d)
+
+
+def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: Sequence[str]
+                   ) -> list[list[Any]]:
+    """Markers detected in one camera's images ``rows`` (read here, on the worker, from ``paths``):
+    ``[[row, [[marker_id, corners, cov], ...]], ...]``, the checkpoint's JSON form."""
+    st = _state(ctx)
+    cam = st["model"].cameras[camera]
     out = []
-    for ins in instants:
-        views: list[MarkerView] = []
-        for cam, i in ins.images:
-            img = read_image(_W["paths"][cam][i])  # an image file or a video's frame
-            views.extend(replace(v, frame=i) for v in _W["detect"](img, model.cameras[cam]))
-        obs = FrameObservations(ins.stamp_s, tuple(views), tuple(sorted({c for c, _ in ins.images})),
-                                tuple(ins.images))
-        out.append({"obs": _obs_to_json(obs)})
-    return chunk_id, out
+    for i, path in zip(rows, paths, strict=True):
+        img = read_image(path)  # an image file or a video's frame
+        out.append([int(i), _views_to_json(st["detect"](img, cam))])
+    return out
 
 
-def _estimate_chunk(chunk_id: int, obs: Sequence[FrameObservations], options: VisionOptions
-                    ) -> tuple[int, list[FrameEstimate]]:
-    return chunk_id, [estimate_frame(_W["model"], o, options) for o in obs]
+def _estimate_chunk(ctx: WorkerContext, obs: Sequence[FrameObservations], options: VisionOptions
+                    ) -> list[FrameEstimate]:
+    model = _state(ctx)["model"]
+    return [estimate_frame(model, o, options) for o in obs]
 
 
-def _estimate_all(model: VisionModel, obs: list[FrameObservations], options: VisionOptions, nproc: int,
-                  chunk_size: int, init_args: tuple[Any, ...]) -> list[FrameEstimate]:
+def _instant_label(obs: Sequence[FrameObservations]) -> str:
+    return f"instants {obs[0].stamp_s:.3f}-{obs[-1].stamp_s:.3f} s" if obs else "no instant"
+
+
+def _map_in_chunks(fn: Callable[..., list[Any]], items: Sequence[Any], args: Callable[[list[Any]], tuple[Any, ...]],
+                   label: Callable[[list[Any]], str], chunk_size: int, executor: Any, workers: int) -> list[Any]:
+    """``fn(*args(chunk))`` over consecutive chunks of ``items``, results concatenated in order."""
+    from gtrig.executor import Chunk, map_chunks
+
+    parts = [list(items[i:i + chunk_size]) for i in range(0, len(items), chunk_size)]
+    out: dict[int, list[Any]] = {}
+    map_chunks(fn, [Chunk(args(p), label(p)) for p in parts], out.__setitem__, executor=executor, workers=workers)
+    return [x for i in range(len(parts)) for x in out[i]]
+
+
+def _estimate_all(ctx: WorkerContext, obs: list[FrameObservations], options: VisionOptions, chunk_size: int,
+                  executor: Any, workers: int) -> list[FrameEstimate]:
     """Every instant estimated again from its detections (no image read), in parallel chunks."""
-    chunks = [obs[i:i + chunk_size] for i in range(0, len(obs), chunk_size)]
-    out: dict[int, list[FrameEstimate]] = {}
-    if nproc == 1 or len(chunks) <= 1:
-        for i, c in enumerate(chunks):
-            out[i] = [estimate_frame(model, o, options) for o in c]
-    else:
-        with process_pool(nproc, _worker_init, init_args) as ex:
-            for fut in [ex.submit(_estimate_chunk, i, c, options) for i, c in enumerate(chunks)]:
-                cid, ests = fut.result()
-                out[cid] = ests
-    return [e for i in range(len(chunks)) for e in out[i]]
+    return _map_in_chunks(_estimate_chunk, obs, lambda p: (ctx, p, options), _instant_label, chunk_size,
+                          executor, workers)
 
 
 def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, cameras: Sequence[str],
@@ -322,12 +351,11 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
 
 
 # ----------------------------------------------------------------------------------------- the runner
-def _key(rig: Rig, sequence: str, detector: str, instants: list[Instant], paths: dict[str, list[str]],
-         rec: Path | None = None) -> str:
+def _key(rig: Rig, sequence: str, detector: str, paths: dict[str, list[str]], rec: Path | None = None) -> str:
     """What the checkpointed detections depend on: the images, the detector, the lenses and the markers'
-    families and sizes; not the poses nor the estimator's options, so a re-estimation with a newly
-    calibrated rig or other settings reuses them. The images count by their path inside the recording
-    ``rec``, so a recording moved or copied elsewhere keeps its detections."""
+    families and sizes; not the poses, the estimator's options nor how images group into instants, so a
+    re-estimation with a newly calibrated rig or other settings reuses them. The images count by their
+    path inside the recording ``rec``, so a recording moved or copied elsewhere keeps its detections."""
     if rec is not None:
         paths = {c: [os.path.relpath(p, rec) for p in ps] for c, ps in paths.items()}
     doc_rig = rig_to_dict(rig)
@@ -340,31 +368,109 @@ def _key(rig: Rig, sequence: str, detector: str, instants: list[Instant], paths:
         c["dist_coeffs"] = [float(f"{v:.9g}") for v in c["dist_coeffs"]]
     markers = [{k: m[k] for k in ("family", "id", "side_m")} for m in doc_rig["robot"]["markers"]]
     doc = {"v": CHECKPOINT_VERSION, "cameras": doc_rig["cameras"], "markers": markers, "sequence": sequence,
-           "detector": detector, "instants": [[i.stamp_s, [list(x) for x in i.images]] for i in instants],
-           "paths": paths}
+           "detector": detector, "paths": paths}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:20]
 
 
-def _load_checkpoint(path: Path, key: str) -> dict[int, list[dict[str, Any]]]:
+#: detections by camera and row of its frame index
+Detections = dict[str, dict[int, tuple[MarkerView, ...]]]
+
+
+def _load_checkpoint(path: Path, key: str) -> tuple[Detections, int]:
+    """The detections in ``path`` and the length of its good part (a line cut by an interruption, and
+    what follows it, is dropped: that chunk is detected again)."""
     if not path.is_file():
-        return {}
-    done: dict[int, list[dict[str, Any]]] = {}
-    with open(path, encoding="utf-8") as f:
+        return {}, 0
+    dets: Detections = {}
+    with open(path, "rb") as f:
         first = f.readline()
         try:
             head = json.loads(first)
-        except json.JSONDecodeError:
+        except (json.JSONDecodeError, UnicodeDecodeError):
             head = {}
-        if head.get("key") != key:
+        if not isinstance(head, dict) or head.get("key") != key:
             raise InputError(f"{path}: checkpoint of another run (other images, detector, lenses or markers); "
                              "delete it or choose another output")
+        good = f.tell()
         for line in f:
             try:
                 d = json.loads(line)
-            except json.JSONDecodeError:
-                break  # a line cut by the interruption: recompute that chunk
-            done[int(d["chunk"])] = d["items"]
-    return done
+                cam = d["camera"]
+                got = {int(r): _views_from_json(cam, int(r), v) for r, v in d["frames"]}
+            except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError):
+                break
+            if not line.endswith(b"\n"):
+                break
+            dets.setdefault(cam, {}).update(got)
+            good += len(line)
+    return dets, good
+
+
+def _open_checkpoint(ck: Path, key: str, stale: str) -> tuple[Detections, Any]:
+    """The detections already in the checkpoint ``ck`` and the file opened to append the next chunks."""
+    try:
+        dets, good = _load_checkpoint(ck, key)
+    except InputError as err:
+        if stale != "restart":
+            raise
+        log.warning("%s; starting afresh", err)
+        dets, good = {}, 0
+    ck.parent.mkdir(parents=True, exist_ok=True)
+    if good == 0:
+        f = open(ck, "w", encoding="utf-8")  # noqa: SIM115
+        f.write(json.dumps({"key": key, "version": CHECKPOINT_VERSION}) + "\n")
+        f.flush()
+    else:
+        with open(ck, "r+b") as g:  # drop a torn last line
+            g.truncate(good)
+        f = open(ck, "a", encoding="utf-8")  # noqa: SIM115
+    return dets, f
+
+
+def detection_chunks(instants: Sequence[Instant], indices: dict[str, FrameIndex], chunk_size: int
+                     ) -> list[tuple[str, list[int]]]:
+    """The detection work: for each camera, the rows of its frame index that some instant uses, in
+    runs of ``chunk_size`` consecutive ones (a camera and a time window)."""
+    rows: dict[str, set[int]] = {}
+    for ins in instants:
+        for cam, i in ins.images:
+            rows.setdefault(cam, set()).add(i)
+    out: list[tuple[str, list[int]]] = []
+    for cam in sorted(rows):
+        r = sorted(rows[cam])
+        out.extend((cam, r[k:k + chunk_size]) for k in range(0, len(r), chunk_size))
+    return out
+
+
+def _detect_all(ctx: WorkerContext, chunks: list[tuple[str, list[int]]], indices: dict[str, FrameIndex],
+                dets: Detections, ckf: Any, executor: Any, workers: int,
+                progress: Callable[[int, int], None] | None) -> None:
+    """The chunks not in ``dets`` detected on the workers, each appended to the checkpoint ``ckf`` as one
+    line as it completes (the images are read by the workers, never sent from here)."""
+    from gtrig.executor import Chunk, map_chunks
+
+    jobs = []
+    for cam, rows in chunks:
+        ix = indices[cam]
+        label = f"camera {cam}, {ix.stamps_s[rows[0]]:.3f}-{ix.stamps_s[rows[-1]]:.3f} s"
+        jobs.append(Chunk((ctx, cam, rows, [ix.source(i) for i in rows]), label))
+    todo = [k for k, (cam, rows) in enumerate(chunks) if not all(i in dets.get(cam, {}) for i in rows)]
+    if len(todo) < len(chunks):
+        log.info("resuming: %d of %d detection chunks already checkpointed", len(chunks) - len(todo), len(chunks))
+
+    def record(k: int, frames: list[list[Any]]) -> None:
+        cam = chunks[k][0]
+        if ckf is not None:  # one line per finished chunk: an interrupted run resumes from here
+            ckf.write(json.dumps({"camera": cam, "frames": frames}) + "\n")
+            ckf.flush()
+        dets.setdefault(cam, {}).update((int(r), _views_from_json(cam, int(r), v)) for r, v in frames)
+
+    map_chunks(_process_chunk, jobs, record, executor=executor, workers=workers, todo=todo, progress=progress)
+
+
+def _observations(instants: Sequence[Instant], dets: Detections) -> list[FrameObservations]:
+    return [FrameObservations(ins.stamp_s, tuple(v for cam, i in ins.images for v in dets[cam][i]),
+                              tuple(sorted({c for c, _ in ins.images})), tuple(ins.images)) for ins in instants]
 
 
 def _resolve_flips(model: VisionModel, obs: list[FrameObservations], ests: list[FrameEstimate],
@@ -405,15 +511,17 @@ def _moving_instant(model: VisionModel, o: FrameObservations, options: VisionOpt
     return estimate_frame(model.with_camera_motion(deltas) if deltas else model, o, opts, start=first)
 
 
-def _moving_chunk(chunk_id: int, items: Sequence[tuple[Any, ...]], options: VisionOptions
-                  ) -> tuple[int, list[FrameEstimate]]:
-    return chunk_id, [_moving_instant(_W["model"], o, options, e, d, x) for o, e, d, x in items]
+def _moving_chunk(ctx: WorkerContext, items: Sequence[tuple[Any, ...]], options: VisionOptions
+                  ) -> list[FrameEstimate]:
+    model = _state(ctx)["model"]
+    return [_moving_instant(model, o, options, e, d, x) for o, e, d, x in items]
 
 
 def compensate_motion(model: VisionModel, obs: Sequence[FrameObservations], ests: Sequence[FrameEstimate],
                       offsets: Sequence[dict[str, float]], stamp_sigma_s: dict[str, float],
-                      options: VisionOptions, *, max_gap_s: float = 0.5, nproc: int = 1, chunk_size: int = 16,
-                      init_args: tuple[Any, ...] = ()) -> tuple[list[FrameEstimate], set[int]]:
+                      options: VisionOptions, *, max_gap_s: float = 0.5, chunk_size: int = 16,
+                      context: WorkerContext | None = None, executor: Any = None, workers: int = 1
+                      ) -> tuple[list[FrameEstimate], set[int]]:
     """The moving instants estimated again with their cameras' exposure times.
 
     Two things the first estimate of an instant cannot know, from the velocity of the neighbouring
@@ -463,24 +571,16 @@ def compensate_motion(model: VisionModel, obs: Sequence[FrameObservations], ests
                 extra[c] = timing_camera_covariance(vel[k], T[k], model.cameras[c].T_world_cam[:3, 3], sig)
         if deltas or extra:
             jobs.append((i, (obs[i], ests[i], deltas, extra)))
-    chunks = [jobs[j:j + chunk_size] for j in range(0, len(jobs), chunk_size)]
-    results: dict[int, list[FrameEstimate]] = {}
-    if nproc == 1 or len(chunks) <= 1:
-        for cid, chunk in enumerate(chunks):
-            results[cid] = [_moving_instant(model, o, options, e, d, x) for _, (o, e, d, x) in chunk]
+    if context is None:  # ``model`` is not a rig's: estimated here
+        res = [_moving_instant(model, o, options, e, d, x) for _, (o, e, d, x) in jobs]
     else:
-        with process_pool(nproc, _worker_init, init_args) as ex:
-            futs = [ex.submit(_moving_chunk, cid, [it for _, it in chunk], options)
-                    for cid, chunk in enumerate(chunks)]
-            for fut in futs:
-                cid, res = fut.result()
-                results[cid] = res
+        res = _map_in_chunks(_moving_chunk, [it for _, it in jobs], lambda p: (context, p, options),
+                             lambda p: _instant_label([it[0] for it in p]), chunk_size, executor, workers)
     done: set[int] = set()
-    for cid, chunk in enumerate(chunks):
-        for (i, _), e in zip(chunk, results[cid], strict=True):
-            if e.ok:
-                out[i] = e
-                done.add(i)
+    for (i, _), e in zip(jobs, res, strict=True):
+        if e.ok:
+            out[i] = e
+            done.add(i)
     log.info("%d moving instants estimated again with their cameras' exposure times", len(done))
     return out, done
 
@@ -491,7 +591,7 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
                   checkpoint: str | os.PathLike[str] | None = None,
                   progress: Callable[[int, int], None] | None = None, chunk_size: int = 16,
                   sync_tol_s: float = 0.005, estimate_noise: bool = True,
-                  stale_checkpoint: str = "refuse") -> VisionResult:
+                  stale_checkpoint: str = "refuse", executor: Any = None) -> VisionResult:
     """GTvision over one sequence of a recording.
 
     Parameters
@@ -500,13 +600,16 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     rig : the calibrated rig (cameras and markers); never the truth.
     sequence : "validation" (one pose per static interval) or "run" (one pose per instant).
     planar : use the floor prior (``options.planar`` is overridden by this).
-    workers : processes; 0 = one per core, 1 = in this process.
+    workers : local processes when ``executor`` is None; 0 = one per core, 1 = in this process.
+    executor : a ``concurrent.futures.Executor`` or a Dask ``distributed.Client`` to map the chunks over
+        (:mod:`gtrig.executor`); None: a local pool of ``workers``. The output does not depend on it.
     options : estimation settings (default :class:`VisionOptions`).
     detector : "auto", "gtrig" or "aruco" (see :func:`gtrig.vision.detect.make_detector`).
     checkpoint : file to resume from and append to; None: no checkpoint.
     stale_checkpoint : a checkpoint of other images, lenses or markers is refused ("refuse": a user's
         file is not overwritten by guess) or started afresh ("restart": a folder the caller owns).
-    progress : called as ``progress(done_instants, total_instants)``.
+    progress : called as ``progress(done_chunks, total_chunks)`` over the detection chunks (each: one
+        camera's ``chunk_size`` images in a time window).
     estimate_noise : estimate the corner covariances' variance factor per camera from this sequence's
         residuals and estimate every instant again with it (:func:`calibrate_noise`); ignored when
         ``options.corner_scale`` is given (those factors are used as they are).
@@ -533,71 +636,29 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     intervals = read_static_intervals(rec / "validation" / "poses.csv") if sequence == "validation" else None
     instants = make_instants(indices, sequence, sync_tol_s, intervals)
     paths = {name: [ix.source(i) for i in range(len(ix))] for name, ix in indices.items()}
-    chunks = [instants[i:i + chunk_size] for i in range(0, len(instants), chunk_size)]
+    chunks = detection_chunks(instants, indices, chunk_size)
     # a new version of the detector's code makes other detections: not the checkpoint's
-    key = _key(rig, sequence, f"{det.name}/{det.version}", instants, paths, rec)
-    ck = Path(checkpoint) if checkpoint is not None else None
-    try:
-        done = _load_checkpoint(ck, key) if ck is not None else {}
-    except InputError as err:
-        if stale_checkpoint != "restart":
-            raise
-        log.warning("%s; starting afresh", err)
-        done = {}
-    if done:
-        log.info("resuming: %d of %d chunks already in %s", len(done), len(chunks), ck)
+    key = _key(rig, sequence, f"{det.name}/{det.version}", paths, rec)
+    del paths  # the workers read their chunk's images by path; the client keeps no list of them
+    ctx = WorkerContext.of(rig, detector)
+    _seed(ctx, model, det)
+    dets: Detections = {}
     ckf = None
-    if ck is not None:
-        ck.parent.mkdir(parents=True, exist_ok=True)
-        ckf = open(ck, "w" if not done else "a", encoding="utf-8")  # noqa: SIM115
-        if not done:
-            ckf.write(json.dumps({"key": key, "version": CHECKPOINT_VERSION}) + "\n")
-        else:  # rewrite cleanly (drops a torn last line)
-            ckf.close()
-            ckf = open(ck, "w", encoding="utf-8")  # noqa: SIM115
-            ckf.write(json.dumps({"key": key, "version": CHECKPOINT_VERSION}) + "\n")
-            for cid in sorted(done):
-                ckf.write(json.dumps({"chunk": cid, "items": done[cid]}) + "\n")
-            ckf.flush()
-    todo = [i for i in range(len(chunks)) if i not in done]
-    n_done = sum(len(chunks[i]) for i in done)
-    if progress:
-        progress(n_done, len(instants))
+    if checkpoint is not None:
+        dets, ckf = _open_checkpoint(Path(checkpoint), key, stale_checkpoint)
     t_par = time.perf_counter()
-    init_args: tuple[Any, ...] = (rig_to_dict(rig), detector, opts, paths, {})
-
-    def record(cid: int, items: Any) -> None:
-        nonlocal n_done
-        done[cid] = items
-        n_done += len(items)
-        if ckf:  # one line per finished chunk: an interrupted run resumes from here
-            ckf.write(json.dumps({"chunk": cid, "items": items}) + "\n")
-            ckf.flush()
-        if progress:
-            progress(n_done, len(instants))
-
-    nproc = workers if workers > 0 else (os.cpu_count() or 1)
     try:
-        if nproc == 1 or len(todo) <= 1:
-            _worker_init(*init_args)
-            for i in todo:
-                record(*_process_chunk(i, chunks[i]))
-        else:
-            from concurrent.futures import as_completed
-
-            with process_pool(nproc, _worker_init, init_args) as ex:
-                for fut in as_completed([ex.submit(_process_chunk, i, chunks[i]) for i in todo]):
-                    record(*fut.result())
+        _detect_all(ctx, chunks, indices, dets, ckf, executor, workers, progress)
     finally:
         if ckf:
             ckf.close()
     t_par = time.perf_counter() - t_par
-    items = [it for cid in range(len(chunks)) for it in done[cid]]
-    obs = [_obs_from_json(it["obs"]) for it in items]
+    obs = _observations(instants, dets)
+    del dets
     t_noise = time.perf_counter()
     if estimate_noise and not opts.corner_scale:
         opts, history = calibrate_noise(obs, opts, sorted(indices),
-                                        lambda o, x: _estimate_all(model, x, o, nproc, chunk_size, init_args),
+                                        lambda o, x: _estimate_all(ctx, x, o, chunk_size, executor, workers),
                                         max_rounds=10 if opts.rig_variance_component else 1,
                                         rig_component=opts.rig_variance_component)
         for k, sc in enumerate(history):
@@ -605,13 +666,13 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
                      ", ".join(f"{c} {f:.3g}" for c, f in sc))
     t_noise = time.perf_counter() - t_noise
     t_est = time.perf_counter()
-    ests = _estimate_all(model, obs, opts, nproc, chunk_size, init_args)
+    ests = _estimate_all(ctx, obs, opts, chunk_size, executor, workers)
     ests = _resolve_flips(model, obs, ests, opts)
     stamp_sigma = {c.name: c.stamp_sigma_s for c in rig.cameras}
     timed: set[int] = set()
     if sequence == "run":
         ests, timed = compensate_motion(model, obs, ests, camera_time_offsets(obs, indices), stamp_sigma, opts,
-                                        nproc=nproc, chunk_size=chunk_size, init_args=init_args)
+                                        chunk_size=chunk_size, context=ctx, executor=executor, workers=workers)
     t_est = time.perf_counter() - t_est
     for e in ests:  # an empty view is the common case in a run: not worth a line each
         if not e.ok:

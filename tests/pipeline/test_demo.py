@@ -132,3 +132,22 @@ def test_from_laser_reruns_laser_and_what_follows(demo: Path) -> None:
     assert "reused (unchanged since their last run): survey, cameras, markers, robot-frame\n" in r.output
     for n, b in before.items():
         assert (res / n).read_bytes() == b, n
+
+
+def test_run_on_a_dask_cluster_writes_the_same_tracks(demo: Path, tmp_path: Path) -> None:
+    """``--dask`` on a cluster of separate ``dask scheduler`` / ``dask worker`` processes on 127.0.0.1
+    (issue 24): GTlaser, GTvision (the run's images detected again, on the workers) and fusion write the
+    same bytes as the local process pool did."""
+    pytest.importorskip("distributed")
+    from tests.scale.cluster import dask_cluster
+
+    out = tmp_path / "out"
+    shutil.copytree(demo / "results", out)
+    (out / "gt_vision_run.checkpoint").unlink()  # the stops' detections kept: the test's cost halved
+    with dask_cluster(tmp_path / "dask", nworkers=2) as address:
+        r = CliRunner().invoke(app, ["run", "--recording", str(demo / "recording"), "--out", str(out), "--from",
+                                     "laser", "--dask", address])
+    assert r.exit_code == 0, r.output
+    assert (out / "gt_vision_run.checkpoint").is_file()  # detected again, chunk by chunk
+    for name in (*TRACKS, "gt_fused.tum", "gt_fused_cov.csv", "accuracy.csv"):
+        assert (out / name).read_bytes() == (demo / "results" / name).read_bytes(), name

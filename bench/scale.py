@@ -1,0 +1,258 @@
+"""Scale benchmark (issue 24): GTvision over a long recording on the local process pool and on Dask.
+
+A long run is made cheaply from a short one: each camera's images of the short run's ``run/`` are
+linked once and repeated through a ``timestamps.csv`` that goes on for ``--minutes`` (stamps of the
+short run shifted by its length, cycle after cycle; 10 Hz for the simulator's cameras). The stamps,
+not the pixels, set the work: every repeated image is read and detected again.
+
+Measured, each in its own process (so each peak is its own):
+
+* throughput: detection (images read and detected on the workers) and the whole GTvision run, in
+  images per second per worker, for the local pool and ``--dask local:N``, with 1 and 2 workers, on
+  ``--throughput-seconds`` of the run; with the workers' CPU seconds, since wall time on a loaded
+  machine is not the code's (rates per CPU second are what to compare; rerun idle for wall figures);
+* Dask's overhead per chunk: a map of empty chunks on the same LocalCluster (round trip per chunk),
+  and the wall difference per chunk between Dask and the pool with one worker;
+* memory: the client's and a worker's peak RSS for the real-detection runs; then the whole
+  ``--minutes`` run end to end from a detection checkpoint filled from one detected cycle (the images
+  repeat, so the detections of a repeated image are its first detections, byte for byte): estimation,
+  noise, flips, motion compensation and the written track, on ``--minutes`` and on fractions of it to
+  show how the client's peak grows with the recording's length.
+
+Usage::
+
+    python bench/scale.py --source REC --rig RESULTS/rig.calibrated.yaml --minutes 60 --work /tmp/scale
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def make_long(source: Path, out: Path, seconds: float | None) -> dict[str, int]:
+    """``out/run/cameras/<cam>/``: ``source``'s run images hard-linked once, repeated by a timestamps file
+    ``seconds`` long (None: once); ``out/rig.yaml`` copied. Returns the images per camera."""
+    import shutil
+
+    import numpy as np
+
+    from gtrig.io.frames import read_frame_index, write_frame_index
+
+    counts = {}
+    for cam_dir in sorted((source / "run" / "cameras").iterdir()):
+        if not cam_dir.is_dir():
+            continue
+        ix = read_frame_index(cam_dir)
+        n = len(ix)
+        period = float(ix.stamps_s[-1] - ix.stamps_s[0]) + float(np.median(np.diff(ix.stamps_s)))
+        total = n if seconds is None else int(round(seconds / period * n))
+        dst = out / "run" / "cameras" / cam_dir.name
+        dst.mkdir(parents=True, exist_ok=True)
+        for f in ix.files:
+            if not (dst / f).exists():
+                os.link(cam_dir / f, dst / f)
+        k = np.arange(total)
+        write_frame_index(dst, ix.stamps_s[k % n] + (k // n) * period, [ix.files[i] for i in k % n])
+        counts[cam_dir.name] = total
+    shutil.copy(source / "rig.yaml", out / "rig.yaml")
+    return counts
+
+
+def _worker_stats(executor: object) -> dict[str, float]:
+    """CPU seconds and peak RSS (MB) of the executor's worker processes."""
+    from gtrig.executor import is_dask
+
+    if executor is not None and is_dask(executor):
+        got = executor.run(_self_stats)  # type: ignore[attr-defined]
+        return {"cpu_s": sum(v["cpu_s"] for v in got.values()), "peak_mb": max(v["peak_mb"] for v in got.values())}
+    ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return {"cpu_s": ch.ru_utime + ch.ru_stime, "peak_mb": ch.ru_maxrss / 1024}
+
+
+def _self_stats() -> dict[str, float]:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return {"cpu_s": r.ru_utime + r.ru_stime, "peak_mb": r.ru_maxrss / 1024}
+
+
+def _noop(i: int) -> int:
+    return i
+
+
+def _warm(ctx: object, camera: str, path: str) -> None:
+    """Imports, the detector's compiled kernels and one image: what a new worker pays once, kept out of
+    the per-image CPU figures."""
+    from gtrig.vision.sequence import _process_chunk
+
+    _process_chunk(ctx, camera, [0], [path])  # type: ignore[arg-type]
+
+
+def child_vision(rec: Path, rig_path: Path, mode: str, checkpoint: Path | None) -> dict[str, object]:
+    """One GTvision run in this process: ``mode`` ``pool:N``, ``dask:N`` (``--dask local:N``: the
+    scheduler in this process) or ``tcp:N`` (a scheduler and N workers started as their own processes on
+    127.0.0.1, as on a cluster: this process is only the client)."""
+    import contextlib
+
+    from gtrig.executor import Chunk, map_chunks, open_executor
+    from gtrig.rig import load_rig
+    from gtrig.vision.sequence import run_recording, write_pose_track_files
+
+    kind, n = mode.split(":")
+    rig = load_rig(rig_path)
+    out: dict[str, object] = {"mode": mode}
+    with contextlib.ExitStack() as stack:
+        spec = {"dask": f"local:{n}", "pool": None}.get(kind)
+        if kind == "tcp":
+            sys.path.insert(0, str(REPO))
+            from tests.scale.cluster import dask_cluster
+
+            spec = stack.enter_context(dask_cluster(rec.parent / f"{rec.name}_cluster", int(n)))
+        ex = stack.enter_context(open_executor(spec))
+        from gtrig.vision.sequence import WorkerContext, camera_indices
+
+        ix = next(iter(camera_indices(rec, "run", rig).values()))
+        warm = (WorkerContext.of(rig, "auto"), ix.camera, ix.source(0))
+        if ex is not None:
+            ex.run(_warm, *warm)  # type: ignore[attr-defined]
+        _warm(*warm)  # the client (forked into the local pool's workers)
+        before, me0 = _worker_stats(ex), _self_stats()
+        chunks = [0]
+        t0 = time.perf_counter()
+        res = run_recording(rec, rig, "run", True, workers=int(n), executor=ex, checkpoint=checkpoint,
+                            progress=lambda d, total: chunks.__setitem__(0, total))
+        wall = time.perf_counter() - t0
+        after, me1 = _worker_stats(ex), _self_stats()
+        if kind == "pool" and int(n) == 1:  # in this process: the client is the worker
+            before, after = {"cpu_s": me0["cpu_s"]}, {"cpu_s": me1["cpu_s"], "peak_mb": me1["peak_mb"]}
+        if ex is not None:  # Dask's own cost per chunk: empty chunks, round trip through the scheduler
+            t = time.perf_counter()
+            map_chunks(_noop, [Chunk((i,), str(i)) for i in range(200)], lambda i, r: None, executor=ex)
+            out["noop_ms_per_chunk"] = 1000 * (time.perf_counter() - t) / 200
+    write_pose_track_files(res, rec.parent / f"{rec.name}_{kind}{n}.tum")
+    images = sum(res.images_per_camera.values())
+    out.update(images=images, instants=len(res.estimates), localized=len(res.localized()), chunks=chunks[0],
+               wall_s=wall, detect_s=res.seconds["parallel"], worker_cpu_s=after["cpu_s"] - before["cpu_s"],
+               worker_peak_mb=after["peak_mb"], client_peak_mb=_self_stats()["peak_mb"],
+               client_cpu_s=_self_stats()["cpu_s"])
+    return out
+
+
+def seed_checkpoint(long_rec: Path, rig_path: Path, cycle_ck: Path, out_ck: Path, chunk_size: int = 16) -> int:
+    """A detection checkpoint of the long recording from the detections of its first cycle (the images
+    repeat: a repeated image's detections are its first ones). Returns the chunk lines written."""
+    from gtrig.rig import load_rig
+    from gtrig.vision.detect import make_detector
+    from gtrig.vision.sequence import (
+        CHECKPOINT_VERSION,
+        _key,
+        camera_indices,
+        detection_chunks,
+        make_instants,
+    )
+
+    rig = load_rig(rig_path)
+    first: dict[tuple[str, str], object] = {}
+    with open(cycle_ck, encoding="utf-8") as f:
+        next(f)
+        for line in f:
+            d = json.loads(line)
+            for row, views in d["frames"]:
+                first[(d["camera"], int(row))] = views
+    indices = camera_indices(long_rec, "run", rig)
+    det = make_detector(rig, "auto")
+    paths = {name: [ix.source(i) for i in range(len(ix))] for name, ix in indices.items()}
+    key = _key(rig, "run", f"{det.name}/{det.version}", paths, long_rec)
+    instants = make_instants(indices, "run")
+    n_lines = 0
+    with open(out_ck, "w", encoding="utf-8") as f:
+        f.write(json.dumps({"key": key, "version": CHECKPOINT_VERSION}) + "\n")
+        for cam, rows in detection_chunks(instants, indices, chunk_size):
+            n = len(set(indices[cam].files))
+            frames = [[r, first[(cam, r % n)]] for r in rows]
+            f.write(json.dumps({"camera": cam, "frames": frames}) + "\n")
+            n_lines += 1
+    return n_lines
+
+
+def _child(args: list[str]) -> dict[str, object]:
+    cmd = [sys.executable, __file__, "--child", *args]
+    env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    r = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    if r.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{r.stderr[-3000:]}")
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--source", type=Path, help="a short recording (gtrig sim --quick)")
+    ap.add_argument("--rig", type=Path, help="its calibrated rig (default: SOURCE/rig.yaml)")
+    ap.add_argument("--minutes", type=float, default=60.0)
+    ap.add_argument("--fractions", type=float, nargs="*", default=[0.25, 0.5, 1.0],
+                    help="lengths of the memory runs, as fractions of --minutes")
+    ap.add_argument("--throughput-seconds", type=float, default=24.0)
+    ap.add_argument("--modes", nargs="*", default=["pool:1", "dask:1", "pool:2", "dask:2"])
+    ap.add_argument("--work", type=Path, default=Path("/tmp/gtrig_scale"))
+    ap.add_argument("--child", nargs="*", help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a.child:
+        rec, rig, mode, ck = a.child
+        print(json.dumps(child_vision(Path(rec), Path(rig), mode, Path(ck) if ck != "-" else None)))
+        return
+    if a.source is None:
+        ap.error("--source REC is needed")
+    rig = a.rig or a.source / "rig.yaml"
+    a.work.mkdir(parents=True, exist_ok=True)
+    rows = []
+    short = a.work / "short"
+    make_long(a.source, short, a.throughput_seconds)
+    print(f"throughput on {a.throughput_seconds:g} s of the run ({short}); loaded machine: compare the per "
+          "CPU-second rates, rerun idle for wall-clock figures", flush=True)
+    for mode in a.modes:
+        r = _child([str(short), str(rig), mode, "-"])
+        rows.append(r)
+        n = int(mode.split(":")[1])
+        print(f"  {mode}: {r['images']} images, {r['chunks']} chunks; detection {r['detect_s']:.1f} s wall = "
+              f"{r['images'] / r['detect_s'] / n:.1f} images/s per worker; whole run {r['wall_s']:.1f} s; "
+              f"worker CPU {r['worker_cpu_s']:.1f} s = {r['images'] / max(r['worker_cpu_s'], 1e-9):.1f} images "
+              f"per CPU second; client peak {r['client_peak_mb']:.0f} MB, worker peak {r['worker_peak_mb']:.0f} MB"
+              + (f"; empty chunk round trip {r['noop_ms_per_chunk']:.1f} ms" if "noop_ms_per_chunk" in r else ""),
+              flush=True)
+    by = {r["mode"]: r for r in rows}
+    for n in (1, 2):
+        p, d = by.get(f"pool:{n}"), by.get(f"dask:{n}")
+        if p and d:
+            per = (float(d["detect_s"]) - float(p["detect_s"])) / max(int(d["chunks"]), 1)  # type: ignore[arg-type]
+            print(f"  {n} worker(s): Dask / pool detection rate {float(p['detect_s']) / float(d['detect_s']):.2f} "
+                  f"(wall), {float(p['worker_cpu_s']) / float(d['worker_cpu_s']):.2f} (CPU); Dask's wall overhead "
+                  f"{1000 * per:.0f} ms per chunk", flush=True)
+    if not a.fractions:
+        return
+    # memory over the long run: detections of one cycle checkpointed, repeated through the hour
+    cycle_ck = a.work / "cycle.ck"
+    cyc = a.work / "cycle"
+    make_long(a.source, cyc, None)  # one cycle: every image once
+    _child([str(cyc), str(rig), "pool:2", str(cycle_ck)])
+    for frac in a.fractions:
+        minutes = a.minutes * frac
+        rec = a.work / f"long_{minutes:g}min"
+        counts = make_long(a.source, rec, 60 * minutes)
+        ck = a.work / f"long_{minutes:g}min.ck"
+        lines = seed_checkpoint(rec, rig, cycle_ck, ck)
+        r = _child([str(rec), str(rig), "dask:2", str(ck)])
+        print(f"{minutes:g} min: {sum(counts.values())} images ({len(counts)} cameras), {r['instants']} instants, "
+              f"{lines} detection chunks from the checkpoint; end to end {r['wall_s']:.0f} s wall, client CPU "
+              f"{r['client_cpu_s']:.0f} s, workers' CPU {r['worker_cpu_s']:.0f} s; client peak "
+              f"{r['client_peak_mb']:.0f} MB, worker peak {r['worker_peak_mb']:.0f} MB", flush=True)
+
+
+if __name__ == "__main__":
+    main()
