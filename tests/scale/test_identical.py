@@ -108,7 +108,13 @@ def test_gtlaser_identical_on_every_executor(executors, monkeypatch: pytest.Monk
     model = HullModel.from_hull(hull)
 
     def fields(r: object) -> list[bytes]:
-        return [np.asarray(getattr(r, f.name)).tobytes() for f in dataclasses.fields(r)]  # type: ignore[arg-type]
+        """Every field's bytes, nested records (the side bias) field by field: an object's own bytes
+        would be its address."""
+        out: list[bytes] = []
+        for f in dataclasses.fields(r):  # type: ignore[arg-type]
+            v = getattr(r, f.name)
+            out.extend(fields(v) if dataclasses.is_dataclass(v) else [np.asarray(v).tobytes()])
+        return out
 
     monkeypatch.setattr(track, "COVARIANCE_WINDOW_FRAMES", 10**9)
     ref = track.track_frames(fp, model, scanner_cov=cal)
