@@ -146,6 +146,10 @@ def write_frame_index(folder: str | os.PathLike[str], stamps_s: np.ndarray, file
             w.writerow([i, f"{t:.6f}", name])
 
 
+#: frame numbers are counts of images: a billion is a year of video at 30 frames per second
+MAX_FRAME = 10**9
+
+
 def read_frame_index(folder: str | os.PathLike[str]) -> FrameIndex:
     """Read ``<folder>/timestamps.csv``; errors name the file and line."""
     folder = Path(folder)
@@ -173,6 +177,8 @@ def read_frame_index(folder: str | os.PathLike[str]) -> FrameIndex:
             stamps.append(float(row[1]))
         except (ValueError, IndexError):
             raise FormatError(f"{p}:{line}: expected 'frame,stamp_s,file'") from None
+        if not 0 <= frames[-1] < MAX_FRAME:
+            raise FormatError(f"{p}:{line}: frame {row[0].strip()[:30]} is not a frame number (0 to {MAX_FRAME - 1})")
         name = row[2].strip() if len(row) > 2 else ""
         if name and (Path(name).name != name or name in (".", "..")):
             # a recording is self-contained: an index may not point outside its camera's folder
