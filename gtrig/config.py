@@ -193,14 +193,17 @@ def load_config(path: str | os.PathLike[str] | None) -> RunConfig:
     if path is None:
         return RunConfig()
     p = Path(path)
+    from gtrig.io.yamlfile import parse_yaml
+
     try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise ConfigError(f"{p}: no such file") from None
-    except (yaml.YAMLError, UnicodeDecodeError) as e:
-        line = getattr(getattr(e, "problem_mark", None), "line", None)
-        raise ConfigError(f"{p}{'' if line is None else f':{line + 1}'}: not valid YAML") from None
-    return config_from_dict(doc, str(p))
+    except UnicodeDecodeError:
+        raise ConfigError(f"{p}: not valid YAML (undecodable bytes: a binary file?)") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{p}: is a folder, expected a run.yaml") from None
+    return config_from_dict(parse_yaml(text, str(p)), str(p))  # within the YAML limits (aliases, depth)
 
 
 def write_config(cfg: RunConfig, path: str | os.PathLike[str]) -> None:

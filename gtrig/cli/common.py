@@ -124,6 +124,39 @@ def handle_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def _one_line_group() -> type:
+    """The root command's class: Click's own usage errors (a missing option, a value of the wrong type, an
+    unknown option) as one ``error:`` line and exit code 2, like every other refusal, instead of a
+    usage panel."""
+    from typer import exceptions as typer_exceptions
+    from typer._click import exceptions as click  # Typer's own copy of Click: its exceptions are these
+    from typer.core import TyperGroup
+
+    class OneLineErrorsGroup(TyperGroup):
+        def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
+                 standalone_mode: bool = True, **extra: Any) -> Any:
+            if not standalone_mode:
+                return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            try:
+                rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            except click.NoArgsIsHelpError as e:
+                e.show()  # `gtrig survey` alone: the help, as before
+                sys.exit(e.exit_code)
+            except click.ClickException as e:
+                where = e.ctx.command_path if isinstance(e, click.UsageError) and e.ctx is not None else "gtrig"
+                _print_error(f"{where}: {e.format_message()} (--help lists the options)")
+                sys.exit(2)
+            except typer_exceptions.Abort:
+                err_console.print("interrupted", markup=False)
+                sys.exit(130)
+            sys.exit(rv if isinstance(rv, int) else 0)
+
+    return OneLineErrorsGroup
+
+
+ONE_LINE_ERRORS_GROUP = _one_line_group()
+
+
 def track(items: Iterable[T], description: str, total: int | None = None) -> Iterator[T]:
     """A Rich progress bar on stderr (silent when stderr is not a terminal)."""
     from rich.progress import (

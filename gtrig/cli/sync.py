@@ -23,6 +23,7 @@ def command(
                                 help="Refine with the offset as a parameter of the fusion's fit (needs covariances)."),
 ) -> None:
     """Clock offsets of GT sources to odometry: cross-correlation of heading rates, then a sub-sample fit."""
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.fusion.measurements import fixes_from_track
     from gtrig.fusion.sync import estimate_offset, refine_by_fusion
@@ -30,6 +31,9 @@ def command(
     from gtrig.io.offsets import CONVENTION, write_offsets
     from gtrig.io.posetrack import read_pose_track
 
+    checks.number("--search-s", search_s, lo=0.0, lo_open=True, hi=3600.0, unit="s")
+    ins = [Path(f) for spec in source for f in spec.split("=", 1)[-1].split(",")]
+    checks.outputs([*ins, recording / "run" / "odometry.csv" if recording else None], [out, figure])
     tracks = {}
     for spec in source:
         if "=" not in spec:

@@ -117,7 +117,21 @@ def read_image(source: str | os.PathLike[str]) -> np.ndarray:
     img = cv2.imread(s, cv2.IMREAD_GRAYSCALE)
     if img is None:
         raise FormatError(f"{s}: cannot read the image")
+    check_image_size(img, s)
     return img
+
+
+#: the largest image a stage processes: 64 megapixels (a 12 MP photo is far inside; a 20000 x 20000 px
+#: image would hold the detector for minutes in more than a gigabyte)
+MAX_IMAGE_PIXELS = 64_000_000
+
+
+def check_image_size(img: np.ndarray, source: str | os.PathLike[str]) -> None:
+    """Refuse an image beyond :data:`MAX_IMAGE_PIXELS` with one line naming it."""
+    n = int(img.shape[0]) * int(img.shape[1])
+    if n > MAX_IMAGE_PIXELS:
+        raise FormatError(f"{source}: {img.shape[1]} x {img.shape[0]} px is more than the "
+                          f"{MAX_IMAGE_PIXELS / 1e6:g} megapixels gtrig processes; downscale or crop it")
 
 
 def video_frame_count(video: Path) -> int:

@@ -109,6 +109,17 @@ def check_stamps(path: Path, stamps: np.ndarray, line_no: list[int]) -> None:
                           f"(previous {stamps[i - 1]:.9f})")
 
 
+def _check_unit(p: Path, ranges: np.ndarray, range_max_m: float | None) -> None:
+    """Refuse ranges in another unit: most returns of a real scan lie within the scanner's maximum range;
+    a median beyond twice that is millimetres (or centimetres) written for metres."""
+    if range_max_m is None or not ranges.size:
+        return
+    finite = ranges[np.isfinite(ranges)]
+    if finite.size and float(np.median(finite)) > 2.0 * float(range_max_m):
+        raise FormatError(f"{p}: ranges are in metres; their median {float(np.median(finite)):.4g} m is beyond twice "
+                          f"the scanner's maximum range {float(range_max_m):g} m (millimetres given for metres?)")
+
+
 def read_scans(
     path: str | os.PathLike[str], scanner: _HasBeams | None = None, *, beams: int | None = None
 ) -> ScanLog:
@@ -148,6 +159,7 @@ def read_scans(
     if bad.size:
         i = int(bad[0])
         raise FormatError(f"{p}:{line_no[i]}: infinite range (write nan for no return)")
+    _check_unit(p, ranges, getattr(scanner, "range_max_m", None))
     return ScanLog(stamps, np.ascontiguousarray(ranges))
 
 

@@ -152,6 +152,24 @@ def parse_yaml(text: str, source: str) -> Any:
     return construct_yaml(compose_yaml(text, source), source)
 
 
+def safe_load(text: str) -> Any:
+    """``yaml.safe_load`` within the module's limits, for readers with their own messages: a refusal is a
+    ``yaml.YAMLError`` (which they already report) rather than a hang or a RecursionError."""
+    loader = _Loader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _expanded_size(node, {}, set())
+        return loader.construct_document(node)
+    except _RefusedError as e:
+        raise yaml.YAMLError(f"refused: {e}") from None
+    except RecursionError:
+        raise yaml.YAMLError("refused: nested too deeply") from None
+    finally:
+        loader.dispose()
+
+
 def read_text_file(path: str | os.PathLike[str], what: str = "file") -> str:
     """The text of ``path``, with one-line errors: missing, a folder, not text, unreadable."""
     p = Path(path)

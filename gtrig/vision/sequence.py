@@ -330,25 +330,45 @@ def _key(rig: Rig, sequence: str, detector: str, instants: list[Instant], paths:
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:20]
 
 
+def _decodes(items: list[dict[str, Any]], n: int) -> bool:
+    """A checkpointed chunk holds ``n`` observations that decode (a damaged one is recomputed)."""
+    if len(items) != n:
+        return False
+    try:
+        for it in items:
+            _obs_from_json(it["obs"])
+    except Exception:  # any damage at all: the chunk is recomputed, never trusted
+        return False
+    return True
+
+
 def _load_checkpoint(path: Path, key: str) -> dict[int, list[dict[str, Any]]]:
     if not path.is_file():
         return {}
     done: dict[int, list[dict[str, Any]]] = {}
-    with open(path, encoding="utf-8") as f:
+    with open(path, encoding="utf-8", errors="replace") as f:
         first = f.readline()
         try:
             head = json.loads(first)
         except json.JSONDecodeError:
-            head = {}
-        if head.get("key") != key:
+            head = None
+        if not isinstance(head, dict) or not isinstance(head.get("key"), str):
+            # not what run_recording writes (a corrupt or foreign file): never trusted, started afresh
+            log.warning("%s: not a GTvision checkpoint (corrupt header); starting afresh", path)
+            return {}
+        if head["key"] != key:
             raise InputError(f"{path}: checkpoint of another run (other images, detector, lenses or markers); "
                              "delete it or choose another output")
         for line in f:
             try:
                 d = json.loads(line)
-            except json.JSONDecodeError:
-                break  # a line cut by the interruption: recompute that chunk
-            done[int(d["chunk"])] = d["items"]
+                cid, items = d["chunk"], d["items"]
+                if not (type(cid) is int and isinstance(items, list) and all(isinstance(x, dict) for x in items)):
+                    raise TypeError
+            except (json.JSONDecodeError, KeyError, TypeError):
+                # a line cut by the interruption (or damaged): recompute that chunk and the ones after it
+                break
+            done[cid] = items
     return done
 
 
@@ -529,6 +549,8 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
             raise
         log.warning("%s; starting afresh", err)
         done = {}
+    # a chunk the checkpoint holds must be one of these, of its size: anything else is not trusted
+    done = {c: v for c, v in done.items() if 0 <= c < len(chunks) and _decodes(v, len(chunks[c]))}
     if done:
         log.info("resuming: %d of %d chunks already in %s", len(done), len(chunks), ck)
     ckf = None
