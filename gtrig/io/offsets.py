@@ -49,4 +49,6 @@ def read_offsets(path: str | os.PathLike[str]) -> dict[str, float]:
                 out[str(name)] = float(v["offset_s"])
             except (TypeError, ValueError, KeyError):
                 raise FormatError(f"{p}: sources.{name}.offset_s: not a number") from None
+            if not abs(out[str(name)]) <= 86400.0:  # NaN fails too
+                raise FormatError(f"{p}: sources.{name}.offset_s: {v['offset_s']} is not a finite offset within a day")
     return out

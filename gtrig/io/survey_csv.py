@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gtrig.errors import FormatError
+from gtrig.errors import FormatError, InputError
 from gtrig.io.atomic import atomic_write_text
 
 #: Anything larger in a room survey is almost surely millimetres (metres expected).
@@ -213,6 +213,10 @@ def read_robot_points(path: str | os.PathLike[str]) -> NamedPoints:
         [[_metres(t, k, "x", limit=10.0), _metres(t, k, "y", limit=10.0)] for k in range(len(t.rows))]
     )
     sig = np.array([_sigma(t, k, 0.0) for k in range(len(t.rows))])
+    if len(xy) >= 2 and float(np.max(np.ptp(xy, axis=0))) < 0.01:
+        # a pose's heading comes from the spread of these points: coincident ones leave it unmeasurable
+        raise InputError(f"{t.path}: the robot points all lie within 1 cm of each other; a pose's heading needs "
+                         "points spread over the robot (a degenerate geometry)")
     return NamedPoints(tuple(names), xy, sig)
 
 
