@@ -154,8 +154,9 @@ def main() -> None:
     ap.add_argument("--max-mem-gib", type=float, default=2.0, help="address space of a worker (0: no limit)")
     ap.add_argument("--nice", type=int, default=0, help="niceness added in the workers")
     ap.add_argument("--crashes", type=Path, default=Path(tempfile.gettempdir()) / "gtrig_fuzz_crashes")
-    ap.add_argument("--order", choices=("cheap-first", "even"), default="cheap-first",
-                    help="cheap-first: reader after reader, the fastest first; even: all readers in step")
+    ap.add_argument("--order", choices=("equal-cpu", "even"), default="equal-cpu",
+                    help="equal-cpu: every reader gets the same CPU time until it reaches --n; even: the same "
+                    "number of inputs, all readers in step")
     ap.add_argument("--progress", type=Path, default=None, help="running totals as JSON after every chunk")
     a = ap.parse_args()
     names = [x for x in a.only.split(",") if x] or sorted(READERS)
@@ -167,9 +168,17 @@ def main() -> None:
         # chunk i of every reader before chunk i + 1 of any: a stopped run has covered all readers alike
         tasks = [(name, i, min(a.chunk, a.n - i * a.chunk), a.seed) for i in range(n_chunks) for name in names]
     else:
-        # the cheapest readers first, each to the end: a run stopped early has finished the most readers
-        names = sorted(names, key=lambda x: _COST.get(x, 1.0))
-        tasks = [(name, i, min(a.chunk, a.n - i * a.chunk), a.seed) for name in names for i in range(n_chunks)]
+        # equal CPU time per reader: the next chunk is always the one of the reader that has had the least
+        # (by _COST); a run stopped early has brought the cheap readers to --n and covered the dear ones
+        spent = {name: 0.0 for name in names}
+        left = {name: n_chunks for name in names}
+        tasks = []
+        while any(left.values()):
+            name = min((x for x in names if left[x]), key=lambda x: spent[x])
+            i = n_chunks - left[name]
+            tasks.append((name, i, min(a.chunk, a.n - i * a.chunk), a.seed))
+            spent[name] += _COST.get(name, 100) * a.chunk
+            left[name] -= 1
     totals = {name: {"n": 0, "ok": 0, "refused": 0, "crashes": 0, "cpu_s": 0.0} for name in names}
     seen: set[str] = set()
     t_wall = time.perf_counter()

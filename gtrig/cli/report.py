@@ -21,7 +21,6 @@ def command(
     from gtrig.cli import checks
     from gtrig.report import write_report
 
-    checks.input_folder("RESULTS", results)
     checks.outputs([], [out])
     t0 = time.perf_counter()
     p = write_report(results, out, truth)

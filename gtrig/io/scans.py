@@ -16,6 +16,7 @@ import numpy as np
 
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_open
+from gtrig.io.text import read_text
 
 
 class _HasBeams(Protocol):
@@ -60,12 +61,7 @@ def data_lines(path: Path) -> tuple[str, list[str], list[int]]:
 
     Returns the header, the data lines and their 1-based line numbers in the file.
     """
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FormatError(f"{path}: no such file") from None
-    except UnicodeDecodeError:
-        raise FormatError(f"{path}: not a UTF-8 text file") from None
+    text = read_text(path, "UTF-8 text file")
     lines = text.splitlines()
     keep = [i for i, s in enumerate(lines) if s.strip() and not s.lstrip().startswith("#")]
     if not keep:

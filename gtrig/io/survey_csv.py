@@ -30,6 +30,7 @@ import numpy as np
 
 from gtrig.errors import FormatError, InputError
 from gtrig.io.atomic import atomic_write_text
+from gtrig.io.text import read_text
 
 #: Anything larger in a room survey is almost surely millimetres (metres expected).
 MAX_DISTANCE_M = 100.0
@@ -57,16 +58,7 @@ class Table:
 def read_table(path: str | os.PathLike[str], required: Sequence[str] = ()) -> Table:
     """Read a CSV with ``#`` comment lines and one header row; check that ``required`` columns exist."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise FormatError(f"{p}: no such file") from None
-    except IsADirectoryError:
-        raise FormatError(f"{p}: is a folder, expected a CSV file") from None
-    except UnicodeDecodeError:
-        raise FormatError(f"{p}: not a text CSV file (undecodable bytes)") from None
-    except OSError as e:
-        raise FormatError(f"{p}: cannot read ({e.strerror or e})") from None
+    text = read_text(p, "text CSV file", encoding="utf-8-sig")
     header: tuple[str, ...] | None = None
     rows: list[tuple[str, ...]] = []
     lines: list[int] = []

@@ -19,7 +19,8 @@ from typing import Any
 
 import yaml
 
-from gtrig.errors import FormatError, InputError
+from gtrig.errors import FormatError
+from gtrig.io.text import read_text
 
 MAX_BYTES = 64 * 2**20
 MAX_ALIASES = 1000
@@ -172,17 +173,7 @@ def safe_load(text: str) -> Any:
 
 def read_text_file(path: str | os.PathLike[str], what: str = "file") -> str:
     """The text of ``path``, with one-line errors: missing, a folder, not text, unreadable."""
-    p = Path(path)
-    try:
-        return p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{p}: no such {what}") from None
-    except IsADirectoryError:
-        raise InputError(f"{p}: is a folder, expected a {what}") from None
-    except UnicodeDecodeError:
-        raise FormatError(f"{p}: not a text {what} (undecodable bytes)") from None
-    except OSError as e:
-        raise InputError(f"{p}: cannot read ({e.strerror or e})") from None
+    return read_text(path, f"text {what}")
 
 
 def load_yaml(path: str | os.PathLike[str]) -> Any:

@@ -494,7 +494,7 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
                   planar: bool = True, workers: int = 0, *, options: VisionOptions | None = None,
                   detector: str = "auto",
                   checkpoint: str | os.PathLike[str] | None = None,
-                  progress: Callable[[int, int], None] | None = None, chunk_size: int = 16,
+                  progress: Callable[[int, int], None] | None = None, chunk_size: int | None = None,
                   sync_tol_s: float = 0.005, estimate_noise: bool = True,
                   stale_checkpoint: str = "refuse") -> VisionResult:
     """GTvision over one sequence of a recording.
@@ -512,6 +512,9 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     stale_checkpoint : a checkpoint of other images, lenses or markers is refused ("refuse": a user's
         file is not overwritten by guess) or started afresh ("restart": a folder the caller owns).
     progress : called as ``progress(done_instants, total_instants)``.
+    chunk_size : instants per checkpointed chunk; ``None``: 16, fewer for a sequence of fewer than 512
+        instants (at least 32 chunks, so that an interruption loses little). It depends on the sequence
+        alone, never on ``workers``: a run resumed with other workers finds the same chunks.
     estimate_noise : estimate the corner covariances' variance factor per camera from this sequence's
         residuals and estimate every instant again with it (:func:`calibrate_noise`); ignored when
         ``options.corner_scale`` is given (those factors are used as they are).
@@ -538,6 +541,8 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     intervals = read_static_intervals(rec / "validation" / "poses.csv") if sequence == "validation" else None
     instants = make_instants(indices, sequence, sync_tol_s, intervals)
     paths = {name: [ix.source(i) for i in range(len(ix))] for name, ix in indices.items()}
+    if chunk_size is None:
+        chunk_size = min(16, max(1, len(instants) // 32))
     chunks = [instants[i:i + chunk_size] for i in range(0, len(instants), chunk_size)]
     # a new version of the detector's code makes other detections: not the checkpoint's
     key = _key(rig, sequence, f"{det.name}/{det.version}", instants, paths, rec)
