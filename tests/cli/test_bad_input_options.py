@@ -123,7 +123,8 @@ CASES: list[tuple[str, list[str], list[str]]] = [
     ("sync-source-no-name", ["sync", "--recording", "{d}/rec", "--source", "{d}/est.tum", "--out", "{o}/sync.yaml"],
      ["--source"]),
     *[(f"fuse-{opt[2:]}-{v}", ["fuse", "--vision", "{d}/est.tum", "--vision-cov", "{d}/est_cov.csv", "--odometry",
-                               "{d}/odometry.csv", "--out", "{o}/gt.tum", "--covariance", "{o}/gt_cov.csv", opt, v], [opt])
+                               "{d}/odometry.csv", "--out", "{o}/gt.tum", "--covariance", "{o}/gt_cov.csv", opt, v],
+       [opt])
       for opt, v in (("--max-gap", "nan"), ("--max-gap", "-1"), ("--rate", "nan"), ("--rate", "0"),
                      ("--rate", "fast"), ("--estimator", "ukf"))],
     ("fuse-vision-without-cov", ["fuse", "--vision", "{d}/est.tum", "--odometry", "{d}/odometry.csv",
