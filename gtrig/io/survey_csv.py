@@ -111,11 +111,13 @@ def _metres(t: Table, k: int, col: str, *, positive: bool = False, limit: float 
     return v
 
 
-def _sigma(t: Table, k: int, default: float | None) -> float:
+def _sigma(t: Table, k: int, default: float | None, reading: bool = False) -> float:
+    """The row's sigma (metres); a reading's must be positive (a zero would weigh it infinitely), a
+    point's may be zero (a fixed reference)."""
     if t.has("sigma") and t.rows[k][t.header.index("sigma")] != "":
         v = _metres(t, k, "sigma", limit=1.0)
-        if v < 0:
-            raise FormatError(f"{t.path}:{t.lines[k]}: sigma {v:g} must not be negative")
+        if v < 0 or (reading and v == 0):
+            raise FormatError(f"{t.path}:{t.lines[k]}: sigma {v:g} must be {'positive' if reading else 'not negative'}")
         return v
     if default is None:
         raise FormatError(f"{t.path}:{t.lines[k]}: no sigma given and no default hand-laser sigma")
@@ -248,7 +250,7 @@ def read_world_distances(path: str | os.PathLike[str], default_sigma_m: float | 
             a.append(t.rows[k][t.header.index("point")])
             b.append(t.rows[k][t.header.index("reference")])
             d.append(_distance(t, k, "distance"))
-            s.append(_sigma(t, k, default_sigma_m))
+            s.append(_sigma(t, k, default_sigma_m, reading=True))
             src.append(f"{t.path.name}:{t.lines[k]}")
     else:
         wide = [c for c in t.header if c.startswith("d_") and len(c) > 2]
@@ -268,7 +270,7 @@ def read_world_distances(path: str | os.PathLike[str], default_sigma_m: float | 
                 a.append(t.rows[k][t.header.index("point")])
                 b.append(raw[c])
                 d.append(_distance(t, k, c))
-                s.append(_sigma(t, k, default_sigma_m))
+                s.append(_sigma(t, k, default_sigma_m, reading=True))
                 src.append(f"{t.path.name}:{t.lines[k]}")
     return Distances(tuple("" for _ in a), tuple(a), tuple(b), np.array(d), np.array(s), tuple(src))
 
@@ -283,7 +285,7 @@ def read_pose_distances(path: str | os.PathLike[str], default_sigma_m: float | N
         a.append(r[t.header.index("robot_point")])
         b.append(r[t.header.index("world_point")])
         d.append(_distance(t, k, "distance"))
-        s.append(_sigma(t, k, default_sigma_m))
+        s.append(_sigma(t, k, default_sigma_m, reading=True))
         src.append(f"{t.path.name}:{t.lines[k]}")
     return Distances(tuple(g), tuple(a), tuple(b), np.array(d), np.array(s), tuple(src))
 

@@ -81,6 +81,7 @@ def make_inputs(d: Path) -> Path:
     (d / "ref_markup.csv").write_text("name,x,y,sigma\n[/i],0,0,0.0005\nA,0,2.5,0.0005\nB,2.5,0,0.0005\n")
     (d / "d.csv").write_text("point,reference,distance,sigma\n1,O,1.8028,0.00075\n1,A,1.4142,0.00075\n"
                              "1,B,2.1213,0.00075\n1,C,1.5811,0.00075\n")
+    (d / "d_sigma0.csv").write_text((d / "d.csv").read_text().replace("1.8028,0.00075", "1.8028,0"))
     (d / "d_markup.csv").write_text("point,reference,distance,sigma\n1,[/i],1.8028,0.00075\n1,A,1.4142,0.00075\n"
                                     "1,B,2.1213,0.00075\n1,Q[/b],1.5,0.00075\n")
     (d / "points.csv").write_text("name,x,y\nO,0,0\nA,0,2.5\nB,2.5,0\nC,2.5,2.5\n")
