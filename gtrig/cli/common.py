@@ -110,16 +110,14 @@ def handle_errors(fn: F) -> F:
         except ValidationError as e:
             _print_error(_validation_message(e))
             sys.exit(2)
-        except ArithmeticError as e:  # numpy.linalg.LinAlgError, ZeroDivisionError, FloatingPointError
-            if type(e).__name__ != "LinAlgError":
-                raise
-            _print_error(f"a degenerate input: the estimate is not determined ({_one_line(e)}); check that the "
-                         "inputs constrain every unknown")
-            sys.exit(3)
         except MemoryError:
             _print_error("out of memory: the input is larger than this machine can hold")
             sys.exit(2)
         except Exception as e:
+            if type(e).__name__ == "LinAlgError":  # numpy's: a singular system, from a degenerate input
+                _print_error(f"a degenerate input: the estimate is not determined ({_one_line(e)}); check that "
+                             "the inputs constrain every unknown")
+                sys.exit(3)
             if logging.getLogger().isEnabledFor(logging.DEBUG):
                 raise
             log_path = _write_crash_log(e)
