@@ -116,6 +116,13 @@ def make_inputs(d: Path) -> Path:
     return d
 
 
+def case_ids(cases: Sequence[tuple[object, ...]]) -> list[str]:
+    """The cases' names, checked unique (a duplicate would hide a case)."""
+    ids = [str(c[0]) for c in cases]
+    assert len(ids) == len(set(ids)), sorted(i for i in ids if ids.count(i) > 1)
+    return ids
+
+
 def snapshot(*folders: Path) -> dict[str, str]:
     """Every file and folder under ``folders`` with a hash of its bytes (temporaries included)."""
     out: dict[str, str] = {}

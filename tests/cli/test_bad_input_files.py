@@ -9,7 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from bad_input_kit import make_inputs, refused
+from bad_input_kit import case_ids, refused
 
 VIS = ["vision", "--rig", "{d}/rig.yaml", "--recording", "{d}/rec"]
 FUSE = ["fuse", "--vision", "{d}/est.tum", "--vision-cov", "{d}/est_cov.csv", "--odometry", "{d}/odometry.csv"]
@@ -187,17 +187,7 @@ CASES: list[tuple[str, list[str], int, list[str], Callable[[Path], None] | None]
 ]
 
 
-@pytest.fixture(scope="module")
-def d(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return make_inputs(tmp_path_factory.mktemp("inputs"))
-
-
-def test_case_ids_unique() -> None:
-    ids = [c[0] for c in CASES]
-    assert len(ids) == len(set(ids))
-
-
-@pytest.mark.parametrize(("args", "code", "must", "setup"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
+@pytest.mark.parametrize(("args", "code", "must", "setup"), [c[1:] for c in CASES], ids=case_ids(CASES))
 def test_bad_file_refused(d: Path, tmp_path: Path, args: list[str], code: int, must: list[str],
                           setup: Callable[[Path], None] | None) -> None:
     refused(args, d, tmp_path / "o", code, must, setup)

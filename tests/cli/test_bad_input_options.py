@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from bad_input_kit import make_inputs, refused
+from bad_input_kit import case_ids, refused
 
 # (id, command line, words the error line must hold)
 CASES: list[tuple[str, list[str], list[str]]] = [
@@ -160,16 +160,6 @@ CASES: list[tuple[str, list[str], list[str]]] = [
 ]
 
 
-@pytest.fixture(scope="module")
-def d(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return make_inputs(tmp_path_factory.mktemp("inputs"))
-
-
-def test_case_ids_unique() -> None:
-    ids = [c[0] for c in CASES]
-    assert len(ids) == len(set(ids))
-
-
-@pytest.mark.parametrize(("args", "must"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
+@pytest.mark.parametrize(("args", "must"), [c[1:] for c in CASES], ids=case_ids(CASES))
 def test_option_refused_before_work(d: Path, tmp_path: Path, args: list[str], must: list[str]) -> None:
     refused(args, d, tmp_path / "o", 2, must)

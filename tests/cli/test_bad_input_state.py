@@ -11,16 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from bad_input_kit import make_inputs, refused, runner
+from bad_input_kit import refused, runner
 
 from gtrig.cli.main import app
 from gtrig.errors import InputError
 from gtrig.vision.sequence import _load_checkpoint
-
-
-@pytest.fixture(scope="module")
-def d(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return make_inputs(tmp_path_factory.mktemp("inputs"))
 
 
 @pytest.mark.parametrize(("text", "chunks"), [
