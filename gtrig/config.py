@@ -23,7 +23,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 
-from gtrig.errors import ConfigError
+from gtrig.errors import ConfigError, GtrigError
 from gtrig.laser.hull_icp import IcpSettings
 from gtrig.laser.track import TrackSettings
 from gtrig.markers.robotcal.bundle import BundleOptions
@@ -203,7 +203,11 @@ def load_config(path: str | os.PathLike[str] | None) -> RunConfig:
         raise ConfigError(f"{p}: not valid YAML (undecodable bytes: a binary file?)") from None
     except IsADirectoryError:
         raise ConfigError(f"{p}: is a folder, expected a run.yaml") from None
-    return config_from_dict(parse_yaml(text, str(p)), str(p))  # within the YAML limits (aliases, depth)
+    try:
+        doc = parse_yaml(text, str(p))  # within the YAML limits (aliases, depth)
+    except GtrigError as e:
+        raise ConfigError(str(e)) from None
+    return config_from_dict(doc, str(p))
 
 
 def write_config(cfg: RunConfig, path: str | os.PathLike[str]) -> None:
