@@ -14,7 +14,7 @@ import pytest
 from bad_input_kit import refused, runner
 
 from gtrig.cli.main import app
-from gtrig.errors import InputError
+from gtrig.errors import FormatError, InputError
 from gtrig.vision.sequence import _load_checkpoint
 
 
@@ -119,3 +119,14 @@ def test_json_state_of_sim_written_by_sim_is_accepted(tmp_path: Path) -> None:
     p = tmp_path / "state.json"
     p.write_text(json.dumps({"config": "abc", "done": [STEPS[0][0]]}))
     assert _read_state(p)["done"] == [STEPS[0][0]]
+
+
+def test_images_beyond_the_size_limit_refused(d: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import gtrig.io.frames as frames
+
+    # the 64-megapixel limit, lowered under this 64 x 48 px image (a real 20000 x 20000 px one costs 400 MB)
+    monkeypatch.setattr(frames, "MAX_IMAGE_PIXELS", 1000)
+    refused(["markers", "detect", str(d / "images" / "0.png"), "--family", "artoolkitplus_simple", "--out",
+             str(tmp_path / "o" / "det.json")], d, tmp_path / "o", 2, [str(d / "images" / "0.png"), "megapixels"])
+    with pytest.raises(FormatError, match="megapixels"):
+        frames.read_image(d / "images" / "0.png")
