@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 import logging
 import sys
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -137,12 +137,15 @@ def _one_line_group() -> type:
     from typer.core import TyperGroup
 
     class OneLineErrorsGroup(TyperGroup):
-        def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
-                 standalone_mode: bool = True, **extra: Any) -> Any:
+        def main(self, args: Sequence[str] | None = None, prog_name: str | None = None,
+                 complete_var: str | None = None, standalone_mode: bool = True, windows_expand_args: bool = True,
+                 **extra: Any) -> Any:
+            call = {"args": args, "prog_name": prog_name, "complete_var": complete_var,
+                    "windows_expand_args": windows_expand_args, **extra}
             if not standalone_mode:
-                return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+                return super().main(standalone_mode=False, **call)
             try:
-                rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+                rv = super().main(standalone_mode=False, **call)
             except click.NoArgsIsHelpError as e:
                 e.show()  # `gtrig survey` alone: the help, as before
                 sys.exit(e.exit_code)

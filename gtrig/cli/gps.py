@@ -54,7 +54,8 @@ def command(
 
     checks.number("--max-sigma", max_sigma, lo=0.0, hi=1000.0, unit="m")
     checks.number("--max-malformed", max_malformed, lo=0.0, hi=1.0)
-    arm = checks.floats("--antenna-lever-arm", lever_arm, 3, "metres")
+    xyz = checks.floats("--antenna-lever-arm", lever_arm, 3, "metres")
+    arm = None if xyz is None else (xyz[0], xyz[1], xyz[2])
     if arm is not None:
         checks.number("--antenna-lever-arm", max(abs(v) for v in arm), hi=10.0, unit="m",
                       unit_hint="millimetres given for metres")

@@ -58,14 +58,14 @@ class _LimitedLoader(_Limits, yaml.SafeLoader):
 
 
 if getattr(yaml, "__with_libyaml__", False):
-    class _FastLimitedLoader(yaml._yaml.CParser, _Limits, yaml.composer.Composer,  # type: ignore[name-defined]
+    class _FastLimitedLoader(yaml._yaml.CParser, _Limits, yaml.composer.Composer,
                              yaml.constructor.SafeConstructor, yaml.resolver.Resolver):
         """libyaml's event parser (C, about ten times faster than PyYAML's scanner) under the same
         Python composer and limits; the composer's ``get_single_node`` is called explicitly because
         the C parser has its own, without limits."""
 
         def __init__(self, stream: str) -> None:
-            yaml._yaml.CParser.__init__(self, stream)  # type: ignore[attr-defined]
+            yaml._yaml.CParser.__init__(self, stream)
             yaml.composer.Composer.__init__(self)
             yaml.constructor.SafeConstructor.__init__(self)
             yaml.resolver.Resolver.__init__(self)

@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -223,7 +224,7 @@ def _config_key(cfg: SimConfig) -> str:
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def _read_state(path: Path) -> dict[str, object]:
+def _read_state(path: Path) -> dict[str, Any]:
     """The resume state, validated: never trusted when it is not what :func:`simulate` writes."""
     try:
         state = json.loads(path.read_text(encoding="utf-8"))
