@@ -90,6 +90,10 @@ def parse_numbers(path: Path, lines: list[str], line_no: list[int], n_cols: int)
                 except ValueError:
                     raise FormatError(f"{path}:{line_no[i]}: not a number: {tok.strip()!r}") from None
         raise FormatError(f"{path}: could not parse the numbers") from None
+    if a.shape != (len(lines), n_cols):
+        # loadtxt cuts a row at a '#' (an inline comment): the row holds fewer numbers than its commas say
+        i = next((k for k, s in enumerate(lines) if "#" in s), 0)
+        raise FormatError(f"{path}:{line_no[i]}: expected {n_cols} values; a '#' cuts this row short")
     return a
 
 
