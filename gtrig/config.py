@@ -23,7 +23,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 
-from gtrig.errors import ConfigError
+from gtrig.errors import ConfigError, GtrigError
 from gtrig.laser.hull_icp import IcpSettings
 from gtrig.laser.track import TrackSettings
 from gtrig.markers.robotcal.bundle import BundleOptions
@@ -195,13 +195,20 @@ def load_config(path: str | os.PathLike[str] | None) -> RunConfig:
     if path is None:
         return RunConfig()
     p = Path(path)
+    from gtrig.io.yamlfile import parse_yaml
+
     try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise ConfigError(f"{p}: no such file") from None
-    except (yaml.YAMLError, UnicodeDecodeError) as e:
-        line = getattr(getattr(e, "problem_mark", None), "line", None)
-        raise ConfigError(f"{p}{'' if line is None else f':{line + 1}'}: not valid YAML") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{p}: not valid YAML (undecodable bytes: a binary file?)") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{p}: is a folder, expected a run.yaml") from None
+    try:
+        doc = parse_yaml(text, str(p))  # within the YAML limits (aliases, depth)
+    except GtrigError as e:
+        raise ConfigError(str(e)) from None
     return config_from_dict(doc, str(p))
 
 

@@ -92,6 +92,12 @@ def parse_board(spec: str, origin: str = "corner") -> Board:
         square = float(m.group(3))
     except ValueError:
         raise InputError(f"--board {spec!r}: the square size {m.group(3)!r} is not a number") from None
+    cols, rows = int(m.group(1)), int(m.group(2))
+    if not (2 <= cols <= 200 and 2 <= rows <= 200):
+        raise InputError(f"--board {spec!r}: a board has 2 to 200 inner corners along each side")
+    if not 0.001 <= square <= 1.0:
+        hint = " (millimetres given for metres?)" if square > 1.0 else ""
+        raise InputError(f"--board {spec!r}: the square side must be 0.001 to 1 m, got {square:g}{hint}")
     return Board(int(m.group(1)), int(m.group(2)), square, origin)
 
 

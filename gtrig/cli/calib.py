@@ -29,8 +29,11 @@ def intrinsics(
     from gtrig.calib.chessboard import parse_board
     from gtrig.calib.intrinsics import calibrate_intrinsics
     from gtrig.calib.plots import plot_coverage
+    from gtrig.cli import checks
 
     b = parse_board(board)
+    checks.input_folder("--images", images)
+    checks.outputs([], [out, figure])
     res = calibrate_intrinsics(images, b, estimate_k3=k3)
     write_cam_yaml(out, res.camera)
     fig = figure or out.with_name(out.stem + "_coverage.png")
@@ -95,9 +98,13 @@ def network(
         load_world_views,
         sweep_views,
     )
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.rig import load_rig
 
+    for opt, folder in (("--pairs", pairs), ("--world-board", world_board)):
+        checks.input_folder(opt, folder)
+    checks.outputs([rig, boards], [out])
     r = load_rig(rig)
     spec = read_boards_yaml(boards)
     if spec.T_world_board is None:
@@ -131,7 +138,10 @@ def recording(
 ) -> None:
     """Calibrate every camera of a recording (intrinsics, then the network); compare with truth if present."""
     from gtrig.calib.recording import calibrate_recording
+    from gtrig.cli import checks
 
+    checks.input_folder("REC", rec)
+    checks.outputs([rec / "rig.yaml"], [out])
     rig_cal, report = calibrate_recording(rec, estimate_k3=k3)
     _report(rig_cal, report, out or rec / "rig.calibrated.yaml")
 
@@ -153,8 +163,11 @@ def check(
 
     from gtrig.calib.check import check_rig
     from gtrig.calib.chessboard import parse_board
+    from gtrig.cli import checks
     from gtrig.rig import load_rig
 
+    checks.number("--tol-mm", tol_mm, lo=0.0, lo_open=True, hi=10000.0, unit="mm")
+    checks.input_folder("--images", images)
     rows = check_rig(load_rig(rig), images, truth, parse_board(board))
     t = Table(
         "camera", "image", "x, y, z est (m)", "dx, dy, dz (mm)", "|d| (mm)", "yaw err (deg)", "RMS (px)"
@@ -201,8 +214,17 @@ def steady(
 
     from gtrig.calib.chessboard import parse_board
     from gtrig.calib.steady import check_steady
+    from gtrig.cli import checks
     from gtrig.rig import load_rig
 
+    # a NaN threshold would call every camera steady: every threshold is a positive finite number
+    checks.number("--shift-px", shift_px, lo=0.0, lo_open=True, hi=1000.0, unit="px")
+    checks.number("--move-mm", move_mm, lo=0.0, lo_open=True, hi=10000.0, unit="mm")
+    checks.number("--turn-deg", turn_deg, lo=0.0, lo_open=True, hi=180.0, unit="deg")
+    for opt, folder in (("--before", before), ("--after", after)):
+        checks.input_folder(opt, folder)
+    if figures is not None:
+        checks.output_folder("--figures", figures)
     r = load_rig(rig)
     b = None if board.lower() == "none" else parse_board(board)
     res = check_steady(

@@ -16,18 +16,19 @@ MAX_WORKERS = 256
 
 
 def number(option: str, value: float | None, *, lo: float | None = None, hi: float | None = None,
-           lo_open: bool = False, unit: str = "", unit_hint: str = "") -> None:
+           lo_open: bool = False, unit: str = "", unit_hint: str = "", lo_hint: str = "") -> None:
     """``value`` is finite and within ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); ``None`` passes.
 
-    ``unit_hint`` is added when ``value`` is above ``hi``: the likely unit mistake (e.g. "millimetres
-    given for metres")."""
+    ``unit_hint`` is added when ``value`` is above ``hi``, ``lo_hint`` when it is positive and below
+    ``lo``: the likely unit mistake (e.g. "millimetres given for metres")."""
     if value is None:
         return
     u = f" {unit}" if unit else ""
     if not math.isfinite(value):
         raise InputError(f"{option}: must be a finite number{u}, got {value}")
     if lo is not None and (value <= lo if lo_open else value < lo):
-        raise InputError(f"{option}: must be {'>' if lo_open else '>='} {lo:g}{u}, got {value:g}")
+        hint = f" ({lo_hint}?)" if lo_hint and value > 0 else ""
+        raise InputError(f"{option}: must be {'>' if lo_open else '>='} {lo:g}{u}, got {value:g}{hint}")
     if hi is not None and value > hi:
         hint = f" ({unit_hint}?)" if unit_hint else ""
         raise InputError(f"{option}: must be <= {hi:g}{u}, got {value:g}{hint}")
@@ -80,3 +81,50 @@ def output_folder(option: str, folder: Path) -> None:
             if not parent.is_dir():
                 raise InputError(f"{option} {folder}: {parent} is a file, not a folder")
             break
+
+
+def choice(option: str, value: str | None, allowed: Iterable[str]) -> None:
+    """``value`` is one of ``allowed`` (``None`` passes)."""
+    allowed = tuple(allowed)
+    if value is not None and value not in allowed:
+        raise InputError(f"{option}: must be one of {', '.join(allowed)}, got {value!r}")
+
+
+def count(option: str, value: int | None, lo: int | None = None, hi: int | None = None) -> None:
+    """An integer option within ``[lo, hi]`` (``None`` passes)."""
+    if value is None:
+        return
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        span = f"between {lo} and {hi}" if lo is not None and hi is not None else (
+            f">= {lo}" if lo is not None else f"<= {hi}")
+        raise InputError(f"{option}: must be {span}, got {value}")
+
+
+def input_folder(option: str, folder: Path) -> None:
+    """``folder`` exists and is a folder."""
+    if not folder.exists():
+        raise InputError(f"{option} {folder}: no such folder")
+    if not folder.is_dir():
+        raise InputError(f"{option} {folder}: is a file, expected a folder")
+
+
+def not_inside(option: str, out: Path, folder: Path, what: str = "the recording") -> None:
+    """An output folder is not ``folder`` itself nor inside it (a recording is read, never written)."""
+    o, f = out.resolve(), folder.resolve()
+    if o == f or f in o.parents:
+        raise InputError(f"{option} {out}: inside {what} ({folder}); outputs go elsewhere")
+
+
+def floats(option: str, text: str | None, n: int, unit: str = "") -> tuple[float, ...] | None:
+    """``text`` as ``n`` comma-separated finite numbers (``None`` passes)."""
+    if text is None:
+        return None
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        vals = ()
+    if len(vals) != n:
+        raise InputError(f"{option} {text!r}: expected {n} comma-separated numbers{f' ({unit})' if unit else ''}")
+    if not all(math.isfinite(v) for v in vals):
+        raise InputError(f"{option} {text!r}: every value must be a finite number")
+    return vals

@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 import logging
 import sys
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -114,6 +114,10 @@ def handle_errors(fn: F) -> F:
             _print_error("out of memory: the input is larger than this machine can hold")
             sys.exit(2)
         except Exception as e:
+            if type(e).__name__ == "LinAlgError":  # numpy's: a singular system, from a degenerate input
+                _print_error(f"a degenerate input: the estimate is not determined ({_one_line(e)}); check that "
+                             "the inputs constrain every unknown")
+                sys.exit(3)
             if logging.getLogger().isEnabledFor(logging.DEBUG):
                 raise
             log_path = _write_crash_log(e)
@@ -122,6 +126,42 @@ def handle_errors(fn: F) -> F:
             sys.exit(1)
 
     return wrapper  # type: ignore[return-value]
+
+
+def _one_line_group() -> type:
+    """The root command's class: Click's own usage errors (a missing option, a value of the wrong type, an
+    unknown option) as one ``error:`` line and exit code 2, like every other refusal, instead of a
+    usage panel."""
+    from typer import exceptions as typer_exceptions
+    from typer._click import exceptions as click  # Typer's own copy of Click: its exceptions are these
+    from typer.core import TyperGroup
+
+    class OneLineErrorsGroup(TyperGroup):
+        def main(self, args: Sequence[str] | None = None, prog_name: str | None = None,
+                 complete_var: str | None = None, standalone_mode: bool = True, windows_expand_args: bool = True,
+                 **extra: Any) -> Any:
+            call = {"args": args, "prog_name": prog_name, "complete_var": complete_var,
+                    "windows_expand_args": windows_expand_args, **extra}
+            if not standalone_mode:
+                return super().main(standalone_mode=False, **call)
+            try:
+                rv = super().main(standalone_mode=False, **call)
+            except click.NoArgsIsHelpError as e:
+                e.show()  # `gtrig survey` alone: the help, as before
+                sys.exit(e.exit_code)
+            except click.ClickException as e:
+                where = e.ctx.command_path if isinstance(e, click.UsageError) and e.ctx is not None else "gtrig"
+                _print_error(f"{where}: {e.format_message()} (--help lists the options)")
+                sys.exit(2)
+            except typer_exceptions.Abort:
+                err_console.print("interrupted", markup=False)
+                sys.exit(130)
+            sys.exit(rv if isinstance(rv, int) else 0)
+
+    return OneLineErrorsGroup
+
+
+ONE_LINE_ERRORS_GROUP = _one_line_group()
 
 
 def track(items: Iterable[T], description: str, total: int | None = None) -> Iterator[T]:

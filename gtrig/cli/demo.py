@@ -26,6 +26,10 @@ def command(
     from rich.table import Table
 
     from gtrig import pipeline
+    from gtrig.cli import checks
+
+    checks.seed(seed)
+    checks.output_folder("--out", out)
     from gtrig.io.recording import summarize
     from gtrig.sim.config import SimConfig
     from gtrig.sim.recording import simulate

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -68,12 +69,15 @@ def poses(
     max_dt: float = typer.Option(0.01, "--max-dt", help="TUM inputs: largest stamp difference of a pair (s)."),
 ) -> None:
     """Per-pose errors (reference - estimate, angles wrapped) and per-axis statistics."""
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.evaluate import poses as ev
     from gtrig.io.survey_csv import read_pose_table
 
     if fmt not in ("table", "csv", "md"):
         raise InputError(f"--format must be table, csv or md, got {fmt!r}")
+    checks.number("--max-dt", max_dt, lo=0.0, lo_open=True, hi=3600.0, unit="s")
+    checks.outputs([reference, estimate], [plot])
     ref_t = read_pose_table(reference, _cols(reference_columns))
     est_t = read_pose_table(estimate, _cols(estimate_columns), method)
     ref_t, est_t = _pair_tum_by_stamp(reference, estimate, ref_t, est_t, max_dt)
@@ -129,8 +133,8 @@ def _interval(s: str | None) -> tuple[float, float] | None:
         t0, t1 = (float(v) for v in s.split(","))
     except ValueError:
         raise InputError(f"--align-interval must be T0,T1 in seconds, got {s!r}") from None
-    if not t1 > t0:
-        raise InputError(f"--align-interval {s!r}: T1 must be after T0")
+    if not (math.isfinite(t0) and math.isfinite(t1) and t1 > t0):
+        raise InputError(f"--align-interval {s!r}: T0 and T1 must be finite, T1 after T0")
     return t0, t1
 
 
@@ -167,6 +171,7 @@ def slam(
     plot: Path | None = typer.Option(None, "--plot", help="Folder for the figures."),
 ) -> None:
     """Score a SLAM result against a GT: evo's APE/RPE, RAWSEEDS' ATE/RPE and the GT-aware scores."""
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.evaluate import tables
     from gtrig.evaluate.slam import evaluate_slam
@@ -175,6 +180,16 @@ def slam(
 
     if fmt not in ("table", "csv", "md", "json"):
         raise InputError(f"--format must be table, csv, md or json, got {fmt!r}")
+    checks.choice("--metrics", metrics, ("rawseeds", "evo", "all"))
+    checks.choice("--align", align, ("none", "se2", "yaw", "se3", "sim3", "sim2"))
+    checks.choice("--associate", assoc, ("nearest", "interpolate"))
+    checks.number("--max-dt", max_dt, lo=0.0, lo_open=True, hi=3600.0, unit="s")
+    checks.count("--rpe-delta", rpe_delta, lo=1, hi=10**6)
+    if t_offset != "auto":
+        checks.number("--t-offset", _offset(t_offset), lo=-1e6, hi=1e6, unit="s")  # type: ignore[arg-type]
+    _interval(align_interval)
+    if plot is not None:
+        checks.output_folder("--plot", plot)
     f_gt, f_est = _formats_in(format_in)
     g = read_trajectory(gt, f_gt)
     e = read_trajectory(estimate, f_est)
@@ -252,12 +267,16 @@ def compare(
     format_in: str | None = typer.Option(None, "--format-in", help="FMT or A_FMT,B_FMT."),
 ) -> None:
     """Two GT sources of one run side by side on their common span (differences and covariance consistency)."""
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.evaluate.compare import compare_sources
     from gtrig.io.formats import read_trajectory
 
     if fmt not in ("table", "csv", "md"):
         raise InputError(f"--format must be table, csv or md, got {fmt!r}")
+    checks.choice("--align", align, ("none", "se2", "yaw", "se3", "sim3", "sim2"))
+    checks.number("--max-gap", max_gap, lo=0.0, lo_open=True, hi=3600.0, unit="s")
+    checks.number("--t-offset", t_offset, lo=-1e6, hi=1e6, unit="s")
     fa, fb = _formats_in(format_in)
     c = compare_sources(read_trajectory(a, fa), read_trajectory(b, fb), align, max_gap, t_offset)  # type: ignore[arg-type]
     rows = c.rows()

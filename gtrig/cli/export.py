@@ -37,6 +37,12 @@ def command(
         raise InputError(f"--to must be one of {', '.join(FORMATS)}, got {to!r}")
     if storage not in ("sqlite3", "mcap"):
         raise InputError(f"--storage must be sqlite3 or mcap, got {storage!r}")
+    from gtrig.cli import checks
+
+    checks.choice("--from", from_, FORMATS)
+    if out.resolve() in {traj.resolve(), *([covariance.resolve()] if covariance else [])}:
+        raise InputError(f"{out}: an output may not overwrite an input")
+    checks.not_inside("--out", out, traj, "the input")
     if traj.is_dir() and (traj / "rig.yaml").is_file():
         if to not in ("rosbag1", "rosbag2"):
             raise InputError(f"{traj}: a recording exports to rosbag1 or rosbag2, not {to}")

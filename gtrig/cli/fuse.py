@@ -30,6 +30,7 @@ def command(
     """Fuse GT sources with odometry (EKF + RTS, then a robust batch MAP); bridged poses flagged."""
     import json
 
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.fusion import FusionOptions, fuse_tracks
     from gtrig.io.odometry import read_odometry
@@ -38,6 +39,8 @@ def command(
 
     if estimator not in ("batch", "ekf"):
         raise InputError(f"--estimator {estimator!r}: batch or ekf")
+    checks.number("--max-gap", max_gap, lo=0.0, lo_open=True, hi=86400.0, unit="s")
+    checks.outputs([rig, vision, vision_cov, laser, laser_cov, odometry, sync], [out, covariance, report])
     if rig is not None:
         from gtrig.rig import load_rig
 
@@ -63,8 +66,7 @@ def command(
             rate_hz = float(rate)
         except ValueError:
             raise InputError(f"--rate {rate!r}: 'odometry' or a number of Hz") from None
-        if not rate_hz > 0:
-            raise InputError(f"--rate {rate!r}: must be positive")
+        checks.number("--rate", rate_hz, lo=0.0, lo_open=True, hi=10000.0, unit="Hz")
     offsets = read_offsets(sync) if sync is not None else {}
     opts = FusionOptions(estimator=estimator, rate_hz=rate_hz, offsets_s=offsets, max_gap_s=max_gap)  # type: ignore[arg-type]
     track, rep = fuse_tracks(tracks, odo, opts)

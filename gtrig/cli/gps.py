@@ -10,18 +10,6 @@ import typer
 from gtrig.cli.common import console, handle_errors
 
 
-def _vector3(text: str | None, name: str) -> tuple[float, float, float] | None:
-    from gtrig.errors import InputError
-
-    if text is None:
-        return None
-    try:
-        x, y, z = (float(v) for v in text.split(","))
-    except ValueError:
-        raise InputError(f"{name} {text!r}: expected X,Y,Z in metres") from None
-    return (x, y, z)
-
-
 @handle_errors
 def command(
     log: Annotated[Path, typer.Option("--log", help="GPS log: NMEA 0183, RAWSEEDS 'unixtime, sentence', RTKLIB .pos")],
@@ -62,9 +50,20 @@ def command(
     for name, (val, allowed) in choices.items():
         if val not in allowed:
             raise InputError(f"{name} {val!r}: expected one of {', '.join(allowed)}")
-    if max_sigma < 0 or not (0 <= max_malformed <= 1):
-        raise InputError("--max-sigma must be >= 0 and --max-malformed within [0, 1]")
-    arm = _vector3(lever_arm, "--antenna-lever-arm")
+    from gtrig.cli import checks
+
+    checks.number("--max-sigma", max_sigma, lo=0.0, hi=1000.0, unit="m")
+    checks.number("--max-malformed", max_malformed, lo=0.0, hi=1.0)
+    xyz = checks.floats("--antenna-lever-arm", lever_arm, 3, "metres")
+    arm = None if xyz is None else (xyz[0], xyz[1], xyz[2])
+    if arm is not None:
+        checks.number("--antenna-lever-arm", max(abs(v) for v in arm), hi=10.0, unit="m",
+                      unit_hint="millimetres given for metres")
+    if origin != "first":
+        checks.floats("--origin", origin, 3, "deg, deg, m")
+    checks.outputs([log, odometry], [out, covariance, report, report.with_suffix(".md") if report else None])
+    if plot is not None:
+        checks.output_folder("--plot", plot)
     if arm is not None and odometry is None and any(abs(v) > 0 for v in arm[:2]):
         raise InputError("--antenna-lever-arm with a horizontal offset needs --odometry (the heading)")
     opts = GpsOptions(format=fmt, frame=frame, clock=clock,  # type: ignore[arg-type]

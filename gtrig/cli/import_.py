@@ -46,6 +46,12 @@ def rosbag(
         raise InputError("give --topics topics.yaml and --out REC (or --list to start a topics.yaml)")
     if image_format not in ("png", "pgm"):
         raise InputError(f"--image-format must be png or pgm, got {image_format!r}")
+    from gtrig.cli import checks
+
+    checks.choice("--stamp", stamp, ("header", "receive"))
+    checks.output_folder("--out", out)
+    for b in bags:
+        checks.not_inside("--out", out, b, "a bag")
     from gtrig.io.rosbag.record_import import import_bag
 
     with console.status("importing"):

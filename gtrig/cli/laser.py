@@ -26,6 +26,8 @@ def calibrate(
     ] = None,
 ) -> None:
     """Calibrate the fixed scanners' poses from a static sequence and the world-defining object."""
+    from gtrig.cli import checks
+    from gtrig.io.atomic import atomic_group
     from gtrig.laser.recording import (
         calibrate_recording,
         calibration_cov_path,
@@ -36,12 +38,15 @@ def calibrate(
     from gtrig.rig import load_rig
     from gtrig.rig.load import dump_rig
 
+    cov_path = calibration_cov_path(out)
+    checks.input_folder("--static", static)
+    checks.outputs([rig, object_file], [out, cov_path])
     r = load_rig(rig)
     obj = load_object_outline(object_file) if object_file is not None else None
     new, report = calibrate_recording(static.parent, rig=r, static_dir=static, object_corners_world_xy=obj)
-    dump_rig(new, out)
-    cov_path = calibration_cov_path(out)
-    write_calibration_cov(cov_path, new, report)
+    with atomic_group(out, cov_path) as (tmp_rig, tmp_cov):  # both or neither: one calibration
+        dump_rig(new, tmp_rig)
+        write_calibration_cov(tmp_cov, new, report)
     for line in calibration_lines(report):
         console.print(line, highlight=False)
     console.print(f"wrote {out} and {cov_path} (calibration covariance)")
@@ -73,6 +78,7 @@ def track(
     """Track the robot's hull through a sequence and write its poses and covariances."""
     import time
 
+    from gtrig.cli import checks
     from gtrig.laser.recording import (
         calibration_cov_path,
         load_backgrounds,
@@ -82,6 +88,9 @@ def track(
     )
     from gtrig.rig import load_rig
 
+    checks.choice("--sequence", sequence, ("run", "validation"))
+    checks.input_folder("--recording", recording)
+    checks.outputs([rig, calibration_cov], [out, covariance])
     r = load_rig(rig)
     if calibration_cov is None and calibration_cov_path(rig).is_file():
         calibration_cov = calibration_cov_path(rig)

@@ -7,6 +7,7 @@ import importlib
 import typer
 
 from gtrig import __version__
+from gtrig.cli.common import ONE_LINE_ERRORS_GROUP
 
 app = typer.Typer(
     name="gtrig",
@@ -14,6 +15,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    cls=ONE_LINE_ERRORS_GROUP,
 )
 
 # (module under gtrig.cli, name, kind): "group" modules expose `app`, "command" modules a `command`.

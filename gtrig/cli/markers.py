@@ -24,8 +24,12 @@ def make(
     dpi: Annotated[float, typer.Option("--dpi", help="Minimum resolution of a PNG (dots per inch).")] = 600.0,
 ) -> None:
     """Write a printable marker at exact physical size, with cut marks and its ID outside the marker."""
+    from gtrig.cli import checks
     from gtrig.markers.generate import png_resolution, write_marker
 
+    checks.count("--id", marker_id, lo=0, hi=10**6)
+    checks.number("--size-mm", size_mm, lo=1.0, hi=5000.0, unit="mm", lo_hint="metres given for millimetres")
+    checks.outputs([], [out])
     lay = write_marker(family, marker_id, size_mm, out, dpi)
     msg = f"{out}: {family.value} id {marker_id}, black square {size_mm:g} mm"
     if out.suffix.lower() == ".png":
@@ -73,11 +77,18 @@ def detect(
 
     import cv2
 
+    from gtrig.cli import checks
     from gtrig.cli.common import track
     from gtrig.errors import FormatError, InputError
     from gtrig.io.atomic import atomic_write_text
+    from gtrig.io.frames import check_image_size
     from gtrig.markers.detect import DetectorParams, MarkerDetector
     from gtrig.markers.detect.blurred import BlurredParams
+
+    files = _image_files(inputs)
+    checks.outputs([*files, camera], [out])
+    if debug is not None:
+        checks.output_folder("--debug", debug)
 
     K = dist = None
     size = None
@@ -88,7 +99,6 @@ def detect(
         K, dist, size = cam.camera_matrix, cam.dist_coeffs, cam.image_size
     params = None if blurred else DetectorParams(blurred=BlurredParams(enabled=False))
     det = MarkerDetector(family, K, dist, params)
-    files = _image_files(inputs)
     images = []
     debug_files: list[tuple[Path, bytes]] = []
     n_det = 0
@@ -96,6 +106,7 @@ def detect(
         img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH)  # 16-bit kept: _to_gray scales it
         if img is None:
             raise FormatError(f"{f}: not a readable image")
+        check_image_size(img, f)
         if size is not None and (img.shape[1], img.shape[0]) != tuple(size):
             raise InputError(f"{f}: {img.shape[1]} x {img.shape[0]} px but {camera} is for "
                              f"{size[0]} x {size[1]}")
@@ -124,6 +135,7 @@ def detect(
 
 def _parse_sides(items: list[str], family: MarkerFamily) -> list:
     """``--side-mm ID=MM[,ID=MM...]`` (repeatable) as calibration targets."""
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.markers.robotcal import MarkerSpec
 
@@ -135,11 +147,12 @@ def _parse_sides(items: list[str], family: MarkerFamily) -> list:
                 continue
             try:
                 mid, mm = tok.split("=")
-                specs[int(mid)] = MarkerSpec(int(mid), float(mm) / 1000.0, family)
+                side_mm = float(mm)
+                checks.number(f"--side-mm {tok!r}", side_mm, lo=5.0, hi=2000.0, unit="mm",
+                              lo_hint="metres given for millimetres")
+                specs[int(mid)] = MarkerSpec(int(mid), side_mm / 1000.0, family)
             except ValueError:
                 raise InputError(f"--side-mm {tok!r}: expected ID=MM, e.g. 14=160") from None
-            if specs[int(mid)].side_m <= 0:
-                raise InputError(f"--side-mm {tok!r}: the side must be positive")
     return list(specs.values())
 
 
@@ -173,14 +186,17 @@ def calibrate_robot(
     import numpy as np
 
     from gtrig.calib.camfile import read_cam_yaml
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.markers import robotcal as rc
     from gtrig.rig import dump_rig, load_rig
 
     if rig_out is not None and rig is None:
         raise InputError("--rig-out needs --rig (the rig to update)")
-    if anchor_sigma_mm < 0 or anchor_sigma_deg < 0:
-        raise InputError("--anchor-sigma-mm and --anchor-sigma-deg must not be negative")
+    checks.number("--anchor-sigma-mm", anchor_sigma_mm, lo=0.0, hi=100.0, unit="mm")
+    checks.number("--anchor-sigma-deg", anchor_sigma_deg, lo=0.0, hi=45.0, unit="deg")
+    checks.input_folder("--images", images)
+    checks.outputs([camera, rig], [out, rig_out])
     the_rig = load_rig(rig) if rig is not None else None
     if the_rig is not None:
         if side_mm:
@@ -204,9 +220,13 @@ def calibrate_robot(
     if anchor_sigma_mm > 0 or anchor_sigma_deg > 0:
         cov = np.diag([(anchor_sigma_mm / 1000) ** 2] * 3 + [math.radians(anchor_sigma_deg) ** 2] * 3)
     cal = rc.calibrate_robot_markers(images, cam, specs, anchor, T_anchor, cov)
-    rc.write_markers_yaml(out, cal, specs)
-    if the_rig is not None and rig_out is not None:
-        dump_rig(rc.apply_to_rig(the_rig, cal), rig_out)
+    from gtrig.io.atomic import atomic_group
+
+    # both or neither: the markers file and the rig carry one calibration
+    with atomic_group(*([out] if rig_out is None else [out, rig_out])) as tmps:
+        rc.write_markers_yaml(tmps[0], cal, specs)
+        if the_rig is not None and rig_out is not None:
+            dump_rig(rc.apply_to_rig(the_rig, cal), tmps[1])
     _print_calibration(cal)
     console.print(f"{out}: {len(cal.T_robot_marker)} marker(s), anchor {anchor}"
                   + (f"; {rig_out}: rig with the calibrated markers" if rig_out is not None else ""),

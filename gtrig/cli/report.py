@@ -18,8 +18,10 @@ def command(
     """One self-contained HTML page of a results folder: accuracy, every stage's summary and figures."""
     import time
 
+    from gtrig.cli import checks
     from gtrig.report import write_report
 
+    checks.outputs([], [out])
     t0 = time.perf_counter()
     p = write_report(results, out, truth)
     console.print(f"report: {p} ({p.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")

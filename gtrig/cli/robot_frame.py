@@ -25,6 +25,7 @@ def command(
     import numpy as np
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.io.survey_csv import read_table
     from gtrig.rig import load_rig
@@ -34,6 +35,9 @@ def command(
     from gtrig.vision.robot_frame import fit_validation, rig_tied_to_survey, with_markers_frame_cov
     from gtrig.vision.sequence import run_recording
 
+    checks.workers(workers)
+    checks.input_folder("--recording", recording)
+    checks.outputs([rig], [out])
     r = load_rig(rig)
     if r.robot.markers_frame_cov is None:
         try:

@@ -58,9 +58,17 @@ def command(
     import time
 
     from gtrig import pipeline
+    from gtrig.cli import checks
     from gtrig.config import load_config
     from gtrig.errors import InputError
 
+    checks.workers(workers or 0)
+    if recording is not None:
+        checks.input_folder("--recording", recording)
+    if out is not None:
+        checks.output_folder("--out", out)
+        if recording is not None:
+            checks.not_inside("--out", out, recording)
     cfg = load_config(config)
     if workers is not None:
         cfg = cfg.model_copy(update={"workers": workers})

@@ -63,6 +63,7 @@ def pairs(
     dask: Annotated[str | None, dask_option(annotated=True)] = None,
 ) -> None:
     """Candidate scan pairs near the guessed trajectory, matched and judged by the acceptance test."""
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.io.odometry import read_odometry
     from gtrig.io.scanmatch import write_relations
@@ -73,8 +74,12 @@ def pairs(
 
     if sequence not in ("run", "validation"):
         raise InputError(f"--sequence must be run or validation, got {sequence!r}")
-    if every < 1 or max_dist <= 0 or not 0 < max_angle <= 180:
-        raise InputError("--every must be >= 1, --max-dist > 0 and --max-angle in (0, 180]")
+    checks.count("--every", every, lo=1, hi=10**6)
+    checks.count("--max-pairs", max_pairs, lo=1, hi=10**7)
+    checks.number("--max-dist", max_dist, lo=0.0, lo_open=True, hi=100.0, unit="m")
+    checks.number("--max-angle", max_angle, lo=0.0, lo_open=True, hi=180.0, unit="deg")
+    checks.input_folder("--recording", recording)
+    checks.outputs([rig, None if guess == "odometry" else Path(guess)], [out, out.with_suffix(".relations"), review])
     r = _rig(rig, recording)
     logs = _logs(r, recording, sequence)
     if guess == "odometry":
@@ -122,6 +127,7 @@ def validate(
                                                 "and comparison")] = None,
 ) -> None:
     """Every validation stop's pose relative to a reference stop, from both onboard scanners merged."""
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.io.atomic import atomic_group
     from gtrig.io.posetrack import covariance_text
@@ -129,6 +135,9 @@ def validate(
     from gtrig.io.tum import tum_text
     from gtrig.scanmatch.validate import validate_recording
 
+    checks.count("--reference", reference, lo=1)
+    checks.input_folder("--recording", recording)
+    checks.outputs([rig, survey], [out, out.with_suffix(".tum"), out.with_name(out.stem + "_cov.csv")])
     r = _rig(rig, recording)
     sv = None
     if survey is not None:
@@ -174,6 +183,7 @@ def map_(
     rig: Annotated[Path | None, typer.Option("--rig", help="rig.yaml (default: the recording's)")] = None,
 ) -> None:
     """Validation stops' onboard scans aligned on a map; the map's surfaces that disagree are named."""
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.io.atomic import atomic_group
     from gtrig.io.rosmap import read_map
@@ -181,6 +191,8 @@ def map_(
     from gtrig.scanmatch.mapmatch import map_points, match_to_map
     from gtrig.scanmatch.validate import ErrorModel, load_stop_scans, scanner_height_m
 
+    checks.input_folder("--recording", recording)
+    checks.outputs([map_file, initial, rig], [out, out.with_name(out.stem + "_map_errors.csv")])
     m = read_map(map_file)
     r = _rig(rig, recording)
     ids, init, _ = read_planar_poses(initial)
@@ -223,6 +235,7 @@ def mounting(
     rig: Annotated[Path | None, typer.Option("--rig", help="rig.yaml (default: the recording's)")] = None,
 ) -> None:
     """The onboard scanners' mountings from matched validation stops against the survey (planar hand-eye)."""
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.geometry import rpy_from_T
     from gtrig.io.scanmatch import read_planar_poses
@@ -231,6 +244,8 @@ def mounting(
     from gtrig.scanmatch.mounting import calibrate_mounting
     from gtrig.scanmatch.validate import ErrorModel, load_stop_scans, scanner_height_m, scanner_pose_xyth
 
+    checks.input_folder("--recording", recording)
+    checks.outputs([rig, survey, recording / "rig.yaml"], [out])
     r = _rig(rig, recording)
     ids, sv, cov = read_planar_poses(survey)
     stops = load_stop_scans(recording, r)

@@ -31,6 +31,7 @@ def command(
     checks.seed(seed)
     checks.workers(workers)
     checks.output_folder("--out", out)
+    checks.number("--odometry-offset-s", odometry_offset_s, lo=-3600, hi=3600, unit="s")
     base = SimConfig.quick_defaults(seed) if quick else SimConfig(seed=seed)
     cfg = base.model_copy(update={"scenario": scenario, "workers": workers,
                                   "odometry_clock_offset_s": odometry_offset_s})
@@ -46,17 +47,14 @@ def command(
 
 def _with_file(cfg, path: Path):  # noqa: ANN001, ANN202
     """``cfg`` with the settings of a YAML file merged over it, validated; one-line errors."""
-    import yaml
     from pydantic import ValidationError
 
     from gtrig.errors import ConfigError
+    from gtrig.io.yamlfile import load_yaml
     from gtrig.rig.load import _deep_merge
     from gtrig.sim.config import SimConfig
 
-    try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except (OSError, yaml.YAMLError) as e:
-        raise ConfigError(f"{path}: cannot read the settings ({type(e).__name__})") from None
+    doc = load_yaml(path) or {}  # within the YAML limits; one line naming the file
     if not isinstance(doc, dict):
         raise ConfigError(f"{path}: the settings must be a mapping (motion: ..., laser: ...)")
     try:

@@ -19,6 +19,13 @@ _SIGMA = typer.Option(None, "--sigma", help="Hand-laser sigma (m) for rows witho
 _REF_SIGMA = typer.Option(0.002, "--reference-sigma", help="Reference sigma (m) if REF.csv has none.")
 
 
+def _policies(on_ambiguity: str, on_outlier: str) -> None:
+    from gtrig.cli import checks
+
+    checks.choice("--on-ambiguity", on_ambiguity, ("refuse", "warn"))
+    checks.choice("--on-outlier", on_outlier, ("exclude", "refuse", "keep"))
+
+
 @app.command("points")
 @handle_errors
 def points(
@@ -45,6 +52,7 @@ def points(
 
     checks.sigma_m("--sigma", sigma)
     checks.sigma_m("--reference-sigma", reference_sigma)
+    _policies(on_ambiguity, on_outlier)
     checks.outputs([reference, distances], [out, plot])
 
     refs = read_reference_points(reference, reference_sigma)
@@ -107,6 +115,7 @@ def poses(
     from gtrig.survey.poses import estimate_poses
 
     checks.sigma_m("--sigma", sigma)
+    _policies(on_ambiguity, on_outlier)
     checks.outputs([points, robot_points, distances, initial], [out, plot])
 
     wp = read_points(points)
@@ -190,6 +199,7 @@ def adjust(
 
     checks.sigma_m("--sigma", sigma)
     checks.sigma_m("--reference-sigma", reference_sigma)
+    _policies(on_ambiguity, on_outlier)
     checks.outputs([reference, distances, robot_points, pose_distances], [out_points, out_poses])
 
     s = 0.002 if sigma is None else sigma

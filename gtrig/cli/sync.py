@@ -28,6 +28,7 @@ def command(
     rig_path: Path | None = typer.Option(None, "--rig", help="rig.calibrated.yaml (cameras, scanners, hull)."),
 ) -> None:
     """Clock offsets of GT sources to odometry: cross-correlation of heading rates, then a sub-sample fit."""
+    from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.fusion.measurements import fixes_from_track
     from gtrig.fusion.sync import estimate_offset, refine_by_fusion
@@ -37,6 +38,10 @@ def command(
 
     if (per_camera or per_scanner) and (recording is None or rig_path is None):
         raise InputError("--per-camera / --per-scanner need --recording and --rig (the calibrated rig)")
+
+    checks.number("--search-s", search_s, lo=0.0, lo_open=True, hi=3600.0, unit="s")
+    ins = [Path(f) for spec in source for f in spec.split("=", 1)[-1].split(",")]
+    checks.outputs([*ins, recording / "run" / "odometry.csv" if recording else None], [out, figure])
     tracks = {}
     for spec in source:
         if "=" not in spec:

@@ -41,6 +41,7 @@ def command(
 
     from rich.table import Table
 
+    from gtrig.cli import checks
     from gtrig.rig import load_rig
     from gtrig.vision.covariance import RigUncertainty
     from gtrig.vision.estimate import VisionOptions
@@ -48,6 +49,18 @@ def command(
     from gtrig.vision.report import summarize
     from gtrig.vision.sequence import run_recording, write_pose_track_files
 
+    checks.choice("--sequence", sequence, ("run", "validation"))
+    checks.choice("--detector", detector, ("auto", "gtrig", "aruco"))
+    checks.workers(workers)
+    for opt, v, hi, unit in (("--floor-sigma-mm", floor_sigma_mm, 500.0, "mm"),
+                             ("--floor-tilt-deg", floor_tilt_deg, 45.0, "deg"),
+                             ("--camera-sigma-mm", camera_sigma_mm, 500.0, "mm"),
+                             ("--camera-sigma-deg", camera_sigma_deg, 45.0, "deg"),
+                             ("--marker-sigma-mm", marker_sigma_mm, 500.0, "mm"),
+                             ("--marker-sigma-deg", marker_sigma_deg, 45.0, "deg")):
+        checks.number(opt, v, lo=0.0, lo_open=True, hi=hi, unit=unit)
+    checks.input_folder("--recording", recording)
+    checks.outputs([rig], [out, covariance])
     r = load_rig(rig)
     # the rig's own uncertainty wherever it gives one; say which defaults stand in for the rest
     assumed = []

@@ -76,10 +76,17 @@ def read_rtklib_pos(path: str | os.PathLike[str]) -> Epochs:
             t_gps = GPS_EPOCH_UNIX_S + np.array([float(r[0]) * 7 * DAY_S + float(r[1]) for r in rows])
         else:
             ymd = np.array([[int(v) for v in r[0].split("/")] for r in rows])
+            ok = (ymd.dtype != object and ymd.ndim == 2 and ymd.shape[1] == 3)
+            bad_date = np.flatnonzero(~((ymd[:, 0] >= 1980) & (ymd[:, 0] <= 2200) & (ymd[:, 1] >= 1) & (ymd[:, 1] <= 12)
+                                        & (ymd[:, 2] >= 1) & (ymd[:, 2] <= 31))) if ok else np.array([0])
+            if bad_date.size:
+                raise FormatError(f"{p}:{line_no[int(bad_date[0])]}: the date is not yyyy/mm/dd between 1980 and 2200")
             hms = np.array([[float(v) for v in r[1].split(":")] for r in rows])
             t_gps = days_from_civil(ymd[:, 0], ymd[:, 1], ymd[:, 2]) * DAY_S + hms @ np.array([3600.0, 60.0, 1.0])
     except ValueError as e:
         raise FormatError(f"{p}: a .pos value is not a number ({e})") from None
+    if not np.all(np.isfinite(t_gps)):
+        raise FormatError(f"{p}:{line_no[int(np.argmax(~np.isfinite(t_gps)))]}: the time is not a finite number")
     if system == "GPST" or week_tow:
         utc = t_gps - gps_minus_utc_s(t_gps)
     elif system == "JST":

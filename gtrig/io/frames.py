@@ -117,7 +117,21 @@ def read_image(source: str | os.PathLike[str]) -> np.ndarray:
     img = cv2.imread(s, cv2.IMREAD_GRAYSCALE)
     if img is None:
         raise FormatError(f"{s}: cannot read the image")
+    check_image_size(img, s)
     return img
+
+
+#: the largest image a stage processes: 64 megapixels (a 12 MP photo is far inside; a 20000 x 20000 px
+#: image would hold the detector for minutes in more than a gigabyte)
+MAX_IMAGE_PIXELS = 64_000_000
+
+
+def check_image_size(img: np.ndarray, source: str | os.PathLike[str]) -> None:
+    """Refuse an image beyond :data:`MAX_IMAGE_PIXELS` with one line naming it."""
+    n = int(img.shape[0]) * int(img.shape[1])
+    if n > MAX_IMAGE_PIXELS:
+        raise FormatError(f"{source}: {img.shape[1]} x {img.shape[0]} px is more than the "
+                          f"{MAX_IMAGE_PIXELS / 1e6:g} megapixels gtrig processes; downscale or crop it")
 
 
 def video_frame_count(video: Path) -> int:
@@ -144,6 +158,10 @@ def write_frame_index(folder: str | os.PathLike[str], stamps_s: np.ndarray, file
         w.writerow(["frame", "stamp_s", "file"])
         for i, (t, name) in enumerate(zip(stamps_s, files, strict=True)):
             w.writerow([i, f"{t:.6f}", name])
+
+
+#: frame numbers are counts of images: a billion is a year of video at 30 frames per second
+MAX_FRAME = 10**9
 
 
 def read_frame_index(folder: str | os.PathLike[str]) -> FrameIndex:
@@ -173,6 +191,8 @@ def read_frame_index(folder: str | os.PathLike[str]) -> FrameIndex:
             stamps.append(float(row[1]))
         except (ValueError, IndexError):
             raise FormatError(f"{p}:{line}: expected 'frame,stamp_s,file'") from None
+        if not 0 <= frames[-1] < MAX_FRAME:
+            raise FormatError(f"{p}:{line}: frame {row[0].strip()[:30]} is not a frame number (0 to {MAX_FRAME - 1})")
         name = row[2].strip() if len(row) > 2 else ""
         if name and (Path(name).name != name or name in (".", "..")):
             # a recording is self-contained: an index may not point outside its camera's folder

@@ -18,6 +18,8 @@ import yaml
 
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_write_text
+from gtrig.io.text import read_text
+from gtrig.io.yamlfile import safe_load
 
 CONVENTION = "offset_s = source stamp - reference stamp of the same instant"
 
@@ -31,7 +33,7 @@ def read_offsets(path: str | os.PathLike[str]) -> dict[str, float]:
     """Offsets (seconds) of the sources whose verdict is ``ok``; the others are left out (no number)."""
     p = Path(path)
     try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+        doc = safe_load(read_text(p, "YAML file"))
     except FileNotFoundError:
         raise FormatError(f"{p}: no such file") from None
     except yaml.YAMLError as e:
@@ -48,4 +50,6 @@ def read_offsets(path: str | os.PathLike[str]) -> dict[str, float]:
                 out[str(name)] = float(v["offset_s"])
             except (TypeError, ValueError, KeyError):
                 raise FormatError(f"{p}: sources.{name}.offset_s: not a number") from None
+            if not abs(out[str(name)]) <= 86400.0:  # NaN fails too
+                raise FormatError(f"{p}: sources.{name}.offset_s: {v['offset_s']} is not a finite offset within a day")
     return out

@@ -18,6 +18,8 @@ import yaml
 
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_group
+from gtrig.io.text import read_text
+from gtrig.io.yamlfile import safe_load
 
 
 @dataclass(frozen=True)
@@ -54,7 +56,7 @@ def read_map(path: str | os.PathLike[str]) -> OccupancyMap:
 
     p = Path(path)
     try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+        doc = safe_load(read_text(p, "YAML file"))
     except FileNotFoundError:
         raise FormatError(f"{p}: no such file") from None
     except (yaml.YAMLError, UnicodeDecodeError) as e:

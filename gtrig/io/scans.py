@@ -16,6 +16,7 @@ import numpy as np
 
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_open
+from gtrig.io.text import read_text
 
 
 class _HasBeams(Protocol):
@@ -60,12 +61,7 @@ def data_lines(path: Path) -> tuple[str, list[str], list[int]]:
 
     Returns the header, the data lines and their 1-based line numbers in the file.
     """
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FormatError(f"{path}: no such file") from None
-    except UnicodeDecodeError:
-        raise FormatError(f"{path}: not a UTF-8 text file") from None
+    text = read_text(path, "UTF-8 text file")
     lines = text.splitlines()
     keep = [i for i, s in enumerate(lines) if s.strip() and not s.lstrip().startswith("#")]
     if not keep:
@@ -94,6 +90,10 @@ def parse_numbers(path: Path, lines: list[str], line_no: list[int], n_cols: int)
                 except ValueError:
                     raise FormatError(f"{path}:{line_no[i]}: not a number: {tok.strip()!r}") from None
         raise FormatError(f"{path}: could not parse the numbers") from None
+    if a.shape != (len(lines), n_cols):
+        # loadtxt cuts a row at a '#' (an inline comment): the row holds fewer numbers than its commas say
+        i = next((k for k, s in enumerate(lines) if "#" in s), 0)
+        raise FormatError(f"{path}:{line_no[i]}: expected {n_cols} values; a '#' cuts this row short")
     return a
 
 
@@ -107,6 +107,17 @@ def check_stamps(path: Path, stamps: np.ndarray, line_no: list[int]) -> None:
         i = int(bad[0]) + 1
         raise FormatError(f"{path}:{line_no[i]}: time stamp {stamps[i]:.9f} does not increase "
                           f"(previous {stamps[i - 1]:.9f})")
+
+
+def _check_unit(p: Path, ranges: np.ndarray, range_max_m: float | None) -> None:
+    """Refuse ranges in another unit: most returns of a real scan lie within the scanner's maximum range;
+    a median beyond twice that is millimetres (or centimetres) written for metres."""
+    if range_max_m is None or not ranges.size:
+        return
+    finite = ranges[np.isfinite(ranges)]
+    if finite.size and float(np.median(finite)) > 2.0 * float(range_max_m):
+        raise FormatError(f"{p}: ranges are in metres; their median {float(np.median(finite)):.4g} m is beyond twice "
+                          f"the scanner's maximum range {float(range_max_m):g} m (millimetres given for metres?)")
 
 
 def read_scans(
@@ -148,6 +159,7 @@ def read_scans(
     if bad.size:
         i = int(bad[0])
         raise FormatError(f"{p}:{line_no[i]}: infinite range (write nan for no return)")
+    _check_unit(p, ranges, getattr(scanner, "range_max_m", None))
     return ScanLog(stamps, np.ascontiguousarray(ranges))
 
 

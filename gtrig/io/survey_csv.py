@@ -28,8 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from gtrig.errors import FormatError
+from gtrig.errors import FormatError, InputError
 from gtrig.io.atomic import atomic_write_text
+from gtrig.io.text import read_text
 
 #: Anything larger in a room survey is almost surely millimetres (metres expected).
 MAX_DISTANCE_M = 100.0
@@ -57,16 +58,7 @@ class Table:
 def read_table(path: str | os.PathLike[str], required: Sequence[str] = ()) -> Table:
     """Read a CSV with ``#`` comment lines and one header row; check that ``required`` columns exist."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise FormatError(f"{p}: no such file") from None
-    except IsADirectoryError:
-        raise FormatError(f"{p}: is a folder, expected a CSV file") from None
-    except UnicodeDecodeError:
-        raise FormatError(f"{p}: not a text CSV file (undecodable bytes)") from None
-    except OSError as e:
-        raise FormatError(f"{p}: cannot read ({e.strerror or e})") from None
+    text = read_text(p, "text CSV file", encoding="utf-8-sig")
     header: tuple[str, ...] | None = None
     rows: list[tuple[str, ...]] = []
     lines: list[int] = []
@@ -119,11 +111,13 @@ def _metres(t: Table, k: int, col: str, *, positive: bool = False, limit: float 
     return v
 
 
-def _sigma(t: Table, k: int, default: float | None) -> float:
+def _sigma(t: Table, k: int, default: float | None, reading: bool = False) -> float:
+    """The row's sigma (metres); a reading's must be positive (a zero would weigh it infinitely), a
+    point's may be zero (a fixed reference)."""
     if t.has("sigma") and t.rows[k][t.header.index("sigma")] != "":
         v = _metres(t, k, "sigma", limit=1.0)
-        if v < 0:
-            raise FormatError(f"{t.path}:{t.lines[k]}: sigma {v:g} must not be negative")
+        if v < 0 or (reading and v == 0):
+            raise FormatError(f"{t.path}:{t.lines[k]}: sigma {v:g} must be {'positive' if reading else 'not negative'}")
         return v
     if default is None:
         raise FormatError(f"{t.path}:{t.lines[k]}: no sigma given and no default hand-laser sigma")
@@ -213,6 +207,10 @@ def read_robot_points(path: str | os.PathLike[str]) -> NamedPoints:
         [[_metres(t, k, "x", limit=10.0), _metres(t, k, "y", limit=10.0)] for k in range(len(t.rows))]
     )
     sig = np.array([_sigma(t, k, 0.0) for k in range(len(t.rows))])
+    if len(xy) >= 2 and float(np.max(np.ptp(xy, axis=0))) < 0.01:
+        # a pose's heading comes from the spread of these points: coincident ones leave it unmeasurable
+        raise InputError(f"{t.path}: the robot points all lie within 1 cm of each other; a pose's heading needs "
+                         "points spread over the robot (a degenerate geometry)")
     return NamedPoints(tuple(names), xy, sig)
 
 
@@ -252,7 +250,7 @@ def read_world_distances(path: str | os.PathLike[str], default_sigma_m: float | 
             a.append(t.rows[k][t.header.index("point")])
             b.append(t.rows[k][t.header.index("reference")])
             d.append(_distance(t, k, "distance"))
-            s.append(_sigma(t, k, default_sigma_m))
+            s.append(_sigma(t, k, default_sigma_m, reading=True))
             src.append(f"{t.path.name}:{t.lines[k]}")
     else:
         wide = [c for c in t.header if c.startswith("d_") and len(c) > 2]
@@ -272,7 +270,7 @@ def read_world_distances(path: str | os.PathLike[str], default_sigma_m: float | 
                 a.append(t.rows[k][t.header.index("point")])
                 b.append(raw[c])
                 d.append(_distance(t, k, c))
-                s.append(_sigma(t, k, default_sigma_m))
+                s.append(_sigma(t, k, default_sigma_m, reading=True))
                 src.append(f"{t.path.name}:{t.lines[k]}")
     return Distances(tuple("" for _ in a), tuple(a), tuple(b), np.array(d), np.array(s), tuple(src))
 
@@ -287,7 +285,7 @@ def read_pose_distances(path: str | os.PathLike[str], default_sigma_m: float | N
         a.append(r[t.header.index("robot_point")])
         b.append(r[t.header.index("world_point")])
         d.append(_distance(t, k, "distance"))
-        s.append(_sigma(t, k, default_sigma_m))
+        s.append(_sigma(t, k, default_sigma_m, reading=True))
         src.append(f"{t.path.name}:{t.lines[k]}")
     return Distances(tuple(g), tuple(a), tuple(b), np.array(d), np.array(s), tuple(src))
 

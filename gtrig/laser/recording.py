@@ -18,6 +18,8 @@ from gtrig.errors import ConfigError, FormatError, InputError
 from gtrig.io.atomic import atomic_open
 from gtrig.io.posetrack import write_pose_track
 from gtrig.io.scans import ScanLog, read_scans
+from gtrig.io.text import read_text
+from gtrig.io.yamlfile import safe_load
 from gtrig.laser.background import BackgroundModel, build_background
 from gtrig.laser.calibrate import CalibrationReport, calibrate_scanners, calibrated_rig, object_outlines
 from gtrig.laser.foreground import foreground_mask, foreground_threshold
@@ -69,7 +71,7 @@ def load_object_outline(path: str | os.PathLike[str]) -> list[np.ndarray]:
     several (their poses surveyed in the world). Returned counter-clockwise, each (K_j, 2)."""
     p = Path(path)
     try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+        doc = safe_load(read_text(p, "YAML file"))
         entries = doc["objects"] if "objects" in doc else [doc]
         outlines = [np.asarray(e["corners_xy"], dtype=float) for e in entries]
     except FileNotFoundError:
@@ -157,7 +159,7 @@ def read_calibration_cov(path: str | os.PathLike[str], rig: Rig) -> np.ndarray:
     """
     p = Path(path)
     try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+        doc = safe_load(read_text(p, "YAML file"))
         names = [str(n) for n in doc["scanners"]]
         cov = np.asarray(doc["cov_xytheta"], dtype=float)
     except FileNotFoundError:

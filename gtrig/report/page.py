@@ -290,14 +290,14 @@ def _survey(inv: ResultsInventory) -> Section | None:
 
 
 def _calibration(inv: ResultsInventory) -> Section | None:
-    import yaml
-
+    from gtrig.io.text import read_text
+    from gtrig.io.yamlfile import safe_load
     from gtrig.report.figures import bars_figure
 
     if inv.calibration_yaml is None:
         return None
     s = Section("calibration", "Calibration residuals")
-    d = yaml.safe_load(inv.calibration_yaml.read_text(encoding="utf-8")) or {}
+    d = safe_load(read_text(inv.calibration_yaml, "YAML file")) or {}
     groups: dict[str, dict[str, float]] = {}
     for cam, v in (d.get("intrinsics") or {}).items():
         if isinstance(v, dict) and "rms_px" in v:

@@ -8,11 +8,12 @@ rather than a silently ignored setting. Plausibility bounds catch millimetres gi
 from __future__ import annotations
 
 import math
+import re
 from enum import StrEnum
 from typing import Annotated, Self
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from gtrig import geometry as geo
 
@@ -49,7 +50,20 @@ MAX_ROOM_EXTENT_M = 100.0
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # NaN and infinities are refused in every number of a rig: none of them means anything there
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+def _plain_name(v: str) -> str:
+    """A sensor name is also a folder or file name in the recording: a plain name, never a path."""
+    if not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*", v) or v.endswith("."):
+        raise ValueError(f"{v!r} is not a plain name (letters, digits, _ . + -): a sensor's name is a folder or "
+                         "file name in the recording, never a path")
+    return v
+
+
+#: the name of a sensor whose data lie in the recording under that name
+SensorName = Annotated[str, Field(min_length=1, max_length=100), AfterValidator(_plain_name)]
 
 
 def _check_metres(value: float, limit: float, what: str = "value") -> float:
@@ -108,7 +122,7 @@ class Pose(_Strict):
 class Camera(_Strict):
     """A fixed camera: OpenCV pinhole model with distortion, and its pose in the world."""
 
-    name: str = Field(min_length=1)
+    name: SensorName
     resolution: tuple[Annotated[int, Field(gt=0, le=20000)], Annotated[int, Field(gt=0, le=20000)]]
     camera_matrix: tuple[
         tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]
@@ -191,7 +205,7 @@ class LaserScanner(_Strict):
     (:func:`gtrig.laser.fuse.beam_delays_s`); the default is a mirror sweep stamped at its first beam.
     """
 
-    name: str = Field(min_length=1)
+    name: SensorName
     T_world_scanner: Pose
     angle_min_rad: float = Field(ge=-2 * math.pi, le=2 * math.pi)
     angle_increment_rad: float
@@ -302,7 +316,7 @@ class Odometry(_Strict):
 
 
 class OnboardScanner(_Strict):
-    name: str = Field(min_length=1)
+    name: SensorName
     T_robot_scanner: Pose
     angle_min_rad: float
     angle_increment_rad: float

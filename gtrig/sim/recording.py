@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -223,6 +224,20 @@ def _config_key(cfg: SimConfig) -> str:
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 
+def _read_state(path: Path) -> dict[str, Any]:
+    """The resume state, validated: never trusted when it is not what :func:`simulate` writes."""
+    try:
+        state = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        state = None
+    names = {name for name, _ in STEPS}
+    if not (isinstance(state, dict) and isinstance(state.get("config"), str) and isinstance(state.get("done"), list)
+            and all(isinstance(d, str) and d in names for d in state["done"])):
+        raise InputError(f"{path}: a corrupt resume state (not what gtrig sim writes); delete the folder "
+                         "(or this file) to simulate afresh")
+    return state
+
+
 def simulate(
     cfg: SimConfig, out_dir: str | Path, on_step: Callable[[str, int, int], None] | None = None
 ) -> dict[str, float]:
@@ -249,7 +264,7 @@ def simulate(
     key = _config_key(cfg)
     done: list[str] = []
     if state_path.exists():
-        state = json.loads(state_path.read_text())
+        state = _read_state(state_path)
         if state.get("config") != key:
             raise InputError(f"{out}: holds a recording simulated with other settings; choose another --out")
         done = list(state.get("done", []))

@@ -388,7 +388,11 @@ def _load_checkpoint(path: Path, key: str) -> tuple[Detections, int]:
             head = json.loads(first)
         except (json.JSONDecodeError, UnicodeDecodeError):
             head = {}
-        if not isinstance(head, dict) or head.get("key") != key:
+        if not isinstance(head, dict) or not isinstance(head.get("key"), str):
+            # not what run_recording writes (a corrupt or foreign file): never trusted, started afresh
+            log.warning("%s: not a GTvision checkpoint (corrupt header); starting afresh", path)
+            return {}, 0
+        if head["key"] != key:
             raise InputError(f"{path}: checkpoint of another run (other images, detector, lenses or markers); "
                              "delete it or choose another output")
         good = f.tell()
@@ -397,8 +401,8 @@ def _load_checkpoint(path: Path, key: str) -> tuple[Detections, int]:
                 d = json.loads(line)
                 cam = d["camera"]
                 got = {int(r): _views_from_json(cam, int(r), v) for r, v in d["frames"]}
-            except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError):
-                break
+            except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError, InputError):
+                break  # a line cut by an interruption, or damaged: never trusted, detected again
             if not line.endswith(b"\n"):
                 break
             dets.setdefault(cam, {}).update(got)
@@ -589,7 +593,7 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
                   planar: bool = True, workers: int = 0, *, options: VisionOptions | None = None,
                   detector: str = "auto",
                   checkpoint: str | os.PathLike[str] | None = None,
-                  progress: Callable[[int, int], None] | None = None, chunk_size: int = 16,
+                  progress: Callable[[int, int], None] | None = None, chunk_size: int | None = None,
                   sync_tol_s: float = 0.005, estimate_noise: bool = True,
                   stale_checkpoint: str = "refuse", executor: Any = None) -> VisionResult:
     """GTvision over one sequence of a recording.
@@ -636,6 +640,10 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     intervals = read_static_intervals(rec / "validation" / "poses.csv") if sequence == "validation" else None
     instants = make_instants(indices, sequence, sync_tol_s, intervals)
     paths = {name: [ix.source(i) for i in range(len(ix))] for name, ix in indices.items()}
+    if chunk_size is None:
+        # at least 32 chunks where the sequence allows, so that an interruption loses little; it depends
+        # on the sequence alone, never on the workers, so a run resumed with other workers finds the same
+        chunk_size = min(16, max(1, sum(len(ins.images) for ins in instants) // 32))
     chunks = detection_chunks(instants, indices, chunk_size)
     # a new version of the detector's code makes other detections: not the checkpoint's
     key = _key(rig, sequence, f"{det.name}/{det.version}", paths, rec)

@@ -77,6 +77,64 @@ def _carmen() -> bytes:
     return gzip.compress(("\n".join(lines) + "\n").encode(), mtime=0)
 
 
+def _track() -> object:
+    from gtrig.trajectory import PoseTrack
+
+    t = np.arange(1.0, 6.0)
+    q = np.c_[np.zeros((5, 2)), np.sin(t / 4), np.cos(t / 4)]
+    cov = np.tile(np.diag([1e-6, 2e-6, 3e-6]), (5, 1, 1))
+    return PoseTrack(t, np.c_[t, 0.5 * t, np.zeros(5)], q, cov, "xyyaw", source="fuzz")
+
+
+def _written(fmt: str, name: str, pick: str = "", **options: object) -> Callable[[], bytes]:
+    """The bytes of a small track written by gtrig in ``fmt`` (``pick``: which of the files written)."""
+    def make() -> bytes:
+        import tempfile
+
+        from gtrig.io.formats import write_trajectory
+
+        with tempfile.TemporaryDirectory() as d:
+            paths = write_trajectory(_track(), Path(d) / name, fmt, **options)  # type: ignore[arg-type]
+            return next(q for q in paths if q.name.endswith(pick or name.rsplit("/", 1)[-1])).read_bytes()
+    return make
+
+
+def _nmea() -> bytes:
+    def cs(body: str) -> str:
+        x = 0
+        for ch in body.encode():
+            x ^= ch
+        return f"${body}*{x:02X}"
+
+    lines = []
+    for i in range(4):
+        t = f"1355{10 + i:02d}.00"
+        lines += [cs(f"GPGGA,{t},4530.36844637,N,00909.97033083,E,4,8,0.9,129.085,M,48.022,M,1.0,0000"),
+                  cs(f"GPGST,{t},0.02,0.020,0.010,30.0,0.018,0.013,0.030"),
+                  cs(f"GPRMC,{t},A,4530.36844637,N,00909.97033083,E,0.1,45.0,041008,,,R")]
+    return ("\r\n".join(lines) + "\r\n").encode()
+
+
+def _rtklib() -> bytes:
+    head = ("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
+            "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio")
+    rows = [f"2008/10/04 13:55:{52 + 0.2 * i:06.3f}   45.50617412{i}    9.16670663{i}   186.527{i}   1   9   0.0068"
+            "   0.0052   0.0155   -0.0021   0.0010  -0.0042   0.60   12.3" for i in range(4)]
+    return ("\n".join(["% program   : RTKPOST ver.2.4.3", head, *rows]) + "\n").encode()
+
+
+def _read_traj(fmt: str, name: str, **options: object) -> Callable[[Path], object]:
+    """The trajectory front door on a file named ``name`` (the name selects the format)."""
+    def read(p: Path) -> object:
+        from gtrig.io.formats import read_trajectory
+
+        target = p.parent / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(p.read_bytes())
+        return read_trajectory(target, fmt, **options)
+    return read
+
+
 def _read_cov(p: Path) -> object:
     from gtrig.io.posetrack import read_covariance_csv
 
@@ -115,6 +173,16 @@ READERS: dict[str, tuple[Callable[[Path], object], Callable[[], bytes], str]] = 
     "camera_yaml": (_lazy("gtrig.io.camfile", "read_cam_yaml"), _cam, ".yaml"),
     "rig_yaml": (_lazy("gtrig.rig.load", "load_rig"), _rig, ".yaml"),
     "carmen": (_lazy("gtrig.io.carmen", "read_carmen"), _carmen, ".log.gz"),
+    "nmea": (_lazy("gtrig.gps.nmea", "read_nmea"), _nmea, ".nmea"),
+    "rtklib_pos": (_lazy("gtrig.gps.rtklib", "read_rtklib_pos"), _rtklib, ".pos"),
+    "kitti": (_read_traj("kitti", "t.kitti"), _written("kitti", "t.kitti"), ".kitti"),
+    "euroc": (_read_traj("euroc", "state_groundtruth_estimate0/data.csv"),
+              _written("euroc", "state_groundtruth_estimate0/data.csv"), ".csv"),
+    "rawseeds": (_read_traj("rawseeds", "t-GROUNDTRUTH.csv"), _written("rawseeds", "t-GROUNDTRUTH.csv"), ".csv"),
+    "trajectory_csv": (_read_traj("csv", "t.csv"), _written("csv", "t.csv"), ".csv"),
+    "rosbag1": (_read_traj("rosbag1", "t.bag", topic="/gt"), _written("rosbag1", "t.bag", topic="/gt"), ".bag"),
+    "rosbag2_mcap": (_read_traj("rosbag2", "t.mcap", topic="/gt"), _written("rosbag2", "t.mcap", topic="/gt"),
+                     ".mcap"),
 }
 
 _TOKENS = [b"nan", b"inf", b"-inf", b"1e308", b"-1e400", b"", b",", b"\n", b"\x00", b"\xff\xfe", b"*", b"&a",

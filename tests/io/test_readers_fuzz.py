@@ -57,3 +57,22 @@ def test_mutated_valid_files(tmp_path_factory, name):
         _check(read, path, mutate(base, rnd, n))
 
     run()
+
+
+# inputs on which a reader crashed in bench/fuzz.py runs (issue 17), each now a one-line refusal
+FOUND = [
+    ("frame_index", b"frame,stamp_s,file\n99999999999999999999,0.0,0.png\n", "frame number"),
+    ("rtklib_pos", b"%  GPST  latitude(deg) longitude(deg)\n99999999999999999999/10/04 13:55:52.000 45.5 9.1 186.5 1 9"
+                   b" 0.0068 0.0052 0.0155 -0.0021 0.0010 -0.0042 0.60 12.3\n", "date"),
+    ("odometry", b"stamp_s,x,y,theta,v,omega\n0.100,0.100,0#,0.1,0.5,0.\n", "'#'"),
+    ("scans", b"timestamp,r_0,r_1\n0.0,1.0#,2.0\n0.1,1.0,2.0\n", "not a number|'#'"),
+]
+
+
+@pytest.mark.parametrize(("name", "data", "why"), FOUND, ids=[f[0] for f in FOUND])
+def test_crashes_found_by_the_fuzz_run(tmp_path, name, data, why):
+    read, _, suffix = READERS[name]
+    path = tmp_path / f"in{suffix}"
+    path.write_bytes(data)
+    with pytest.raises(GtrigError, match=why):
+        read(path)

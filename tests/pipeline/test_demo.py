@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -150,4 +151,27 @@ def test_run_on_a_dask_cluster_writes_the_same_tracks(demo: Path, tmp_path: Path
     assert r.exit_code == 0, r.output
     assert (out / "gt_vision_run.checkpoint").is_file()  # detected again, chunk by chunk
     for name in (*TRACKS, "gt_fused.tum", "gt_fused_cov.csv", "accuracy.csv"):
+        assert (out / name).read_bytes() == (demo / "results" / name).read_bytes(), name
+
+
+@pytest.mark.faults
+def test_run_killed_three_ways_resumes_to_the_same_tracks(demo: Path, tmp_path: Path) -> None:
+    """SIGINT after the survey, SIGTERM after the cameras, SIGKILL after GTlaser (in GTvision's pool): no
+    worker survives, the last rerun reuses what was finished and writes the demo's tracks byte for byte."""
+    from kill_kit import finish, gtrig, interrupt, temporaries
+
+    out = tmp_path / "out"
+    out.mkdir()
+    for seq in ("validation", "run"):  # the detections only, as above: the test is about the stages
+        shutil.copy(demo / "results" / f"gt_vision_{seq}.checkpoint", out)
+    args = ("run", "--recording", str(demo / "recording"), "--out", str(out), "--workers", "2")
+    records = out / ".gtrig" / "stages"
+    for sig, after in ((signal.SIGINT, "survey"), (signal.SIGTERM, "cameras"), (signal.SIGKILL, "laser")):
+        interrupt(gtrig(*args), lambda a=after: (records / f"{a}.pkl").is_file(), sig)
+        if sig != signal.SIGKILL:
+            assert not temporaries(out)
+    log = finish(gtrig(*args))
+    assert "reused (unchanged since their last run): survey, cameras, markers, robot-frame, laser" in log, log
+    assert not temporaries(out)
+    for name in (*TRACKS, "rig.calibrated.yaml"):
         assert (out / name).read_bytes() == (demo / "results" / name).read_bytes(), name

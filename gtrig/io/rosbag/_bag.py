@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from gtrig.errors import FormatError, InputError
+from gtrig.errors import FormatError, GtrigError, InputError
 
 RosVersion = Literal[1, 2]
 Storage = Literal["sqlite3", "mcap"]
@@ -75,8 +75,31 @@ def open_bag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -
         raise FormatError(f"{ps[0]}: not a readable ROS 1 or ROS 2 bag ({type(e).__name__}: {msg})") from None
     try:
         yield reader
+    except GtrigError:
+        raise
+    except Exception as e:
+        # reading messages lazily, the storage layers raise on a corrupt chunk or index; only theirs
+        # are the bag's fault (an error of gtrig's own code stays a crash, to be seen and fixed)
+        if not _from_storage(e):
+            raise
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise FormatError(f"{ps[0]}: a corrupt part in the bag ({type(e).__name__}: {msg[:120]})") from None
     finally:
         reader.close()
+
+
+def _from_storage(e: BaseException) -> bool:
+    """``e`` comes from reading the bag's bytes: raised inside rosbags or a storage library (whatever
+    its type: they raise KeyError and AssertionError on corrupt data too), or a decoding error."""
+    import struct
+
+    tb = e.__traceback__
+    while tb is not None and tb.tb_next is not None:
+        tb = tb.tb_next
+    where = tb.tb_frame.f_code.co_filename if tb is not None else ""
+    return (any(f"{os.sep}{lib}{os.sep}" in where for lib in ("rosbags", "zstandard", "lz4", "mcap", "ruamel"))
+            or type(e).__module__.split(".")[0] in ("rosbags", "sqlite3")
+            or isinstance(e, (struct.error, EOFError, OSError, UnicodeDecodeError)))
 
 
 def deserialize(reader: Any, rawdata: bytes, msgtype: str, where: str) -> Any:

@@ -20,7 +20,6 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Literal
 
 import yaml
@@ -28,6 +27,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from gtrig.errors import ConfigError
 from gtrig.io.rosbag._bag import open_bag
+from gtrig.io.text import read_text
+from gtrig.io.yamlfile import safe_load
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
@@ -55,7 +56,7 @@ def load_topics(path: str | os.PathLike[str] | dict[str, Any]) -> TopicsConfig:
         doc: Any = path
     else:
         try:
-            doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+            doc = safe_load(read_text(path, "YAML file"))
         except FileNotFoundError:
             raise ConfigError(f"{path}: no such file") from None
         except yaml.YAMLError as e:

@@ -144,8 +144,13 @@ def read_bag_trajectory(bag: str | os.PathLike[str] | Sequence[str | os.PathLike
             if msgtype == "nav_msgs/msg/Path":
                 last_path = (msg, t_ns)
                 continue
-            stamps.append(time_to_s(msg.header.stamp) if stamp == "header" else ns_to_s(t_ns))
-            p, q, c = _pose_of(msg)
+            try:
+                stamps.append(time_to_s(msg.header.stamp) if stamp == "header" else ns_to_s(t_ns))
+                p, q, c = _pose_of(msg)
+            except (AttributeError, TypeError):
+                # the bag embeds its own message definitions: one that is not the standard type's
+                raise FormatError(f"{name}: the bag's definition of {conn.msgtype} is not the standard one "
+                                  "(a field is missing or renamed)") from None
             xyz.append(p)
             quat.append(q)
             covs.append(c)

@@ -56,6 +56,11 @@ def parse_anchor_pose(text: str) -> Array:
             v = [float(p) for p in parts]
         except ValueError:
             raise InputError(f"--anchor-pose {text!r}: expected x,y,z,roll,pitch,yaw (m, deg) numbers") from None
+        if not all(math.isfinite(x) for x in v):
+            raise InputError(f"--anchor-pose {text!r}: every value must be a finite number")
+        if max(abs(x) for x in v[:3]) > 5.0:  # a marker on a robot is within metres of its origin
+            raise InputError(f"--anchor-pose {text!r}: x, y, z are in metres and must be within 5 m of the robot's "
+                             "origin (millimetres given for metres?)")
         return Pose(xyz=(v[0], v[1], v[2]), rpy_deg=(v[3], v[4], v[5])).matrix()
     p = Path(s)
     if not p.is_file():
