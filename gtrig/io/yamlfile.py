@@ -19,8 +19,7 @@ from typing import Any
 
 import yaml
 
-from gtrig.errors import FormatError
-from gtrig.io.text import read_text
+from gtrig.errors import FormatError, InputError
 
 MAX_BYTES = 64 * 2**20
 MAX_ALIASES = 1000
