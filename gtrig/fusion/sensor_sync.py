@@ -155,18 +155,22 @@ def camera_membership(stamps_s: np.ndarray, camera_stamps_s: Mapping[str, np.nda
 
 
 def checkpoint_membership(stamps_s: np.ndarray, checkpoint: str | os.PathLike[str],
-                          camera_stamps_s: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+                          camera_stamps_s: Mapping[str, np.ndarray], sync_tol_s: float = 0.005
+                          ) -> tuple[np.ndarray, np.ndarray]:
     """Which cameras made each GTvision pose, and when, from GTvision's checkpoint of detections.
 
-    GTvision groups the images of cameras within 5 ms into one instant stamped at their mean stamp, but
-    when only one of those images shows markers the pose is that camera's alone, taken at *its* stamp:
-    such a pose is stamped up to 2.5 ms off (on the simulated runs, 352 of 902 and 673 of 916 poses). A
-    pose of several cameras' views is moved to the instant's stamp by GTvision (``compensate_motion``).
+    GTvision groups the images of cameras within ``sync_tol_s`` into one instant stamped at their mean
+    stamp, but when only one of those images shows markers the pose is that camera's alone, taken at *its*
+    stamp: such a pose is stamped up to 2.5 ms off (on the simulated runs, 352 of 902 and 673 of 916
+    poses). A pose of several cameras' views is moved to the instant's stamp by GTvision
+    (``compensate_motion``).
 
     Parameters
     ----------
-    stamps_s : (N,) GTvision's pose stamps. checkpoint : ``gt_vision_<sequence>.checkpoint`` (JSON lines).
+    stamps_s : (N,) GTvision's pose stamps. checkpoint : ``gt_vision_<sequence>.checkpoint`` (JSON lines:
+        one camera's detections in a time window per line, or, before version 5, whole instants).
     camera_stamps_s : per camera, its frame stamps (the rows the checkpoint's frames name).
+    sync_tol_s : GTvision's grouping tolerance, seconds (its instants are rebuilt from the frame stamps).
 
     Returns
     -------
@@ -174,35 +178,65 @@ def checkpoint_membership(stamps_s: np.ndarray, checkpoint: str | os.PathLike[st
         instant's stamp); share : (N, C) each camera's share of the pose (1 / number of cameras with views);
         a row of zeros where the checkpoint has no instant at that stamp.
     """
-    import json
-
     names = list(camera_stamps_s)
     col = {n: j for j, n in enumerate(names)}
-    by_stamp: dict[float, tuple[float, list[str]]] = {}
-    with open(checkpoint, encoding="utf-8") as f:
-        f.readline()  # the header: the detections' key
-        for line in f:
-            try:
-                items = json.loads(line)["items"]
-            except (json.JSONDecodeError, KeyError):
-                break  # a line cut by an interruption
-            for it in items:
-                o = it["obs"]
-                seen = sorted({v[0] for v in o["views"] if v[0] in col})
-                rows = {c: int(r) for c, r in o["frames"]}
-                t = float(o["stamp_s"])
-                if len(seen) == 1 and seen[0] in rows:
-                    t = float(np.asarray(camera_stamps_s[seen[0]])[rows[seen[0]]])
-                by_stamp[round(float(o["stamp_s"]), 6)] = (t, seen)
+    by_stamp = _instants_with_views(checkpoint, camera_stamps_s, sync_tol_s)
     st = np.asarray(stamps_s, float)
     times, share = st.copy(), np.zeros((st.size, len(names)))
     for i, s_ in enumerate(st):
         hit = by_stamp.get(round(float(s_), 6))
-        if hit is None or not hit[1]:
+        if hit is None:
+            continue
+        seen = [c for c in hit[1] if c in col]
+        if not seen:
             continue
         times[i] = hit[0]
-        share[i, [col[c] for c in hit[1]]] = 1.0 / len(hit[1])
+        share[i, [col[c] for c in seen]] = 1.0 / len(seen)
     return times, share
+
+
+def _instants_with_views(checkpoint: str | os.PathLike[str], camera_stamps_s: Mapping[str, np.ndarray],
+                         sync_tol_s: float) -> dict[float, tuple[float, list[str]]]:
+    """Per GTvision instant (keyed by its stamp rounded to the microsecond): when its pose was taken and
+    the cameras whose images show markers. Reads both checkpoint layouts: per camera and time window
+    (``{"camera", "frames"}``, version 5), whose instants are rebuilt as GTvision makes them, and whole
+    instants (``{"chunk", "items"}``, before)."""
+    import json
+    from pathlib import Path
+
+    from gtrig.io.frames import FrameIndex
+    from gtrig.vision.sequence import make_instants
+
+    def when(seen: list[str], rows: dict[str, int], t: float) -> float:
+        if len(seen) == 1 and seen[0] in rows and seen[0] in camera_stamps_s:
+            return float(np.asarray(camera_stamps_s[seen[0]])[rows[seen[0]]])
+        return t
+
+    by_stamp: dict[float, tuple[float, list[str]]] = {}
+    with_views: dict[str, set[int]] = {}
+    with open(checkpoint, encoding="utf-8") as f:
+        f.readline()  # the header: the detections' key
+        for line in f:
+            try:
+                d = json.loads(line)
+                if "camera" in d:
+                    with_views.setdefault(str(d["camera"]), set()).update(int(r) for r, v in d["frames"] if v)
+                    continue
+                items = d["items"]
+            except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+                break  # a line cut by an interruption
+            for it in items:
+                o = it["obs"]
+                seen = sorted({v[0] for v in o["views"]})
+                t0 = float(o["stamp_s"])
+                by_stamp[round(t0, 6)] = (when(seen, {c: int(r) for c, r in o["frames"]}, t0), seen)
+    if with_views:
+        indices = {c: FrameIndex(c, Path("."), np.arange(len(s)), np.asarray(s, float), ())
+                   for c, s in camera_stamps_s.items()}
+        for ins in make_instants(indices, "run", sync_tol_s):
+            seen = sorted({c for c, r in ins.images if r in with_views.get(c, ())})
+            by_stamp[round(ins.stamp_s, 6)] = (when(seen, dict(ins.images), ins.stamp_s), seen)
+    return by_stamp
 
 
 def restamp_vision(track: PoseTrack, checkpoint: str | os.PathLike[str],

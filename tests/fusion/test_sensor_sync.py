@@ -156,3 +156,19 @@ def test_checkpoint_membership_takes_a_one_camera_pose_at_its_camera_stamp(tmp_p
     when, share = checkpoint_membership(np.array([10.002, 10.102, 11.0]), p, cams)
     assert when == pytest.approx([10.004, 10.102, 11.0], abs=1e-9)
     assert np.allclose(share, [[0.0, 1.0], [0.5, 0.5], [0.0, 0.0]])
+
+
+def test_checkpoint_membership_reads_the_per_camera_checkpoint(tmp_path) -> None:
+    """The same instants from GTvision's checkpoint of one camera's detections per time window (version 5),
+    whose instants are rebuilt from the frame stamps as GTvision groups them."""
+    import json
+
+    cams = {"a": np.array([10.000, 10.100]), "b": np.array([10.004, 10.104])}
+    det = [[3, [[0.0, 0.0]] * 4, [[[1.0, 0.0], [0.0, 1.0]]] * 4]]
+    p = tmp_path / "gt_vision_run.checkpoint"
+    p.write_text(json.dumps({"key": "k", "version": 5}) + "\n"
+                 + json.dumps({"camera": "a", "frames": [[0, []], [1, det]]}) + "\n"
+                 + json.dumps({"camera": "b", "frames": [[0, det], [1, det]]}) + "\n")
+    when, share = checkpoint_membership(np.array([10.002, 10.102, 11.0]), p, cams)
+    assert when == pytest.approx([10.004, 10.102, 11.0], abs=1e-9)
+    assert np.allclose(share, [[0.0, 1.0], [0.5, 0.5], [0.0, 0.0]])
