@@ -28,6 +28,15 @@ def _die_with_parent(parent_pid: int) -> None:
 
 
 def _worker_start(parent_pid: int, initializer: Callable[..., Any] | None, initargs: tuple[Any, ...]) -> None:
+    import signal
+
+    # A forked worker inherits the CLI's SIGTERM handler, which unwinds by raising SystemExit: in a worker
+    # that exception ends only the chunk (the pool sends it back as the chunk's result) and the worker
+    # then waits for more work on a pipe its siblings keep open, so a SIGKILL of gtrig left workers alive.
+    # Here SIGTERM (also the parent-death signal) ends the worker, and an interrupt is the parent's to
+    # handle: it cancels the chunks not started and waits for the running ones.
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _die_with_parent(parent_pid)
     if initializer is not None:
         initializer(*initargs)

@@ -63,6 +63,10 @@ def command(
     from gtrig.errors import InputError
 
     checks.workers(workers or 0)
+    if dask is not None:
+        from gtrig.executor import parse_dask
+
+        parse_dask(dask)  # its form, before anything else; the scheduler is reached when the run starts
     if recording is not None:
         checks.input_folder("--recording", recording)
     if out is not None:

@@ -18,24 +18,27 @@ from gtrig.errors import FormatError, InputError
 from gtrig.vision.sequence import _load_checkpoint
 
 
-@pytest.mark.parametrize(("text", "chunks"), [
+@pytest.mark.parametrize(("text", "rows"), [
     ("{not json\n", 0),                                          # a torn or foreign header
     ("[1, 2, 3]\n", 0),                                          # JSON of the wrong type
     ('{"key": 5}\n', 0),                                         # a header without a key string
-    ('{"key": "K"}\n{"chunk": 0, "items": [{"obs": {}}]}\n{"chunk": "x", "items": []}\n'
-     '{"chunk": 2, "items": []}\n', 1),                         # a damaged line: stop there
-    ('{"key": "K"}\n{"chunk": 0, "items": [{"obs": {}}]}\n[1]\n', 1),
-    ('{"key": "K"}\n{"chunk": 0, "items": 7}\n', 0),
+    ('{"key": "K"}\n{"camera": "a", "frames": [[0, []]]}\n{"camera": 3, "frames": "x"}\n'
+     '{"camera": "a", "frames": [[2, []]]}\n', 1),              # a damaged line: stop there
+    ('{"key": "K"}\n{"camera": "a", "frames": [[0, []]]}\n[1]\n', 1),
+    ('{"key": "K"}\n{"camera": "a", "frames": 7}\n', 0),
+    ('{"key": "K"}\n{"camera": "a", "frames": [[0, [[3, [[0, 0]], [[1]]]]]]}\n', 0),  # a view of the wrong shape
+    ('{"key": "K"}\n{"camera": "a", "frames": [[0, []]]}', 0),  # a last line cut before its end
     ('{"key": "K"}\n\x00\x01\x02\n', 0),
 ])
 def test_corrupt_checkpoint_is_restarted_not_trusted(tmp_path: Path, caplog: pytest.LogCaptureFixture,
-                                                     text: str, chunks: int) -> None:
+                                                     text: str, rows: int) -> None:
     ck = tmp_path / "v.tum.checkpoint.jsonl"
     ck.write_text(text, encoding="utf-8", errors="surrogateescape")
     with caplog.at_level(logging.WARNING):
-        done = _load_checkpoint(ck, "K")
-    assert len(done) == chunks
-    assert all(isinstance(v, list) for v in done.values())
+        dets, good = _load_checkpoint(ck, "K")
+    assert sum(len(v) for v in dets.values()) == rows
+    assert all(isinstance(v, tuple) for d in dets.values() for v in d.values())
+    assert good <= len(text.encode("utf-8", "surrogateescape"))
 
 
 def test_checkpoint_of_another_run_is_refused(tmp_path: Path) -> None:

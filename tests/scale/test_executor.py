@@ -35,6 +35,7 @@ def _one_line_exit_2(args: list[str]) -> str:
 
 
 def test_dask_refusals_are_one_line_and_exit_2(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    (tmp_path / "rec").mkdir()  # the options' own checks pass: what is left to refuse is --dask
     run = ["run", "--recording", str(tmp_path / "rec"), "--out", str(tmp_path / "out")]
     assert "local:N" in _one_line_exit_2([*run, "--dask", "somewhere"])
     assert "1 <= N" in _one_line_exit_2([*run, "--dask", "local:0"])
