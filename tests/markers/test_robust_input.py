@@ -66,7 +66,8 @@ def test_odd_images_never_raise(case: str) -> None:
     rng = np.random.default_rng(2)
     t = _texture((240, 320), rng)
     img = {
-        "1x1": np.zeros((1, 1), np.uint8), "empty": np.zeros((0, 0), np.uint8), "thin": np.full((7, 500), 200, np.uint8),
+        "1x1": np.zeros((1, 1), np.uint8), "empty": np.zeros((0, 0), np.uint8),
+        "thin": np.full((7, 500), 200, np.uint8),
         "u16": t.astype(np.uint16) * 16, "f32": t.astype(np.float32) / 255, "bool": t > 128,
         "f64_nan": np.where(t > 250, np.nan, t.astype(np.float64)),
         "bgra": cv2.cvtColor(t, cv2.COLOR_GRAY2BGRA), "grey_alpha": np.dstack([t, t]),
