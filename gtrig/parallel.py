@@ -37,9 +37,25 @@ def _worker_start(parent_pid: int, initializer: Callable[..., Any] | None, inita
     # handle: it cancels the chunks not started and waits for the running ones.
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM, signal.SIGINT})  # held while forking
     _die_with_parent(parent_pid)
     if initializer is not None:
         initializer(*initargs)
+
+
+def _fork_workers_now(ex: ProcessPoolExecutor) -> None:
+    """Fork the pool's workers (a forking pool starts them all at its first task) with SIGTERM and SIGINT
+    held: a signal that arrives inside the fork's at-fork callbacks runs the CLI's handler there, where
+    Python ignores the exception it raises ("Exception ignored in _releaseLock"), and the run would go on
+    as if never signalled. Held, it is delivered right after, in plain code."""
+    import os
+    import signal
+
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
+    try:
+        ex.submit(os.getpid).result()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 @contextlib.contextmanager
@@ -62,6 +78,7 @@ def process_pool(
     cv2.setNumThreads(1)
     try:
         ex = ProcessPoolExecutor(workers, initializer=_worker_start, initargs=(os.getpid(), initializer, initargs))
+        _fork_workers_now(ex)
         try:
             yield ex
         except BaseException:
