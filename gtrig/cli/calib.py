@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from gtrig.cli.common import console, err_console, handle_errors
+from gtrig.cli.common import console, err_console, handle_errors, styled
 
 app = typer.Typer(help="Camera calibration: intrinsics, the camera network, checks.", no_args_is_help=True)
 
@@ -46,7 +46,7 @@ def intrinsics(
         title=f"{images.name}: coverage {100 * res.coverage:.0f} %",
     )
     K, d, std = res.camera.camera_matrix, res.camera.dist_coeffs, res.std
-    console.print(f"[bold]{out}[/bold]: {len(res.views)} views, RMS {res.camera.rms_px:.3f} px")
+    console.print(styled(out, "bold"), f": {len(res.views)} views, RMS {res.camera.rms_px:.3f} px", sep="")
     console.print(
         f"  fx {K[0, 0]:.2f} ± {std.get('fx', 0):.2f}  fy {K[1, 1]:.2f} ± {std.get('fy', 0):.2f}  "
         f"cx {K[0, 2]:.2f} ± {std.get('cx', 0):.2f}  cy {K[1, 2]:.2f} ± {std.get('cy', 0):.2f} px"
@@ -55,7 +55,7 @@ def intrinsics(
         f"  dist {', '.join(f'{v:.5f}' for v in d)}; coverage {100 * res.coverage:.0f} %; figure {fig}"
     )
     for w in res.warnings:
-        err_console.print(f"[yellow]warning:[/yellow] {w}")
+        err_console.print(styled("warning:", "yellow"), w)
 
 
 def _report(rig_cal: object, report: object, out: Path) -> None:
@@ -244,7 +244,7 @@ def steady(
             f"{s.shift_px:.3f}",
             "-" if s.board is None else f"{s.board.move_mm:.2f}",
             "-" if s.board is None else f"{s.board.turn_deg:.4f}",
-            "[red]MOVED[/red]" if s.moved else "[green]steady[/green]",
+            styled("MOVED", "red") if s.moved else styled("steady", "green"),
         )
         if figures is not None:
             from gtrig.calib.chessboard import read_grey

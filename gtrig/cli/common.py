@@ -12,11 +12,20 @@ from typing import Any, TypeVar
 from rich.console import Console
 from rich.logging import RichHandler
 
-console = Console(soft_wrap=True)
-err_console = Console(stderr=True, soft_wrap=True)
+# plain text by default: paths, camera and point names are printed as given, so one holding Rich markup
+# ("x[/b].yaml") can neither restyle nor crash the output; a styled word is a Text (``styled``)
+console = Console(soft_wrap=True, markup=False)
+err_console = Console(stderr=True, soft_wrap=True, markup=False)
 
 F = TypeVar("F", bound=Callable[..., Any])
 T = TypeVar("T")
+
+
+def styled(text: object, style: str) -> Any:
+    """``text`` as a Rich Text in ``style`` (its characters never read as markup)."""
+    from rich.text import Text
+
+    return Text(str(text), style=style)
 
 
 def setup_logging(verbose: bool = False) -> None:

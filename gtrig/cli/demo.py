@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from gtrig.cli.common import console, handle_errors
+from gtrig.cli.common import console, handle_errors, styled
 from gtrig.cli.run import print_result
 from gtrig.cli.scale import chunk_bar, dask_option, executor
 
@@ -74,7 +74,7 @@ def _scanmatch_validate(rec: Path, results: Path) -> None:
         sv = read_planar_poses(sv_path)[1] if sv_path.exists() else None
         res = validate_recording(rec, survey_poses=sv)
     except GtrigError as e:
-        console.print(f"[yellow]skipped[/yellow] scanmatch validate: {e}")
+        console.print(styled("skipped", "yellow"), f"scanmatch validate: {e}")
         return
     console.print("scanmatch validate: validation stops from the onboard scans, relative to stop 1")
     for line in validation_lines(res):

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import typer
 
-from gtrig.cli.common import console, handle_errors
+from gtrig.cli.common import console, handle_errors, styled
 from gtrig.io.survey_csv import PoseTable
 
 if TYPE_CHECKING:
@@ -208,7 +208,7 @@ def slam(
     for w in ev.warnings:
         from gtrig.cli.common import err_console
 
-        err_console.print(f"[yellow]warning:[/yellow] {w}", highlight=False)
+        err_console.print(styled("warning:", "yellow"), w, highlight=False)
     if plot is not None:
         from gtrig.evaluate.plots import plot_slam
 
@@ -249,10 +249,10 @@ def _print_tables(ev: SlamEvaluation) -> None:
             console.print(t)
     if ev.gt_aware is not None:
         g = ev.gt_aware
-        verdict = "[green]as good as the GT can tell[/green]" if g.indistinguishable else "distinguished from the GT"
+        verdict = styled("as good as the GT can tell", "green") if g.indistinguishable else "distinguished from the GT"
         console.print(f"{100 * g.share_resolved:.1f} % of poses within the GT's 95 % region (a perfect estimate: "
                       f"95 %); RMSE against the truth {1000 * g.rmse_trans_m.value:.2f} mm "
-                      f"(95 % {1000 * g.rmse_trans_m.low:.2f} .. {1000 * g.rmse_trans_m.high:.2f}); {verdict}")
+                      f"(95 % {1000 * g.rmse_trans_m.low:.2f} .. {1000 * g.rmse_trans_m.high:.2f});", verdict)
 
 
 @app.command("compare")

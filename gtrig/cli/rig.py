@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from gtrig.cli.common import console, handle_errors
+from gtrig.cli.common import console, handle_errors, styled
 from gtrig.errors import ConfigError
 
 app = typer.Typer(help="Rig files: validate and summarise.", no_args_is_help=True)
@@ -29,9 +29,9 @@ def check(rig: Path = typer.Argument(..., help="rig.yaml")) -> None:
     except RigValidationError as e:
         # every problem of the file at once, one line each: a new rig is fixed in one pass
         for p in e.problems[:-1]:
-            err_console.print(f"[red]error:[/red] {p}", highlight=False, soft_wrap=True)
+            err_console.print(styled("error:", "red"), p, highlight=False, soft_wrap=True)
         raise ConfigError(e.problems[-1]) from None
-    console.print(f"[bold]{rig}[/bold]: valid rig '{r.world.name}'")
+    console.print(styled(rig, "bold"), f": valid rig '{r.world.name}'", sep="")
     t = Table("camera", "resolution", "fx, fy (px)", "position (m)", "tilt down (deg)", "rate (Hz)")
     for c in r.cameras:
         T = c.T_world_cam.matrix()

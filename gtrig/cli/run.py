@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import typer
 
-from gtrig.cli.common import console, handle_errors
+from gtrig.cli.common import console, handle_errors, styled
 from gtrig.cli.scale import chunk_bar, dask_option, executor
 
 
@@ -18,8 +19,8 @@ def print_result(result: object, has_truth: bool) -> None:
 
     assert isinstance(result, PipelineResult)
 
-    def mark(ok: bool | None) -> str:
-        return "" if ok is None else ("[green]ok[/green]" if ok else "[red]miss[/red]")
+    def mark(ok: bool | None) -> Any:
+        return "" if ok is None else (styled("ok", "green") if ok else styled("miss", "red"))
 
     if result.checks:
         t = Table("stage", "check", "value", "expected", "", title="what the recording says without truth")
@@ -34,12 +35,12 @@ def print_result(result: object, has_truth: bool) -> None:
     elif not has_truth:
         console.print("no truth/ in the recording: accuracy is judged by the checks above", highlight=False)
     for w in result.warnings:
-        console.print(f"[yellow]warning[/yellow] {w.stage}: {w.metric} is {w.value:.4g} {w.unit} "
+        console.print(styled("warning", "yellow"), f"{w.stage}: {w.metric} is {w.value:.4g} {w.unit} "
                       f"(expected {w.target})", highlight=False)
     if result.reused:
         console.print(f"reused (unchanged since their last run): {', '.join(result.reused)}", highlight=False)
     for name, why in result.skipped.items():
-        console.print(f"[yellow]skipped[/yellow] {name}: {why}", highlight=False)
+        console.print(styled("skipped", "yellow"), f"{name}: {why}", highlight=False)
 
 
 @handle_errors

@@ -13,13 +13,30 @@ import typer
 from gtrig.cli.common import console, err_console
 
 DASK_HELP = ("Run the chunks on Dask: local:N (a cluster of N processes on this machine, started and stopped "
-             "here) or a scheduler's address, tcp://HOST:8786 (pip install 'gtrig[dask]'; docs/scale.md).")
+             "here) or a scheduler's address, tcp://HOST:8786 (pip install 'gtrig\\[dask]'; docs/scale.md).")
+
+
+def _check_dask(value: str | None) -> str | None:
+    """The value's form, checked while the options are parsed, so that no verb starts work on a ``--dask``
+    it would refuse when the executor opens (the scheduler itself is reached only then)."""
+    if value is None:
+        return None
+    from gtrig.errors import InputError
+    from gtrig.executor import parse_dask
+
+    try:
+        parse_dask(value)
+    except InputError as e:
+        raise typer.BadParameter(str(e).removeprefix(f"--dask {value!r}: ").removeprefix(f"--dask {value}: ")) from None
+    return value
 
 
 def dask_option(annotated: bool = False) -> Any:
-    """The ``--dask`` option (None: local processes, ``--workers``); ``annotated``: for an ``Annotated``
-    parameter, whose default is given after ``=``."""
-    return typer.Option("--dask", help=DASK_HELP) if annotated else typer.Option(None, "--dask", help=DASK_HELP)
+    """The ``--dask`` option (None: local processes, ``--workers``), its form checked on parsing;
+    ``annotated``: for an ``Annotated`` parameter, whose default is given after ``=``."""
+    if annotated:
+        return typer.Option("--dask", help=DASK_HELP, callback=_check_dask)
+    return typer.Option(None, "--dask", help=DASK_HELP, callback=_check_dask)
 
 
 @contextlib.contextmanager

@@ -15,7 +15,7 @@ _AMBIG = typer.Option("refuse", "--on-ambiguity", help="refuse (exit 3) or warn 
 _OUTLIER = typer.Option(
     "exclude", "--on-outlier", help="exclude (with a warning), refuse, or keep a bad reading."
 )
-_SIGMA = typer.Option(None, "--sigma", help="Hand-laser sigma (m) for rows without one [default 0.002].")
+_SIGMA = typer.Option(None, "--sigma", help="Hand-laser sigma (m) for rows without one \\[default 0.002].")
 _REF_SIGMA = typer.Option(0.002, "--reference-sigma", help="Reference sigma (m) if REF.csv has none.")
 
 
