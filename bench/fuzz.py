@@ -94,13 +94,18 @@ def _chunk(task: tuple[str, int, int, int]) -> dict[str, object]:
     name, index, n, seed = task
     read, valid, suffix = READERS[name]
     seeds: dict[str, bytes] = _STATE["seeds"]  # type: ignore[assignment]
-    if name not in seeds:
-        seeds[name] = valid()
-    base = seeds[name]
-    rnd = random.Random(f"{seed}:{name}:{index}")
     folder = _STATE["dir"] / name  # type: ignore[operator]
     folder.mkdir(exist_ok=True)
     path = folder / f"in{suffix}"
+    if name not in seeds:
+        seeds[name] = valid()
+        # warm up outside the alarm: the first read imports and loads (or compiles) the reader's numba
+        # kernels, seconds of CPU; an alarm inside numba's compiler leaves its dispatcher broken, and every
+        # later input of that worker then "crashes" in numba, not in the reader
+        path.write_bytes(seeds[name])
+        read(path)
+    base = seeds[name]
+    rnd = random.Random(f"{seed}:{name}:{index}")
     limit = float(_STATE["limit_s"])  # type: ignore[arg-type]
     ok = refused = 0
     crashes: list[tuple[str, str, bytes]] = []
