@@ -31,7 +31,7 @@ def white_noise_model(dt: np.ndarray, qd: np.ndarray, order: int) -> tuple[np.nd
     qd = np.broadcast_to(np.asarray(qd, dtype=float), (N, 3))
     i = np.arange(order)
     p = i[None, :] - i[:, None]  # F_ij = dt^(j - i) / (j - i)!
-    fact = np.array([math.factorial(max(k, 0)) for k in p.ravel()], dtype=float).reshape(p.shape)
+    fact = np.array([math.factorial(max(int(k), 0)) for k in p.ravel()], dtype=np.float64).reshape(p.shape)
     Fn = np.where(p >= 0, dt[:, None, None] ** np.maximum(p, 0) / fact, 0.0)
     # Q_ij = q dt^(2n-1-i-j) / ((n-1-i)! (n-1-j)! (2n-1-i-j)) (integrated white noise)
     a = order - 1 - i

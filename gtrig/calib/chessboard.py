@@ -72,9 +72,9 @@ class Board:
     def object_points(self) -> geo.Array:
         """Inner corners (N, 3) in the board frame, metres, in detection order."""
         c, r = np.meshgrid(np.arange(self.cols), np.arange(self.rows))
-        p = np.column_stack([c.ravel(), r.ravel(), np.zeros(c.size)]) * self.square_m
+        p = np.column_stack([c.ravel(), r.ravel(), np.zeros(c.size)]).astype(np.float64) * self.square_m
         if self.origin == "centre":
-            p[:, :2] -= [(self.cols - 1) * self.square_m / 2, (self.rows - 1) * self.square_m / 2]
+            p[:, :2] -= np.array([(self.cols - 1) * self.square_m / 2, (self.rows - 1) * self.square_m / 2])
         return p
 
     def spec(self) -> str:
@@ -345,7 +345,7 @@ def boards_spec_from_dict(data: Any, source: str = "<boards>") -> BoardsSpec:
             cols, rows = (int(x) - 1 for x in b["squares"])
         else:
             raise KeyError("inner_corners")
-        square = float(b.get("square_m", b.get("square")))
+        square = float(b["square_m"] if "square_m" in b else b["square"])
     except (KeyError, TypeError, ValueError):
         raise FormatError(f"{source}: board: expected inner_corners: [cols, rows] and square_m") from None
     board = Board(cols, rows, square, str(b.get("origin", "corner")))

@@ -92,7 +92,7 @@ def _run(
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
-        return cv2.calibrateCameraExtended(obj, img, size, K0, None, flags=flags, criteria=crit)
+        return cv2.calibrateCameraExtended(obj, img, size, K0, None, flags=flags, criteria=crit)  # type: ignore[call-overload]  # stubs: no None for K0
     except cv2.error as e:
         raise ConvergenceError(f"OpenCV calibration failed: {str(e).splitlines()[-1].strip()}") from None
     finally:

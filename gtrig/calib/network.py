@@ -210,7 +210,7 @@ class NetworkResult:
                 "n_points": int(c.n_points),
                 **(
                     {}
-                    if c.sigma_rot_rad_fixed_intrinsics is None
+                    if c.sigma_rot_rad_fixed_intrinsics is None or c.sigma_pos_m_fixed_intrinsics is None
                     else {
                         "sigma_pos_mm_intrinsics_held": [float(v * 1000) for v in c.sigma_pos_m_fixed_intrinsics],
                         "sigma_rot_deg_intrinsics_held": [

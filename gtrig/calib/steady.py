@@ -48,7 +48,7 @@ def image_shift_px(before: np.ndarray, after: np.ndarray, smooth_px: float = 1.0
     H = np.eye(3, dtype=np.float32)
     crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200, 1e-7)
     try:
-        _, H = cv2.findTransformECC(a, b, H, cv2.MOTION_HOMOGRAPHY, crit, None, 5)
+        _, H = cv2.findTransformECC(a, b, H, cv2.MOTION_HOMOGRAPHY, crit, None, 5)  # type: ignore[call-overload]  # stubs: no None mask
     except cv2.error as e:
         raise ConvergenceError(f"image registration failed: {str(e).splitlines()[-1].strip()}") from None
     h, w = before.shape[:2]

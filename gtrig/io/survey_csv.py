@@ -483,9 +483,9 @@ def read_pose_table(
             )
     elif method is not None:
         raise FormatError(f"{p}: --method {method} given but the file has no method column")
-    names = [t.rows[k][t.header.index("pose")] for k in keep]
+    pose_names = [t.rows[k][t.header.index("pose")] for k in keep]
     sub = Table(t.path, t.header, tuple(t.rows[k] for k in keep), tuple(t.lines[k] for k in keep))
-    _unique(sub, names, "pose")
+    _unique(sub, pose_names, "pose")
     xyt = np.array([[_float(sub, k, c) for c in columns] for k in range(len(keep))])
     cov = None
     if all(t.has(c) for c in POSE_COV_COLUMNS):
@@ -493,7 +493,7 @@ def read_pose_table(
         for k in range(len(keep)):
             v = [_float(sub, k, c) for c in POSE_COV_COLUMNS]
             cov[k] = [[v[0], v[1], v[2]], [v[1], v[3], v[4]], [v[2], v[4], v[5]]]
-    return PoseTable(tuple(names), xyt, cov)
+    return PoseTable(tuple(pose_names), xyt, cov)
 
 
 def write_named_xy(

@@ -233,7 +233,7 @@ class LaserScanner(_Strict):
 
     @property
     def angles_rad(self) -> geo.Array:
-        return self.angle_min_rad + self.angle_increment_rad * np.arange(self.beams)
+        return self.angle_min_rad + self.angle_increment_rad * np.arange(self.beams, dtype=np.float64)
 
     def beam_delays_s(self) -> geo.Array:
         """Firing time (B,) of each beam after the scan's stamp, seconds (negative: before it)."""
@@ -333,7 +333,7 @@ class OnboardScanner(_Strict):
 
     @property
     def angles_rad(self) -> geo.Array:
-        return self.angle_min_rad + self.angle_increment_rad * np.arange(self.beams)
+        return self.angle_min_rad + self.angle_increment_rad * np.arange(self.beams, dtype=np.float64)
 
 
 class Robot(_Strict):

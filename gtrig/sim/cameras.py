@@ -148,6 +148,7 @@ def _roi_of(view: CameraView, pts_world: np.ndarray, margin: float) -> tuple[int
 
 def _robot_box_points(scene: Scene, T_world_robot: np.ndarray) -> np.ndarray:
     hull = scene.rig_true.robot.hull
+    assert hull is not None, "the simulated robot has a hull"
     c = hull.corners_xy()
     z = (0.0, gtroom.ROBOT_TOP_M + 0.01)
     pts = np.array([[x, y, zz] for zz in z for x, y in c])
@@ -624,7 +625,8 @@ def sample_handheld_poses(scene: Scene, T_world_robot: np.ndarray, cam: PinholeC
     top = geo.transform_points(T_world_robot, np.array([[0.0, 0.0, gtroom.ROBOT_TOP_M]]))[0]
     ids = [m.id for m in scene.rig_true.robot.markers]
     for _attempt in range(50):
-        poses, seen_all = [], []
+        poses: list[np.ndarray] = []
+        seen_all: list[list[int]] = []
         tries = 0
         while len(poses) < n and tries < 20000:
             tries += 1

@@ -51,7 +51,7 @@ def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int], scale_px: fl
     import cv2
 
     n = rng.standard_normal(shape).astype(np.float32)
-    n = cv2.GaussianBlur(n, (0, 0), scale_px)
+    n = np.asarray(cv2.GaussianBlur(n, (0, 0), scale_px), dtype=np.float32)
     sd = float(n.std()) or 1.0
     return (n / sd * amp).astype(np.float32)
 
@@ -281,6 +281,7 @@ def robot_faces(scene: Scene, T_world_robot: np.ndarray, cam: PinholeCamera, T_w
     back faces are culled by the renderer, the plate comes after the sides and the markers last."""
     rig = scene.rig_true
     hull = rig.robot.hull
+    assert hull is not None, "the simulated robot has a hull"
     top = gtroom.ROBOT_TOP_M
     T_box = T_world_robot @ geo.make_T(np.eye(3), [hull.offset_xy_m[0], hull.offset_xy_m[1], 0.0])
     faces = _box_side_faces(T_box, hull.length_m, hull.width_m, hull.z_min_m, hull.z_max_m,

@@ -149,6 +149,6 @@ def render_markers(rig_true: Rig, camera: str, T_world_robot: np.ndarray, rng: n
             roi = roi.reshape(v1 - v0 + 1, S, u1 - u0 + 1, S).mean(axis=(1, 3))
             img[v0:v1 + 1, u0:u1 + 1] = roi
     if blur_px > 0:
-        img = cv2.GaussianBlur(img, (0, 0), blur_px)
+        img = np.asarray(cv2.GaussianBlur(img, (0, 0), blur_px), dtype=np.float32)
     img = img + rng.normal(0, noise_grey, img.shape).astype(np.float32)
     return np.clip(np.rint(img), 0, 255).astype(np.uint8)
