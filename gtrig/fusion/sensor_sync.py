@@ -102,16 +102,19 @@ def _ridge(H: np.ndarray) -> np.ndarray:
     return 1e-12 * max(float(np.trace(H)) / H.shape[0], 1e-300) * np.eye(H.shape[0])
 
 
-def _jackknife(H_b: np.ndarray, g_b: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+def _jackknife(H_b: np.ndarray, g_b: np.ndarray, cols: np.ndarray, L: np.ndarray | None = None,
+               ) -> tuple[np.ndarray, np.ndarray, int]:
     """Solve ``sum_b H_b x = -sum_b g_b`` (blocks (B, n, n), (B, n)) and the jackknife standard error of
-    ``x[cols]``; returns (x, se (len(cols),), number of blocks with data)."""
+    ``x[cols]`` (or, with ``L`` (k, len(cols)), of ``L x[cols]``); returns (x, se, number of blocks with
+    data)."""
     H, g = H_b.sum(axis=0) + _ridge(H_b.sum(axis=0)), g_b.sum(axis=0)
     x = -np.linalg.solve(H, g)
     used = np.flatnonzero(np.abs(g_b).sum(axis=1) > 0)
     B = used.size
+    Lm = np.eye(cols.size) if L is None else L
     if B < 3:
-        return x, np.full(cols.size, np.inf), B
-    loo = np.array([-np.linalg.solve(H - H_b[b], g - g_b[b])[cols] for b in used])
+        return x, np.full(Lm.shape[0], np.inf), B
+    loo = np.array([Lm @ -np.linalg.solve(H - H_b[b], g - g_b[b])[cols] for b in used])
     se = np.sqrt((B - 1) / B * np.sum((loo - loo.mean(axis=0)) ** 2, axis=0))
     return x, se, B
 
@@ -251,7 +254,7 @@ def restamp_vision(track: PoseTrack, checkpoint: str | os.PathLike[str],
 def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray], ref: Reference,
                    block_s: float = 5.0, max_ci_s: float = 0.01, search_s: float = 0.02, min_instants: int = 20,
                    huber_k: float = 3.0, checkpoint: str | os.PathLike[str] | None = None,
-                   ) -> list[OffsetEstimate]:
+                   relative: bool = True) -> list[OffsetEstimate]:
     """Every camera's clock offset to the reference's clock, one fit over GTvision's instants.
 
     An instant of cameras ``c`` sees the reference at its stamp minus ``sum_c share_c tau_c``
@@ -271,6 +274,8 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
     checkpoint : GTvision's checkpoint of detections: which cameras saw the markers in each instant and
         when (:func:`checkpoint_membership`); without it every camera with a frame within 5 ms of a pose's
         stamp shares it.
+    relative : True: offsets to GTvision's clock (the cameras' share-weighted mean over the instants, so
+        the reference's own clock and any along-track shift of it cancel); False: to the reference's clock.
 
     Returns
     -------
@@ -306,6 +311,13 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
     bias = np.zeros((G, 3))
     rows = np.arange(t.size)
     hub = np.ones(t.size)
+    # GTvision's clock is its cameras' share-weighted mean (its poses are stamped with their frames), so
+    # the offsets to it are the fitted ones minus that mean: the reference's own clock error drops out.
+    # It is not small: a robot-frame shift of the reference along the motion (GTlaser's hull frame moved
+    # forward by a fraction of a millimetre by its per-side range biases) is, at a steady speed, a time
+    # offset (0.3 mm at 0.3 m/s = 1 ms), the same for every camera.
+    mean_share = share.mean(axis=0)
+    L = np.eye(C) - (np.ones((C, 1)) @ mean_share[None, :] if relative else 0.0)
     for it in range(4):
         P, V = ref.at(t - share @ tau)
         e = z - P
@@ -325,15 +337,23 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
         g_b = np.zeros((B, n))
         np.add.at(H_b, blocks, Hn)
         np.add.at(g_b, blocks, gn)
-        x, se, _ = _jackknife(H_b, g_b, np.arange(C))
+        x, se, _ = _jackknife(H_b, g_b, np.arange(C), L)
         tau = tau + x[:C]
         bias = x[C:].reshape(G, 3)
     H = H_b.sum(axis=0)
-    white = np.sqrt(np.diag(np.linalg.inv(H + _ridge(H)))[:C])
+    white = np.sqrt(np.diag(L @ np.linalg.inv(H + _ridge(H))[:C, :C] @ L.T))
     fit = (t, z, W * hub[:, None, None], share, bias[group])
-    return [_verdict(f"vision/{name}", float(tau[c]), float(se[c]), float(white[c]),
-                     int(np.unique(blocks[share[:, c] > 0]).size), *_camera_curve(fit, ref, tau, c, search_s),
-                     max_ci_s, int(np.sum(share[:, c] > 0)), min_instants) for c, name in enumerate(names)]
+    common = float(mean_share @ tau) if relative else 0.0
+    out = []
+    for c, name in enumerate(names):
+        taus, curve = _camera_curve(fit, ref, tau, c, search_s)
+        e = _verdict(f"vision/{name}", float(tau[c]) - common, float(se[c]), float(white[c]),
+                     int(np.unique(blocks[share[:, c] > 0]).size), taus - common, curve, max_ci_s,
+                     int(np.sum(share[:, c] > 0)), min_instants)
+        if relative:
+            e = replace(e, reason=f"{e.reason}; the reference's own offset {common * 1e3:+.2f} ms taken out")
+        out.append(e)
+    return out
 
 
 def _camera_curve(fit: tuple[np.ndarray, ...], ref: Reference, tau: np.ndarray, c: int, search_s: float,
