@@ -48,6 +48,11 @@ class FusionOptions:
     rate_hz : None: one pose per odometry stamp; a number: a regular grid at that rate (the constant
         velocity model uses 50 Hz when None).
     offsets_s : per source, its clock minus the reference clock (``gtrig sync``); subtracted from its stamps.
+    offsets_sigma_s : per source, the standard error of that offset (``gtrig sync``'s 95 % half-width / 1.96).
+        The fused poses are stamped on the reference clock, so an offset wrong by ``dt`` puts every pose
+        ``v dt`` off along the motion (``v`` the node's velocity): each node's covariance gains
+        ``sigma_t^2 v v^T`` with ``sigma_t`` the smallest sigma of the sources whose offsets were applied
+        (their errors, mostly the odometry's, are shared). Missing: 0.
     max_gap_s : a longer span without any fix ends a segment (None: odometry bridges every gap).
     bridge_after_s : poses inside a gap between accepted fixes longer than this are BRIDGED.
     gate_prob : chi-square gate of each fix's innovation (probability of keeping a good fix).
@@ -64,6 +69,7 @@ class FusionOptions:
     estimator: Literal["batch", "ekf"] = "batch"
     rate_hz: float | None = None
     offsets_s: Mapping[str, float] = field(default_factory=dict)
+    offsets_sigma_s: Mapping[str, float] = field(default_factory=dict)
     max_gap_s: float | None = None
     bridge_after_s: float = 0.25
     gate_prob: float = 0.9999
@@ -252,6 +258,23 @@ def _bridged(out_stamps: np.ndarray, accepted_stamps: np.ndarray, after_s: float
     return (gap > after_s) & ~exact, gap
 
 
+def _timing_sigma(opts: FusionOptions, sources: Sequence[str]) -> float:
+    """The fused track's clock uncertainty (s): the best-timed of the sources whose offsets were applied."""
+    sig = [float(opts.offsets_sigma_s[s]) for s in sources if s in opts.offsets_s and s in opts.offsets_sigma_s]
+    sig = [v for v in sig if np.isfinite(v) and v > 0]
+    return min(sig) if sig else 0.0
+
+
+def _with_timing(stamps: np.ndarray, X: np.ndarray, cov: np.ndarray, sigma_t: float) -> np.ndarray:
+    """``cov`` (N, d, d) plus ``sigma_t^2 v v^T`` on (x, y, yaw), ``v`` (N, 3) the nodes' velocities."""
+    if sigma_t <= 0 or stamps.size < 2:
+        return cov
+    v = np.gradient(X[:, :3], stamps, axis=0)
+    out = cov.copy()
+    out[:, :3, :3] += sigma_t**2 * v[:, :, None] * v[:, None, :]
+    return out
+
+
 def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: FusionOptions | None = None,
          ) -> tuple[PoseTrack, FusionReport]:
     """Smooth absolute fixes with odometry (or constant velocity) into one trajectory.
@@ -298,7 +321,10 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
         _check_units(fixes, odometry)
     fx = _merge([_decorrelated(f, opts.correlation_s) for f in fixes])
     per_source = {s: {"offered": float(len(f)), "used": 0.0, "rejected": 0.0, "downweighted": 0.0,
-                      "offset_s": float(opts.offsets_s.get(s, 0.0))} for s, f in zip(sources, fixes, strict=True)}
+                      "offset_s": float(opts.offsets_s.get(s, 0.0)),
+                      "offset_sigma_s": float(opts.offsets_sigma_s.get(s, 0.0)) if s in opts.offsets_s else 0.0}
+                  for s, f in zip(sources, fixes, strict=True)}
+    sigma_t = _timing_sigma(opts, sources)
     out_st, out_xyt, out_cov, out_status, out_reason = [], [], [], [], []
     outliers: list[Outlier] = []
     segments: list[Segment] = []
@@ -318,6 +344,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
             res = smooth_batch(chain, ekf.X, ekf.K, fix_use=use, huber_k=opts.huber_k)
             X, K, cov, cov_k, iters = res.X, res.K, res.cov_x, res.cov_k, res.iterations
             huber_w = res.robust_w
+        cov = _with_timing(stamps, X, cov, sigma_t)
         dims = np.where(seg["kind"] == 0, 3, 2)
         for j in np.flatnonzero(~use):
             outliers.append(Outlier(sources[seg["source"][j]], float(seg["stamps"][j]), float(ekf.nis[j]),

@@ -24,6 +24,7 @@ more than its width, reaches 90 % of it, or when the jackknife interval is wider
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
@@ -320,3 +321,24 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
                           estimate.second_peak, estimate.lags_s, estimate.corr, estimate.windows,
                           f"peak {estimate.peak:.3f} at {estimate.coarse_s:+.3f} s, heading fit {c * 1e3:+.2f} ms; "
                           f"refined by the fusion's fit ({int(use.sum())} fixes)")
+
+
+def offset_sigmas(path: str | os.PathLike[str]) -> dict[str, float]:
+    """Per source of a ``sync.yaml`` with an ``ok`` offset to the reference, the offset's standard error (s):
+    its 95 % interval's half-width / 1.96 (for :attr:`~gtrig.fusion.fuse.FusionOptions.offsets_sigma_s`).
+    Entries without an interval are left out; the file's other checks are :func:`gtrig.io.offsets.read_offsets`'."""
+    from gtrig.io.offsets import read_offsets
+    from gtrig.io.yamlfile import load_yaml
+
+    ok = read_offsets(path)
+    doc = load_yaml(path) or {}
+    out: dict[str, float] = {}
+    for name in ok:
+        ci = (doc.get("sources") or {}).get(name, {}).get("ci95_s")
+        try:
+            lo, hi = float(ci[0]), float(ci[1])
+        except (TypeError, ValueError, IndexError, KeyError):
+            continue
+        if np.isfinite(lo) and np.isfinite(hi) and hi >= lo:
+            out[name] = (hi - lo) / 2 / 1.959963984540054
+    return out

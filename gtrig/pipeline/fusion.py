@@ -120,6 +120,7 @@ def fusion(inp: StageInput) -> StageOutput:
     from gtrig.errors import InputError
     from gtrig.evaluate.truth import score_on_recording
     from gtrig.fusion import FusionOptions, fuse_tracks
+    from gtrig.fusion.sync import offset_sigmas
     from gtrig.io.atomic import atomic_group
     from gtrig.io.posetrack import covariance_text
     from gtrig.io.tum import tum_text
@@ -129,7 +130,12 @@ def fusion(inp: StageInput) -> StageOutput:
     if not tracks:
         raise InputError("fusion needs GTvision's or GTlaser's run track")
     offsets = dict(inp.products.clock_offsets or {})
-    opts = FusionOptions(estimator=cfg.estimator, max_gap_s=cfg.max_gap_s, offsets_s=offsets)
+    # the offsets' intervals (sync.yaml, written by the sync stage beside): the fused poses are stamped on
+    # the odometry's clock, so an offset's uncertainty is the poses' along-track uncertainty
+    sync_yaml = inp.out / "sync.yaml"
+    sigmas = offset_sigmas(sync_yaml) if offsets and sync_yaml.is_file() else {}
+    opts = FusionOptions(estimator=cfg.estimator, max_gap_s=cfg.max_gap_s, offsets_s=offsets,
+                         offsets_sigma_s={k: v for k, v in sigmas.items() if k in offsets})
     fused, report = fuse_tracks(tracks, _odometry(inp.rec), opts)
     names = ("gt_fused.tum", "gt_fused_cov.csv", "fusion_report.json")
     texts = (tum_text(fused), covariance_text(fused), json.dumps(report.to_dict(), indent=1, default=float) + "\n")

@@ -113,3 +113,21 @@ def test_bad_inputs_are_one_line_errors(run) -> None:
     cov[7, 0, 0] = -1.0
     with pytest.raises(InputError, match="not positive definite"):
         fuse_tracks({"laser": run.laser.with_cov(cov)}, run.odometry)
+
+
+def test_an_offsets_uncertainty_widens_the_poses_along_the_motion(run) -> None:
+    """Both sources' clocks 4 ms off an applied offset of 0 (an offset wrong by its sigma): the poses are
+    then about v * 4 ms off along the motion; with the offsets' sigma given, their covariance says so."""
+    tracks = {"vision": run.vision.shifted(0.004), "laser": run.laser.shifted(0.004)}
+    zero = {"vision": 0.0, "laser": 0.0}
+    plain, _ = fuse_tracks(tracks, run.odometry, replace(INDEP, offsets_s=zero))
+    timed, rep = fuse_tracks(tracks, run.odometry, replace(INDEP, offsets_s=zero,
+                                                           offsets_sigma_s={"vision": 0.004, "laser": 0.005}))
+    np.testing.assert_allclose(timed.xyz, plain.xyz)  # the estimate itself is unchanged
+    assert nees(plain, run.motion).mean() / 3 > 2.0
+    assert 0.5 <= nees(timed, run.motion).mean() / 3 <= 2.0
+    v = np.gradient(plain.xytheta()[:, :2], plain.stamps_s, axis=0)
+    extra = timed.cov[:, :2, :2] - plain.cov[:, :2, :2]
+    want = 0.004**2 * v[:, :, None] * v[:, None, :]  # the best-timed source's sigma
+    np.testing.assert_allclose(extra[1:-1], want[1:-1], rtol=1e-6, atol=1e-15)
+    assert rep.sources["laser"]["offset_sigma_s"] == 0.005
