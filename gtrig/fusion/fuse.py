@@ -56,6 +56,8 @@ class FusionOptions:
     max_gap_s : a longer span without any fix ends a segment (None: odometry bridges every gap).
     bridge_after_s : poses inside a gap between accepted fixes longer than this are BRIDGED.
     gate_prob : chi-square gate of each fix's innovation (probability of keeping a good fix).
+    gate_own_cov : the gate tests each fix's innovation against the fix's own covariance plus the
+        prediction's (True), or against the covariance inflated for correlation (False; before session 27).
     huber_k : Huber threshold (sigmas) of the batch solve.
     odometry : the odometry noise model; cv : the constant-velocity model (no odometry).
     prior_sigma : (x, y, yaw) sigmas of the start around the robust anchor (m, m, rad).
@@ -73,6 +75,7 @@ class FusionOptions:
     max_gap_s: float | None = None
     bridge_after_s: float = 0.25
     gate_prob: float = 0.9999
+    gate_own_cov: bool = True
     huber_k: float = 3.0
     odometry: OdometryNoise = OdometryNoise()
     cv: ConstantVelocityNoise = ConstantVelocityNoise()
@@ -320,6 +323,9 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
         fixes = kept
         _check_units(fixes, odometry)
     fx = _merge([_decorrelated(f, opts.correlation_s) for f in fixes])
+    # the gate tests each fix against its own covariance: the decorrelation's inflation is for weighing a
+    # second of correlated fixes, not for deciding whether one fix is an outlier
+    fx["gate_cov"] = _merge(fixes)["cov"] if opts.gate_own_cov else fx["cov"]
     per_source = {s: {"offered": float(len(f)), "used": 0.0, "rejected": 0.0, "downweighted": 0.0,
                       "offset_s": float(opts.offsets_s.get(s, 0.0)),
                       "offset_sigma_s": float(opts.offsets_sigma_s.get(s, 0.0)) if s in opts.offsets_s else 0.0}
@@ -336,7 +342,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
             continue
         chain, X0, k0, P0 = _chain(stamps, seg, odometry, opts, sources)
         _, Pk = opts.odometry.prior() if odometry is not None else (None, np.zeros((0, 0)))
-        ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob)
+        ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob, gate_cov=seg["gate_cov"])
         X, K, cov, cov_k, iters = ekf.X, ekf.K, ekf.cov_x, ekf.cov_k, 0
         use = ekf.accept
         huber_w = np.ones(use.size)

@@ -131,3 +131,22 @@ def test_an_offsets_uncertainty_widens_the_poses_along_the_motion(run) -> None:
     want = 0.004**2 * v[:, :, None] * v[:, None, :]  # the best-timed source's sigma
     np.testing.assert_allclose(extra[1:-1], want[1:-1], rtol=1e-6, atol=1e-15)
     assert rep.sources["laser"]["offset_sigma_s"] == 0.005
+
+
+def test_a_biased_stretch_is_gated_against_the_fixes_own_covariance(run) -> None:
+    """Two seconds of GTvision poses 15 mm off, agreeing with each other (7.5 sigma of their own covariance):
+    the decorrelation inflates each covariance by the count of fixes within 0.5 s, which must not let them
+    through the gate."""
+    xyt = run.vision.xytheta().copy()
+    t0 = run.vision.stamps_s[0] + 15.0
+    bad = (run.vision.stamps_s > t0) & (run.vision.stamps_s < t0 + 2.0)
+    xyt[bad, 0] += 0.015
+    vision = PoseTrack.from_xytheta(run.vision.stamps_s, xyt, cov=run.vision.cov, source="vision")
+    opts = FusionOptions(correlation_s=0.5)
+    track, rep = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, opts)
+    old, rep_old = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, replace(opts, gate_own_cov=False))
+    gated = {round(o.stamp_s, 6) for o in rep.outliers if o.stage == "gate" and o.source == "vision"}
+    assert {round(float(s), 6) for s in run.vision.stamps_s[bad]} <= gated
+    assert rep_old.sources["vision"]["rejected"] < bad.sum() / 2  # inflated, most of them passed
+    e, e_old = planar_errors(track, run.motion), planar_errors(old, run.motion)
+    assert np.abs(e[:, 0]).max() < np.abs(e_old[:, 0]).max()
