@@ -567,6 +567,30 @@ def camera_frame_stamps(rec_dir, rig, sequence: str = "run") -> dict[str, np.nda
 
 
 # ------------------------------------------------------------------------------------------ together
+def laser_clock(ret: ScannerReturns, laser: PoseTrack, scanners: list[OffsetEstimate]) -> tuple[float, float]:
+    """GTlaser's clock to GTvision's (s) and its standard error: the mean over GTlaser's usable poses of
+    each frame's share-weighted scanner offsets (:func:`restamp_laser`'s shift), the scanners' errors taken
+    as independent; ``(nan, nan)`` unless every scanner with returns in those frames has an ``ok`` offset."""
+    u = laser.usable()
+    if ret.frame_stamps_s.size == 0 or len(u) == 0:
+        return float("nan"), float("nan")
+    k = np.clip(np.searchsorted(ret.frame_stamps_s, u.stamps_s), 0, ret.frame_stamps_s.size - 1)
+    hit = np.abs(ret.frame_stamps_s[k] - u.stamps_s) < 1e-6
+    if not np.any(hit):
+        return float("nan"), float("nan")
+    w = ret.frame_shares()[k[hit]].mean(axis=0)  # (S,) each scanner's mean share of GTlaser's poses
+    by = {e.source.split("/", 1)[1]: e for e in scanners}
+    tau, se = np.zeros(w.size), np.zeros(w.size)
+    for i, n in enumerate(ret.names):
+        e = by.get(n)
+        if w[i] == 0:
+            continue
+        if e is None or e.verdict != "ok":
+            return float("nan"), float("nan")
+        tau[i], se[i] = e.offset_s, (e.ci95_s[1] - e.ci95_s[0]) / 2 / 1.959963984540054
+    return float(w @ tau), float(np.sqrt(np.sum((w * se) ** 2)))
+
+
 def sensor_offsets(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = None,  # noqa: ANN001
                    cameras: bool = True, scanners: bool = True, sequence: str = "run",
                    checkpoint: str | os.PathLike[str] | None = None) -> list[OffsetEstimate]:
@@ -579,12 +603,21 @@ def sensor_offsets(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = No
     at its camera's stamp (:func:`checkpoint_membership`; strongly advised). Add GTvision's own offset to a
     reference (:func:`to_reference`) for offsets to it.
     """
+    return sensor_offsets_and_laser_clock(rec_dir, rig, vision, laser, cameras, scanners, sequence, checkpoint)[0]
+
+
+def sensor_offsets_and_laser_clock(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = None,  # noqa: ANN001
+                                   cameras: bool = True, scanners: bool = True, sequence: str = "run",
+                                   checkpoint: str | os.PathLike[str] | None = None,
+                                   ) -> tuple[list[OffsetEstimate], tuple[float, float]]:
+    """:func:`sensor_offsets` and GTlaser's clock to GTvision's with its standard error (:func:`laser_clock`;
+    nan without ``laser``), seconds."""
     from gtrig.errors import ConfigError, InputError
     from gtrig.fusion.measurements import fixes_from_track
 
     out: list[OffsetEstimate] = []
     if not (cameras or scanners):
-        return out
+        return out, (float("nan"), float("nan"))
     if rig.robot.hull is None or not rig.laser_scanners:
         raise ConfigError("rig: per-scanner offsets need the fixed scanners and robot.hull")
     cam_stamps = camera_frame_stamps(rec_dir, rig, sequence)
@@ -593,13 +626,14 @@ def sensor_offsets(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = No
     sc = scanner_offsets(ret, reference_track([fixes_from_track(timed, "vision")]), rig.robot.hull.corners_xy())
     if scanners:
         out += sc
+    clock = laser_clock(ret, laser, sc) if laser is not None else (float("nan"), float("nan"))
     if cameras:
         if laser is None:
             raise InputError("per-camera offsets need GTlaser's track (the cameras' reference)")
         off = {e.source.split("/", 1)[1]: e.offset_s for e in sc if e.verdict == "ok"}
         ref = reference_track([fixes_from_track(restamp_laser(laser.usable(), ret, off), "laser")])
         out += camera_offsets(vision, cam_stamps, ref, checkpoint=checkpoint)
-    return out
+    return out, clock
 
 
 def to_reference(sensor: OffsetEstimate, vision: OffsetEstimate) -> dict[str, object]:
