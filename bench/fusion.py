@@ -401,8 +401,8 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
     truth/robot_clock.yaml; cameras are on the GT clock, with per-frame jitter only)."""
     import yaml
 
-    from gtrig.fusion.sensor_sync import recording_returns, sensor_offsets
-    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.fusion.sensor_sync import recording_returns, sensor_offsets_and_laser_clock
+    from gtrig.fusion.sync import combine_with_laser_clock, estimate_offset, refine_by_fusion
     from gtrig.io.odometry import read_odometry
     from gtrig.io.posetrack import read_pose_track
     from gtrig.rig import load_rig
@@ -432,22 +432,28 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
         a_v, a_l = apparent_offset(vis, true_run) * 1e3, apparent_offset(las, true_run) * 1e3
         print(f"(diagnostic with the true trajectory: GTvision's errors look like {a_v:+.3f} ms, GTlaser's like "
               f"{a_l:+.3f} ms)")
+        t0 = time.perf_counter()
+        ck = res / "gt_vision_run.checkpoint"
+        sensors, clock = sensor_offsets_and_laser_clock(rdir, rig, vis, las, checkpoint=ck)
+        secs = time.perf_counter() - t0
+        print(f"(GTlaser's clock to GTvision's from the scanners: {clock[0] * 1e3:+.3f} ms, sigma "
+              f"{clock[1] * 1e3:.3f}; truth {laser_truth * 1e3:+.3f})")
         print("| offset | truth (ms) | estimate, 95 % interval | error (ms) | covers |")
         print("|---|---|---|---|---|")
-        src = {}
-        for name, tr, truth in (("vision", vis, 0.0), ("laser", las, laser_truth)):
-            for lag in (0.0, *lags):
-                o = OdometryLog(odo.stamps_s + lag, odo.xytheta, odo.v_mps, odo.omega_radps)
+        truths = {"vision": 0.0, "laser": laser_truth}
+        for lag in (0.0, *lags):
+            o = OdometryLog(odo.stamps_s + lag, odo.xytheta, odo.v_mps, odo.omega_radps)
+            src = {}
+            for name, tr in (("vision", vis), ("laser", las)):
                 u = tr.usable()
                 e = estimate_offset(o.stamps_s, o.xytheta[:, 2], u.stamps_s, u.yaw_rad(), name)
-                e = refine_by_fusion(e, fixes_from_track(tr, name), o)
-                if lag == 0.0:
-                    src[name] = e
-                print(_row(f"{name} to odometry" + (f" + {lag:g} s injected" if lag else ""), e,
-                           truth - odo_off - lag))
-        t0 = time.perf_counter()
-        sensors = sensor_offsets(rdir, rig, vis, las, checkpoint=res / "gt_vision_run.checkpoint")
-        secs = time.perf_counter() - t0
+                src[name] = refine_by_fusion(e, fixes_from_track(tr, name), o)
+            comb = dict(zip(("vision", "laser"), combine_with_laser_clock(src["vision"], src["laser"], *clock),
+                            strict=True))
+            for label, ests in (("alone", src), ("combined", comb)):
+                for name, e in ests.items():
+                    print(_row(f"{name} to odometry, {label}" + (f" + {lag:g} s injected" if lag else ""), e,
+                               truths[name] - odo_off - lag))
         for e in sensors:
             kind, name = e.source.split("/", 1)
             truth = scan_truth[name] if kind == "laser" else 0.0
