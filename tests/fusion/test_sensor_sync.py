@@ -204,3 +204,25 @@ def test_checkpoint_membership_reads_the_per_camera_checkpoint(tmp_path) -> None
     when, share = checkpoint_membership(np.array([10.002, 10.102, 11.0]), p, cams)
     assert when == pytest.approx([10.004, 10.102, 11.0], abs=1e-9)
     assert np.allclose(share, [[0.0, 1.0], [0.5, 0.5], [0.0, 0.0]])
+
+
+def test_laser_clock_is_the_poses_mean_share_weighted_scanner_offset() -> None:
+    from gtrig.fusion.sensor_sync import laser_clock
+    from gtrig.fusion.sync import OffsetEstimate
+
+    frames = np.array([10.0, 10.1, 10.2])
+    # frame 0: only scanner a; frame 1: a and b half each; frame 2: only b
+    ret = ScannerReturns(("a", "b"), np.zeros(4), np.zeros((4, 2)), np.array([0, 0, 1, 1]), np.zeros((4, 2)),
+                         np.zeros((2, 2)), np.ones(2), np.array([0, 1, 1, 2]), frames)
+    track = PoseTrack.from_xytheta(frames, np.zeros((3, 3)), source="laser")
+
+    def est(name: str, tau: float, half: float, verdict: str = "ok") -> OffsetEstimate:
+        return OffsetEstimate(f"laser/{name}", verdict, tau, (tau - half, tau + half), np.nan, 1.0, np.nan,
+                              np.zeros(0), np.zeros(0), 5, "")
+
+    z = 1.959963984540054
+    clock, sigma = laser_clock(ret, track, [est("a", 0.004, 0.001 * z), est("b", -0.002, 0.002 * z)])
+    # mean shares over the three poses: a (1 + 0.5) / 3 = 0.5, b 0.5
+    assert clock == pytest.approx(0.5 * 0.004 - 0.5 * 0.002)
+    assert sigma == pytest.approx(np.hypot(0.5 * 0.001, 0.5 * 0.002))
+    assert np.isnan(laser_clock(ret, track, [est("a", 0.004, 0.001), est("b", 0.0, 0.0, "ambiguous")])[0])
