@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -59,6 +59,10 @@ class FusionOptions:
     gate_own_cov : the gate tests each fix's innovation against the fix's own covariance plus the
         prediction's (True), or against the covariance inflated for correlation (False; before session 27).
     huber_k : Huber threshold (sigmas) of the batch solve.
+    innovation_window_s : the batch solve weighs each fix with its covariance times the mean normalised
+        innovation squared per dof of its source's fixes within this window (the gate's, at least 1):
+        a source that disagrees with the prediction over a stretch by more than its covariance allows is
+        down-weighted there. 0: off.
     odometry : the odometry noise model; cv : the constant-velocity model (no odometry).
     prior_sigma : (x, y, yaw) sigmas of the start around the robust anchor (m, m, rad).
     correlation_s : a source's errors stay correlated over about this long (its calibration and
@@ -76,6 +80,7 @@ class FusionOptions:
     bridge_after_s: float = 0.25
     gate_prob: float = 0.9999
     gate_own_cov: bool = True
+    innovation_window_s: float = 1.0
     huber_k: float = 3.0
     odometry: OdometryNoise = OdometryNoise()
     cv: ConstantVelocityNoise = ConstantVelocityNoise()
@@ -261,6 +266,28 @@ def _bridged(out_stamps: np.ndarray, accepted_stamps: np.ndarray, after_s: float
     return (gap > after_s) & ~exact, gap
 
 
+def _innovation_factor(seg: dict[str, np.ndarray], nis: np.ndarray, use: np.ndarray, window_s: float,
+                       ) -> np.ndarray:
+    """Per fix, how much its covariance understates its source's innovations nearby: the mean normalised
+    innovation squared per degree of freedom of the same source's accepted fixes within ``window_s``
+    (the gate's, against each fix's own covariance plus the prediction's), at least 1. A stretch of a
+    source that keeps disagreeing with the prediction (the other sources and the odometry) by more than
+    its covariance says is weighed as the disagreement says (covariance matching)."""
+    dof = np.where(seg["kind"] == 0, 3.0, 2.0)
+    q = np.where(use & np.isfinite(nis), nis / dof, 0.0)
+    out = np.ones(q.size)
+    for k in np.unique(seg["source"]):
+        m = np.flatnonzero((seg["source"] == k) & use & np.isfinite(nis))
+        if m.size == 0:
+            continue
+        st = seg["stamps"][m]
+        c = np.r_[0.0, np.cumsum(q[m])]
+        lo = np.searchsorted(st, st - window_s / 2, "left")
+        hi = np.searchsorted(st, st + window_s / 2, "right")
+        out[m] = np.maximum(1.0, (c[hi] - c[lo]) / np.maximum(hi - lo, 1))
+    return out
+
+
 def _timing_sigma(opts: FusionOptions, sources: Sequence[str]) -> float:
     """The fused track's clock uncertainty (s): the best-timed of the sources whose offsets were applied."""
     sig = [float(opts.offsets_sigma_s[s]) for s in sources if s in opts.offsets_s and s in opts.offsets_sigma_s]
@@ -347,6 +374,9 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
         use = ekf.accept
         huber_w = np.ones(use.size)
         if opts.estimator == "batch":
+            if opts.innovation_window_s > 0:
+                chain = replace(chain, fix_W=chain.fix_W / np.sqrt(_innovation_factor(
+                    seg, ekf.nis, use, opts.innovation_window_s))[:, None, None])
             res = smooth_batch(chain, ekf.X, ekf.K, fix_use=use, huber_k=opts.huber_k)
             X, K, cov, cov_k, iters = res.X, res.K, res.cov_x, res.cov_k, res.iterations
             huber_w = res.robust_w

@@ -150,3 +150,23 @@ def test_a_biased_stretch_is_gated_against_the_fixes_own_covariance(run) -> None
     assert rep_old.sources["vision"]["rejected"] < bad.sum() / 2  # inflated, most of them passed
     e, e_old = planar_errors(track, run.motion), planar_errors(old, run.motion)
     assert np.abs(e[:, 0]).max() < np.abs(e_old[:, 0]).max()
+
+
+def test_a_stretch_disagreeing_with_the_prediction_is_down_weighted(run) -> None:
+    """Three seconds of GTvision poses 5 mm off (2.5 sigma each: the gate lets them in): their innovations
+    against the laser-and-odometry prediction stay above their covariance over the stretch, so the batch
+    weighs them by that disagreement and the fused track follows them less."""
+    xyt = run.vision.xytheta().copy()
+    t0 = run.vision.stamps_s[0] + 15.0
+    bad = (run.vision.stamps_s > t0) & (run.vision.stamps_s < t0 + 3.0)
+    xyt[bad, 0] += 0.005
+    vision = PoseTrack.from_xytheta(run.vision.stamps_s, xyt, cov=run.vision.cov, source="vision")
+    opts = FusionOptions(correlation_s=0.5)
+    track, rep = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, opts)
+    plain, _ = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, replace(opts, innovation_window_s=0))
+    assert rep.sources["vision"]["rejected"] < bad.sum() / 2  # not a gate's matter
+    near = (track.stamps_s > t0) & (track.stamps_s < t0 + 3.0)
+    e, e_plain = planar_errors(track, run.motion)[near, 0], planar_errors(plain, run.motion)[near, 0]
+    assert np.abs(e).mean() < 0.8 * np.abs(e_plain).mean()
+    q, q_plain = nees(track, run.motion)[near], nees(plain, run.motion)[near]
+    assert q.mean() < q_plain.mean()  # and its covariance is the more honest there
