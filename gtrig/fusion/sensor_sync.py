@@ -75,7 +75,9 @@ def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float 
     """The fixes smoothed by the constant-velocity model (robust batch MAP, no odometry) on a ``rate_hz``
     grid, one segment per stretch without a gap over ``max_gap_s``; the fits use only times with poses of
     the reference within 50 ms on both sides, so no gap is interpolated across."""
-    track, _ = fuse(fixes, None, FusionOptions(rate_hz=rate_hz, max_gap_s=max_gap_s))
+    # no innovation weighting: one source against a constant-velocity prediction has no other to
+    # disagree with (its turns would read as disagreement)
+    track, _ = fuse(fixes, None, FusionOptions(rate_hz=rate_hz, max_gap_s=max_gap_s, innovation_window_s=0.0))
     xyt = track.xytheta()
     xyt[:, 2] = np.unwrap(xyt[:, 2])
     vel = np.gradient(xyt, track.stamps_s, axis=0)
