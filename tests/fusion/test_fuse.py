@@ -133,15 +133,20 @@ def test_an_offsets_uncertainty_widens_the_poses_along_the_motion(run) -> None:
     assert rep.sources["laser"]["offset_sigma_s"] == 0.005
 
 
+def _vision_off_in_x(run, seconds: float, dx: float) -> tuple[PoseTrack, np.ndarray, float]:  # noqa: ANN001
+    """GTvision with its poses ``dx`` off in x for ``seconds`` from 15 s into the run; which, and the start."""
+    xyt = run.vision.xytheta().copy()
+    t0 = float(run.vision.stamps_s[0]) + 15.0
+    bad = (run.vision.stamps_s > t0) & (run.vision.stamps_s < t0 + seconds)
+    xyt[bad, 0] += dx
+    return PoseTrack.from_xytheta(run.vision.stamps_s, xyt, cov=run.vision.cov, source="vision"), bad, t0
+
+
 def test_a_biased_stretch_is_gated_against_the_fixes_own_covariance(run) -> None:
     """Two seconds of GTvision poses 15 mm off, agreeing with each other (7.5 sigma of their own covariance):
     the decorrelation inflates each covariance by the count of fixes within 0.5 s, which must not let them
     through the gate."""
-    xyt = run.vision.xytheta().copy()
-    t0 = run.vision.stamps_s[0] + 15.0
-    bad = (run.vision.stamps_s > t0) & (run.vision.stamps_s < t0 + 2.0)
-    xyt[bad, 0] += 0.015
-    vision = PoseTrack.from_xytheta(run.vision.stamps_s, xyt, cov=run.vision.cov, source="vision")
+    vision, bad, t0 = _vision_off_in_x(run, 2.0, 0.015)
     opts = FusionOptions(correlation_s=0.5)
     track, rep = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, opts)
     old, rep_old = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, replace(opts, gate_own_cov=False))
@@ -156,11 +161,7 @@ def test_a_stretch_disagreeing_with_the_prediction_is_down_weighted(run) -> None
     """Three seconds of GTvision poses 5 mm off (2.5 sigma each: the gate lets them in): their innovations
     against the laser-and-odometry prediction stay above their covariance over the stretch, so the batch
     weighs them by that disagreement and the fused track follows them less."""
-    xyt = run.vision.xytheta().copy()
-    t0 = run.vision.stamps_s[0] + 15.0
-    bad = (run.vision.stamps_s > t0) & (run.vision.stamps_s < t0 + 3.0)
-    xyt[bad, 0] += 0.005
-    vision = PoseTrack.from_xytheta(run.vision.stamps_s, xyt, cov=run.vision.cov, source="vision")
+    vision, bad, t0 = _vision_off_in_x(run, 3.0, 0.005)
     opts = FusionOptions(correlation_s=0.5)
     track, rep = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, opts)
     plain, _ = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, replace(opts, innovation_window_s=0))
