@@ -79,15 +79,16 @@ def part_speed(hours: float) -> tuple[np.ndarray, np.ndarray, OdometryLog, list[
     small = synthetic_hour(0.01)  # compile / load the kernels outside the timing
     fuse([fixes_from_track(tr) for tr in small[3]], small[2])
     rss0 = peak_rss_mb()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     track, rep = fuse(fixes, odo, FusionOptions(correlation_s=0.0))
-    secs = time.perf_counter() - t0
+    secs, cpu = time.perf_counter() - t0, time.process_time() - c0
     e = track.xytheta() - np.column_stack([np.interp(track.stamps_s, t, truth[:, k]) for k in range(3)])
     e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
     nees = float(np.mean(np.einsum("ni,nij,nj->n", e, np.linalg.inv(track.cov), e)) / 3)
     print(f"## speed: {hours:g} h, {len(track)} poses, {n_meas} measurements "
           f"({len(odo) - 1} odometry, {len(tracks[0])} vision, {len(tracks[1])} laser)")
-    print(f"gtrig fuse (EKF + RTS, batch MAP, marginals): {secs:.2f} s, {n_meas / secs / 1e3:.0f} k measurements/s, "
+    print(f"gtrig fuse (EKF + RTS, batch MAP, marginals): {secs:.2f} s wall, {cpu:.2f} s CPU, "
+          f"{n_meas / secs / 1e3:.0f} k measurements/s, "
           f"peak RSS {peak_rss_mb():.0f} MB (+{peak_rss_mb() - rss0:.0f} MB); batch iterations "
           f"{rep.segments[0].iterations}")
     print(f"accuracy vs truth: mean position {np.hypot(e[:, 0], e[:, 1]).mean() * 1e3:.3f} mm, "
@@ -301,13 +302,15 @@ def part_gtsam_custom(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
 
 
 def part_seeds(root: Path) -> None:
+    from gtrig.fusion.sync import offset_sigmas
     from gtrig.io.odometry import read_odometry
+    from gtrig.io.offsets import read_offsets
     from gtrig.io.posetrack import read_pose_track
     from gtrig.io.tum import read_tum
 
     print("## acceptance on simulated recordings (the pipeline's GTvision and GTlaser)")
-    print("| seed | source | mean pos (mm) | p95 pos (mm) | max pos (mm) | mean yaw (deg) | NEES/dof |")
-    print("|---|---|---|---|---|---|---|")
+    print("| seed | source | mean pos (mm) | p95 pos (mm) | max pos (mm) | mean yaw (deg) | NEES/dof | in 95 % (%) |")
+    print("|---|---|---|---|---|---|---|---|")
     for rec in sorted(root.glob("s*")):
         res = rec / "results"
         if not (res / "gt_laser.tum").exists() or not (res / "gt_vision_run.tum").exists():
@@ -327,15 +330,29 @@ def part_seeds(root: Path) -> None:
             return e
 
         fused, rep = fuse([fixes_from_track(vis), fixes_from_track(las)], odo)
-        for name, tr in (("vision", vis.usable()), ("laser", las.usable()), ("fused", fused)):
+        rows = [("vision", vis.usable()), ("laser", las.usable()), ("fused", fused)]
+        if (res / "sync.yaml").is_file():  # as the pipeline fuses: sync's offsets applied, their sigmas kept
+            offs = read_offsets(res / "sync.yaml")
+            opts = FusionOptions(offsets_s=offs, offsets_sigma_s=offset_sigmas(res / "sync.yaml"))
+            rows.append(("fused, sync's offsets", fuse([fixes_from_track(vis), fixes_from_track(las)], odo, opts)[0]))
+        for name, tr in rows:
             e = errs(tr)
             p = np.hypot(e[:, 0], e[:, 1]) * 1e3
             c = tr.cov_xytheta()
-            q = np.einsum("ni,nij,nj->n", e, np.linalg.inv(c), e) / 3
+            q = np.einsum("ni,nij,nj->n", e, np.linalg.inv(c), e)
             print(f"| {rec.name} | {name} | {p.mean():.3f} | {np.percentile(p, 95):.3f} | {p.max():.3f} | "
-                  f"{np.degrees(np.abs(e[:, 2])).mean():.4f} | {q.mean():.3f} |")
+                  f"{np.degrees(np.abs(e[:, 2])).mean():.4f} | {q.mean() / 3:.3f} | {100 * np.mean(q <= 7.815):.1f} |")
+            if name.startswith("fused"):
+                # where an absolute source is within 0.5 s (accepted fixes of either)
+                near = np.zeros(len(tr), bool)
+                for src in (vis.usable(), las.usable()):
+                    k = np.clip(np.searchsorted(src.stamps_s, tr.stamps_s), 1, len(src) - 1)
+                    gap = np.minimum(np.abs(src.stamps_s[k - 1] - tr.stamps_s), np.abs(src.stamps_s[k] - tr.stamps_s))
+                    near |= gap <= 0.5
+                print(f"|  | {name}: max {p[near].max():.3f} mm where a source is within 0.5 s "
+                      f"({int(near.sum())} poses) | | | | | | |")
         print(f"|  | fused: {rep.seconds:.2f} s, {sum(int(v['rejected']) for v in rep.sources.values())} fixes "
-              f"rejected, {len(fused)} poses | | | | | |")
+              f"rejected, {len(fused)} poses | | | | | | |")
         # a 3 s gap cut out of both sources, mid-run: the bridged poses against their ellipses
         g0 = float(odo.stamps_s[0]) + 30.0
         cut = {n: t.select((t.stamps_s < g0) | (t.stamps_s > g0 + 3.0)) for n, t in (("vision", vis), ("laser", las))}
@@ -345,7 +362,7 @@ def part_seeds(root: Path) -> None:
         q = np.einsum("ni,nij,nj->n", e, np.linalg.inv(bridged.cov[b]), e)
         p = np.hypot(e[:, 0], e[:, 1]) * 1e3
         print(f"|  | 3 s gap: {int(b.sum())} bridged poses, max error {p.max():.2f} mm, NEES/dof {q.mean() / 3:.2f}, "
-              f"inside 3 sigma {np.mean(q < 14.16) * 100:.1f} % | | | | | |")
+              f"inside 3 sigma {np.mean(q < 14.16) * 100:.1f} % | | | | | | |")
 
 
 def _ms(e) -> str:  # noqa: ANN001
@@ -385,8 +402,8 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
     truth/robot_clock.yaml; cameras are on the GT clock, with per-frame jitter only)."""
     import yaml
 
-    from gtrig.fusion.sensor_sync import recording_returns, sensor_offsets
-    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.fusion.sensor_sync import recording_returns, sensor_offsets_and_laser_clock
+    from gtrig.fusion.sync import combine_with_laser_clock, estimate_offset, refine_by_fusion
     from gtrig.io.odometry import read_odometry
     from gtrig.io.posetrack import read_pose_track
     from gtrig.rig import load_rig
@@ -416,22 +433,28 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
         a_v, a_l = apparent_offset(vis, true_run) * 1e3, apparent_offset(las, true_run) * 1e3
         print(f"(diagnostic with the true trajectory: GTvision's errors look like {a_v:+.3f} ms, GTlaser's like "
               f"{a_l:+.3f} ms)")
+        t0 = time.perf_counter()
+        ck = res / "gt_vision_run.checkpoint"
+        sensors, clock = sensor_offsets_and_laser_clock(rdir, rig, vis, las, checkpoint=ck)
+        secs = time.perf_counter() - t0
+        print(f"(GTlaser's clock to GTvision's from the scanners: {clock[0] * 1e3:+.3f} ms, sigma "
+              f"{clock[1] * 1e3:.3f}; truth {laser_truth * 1e3:+.3f})")
         print("| offset | truth (ms) | estimate, 95 % interval | error (ms) | covers |")
         print("|---|---|---|---|---|")
-        src = {}
-        for name, tr, truth in (("vision", vis, 0.0), ("laser", las, laser_truth)):
-            for lag in (0.0, *lags):
-                o = OdometryLog(odo.stamps_s + lag, odo.xytheta, odo.v_mps, odo.omega_radps)
+        truths = {"vision": 0.0, "laser": laser_truth}
+        for lag in (0.0, *lags):
+            o = OdometryLog(odo.stamps_s + lag, odo.xytheta, odo.v_mps, odo.omega_radps)
+            src = {}
+            for name, tr in (("vision", vis), ("laser", las)):
                 u = tr.usable()
                 e = estimate_offset(o.stamps_s, o.xytheta[:, 2], u.stamps_s, u.yaw_rad(), name)
-                e = refine_by_fusion(e, fixes_from_track(tr, name), o)
-                if lag == 0.0:
-                    src[name] = e
-                print(_row(f"{name} to odometry" + (f" + {lag:g} s injected" if lag else ""), e,
-                           truth - odo_off - lag))
-        t0 = time.perf_counter()
-        sensors = sensor_offsets(rdir, rig, vis, las, checkpoint=res / "gt_vision_run.checkpoint")
-        secs = time.perf_counter() - t0
+                src[name] = refine_by_fusion(e, fixes_from_track(tr, name), o)
+            comb = dict(zip(("vision", "laser"), combine_with_laser_clock(src["vision"], src["laser"], *clock),
+                            strict=True))
+            for label, ests in (("alone", src), ("combined", comb)):
+                for name, e in ests.items():
+                    print(_row(f"{name} to odometry, {label}" + (f" + {lag:g} s injected" if lag else ""), e,
+                               truths[name] - odo_off - lag))
         for e in sensors:
             kind, name = e.source.split("/", 1)
             truth = scan_truth[name] if kind == "laser" else 0.0

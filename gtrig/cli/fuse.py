@@ -33,6 +33,7 @@ def command(
     from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.fusion import FusionOptions, fuse_tracks
+    from gtrig.fusion.sync import offset_sigmas
     from gtrig.io.odometry import read_odometry
     from gtrig.io.offsets import read_offsets
     from gtrig.io.posetrack import read_pose_track, write_pose_track
@@ -68,7 +69,9 @@ def command(
             raise InputError(f"--rate {rate!r}: 'odometry' or a number of Hz") from None
         checks.number("--rate", rate_hz, lo=0.0, lo_open=True, hi=10000.0, unit="Hz")
     offsets = read_offsets(sync) if sync is not None else {}
-    opts = FusionOptions(estimator=estimator, rate_hz=rate_hz, offsets_s=offsets, max_gap_s=max_gap)  # type: ignore[arg-type]
+    sigmas = offset_sigmas(sync) if sync is not None else {}
+    opts = FusionOptions(estimator=estimator, rate_hz=rate_hz, offsets_s=offsets,  # type: ignore[arg-type]
+                         offsets_sigma_s=sigmas, max_gap_s=max_gap)
     track, rep = fuse_tracks(tracks, odo, opts)
     paths = [out, covariance] + ([report] if report else [])
     if report is not None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import typer
@@ -77,7 +78,16 @@ def command(
         ci = "" if est.verdict != "ok" else f" [{est.ci95_s[0] * 1e3:+.2f}, {est.ci95_s[1] * 1e3:+.2f}] ms"
         num = "" if est.verdict != "ok" else f" {est.offset_s * 1e3:+.3f} ms"
         console.print(f"{name}: {est.verdict}{num}{ci} ({est.reason})", highlight=False)
-    sensors = _per_sensor(recording, rig_path, tracks, results, per_camera, per_scanner, source)
+    sensors, clock = _per_sensor(recording, rig_path, tracks, results, per_camera, per_scanner, source)
+    if ref_track is None and "vision" in results and "laser" in results and math.isfinite(clock[0]):
+        from gtrig.fusion.sync import combine_with_laser_clock
+
+        results["vision"], results["laser"] = combine_with_laser_clock(results["vision"], results["laser"], *clock)
+        for name in ("vision", "laser"):
+            est = results[name]
+            if est.verdict == "ok":
+                console.print(f"{name}: {est.offset_s * 1e3:+.3f} ms [{est.ci95_s[0] * 1e3:+.2f}, "
+                              f"{est.ci95_s[1] * 1e3:+.2f}] ({est.reason})", highlight=False)
     if figure is not None:
         from gtrig.fusion.plots import correlation_figure
 
@@ -99,12 +109,13 @@ def command(
 
 
 def _per_sensor(recording: Path | None, rig_path: Path | None, tracks: dict, results: dict,  # noqa: ANN001
-                per_camera: bool, per_scanner: bool, sources: list[str]) -> list:
-    """Each camera's / scanner's offset to GTvision's clock (gtrig.fusion.sensor_sync), printed."""
+                per_camera: bool, per_scanner: bool, sources: list[str]) -> tuple[list, tuple[float, float]]:
+    """Each camera's / scanner's offset to GTvision's clock (gtrig.fusion.sensor_sync), printed, and
+    GTlaser's clock to GTvision's with its sigma (nan when not measured)."""
     if not (per_camera or per_scanner):
-        return []
+        return [], (float("nan"), float("nan"))
     from gtrig.errors import InputError
-    from gtrig.fusion.sensor_sync import sensor_offsets
+    from gtrig.fusion.sensor_sync import sensor_offsets_and_laser_clock
     from gtrig.rig import load_rig
 
     assert recording is not None and rig_path is not None  # checked before any work
@@ -118,10 +129,10 @@ def _per_sensor(recording: Path | None, rig_path: Path | None, tracks: dict, res
         console.print(f"{ck}: no GTvision checkpoint; each pose is taken at its stamp (up to 2.5 ms off for a "
                       "one-camera pose of a multi-camera instant)", highlight=False)
         ck = None
-    out = sensor_offsets(recording, load_rig(rig_path), tracks["vision"], tracks.get("laser"), per_camera,
-                         per_scanner, checkpoint=ck)
+    out, clock = sensor_offsets_and_laser_clock(recording, load_rig(rig_path), tracks["vision"], tracks.get("laser"),
+                                                per_camera, per_scanner, checkpoint=ck)
     for e in out:
         num = "" if e.verdict != "ok" else (f" {e.offset_s * 1e3:+.3f} ms [{e.ci95_s[0] * 1e3:+.2f}, "
                                             f"{e.ci95_s[1] * 1e3:+.2f}] to GTvision's clock")
         console.print(f"{e.source}: {e.verdict}{num} ({e.reason})", highlight=False)
-    return out
+    return out, clock

@@ -56,8 +56,8 @@ def _mm(A, B, out, transpose_b=False):  # noqa: ANN001, ANN202
 
 
 @nb.njit(cache=True, nogil=True)
-def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z, fix_cov, fix_lever, fix_use,  # noqa: ANN001, ANN201, PLR0913, C901
-             gate, x0, P0, k0, Pk, Xs, Xf, Ps, Ks, Pks, accept, nis):
+def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z, fix_cov, fix_gcov, fix_lever,  # noqa: ANN001, ANN201, PLR0913, C901
+             fix_use, gate, x0, P0, k0, Pk, Xs, Xf, Ps, Ks, Pks, accept, nis):
     N, d = Xs.shape
     p = k0.shape[0]
     n = d + p
@@ -166,7 +166,13 @@ def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z,
                     S[a, b] = t
             Sm = S[:mdim, :mdim].copy()
             Si = np.empty((mdim, mdim))
-            if not chol_inv(Sm, Si):
+            # the gate's innovation covariance: the prediction's plus the fix's own (gate_cov)
+            Sg = Sm.copy()
+            for a in range(mdim):
+                for b in range(mdim):
+                    Sg[a, b] += fix_gcov[j, a, b] - fix_cov[j, a, b]
+            Sgi = np.empty((mdim, mdim))
+            if not chol_inv(Sm, Si) or not chol_inv(Sg, Sgi):
                 accept[j] = False
                 nis[j] = np.nan
                 j += 1
@@ -176,7 +182,7 @@ def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z,
             q = 0.0
             for a in range(mdim):
                 for b in range(mdim):
-                    q += nu[a] * Si[a, b] * nu[b]
+                    q += nu[a] * Sgi[a, b] * nu[b]
             nis[j] = q
             if q > gate[mdim]:
                 accept[j] = False
@@ -256,7 +262,7 @@ def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z,
 
 
 def smooth_ekf(chain: FactorChain, P0: np.ndarray, Pk: np.ndarray, fix_use: np.ndarray | None = None,
-               gate_prob: float = 0.9999) -> EkfResult:
+               gate_prob: float = 0.9999, gate_cov: np.ndarray | None = None) -> EkfResult:
     """Forward EKF (gated) and RTS smoother over ``chain``.
 
     Parameters
@@ -266,6 +272,8 @@ def smooth_ekf(chain: FactorChain, P0: np.ndarray, Pk: np.ndarray, fix_use: np.n
     fix_use : (M,) bool, fixes allowed in (all by default).
     gate_prob : a fix whose normalised innovation squared exceeds the chi-square quantile of this
         probability (its own dimension's degrees of freedom) is rejected.
+    gate_cov : (M, 3, 3) the fixes' covariances the gate tests against (the prediction's added); by default
+        ``chain.fix_cov``, the ones that weigh the update.
     """
     N = len(chain)
     d, p = chain.d, chain.p
@@ -281,7 +289,9 @@ def smooth_ekf(chain: FactorChain, P0: np.ndarray, Pk: np.ndarray, fix_use: np.n
     accept = np.zeros(M, bool)
     nis = np.full(M, np.nan)
     bad = _ekf_rts(chain.process, chain.proc_u, proc_Q, np.diff(chain.stamps_s), chain.fix_node, chain.fix_alpha,
-                   chain.fix_kind, chain.fix_z, chain.fix_cov, chain.fix_lever, use, gate, chain.x0,
+                   chain.fix_kind, chain.fix_z, chain.fix_cov,
+                   chain.fix_cov if gate_cov is None else np.ascontiguousarray(gate_cov, float), chain.fix_lever, use,
+                   gate, chain.x0,
                    np.asarray(P0, float), chain.k0, np.asarray(Pk, float).reshape(p, p), Xs, Xf, Ps, Ks, Pks,
                    accept, nis)
     if bad >= 0:

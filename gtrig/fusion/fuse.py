@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -48,10 +48,21 @@ class FusionOptions:
     rate_hz : None: one pose per odometry stamp; a number: a regular grid at that rate (the constant
         velocity model uses 50 Hz when None).
     offsets_s : per source, its clock minus the reference clock (``gtrig sync``); subtracted from its stamps.
+    offsets_sigma_s : per source, the standard error of that offset (``gtrig sync``'s 95 % half-width / 1.96).
+        The fused poses are stamped on the reference clock, so an offset wrong by ``dt`` puts every pose
+        ``v dt`` off along the motion (``v`` the node's velocity): each node's covariance gains
+        ``sigma_t^2 v v^T`` with ``sigma_t`` the smallest sigma of the sources whose offsets were applied
+        (their errors, mostly the odometry's, are shared). Missing: 0.
     max_gap_s : a longer span without any fix ends a segment (None: odometry bridges every gap).
     bridge_after_s : poses inside a gap between accepted fixes longer than this are BRIDGED.
     gate_prob : chi-square gate of each fix's innovation (probability of keeping a good fix).
+    gate_own_cov : the gate tests each fix's innovation against the fix's own covariance plus the
+        prediction's (True), or against the covariance inflated for correlation (False; before session 27).
     huber_k : Huber threshold (sigmas) of the batch solve.
+    innovation_window_s : the batch solve weighs each fix with its covariance times the mean normalised
+        innovation squared per dof of its source's fixes within this window (the gate's, at least 1):
+        a source that disagrees with the prediction over a stretch by more than its covariance allows is
+        down-weighted there. 0: off.
     odometry : the odometry noise model; cv : the constant-velocity model (no odometry).
     prior_sigma : (x, y, yaw) sigmas of the start around the robust anchor (m, m, rad).
     correlation_s : a source's errors stay correlated over about this long (its calibration and
@@ -64,9 +75,12 @@ class FusionOptions:
     estimator: Literal["batch", "ekf"] = "batch"
     rate_hz: float | None = None
     offsets_s: Mapping[str, float] = field(default_factory=dict)
+    offsets_sigma_s: Mapping[str, float] = field(default_factory=dict)
     max_gap_s: float | None = None
     bridge_after_s: float = 0.25
     gate_prob: float = 0.9999
+    gate_own_cov: bool = True
+    innovation_window_s: float = 1.0
     huber_k: float = 3.0
     odometry: OdometryNoise = OdometryNoise()
     cv: ConstantVelocityNoise = ConstantVelocityNoise()
@@ -252,6 +266,45 @@ def _bridged(out_stamps: np.ndarray, accepted_stamps: np.ndarray, after_s: float
     return (gap > after_s) & ~exact, gap
 
 
+def _innovation_factor(seg: dict[str, np.ndarray], nis: np.ndarray, use: np.ndarray, window_s: float,
+                       ) -> np.ndarray:
+    """Per fix, how much its covariance understates its source's innovations nearby: the mean normalised
+    innovation squared per degree of freedom of the same source's accepted fixes within ``window_s``
+    (the gate's, against each fix's own covariance plus the prediction's), at least 1. A stretch of a
+    source that keeps disagreeing with the prediction (the other sources and the odometry) by more than
+    its covariance says is weighed as the disagreement says (covariance matching)."""
+    dof = np.where(seg["kind"] == 0, 3.0, 2.0)
+    q = np.where(use & np.isfinite(nis), nis / dof, 0.0)
+    out = np.ones(q.size)
+    for k in np.unique(seg["source"]):
+        m = np.flatnonzero((seg["source"] == k) & use & np.isfinite(nis))
+        if m.size == 0:
+            continue
+        st = seg["stamps"][m]
+        c = np.r_[0.0, np.cumsum(q[m])]
+        lo = np.searchsorted(st, st - window_s / 2, "left")
+        hi = np.searchsorted(st, st + window_s / 2, "right")
+        out[m] = np.maximum(1.0, (c[hi] - c[lo]) / np.maximum(hi - lo, 1))
+    return out
+
+
+def _timing_sigma(opts: FusionOptions, sources: Sequence[str]) -> float:
+    """The fused track's clock uncertainty (s): the best-timed of the sources whose offsets were applied."""
+    sig = [float(opts.offsets_sigma_s[s]) for s in sources if s in opts.offsets_s and s in opts.offsets_sigma_s]
+    sig = [v for v in sig if np.isfinite(v) and v > 0]
+    return min(sig) if sig else 0.0
+
+
+def _with_timing(stamps: np.ndarray, X: np.ndarray, cov: np.ndarray, sigma_t: float) -> np.ndarray:
+    """``cov`` (N, d, d) plus ``sigma_t^2 v v^T`` on (x, y, yaw), ``v`` (N, 3) the nodes' velocities."""
+    if sigma_t <= 0 or stamps.size < 2:
+        return cov
+    v = np.gradient(X[:, :3], stamps, axis=0)
+    out = cov.copy()
+    out[:, :3, :3] += sigma_t**2 * v[:, :, None] * v[:, None, :]
+    return out
+
+
 def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: FusionOptions | None = None,
          ) -> tuple[PoseTrack, FusionReport]:
     """Smooth absolute fixes with odometry (or constant velocity) into one trajectory.
@@ -297,8 +350,14 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
         fixes = kept
         _check_units(fixes, odometry)
     fx = _merge([_decorrelated(f, opts.correlation_s) for f in fixes])
+    # the gate tests each fix against its own covariance: the decorrelation's inflation is for weighing a
+    # second of correlated fixes, not for deciding whether one fix is an outlier
+    fx["gate_cov"] = _merge(fixes)["cov"] if opts.gate_own_cov else fx["cov"]
     per_source = {s: {"offered": float(len(f)), "used": 0.0, "rejected": 0.0, "downweighted": 0.0,
-                      "offset_s": float(opts.offsets_s.get(s, 0.0))} for s, f in zip(sources, fixes, strict=True)}
+                      "offset_s": float(opts.offsets_s.get(s, 0.0)),
+                      "offset_sigma_s": float(opts.offsets_sigma_s.get(s, 0.0)) if s in opts.offsets_s else 0.0}
+                  for s, f in zip(sources, fixes, strict=True)}
+    sigma_t = _timing_sigma(opts, sources)
     out_st, out_xyt, out_cov, out_status, out_reason = [], [], [], [], []
     outliers: list[Outlier] = []
     segments: list[Segment] = []
@@ -310,14 +369,18 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
             continue
         chain, X0, k0, P0 = _chain(stamps, seg, odometry, opts, sources)
         _, Pk = opts.odometry.prior() if odometry is not None else (None, np.zeros((0, 0)))
-        ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob)
+        ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob, gate_cov=seg["gate_cov"])
         X, K, cov, cov_k, iters = ekf.X, ekf.K, ekf.cov_x, ekf.cov_k, 0
         use = ekf.accept
         huber_w = np.ones(use.size)
         if opts.estimator == "batch":
+            if opts.innovation_window_s > 0:
+                chain = replace(chain, fix_W=chain.fix_W / np.sqrt(_innovation_factor(
+                    seg, ekf.nis, use, opts.innovation_window_s))[:, None, None])
             res = smooth_batch(chain, ekf.X, ekf.K, fix_use=use, huber_k=opts.huber_k)
             X, K, cov, cov_k, iters = res.X, res.K, res.cov_x, res.cov_k, res.iterations
             huber_w = res.robust_w
+        cov = _with_timing(stamps, X, cov, sigma_t)
         dims = np.where(seg["kind"] == 0, 3, 2)
         for j in np.flatnonzero(~use):
             outliers.append(Outlier(sources[seg["source"][j]], float(seg["stamps"][j]), float(ekf.nis[j]),

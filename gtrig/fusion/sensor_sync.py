@@ -75,7 +75,9 @@ def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float 
     """The fixes smoothed by the constant-velocity model (robust batch MAP, no odometry) on a ``rate_hz``
     grid, one segment per stretch without a gap over ``max_gap_s``; the fits use only times with poses of
     the reference within 50 ms on both sides, so no gap is interpolated across."""
-    track, _ = fuse(fixes, None, FusionOptions(rate_hz=rate_hz, max_gap_s=max_gap_s))
+    # no innovation weighting: one source against a constant-velocity prediction has no other to
+    # disagree with (its turns would read as disagreement)
+    track, _ = fuse(fixes, None, FusionOptions(rate_hz=rate_hz, max_gap_s=max_gap_s, innovation_window_s=0.0))
     xyt = track.xytheta()
     xyt[:, 2] = np.unwrap(xyt[:, 2])
     vel = np.gradient(xyt, track.stamps_s, axis=0)
@@ -102,16 +104,19 @@ def _ridge(H: np.ndarray) -> np.ndarray:
     return 1e-12 * max(float(np.trace(H)) / H.shape[0], 1e-300) * np.eye(H.shape[0])
 
 
-def _jackknife(H_b: np.ndarray, g_b: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+def _jackknife(H_b: np.ndarray, g_b: np.ndarray, cols: np.ndarray, L: np.ndarray | None = None,
+               ) -> tuple[np.ndarray, np.ndarray, int]:
     """Solve ``sum_b H_b x = -sum_b g_b`` (blocks (B, n, n), (B, n)) and the jackknife standard error of
-    ``x[cols]``; returns (x, se (len(cols),), number of blocks with data)."""
+    ``x[cols]`` (or, with ``L`` (k, len(cols)), of ``L x[cols]``); returns (x, se, number of blocks with
+    data)."""
     H, g = H_b.sum(axis=0) + _ridge(H_b.sum(axis=0)), g_b.sum(axis=0)
     x = -np.linalg.solve(H, g)
     used = np.flatnonzero(np.abs(g_b).sum(axis=1) > 0)
     B = used.size
+    Lm = np.eye(cols.size) if L is None else L
     if B < 3:
-        return x, np.full(cols.size, np.inf), B
-    loo = np.array([-np.linalg.solve(H - H_b[b], g - g_b[b])[cols] for b in used])
+        return x, np.full(Lm.shape[0], np.inf), B
+    loo = np.array([Lm @ -np.linalg.solve(H - H_b[b], g - g_b[b])[cols] for b in used])
     se = np.sqrt((B - 1) / B * np.sum((loo - loo.mean(axis=0)) ** 2, axis=0))
     return x, se, B
 
@@ -251,7 +256,7 @@ def restamp_vision(track: PoseTrack, checkpoint: str | os.PathLike[str],
 def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray], ref: Reference,
                    block_s: float = 5.0, max_ci_s: float = 0.01, search_s: float = 0.02, min_instants: int = 20,
                    huber_k: float = 3.0, checkpoint: str | os.PathLike[str] | None = None,
-                   ) -> list[OffsetEstimate]:
+                   relative: bool = True) -> list[OffsetEstimate]:
     """Every camera's clock offset to the reference's clock, one fit over GTvision's instants.
 
     An instant of cameras ``c`` sees the reference at its stamp minus ``sum_c share_c tau_c``
@@ -271,6 +276,8 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
     checkpoint : GTvision's checkpoint of detections: which cameras saw the markers in each instant and
         when (:func:`checkpoint_membership`); without it every camera with a frame within 5 ms of a pose's
         stamp shares it.
+    relative : True: offsets to GTvision's clock (the cameras' share-weighted mean over the instants, so
+        the reference's own clock and any along-track shift of it cancel); False: to the reference's clock.
 
     Returns
     -------
@@ -306,6 +313,13 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
     bias = np.zeros((G, 3))
     rows = np.arange(t.size)
     hub = np.ones(t.size)
+    # GTvision's clock is its cameras' share-weighted mean (its poses are stamped with their frames), so
+    # the offsets to it are the fitted ones minus that mean: the reference's own clock error drops out.
+    # It is not small: a robot-frame shift of the reference along the motion (GTlaser's hull frame moved
+    # forward by a fraction of a millimetre by its per-side range biases) is, at a steady speed, a time
+    # offset (0.3 mm at 0.3 m/s = 1 ms), the same for every camera.
+    mean_share = share.mean(axis=0)
+    L = np.eye(C) - (np.ones((C, 1)) @ mean_share[None, :] if relative else 0.0)
     for it in range(4):
         P, V = ref.at(t - share @ tau)
         e = z - P
@@ -325,15 +339,23 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
         g_b = np.zeros((B, n))
         np.add.at(H_b, blocks, Hn)
         np.add.at(g_b, blocks, gn)
-        x, se, _ = _jackknife(H_b, g_b, np.arange(C))
+        x, se, _ = _jackknife(H_b, g_b, np.arange(C), L)
         tau = tau + x[:C]
         bias = x[C:].reshape(G, 3)
     H = H_b.sum(axis=0)
-    white = np.sqrt(np.diag(np.linalg.inv(H + _ridge(H)))[:C])
+    white = np.sqrt(np.diag(L @ np.linalg.inv(H + _ridge(H))[:C, :C] @ L.T))
     fit = (t, z, W * hub[:, None, None], share, bias[group])
-    return [_verdict(f"vision/{name}", float(tau[c]), float(se[c]), float(white[c]),
-                     int(np.unique(blocks[share[:, c] > 0]).size), *_camera_curve(fit, ref, tau, c, search_s),
-                     max_ci_s, int(np.sum(share[:, c] > 0)), min_instants) for c, name in enumerate(names)]
+    common = float(mean_share @ tau) if relative else 0.0
+    out = []
+    for c, name in enumerate(names):
+        taus, curve = _camera_curve(fit, ref, tau, c, search_s)
+        e = _verdict(f"vision/{name}", float(tau[c]) - common, float(se[c]), float(white[c]),
+                     int(np.unique(blocks[share[:, c] > 0]).size), taus - common, curve, max_ci_s,
+                     int(np.sum(share[:, c] > 0)), min_instants)
+        if relative:
+            e = replace(e, reason=f"{e.reason}; the reference's own offset {common * 1e3:+.2f} ms taken out")
+        out.append(e)
+    return out
 
 
 def _camera_curve(fit: tuple[np.ndarray, ...], ref: Reference, tau: np.ndarray, c: int, search_s: float,
@@ -547,6 +569,30 @@ def camera_frame_stamps(rec_dir, rig, sequence: str = "run") -> dict[str, np.nda
 
 
 # ------------------------------------------------------------------------------------------ together
+def laser_clock(ret: ScannerReturns, laser: PoseTrack, scanners: list[OffsetEstimate]) -> tuple[float, float]:
+    """GTlaser's clock to GTvision's (s) and its standard error: the mean over GTlaser's usable poses of
+    each frame's share-weighted scanner offsets (:func:`restamp_laser`'s shift), the scanners' errors taken
+    as independent; ``(nan, nan)`` unless every scanner with returns in those frames has an ``ok`` offset."""
+    u = laser.usable()
+    if ret.frame_stamps_s.size == 0 or len(u) == 0:
+        return float("nan"), float("nan")
+    k = np.clip(np.searchsorted(ret.frame_stamps_s, u.stamps_s), 0, ret.frame_stamps_s.size - 1)
+    hit = np.abs(ret.frame_stamps_s[k] - u.stamps_s) < 1e-6
+    if not np.any(hit):
+        return float("nan"), float("nan")
+    w = ret.frame_shares()[k[hit]].mean(axis=0)  # (S,) each scanner's mean share of GTlaser's poses
+    by = {e.source.split("/", 1)[1]: e for e in scanners}
+    tau, se = np.zeros(w.size), np.zeros(w.size)
+    for i, n in enumerate(ret.names):
+        e = by.get(n)
+        if w[i] == 0:
+            continue
+        if e is None or e.verdict != "ok":
+            return float("nan"), float("nan")
+        tau[i], se[i] = e.offset_s, (e.ci95_s[1] - e.ci95_s[0]) / 2 / 1.959963984540054
+    return float(w @ tau), float(np.sqrt(np.sum((w * se) ** 2)))
+
+
 def sensor_offsets(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = None,  # noqa: ANN001
                    cameras: bool = True, scanners: bool = True, sequence: str = "run",
                    checkpoint: str | os.PathLike[str] | None = None) -> list[OffsetEstimate]:
@@ -559,12 +605,21 @@ def sensor_offsets(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = No
     at its camera's stamp (:func:`checkpoint_membership`; strongly advised). Add GTvision's own offset to a
     reference (:func:`to_reference`) for offsets to it.
     """
+    return sensor_offsets_and_laser_clock(rec_dir, rig, vision, laser, cameras, scanners, sequence, checkpoint)[0]
+
+
+def sensor_offsets_and_laser_clock(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = None,  # noqa: ANN001
+                                   cameras: bool = True, scanners: bool = True, sequence: str = "run",
+                                   checkpoint: str | os.PathLike[str] | None = None,
+                                   ) -> tuple[list[OffsetEstimate], tuple[float, float]]:
+    """:func:`sensor_offsets` and GTlaser's clock to GTvision's with its standard error (:func:`laser_clock`;
+    nan without ``laser``), seconds."""
     from gtrig.errors import ConfigError, InputError
     from gtrig.fusion.measurements import fixes_from_track
 
     out: list[OffsetEstimate] = []
     if not (cameras or scanners):
-        return out
+        return out, (float("nan"), float("nan"))
     if rig.robot.hull is None or not rig.laser_scanners:
         raise ConfigError("rig: per-scanner offsets need the fixed scanners and robot.hull")
     cam_stamps = camera_frame_stamps(rec_dir, rig, sequence)
@@ -573,13 +628,14 @@ def sensor_offsets(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = No
     sc = scanner_offsets(ret, reference_track([fixes_from_track(timed, "vision")]), rig.robot.hull.corners_xy())
     if scanners:
         out += sc
+    clock = laser_clock(ret, laser, sc) if laser is not None else (float("nan"), float("nan"))
     if cameras:
         if laser is None:
             raise InputError("per-camera offsets need GTlaser's track (the cameras' reference)")
         off = {e.source.split("/", 1)[1]: e.offset_s for e in sc if e.verdict == "ok"}
         ref = reference_track([fixes_from_track(restamp_laser(laser.usable(), ret, off), "laser")])
         out += camera_offsets(vision, cam_stamps, ref, checkpoint=checkpoint)
-    return out
+    return out, clock
 
 
 def to_reference(sensor: OffsetEstimate, vision: OffsetEstimate) -> dict[str, object]:

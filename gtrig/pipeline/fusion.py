@@ -34,7 +34,7 @@ def sync(inp: StageInput) -> StageOutput:
     from gtrig.errors import InputError
     from gtrig.fusion.measurements import fixes_from_track
     from gtrig.fusion.sensor_sync import to_reference
-    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.fusion.sync import combine_with_laser_clock, estimate_offset, refine_by_fusion
     from gtrig.io.offsets import write_offsets
 
     cfg = inp.config.fusion
@@ -50,8 +50,12 @@ def sync(inp: StageInput) -> StageOutput:
         if track.cov is not None and est.verdict == "ok":
             est = refine_by_fusion(est, fixes_from_track(track, name), odo)
         results[name] = est
+    sensors, clock = _sensor_offsets(inp, tracks, results) if cfg.sync_per_sensor else ([], (math.nan, math.nan))
+    if "vision" in results and "laser" in results:
+        # one offset for the GT system: the two sources' estimates made consistent with GTlaser's clock
+        # to GTvision's (the scanners'), far better known than either offset to odometry
+        results["vision"], results["laser"] = combine_with_laser_clock(results["vision"], results["laser"], *clock)
     doc = {k: v.to_dict() for k, v in results.items()}
-    sensors = _sensor_offsets(inp, tracks, results) if cfg.sync_per_sensor else []
     for e in sensors:
         doc[e.source] = to_reference(e, results["vision"])
     write_offsets(inp.out / "sync.yaml", "odometry", doc)
@@ -71,17 +75,21 @@ def sync(inp: StageInput) -> StageOutput:
     return StageOutput({"clock_offsets": offsets}, rows, checks, ("sync.yaml",))
 
 
-def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict) -> list:  # noqa: ANN001
-    """Each camera's and scanner's offset to GTvision's clock, when both GT sources and the scanners exist."""
-    from gtrig.fusion.sensor_sync import sensor_offsets
+def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict,  # noqa: ANN001
+                    ) -> tuple[list, tuple[float, float]]:
+    """Each camera's and scanner's offset to GTvision's clock, when both GT sources and the scanners exist,
+    and GTlaser's clock to GTvision's with its sigma (nan when not measured)."""
+    from gtrig.fusion.sensor_sync import sensor_offsets_and_laser_clock
 
+    none = ([], (math.nan, math.nan))
     rig = inp.products.rig
     if rig is None or "vision" not in tracks or "laser" not in tracks or rig.robot.hull is None:
-        return []
+        return none
     if not rig.laser_scanners or "vision" not in results:
-        return []
+        return none
     ck = inp.out / "gt_vision_run.checkpoint"  # GTvision's detections: which camera made each pose
-    return sensor_offsets(inp.rec, rig, tracks["vision"], tracks["laser"], checkpoint=ck if ck.is_file() else None)
+    return sensor_offsets_and_laser_clock(inp.rec, rig, tracks["vision"], tracks["laser"],
+                                          checkpoint=ck if ck.is_file() else None)
 
 
 def _sensor_truth_rows(rec: Path, sensors: list) -> tuple[AccuracyRow, ...]:  # noqa: ANN001
@@ -120,6 +128,7 @@ def fusion(inp: StageInput) -> StageOutput:
     from gtrig.errors import InputError
     from gtrig.evaluate.truth import score_on_recording
     from gtrig.fusion import FusionOptions, fuse_tracks
+    from gtrig.fusion.sync import offset_sigmas
     from gtrig.io.atomic import atomic_group
     from gtrig.io.posetrack import covariance_text
     from gtrig.io.tum import tum_text
@@ -129,7 +138,12 @@ def fusion(inp: StageInput) -> StageOutput:
     if not tracks:
         raise InputError("fusion needs GTvision's or GTlaser's run track")
     offsets = dict(inp.products.clock_offsets or {})
-    opts = FusionOptions(estimator=cfg.estimator, max_gap_s=cfg.max_gap_s, offsets_s=offsets)
+    # the offsets' intervals (sync.yaml, written by the sync stage beside): the fused poses are stamped on
+    # the odometry's clock, so an offset's uncertainty is the poses' along-track uncertainty
+    sync_yaml = inp.out / "sync.yaml"
+    sigmas = offset_sigmas(sync_yaml) if offsets and sync_yaml.is_file() else {}
+    opts = FusionOptions(estimator=cfg.estimator, max_gap_s=cfg.max_gap_s, offsets_s=offsets,
+                         offsets_sigma_s={k: v for k, v in sigmas.items() if k in offsets})
     fused, report = fuse_tracks(tracks, _odometry(inp.rec), opts)
     names = ("gt_fused.tum", "gt_fused_cov.csv", "fusion_report.json")
     texts = (tum_text(fused), covariance_text(fused), json.dumps(report.to_dict(), indent=1, default=float) + "\n")

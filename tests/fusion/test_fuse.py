@@ -113,3 +113,61 @@ def test_bad_inputs_are_one_line_errors(run) -> None:
     cov[7, 0, 0] = -1.0
     with pytest.raises(InputError, match="not positive definite"):
         fuse_tracks({"laser": run.laser.with_cov(cov)}, run.odometry)
+
+
+def test_an_offsets_uncertainty_widens_the_poses_along_the_motion(run) -> None:
+    """Both sources' clocks 4 ms off an applied offset of 0 (an offset wrong by its sigma): the poses are
+    then about v * 4 ms off along the motion; with the offsets' sigma given, their covariance says so."""
+    tracks = {"vision": run.vision.shifted(0.004), "laser": run.laser.shifted(0.004)}
+    zero = {"vision": 0.0, "laser": 0.0}
+    plain, _ = fuse_tracks(tracks, run.odometry, replace(INDEP, offsets_s=zero))
+    timed, rep = fuse_tracks(tracks, run.odometry, replace(INDEP, offsets_s=zero,
+                                                           offsets_sigma_s={"vision": 0.004, "laser": 0.005}))
+    np.testing.assert_allclose(timed.xyz, plain.xyz)  # the estimate itself is unchanged
+    assert nees(plain, run.motion).mean() / 3 > 2.0
+    assert 0.5 <= nees(timed, run.motion).mean() / 3 <= 2.0
+    v = np.gradient(plain.xytheta()[:, :2], plain.stamps_s, axis=0)
+    extra = timed.cov[:, :2, :2] - plain.cov[:, :2, :2]
+    want = 0.004**2 * v[:, :, None] * v[:, None, :]  # the best-timed source's sigma
+    np.testing.assert_allclose(extra[1:-1], want[1:-1], rtol=1e-6, atol=1e-15)
+    assert rep.sources["laser"]["offset_sigma_s"] == 0.005
+
+
+def _vision_off_in_x(run, seconds: float, dx: float) -> tuple[PoseTrack, np.ndarray, float]:  # noqa: ANN001
+    """GTvision with its poses ``dx`` off in x for ``seconds`` from 15 s into the run; which, and the start."""
+    xyt = run.vision.xytheta().copy()
+    t0 = float(run.vision.stamps_s[0]) + 15.0
+    bad = (run.vision.stamps_s > t0) & (run.vision.stamps_s < t0 + seconds)
+    xyt[bad, 0] += dx
+    return PoseTrack.from_xytheta(run.vision.stamps_s, xyt, cov=run.vision.cov, source="vision"), bad, t0
+
+
+def test_a_biased_stretch_is_gated_against_the_fixes_own_covariance(run) -> None:
+    """Two seconds of GTvision poses 15 mm off, agreeing with each other (7.5 sigma of their own covariance):
+    the decorrelation inflates each covariance by the count of fixes within 0.5 s, which must not let them
+    through the gate."""
+    vision, bad, t0 = _vision_off_in_x(run, 2.0, 0.015)
+    opts = FusionOptions(correlation_s=0.5)
+    track, rep = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, opts)
+    old, rep_old = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, replace(opts, gate_own_cov=False))
+    gated = {round(o.stamp_s, 6) for o in rep.outliers if o.stage == "gate" and o.source == "vision"}
+    assert {round(float(s), 6) for s in run.vision.stamps_s[bad]} <= gated
+    assert rep_old.sources["vision"]["rejected"] < bad.sum() / 2  # inflated, most of them passed
+    e, e_old = planar_errors(track, run.motion), planar_errors(old, run.motion)
+    assert np.abs(e[:, 0]).max() < np.abs(e_old[:, 0]).max()
+
+
+def test_a_stretch_disagreeing_with_the_prediction_is_down_weighted(run) -> None:
+    """Three seconds of GTvision poses 5 mm off (2.5 sigma each: the gate lets them in): their innovations
+    against the laser-and-odometry prediction stay above their covariance over the stretch, so the batch
+    weighs them by that disagreement and the fused track follows them less."""
+    vision, bad, t0 = _vision_off_in_x(run, 3.0, 0.005)
+    opts = FusionOptions(correlation_s=0.5)
+    track, rep = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, opts)
+    plain, _ = fuse_tracks({"vision": vision, "laser": run.laser}, run.odometry, replace(opts, innovation_window_s=0))
+    assert rep.sources["vision"]["rejected"] < bad.sum() / 2  # not a gate's matter
+    near = (track.stamps_s > t0) & (track.stamps_s < t0 + 3.0)
+    e, e_plain = planar_errors(track, run.motion)[near, 0], planar_errors(plain, run.motion)[near, 0]
+    assert np.abs(e).mean() < 0.8 * np.abs(e_plain).mean()
+    q, q_plain = nees(track, run.motion)[near], nees(plain, run.motion)[near]
+    assert q.mean() < q_plain.mean()  # and its covariance is the more honest there

@@ -120,11 +120,43 @@ def test_camera_offsets_recovered(run) -> None:  # noqa: ANN001
     vision = PoseTrack.from_xytheta(t, z, cov=cov, source="vision")
     share = camera_membership(t, stamps)
     assert np.allclose(share[np.isin(t, pair)], [0.0, 0.5, 0.5]) and np.allclose(share.sum(axis=1), 1.0)
-    est = camera_offsets(vision, stamps, _truth_reference(run), block_s=3.0)
+    est = camera_offsets(vision, stamps, _truth_reference(run), block_s=3.0, relative=False)
     e0 = est[0]
     assert e0.verdict == "ok" and abs(e0.offset_s - taus["c0"]) < 0.001 and e0.ci95_s[0] <= taus["c0"] <= e0.ci95_s[1]
     # c1 and c2 only ever appear together: only their mean is observable, so neither gets a number
     assert [e.verdict for e in est[1:]] == ["unobservable", "unobservable"]
+
+
+def test_camera_offsets_to_the_cameras_mean_ignore_a_reference_shifted_along_the_motion(run) -> None:  # noqa: ANN001
+    """A reference whose robot frame sits 0.8 mm ahead of the truth (GTlaser's hull frame shifted by its
+    range biases) looks, at a steady speed, like a clock offset of the reference: the same for every
+    camera. To GTvision's clock (the cameras' mean) it cancels; to the reference's clock it does not."""
+    rng = np.random.default_rng(9)
+    t0, t1 = run.motion.stamps_s[0] + 0.5, run.motion.stamps_s[-1] - 0.5
+    taus = {"c0": 0.001, "c1": -0.001}
+    stamps = {c: np.arange(t0 + ph, t1, 0.1) + taus[c] for c, ph in (("c0", 0.0), ("c1", 0.05))}
+    t = np.concatenate([stamps["c0"], stamps["c1"]])
+    z = np.concatenate([run.motion.planar(stamps[c] - taus[c]) for c in ("c0", "c1")])
+    order = np.argsort(t)
+    t, z = t[order], z[order] + rng.normal(0, 1, z.shape) * [0.0005, 0.0005, 0.0003]
+    cov = np.tile(np.diag([0.0005**2, 0.0005**2, 0.0003**2]), (t.size, 1, 1))
+    vision = PoseTrack.from_xytheta(t, z, cov=cov, source="vision")
+    ref = _truth_reference(run)
+    th = ref.xytheta[:, 2]
+    shifted = ref.xytheta.copy()
+    shifted[:, 0] += 0.0008 * np.cos(th)
+    shifted[:, 1] += 0.0008 * np.sin(th)
+    ref = Reference(ref.stamps_s, shifted, np.gradient(shifted, ref.stamps_s, axis=0), ref.cov)
+    share = camera_membership(t, stamps)
+    mean = float(share.mean(axis=0) @ [taus["c0"], taus["c1"]])
+    rel = camera_offsets(vision, stamps, ref, block_s=3.0)
+    for e, c in zip(rel, ("c0", "c1"), strict=True):
+        truth = taus[c] - mean
+        assert e.verdict == "ok" and abs(e.offset_s - truth) < 3e-4 and e.ci95_s[0] <= truth <= e.ci95_s[1], e
+    assert abs(share.mean(axis=0) @ [e.offset_s for e in rel]) < 1e-9
+    absolute = camera_offsets(vision, stamps, ref, block_s=3.0, relative=False)
+    common = np.mean([e.offset_s - taus[c] for e, c in zip(absolute, ("c0", "c1"), strict=True)])
+    assert abs(common) > 4e-4  # the shift shows as the reference's clock error when not taken out
 
 
 def test_restamp_laser_by_the_frames_shares() -> None:
@@ -172,3 +204,25 @@ def test_checkpoint_membership_reads_the_per_camera_checkpoint(tmp_path) -> None
     when, share = checkpoint_membership(np.array([10.002, 10.102, 11.0]), p, cams)
     assert when == pytest.approx([10.004, 10.102, 11.0], abs=1e-9)
     assert np.allclose(share, [[0.0, 1.0], [0.5, 0.5], [0.0, 0.0]])
+
+
+def test_laser_clock_is_the_poses_mean_share_weighted_scanner_offset() -> None:
+    from gtrig.fusion.sensor_sync import laser_clock
+    from gtrig.fusion.sync import OffsetEstimate
+
+    frames = np.array([10.0, 10.1, 10.2])
+    # frame 0: only scanner a; frame 1: a and b half each; frame 2: only b
+    ret = ScannerReturns(("a", "b"), np.zeros(4), np.zeros((4, 2)), np.array([0, 0, 1, 1]), np.zeros((4, 2)),
+                         np.zeros((2, 2)), np.ones(2), np.array([0, 1, 1, 2]), frames)
+    track = PoseTrack.from_xytheta(frames, np.zeros((3, 3)), source="laser")
+
+    def est(name: str, tau: float, half: float, verdict: str = "ok") -> OffsetEstimate:
+        return OffsetEstimate(f"laser/{name}", verdict, tau, (tau - half, tau + half), np.nan, 1.0, np.nan,
+                              np.zeros(0), np.zeros(0), 5, "")
+
+    z = 1.959963984540054
+    clock, sigma = laser_clock(ret, track, [est("a", 0.004, 0.001 * z), est("b", -0.002, 0.002 * z)])
+    # mean shares over the three poses: a (1 + 0.5) / 3 = 0.5, b 0.5
+    assert clock == pytest.approx(0.5 * 0.004 - 0.5 * 0.002)
+    assert sigma == pytest.approx(np.hypot(0.5 * 0.001, 0.5 * 0.002))
+    assert np.isnan(laser_clock(ret, track, [est("a", 0.004, 0.001), est("b", 0.0, 0.0, "ambiguous")])[0])

@@ -1,5 +1,7 @@
 """Clock offsets: injected odometry offsets recovered with intervals covering them; no turning -> unobservable."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -48,3 +50,29 @@ def test_refinement_starts_from_the_heading_fit_not_the_grid_peak(run) -> None:
     off_grid = replace(est, coarse_s=est.offset_s - 0.02)
     fine = refine_by_fusion(off_grid, fixes_from_track(run.laser), o, FusionOptions(correlation_s=0.0))
     assert fine.verdict == "ok" and abs(fine.offset_s) < 0.002 and fine.ci95_s[0] <= 0.0 <= fine.ci95_s[1]
+
+
+def test_both_sources_offsets_made_consistent_with_gtlasers_clock(run) -> None:
+    """GTlaser's clock 3 ms behind GTvision's: each source's offset to odometry alone scatters by the
+    odometry's slip, apart; combined with GTlaser's clock to GTvision's, their difference is that clock
+    and both intervals still cover the truth."""
+    from gtrig.fusion.sync import combine_with_laser_clock
+
+    odo = run.odometry
+    laser = run.laser.shifted(0.003)
+    opts = FusionOptions(correlation_s=0.0)
+    est = {}
+    for name, tr in (("vision", run.vision), ("laser", laser)):
+        e = estimate_offset(odo.stamps_s, odo.xytheta[:, 2], tr.stamps_s, tr.yaw_rad(), name)
+        est[name] = refine_by_fusion(e, fixes_from_track(tr, name), odo, opts)
+        assert est[name].verdict == "ok"
+    v, la = combine_with_laser_clock(est["vision"], est["laser"], 0.003, 0.0003)
+    assert la.offset_s - v.offset_s == pytest.approx(0.003, abs=1e-12)
+    for e, truth, alone in ((v, 0.0, est["vision"]), (la, 0.003, est["laser"])):
+        assert e.verdict == "ok" and e.ci95_s[0] <= truth <= e.ci95_s[1]
+        assert e.ci95_s[1] - e.ci95_s[0] >= 0.9 * min(alone.ci95_s[1] - alone.ci95_s[0] for alone in est.values())
+    lo, hi = sorted((est["vision"].offset_s, est["laser"].offset_s - 0.003))
+    assert lo <= v.offset_s <= hi  # between the two estimates of GTvision's clock
+    # an estimate that is not ok leaves both as they are
+    amb = replace(est["laser"], verdict="ambiguous")
+    assert combine_with_laser_clock(est["vision"], amb, 0.003, 0.0003) == (est["vision"], amb)
