@@ -415,7 +415,7 @@ class MarkerDetector:
         receives the candidates (raw pixels) as soon as they are found."""
         p = self.params
         nt = _threads.threads(p.threads)
-        quads = find_candidates(gray, p.candidates, self._hole_frac, trace)
+        quads = find_candidates(gray, p.candidates, self._hole_frac, trace, nt)
         self._first_quads = quads
         if first is not None:
             first.set_result(quads)

@@ -7,9 +7,10 @@ OpenCV's own ArUco detector uses too and which GTvision's worker processes set t
 
 from __future__ import annotations
 
+import itertools
 import os
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
 
@@ -52,3 +53,50 @@ def run_split(fn: Callable[..., T], parts: Sequence[tuple[Any, ...]]) -> list[T]
         return [fn(*parts[0])]
     later = [helper_pool().submit(fn, *p) for p in parts[1:]]
     return [fn(*parts[0])] + [f.result() for f in later]
+
+
+def ordered_map(fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], threads: int) -> Iterator[T]:
+    """``fn(*t)`` for every task ``t``, yielded in order, with ``threads - 1`` helper threads working
+    ahead of the caller.
+
+    Each task is claimed once, by whichever thread reaches it first, so the caller never waits for a
+    task nobody has started (it runs the next unclaimed one itself), the helper pool may be busy
+    elsewhere, and the results are those of ``[fn(*t) for t in tasks]`` whatever the threads. The
+    caller consumes a result (pure Python, holding the GIL) while a helper computes the next one
+    (OpenCV and the compiled kernels release it).
+    """
+    n = len(tasks)
+    if threads < 2 or n < 2:
+        for t in tasks:
+            yield fn(*t)
+        return
+    claims = itertools.count()  # next() on a count is atomic under the GIL
+    results: list[Any] = [None] * n
+    errors: list[BaseException | None] = [None] * n
+    done = [threading.Event() for _ in range(n)]
+
+    def run(k: int) -> None:
+        try:
+            results[k] = fn(*tasks[k])
+        except BaseException as exc:  # handed to the caller, raised where the result is consumed
+            errors[k] = exc
+        finally:
+            done[k].set()
+
+    def helper() -> None:
+        while (k := next(claims)) < n:
+            run(k)
+
+    for _ in range(min(threads, n) - 1):
+        helper_pool().submit(helper)
+    for k in range(n):
+        while not done[k].is_set():
+            j = next(claims)
+            if j >= n:
+                done[k].wait()
+                break
+            run(j)
+        if errors[k] is not None:
+            raise errors[k]
+        yield results[k]
+        results[k] = None

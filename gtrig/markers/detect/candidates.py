@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from gtrig.markers.detect import _kernels
+from gtrig.markers.detect import _kernels, _threads
 
 
 @dataclass(frozen=True)
@@ -164,7 +164,7 @@ def robust_quad(contour: NDArray[np.int32], approx: NDArray[np.float64]) -> NDAr
 
 def find_candidates(
     gray: NDArray[np.uint8], params: CandidateParams, max_hole_fraction: float | None = None,
-    trace: list | None = None,
+    trace: list | None = None, threads: int = 1,
 ) -> list[NDArray[np.float64]]:
     """Candidate quadrilaterals (each (4, 2), clockwise on screen, pixel coordinates) of dark squares.
 
@@ -191,14 +191,19 @@ def find_candidates(
         # squares already found, filled: a blob of a later threshold centred in one is the same marker
         if out:
             cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in out], 255)
+        # a box's contours do not depend on what the earlier boxes found: with two threads a helper
+        # traces the next boxes (OpenCV releases the GIL) while this thread tests the blobs of one
+        tasks, looser = [], []
         for thr in more:
-            region, boxes = regions[thr > params.ratio_threshold]
-            for box in boxes:
-                found = _mask_candidates(_contours_at(gray, bg, thr, params.smooth, box), params, max_side,
-                                         max_hole_fraction, None if trace is None else rejected, covered, region)
-                out.extend(found)
-                if found:  # (the boxes may overlap: a blob in two of them is one candidate)
-                    cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
+            loose = thr > params.ratio_threshold
+            tasks += [(gray, bg, thr, params.smooth, box) for box in regions[loose][1]]
+            looser += [loose] * len(regions[loose][1])
+        for loose, contours in zip(looser, _threads.ordered_map(_contours_at, tasks, threads), strict=True):
+            found = _mask_candidates(contours, params, max_side, max_hole_fraction,
+                                     None if trace is None else rejected, covered, regions[loose][0])
+            out.extend(found)
+            if found:  # (the boxes may overlap: a blob in two of them is one candidate)
+                cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
     if trace is not None:
         # a blob that failed at one threshold but gave a candidate at another is not a rejection
         if out and not (more and seeds):
