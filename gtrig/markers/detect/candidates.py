@@ -113,7 +113,6 @@ def dark_mask(gray: NDArray[np.uint8], max_side_px: float, scale: int = 4, thres
 
 # corner / side index helpers: side i runs from corner i to corner i + 1
 _NEXT = np.array([1, 2, 3, 0])
-_PREV = np.array([3, 0, 1, 2])
 
 
 def _ordered_cw(quad: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -123,18 +122,6 @@ def _ordered_cw(quad: NDArray[np.float64]) -> NDArray[np.float64]:
     return quad if area2 > 0 else quad[::-1].copy()
 
 
-def _line_intersections(lines: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Corner i = intersection of lines i-1 and i; ``lines`` (4, 3) as (nx, ny, c) with n.x = c.
-
-    Solved by Cramer's rule (non-finite where two lines are parallel).
-    """
-    a1, b1, c1 = lines[_PREV].T
-    a2, b2, c2 = lines.T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / (a1 * b2 - a2 * b1)
-        return np.column_stack([(c1 * b2 - c2 * b1) * inv, (a1 * c2 - a2 * c1) * inv])
-
-
 def robust_quad(contour: NDArray[np.int32], approx: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """Refine 4 approximate vertices by Huber line fits to the contour points of each side.
 
@@ -142,24 +129,19 @@ def robust_quad(contour: NDArray[np.int32], approx: NDArray[np.float64]) -> NDAr
     Returns (4, 2) corners ordered clockwise on screen, or None when a side has too few points.
     """
     pts = contour.reshape(-1, 2)
-    t = approx[_NEXT] - approx  # (4, 2) sides
-    if np.hypot(t[:, 0], t[:, 1]).min() < 3:
-        return None
-    sel = _kernels.side_points(np.ascontiguousarray(pts, np.float64), np.ascontiguousarray(approx, np.float64))
-    if sel.sum(axis=1).min() < 3:
+    approx = np.ascontiguousarray(approx, np.float64)
+    # the tests and the intersections are compiled: called for every blob that passes the shape
+    # tests, their NumPy forms cost more than the four line fits
+    sel, ok = _kernels.side_select(np.ascontiguousarray(pts, np.float64), approx)
+    if not ok:
         return None
     pts32 = pts.astype(np.float32)
     lines = np.empty((4, 3))
     for i in range(4):
         vx, vy, x0, y0 = cv2.fitLine(pts32[sel[i]], cv2.DIST_HUBER, 0, 0.01, 0.01).ravel()
         lines[i] = (vy, -vx, float(vy) * float(x0) - float(vx) * float(y0))
-    q = _line_intersections(lines)
-    if not np.all(np.isfinite(q)):
-        return None
-    moved = np.max(np.hypot(*(q - approx).T))
-    if moved > max(3.0, 0.1 * np.ptp(approx)):
-        return None
-    return q
+    q, ok = _kernels.quad_from_lines(lines, approx)
+    return q if ok else None
 
 
 def find_candidates(
