@@ -234,10 +234,14 @@ def _seed_regions(shape: tuple[int, ...], seeds: list[tuple[int, int, int, int]]
     """
     h_img, w_img = shape[:2]
     region = np.zeros((h_img, w_img), np.uint8)
-    for x, y, w, h in seeds:
-        mx, my = (max(h - w, 0) + max(w, h) // 8 + 2, max(w - h, 0) + max(w, h) // 8 + 2) if looser else (2, 2)
-        cv2.rectangle(region, (max(x - mx, 0), max(y - my, 0)),
-                      (min(x + w + mx, w_img - 1), min(y + h + my, h_img - 1)), 255, -1)
+    x, y, w, h = np.array(seeds, np.int64).reshape(-1, 4).T
+    if looser:
+        big = np.maximum(w, h) // 8 + 2
+        mx, my = np.maximum(h - w, 0) + big, np.maximum(w - h, 0) + big
+    else:
+        mx = my = np.full(len(x), 2, np.int64)
+    _kernels.fill_boxes(region, np.column_stack([np.maximum(x - mx, 0), np.maximum(y - my, 0),
+                                                 np.minimum(x + w + mx, w_img - 1), np.minimum(y + h + my, h_img - 1)]))
     # parts less than 16 px apart share a box (on an 8 x coarser grid, dilated by one): each box costs a
     # few OpenCV calls, and clutter leaves tens of small seeds
     coarse = cv2.dilate(cv2.resize(region, ((w_img + 7) // 8, (h_img + 7) // 8), interpolation=cv2.INTER_AREA),
