@@ -371,10 +371,12 @@ class MarkerDetector:
             return []
         codes = self._all_codes()
         late = [i for i in todo if i not in done]
-        reads = [] if not late else read_blurred(
-            gray, np.array([quads_all[i] for i in late]), codes, self.spec.cells, self.spec.border_cells,
-            self.params.blurred, noise)
-        reads = [dataclasses.replace(r, index=late[r.index]) for r in reads]
+        # each candidate is read on its own (read_blurred's loop): with two threads a helper reads the
+        # next while this thread reads one, their compiled fits overlapping
+        tasks = [(gray, quads_all[i][None], codes, self.spec.cells, self.spec.border_cells, self.params.blurred, noise)
+                 for i in late]
+        each = _threads.ordered_map(read_blurred, tasks, _threads.threads(self.params.threads))
+        reads = [dataclasses.replace(r, index=i) for i, rs in zip(late, each, strict=True) for r in rs]
         keep = set(todo)
         reads = sorted(reads + [r for r in early or [] if r.index in keep], key=lambda r: r.index)
         if trace is not None:
