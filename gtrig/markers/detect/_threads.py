@@ -10,7 +10,7 @@ from __future__ import annotations
 import itertools
 import os
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
 
@@ -100,3 +100,62 @@ def ordered_map(fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], threads:
             raise errors[k]
         yield results[k]
         results[k] = None
+
+
+_OPEN, _CLAIMED, _SKIPPED = 0, 1, 2
+
+
+class Claims:
+    """Tasks ``fn(*t)`` that a helper thread runs ahead, in order (:meth:`work`), while the caller
+    decides which results it needs (:meth:`skip` the others) and takes them (:meth:`get`).
+
+    Each task runs at most once, in whichever thread claims it first: :meth:`get` runs a task nobody
+    has started itself, so the caller never waits on a helper that is busy elsewhere, and a result is
+    that of ``fn(*t)`` whatever the threads.
+    """
+
+    def __init__(self, fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]]) -> None:
+        n = len(tasks)
+        self._fn, self._tasks = fn, tasks
+        self._lock = threading.Lock()
+        self._state = [_OPEN] * n
+        self._results: list[Any] = [None] * n
+        self._errors: list[BaseException | None] = [None] * n
+        self._done = [threading.Event() for _ in range(n)]
+
+    def _claim(self, k: int, skipped_too: bool = False) -> bool:
+        with self._lock:
+            if self._state[k] == _OPEN or (skipped_too and self._state[k] == _SKIPPED):
+                self._state[k] = _CLAIMED
+                return True
+            return False
+
+    def _run(self, k: int) -> None:
+        try:
+            self._results[k] = self._fn(*self._tasks[k])
+        except BaseException as exc:  # raised in the caller by get()
+            self._errors[k] = exc
+        finally:
+            self._done[k].set()
+
+    def work(self) -> None:
+        """Run every task not yet claimed or skipped, in order (the helper's side)."""
+        for k in range(len(self._tasks)):
+            if self._claim(k):
+                self._run(k)
+
+    def skip(self, ks: Iterable[int]) -> None:
+        """Tasks whose results are not needed: not started if nobody has started them yet."""
+        with self._lock:
+            for k in ks:
+                if self._state[k] == _OPEN:
+                    self._state[k] = _SKIPPED
+
+    def get(self, k: int) -> Any:
+        """The result of task ``k``, run here if nobody has started it (skipped or not)."""
+        if self._claim(k, skipped_too=True):
+            self._run(k)
+        self._done[k].wait()
+        if self._errors[k] is not None:
+            raise self._errors[k]
+        return self._results[k]
