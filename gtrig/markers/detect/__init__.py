@@ -303,31 +303,37 @@ class MarkerDetector:
             dets = self._detect_sharp(gray, trace)
             return self._merge_paths(gray, dets, cands, trace)
         # the second path beside the first: in a helper thread its candidate stage (OpenCV's filters
-        # and contours, which release the GIL), then the reading of its candidates one by one, ahead
-        # of knowing which the first path's detections leave to it (those it covers are skipped then;
-        # the few read in vain cost CPU the second core has spare while the first path runs)
+        # and contours, which release the GIL), then, once the first path's candidates are known, the
+        # reading of those of its candidates that none of them covers; the others wait for the first
+        # path's detections (read ahead, most would be read in vain: half of them lie in markers the
+        # first path finds, and on the bench those cost twice the others' CPU)
         ahead: Future[tuple[tuple[list[NDArray[np.float64]], float], _threads.Claims]] = Future()
-        job = _threads.helper_pool().submit(self._blurred_ahead, gray, ahead)
+        first: Future[list[NDArray[np.float64]]] = Future()
+        jobs = [_threads.helper_pool().submit(self._blurred_ahead, gray, ahead, first)]
         try:
-            dets = self._detect_sharp(gray, trace)
+            dets = self._detect_sharp(gray, trace, first)
             cands, reads = ahead.result()
             try:
-                return self._merge_paths(gray, dets, cands, trace, reads)
+                return self._merge_paths(gray, dets, cands, trace, reads, jobs)
             finally:
                 reads.skip(range(len(cands[0])))
         finally:
-            job.result()  # no read left running into the next image (at most the one in progress)
+            if not first.done():
+                first.set_result([])
+            for job in jobs:
+                job.result()  # no read left running into the next image (at most the one in progress)
 
     def _merge_paths(self, gray: NDArray[np.uint8], dets: list[Detection],
                      cands: tuple[list[NDArray[np.float64]], float], trace: list[Rejection] | None,
-                     reads: _threads.Claims | None = None) -> list[Detection]:
+                     reads: _threads.Claims | None = None, jobs: list[Future[None]] | None = None
+                     ) -> list[Detection]:
         """The first path's detections ``dets`` with the second path's on its candidates ``cands``
-        (read, if given, from ``reads``: :meth:`_blurred_ahead`)."""
+        (read, if given, from ``reads``: :meth:`_blurred_ahead`; ``jobs`` receives the helper's)."""
         # markers read only through the blur model in the pre-decoder are small and blurred: the second
         # path, whose model is made for them, reads them too, and its reading replaces the first's
         prov = [d for d in dets if id(d) in self._provisional]
         sure = [d for d in dets if id(d) not in self._provisional]
-        blurred = self._detect_blurred(gray, cands, sure, trace, reads)
+        blurred = self._detect_blurred(gray, cands, sure, trace, reads, jobs)
         keep = [d for d in prov
                 if not any(b.id == d.id and np.linalg.norm(b.corners_px.mean(axis=0) - d.corners_px.mean(axis=0))
                            < 0.25 * np.sqrt(_area(d.corners_px)) for b in blurred)]
@@ -356,10 +362,12 @@ class MarkerDetector:
                 for q in quads]
 
     def _blurred_ahead(self, gray: NDArray[np.uint8],
-                       ahead: Future[tuple[tuple[list[NDArray[np.float64]], float], _threads.Claims]]) -> None:
+                       ahead: Future[tuple[tuple[list[NDArray[np.float64]], float], _threads.Claims]],
+                       first: Future[list[NDArray[np.float64]]]) -> None:
         """The helper thread's part: the second path's candidates (:meth:`_blurred_candidates`), handed
         over in ``ahead`` with their reads (a :class:`._threads.Claims` of :func:`.blurred.read_blurred`
-        per candidate), which it then runs in order until the caller skips those it does not need."""
+        per candidate), then the reads of those whose centre lies in no quad of ``first`` (the first
+        path's candidates, raw pixels, once known)."""
         try:
             cands = self._blurred_candidates(gray)
             reads = _threads.Claims(read_blurred, self._read_tasks(gray, cands))
@@ -367,14 +375,18 @@ class MarkerDetector:
             ahead.set_exception(exc)
             return
         ahead.set_result((cands, reads))
-        reads.work()
+        if cands[0]:
+            reads.work(_outside(cands[0], first.result()))
 
     def _detect_blurred(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float],
                         found: list[Detection], trace: list[Rejection] | None = None,
-                        ahead: _threads.Claims | None = None) -> list[Detection]:
+                        ahead: _threads.Claims | None = None, jobs: list[Future[None]] | None = None
+                        ) -> list[Detection]:
         """The second path (:mod:`.blurred`) on its candidates ``cands`` (from
         :meth:`_blurred_candidates`) that no detection of the first path (``found``) covers.
-        ``ahead`` holds their reads, made or to make (:meth:`_blurred_ahead`).
+        ``ahead`` holds their reads, made or to make (:meth:`_blurred_ahead`); with it a helper thread
+        reads the next candidate while this one reads one (their compiled fits overlapping), its job
+        put in ``jobs``.
 
         It works in raw pixels: over a marker of at most ``max_side_px`` the lens distortion is close
         to a homography.
@@ -391,6 +403,8 @@ class MarkerDetector:
             each = (read_blurred(*tasks[i]) for i in todo)
         else:
             ahead.skip(sorted(set(range(len(quads_all))) - set(todo)))
+            if jobs is not None and len(todo) > 1:
+                jobs.append(_threads.helper_pool().submit(ahead.work, todo))
             each = map(ahead.get, todo)
         reads = [dataclasses.replace(r, index=i) for i, rs in zip(todo, each, strict=True) for r in rs]
         if trace is not None:
@@ -425,11 +439,15 @@ class MarkerDetector:
                        if np.isfinite(shift[k]) else "edges do not intersect")
             trace.append(Rejection(Qr[k].copy(), "fit", why))
 
-    def _detect_sharp(self, gray: NDArray[np.uint8], trace: list[Rejection] | None = None) -> list[Detection]:
-        """The first path: candidates, edge fits and decoding (module docstring, steps 1-5)."""
+    def _detect_sharp(self, gray: NDArray[np.uint8], trace: list[Rejection] | None = None,
+                      first: Future[list[NDArray[np.float64]]] | None = None) -> list[Detection]:
+        """The first path: candidates, edge fits and decoding (module docstring, steps 1-5); ``first``
+        receives the candidates (raw pixels) as soon as they are found."""
         p = self.params
         nt = _threads.threads(p.threads)
         quads = find_candidates(gray, p.candidates, self._hole_frac, trace, nt)
+        if first is not None:
+            first.set_result(quads)
         if not quads:
             return []
         und = self._undistorter(gray.shape)

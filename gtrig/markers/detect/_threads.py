@@ -138,9 +138,10 @@ class Claims:
         finally:
             self._done[k].set()
 
-    def work(self) -> None:
-        """Run every task not yet claimed or skipped, in order (the helper's side)."""
-        for k in range(len(self._tasks)):
+    def work(self, order: Iterable[int] | None = None) -> None:
+        """Run the tasks ``order`` (all by default) not yet claimed or skipped, in turn (the helper's
+        side)."""
+        for k in range(len(self._tasks)) if order is None else order:
             if self._claim(k):
                 self._run(k)
 
