@@ -138,9 +138,9 @@ class DetectorParams:
         default, ``BlurredParams(enabled=False)`` turns it off).
     threads : threads one detection may use; 0 follows OpenCV's setting (``cv2.getNumThreads()``,
         which OpenCV's own ArUco detector uses too, and which GTvision's worker processes set to 1).
-        With two or more the second path's candidate stage runs in a helper thread beside the first
-        path, and the edge fits are split between two threads (:mod:`._threads`); the output is the
-        same.
+        With two or more a helper thread runs, beside the first path, the second path's candidate
+        stage and its reads, and traces the further thresholds' boxes ahead of the blob tests; the
+        edge fits are split between two threads (:mod:`._threads`); the output is the same.
     tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored
         levels back to light, where the blurred-step model holds.
