@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 
 from gtrig.errors import InputError
 from gtrig.markers.detect import _threads
-from gtrig.markers.detect.blurred import BlurredParams, BlurredRead, find_blurred_candidates, image_noise, read_blurred
+from gtrig.markers.detect.blurred import BlurredParams, find_blurred_candidates, image_noise, read_blurred
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
 from gtrig.markers.detect.decode import sample_cells, unblur_cells
@@ -138,9 +138,9 @@ class DetectorParams:
         default, ``BlurredParams(enabled=False)`` turns it off).
     threads : threads one detection may use; 0 follows OpenCV's setting (``cv2.getNumThreads()``,
         which OpenCV's own ArUco detector uses too, and which GTvision's worker processes set to 1).
-        With two or more the second path's candidate stage runs in a helper thread beside the first
-        path, and the edge fits are split between two threads (:mod:`._threads`); the output is the
-        same.
+        With two or more a helper thread runs, beside the first path, the second path's candidate
+        stage and its reads, and traces the further thresholds' boxes ahead of the blob tests; the
+        edge fits are split between two threads (:mod:`._threads`); the output is the same.
     tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored
         levels back to light, where the blurred-step model holds.
@@ -298,28 +298,42 @@ class MarkerDetector:
             # without the second path the first path keeps to the markers it reads plainly (those read
             # only through the blur model are the second path's regime, where its corners are better)
             return _dedupe([d for d in self._detect_sharp(gray, trace) if id(d) not in self._provisional])
-        early: list[BlurredRead] | None = None
         if _threads.threads(self.params.threads) < 2:
             cands = self._blurred_candidates(gray)
             dets = self._detect_sharp(gray, trace)
-        else:
-            # the second path beside the first: its candidate stage (OpenCV's filters and contours,
-            # which release the GIL), then, once the first path's candidates are known, the reading of
-            # those of its candidates that no first-path candidate covers (the others wait for the
-            # first path's detections)
-            first: Future[list[NDArray[np.float64]]] = Future()
-            later = _threads.helper_pool().submit(self._blurred_early, gray, first)
+            return self._merge_paths(gray, dets, cands, trace)
+        # the second path beside the first: in a helper thread its candidate stage (OpenCV's filters
+        # and contours, which release the GIL), then, once the first path's candidates are known, the
+        # reading of those of its candidates that none of them covers; the others wait for the first
+        # path's detections (read ahead, most would be read in vain: half of them lie in markers the
+        # first path finds, and on the bench those cost twice the others' CPU)
+        ahead: Future[tuple[tuple[list[NDArray[np.float64]], float], _threads.Claims]] = Future()
+        first: Future[list[NDArray[np.float64]]] = Future()
+        jobs = [_threads.helper_pool().submit(self._blurred_ahead, gray, ahead, first)]
+        try:
+            dets = self._detect_sharp(gray, trace, first)
+            cands, reads = ahead.result()
             try:
-                dets = self._detect_sharp(gray, trace, first)
+                return self._merge_paths(gray, dets, cands, trace, reads, jobs)
             finally:
-                if not first.done():
-                    first.set_result([])
-            cands, early = later.result()
+                reads.skip(range(len(cands[0])))
+        finally:
+            if not first.done():
+                first.set_result([])
+            for job in jobs:
+                job.result()  # no read left running into the next image (at most the one in progress)
+
+    def _merge_paths(self, gray: NDArray[np.uint8], dets: list[Detection],
+                     cands: tuple[list[NDArray[np.float64]], float], trace: list[Rejection] | None,
+                     reads: _threads.Claims | None = None, jobs: list[Future[None]] | None = None
+                     ) -> list[Detection]:
+        """The first path's detections ``dets`` with the second path's on its candidates ``cands``
+        (read, if given, from ``reads``: :meth:`_blurred_ahead`; ``jobs`` receives the helper's)."""
         # markers read only through the blur model in the pre-decoder are small and blurred: the second
         # path, whose model is made for them, reads them too, and its reading replaces the first's
         prov = [d for d in dets if id(d) in self._provisional]
         sure = [d for d in dets if id(d) not in self._provisional]
-        blurred = self._detect_blurred(gray, cands, sure, trace, early)
+        blurred = self._detect_blurred(gray, cands, sure, trace, reads, jobs)
         keep = [d for d in prov
                 if not any(b.id == d.id and np.linalg.norm(b.corners_px.mean(axis=0) - d.corners_px.mean(axis=0))
                            < 0.25 * np.sqrt(_area(d.corners_px)) for b in blurred)]
@@ -339,44 +353,60 @@ class MarkerDetector:
         quads = find_blurred_candidates(gray, p.blurred, p.candidates.max_side_px(gray.shape), p.candidates.scale)
         return quads, image_noise(gray) if quads else float("nan")
 
-    def _blurred_early(self, gray: NDArray[np.uint8], first: Future[list[NDArray[np.float64]]]
-                       ) -> tuple[tuple[list[NDArray[np.float64]], float], list[BlurredRead]]:
-        """The second path's candidates (:meth:`_blurred_candidates`) and the reads of those whose
-        centre lies in no quad of ``first`` (the first path's candidates, raw pixels, once known)."""
-        cands = self._blurred_candidates(gray)
+    def _read_tasks(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float]
+                    ) -> list[tuple[object, ...]]:
+        """:func:`.blurred.read_blurred`'s arguments for each candidate of ``cands`` on its own (its
+        loop reads them independently)."""
         quads, noise = cands
-        idx = _outside(quads, first.result())
-        if not idx:
-            return cands, []
-        reads = read_blurred(gray, np.array([quads[i] for i in idx]), self._all_codes(), self.spec.cells,
-                             self.spec.border_cells, self.params.blurred, noise)
-        return cands, [dataclasses.replace(r, index=idx[r.index]) for r in reads]
+        return [(gray, q[None], self._all_codes(), self.spec.cells, self.spec.border_cells, self.params.blurred, noise)
+                for q in quads]
+
+    def _blurred_ahead(self, gray: NDArray[np.uint8],
+                       ahead: Future[tuple[tuple[list[NDArray[np.float64]], float], _threads.Claims]],
+                       first: Future[list[NDArray[np.float64]]]) -> None:
+        """The helper thread's part: the second path's candidates (:meth:`_blurred_candidates`), handed
+        over in ``ahead`` with their reads (a :class:`._threads.Claims` of :func:`.blurred.read_blurred`
+        per candidate), then the reads of those whose centre lies in no quad of ``first`` (the first
+        path's candidates, raw pixels, once known)."""
+        try:
+            cands = self._blurred_candidates(gray)
+            reads = _threads.Claims(read_blurred, self._read_tasks(gray, cands))
+        except BaseException as exc:
+            ahead.set_exception(exc)
+            return
+        ahead.set_result((cands, reads))
+        if cands[0]:
+            reads.work(_outside(cands[0], first.result()))
 
     def _detect_blurred(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float],
                         found: list[Detection], trace: list[Rejection] | None = None,
-                        early: list[BlurredRead] | None = None) -> list[Detection]:
+                        ahead: _threads.Claims | None = None, jobs: list[Future[None]] | None = None
+                        ) -> list[Detection]:
         """The second path (:mod:`.blurred`) on its candidates ``cands`` (from
         :meth:`_blurred_candidates`) that no detection of the first path (``found``) covers.
-        ``early`` are reads already made (:meth:`_blurred_early`): their candidates are not read again.
+        ``ahead`` holds their reads, made or to make (:meth:`_blurred_ahead`); with it a helper thread
+        reads the next candidate while this one reads one (their compiled fits overlapping), its job
+        put in ``jobs``.
 
         It works in raw pixels: over a marker of at most ``max_side_px`` the lens distortion is close
         to a homography.
         """
-        quads_all, noise = cands
+        quads_all, _noise = cands
         # a candidate whose centre lies inside a detection is that marker (or a part of it)
         todo = _outside(quads_all, [d.corners_px for d in found])
-        done = set() if early is None else set(_outside(quads_all, self._first_quads))
         quads = [quads_all[i] for i in todo]
         if not quads:
             return []
         codes = self._all_codes()
-        late = [i for i in todo if i not in done]
-        reads = [] if not late else read_blurred(
-            gray, np.array([quads_all[i] for i in late]), codes, self.spec.cells, self.spec.border_cells,
-            self.params.blurred, noise)
-        reads = [dataclasses.replace(r, index=late[r.index]) for r in reads]
-        keep = set(todo)
-        reads = sorted(reads + [r for r in early or [] if r.index in keep], key=lambda r: r.index)
+        if ahead is None:
+            tasks = self._read_tasks(gray, cands)
+            each = (read_blurred(*tasks[i]) for i in todo)
+        else:
+            ahead.skip(sorted(set(range(len(quads_all))) - set(todo)))
+            if jobs is not None and len(todo) > 1:
+                jobs.append(_threads.helper_pool().submit(ahead.work, todo))
+            each = map(ahead.get, todo)
+        reads = [dataclasses.replace(r, index=i) for i, rs in zip(todo, each, strict=True) for r in rs]
         if trace is not None:
             read_at = [r.corners.mean(axis=0) for r in reads]
             for q in quads:
@@ -415,8 +445,7 @@ class MarkerDetector:
         receives the candidates (raw pixels) as soon as they are found."""
         p = self.params
         nt = _threads.threads(p.threads)
-        quads = find_candidates(gray, p.candidates, self._hole_frac, trace)
-        self._first_quads = quads
+        quads = find_candidates(gray, p.candidates, self._hole_frac, trace, nt)
         if first is not None:
             first.set_result(quads)
         if not quads:

@@ -578,6 +578,52 @@ def side_points(pts: NDArray[np.float64], approx: NDArray[np.float64]) -> NDArra
     return sel
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def side_select(pts: NDArray[np.float64], approx: NDArray[np.float64]) -> tuple[NDArray[np.bool_], bool]:
+    """:func:`side_points` of ``pts`` (P, 2) for the quad ``approx`` (4, 2), and whether the quad is
+    usable: every side at least 3 px long and holding at least 3 points (:func:`.candidates.robust_quad`)."""
+    for i in range(4):
+        j = (i + 1) % 4
+        if math.hypot(approx[j, 0] - approx[i, 0], approx[j, 1] - approx[i, 1]) < 3.0:
+            return np.zeros((4, 0), np.bool_), False
+    sel = side_points(pts, approx)
+    for i in range(4):
+        if sel[i].sum() < 3:
+            return sel, False
+    return sel, True
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def quad_from_lines(lines: NDArray[np.float64], approx: NDArray[np.float64]) -> tuple[NDArray[np.float64], bool]:
+    """Corner ``i`` = intersection of lines ``i - 1`` and ``i`` (``lines`` (4, 3) as (nx, ny, c) with
+    n.x = c, Cramer's rule), and whether the quad (4, 2) is accepted: finite, and no corner moved from
+    ``approx`` (4, 2) by more than ``max(3, 0.1 peak-to-peak of approx)`` (:func:`.candidates.robust_quad`)."""
+    q = np.empty((4, 2))
+    moved = 0.0
+    for i in range(4):
+        h = (i + 3) % 4
+        a1, b1, c1 = lines[h, 0], lines[h, 1], lines[h, 2]
+        a2, b2, c2 = lines[i, 0], lines[i, 1], lines[i, 2]
+        inv = 1.0 / (a1 * b2 - a2 * b1)
+        q[i, 0] = (c1 * b2 - c2 * b1) * inv
+        q[i, 1] = (a1 * c2 - a2 * c1) * inv
+        if not (math.isfinite(q[i, 0]) and math.isfinite(q[i, 1])):
+            return q, False
+        moved = max(moved, math.hypot(q[i, 0] - approx[i, 0], q[i, 1] - approx[i, 1]))
+    return q, moved <= max(3.0, 0.1 * (approx.max() - approx.min()))
+
+
+@njit(cache=True, nogil=True)
+def fill_boxes(region: NDArray[np.uint8], boxes: NDArray[np.int64]) -> None:
+    """Set to 255 the pixels of ``region`` (H, W) inside each box ``(x0, y0, x1, y1)`` of ``boxes``
+    (B, 4), both ends included (``cv2.rectangle`` filled, without a Python call per box)."""
+    for b in range(boxes.shape[0]):
+        x0, y0, x1, y1 = boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3]
+        for y in range(y0, y1 + 1):
+            for x in range(x0, x1 + 1):
+                region[y, x] = 255
+
+
 @njit(cache=True, inline="always")
 def _popcount64(x: np.uint64) -> int:
     """Set bits of a 64-bit word (SWAR: pairs, nibbles, bytes, then one multiply)."""

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from gtrig.markers.detect import _kernels
+from gtrig.markers.detect import _kernels, _threads
 
 
 @dataclass(frozen=True)
@@ -113,7 +113,6 @@ def dark_mask(gray: NDArray[np.uint8], max_side_px: float, scale: int = 4, thres
 
 # corner / side index helpers: side i runs from corner i to corner i + 1
 _NEXT = np.array([1, 2, 3, 0])
-_PREV = np.array([3, 0, 1, 2])
 
 
 def _ordered_cw(quad: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -123,18 +122,6 @@ def _ordered_cw(quad: NDArray[np.float64]) -> NDArray[np.float64]:
     return quad if area2 > 0 else quad[::-1].copy()
 
 
-def _line_intersections(lines: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Corner i = intersection of lines i-1 and i; ``lines`` (4, 3) as (nx, ny, c) with n.x = c.
-
-    Solved by Cramer's rule (non-finite where two lines are parallel).
-    """
-    a1, b1, c1 = lines[_PREV].T
-    a2, b2, c2 = lines.T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / (a1 * b2 - a2 * b1)
-        return np.column_stack([(c1 * b2 - c2 * b1) * inv, (a1 * c2 - a2 * c1) * inv])
-
-
 def robust_quad(contour: NDArray[np.int32], approx: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """Refine 4 approximate vertices by Huber line fits to the contour points of each side.
 
@@ -142,29 +129,24 @@ def robust_quad(contour: NDArray[np.int32], approx: NDArray[np.float64]) -> NDAr
     Returns (4, 2) corners ordered clockwise on screen, or None when a side has too few points.
     """
     pts = contour.reshape(-1, 2)
-    t = approx[_NEXT] - approx  # (4, 2) sides
-    if np.hypot(t[:, 0], t[:, 1]).min() < 3:
-        return None
-    sel = _kernels.side_points(np.ascontiguousarray(pts, np.float64), np.ascontiguousarray(approx, np.float64))
-    if sel.sum(axis=1).min() < 3:
+    approx = np.ascontiguousarray(approx, np.float64)
+    # the tests and the intersections are compiled: called for every blob that passes the shape
+    # tests, their NumPy forms cost more than the four line fits
+    sel, ok = _kernels.side_select(np.ascontiguousarray(pts, np.float64), approx)
+    if not ok:
         return None
     pts32 = pts.astype(np.float32)
     lines = np.empty((4, 3))
     for i in range(4):
         vx, vy, x0, y0 = cv2.fitLine(pts32[sel[i]], cv2.DIST_HUBER, 0, 0.01, 0.01).ravel()
         lines[i] = (vy, -vx, float(vy) * float(x0) - float(vx) * float(y0))
-    q = _line_intersections(lines)
-    if not np.all(np.isfinite(q)):
-        return None
-    moved = np.max(np.hypot(*(q - approx).T))
-    if moved > max(3.0, 0.1 * np.ptp(approx)):
-        return None
-    return q
+    q, ok = _kernels.quad_from_lines(lines, approx)
+    return q if ok else None
 
 
 def find_candidates(
     gray: NDArray[np.uint8], params: CandidateParams, max_hole_fraction: float | None = None,
-    trace: list | None = None,
+    trace: list | None = None, threads: int = 1,
 ) -> list[NDArray[np.float64]]:
     """Candidate quadrilaterals (each (4, 2), clockwise on screen, pixel coordinates) of dark squares.
 
@@ -191,14 +173,19 @@ def find_candidates(
         # squares already found, filled: a blob of a later threshold centred in one is the same marker
         if out:
             cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in out], 255)
+        # a box's contours do not depend on what the earlier boxes found: with two threads a helper
+        # traces the next boxes (OpenCV releases the GIL) while this thread tests the blobs of one
+        tasks, looser = [], []
         for thr in more:
-            region, boxes = regions[thr > params.ratio_threshold]
-            for box in boxes:
-                found = _mask_candidates(_contours_at(gray, bg, thr, params.smooth, box), params, max_side,
-                                         max_hole_fraction, None if trace is None else rejected, covered, region)
-                out.extend(found)
-                if found:  # (the boxes may overlap: a blob in two of them is one candidate)
-                    cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
+            loose = thr > params.ratio_threshold
+            tasks += [(gray, bg, thr, params.smooth, box) for box in regions[loose][1]]
+            looser += [loose] * len(regions[loose][1])
+        for loose, contours in zip(looser, _threads.ordered_map(_contours_at, tasks, threads), strict=True):
+            found = _mask_candidates(contours, params, max_side, max_hole_fraction,
+                                     None if trace is None else rejected, covered, regions[loose][0])
+            out.extend(found)
+            if found:  # (the boxes may overlap: a blob in two of them is one candidate)
+                cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
     if trace is not None:
         # a blob that failed at one threshold but gave a candidate at another is not a rejection
         if out and not (more and seeds):
@@ -247,10 +234,14 @@ def _seed_regions(shape: tuple[int, ...], seeds: list[tuple[int, int, int, int]]
     """
     h_img, w_img = shape[:2]
     region = np.zeros((h_img, w_img), np.uint8)
-    for x, y, w, h in seeds:
-        mx, my = (max(h - w, 0) + max(w, h) // 8 + 2, max(w - h, 0) + max(w, h) // 8 + 2) if looser else (2, 2)
-        cv2.rectangle(region, (max(x - mx, 0), max(y - my, 0)),
-                      (min(x + w + mx, w_img - 1), min(y + h + my, h_img - 1)), 255, -1)
+    x, y, w, h = np.array(seeds, np.int64).reshape(-1, 4).T
+    if looser:
+        big = np.maximum(w, h) // 8 + 2
+        mx, my = np.maximum(h - w, 0) + big, np.maximum(w - h, 0) + big
+    else:
+        mx = my = np.full(len(x), 2, np.int64)
+    _kernels.fill_boxes(region, np.column_stack([np.maximum(x - mx, 0), np.maximum(y - my, 0),
+                                                 np.minimum(x + w + mx, w_img - 1), np.minimum(y + h + my, h_img - 1)]))
     # parts less than 16 px apart share a box (on an 8 x coarser grid, dilated by one): each box costs a
     # few OpenCV calls, and clutter leaves tens of small seeds
     coarse = cv2.dilate(cv2.resize(region, ((w_img + 7) // 8, (h_img + 7) // 8), interpolation=cv2.INTER_AREA),

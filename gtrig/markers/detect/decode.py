@@ -89,32 +89,31 @@ def unblur_cells(
     gy, gx = np.meshgrid(c, c, indexing="ij")
     mu = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)], -1)  # (S, 3) marker units
     Hm = quad_homographies(quads)  # fit coords -> marker units
-    px = np.empty((Q, mu.shape[0], 2))
-    for q in range(Q):
-        p = mu @ np.linalg.inv(Hm[q]).T
-        px[q] = p[:, :2] / p[:, 2:]
+    # every quad at once (the loop over quads with a dozen small array operations each was most of
+    # the cost): the same element-wise formulas, and one batched solve
+    p = mu @ np.linalg.inv(Hm).transpose(0, 2, 1)  # (Q, S, 3)
+    px = p[..., :2] / p[..., 2:]
     flat = px.reshape(-1, 2)
     if undist is not None:
         flat = undist.to_raw(flat)
     vals = bilinear(gray, flat[:, 0], flat[:, 1]).reshape(Q, -1)
     k = np.arange(n + 1, dtype=np.float64)
-    out = np.empty((Q, d, d))
-    for q in range(Q):
-        H = Hm[q]
-        x, y = px[q, :, 0], px[q, :, 1]
-        w3 = H[2, 0] * x + H[2, 1] * y + H[2, 2]
-        mx, my = mu[:, 0], mu[:, 1]
-        sx = sigma[q] * np.hypot(H[0, 0] - mx * H[2, 0], H[0, 1] - mx * H[2, 1]) / np.abs(w3) * n
-        sy = sigma[q] * np.hypot(H[1, 0] - my * H[2, 0], H[1, 1] - my * H[2, 1]) / np.abs(w3) * n
-        Fx = ndtr((mx[:, None] * n - k) / sx[:, None])
-        Fy = ndtr((my[:, None] * n - k) / sy[:, None])
-        X = (Fx[:, :-1] - Fx[:, 1:])[:, border : n - border]
-        Y = (Fy[:, :-1] - Fy[:, 1:])[:, border : n - border]
-        S = (Fx[:, 0] - Fx[:, -1]) * (Fy[:, 0] - Fy[:, -1])
-        M = (Y[:, :, None] * X[:, None, :]).reshape(len(mx), d * d)
-        r = (vals[q] - black[q]) / contrast[q] - (1.0 - S)
-        A = M.T @ M
-        lam = 1e-2 * np.trace(A) / (d * d)
-        w = np.linalg.solve(A + lam * np.eye(d * d), M.T @ r + lam * 0.5)
-        out[q] = w.reshape(d, d)
-    return out
+    x, y = px[..., 0], px[..., 1]  # (Q, S)
+    H = Hm[:, None]  # (Q, 1, 3, 3)
+    w3 = H[..., 2, 0] * x + H[..., 2, 1] * y + H[..., 2, 2]
+    mx, my = mu[:, 0], mu[:, 1]
+    sig = sigma[:, None]
+    sx = sig * np.hypot(H[..., 0, 0] - mx * H[..., 2, 0], H[..., 0, 1] - mx * H[..., 2, 1]) / np.abs(w3) * n
+    sy = sig * np.hypot(H[..., 1, 0] - my * H[..., 2, 0], H[..., 1, 1] - my * H[..., 2, 1]) / np.abs(w3) * n
+    Fx = ndtr((mx[:, None] * n - k) / sx[..., None])  # (Q, S, n + 1)
+    Fy = ndtr((my[:, None] * n - k) / sy[..., None])
+    X = (Fx[..., :-1] - Fx[..., 1:])[..., border : n - border]  # (Q, S, d)
+    Y = (Fy[..., :-1] - Fy[..., 1:])[..., border : n - border]
+    S = (Fx[..., 0] - Fx[..., -1]) * (Fy[..., 0] - Fy[..., -1])
+    M = (Y[..., :, None] * X[..., None, :]).reshape(Q, len(mx), d * d)
+    r = (vals - black[:, None]) / contrast[:, None] - (1.0 - S)
+    Mt = M.transpose(0, 2, 1)
+    A = Mt @ M
+    lam = 1e-2 * np.trace(A, axis1=1, axis2=2) / (d * d)
+    w = np.linalg.solve(A + lam[:, None, None] * np.eye(d * d), Mt @ r[..., None] + lam[:, None, None] * 0.5)
+    return w.reshape(Q, d, d)

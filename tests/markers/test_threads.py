@@ -1,0 +1,121 @@
+"""The detector's threading helpers (issue 16, speed): the results never depend on the threads."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import cv2
+import numpy as np
+import pytest
+
+from gtrig.markers.detect import DetectorParams, MarkerDetector, _kernels, _threads
+from gtrig.markers.synth import clutter_background, homography_from_pose, render
+from gtrig.rig.models import MarkerFamily
+
+
+def _slow_square(k: int) -> tuple[int, str]:
+    time.sleep(0.002 * (k % 3))  # uneven tasks: the helper and the caller overtake each other
+    return k * k, threading.current_thread().name
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_ordered_map_keeps_the_order(threads: int) -> None:
+    out = list(_threads.ordered_map(_slow_square, [(k,) for k in range(40)], threads))
+    assert [v for v, _ in out] == [k * k for k in range(40)]
+    if threads == 1:
+        assert {name for _, name in out} == {threading.current_thread().name}
+
+
+def test_ordered_map_raises_where_the_result_is_taken() -> None:
+    def f(k: int) -> int:
+        if k == 5:
+            raise ValueError("task 5")
+        return k
+
+    got = []
+    with pytest.raises(ValueError, match="task 5"):
+        for v in _threads.ordered_map(f, [(k,) for k in range(10)], 2):
+            got.append(v)
+    assert got == [0, 1, 2, 3, 4]
+
+
+def test_claims_run_each_task_once() -> None:
+    """The helper runs tasks ahead; the caller takes some, skips the rest; a skipped task that is
+    asked for anyway is run; no task runs twice."""
+    runs: list[int] = []
+    lock = threading.Lock()
+
+    def f(k: int) -> int:
+        with lock:
+            runs.append(k)
+        time.sleep(0.001)
+        return -k
+
+    claims = _threads.Claims(f, [(k,) for k in range(30)])
+    job = _threads.helper_pool().submit(claims.work)
+    claims.skip(range(10, 30, 2))
+    assert [claims.get(k) for k in range(0, 30, 3)] == [-k for k in range(0, 30, 3)]
+    claims.skip(range(30))
+    job.result(timeout=60)
+    assert len(runs) == len(set(runs))
+    assert set(range(0, 30, 3)) <= set(runs)  # 12, 18 and 24 among them: skipped, then asked for
+
+
+def test_fill_boxes_is_cv2_rectangle() -> None:
+    rng = np.random.default_rng(4)
+    a = np.zeros((60, 80), np.uint8)
+    b = np.zeros_like(a)
+    boxes = []
+    for _ in range(40):
+        x0, y0 = rng.integers(0, 80), rng.integers(0, 60)
+        x1, y1 = rng.integers(x0, 80), rng.integers(y0, 60)
+        boxes.append((x0, y0, x1, y1))
+        cv2.rectangle(a, (int(x0), int(y0)), (int(x1), int(y1)), 255, -1)
+    _kernels.fill_boxes(b, np.array(boxes, np.int64))
+    np.testing.assert_array_equal(a, b)
+
+
+def test_quad_from_lines_is_cramers_rule() -> None:
+    """The compiled intersections equal NumPy's Cramer's rule bit for bit, and refuse parallel lines
+    and corners moved too far."""
+    rng = np.random.default_rng(5)
+    prev = np.array([3, 0, 1, 2])
+    for _ in range(200):
+        approx = np.array([[10, 10], [40, 11], [41, 39], [9, 40]], float) + rng.normal(0, 1, (4, 2))
+        th = np.arctan2(*(np.roll(approx, -1, axis=0) - approx).T[::-1]) + np.pi / 2 + rng.normal(0, 0.01, 4)
+        n = np.column_stack([np.cos(th), np.sin(th)])
+        lines = np.column_stack([n, np.einsum("ij,ij->i", n, approx + np.roll(approx, -1, axis=0)) / 2])
+        a1, b1, c1 = lines[prev].T
+        a2, b2, c2 = lines.T
+        inv = 1.0 / (a1 * b2 - a2 * b1)
+        ref = np.column_stack([(c1 * b2 - c2 * b1) * inv, (a1 * c2 - a2 * c1) * inv])
+        q, ok = _kernels.quad_from_lines(lines, approx)
+        np.testing.assert_array_equal(q, ref)
+        assert ok == (np.hypot(*(ref - approx).T).max() <= max(3.0, 0.1 * np.ptp(approx)))
+    lines[1] = lines[0]
+    assert not _kernels.quad_from_lines(lines, approx)[1]
+
+
+def test_two_threads_give_the_same_detections_on_clutter() -> None:
+    """Large, small and blurred markers on clutter, in dim light (many seeds for the further
+    thresholds, candidates for both paths): one thread and two give the same detections, bit for bit."""
+    rng = np.random.default_rng(8)
+    fam = MarkerFamily.APRILTAG_36H11
+    shape = (480, 640)
+    cases = [(22, (90, 90), 1.8), (60, (300, 150), 0.5), (21, (520, 120), 1.2), (120, (250, 360), 1.0),
+             (24, (540, 380), 2.0)]
+    markers = [(fam, 3 + 97 * i, homography_from_pose(s, c, 25, 40 * i, 70 * i)) for i, (s, c, _) in enumerate(cases)]
+    got = {}
+    for blur in (0.8, 1.8):
+        img, truths = render(shape, markers, blur_px=blur, noise=3.0, gain=80.0, gradient=0.4,
+                             background=clutter_background(shape, rng, n_shapes=30), rng=rng)
+        for threads in (1, 2):
+            det = MarkerDetector(fam, params=DetectorParams(threads=threads))
+            got[blur, threads] = det.detect(img)
+        assert len(got[blur, 1]) >= 3
+        a, b = got[blur, 1], got[blur, 2]
+        assert [d.id for d in a] == [d.id for d in b]
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x.corners_px, y.corners_px)
+            np.testing.assert_array_equal(x.corner_cov, y.corner_cov)
