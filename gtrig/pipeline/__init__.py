@@ -16,7 +16,7 @@ robot-frame    rig, survey, marker_calibration              rig, frame_fit, visi
 laser          rig                                          rig, laser_report, laser_result, tracks/GTlaser/run
 vision         rig (marker_calibration, frame_fit, ...)     tracks/GTvision/{validation,run}, vision_results
 sync           tracks/GTvision/run, tracks/GTlaser/run, rig  clock_offsets (per camera and scanner too)
-laser-clock    rig, laser_report (clock_offsets, sync.yaml)   tracks/GTlaser/run on one clock, clock_offsets
+laser-clock    rig, laser_report (clock_offsets, sync.yaml)   tracks/GTlaser-synced/run (GTvision's clock)
 fusion         the same, clock_offsets (*)                  tracks/fusion/run
 =============  ==========================================  ==============================================
 
@@ -72,8 +72,7 @@ STAGES: tuple[Stage, ...] = (
           produces=("clock_offsets",), reads=("run/odometry.csv", "run/cameras", "run/lasers", "background/lasers"),
           section="fusion"),
     Stage("laser-clock", "GTlaser on one clock", gtlaser_clock, consumes=("rig", "laser_report"),
-          uses=("clock_offsets", "tracks/GTlaser/run"),
-          produces=("laser_result", "tracks/GTlaser/run", "clock_offsets"),
+          uses=("clock_offsets",), produces=("tracks/GTlaser-synced/run",),
           reads=("background/lasers", "run/lasers", "run/odometry.csv"), section="laser"),
     Stage("fusion", "fusion", fusion, uses=("tracks/GTvision/run", "tracks/GTlaser/run", "clock_offsets"),
           produces=("tracks/fusion/run",), reads=("run/odometry.csv",), section="fusion"),

@@ -58,8 +58,11 @@ def gtlaser(inp: StageInput) -> StageOutput:
 def gtlaser_clock(inp: StageInput) -> StageOutput:
     """GTlaser fitted again with each scanner's stamps on one clock (gtrig.laser.clock): the offsets the
     sync stage measured (``sync.yaml``: each scanner against GTvision's smoothed track), the track written
-    as ``gt_laser_synced.tum`` + ``gt_laser_synced_cov.csv``; it replaces GTlaser's track for fusion, with
-    its offset to odometry measured again on it (:func:`_offset_to_odometry`)."""
+    as ``gt_laser_synced.tum`` + ``gt_laser_synced_cov.csv`` (the product ``tracks/GTlaser-synced/run``), with
+    its offset to odometry measured on it (:func:`_offset_to_odometry`) as a check. Fusion keeps GTlaser's
+    own track and the sync stage's offset for it: fed the synced track instead, the fused track moved by
+    -0.023 and +0.014 mm on two recordings (BENCHMARKS.md, issue 19, session 27), a wash, because the
+    fused clock is set by the sources' offsets to odometry, which odometry's slip dominates."""
     from gtrig.config import apply_to_dataclass
     from gtrig.io.yamlfile import load_yaml
     from gtrig.laser.clock import clocks_from_sync
@@ -72,7 +75,6 @@ def gtlaser_clock(inp: StageInput) -> StageOutput:
     sources = doc.get("sources") if isinstance(doc, dict) else None
     clocks = clocks_from_sync(sources, clock) if isinstance(sources, dict) else {}
     rig, report = inp.products.rig, inp.products.laser_report
-    offsets = dict(inp.products.clock_offsets or {})
     if clock == "scanners" or not clocks or rig is None or report is None:
         why = ("laser.clock is 'scanners'" if clock == "scanners" else
                f"no scanner offset to {clock}'s clock in sync.yaml" if not clocks else "no scanner calibration")
@@ -85,16 +87,12 @@ def gtlaser_clock(inp: StageInput) -> StageOutput:
                           workers=inp.workers, progress=inp.progress)
     track = to_pose_track(res)
     est = _offset_to_odometry(inp, track)
-    if est is not None:
-        offsets["laser"] = est
-    else:
-        offsets.pop("laser", None)
     missing = [s.name for s in rig.laser_scanners if s.name not in clocks]
     checks = (AccuracyRow("GTlaser", f"track on {clock}'s clock: scanners without a measured offset",
                           len(missing), f"of {len(rig.laser_scanners)}", "0", not missing),
               AccuracyRow("sync", f"laser on {clock}'s clock: offset to odometry",
                           math.nan if est is None else 1000 * est, "ms", "", est is not None))
-    prod = {"laser_result": res, "tracks/GTlaser/run": track, "clock_offsets": offsets}
+    prod = {"tracks/GTlaser-synced/run": track}
     outputs = ("gt_laser_synced.tum", "gt_laser_synced_cov.csv")
     if not inp.has_truth:
         return StageOutput(prod, checks=checks, outputs=outputs)
@@ -123,8 +121,8 @@ def gtlaser_clock(inp: StageInput) -> StageOutput:
 def _offset_to_odometry(inp: StageInput, track: PoseTrack) -> float | None:
     """The track's clock offset to odometry, seconds, measured as the sync stage measures a source's
     (heading correlation refined by the fusion's fit, :mod:`gtrig.fusion.sync`); None when not ``ok``.
-    Measured again rather than derived: GTvision's own offset is another estimate from the same odometry,
-    and fusion weighs each source's clock on its own."""
+    On GTvision's clock it is another estimate of GTvision's offset (``sync.yaml``, ``vision``), from the
+    same odometry."""
     from gtrig.fusion.measurements import fixes_from_track
     from gtrig.fusion.sync import estimate_offset, refine_by_fusion
     from gtrig.io.odometry import read_odometry
