@@ -7,7 +7,9 @@ driven as the scenario says (``cruise``: 0.3 m/s; ``agile``: up to 1.5 m/s, 1 m/
 the sweep; ``agile-two-fabrics``: a hull with dark and light sides; ``agile-2mps``: up to 2 m/s at
 1.5 m/s^2; ``agile-one-clock``: the scanners' clock offsets zeroed; ``agile-common-clock``,
 ``agile-clock-differences``: only their mean, only their differences; ``agile-noise-only``: 1 cm range
-noise and nothing else; ``agile-ideal``: exact scans (the yaw budget);
+noise and nothing else; ``agile-ideal``: exact scans (the yaw budget); ``agile-synced``,
+``agile-blocked-synced``: each scanner's offset measured by the sync stage's fit against a stand-in for
+GTvision and removed before tracking, as the pipeline's laser-clock stage does (gtrig.laser.clock);
 ``agile-glossy-fabrics``: dark and light sides 3 cm apart in range bias; ``like-issue-19``: those fabrics,
 1 % dropouts, up to 0.9 m/s). The scanners are calibrated from the background sequence (nominal poses
 3 cm / 2 deg off), then the run is tracked with the calibrated poses and with the true ones. The peer is Open3D's
@@ -15,6 +17,7 @@ point-to-point ``registration_icp`` (outline points of the hull to the same fore
 from its own previous pose), else a SciPy KD-tree ICP; the table says which.
 
     python bench/laser.py [--seeds 0 1 2] [--scenarios cruise agile agile-blocked] [--duration S]
+                          [--no-peer] [--by-turn-rate]
 """
 
 from __future__ import annotations
