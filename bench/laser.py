@@ -401,6 +401,8 @@ def main() -> None:
     ap.add_argument("--scenarios", nargs="+", default=["cruise", "agile", "agile-blocked"], choices=SCENARIOS)
     ap.add_argument("--blocked-seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--no-peer", action="store_true", help="skip Open3D's ICP (its columns left empty)")
+    ap.add_argument("--synced", action="store_true",
+                    help="every scenario with its scanners' offsets measured and removed (as agile-synced)")
     ap.add_argument("--by-turn-rate", action="store_true",
                     help="also print, per run, the mean |yaw| error by |true yaw rate| and the apparent lag")
     a = ap.parse_args()
@@ -415,6 +417,8 @@ def main() -> None:
     rates = []
     for name in a.scenarios:
         laser, motion = SCENARIOS[name]
+        if a.synced:
+            laser = {**laser, "clocks": "synced"}
         seeds = a.blocked_seeds if "blocked" in name else a.seeds
         for seed in seeds:
             r = run_seed(seed, a.duration, laser, motion, validate=False, peer=not a.no_peer)
