@@ -7,7 +7,9 @@ driven as the scenario says (``cruise``: 0.3 m/s; ``agile``: up to 1.5 m/s, 1 m/
 the sweep; ``agile-two-fabrics``: a hull with dark and light sides; ``agile-2mps``: up to 2 m/s at
 1.5 m/s^2; ``agile-one-clock``: the scanners' clock offsets zeroed; ``agile-common-clock``,
 ``agile-clock-differences``: only their mean, only their differences; ``agile-noise-only``: 1 cm range
-noise and nothing else; ``agile-ideal``: exact scans (the yaw budget);
+noise and nothing else; ``agile-ideal``: exact scans (the yaw budget); ``agile-synced``,
+``agile-blocked-synced``: each scanner's offset measured by the sync stage's fit against a stand-in for
+GTvision and removed before tracking, as the pipeline's laser-clock stage does (gtrig.laser.clock);
 ``agile-glossy-fabrics``: dark and light sides 3 cm apart in range bias; ``like-issue-19``: those fabrics,
 1 % dropouts, up to 0.9 m/s). The scanners are calibrated from the background sequence (nominal poses
 3 cm / 2 deg off), then the run is tracked with the calibrated poses and with the true ones. The peer is Open3D's
@@ -15,6 +17,7 @@ point-to-point ``registration_icp`` (outline points of the hull to the same fore
 from its own previous pose), else a SciPy KD-tree ICP; the table says which.
 
     python bench/laser.py [--seeds 0 1 2] [--scenarios cruise agile agile-blocked] [--duration S]
+                          [--no-peer] [--by-turn-rate]
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from gtrig.geometry import wrap_angle
 from gtrig.io.scans import ScanLog
 from gtrig.laser.background import build_background
 from gtrig.laser.calibrate import calibrate_scanners
+from gtrig.laser.clock import ScannerClock, scanners_on_clock
 from gtrig.laser.foreground import foreground_mask, foreground_threshold
 from gtrig.laser.fuse import frame_points
 from gtrig.laser.hull_icp import HullModel
@@ -174,11 +178,69 @@ def validation(vals, motion, intervals, scs, bgm, model: HullModel) -> dict:
     }
 
 
+TURN_RATE_EDGES = (0.0, 0.25, 0.75, 1.25, 1.75, np.inf)  # rad/s
+
+
+def yaw_by_turn_rate(err_rad: np.ndarray, rate_radps: np.ndarray) -> dict:
+    """Where the yaw error piles up: mean |yaw error| (deg) and share of frames per bin of |true yaw rate|
+    (:data:`TURN_RATE_EDGES`), and the least-squares slope of the signed error on the yaw rate, in ms: a
+    track whose clock runs ``tau`` late shows ``err = -tau * rate`` (the lag it would take)."""
+    a = np.abs(rate_radps)
+    bins = []
+    for lo, hi in zip(TURN_RATE_EDGES[:-1], TURN_RATE_EDGES[1:], strict=True):
+        m = (a >= lo) & (a < hi)
+        bins.append((float(np.mean(m)), float(np.degrees(np.mean(np.abs(err_rad[m])))) if m.any() else float("nan")))
+    slope = -float(np.sum(err_rad * rate_radps) / max(float(np.sum(rate_radps**2)), 1e-12))
+    return {"bins": bins, "lag_ms": 1000 * slope}
+
+
+def vision_stand_in(mot: RobotMotion, t_end: float, jitter_s: float, seed: int, rate_hz: float = 30.0,
+                    share: float = 0.4, sigma_xy_m: float = 1.5e-3, sigma_th_rad: float = np.radians(0.035),
+                    corr_s: float = 0.5):
+    """A stand-in for GTvision's run track, the sync stage's reference for the scanners (no images are
+    rendered in this bench): the true pose at ``share`` of ``rate_hz`` instants (the full recordings
+    localize 38-39 % of 31 Hz), each taken at its stamp plus a camera jitter, with an error of
+    ``sigma_xy_m`` / ``sigma_th_rad`` per axis, half of it white and half slow (correlation time
+    ``corr_s``, a marker's calibration error while it stays in view), and that covariance with it;
+    on the GT clock, as the simulated cameras are."""
+    from gtrig.trajectory import PoseTrack
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.05, t_end - 0.05, 1.0 / rate_hz)
+    t = t[rng.random(t.size) < share]
+    true = mot.planar(t + rng.normal(0.0, jitter_s, t.size) / np.sqrt(2.0))
+    sig = np.array([sigma_xy_m, sigma_xy_m, sigma_th_rad])
+    a = np.exp(-np.diff(t, prepend=t[0]) / corr_s)
+    slow = np.zeros((t.size, 3))
+    w = rng.normal(size=(t.size, 3))
+    for k in range(1, t.size):
+        slow[k] = a[k] * slow[k - 1] + np.sqrt(1 - a[k] ** 2) * w[k]
+    err = sig * (rng.normal(size=(t.size, 3)) + slow) / np.sqrt(2.0)
+    cov = np.broadcast_to(np.diag(sig**2), (t.size, 3, 3)).copy()
+    return PoseTrack.from_xytheta(t, true + err, cov=cov, cov_kind="xyyaw", source="GTvision")
+
+
+def measured_clocks(fp, vision, corners_xy: np.ndarray) -> dict[str, ScannerClock]:  # noqa: ANN001
+    """Each scanner's offset to ``vision``'s clock as the pipeline's sync stage measures it
+    (:func:`gtrig.fusion.sensor_sync.scanner_offsets` on GTlaser's framed returns against ``vision``
+    smoothed), as :func:`gtrig.laser.clock.clocks_from_sync` reads it from ``sync.yaml``."""
+    from gtrig.fusion.measurements import fixes_from_track
+    from gtrig.fusion.sensor_sync import ScannerReturns, reference_track, scanner_offsets
+    from gtrig.laser.clock import clocks_from_sync
+
+    est = scanner_offsets(ScannerReturns.from_framed(fp), reference_track([fixes_from_track(vision, "vision")]),
+                          corners_xy)
+    doc = {e.source: {"verdict": e.verdict, "offset_to_vision_s": e.offset_s, "ci95_to_vision_s": list(e.ci95_s)}
+           for e in est}
+    return clocks_from_sync(doc, "vision")
+
+
 def run_seed(seed: int, duration: float | None, laser: dict | None = None, motion: dict | None = None,
              calibrate: bool = True, validate: bool = True, peer: bool = True) -> dict:
     laser = dict(laser or {})
     ideal = bool(laser.pop("ideal", False))  # exact geometry: no noise, bias, mixed pixels, clock offsets
-    clocks = laser.pop("clocks", None)  # "common": the offsets' mean only; "differences": mean removed
+    clocks = laser.pop("clocks", None)  # "common": the offsets' mean only; "differences": mean removed;
+    # "synced": each scanner's offset measured by the sync stage's fit against a GTvision stand-in and removed
     cfg = SimConfig(seed=seed, laser=LaserSimConfig(**laser), motion=MotionSimConfig(**(motion or {})))
     sc = configure_scene(make_scene(seed), cfg)
     # the rigs say how well the scanners' clocks are synchronised, as a recording's rig.yaml does
@@ -193,7 +255,7 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
     mot = RobotMotion(ts, xyth, sc.floor)
     bgs, _ = simulate_fixed_scans(sc, None, np.array([[-10.0, -10.0 + cfg.background_s]]), cfg, seed * 10 + 1)
     runs, info = simulate_fixed_scans(sc, mot, np.array([[0.0, ts[-1]]]), cfg, seed * 10 + 3, ideal=ideal)
-    if clocks is not None:  # the same scans re-stamped: an offset only shifts a scanner's stamps
+    if clocks in ("common", "differences"):  # the same scans re-stamped: an offset only shifts a scanner's stamps
         off = info.clock_offsets_s
         mean = float(np.mean(list(off.values())))
         runs = {k: ScanLog(v.stamps_s - off[k] + (mean if clocks == "common" else off[k] - mean), v.ranges_m)
@@ -222,6 +284,9 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
         "cal_s": t_cal,
     }
     model = HullModel.from_hull(sc.rig_true.robot.hull)
+    if clocks == "synced":
+        out["true_offsets_ms"] = {k: 1000 * v for k, v in info.clock_offsets_s.items()}
+        vision_ref = vision_stand_in(mot, ts[-1], cfg.camera.stamp_jitter_s, seed * 10 + 4)
     for label, scs in (("calibrated", cal), ("true", sc.rig_true.laser_scanners)):
         t0 = time.perf_counter()
         bgm = [build_background(bgs[s.name].ranges_m, s) for s in scs]
@@ -232,6 +297,13 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
         fp = frame_points(
             scs, [runs[s.name].stamps_s for s in scs], [runs[s.name].ranges_m for s in scs], masks
         )
+        if clocks == "synced":  # as the pipeline does after its sync stage (gtrig.laser.clock)
+            cl = measured_clocks(fp, vision_ref, sc.rig_true.robot.hull.corners_xy())
+            out.setdefault("measured_offsets_ms", {})[label] = {k: (1000 * c.offset_s, 1000 * c.sigma_s)
+                                                                 for k, c in cl.items()}
+            scs, logs = scanners_on_clock(scs, runs, cl)
+            fp = frame_points(scs, [logs[s.name].stamps_s for s in scs], [logs[s.name].ranges_m for s in scs],
+                              masks)
         res = track_frames(fp, model, TrackSettings(), rep.cov_xytheta if label == "calibrated" else None)
         dt = time.perf_counter() - t0
         n_scans = sum(len(runs[s.name].stamps_s) for s in scs)
@@ -245,6 +317,8 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
         z = res.xytheta[ok] - tru[ok]
         z[:, 2] = wrap_angle(z[:, 2])
         nees = np.einsum("ni,nij,nj->n", z, np.linalg.inv(res.cov_xytheta[ok]), z)
+        rate = np.gradient(tru[:, 2], res.stamps_s)  # the true yaw rate at each frame, rad/s
+        ey_signed = wrap_angle(res.xytheta[ok, 2] - tru[ok, 2])
         vis = visible_sides(sc.rig_true, tru)
         two = vis >= 2
         deg = res.status == 1
@@ -267,6 +341,7 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
             "loc_2sides": float(np.mean(ok[two])) if two.any() else float("nan"),
             "ok_wrong_5cm": int(np.sum(e > 0.05)),
             "deg_wrong_5cm": int(np.sum(e_all[deg] > 0.05)),
+            "by_rate": yaw_by_turn_rate(ey_signed, rate[ok]),
         }
         if label == "calibrated" and validate:
             out["validation"] = validation(vals, val, val_iv, scs, bgm, model)
@@ -303,6 +378,10 @@ SCENARIOS = {
     "agile-one-clock": ({"clock_offset_sigma_s": 0.0}, {"profile": "agile", "speed_mps": 1.5}),
     "agile-common-clock": ({"clocks": "common"}, {"profile": "agile", "speed_mps": 1.5}),
     "agile-clock-differences": ({"clocks": "differences"}, {"profile": "agile", "speed_mps": 1.5}),
+    # the scanners' offsets measured against a GTvision stand-in and removed, as the pipeline does after sync
+    "agile-synced": ({"clocks": "synced"}, {"profile": "agile", "speed_mps": 1.5}),
+    "agile-blocked-synced": ({"blocked_scanner": 0, "blocked_fraction": 0.5, "clocks": "synced"},
+                             {"profile": "agile", "speed_mps": 1.5}),
     "agile-noise-only": ({"clock_offset_sigma_s": 0.0, "people": 0, "dropout_prob": 0.0, "mixed_pixels": False,
                           "reflectivity_bias_m": 0.0}, {"profile": "agile", "speed_mps": 1.5}),
     "agile-ideal": ({"ideal": True}, {"profile": "agile", "speed_mps": 1.5}),
@@ -321,6 +400,11 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=None, help="seconds of run (default: the whole path)")
     ap.add_argument("--scenarios", nargs="+", default=["cruise", "agile", "agile-blocked"], choices=SCENARIOS)
     ap.add_argument("--blocked-seeds", type=int, nargs="+", default=[0])
+    ap.add_argument("--no-peer", action="store_true", help="skip Open3D's ICP (its columns left empty)")
+    ap.add_argument("--synced", action="store_true",
+                    help="every scenario with its scanners' offsets measured and removed (as agile-synced)")
+    ap.add_argument("--by-turn-rate", action="store_true",
+                    help="also print, per run, the mean |yaw| error by |true yaw rate| and the apparent lag")
     a = ap.parse_args()
     print("GTlaser benchmark: 4 scanners x 75 Hz, people walking, uneven floor; the whole run unless --duration")
     print("Same foreground points for both methods; Open3D is started from GTlaser's first pose and then")
@@ -330,19 +414,44 @@ def main() -> None:
           "| yaw mean (deg) "
           "| NEES/dof calibrated (true) | OK > 5 cm | peer pos (mm) | peer yaw mod 180 (deg) | peer share < 5 cm |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    rates = []
     for name in a.scenarios:
         laser, motion = SCENARIOS[name]
+        if a.synced:
+            laser = {**laser, "clocks": "synced"}
         seeds = a.blocked_seeds if "blocked" in name else a.seeds
         for seed in seeds:
-            r = run_seed(seed, a.duration, laser, motion, validate=False, peer=True)
-            c, t, b = r["calibrated"], r["true"], r["baseline"]
+            r = run_seed(seed, a.duration, laser, motion, validate=False, peer=not a.no_peer)
+            c, t = r["calibrated"], r["true"]
+            b = r.get("baseline")
+            peer = (f"{b['pos_mm']:.1f} | {b['yaw_mod_pi_deg']:.2f} | {100 * b['share_5cm']:.1f} %" if b
+                    else "- | - | -")
             print(
                 f"| {name} | {seed} | {c['speed_max']:.2f} | {c['frames']} | {100 * c['loc_2sides']:.2f} % | "
                 f"{c['pos_mm']:.2f} / {c['ok_max_mm']:.1f} | {c['yaw_deg']:.3f} | "
-                f"{c['nees'] / 3:.2f} ({t['nees'] / 3:.2f}) | {c['ok_wrong_5cm']} | "
-                f"{b['pos_mm']:.1f} | {b['yaw_mod_pi_deg']:.2f} | {100 * b['share_5cm']:.1f} % |",
+                f"{c['nees'] / 3:.2f} ({t['nees'] / 3:.2f}) | {c['ok_wrong_5cm']} | {peer} |",
                 flush=True,
             )
+            rates.append((name, seed, r))
+            if "measured_offsets_ms" in r:
+                m = r["measured_offsets_ms"]["calibrated"]
+                print("  offsets true / measured (sigma), ms: " + ", ".join(
+                    f"{k} {r['true_offsets_ms'][k]:+.2f} / {m[k][0]:+.2f} ({m[k][1]:.2f})" if k in m
+                    else f"{k} {r['true_offsets_ms'][k]:+.2f} / -" for k in r["true_offsets_ms"]), flush=True)
+    if a.by_turn_rate:
+        heads = [f"{lo:g}-{hi:g}" if np.isfinite(hi) else f">= {lo:g}"
+                 for lo, hi in zip(TURN_RATE_EDGES[:-1], TURN_RATE_EDGES[1:], strict=True)]
+        print()
+        print("Mean |yaw| error (deg) of the OK frames by |true yaw rate| (rad/s), calibrated scanners; in brackets")
+        print("the share of frames; lag: the slope of the signed yaw error on the yaw rate (err = -lag * rate).")
+        print()
+        print("| scenario | seed | " + " | ".join(heads) + " | lag (ms) |")
+        print("|---|---|" + "---|" * len(heads) + "---|")
+        for name, seed, r in rates:
+            br = r["calibrated"]["by_rate"]
+            cells = " | ".join(f"{y:.3f} ({100 * f:.0f} %)" for f, y in br["bins"])
+            print(f"| {name} | {seed} | {cells} | {br['lag_ms']:+.2f} |", flush=True)
+    print(f"\nCPU time of this process: {time.process_time():.0f} s")
 
 
 if __name__ == "__main__":

@@ -142,6 +142,10 @@ class LaserConfig(Section):
     """GTlaser (:func:`gtrig.laser.track.track_frames`)."""
 
     track: LaserTrackSection = Field(default_factory=LaserTrackSection)  # type: ignore[valid-type]
+    clock: Literal["scanners", "vision", "odometry"] = Field(
+        default="vision", description="the clock of gt_laser_synced.tum, after the sync stage: each scanner's "
+        "stamps moved by its measured offset onto GTvision's (the cameras') or odometry's clock and the track "
+        "fitted again (gtrig.laser.clock); 'scanners': no second track")
 
 
 class FusionConfig(Section):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +23,7 @@ from gtrig.io.text import read_text
 from gtrig.io.yamlfile import safe_load
 from gtrig.laser.background import BackgroundModel, build_background
 from gtrig.laser.calibrate import CalibrationReport, calibrate_scanners, calibrated_rig, object_outlines
+from gtrig.laser.clock import ScannerClock, on_clock
 from gtrig.laser.foreground import foreground_mask, foreground_threshold
 from gtrig.laser.fuse import frame_points
 from gtrig.laser.hull_icp import HullModel
@@ -180,17 +182,22 @@ def track_sequence(
     backgrounds: list[BackgroundModel],
     settings: TrackSettings | None = None,
     scanner_cov: np.ndarray | None = None,
+    clocks: Mapping[str, ScannerClock] | None = None,
     **parallel: Any,
 ) -> TrackResult:
     """Track the hull through ``seq_dir/lasers/<scanner>.csv`` with the given background models;
     ``scanner_cov`` (3 S, 3 S) is the scanners' calibration covariance, propagated into each pose;
-    ``parallel``: ``executor``, ``workers``, ``progress`` of :func:`gtrig.laser.track.track_frames`."""
+    ``clocks``: per scanner, its offset to a reference clock (:mod:`gtrig.laser.clock`): the scans are
+    moved onto that clock first and the track is on it; ``parallel``: ``executor``, ``workers``,
+    ``progress`` of :func:`gtrig.laser.track.track_frames`."""
     if not rig.laser_scanners:
         raise InputError("the rig has no laser scanners")
     if rig.robot.hull is None:
         raise ConfigError("rig: robot.hull: missing field: GTlaser tracks the robot's hull (length_m, width_m, "
                           "z_min_m, z_max_m)")
     logs = read_scanner_logs(Path(seq_dir) / "lasers", rig, "sequence")
+    if clocks:
+        rig, logs = on_clock(rig, logs, clocks)
     scs = rig.laser_scanners
     masks = [
         foreground_mask(logs[s.name].ranges_m, foreground_threshold(b))
@@ -208,6 +215,7 @@ def track_recording(
     out_cov: str | os.PathLike[str] | None = None,
     settings: TrackSettings | None = None,
     scanner_cov: np.ndarray | None = None,
+    clocks: Mapping[str, ScannerClock] | None = None,
     **parallel: Any,
 ) -> TrackResult:
     """Run GTlaser on one sequence of a recording.
@@ -227,6 +235,9 @@ def track_recording(
     scanner_cov
         (3 S, 3 S) the scanners' calibration covariance (``CalibrationReport.cov_xytheta``), propagated into
         each pose's covariance; when ``rig`` is ``None`` the recording's own calibration provides it.
+    clocks
+        Per scanner, its clock offset to a reference clock (:func:`gtrig.laser.clock.clocks_from_sync`):
+        the track is then on that clock (:func:`track_sequence`); default: the scanners' own stamps.
     parallel
         ``executor``, ``workers`` and ``progress`` of :func:`gtrig.laser.track.track_frames` (where the
         per-frame covariance terms run; the output does not depend on them).
@@ -238,7 +249,7 @@ def track_recording(
         rig, report = calibrate_recording(rec)
         scanner_cov = report.cov_xytheta if scanner_cov is None else scanner_cov
     bgs = load_backgrounds(rec / "background", rig)
-    res = track_sequence(rig, rec / sequence, bgs, settings, scanner_cov, **parallel)
+    res = track_sequence(rig, rec / sequence, bgs, settings, scanner_cov, clocks, **parallel)
     if out_tum is not None:
         write_track(res, out_tum, out_cov)
     return res

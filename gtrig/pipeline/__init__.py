@@ -16,6 +16,7 @@ robot-frame    rig, survey, marker_calibration              rig, frame_fit, visi
 laser          rig                                          rig, laser_report, laser_result, tracks/GTlaser/run
 vision         rig (marker_calibration, frame_fit, ...)     tracks/GTvision/{validation,run}, vision_results
 sync           tracks/GTvision/run, tracks/GTlaser/run, rig  clock_offsets (per camera and scanner too)
+laser-clock    rig, laser_report (clock_offsets, sync.yaml)   tracks/GTlaser-synced/run (GTvision's clock)
 fusion         the same, clock_offsets (*)                  tracks/fusion/run
 =============  ==========================================  ==============================================
 
@@ -30,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 from gtrig.pipeline.cameras import camera_calibration
 from gtrig.pipeline.context import AccuracyRow, Products, Stage, StageInput, StageOutput
 from gtrig.pipeline.fusion import fusion, sync
-from gtrig.pipeline.laser import gtlaser
+from gtrig.pipeline.laser import gtlaser, gtlaser_clock
 from gtrig.pipeline.markers import marker_calibration
 from gtrig.pipeline.robot_frame import robot_frame
 from gtrig.pipeline.rows import read_accuracy_csv, write_accuracy_csv
@@ -70,6 +71,9 @@ STAGES: tuple[Stage, ...] = (
     Stage("sync", "time sync", sync, uses=("tracks/GTvision/run", "tracks/GTlaser/run", "rig"),
           produces=("clock_offsets",), reads=("run/odometry.csv", "run/cameras", "run/lasers", "background/lasers"),
           section="fusion"),
+    Stage("laser-clock", "GTlaser on one clock", gtlaser_clock, consumes=("rig", "laser_report"),
+          uses=("clock_offsets",), produces=("tracks/GTlaser-synced/run",),
+          reads=("background/lasers", "run/lasers", "run/odometry.csv"), section="laser"),
     Stage("fusion", "fusion", fusion, uses=("tracks/GTvision/run", "tracks/GTlaser/run", "clock_offsets"),
           produces=("tracks/fusion/run",), reads=("run/odometry.csv",), section="fusion"),
 )

@@ -4,8 +4,12 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 from gtrig.pipeline.context import AccuracyRow, StageInput, StageOutput
+
+if TYPE_CHECKING:
+    from gtrig.trajectory import PoseTrack
 
 
 def gtlaser(inp: StageInput) -> StageOutput:
@@ -51,4 +55,85 @@ def gtlaser(inp: StageInput) -> StageOutput:
     return StageOutput(prod, rows, checks, outputs)
 
 
+def gtlaser_clock(inp: StageInput) -> StageOutput:
+    """GTlaser fitted again with each scanner's stamps on one clock (gtrig.laser.clock): the offsets the
+    sync stage measured (``sync.yaml``: each scanner against GTvision's smoothed track), the track written
+    as ``gt_laser_synced.tum`` + ``gt_laser_synced_cov.csv`` (the product ``tracks/GTlaser-synced/run``), with
+    its offset to odometry measured on it (:func:`_offset_to_odometry`) as a check. Fusion keeps GTlaser's
+    own track and the sync stage's offset for it: fed the synced track instead, the fused track moved by
+    -0.023, +0.014 and 0.000 mm on three recordings (BENCHMARKS.md, issue 19, session 27), a wash, because the
+    fused clock is set by the sources' offsets to odometry, which odometry's slip dominates."""
+    from gtrig.config import apply_to_dataclass
+    from gtrig.io.yamlfile import load_yaml
+    from gtrig.laser.clock import clocks_from_sync
+    from gtrig.laser.recording import track_recording
+    from gtrig.laser.track import TrackSettings, to_pose_track
 
+    clock = inp.config.laser.clock
+    p = inp.out / "sync.yaml"
+    doc = load_yaml(p) if p.is_file() else None
+    sources = doc.get("sources") if isinstance(doc, dict) else None
+    clocks = clocks_from_sync(sources, clock) if isinstance(sources, dict) else {}
+    rig, report = inp.products.rig, inp.products.laser_report
+    if clock == "scanners" or not clocks or rig is None or report is None:
+        why = ("laser.clock is 'scanners'" if clock == "scanners" else
+               f"no scanner offset to {clock}'s clock in sync.yaml" if not clocks else "no scanner calibration")
+        return StageOutput(checks=(AccuracyRow("GTlaser", f"track on {clock}'s clock: not made ({why})", math.nan,
+                                               "", "", clock == "scanners"),))
+    settings = apply_to_dataclass(inp.config.laser.track, TrackSettings())
+    res = track_recording(inp.rec, sequence="run", rig=rig, out_tum=inp.out / "gt_laser_synced.tum",
+                          out_cov=inp.out / "gt_laser_synced_cov.csv", settings=settings,
+                          scanner_cov=report.cov_xytheta, clocks=clocks, executor=inp.executor,
+                          workers=inp.workers, progress=inp.progress)
+    track = to_pose_track(res)
+    est = _offset_to_odometry(inp, track)
+    missing = [s.name for s in rig.laser_scanners if s.name not in clocks]
+    checks = (AccuracyRow("GTlaser", f"track on {clock}'s clock: scanners without a measured offset",
+                          len(missing), f"of {len(rig.laser_scanners)}", "0", not missing),
+              AccuracyRow("sync", f"laser on {clock}'s clock: offset to odometry",
+                          math.nan if est is None else 1000 * est, "ms", "", est is not None))
+    prod = {"tracks/GTlaser-synced/run": track}
+    outputs = ("gt_laser_synced.tum", "gt_laser_synced_cov.csv")
+    if not inp.has_truth:
+        return StageOutput(prod, checks=checks, outputs=outputs)
+    from dataclasses import replace
+
+    from gtrig.evaluate.truth import score_on_recording
+
+    # the truth is on the GT clock; odometry's clock is off it by truth/robot_clock.yaml's offset_s
+    q = inp.rec / "truth" / "robot_clock.yaml"
+    robot = load_yaml(q) if q.is_file() else None
+    shift = float(robot.get("offset_s", 0.0)) if clock == "odometry" and isinstance(robot, dict) else 0.0
+    acc = score_on_recording(replace(track, stamps_s=track.stamps_s - shift), inp.rec, "run",
+                             expected_stamps_s=res.stamps_s - shift)
+    pos_mm, yaw_deg = acc.mean_pos_m * 1000, math.degrees(acc.mean_abs_yaw_rad)
+    n_wrong = acc.n_pos_over(0.05)
+    what = f"run on {clock}'s clock"
+    rows = (
+        AccuracyRow("GTlaser", f"{what}, mean position error", pos_mm, "mm", "<= 5", pos_mm <= 5),
+        AccuracyRow("GTlaser", f"{what}, mean |yaw| error", yaw_deg, "deg", "<= 0.1", yaw_deg <= 0.1),
+        AccuracyRow("GTlaser", f"{what}, OK frames off by > 5 cm", n_wrong, "", "0", n_wrong == 0),
+        AccuracyRow("GTlaser", f"{what}, mean NEES / dof", acc.mean_nees / 3, "", "0.5-2"),
+    )
+    return StageOutput(prod, rows, checks, outputs)
+
+
+def _offset_to_odometry(inp: StageInput, track: PoseTrack) -> float | None:
+    """The track's clock offset to odometry, seconds, measured as the sync stage measures a source's
+    (heading correlation refined by the fusion's fit, :mod:`gtrig.fusion.sync`); None when not ``ok``.
+    On GTvision's clock it is another estimate of GTvision's offset (``sync.yaml``, ``vision``), from the
+    same odometry."""
+    from gtrig.fusion.measurements import fixes_from_track
+    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.io.odometry import read_odometry
+
+    p = inp.rec / "run" / "odometry.csv"
+    if not p.is_file():
+        return None
+    odo = read_odometry(p)
+    use = track.usable()
+    est = estimate_offset(odo.stamps_s, odo.xytheta[:, 2], use.stamps_s, use.yaw_rad(), "laser",
+                          search_s=inp.config.fusion.sync_search_s)
+    if est.verdict == "ok" and track.cov is not None:
+        est = refine_by_fusion(est, fixes_from_track(track, "laser"), odo)
+    return float(est.offset_s) if est.verdict == "ok" else None
