@@ -182,8 +182,9 @@ def find_candidates(
     bg = _closing_background(gray, max_side, params.scale)
     rejected: list = []
     seeds: list[tuple[int, int, int, int]] = []
+    weak: list[NDArray[np.float64]] = []
     out = _mask_candidates(_contours_at(gray, bg, params.ratio_threshold, params.smooth), params, max_side,
-                           max_hole_fraction, None if trace is None else rejected, seeds=seeds)
+                           max_hole_fraction, None if trace is None else rejected, seeds=seeds, weak=weak)
     covered = np.zeros(gray.shape, np.uint8)
     more = params.more_thresholds
     if more and seeds:
@@ -195,18 +196,26 @@ def find_candidates(
             region, boxes = regions[thr > params.ratio_threshold]
             for box in boxes:
                 found = _mask_candidates(_contours_at(gray, bg, thr, params.smooth, box), params, max_side,
-                                         max_hole_fraction, None if trace is None else rejected, covered, region)
+                                         max_hole_fraction, None if trace is None else rejected, covered, region,
+                                         weak=weak)
                 out.extend(found)
                 if found:  # (the boxes may overlap: a blob in two of them is one candidate)
                     cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
+    # the fallback quads of broken borders, where no sound candidate lies (the first of several wins)
+    h, w = gray.shape
+    cover = np.zeros(gray.shape, np.uint8)
+    if out:
+        cv2.fillPoly(cover, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in out], 255)
+    for q in weak:
+        c = np.clip(np.round(q.mean(axis=0)).astype(int), 0, [w - 1, h - 1])
+        if not cover[c[1], c[0]]:
+            out.append(q)
+            cv2.fillPoly(cover, [np.round(q).astype(np.int32).reshape(-1, 1, 2)], 255)
     if trace is not None:
         # a blob that failed at one threshold but gave a candidate at another is not a rejection
-        if out and not (more and seeds):
-            cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in out], 255)
-        h, w = gray.shape
         for r in rejected:
             c = np.clip(np.round(r.quad_px.mean(axis=0)).astype(int), 0, [w - 1, h - 1])
-            if not covered[c[1], c[0]]:
+            if not cover[c[1], c[0]]:
                 trace.append(r)
     return out
 
@@ -266,12 +275,14 @@ def _seed_regions(shape: tuple[int, ...], seeds: list[tuple[int, int, int, int]]
 def _mask_candidates(contours: Contours, params: CandidateParams, max_side: float,
                      max_hole_fraction: float | None, trace: list | None,
                      covered: NDArray[np.uint8] | None = None, region: NDArray[np.uint8] | None = None,
-                     seeds: list[tuple[int, int, int, int]] | None = None) -> list[NDArray[np.float64]]:
+                     seeds: list[tuple[int, int, int, int]] | None = None,
+                     weak: list[NDArray[np.float64]] | None = None) -> list[NDArray[np.float64]]:
     """:func:`find_candidates` on the contours of one dark mask (:func:`_contours_at`). Blobs whose
     bounding box is centred on a non-zero pixel of ``covered``, or on a zero pixel of ``region``, are
     skipped. ``seeds`` receives the bounding box ``(x, y, w, h)`` of every blob of a plausible size
     (outline length, and box at most ``max_side``) that gave no candidate, and of the blobs with
-    outlines of a third to one plausible length."""
+    outlines of a third to one plausible length. ``weak`` receives the fallback quads of blobs of
+    low solidity (:func:`_broken_border_quad`)."""
     contours, hier, (x0, y0, x1, y1) = contours
     if hier is None:
         return []
@@ -305,9 +316,15 @@ def _mask_candidates(contours: Contours, params: CandidateParams, max_side: floa
         if box[0] <= x0 or box[1] <= y0 or box[0] + box[2] - 1 >= x1 or box[1] + box[3] - 1 >= y1:
             continue  # cut by a side of the part of the image it was traced in
         q, why = _blob_quad(c, contours, hier, i, params, hole_frac_max)
-        if q is not None:
+        if q is not None and why is None:
             out.append(q)
             continue
+        if q is not None:
+            # a fallback: kept apart, so that another threshold's sound blob of the same marker (the
+            # seed below lets the further thresholds look) is preferred to it
+            if weak is not None:
+                weak.append(q)
+            why = f"{why}, solidity under {params.min_solidity:g}"
         if seeds is not None and max(box[2], box[3]) <= max_side:
             seeds.append(box)
         if why is not None:
@@ -315,10 +332,15 @@ def _mask_candidates(contours: Contours, params: CandidateParams, max_side: floa
     return out
 
 
+#: the reason :func:`_blob_quad` gives with the quad of a blob of low solidity (:func:`_broken_border_quad`)
+BROKEN = "broken border"
+
+
 def _blob_quad(c: NDArray[np.int32], contours: tuple, hier: NDArray[np.int32], i: int, params: CandidateParams,
                hole_frac_max: float) -> tuple[NDArray[np.float64] | None, str | None]:
     """The candidate quad of the outer contour ``c`` (``contours[i]``, holes from ``hier``), or None
-    and the first test it failed (None for a blob too small to mention)."""
+    and the first test it failed (None for a blob too small to mention). A quad with the reason
+    :data:`BROKEN` is a fallback (:func:`_broken_border_quad`)."""
     area = cv2.contourArea(c)
     if area < 0.5 * params.min_side_px**2:
         return None, None
@@ -329,7 +351,7 @@ def _blob_quad(c: NDArray[np.int32], contours: tuple, hier: NDArray[np.int32], i
     if area / hull_area < params.min_solidity:
         q = _broken_border_quad(c, hull, params)
         if q is not None:
-            return q, None
+            return q, BROKEN
         return None, f"solidity {area / hull_area:.2f} < {params.min_solidity:g}"
     holes = 0
     hole_area = 0.0
