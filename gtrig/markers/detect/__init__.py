@@ -281,6 +281,22 @@ class MarkerDetector:
         self._retried = retried[keep]
         return Q[keep], ids[keep], rot[keep], ham[keep], bits[keep]
 
+    def _locally_white(self, v: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Border cells (Q, n, n; the other cells True) brighter than the ring cell just outside them
+        less half the contrast, ``v`` (Q, n + 2, n + 2) as in :meth:`_bits` (a corner cell against both
+        of its outer neighbours)."""
+        n = self.spec.cells
+        ring = np.concatenate([v[:, 0, :], v[:, -1, :], v[:, 1:-1, 0], v[:, 1:-1, -1]], axis=1)
+        black = np.median(v[:, 1:-1, 1:-1][:, self._border_mask()], axis=1)
+        half = 0.5 * (np.median(ring, axis=1) - black)[:, None]
+        out = np.ones((len(v), n, n), bool)
+        inner = v[:, 1:-1, 1:-1]
+        out[:, 0, :] &= inner[:, 0, :] > v[:, 0, 1:-1] - half
+        out[:, -1, :] &= inner[:, -1, :] > v[:, -1, 1:-1] - half
+        out[:, :, 0] &= inner[:, :, 0] > v[:, 1:-1, 0] - half
+        out[:, :, -1] &= inner[:, :, -1] > v[:, 1:-1, -1] - half
+        return out
+
     def _white_cells(self, ids: NDArray[np.int64], bits: NDArray[np.uint8]) -> NDArray[np.float64]:
         """The code's cells (Q, n, n), 1 = white, turned to the quads' orientation: of the four
         rotations of the printed pattern, the one closest to the cells as read."""
@@ -503,7 +519,10 @@ class MarkerDetector:
         cell_px = np.sqrt(np.array([_area(c) for c in corners])) / n
         mixed = split.sum(axis=(1, 2))
         bc = self.spec.border_cells
-        border_white = bits.sum(axis=(1, 2)) - bits[:, bc:-bc, bc:-bc].sum(axis=(1, 2))
+        # a border cell is white when it is so against the midway level and against the paper just
+        # outside it too: a highlight on the print (glare) lifts black and white alike, so a border cell
+        # under it passes the global midway level while it stays dark next to its own paper
+        border_white = (bits.astype(bool) & self._locally_white(vals))[:, self._border_mask()].sum(axis=1)
         data = bits[:, bc:-bc, bc:-bc]
         if p.unblur:
             # cells solved through the blur model: isolated white cells of small markers peak below
