@@ -23,6 +23,7 @@ Usage::
 
     python bench/markers.py --photos        # the real photos
     python bench/markers.py --hard          # the harder simulated set (300 images)
+    python bench/markers.py --hard --per-side 15 --misses  # gtrig's misses there, by stage
     python bench/markers.py                 # the full table (about 200 images)
     python bench/markers.py --quick         # a smaller grid
     python bench/markers.py --clutter 1000  # wrong-ID count on 1000 cluttered images
@@ -288,6 +289,54 @@ def _apriltag3() -> object | None:
     return _AT3[0]
 
 
+def _classify_misses(rng: np.random.Generator, n_per_side: int) -> None:
+    """``--hard --misses``: every marker of >= 20 px gtrig misses on the harder set, with the stage and
+    reason the rejection trace gives at its place, and its cells read at the TRUE corners, plainly and
+    through the blur model (a marker unreadable there is lost by physics, not by the detector)."""
+    from gtrig.markers.detect.decode import sample_cells, unblur_cells
+    from gtrig.markers.families import decode_batch
+
+    det = MarkerDetector(FAMILY)
+    n, bc, tol = det.spec.cells, det.spec.border_cells, det.spec.max_correction
+    total = missed = readable = 0
+    print("misses of gtrig at >= 20 px (side, image, ID): trace at its place | true corners: plain (ID, cells off), "
+          "blur model (ID, cells off, sigma)")
+    for side in [10, 14, 20, 30, 45, 70]:
+        for j in range(n_per_side):
+            img, truths, cond = _hard_scene(rng, side)
+            if side < 20:
+                continue
+            trace: list = []
+            out = det.detect(img, trace=trace)
+            for t in truths:
+                total += 1
+                if any(d.id == t.marker_id and np.abs(d.corners_px - t.corners_px).max() < 5 for d in out):
+                    continue
+                missed += 1
+                c = t.corners_px.mean(axis=0)
+                near = sorted({f"{r.stage}: {r.reason}" for r in trace
+                               if np.linalg.norm(r.quad_px.mean(axis=0) - c) < 0.3 * side}) or ["no candidate"]
+                Q = t.corners_px[None].astype(np.float64)
+                v = sample_cells(img, Q, n, None, ring=1)
+                bits, _ = det._bits(v)
+                i1, _, h1 = decode_batch(FAMILY, bits[:, bc:-bc, bc:-bc], tol)
+                ring = np.concatenate([v[:, 0, :], v[:, -1, :], v[:, 1:-1, 0], v[:, 1:-1, -1]], axis=1)
+                black = np.median(v[:, 1:-1, 1:-1][:, det._border_mask()], axis=1)
+                white = np.median(ring, axis=1)
+                best = (-1, -1, 0.0)
+                for sig in (max(cond["blur"], 0.3), 1.0, 1.5):
+                    w = unblur_cells(img, Q, n, bc, np.array([np.hypot(sig, 0.3)]), black, white - black)
+                    i2, _, h2 = decode_batch(FAMILY, (w > 0.5).astype(np.uint8), tol)
+                    if i2[0] == t.marker_id:
+                        best = (int(i2[0]), int(h2[0]), sig)
+                        break
+                readable += int(i1[0] == t.marker_id or best[0] == t.marker_id)
+                print(f"{side}/{j}/{t.marker_id} ({cond['background']}, bayer {cond['bayer']}, JPEG {cond['jpeg']}, "
+                      f"blur {cond['blur']:.2f}) | {'; '.join(near[:2])} | plain ({int(i1[0])}, {int(h1[0])}), "
+                      f"blur model ({best[0]}, {best[1]}, {best[2]:.2f})")
+    print(f"{missed} of {total} markers missed; {readable} of them read to their ID at the true corners")
+
+
 def _bench_photos() -> None:
     """The real photos: markers found per detector, and the ChArUco board-fit residual."""
     from gtrig.markers.detect.boardfit import charuco_marker_corners, grid_fit_rms, grid_local_rms, pose_fit_rms
@@ -358,6 +407,8 @@ def main() -> None:
     ap.add_argument("--photos", action="store_true", help="the real photos of ../shared/data/markers_real")
     ap.add_argument("--hard", action="store_true", help="the harder simulated set (JPEG, Bayer, glare, ...)")
     ap.add_argument("--per-side", type=int, default=50, help="--hard: images per marker side")
+    ap.add_argument("--misses", action="store_true",
+                    help="--hard: classify gtrig's misses by stage and read them at the true corners")
     a = ap.parse_args()
     rng = np.random.default_rng(a.seed)
     if a.photos:
@@ -367,6 +418,9 @@ def main() -> None:
             sys.stdout.flush()
             os._exit(0)
     dets = _detectors([s.strip() for s in a.detectors.split(",") if s.strip()])
+    if a.hard and a.misses:
+        _classify_misses(rng, a.per_side)
+        return
     if a.hard:
         _bench_hard(dets, rng, a.per_side)
         return

@@ -51,7 +51,7 @@ __all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", 
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 5
+DETECTOR_VERSION = 6
 
 
 @dataclass(frozen=True)
@@ -234,11 +234,14 @@ class MarkerDetector:
         tol = self.spec.max_correction + 2 if self.params.max_hamming is None else self.params.max_hamming + 2
         ids, rot, ham = decode_batch(self.spec.family, bits[:, bc:-bc, bc:-bc], tol)
         border_white = bits[:, bmask].sum(axis=1)
-        ok_levels = (border_white <= n // 2) & (contrast >= self.params.min_contrast)
+        ok_contrast = contrast >= self.params.min_contrast
         # the blur model only matters where the blur is a good part of a cell (a 1.5 px blur leaves the
         # cells of 5 px and more readable one by one): larger candidates that read as no code are clutter
         cell_px = np.sqrt(np.abs(_shoelace(Q))) / n
-        retry = np.flatnonzero((ids < 0) & ok_levels & (cell_px < 5.0))
+        # the border too: on a 20 px marker (2.5 px cells) blurred by 1-1.5 px a border cell between a
+        # white data cell and the paper outside peaks at 0.4-0.6 of the contrast, and read one by one
+        # up to 9 of the 28 read white (the hard bench, under Bayer demosaicing and JPEG)
+        retry = np.flatnonzero(((ids < 0) | (border_white > n // 2)) & ok_contrast & (cell_px < 5.0))
         retried = np.zeros(len(Q), bool)
         if len(retry):
             # small blurred markers: a white cell among black ones peaks below the midway threshold, so
@@ -248,19 +251,24 @@ class MarkerDetector:
             ring = np.concatenate([v[retry, 0, :], v[retry, -1, :], v[retry, 1:-1, 0], v[retry, 1:-1, -1]], axis=1)
             black = np.median(inner[:, bmask], axis=1)
             white = np.median(ring, axis=1)
+            done = np.zeros(len(Q), bool)
             for sig in (1.0, 1.5):
-                todo = retry[ids[retry] < 0]
+                todo = retry[~done[retry]]
                 if not len(todo):
                     break
                 sel = np.searchsorted(retry, todo)
-                w = unblur_cells(gray, Q[todo], n, bc, np.full(len(todo), sig), black[sel], (white - black)[sel], und)
-                i2, r2, h2 = decode_batch(self.spec.family, (w > 0.5).astype(np.uint8), tol)
-                hit = i2 >= 0
+                # every cell, the border's too, solved through the blur model (the paper outside the
+                # square is modelled, so the border cells need no ring)
+                w = unblur_cells(gray, Q[todo], n, 0, np.full(len(todo), sig), black[sel], (white - black)[sel], und)
+                i2, r2, h2 = decode_batch(self.spec.family, (w[:, bc:-bc, bc:-bc] > 0.5).astype(np.uint8), tol)
+                bw2 = (w[:, bmask] > 0.5).sum(axis=1)
+                hit = (i2 >= 0) & (bw2 <= n // 2)
                 ids[todo[hit]], rot[todo[hit]], ham[todo[hit]] = i2[hit], r2[hit], h2[hit]
+                border_white[todo[hit]] = bw2[hit]
                 retried[todo[hit]] = True
-                d = bits[todo[hit]]
-                d[:, bc:-bc, bc:-bc] = (w[hit] > 0.5)
-                bits[todo[hit]] = d
+                done[todo[hit]] = True
+                bits[todo[hit]] = (w[hit] > 0.5)
+        ok_levels = (border_white <= n // 2) & ok_contrast
         keep = (ids >= 0) & ok_levels
         if trace is not None:
             raw = Q if und is None else und.to_raw(Q.reshape(-1, 2)).reshape(-1, 4, 2)
@@ -272,6 +280,22 @@ class MarkerDetector:
                 trace.append(Rejection(raw[k].copy(), "predecode", why))
         self._retried = retried[keep]
         return Q[keep], ids[keep], rot[keep], ham[keep], bits[keep]
+
+    def _locally_white(self, v: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Border cells (Q, n, n; the other cells True) brighter than the ring cell just outside them
+        less half the contrast, ``v`` (Q, n + 2, n + 2) as in :meth:`_bits` (a corner cell against both
+        of its outer neighbours)."""
+        n = self.spec.cells
+        ring = np.concatenate([v[:, 0, :], v[:, -1, :], v[:, 1:-1, 0], v[:, 1:-1, -1]], axis=1)
+        black = np.median(v[:, 1:-1, 1:-1][:, self._border_mask()], axis=1)
+        half = 0.5 * (np.median(ring, axis=1) - black)[:, None]
+        out = np.ones((len(v), n, n), bool)
+        inner = v[:, 1:-1, 1:-1]
+        out[:, 0, :] &= inner[:, 0, :] > v[:, 0, 1:-1] - half
+        out[:, -1, :] &= inner[:, -1, :] > v[:, -1, 1:-1] - half
+        out[:, :, 0] &= inner[:, :, 0] > v[:, 1:-1, 0] - half
+        out[:, :, -1] &= inner[:, :, -1] > v[:, 1:-1, -1] - half
+        return out
 
     def _white_cells(self, ids: NDArray[np.int64], bits: NDArray[np.uint8]) -> NDArray[np.float64]:
         """The code's cells (Q, n, n), 1 = white, turned to the quads' orientation: of the four
@@ -524,7 +548,10 @@ class MarkerDetector:
         cell_px = np.sqrt(np.array([_area(c) for c in corners])) / n
         mixed = split.sum(axis=(1, 2))
         bc = self.spec.border_cells
-        border_white = bits.sum(axis=(1, 2)) - bits[:, bc:-bc, bc:-bc].sum(axis=(1, 2))
+        # a border cell is white when it is so against the midway level and against the paper just
+        # outside it too: a highlight on the print (glare) lifts black and white alike, so a border cell
+        # under it passes the global midway level while it stays dark next to its own paper
+        border_white = (bits.astype(bool) & self._locally_white(vals))[:, self._border_mask()].sum(axis=1)
         data = bits[:, bc:-bc, bc:-bc]
         if p.unblur:
             # cells solved through the blur model: isolated white cells of small markers peak below
@@ -539,6 +566,14 @@ class MarkerDetector:
                 ab = black_lv, to_levels(ab[0] + ab[1], p.tone) - black_lv
             wls = unblur_cells(gray, corners, n, bc, np.clip(blur, 0.3, p.max_blur_px), ab[0], ab[1], und)
             data = (wls > 0.5).astype(np.uint8)
+            blurry = np.flatnonzero(cell_px < np.maximum(4.0, 3.0 * blur))
+            if len(blurry):
+                # where the blur is a good part of a cell the border cells read one by one flip as the data
+                # cells do (a thin border between white cells and the paper peaks near the midway level):
+                # they are judged through the blur model too, every cell solved with the paper outside
+                w0 = unblur_cells(gray, corners[blurry], n, 0, np.clip(blur[blurry], 0.3, p.max_blur_px),
+                                  ab[0][blurry], ab[1][blurry], und)
+                border_white[blurry] = (w0[:, self._border_mask()] > 0.5).sum(axis=1)
         ids, rot, ham = decode_batch(self.spec.family, data, p.max_hamming)
         good = (ids >= 0) & (border_white <= max(0, n // 4 - 1))
         fine = cell_px >= np.maximum(4.0, 3.0 * blur)  # cells resolved: their insides must be uniform

@@ -164,8 +164,9 @@ def find_candidates(
     bg = _closing_background(gray, max_side, params.scale)
     rejected: list = []
     seeds: list[tuple[int, int, int, int]] = []
+    weak: list[NDArray[np.float64]] = []
     out = _mask_candidates(_contours_at(gray, bg, params.ratio_threshold, params.smooth), params, max_side,
-                           max_hole_fraction, None if trace is None else rejected, seeds=seeds)
+                           max_hole_fraction, None if trace is None else rejected, seeds=seeds, weak=weak)
     covered = np.zeros(gray.shape, np.uint8)
     more = params.more_thresholds
     if more and seeds:
@@ -182,18 +183,25 @@ def find_candidates(
             looser += [loose] * len(regions[loose][1])
         for loose, contours in zip(looser, _threads.ordered_map(_contours_at, tasks, threads), strict=True):
             found = _mask_candidates(contours, params, max_side, max_hole_fraction,
-                                     None if trace is None else rejected, covered, regions[loose][0])
+                                     None if trace is None else rejected, covered, regions[loose][0], weak=weak)
             out.extend(found)
             if found:  # (the boxes may overlap: a blob in two of them is one candidate)
                 cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
+    # the fallback quads of broken borders, where no sound candidate lies (the first of several wins)
+    h, w = gray.shape
+    cover = np.zeros(gray.shape, np.uint8)
+    if out:
+        cv2.fillPoly(cover, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in out], 255)
+    for q in weak:
+        c = np.clip(np.round(q.mean(axis=0)).astype(int), 0, [w - 1, h - 1])
+        if not cover[c[1], c[0]]:
+            out.append(q)
+            cv2.fillPoly(cover, [np.round(q).astype(np.int32).reshape(-1, 1, 2)], 255)
     if trace is not None:
         # a blob that failed at one threshold but gave a candidate at another is not a rejection
-        if out and not (more and seeds):
-            cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in out], 255)
-        h, w = gray.shape
         for r in rejected:
             c = np.clip(np.round(r.quad_px.mean(axis=0)).astype(int), 0, [w - 1, h - 1])
-            if not covered[c[1], c[0]]:
+            if not cover[c[1], c[0]]:
                 trace.append(r)
     return out
 
@@ -257,12 +265,14 @@ def _seed_regions(shape: tuple[int, ...], seeds: list[tuple[int, int, int, int]]
 def _mask_candidates(contours: Contours, params: CandidateParams, max_side: float,
                      max_hole_fraction: float | None, trace: list | None,
                      covered: NDArray[np.uint8] | None = None, region: NDArray[np.uint8] | None = None,
-                     seeds: list[tuple[int, int, int, int]] | None = None) -> list[NDArray[np.float64]]:
+                     seeds: list[tuple[int, int, int, int]] | None = None,
+                     weak: list[NDArray[np.float64]] | None = None) -> list[NDArray[np.float64]]:
     """:func:`find_candidates` on the contours of one dark mask (:func:`_contours_at`). Blobs whose
     bounding box is centred on a non-zero pixel of ``covered``, or on a zero pixel of ``region``, are
     skipped. ``seeds`` receives the bounding box ``(x, y, w, h)`` of every blob of a plausible size
     (outline length, and box at most ``max_side``) that gave no candidate, and of the blobs with
-    outlines of a third to one plausible length."""
+    outlines of a third to one plausible length. ``weak`` receives the fallback quads of blobs of
+    low solidity (:func:`_broken_border_quad`)."""
     contours, hier, (x0, y0, x1, y1) = contours
     if hier is None:
         return []
@@ -296,9 +306,15 @@ def _mask_candidates(contours: Contours, params: CandidateParams, max_side: floa
         if box[0] <= x0 or box[1] <= y0 or box[0] + box[2] - 1 >= x1 or box[1] + box[3] - 1 >= y1:
             continue  # cut by a side of the part of the image it was traced in
         q, why = _blob_quad(c, contours, hier, i, params, hole_frac_max)
-        if q is not None:
+        if q is not None and why is None:
             out.append(q)
             continue
+        if q is not None:
+            # a fallback: kept apart, so that another threshold's sound blob of the same marker (the
+            # seed below lets the further thresholds look) is preferred to it
+            if weak is not None:
+                weak.append(q)
+            why = f"{why}, solidity under {params.min_solidity:g}"
         if seeds is not None and max(box[2], box[3]) <= max_side:
             seeds.append(box)
         if why is not None:
@@ -306,17 +322,27 @@ def _mask_candidates(contours: Contours, params: CandidateParams, max_side: floa
     return out
 
 
+#: the reason :func:`_blob_quad` gives with the quad of a blob of low solidity (:func:`_broken_border_quad`)
+BROKEN = "broken border"
+
+
 def _blob_quad(c: NDArray[np.int32], contours: tuple, hier: NDArray[np.int32], i: int, params: CandidateParams,
                hole_frac_max: float) -> tuple[NDArray[np.float64] | None, str | None]:
     """The candidate quad of the outer contour ``c`` (``contours[i]``, holes from ``hier``), or None
-    and the first test it failed (None for a blob too small to mention)."""
+    and the first test it failed (None for a blob too small to mention). A quad with the reason
+    :data:`BROKEN` is a fallback (:func:`_broken_border_quad`)."""
     area = cv2.contourArea(c)
     if area < 0.5 * params.min_side_px**2:
         return None, None
     hull = cv2.convexHull(c)
     hull_area = cv2.contourArea(hull)
-    if hull_area <= 0 or area / hull_area < params.min_solidity:
-        return None, f"solidity {area / max(hull_area, 1e-9):.2f} < {params.min_solidity:g}"
+    if hull_area <= 0:
+        return None, "solidity 0.00"
+    if area / hull_area < params.min_solidity:
+        q = _broken_border_quad(c, hull, params)
+        if q is not None:
+            return q, BROKEN
+        return None, f"solidity {area / hull_area:.2f} < {params.min_solidity:g}"
     holes = 0
     hole_area = 0.0
     j = hier[i, 2]
@@ -339,3 +365,45 @@ def _blob_quad(c: NDArray[np.int32], contours: tuple, hier: NDArray[np.int32], i
     if q is None:
         return None, "no straight sides (robust quad failed)"
     return _ordered_cw(q), None
+
+
+#: share of a candidate outline's perimeter the contour must trace (within ``robust_quad``'s side band)
+#: for a blob of low solidity to be taken as a marker with a broken border
+BROKEN_BORDER_TRACED = 0.8
+
+
+def _broken_border_quad(c: NDArray[np.int32], hull: NDArray[np.int32], params: CandidateParams
+                        ) -> NDArray[np.float64] | None:
+    """The quad of a marker whose dark border is broken, from a blob that failed the solidity test.
+
+    On a small blurred marker under Bayer demosaicing and JPEG (the hard bench's 20 px AprilTags, 2.5 px
+    border), the white data cells next to the border lift it above the ratio threshold in places; the
+    data area then joins the paper outside through those gaps, the outer contour runs into the marker
+    and the blob's solidity falls to 0.6-0.8 although its outline is still the square's. Such a blob is
+    kept when its convex hull is a convex quadrilateral whose four sides the contour traces over at
+    least :data:`BROKEN_BORDER_TRACED` of their middle parts (clutter of low solidity rarely has four
+    straight, traced sides); the cells read through the quad (the pre-decoder and the decoder) then
+    decide, as for every candidate. Returns the quad (4, 2), clockwise on screen, or None.
+    """
+    peri = cv2.arcLength(hull, True)
+    approx = cv2.approxPolyDP(hull, 0.05 * peri, True)
+    if len(approx) != 4 or not cv2.isContourConvex(approx):
+        return None
+    a = _ordered_cw(approx.reshape(4, 2).astype(np.float64))
+    sides = np.hypot(*(a[_NEXT] - a).T)
+    if sides.min() < params.min_side_px * 0.7 or sides.min() < 0.25 * sides.max():
+        return None
+    pts = c.reshape(-1, 2).astype(np.float64)
+    sel = _kernels.side_points(np.ascontiguousarray(pts), np.ascontiguousarray(a))
+    # traced share of each side's middle 70 % (what side_points looks at): the 2 px bins along the side
+    # that hold a contour point (an 8-connected contour steps by up to 1.41 px along a diagonal side)
+    t = (a[_NEXT] - a) / sides[:, None]
+    for i in range(4):
+        if sel[i].sum() < 3:
+            return None
+        s = (pts[sel[i]] - a[i]) @ t[i] - 0.15 * sides[i]
+        bins = np.unique(np.clip(np.floor(s / 2.0), 0, None))
+        if len(bins) < BROKEN_BORDER_TRACED * np.ceil(0.7 * sides[i] / 2.0):
+            return None
+    q = robust_quad(c, a)
+    return None if q is None else _ordered_cw(q)
