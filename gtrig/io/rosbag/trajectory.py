@@ -20,9 +20,10 @@ stamp going backwards is a :class:`~gtrig.errors.FormatError`.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -144,34 +145,43 @@ def read_bag_trajectory(bag: str | os.PathLike[str] | Sequence[str | os.PathLike
             if msgtype == "nav_msgs/msg/Path":
                 last_path = (msg, t_ns)
                 continue
-            try:
+            with _standard_fields(name, conn.msgtype):
                 stamps.append(time_to_s(msg.header.stamp) if stamp == "header" else ns_to_s(t_ns))
                 p, q, c = _pose_of(msg)
-            except (AttributeError, TypeError):
-                # the bag embeds its own message definitions: one that is not the standard type's
-                raise FormatError(f"{name}: the bag's definition of {conn.msgtype} is not the standard one "
-                                  "(a field is missing or renamed)") from None
+                frame = frame or str(msg.header.frame_id)
             xyz.append(p)
             quat.append(q)
             covs.append(c)
-            frame = frame or msg.header.frame_id
             if not child:
-                child = getattr(msg, "child_frame_id", "")
+                child = str(getattr(msg, "child_frame_id", ""))
         if last_path is not None:
             msg, t_ns = last_path
-            frame = msg.header.frame_id
-            for ps in msg.poses:
-                # a path's poses carry their own stamps; the receive time is the path's
-                stamps.append(time_to_s(ps.header.stamp) if stamp == "header" else ns_to_s(t_ns))
-                p, q, _ = _pose_of(ps)
-                xyz.append(p)
-                quat.append(q)
-                covs.append(None)
+            with _standard_fields(name, msgtype):
+                frame = str(msg.header.frame_id)
+                for ps in msg.poses:
+                    # a path's poses carry their own stamps; the receive time is the path's
+                    stamps.append(time_to_s(ps.header.stamp) if stamp == "header" else ns_to_s(t_ns))
+                    p, q, _ = _pose_of(ps)
+                    xyz.append(p)
+                    quat.append(q)
+                    covs.append(None)
         if not stamps:
             raise InputError(f"{name}: no messages")
         cov_arr = np.array(covs, float) if all(c is not None for c in covs) else None
         return _make_track(np.array(stamps, float), np.array(xyz, float), np.array(quat, float), cov_arr, name,
                            frame, child, topic)
+
+
+@contextlib.contextmanager
+def _standard_fields(name: str, msgtype: str) -> Iterator[None]:
+    """Reads of a deserialized message's fields: a bag embeds its own message definitions, and one
+    that is not the standard type's (a field missing, renamed or of another type) is one refusal
+    naming the topic, wherever the first field it lacks is read."""
+    try:
+        yield
+    except (AttributeError, TypeError):
+        raise FormatError(f"{name}: the bag's definition of {msgtype} is not the standard one "
+                          "(a field is missing or renamed)") from None
 
 
 def _read_tf(reader: Any, tf: tuple[str, str, str], stamp: StampSource, name: str) -> PoseTrack:
@@ -188,15 +198,16 @@ def _read_tf(reader: Any, tf: tuple[str, str, str], stamp: StampSource, name: st
             raise InputError(f"{reader.paths[0]}:{conn.topic}: a {conn.msgtype}, not a {TF_TYPE}")
         msg = deserialize(reader, raw, conn.msgtype, f"{reader.paths[0]}:{conn.topic}")
         static = conn.topic == "/tf_static" and tf_topic != "/tf_static"
-        for ts in msg.transforms:
-            c, p = ts.child_frame_id.lstrip("/"), ts.header.frame_id.lstrip("/")
-            e = edges.setdefault(c, (p, static, [], [], []))
-            if e[0] != p:
-                raise FormatError(f"{reader.paths[0]}:{conn.topic}: frame {c} has two parents, {e[0]} and {p}")
-            xyz, q, _ = _pose_of(ts)
-            e[2].append(time_to_s(ts.header.stamp) if stamp == "header" else ns_to_s(t_ns))
-            e[3].append(xyz)
-            e[4].append(q)
+        with _standard_fields(f"{reader.paths[0]}:{conn.topic}", conn.msgtype):
+            for ts in msg.transforms:
+                c, p = ts.child_frame_id.lstrip("/"), ts.header.frame_id.lstrip("/")
+                e = edges.setdefault(c, (p, static, [], [], []))
+                if e[0] != p:
+                    raise FormatError(f"{reader.paths[0]}:{conn.topic}: frame {c} has two parents, {e[0]} and {p}")
+                xyz, q, _ = _pose_of(ts)
+                e[2].append(time_to_s(ts.header.stamp) if stamp == "header" else ns_to_s(t_ns))
+                e[3].append(xyz)
+                e[4].append(q)
 
     def up(frame: str) -> list[str]:
         chain = [frame]
