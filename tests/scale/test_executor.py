@@ -30,7 +30,8 @@ def _one_line_exit_2(args: list[str]) -> str:
     r = CliRunner().invoke(app, args)
     assert r.exit_code == 2, r.output
     lines = [ln for ln in r.output.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("error: --dask") and "Traceback" not in r.output, r.output
+    assert len(lines) == 1 and lines[0].startswith("error:") and "--dask" in lines[0] and "Traceback" not in r.output, (
+        r.output)
     return lines[0]
 
 
