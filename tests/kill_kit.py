@@ -15,10 +15,16 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
+def _sigint_default() -> None:
+    # a suite started in the background (`cmd &` in a script, nohup) has SIGINT ignored, and an ignored
+    # signal stays ignored across exec: the child would then never see the test's SIGINT and run to the end
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def gtrig(*args: str) -> subprocess.Popen[str]:
     env = {**os.environ, "PYTHONPATH": str(REPO), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     return subprocess.Popen([sys.executable, "-m", "gtrig", *args], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+                            stderr=subprocess.STDOUT, text=True, preexec_fn=_sigint_default)
 
 
 def finish(p: subprocess.Popen[str], timeout: float = 900) -> str:
