@@ -12,6 +12,7 @@ import typer
 
 from gtrig.cli.common import console, err_console
 
+# "\\[" keeps the brackets: Typer renders help through Rich markup, which would swallow "[dask]"
 DASK_HELP = ("Run the chunks on Dask: local:N (a cluster of N processes on this machine, started and stopped "
              "here) or a scheduler's address, tcp://HOST:8786 (pip install 'gtrig\\[dask]'; docs/scale.md).")
 
