@@ -45,6 +45,7 @@ from scipy.stats import t as student_t
 from gtrig.fusion.fuse import FusionOptions, fuse
 from gtrig.fusion.measurements import Fixes
 from gtrig.fusion.sync import OffsetEstimate, Verdict
+from gtrig.io.offsets import Z95
 from gtrig.trajectory import PoseTrack
 
 _NAN2 = (float("nan"), float("nan"))
@@ -589,7 +590,7 @@ def laser_clock(ret: ScannerReturns, laser: PoseTrack, scanners: list[OffsetEsti
             continue
         if e is None or e.verdict != "ok":
             return float("nan"), float("nan")
-        tau[i], se[i] = e.offset_s, (e.ci95_s[1] - e.ci95_s[0]) / 2 / 1.959963984540054
+        tau[i], se[i] = e.offset_s, (e.ci95_s[1] - e.ci95_s[0]) / 2 / Z95
     return float(w @ tau), float(np.sqrt(np.sum((w * se) ** 2)))
 
 

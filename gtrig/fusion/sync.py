@@ -34,6 +34,7 @@ from scipy.stats import t as student_t
 
 from gtrig.fusion.measurements import Fixes
 from gtrig.io.odometry import OdometryLog
+from gtrig.io.offsets import Z95
 
 if TYPE_CHECKING:
     from gtrig.fusion.fuse import FusionOptions
@@ -327,20 +328,16 @@ def offset_sigmas(path: str | os.PathLike[str]) -> dict[str, float]:
     """Per source of a ``sync.yaml`` with an ``ok`` offset to the reference, the offset's standard error (s):
     its 95 % interval's half-width / 1.96 (for :attr:`~gtrig.fusion.fuse.FusionOptions.offsets_sigma_s`).
     Entries without an interval are left out; the file's other checks are :func:`gtrig.io.offsets.read_offsets`'."""
-    from gtrig.io.offsets import read_offsets
+    from gtrig.io.offsets import read_offsets, sigma_from_ci95
     from gtrig.io.yamlfile import load_yaml
 
     ok = read_offsets(path)
     doc = load_yaml(path) or {}
     out: dict[str, float] = {}
     for name in ok:
-        ci = (doc.get("sources") or {}).get(name, {}).get("ci95_s")
-        try:
-            lo, hi = float(ci[0]), float(ci[1])
-        except (TypeError, ValueError, IndexError, KeyError):
-            continue
-        if np.isfinite(lo) and np.isfinite(hi) and hi >= lo:
-            out[name] = (hi - lo) / 2 / 1.959963984540054
+        sigma = sigma_from_ci95((doc.get("sources") or {}).get(name, {}).get("ci95_s"))
+        if sigma is not None:
+            out[name] = sigma
     return out
 
 
@@ -359,7 +356,7 @@ def combine_with_laser_clock(vision: OffsetEstimate, laser: OffsetEstimate, lase
     """
     if vision.verdict != "ok" or laser.verdict != "ok" or not np.isfinite(laser_to_vision_s):
         return vision, laser
-    z = 1.959963984540054
+    z = Z95
     sv, sl = (vision.ci95_s[1] - vision.ci95_s[0]) / 2 / z, (laser.ci95_s[1] - laser.ci95_s[0]) / 2 / z
     sl = float(np.hypot(sl, laser_to_vision_sigma_s if np.isfinite(laser_to_vision_sigma_s) else 0.0))
     if not (sv > 0 and sl > 0):

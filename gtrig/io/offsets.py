@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -22,6 +23,21 @@ from gtrig.io.text import read_text
 from gtrig.io.yamlfile import safe_load
 
 CONVENTION = "offset_s = source stamp - reference stamp of the same instant"
+
+#: scipy.stats.norm.ppf(0.975): a 95 % interval's half-width in standard deviations
+Z95 = 1.959963984540054
+
+
+def sigma_from_ci95(ci95_s: object) -> float | None:
+    """The standard deviation (s) of an offset whose 95 % interval is ``ci95_s = (low, high)``: its
+    half-width / :data:`Z95`; None when the interval is missing, not two finite numbers, or reversed."""
+    try:
+        lo, hi = float(ci95_s[0]), float(ci95_s[1])  # type: ignore[index]
+    except (TypeError, ValueError, IndexError, KeyError):
+        return None
+    if not (math.isfinite(lo) and math.isfinite(hi) and hi >= lo):
+        return None
+    return (hi - lo) / 2 / Z95
 
 
 def write_offsets(path: str | os.PathLike[str], reference: str, sources: dict[str, dict[str, object]]) -> None:

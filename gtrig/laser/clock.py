@@ -21,17 +21,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from gtrig.io.offsets import sigma_from_ci95
 from gtrig.io.scans import ScanLog
 from gtrig.rig.models import LaserScanner, Rig
 
 #: the clocks a GTlaser track can be delivered on: the scanners' own stamps, GTvision's (the cameras'),
 #: or odometry's (the robot's)
 Clock = Literal["scanners", "vision", "odometry"]
-
-#: 95 % interval half-width to one standard deviation (the intervals of sensor_sync are Student-t over
-#: at least a few blocks; 1.96 is the large-sample value and errs on the cautious side for few blocks
-#: only slightly)
-_Z95 = 1.96
 
 
 @dataclass(frozen=True)
@@ -63,10 +59,10 @@ def clocks_from_sync(sources: Mapping[str, Any], clock: Clock) -> dict[str, Scan
     for name, v in sources.items():
         if not str(name).startswith("laser/") or not isinstance(v, Mapping) or v.get("verdict") != "ok":
             continue
-        off, ci = v.get(key), v.get(ci_key)
-        if off is None or ci is None:
+        off, sigma = v.get(key), sigma_from_ci95(v.get(ci_key))
+        if off is None or sigma is None:
             continue
-        out[str(name).split("/", 1)[1]] = ScannerClock(float(off), abs(float(ci[1]) - float(ci[0])) / (2 * _Z95))
+        out[str(name).split("/", 1)[1]] = ScannerClock(float(off), sigma)
     return out
 
 

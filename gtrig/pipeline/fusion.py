@@ -67,7 +67,7 @@ def sync(inp: StageInput) -> StageOutput:
                                 1000 * e.offset_s if e.verdict == "ok" else math.nan, "ms") for e in sensors)
     rows: tuple[AccuracyRow, ...] = ()
     if inp.has_truth:
-        true_s = _true_odometry_offset(inp.rec)
+        true_s = true_odometry_offset(inp.rec)
         # the sources' own clocks (cameras', scanners') carry small offsets too: informational, no target
         rows = tuple(AccuracyRow("sync", f"{k}: offset minus the simulated odometry clock's",
                                  1000 * abs(offsets[k] - true_s), "ms") for k in offsets)
@@ -111,7 +111,7 @@ def _sensor_truth_rows(rec: Path, sensors: list) -> tuple[AccuracyRow, ...]:  # 
     return tuple(rows)
 
 
-def _true_odometry_offset(rec: Path) -> float:
+def true_odometry_offset(rec: Path) -> float:
     """The simulated odometry clock minus the GT clock (truth/robot_clock.yaml; 0 when absent). A source's
     offset to odometry is then its own clock (the GT clock) minus odometry's: ``-offset``."""
     from gtrig.io.yamlfile import load_yaml

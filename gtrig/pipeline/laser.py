@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 from gtrig.pipeline.context import AccuracyRow, StageInput, StageOutput
 
 if TYPE_CHECKING:
+    from gtrig.evaluate.truth import TruthScore
     from gtrig.trajectory import PoseTrack
 
 
@@ -43,16 +44,21 @@ def gtlaser(inp: StageInput) -> StageOutput:
     if not inp.has_truth:
         return StageOutput(prod, checks=checks, outputs=outputs)
     acc = score_on_recording(track, inp.rec, "run", expected_stamps_s=res.stamps_s)
+    return StageOutput(prod, _accuracy_rows(acc, "run", localized=True), checks, outputs)
+
+
+def _accuracy_rows(acc: TruthScore, what: str, localized: bool) -> tuple[AccuracyRow, ...]:
+    """GTlaser's rows against truth for the track ``what`` names (``run``, ``run on vision's clock``)."""
     pos_mm, yaw_deg = acc.mean_pos_m * 1000, math.degrees(acc.mean_abs_yaw_rad)
     n_wrong = acc.n_pos_over(0.05)
-    rows = (
-        AccuracyRow("GTlaser", "run, mean position error", pos_mm, "mm", "<= 5", pos_mm <= 5),
-        AccuracyRow("GTlaser", "run, mean |yaw| error", yaw_deg, "deg", "<= 0.1", yaw_deg <= 0.1),
-        AccuracyRow("GTlaser", "run, frames localized", 100 * acc.n_scored / max(acc.n_expected, 1), "%"),
-        AccuracyRow("GTlaser", "run, OK frames off by > 5 cm", n_wrong, "", "0", n_wrong == 0),
-        AccuracyRow("GTlaser", "run, mean NEES / dof", acc.mean_nees / 3, "", "0.5-2"),
-    )
-    return StageOutput(prod, rows, checks, outputs)
+    rows = [AccuracyRow("GTlaser", f"{what}, mean position error", pos_mm, "mm", "<= 5", pos_mm <= 5),
+            AccuracyRow("GTlaser", f"{what}, mean |yaw| error", yaw_deg, "deg", "<= 0.1", yaw_deg <= 0.1)]
+    if localized:
+        rows.append(AccuracyRow("GTlaser", f"{what}, frames localized", 100 * acc.n_scored / max(acc.n_expected, 1),
+                                "%"))
+    rows += [AccuracyRow("GTlaser", f"{what}, OK frames off by > 5 cm", n_wrong, "", "0", n_wrong == 0),
+             AccuracyRow("GTlaser", f"{what}, mean NEES / dof", acc.mean_nees / 3, "", "0.5-2")]
+    return tuple(rows)
 
 
 def gtlaser_clock(inp: StageInput) -> StageOutput:
@@ -99,23 +105,13 @@ def gtlaser_clock(inp: StageInput) -> StageOutput:
     from dataclasses import replace
 
     from gtrig.evaluate.truth import score_on_recording
+    from gtrig.pipeline.fusion import true_odometry_offset
 
-    # the truth is on the GT clock; odometry's clock is off it by truth/robot_clock.yaml's offset_s
-    q = inp.rec / "truth" / "robot_clock.yaml"
-    robot = load_yaml(q) if q.is_file() else None
-    shift = float(robot.get("offset_s", 0.0)) if clock == "odometry" and isinstance(robot, dict) else 0.0
+    # the truth is on the GT clock; odometry's clock is off it by the simulated robot clock's offset
+    shift = -true_odometry_offset(inp.rec) if clock == "odometry" else 0.0
     acc = score_on_recording(replace(track, stamps_s=track.stamps_s - shift), inp.rec, "run",
                              expected_stamps_s=res.stamps_s - shift)
-    pos_mm, yaw_deg = acc.mean_pos_m * 1000, math.degrees(acc.mean_abs_yaw_rad)
-    n_wrong = acc.n_pos_over(0.05)
-    what = f"run on {clock}'s clock"
-    rows = (
-        AccuracyRow("GTlaser", f"{what}, mean position error", pos_mm, "mm", "<= 5", pos_mm <= 5),
-        AccuracyRow("GTlaser", f"{what}, mean |yaw| error", yaw_deg, "deg", "<= 0.1", yaw_deg <= 0.1),
-        AccuracyRow("GTlaser", f"{what}, OK frames off by > 5 cm", n_wrong, "", "0", n_wrong == 0),
-        AccuracyRow("GTlaser", f"{what}, mean NEES / dof", acc.mean_nees / 3, "", "0.5-2"),
-    )
-    return StageOutput(prod, rows, checks, outputs)
+    return StageOutput(prod, _accuracy_rows(acc, f"run on {clock}'s clock", localized=False), checks, outputs)
 
 
 def _offset_to_odometry(inp: StageInput, track: PoseTrack) -> float | None:

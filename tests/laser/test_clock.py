@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from gtrig.geometry import wrap_angle
+from gtrig.io.offsets import Z95
 from gtrig.io.scans import ScanLog
 from gtrig.laser import synth
 from gtrig.laser.background import build_background
@@ -29,9 +30,9 @@ def test_clocks_from_sync_reads_the_scanner_entries():
     v = clocks_from_sync(sources, "vision")
     assert set(v) == {"a"}  # not the sources, not the cameras, not a scanner without a verdict of ok
     assert v["a"].offset_s == pytest.approx(0.004)
-    assert v["a"].sigma_s == pytest.approx(0.001 / 1.96)
+    assert v["a"].sigma_s == pytest.approx(0.001 / Z95)
     o = clocks_from_sync(sources, "odometry")
-    assert o["a"].offset_s == pytest.approx(0.0025) and o["a"].sigma_s == pytest.approx(0.004 / 1.96)
+    assert o["a"].offset_s == pytest.approx(0.0025) and o["a"].sigma_s == pytest.approx(0.004 / Z95)
     assert clocks_from_sync(sources, "scanners") == {}
 
 
