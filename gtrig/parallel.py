@@ -37,25 +37,52 @@ def _worker_start(parent_pid: int, initializer: Callable[..., Any] | None, inita
     # handle: it cancels the chunks not started and waits for the running ones.
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM, signal.SIGINT})  # held while forking
     _die_with_parent(parent_pid)
     if initializer is not None:
         initializer(*initargs)
 
 
-def _fork_workers_now(ex: ProcessPoolExecutor) -> None:
-    """Fork the pool's workers (a forking pool starts them all at its first task) with SIGTERM and SIGINT
-    held: a signal that arrives inside the fork's at-fork callbacks runs the CLI's handler there, where
-    Python ignores the exception it raises ("Exception ignored in _releaseLock"), and the run would go on
-    as if never signalled. Held, it is delivered right after, in plain code."""
-    import os
-    import signal
+@contextlib.contextmanager
+def _interrupts_deferred() -> Iterator[None]:
+    """Hold SIGTERM and SIGINT at the Python level for the block, then raise the first one that came.
 
-    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
+    Blocking them with ``pthread_sigmask`` is not enough: it holds them for the calling thread only, and
+    the kernel hands a process-directed signal to any thread that does not block it (a progress bar's,
+    OpenCV's, numba's), after which CPython runs the handler in the main thread at its next bytecode,
+    wherever that is. A Python-level handler runs only in the main thread and here only records."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield  # handlers can be set from the main thread only; a signal is the main thread's to handle
+        return
+    came: list[int] = []
+
+    def record(signum: int, frame: object) -> None:
+        came.append(signum)
+
+    before = {s: signal.signal(s, record) for s in (signal.SIGTERM, signal.SIGINT)}
     try:
-        ex.submit(os.getpid).result()
+        yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        for s, handler in before.items():
+            signal.signal(s, handler)
+        if came:
+            signal.raise_signal(came[0])
+
+
+def _fork_workers_now(ex: ProcessPoolExecutor) -> None:
+    """Fork the pool's workers (a forking pool starts them all at its first task) with interrupts deferred.
+
+    A signal handled inside the fork's at-fork callbacks raises where Python ignores the exception
+    ("Exception ignored in _releaseLock"), and the run would go on as if never signalled; one handled
+    between the workers' start and their manager thread's leaves workers that nobody tells to stop, and
+    the exit then waits for them forever (multiprocessing joins its children at exit). Deferred, the
+    signal is raised once the pool is whole, where shutting the pool down ends its workers."""
+    import os
+
+    with _interrupts_deferred():
+        ex.submit(os.getpid).result()
 
 
 @contextlib.contextmanager
@@ -78,8 +105,8 @@ def process_pool(
     cv2.setNumThreads(1)
     try:
         ex = ProcessPoolExecutor(workers, initializer=_worker_start, initargs=(os.getpid(), initializer, initargs))
-        _fork_workers_now(ex)
         try:
+            _fork_workers_now(ex)
             yield ex
         except BaseException:
             # interrupted (Ctrl-C) or failed: drop the chunks not started rather than computing them all
