@@ -51,7 +51,7 @@ __all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", 
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 6
+DETECTOR_VERSION = 7
 
 
 @dataclass(frozen=True)
@@ -118,7 +118,14 @@ class DetectorParams:
     """Detector settings.
 
     candidates : :class:`CandidateParams`.
-    band_px : half-width of the edge band beyond ``3 sigma`` (pixels).
+    band_px : half-width of the edge band beyond ``3 sigma`` (pixels; the limits of a small marker's
+        border and cells still apply). A real edge is not a Gaussian step out to its tails: a phone's
+        sharpening leaves an overshoot 2-4 px beyond the transition, a display's pixels a staircase,
+        and a band that ends inside them fits the white level to the halo and moves the line. With
+        5 px beyond ``3 sigma`` the band reaches the plateaus: the grid photo's block residual 0.888 ->
+        0.775 px (0.681 with ``tone="srgb"``, SUBPIX 0.733), the ChArUco photos' 0.322-0.508 ->
+        0.312-0.495 px, the simulator's RMS at blur 1 px 0.074 -> 0.070 px, for 6 % more CPU
+        (1.5 px until session 28; BENCHMARKS.md, issue 16).
     max_blur_px : edges blurrier than this are rejected.
     min_contrast : smallest accepted white - black difference (grey levels).
     max_rel_rms : largest accepted residual RMS / contrast of an edge fit.
@@ -147,7 +154,7 @@ class DetectorParams:
     """
 
     candidates: CandidateParams = field(default_factory=CandidateParams)
-    band_px: float = 1.5
+    band_px: float = 5.0
     max_blur_px: float = 5.0
     min_contrast: float = 12.0
     max_rel_rms: float = 0.25
