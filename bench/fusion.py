@@ -422,7 +422,7 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
         # frame is its share of that frame's returns)
         ret = recording_returns(rdir, rig)
         sh = ret.frame_shares()
-        k = np.clip(np.searchsorted(ret.frame_stamps_s, las.usable().stamps_s), 0, ret.frame_stamps_s.size - 1)
+        k, _ = ret.frame_of(las.usable().stamps_s)
         laser_truth = float(np.mean(sh[k] @ np.array([scan_truth[n] for n in ret.names])))
         scan = ", ".join(f"{n} {v * 1e3:+.2f}" for n, v in scan_truth.items())
         print(f"## clock offsets, {rec.name} (truth: cameras 0, scanners {scan} ms; GTlaser's share-weighted "

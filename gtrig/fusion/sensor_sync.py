@@ -417,6 +417,21 @@ class ScannerReturns:
         return np.divide(n, tot, out=np.zeros_like(n), where=tot > 0)
 
 
+    def frame_of(self, stamps_s: np.ndarray, tol_s: float = 2e-6) -> tuple[np.ndarray, np.ndarray]:
+        """The frame (index into ``frame_stamps_s``) whose stamp is nearest each of ``stamps_s`` (M,), and
+        whether it is within ``tol_s``: a GTlaser pose is its frame's. The nearest on either side, since a
+        track read back from a TUM file carries its stamps rounded to the microsecond, up or down (the next
+        frame stamp up only would miss every pose rounded up: 2114 of 5614 on seed 0)."""
+        fs = self.frame_stamps_s
+        st = np.asarray(stamps_s, float)
+        if fs.size == 0:
+            return np.zeros(st.size, np.int64), np.zeros(st.size, bool)
+        hi = np.clip(np.searchsorted(fs, st), 0, fs.size - 1)
+        lo = np.clip(hi - 1, 0, fs.size - 1)
+        k = np.where(np.abs(fs[lo] - st) < np.abs(fs[hi] - st), lo, hi)
+        return k, np.abs(fs[k] - st) <= tol_s
+
+
 def restamp_laser(track: PoseTrack, ret: ScannerReturns, offsets_s: Mapping[str, float]) -> PoseTrack:
     """GTlaser's track on the clock the scanners' offsets refer to: GTlaser fits a frame's returns of all
     scanners in one pose, so that pose holds at the frame stamp minus the share-weighted mean of their
@@ -424,8 +439,7 @@ def restamp_laser(track: PoseTrack, ret: ScannerReturns, offsets_s: Mapping[str,
     Poses whose stamp is no frame of ``ret`` keep their stamp."""
     tau = np.array([float(offsets_s.get(n, 0.0)) for n in ret.names])
     shift = ret.frame_shares() @ tau
-    k = np.clip(np.searchsorted(ret.frame_stamps_s, track.stamps_s), 0, ret.frame_stamps_s.size - 1)
-    hit = np.abs(ret.frame_stamps_s[k] - track.stamps_s) < 1e-6
+    k, hit = ret.frame_of(track.stamps_s)
     st = track.stamps_s - np.where(hit, shift[k], 0.0)
     order = np.argsort(st, kind="stable")
     out = track.select(order)
@@ -577,8 +591,7 @@ def laser_clock(ret: ScannerReturns, laser: PoseTrack, scanners: list[OffsetEsti
     u = laser.usable()
     if ret.frame_stamps_s.size == 0 or len(u) == 0:
         return float("nan"), float("nan")
-    k = np.clip(np.searchsorted(ret.frame_stamps_s, u.stamps_s), 0, ret.frame_stamps_s.size - 1)
-    hit = np.abs(ret.frame_stamps_s[k] - u.stamps_s) < 1e-6
+    k, hit = ret.frame_of(u.stamps_s)
     if not np.any(hit):
         return float("nan"), float("nan")
     w = ret.frame_shares()[k[hit]].mean(axis=0)  # (S,) each scanner's mean share of GTlaser's poses
