@@ -422,8 +422,8 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
         # frame is its share of that frame's returns)
         ret = recording_returns(rdir, rig)
         sh = ret.frame_shares()
-        k, _ = ret.frame_of(las.usable().stamps_s)
-        laser_truth = float(np.mean(sh[k] @ np.array([scan_truth[n] for n in ret.names])))
+        k, hit = ret.frame_of(las.usable().stamps_s)
+        laser_truth = float(np.mean(sh[k[hit]] @ np.array([scan_truth[n] for n in ret.names])))
         scan = ", ".join(f"{n} {v * 1e3:+.2f}" for n, v in scan_truth.items())
         print(f"## clock offsets, {rec.name} (truth: cameras 0, scanners {scan} ms; GTlaser's share-weighted "
               f"{laser_truth * 1e3:+.3f} ms; odometry {odo_off * 1e3:+.3f} ms)")

@@ -42,6 +42,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.stats import t as student_t
 
+from gtrig.evaluate.associate import nearest_indices
 from gtrig.fusion.fuse import FusionOptions, fuse
 from gtrig.fusion.measurements import Fixes
 from gtrig.fusion.sync import OffsetEstimate, Verdict
@@ -416,21 +417,19 @@ class ScannerReturns:
         tot = n.sum(axis=1, keepdims=True)
         return np.divide(n, tot, out=np.zeros_like(n), where=tot > 0)
 
-
     def frame_of(self, stamps_s: np.ndarray, tol_s: float = 2e-6) -> tuple[np.ndarray, np.ndarray]:
-        """The frame (index into ``frame_stamps_s``) whose stamp is nearest each of ``stamps_s`` (M,), and
-        whether it is within ``tol_s``: a GTlaser pose is its frame's. The nearest on either side, since a
-        track read back from a TUM file carries its stamps rounded to the microsecond, up or down (the next
-        frame stamp up only would miss every pose rounded up: 2114 of 5614 on seed 0)."""
-        fs = self.frame_stamps_s
+        """The frame (index into ``frame_stamps_s``) of each of ``stamps_s`` (M,), and whether it has one
+        (a frame stamp within ``tol_s``; where not, the index is 0): a GTlaser pose is its frame's. The
+        nearest stamp on either side, since a track read back from a TUM file carries its stamps rounded
+        to the microsecond, up or down (the next frame stamp up only would miss every pose rounded up:
+        2114 of 5614 on seed 0)."""
         st = np.asarray(stamps_s, float)
-        if fs.size == 0:
-            return np.zeros(st.size, np.int64), np.zeros(st.size, bool)
-        hi = np.clip(np.searchsorted(fs, st), 0, fs.size - 1)
-        lo = np.clip(hi - 1, 0, fs.size - 1)
-        k = np.where(np.abs(fs[lo] - st) < np.abs(fs[hi] - st), lo, hi)
-        return k, np.abs(fs[k] - st) <= tol_s
-
+        k = np.zeros(st.size, np.int64)
+        hit = np.zeros(st.size, bool)
+        i_pose, i_frame = nearest_indices(st, self.frame_stamps_s, tol_s)
+        k[i_pose] = i_frame
+        hit[i_pose] = True
+        return k, hit
 
 def restamp_laser(track: PoseTrack, ret: ScannerReturns, offsets_s: Mapping[str, float]) -> PoseTrack:
     """GTlaser's track on the clock the scanners' offsets refer to: GTlaser fits a frame's returns of all
