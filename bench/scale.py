@@ -191,6 +191,23 @@ def _child(args: list[str]) -> dict[str, object]:
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
+def end_to_end(source: Path, rig: Path, work: Path, minutes: float, mode: str) -> None:
+    """The whole ``minutes`` run with every image read and detected on the workers (nothing seeded), then
+    estimated and written: the client's and a worker's peak for the real thing. Its detection checkpoint
+    is kept, so a rerun after an interruption continues where it stopped."""
+    rec = work / f"full_{minutes:g}min"
+    counts = make_long(source, rec, 60 * minutes)
+    ck = work / f"full_{minutes:g}min_{mode.replace(':', '')}.ck"
+    r = _child([str(rec), str(rig), mode, str(ck)])
+    n = int(mode.split(":")[1])
+    print(f"{minutes:g} min end to end on {mode}: {sum(counts.values())} images ({len(counts)} cameras) detected, "
+          f"{r['instants']} instants ({r['localized']} localized), {r['chunks']} chunks; {r['wall_s']:.0f} s wall "
+          f"(detection {r['detect_s']:.0f} s = {r['images'] / r['detect_s'] / n:.1f} images/s per worker), client "
+          f"CPU {r['client_cpu_s']:.0f} s, workers' CPU {r['worker_cpu_s']:.0f} s = "
+          f"{r['images'] / max(float(r['worker_cpu_s']), 1e-9):.1f} images per CPU second; client peak "
+          f"{r['client_peak_mb']:.0f} MB, worker peak {r['worker_peak_mb']:.0f} MB", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--source", type=Path, help="a short recording (gtrig sim --quick)")
@@ -201,6 +218,9 @@ def main() -> None:
     ap.add_argument("--throughput-seconds", type=float, default=24.0)
     ap.add_argument("--modes", nargs="*", default=["pool:1", "dask:1", "pool:2", "dask:2"])
     ap.add_argument("--work", type=Path, default=Path("/tmp/gtrig_scale"))
+    ap.add_argument("--end-to-end", nargs="*", default=[], metavar="MODE",
+                    help="also detect every image of the whole --minutes run (no seeded checkpoint) on each MODE "
+                         "(pool:N, dask:N, tcp:N); resumable: rerun to continue from its checkpoint")
     ap.add_argument("--child", nargs="*", help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.child:
@@ -234,6 +254,8 @@ def main() -> None:
             print(f"  {n} worker(s): Dask / pool detection rate {float(p['detect_s']) / float(d['detect_s']):.2f} "
                   f"(wall), {float(p['worker_cpu_s']) / float(d['worker_cpu_s']):.2f} (CPU); Dask's wall overhead "
                   f"{1000 * per:.0f} ms per chunk", flush=True)
+    for mode in a.end_to_end:
+        end_to_end(a.source, rig, a.work, a.minutes, mode)
     if not a.fractions:
         return
     # memory over the long run: detections of one cycle checkpointed, repeated through the hour

@@ -138,13 +138,13 @@ def open_executor(dask: str | None = None, *, connect_timeout_s: float | None = 
         return
     kind, value = parse_dask(dask)
     distributed = _import_distributed()
-    import dask.config
+    from dask import config as dask_config
 
     with contextlib.ExitStack() as stack:
         # Dask's event logs keep whole messages, a chunk's arguments included, 10,000 of them: a client
         # (and a LocalCluster's scheduler, in this process) then grows by the size of the chunks sent
         # (18 kB per GTvision instant, bench/scale.py). A hundred are enough to diagnose.
-        stack.enter_context(dask.config.set({"distributed.admin.log-length": 100,
+        stack.enter_context(dask_config.set({"distributed.admin.log-length": 100,
                                              "distributed.admin.low-level-log-length": 100}))
         if kind == "local":
             # our cluster's own chatter (scheduler, nannies, a dashboard port taken) is not the user's news
@@ -153,7 +153,7 @@ def open_executor(dask: str | None = None, *, connect_timeout_s: float | None = 
             quiet.setLevel(logging.WARNING)
             # Dask's statistical profiler samples every worker's stack 100 times a second: not for
             # CPU-bound chunks (docs/scale.md: turn it off on a cluster of your own the same way)
-            stack.enter_context(dask.config.set({"distributed.worker.profile.enabled": False}))
+            stack.enter_context(dask_config.set({"distributed.worker.profile.enabled": False}))
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)
                 # one thread per worker: the stages are CPU-bound Python/NumPy; OpenCV and BLAS are kept to

@@ -241,11 +241,11 @@ def _print_tables(ev: SlamEvaluation) -> None:
         console.print(t)
     for fam, title in (("rawseeds", "RAWSEEDS toolkit (get_ATE.m / get_RPE.m)"),
                        ("gt-aware", "GT-aware (the GT's covariance in the scores)")):
-        rows = [r for r in ev.rows() if r.family == fam]
-        if rows:
+        fam_rows = [r for r in ev.rows() if r.family == fam]
+        if fam_rows:
             t = Table("metric", "statistic", "value", "unit", title=title)
-            for r in rows:
-                t.add_row(r.metric, r.statistic, f"{r.value:.6g}", r.unit)
+            for row in fam_rows:
+                t.add_row(row.metric, row.statistic, f"{row.value:.6g}", row.unit)
             console.print(t)
     if ev.gt_aware is not None:
         g = ev.gt_aware

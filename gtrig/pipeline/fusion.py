@@ -81,7 +81,7 @@ def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict
     and GTlaser's clock to GTvision's with its sigma (nan when not measured)."""
     from gtrig.fusion.sensor_sync import sensor_offsets_and_laser_clock
 
-    none = ([], (math.nan, math.nan))
+    none: tuple[list, tuple[float, float]] = ([], (math.nan, math.nan))
     rig = inp.products.rig
     if rig is None or "vision" not in tracks or "laser" not in tracks or rig.robot.hull is None:
         return none

@@ -377,6 +377,7 @@ def simulate_fixed_scans(
     iv = _check_intervals(intervals_s)
     people = sequence_people(scene, motion, iv, cfg)
     hull = scene.rig_true.robot.hull
+    assert hull is not None, "the simulated room's robot always has a hull"
     hull_r = float(np.max(np.linalg.norm(hull.corners_xy(), axis=1)))
     person_r = HIP_HALF_WIDTH_M + LEG_SWING_M + LEG_RADIUS_M
     offsets = _subray_offsets(cfg.laser.mixed_pixels and not ideal)
