@@ -48,11 +48,11 @@ def helper_pool() -> ThreadPoolExecutor:
 
 
 def run_split(fn: Callable[..., T], parts: Sequence[tuple[Any, ...]]) -> list[T]:
-    """``[fn(*p) for p in parts]``, the first part in this thread and the others in helper threads."""
-    if len(parts) == 1:
-        return [fn(*parts[0])]
-    later = [helper_pool().submit(fn, *p) for p in parts[1:]]
-    return [fn(*parts[0])] + [f.result() for f in later]
+    """``[fn(*p) for p in parts]``, the parts claimed in turn by this thread and one helper thread
+    (:func:`ordered_map`): the caller never waits for a part nobody has started, only for the one a
+    helper is finishing, so more parts than threads (the edge fits make four) bound that wait to a
+    part's time while the helper pool is busy with the second path or its thread is descheduled."""
+    return list(ordered_map(fn, parts, 2))
 
 
 def ordered_map(fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], threads: int) -> Iterator[T]:

@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gtrig.markers.detect import _kernels
+from gtrig.markers.detect._blas import matmul
 from gtrig.markers.detect.candidates import _ordered_cw, dark_mask, robust_quad
 from gtrig.markers.detect.edges import quad_homographies
 
@@ -239,7 +240,7 @@ def _prediction_jacobian(px: NDArray[np.float64], quad: NDArray[np.float64], sig
                                   np.ascontiguousarray(cells, np.float64).reshape(d, d), float(contrast))
 
 
-# products are split so that each BLAS call stays below OpenBLAS's threading threshold: on a loaded
+# products are split so that each BLAS call stays below OpenBLAS's threading threshold (:mod:`._blas`): on a loaded
 # machine its threads cost 50-100 times the single-threaded time of these small products
 _CHUNK = 512
 
@@ -248,13 +249,13 @@ def _gram(At: NDArray[np.float64], A: NDArray[np.float64]) -> NDArray[np.float64
     """``At @ A`` for (K, P, N) and (K, N, Q), accumulated over chunks of N."""
     out = np.zeros((A.shape[0], At.shape[1], A.shape[2]))
     for s0 in range(0, A.shape[1], _CHUNK):
-        out += At[:, :, s0:s0 + _CHUNK] @ A[:, s0:s0 + _CHUNK]
+        out += matmul(At[:, :, s0:s0 + _CHUNK], A[:, s0:s0 + _CHUNK])
     return out
 
 
 def _rows(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """``a @ b`` for (M, P) and (P, Q), in chunks of rows of ``a``."""
-    return np.concatenate([a[s0:s0 + _CHUNK // 2] @ b for s0 in range(0, len(a), _CHUNK // 2)])
+    return matmul(a, b)
 
 
 def _solve_levels(I: NDArray[np.float64], A: NDArray[np.float64], ridge: NDArray[np.float64]
@@ -328,7 +329,7 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
             J = -(dpT - proj).T  # (9, N)
             fresh = True
         A = _gram(J[None], np.ascontiguousarray(J.T)[None])[0]
-        g = J @ res
+        g = matmul(J, res)
         improved = False
         for _try in range(3):
             step = -np.linalg.solve(A + lam * (np.diag(np.diag(A)) + 1e-9 * np.eye(9)), g)
@@ -365,11 +366,11 @@ def _rank_codes(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[n
     base, F = _profiles(px, quad[None], np.array([sig]), n, border)
     base, F = base[0], F[0]
     N = float(len(I))
-    Sm = base.sum() + codes @ F.sum(axis=0)
+    Sm = base.sum() + matmul(codes, F.sum(axis=0))
     Ft = np.ascontiguousarray(F.T)
     G = _gram(Ft[None], F[None])[0]
-    Smm = base @ base + 2.0 * (codes @ (Ft @ base)) + np.einsum("ci,ci->c", _rows(codes, G), codes)
-    SIm = I @ base + codes @ (Ft @ I)
+    Smm = base @ base + 2.0 * matmul(codes, matmul(Ft, base)) + np.einsum("ci,ci->c", _rows(codes, G), codes)
+    SIm = I @ base + matmul(codes, matmul(Ft, I))
     var_m = Smm - Sm * Sm / N
     cov = SIm - I.sum() * Sm / N
     var_I = I @ I - I.sum() ** 2 / N

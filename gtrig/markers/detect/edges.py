@@ -66,6 +66,10 @@ CLIPPED_ITER_FACTOR = 4
 MAX_CLIPPED_WHITE = 4.0
 #: band pixels of one fit below which splitting it between threads costs more than it saves
 _SPLIT_MIN_PX = 2000
+#: parts a split fit is cut into (:func:`._threads.run_split`): with two, the calling thread waited for
+#: the helper's half in 15 % of its samples on a loaded machine (session 29); with four the wait is at
+#: most the part the helper is finishing
+SPLIT_PARTS = 4
 #: share of an edge's band pixels clipped above which the edge is fitted as clipped
 CLIPPED_EDGE_SHARE = 0.1
 #: effective Gaussian blur (px) below which an edge is refitted with the pixel-integrated step: a pixel
@@ -322,10 +326,11 @@ def fit_edges(
            np.ascontiguousarray(ext))
     clip_arg = clipped if any_clipped else np.zeros(0, bool)
     P = np.ascontiguousarray(P, np.float64)
-    # edges are independent: groups of edges of about equal pixel counts go to separate threads
+    # edges are independent: groups of edges of about equal pixel counts, claimed in turn by the threads
     cut = [0, E]
     if threads > 1 and N > _SPLIT_MIN_PX and E > 1:
-        cut = [0, int(np.clip(np.searchsorted(bounds, 0.5 * N), 1, E - 1)), E]
+        inner = np.clip(np.searchsorted(bounds, np.arange(1, SPLIT_PARTS) / SPLIT_PARTS * N), 1, E - 1)
+        cut = [0, *sorted({int(c) for c in inner}), E]
     parts = [(*pix, bounds[a:b + 1], P[a:b], has[a:b], clip_arg, slow[a:b], iterations, CLIPPED_ITER_FACTOR, tol,
               wt[a:b], np.log(0.05), np.log(20.0), MAX_CLIPPED_WHITE, CLIP_LOW, CLIP_HIGH)
              for a, b in itertools.pairwise(cut)]
@@ -457,7 +462,8 @@ def marker_context(
     W = np.ascontiguousarray(white, dtype=np.float64)
     xs, ys, quad, sg = np.ascontiguousarray(x), np.ascontiguousarray(y), e // 4, np.ascontiguousarray(fit.sigma[e])
     N = len(e)
-    # pixels are independent: with two threads, two halves at once
-    cuts = [0, N // 2, N] if threads > 1 and N > _SPLIT_MIN_PX else [0, N]
+    # pixels are independent: with two threads, parts claimed in turn by the threads
+    cuts = ([round(k * N / SPLIT_PARTS) for k in range(SPLIT_PARTS + 1)] if threads > 1 and N > _SPLIT_MIN_PX
+            else [0, N])
     parts = [(xs[a:b], ys[a:b], quad[a:b], H, sg[a:b], W, d[a:b]) for a, b in itertools.pairwise(cuts)]
     return np.concatenate(_threads.run_split(_kernels.marker_context, parts))

@@ -1,0 +1,42 @@
+"""Matrix products in BLAS calls small enough to stay on the calling thread.
+
+OpenBLAS (numpy's BLAS) runs a ``gemm`` whose ``m * n * k`` exceeds ``65536 * 4`` in several threads,
+and a ``gemv`` whose ``m * n`` reaches ``2304 * 4`` (its ``GEMM_MULTITHREAD_THRESHOLD`` of 4). The
+detector's products are a few hundred microseconds at most: handing them to OpenBLAS's threads costs
+more than it saves, and its threads spin after each call, taking the core the detector's own helper
+thread (:mod:`._threads`) would use. On a loaded 2-core machine one threaded ``36 x 512 x 36`` product
+took 0.24-6.5 ms of wall time against 0.03 ms in one thread (session 29, BENCHMARKS.md issue 16), and
+the bench's images spent three times the detector's own CPU in OpenBLAS's threads.
+
+:func:`matmul` splits a product along the rows of its first operand (each row of the result is then
+computed by the same kernel over the same ``k``, as in one call) into calls below those thresholds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+#: largest ``m * n * k`` of one ``gemm`` call (OpenBLAS threads above 65536 * 4)
+MAX_GEMM = 65536 * 4
+#: largest ``m * n`` of one ``gemv`` call (OpenBLAS threads from 2304 * 4)
+MAX_GEMV = 2304 * 4 - 1
+
+
+def matmul(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a @ b`` for ``a`` (..., M, K) and ``b`` (..., K, N) or (K,) (stacks broadcast as in
+    ``np.matmul``), in row blocks of ``a`` whose BLAS calls OpenBLAS keeps in one thread.
+
+    A single row beyond the limits (``K * N`` above :data:`MAX_GEMM`) is left to one call.
+    """
+    if a.ndim < 2:
+        raise ValueError("matmul: the first operand must be at least 2-D")
+    m, k = a.shape[-2:]
+    vec = b.ndim == 1 or b.shape[-1] == 1
+    n = 1 if b.ndim == 1 else b.shape[-1]
+    per_row = k * n
+    rows = max(1, (MAX_GEMV if vec else MAX_GEMM) // max(per_row, 1))
+    if rows >= m:
+        return a @ b
+    axis = -1 if b.ndim == 1 else -2
+    return np.concatenate([a[..., s0:s0 + rows, :] @ b for s0 in range(0, m, rows)], axis=axis)
