@@ -48,6 +48,16 @@ class CandidateParams:
         specks, and tracing them cost most of the time of the candidate stage (94 ms on one
         1024 x 768 image); smoothed, a few hundred remain. A 2-px-wide border (20 px AprilTag)
         survives the median.
+    local_windows : window sides (pixels) of the local-contrast masks (:func:`_local_contours`), traced
+        after the ratio masks in the same seed boxes. A 20 px tag under Bayer demosaicing, JPEG and 1-1.5 px
+        blur is broken at the stricter ratios and merged with a dark surface or texture at the looser ones
+        (the closing does not separate them): no ratio gives a solid square (the hard bench's misses had
+        solidity 0.36-0.81). A pixel darker than its neighbourhood's mean follows the border's edges
+        instead of its level; 11 px is about half the smallest tag the detector is meant to read well.
+        Empty: off. On the hard bench (seeds 0-3) 18 of 49 misses found, for +3.3 % detector CPU on
+        the --quick set (BENCHMARKS.md, issue 16, session 29).
+    local_offset : how much darker than the local mean (grey levels) a pixel of those masks is; about the
+        noise the 3 x 3 median leaves.
     """
 
     ratio_threshold: float = 0.6
