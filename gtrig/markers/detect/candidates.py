@@ -54,7 +54,7 @@ class CandidateParams:
         (the closing does not separate them): no ratio gives a solid square (the hard bench's misses had
         solidity 0.36-0.81). A pixel darker than its neighbourhood's mean follows the border's edges
         instead of its level; 11 px is about half the smallest tag the detector is meant to read well.
-        Empty: off. On the hard bench (seeds 0-3) 18 of 49 misses found, for +3.3 % detector CPU on
+        Empty: off. On the hard bench (seeds 0-3) 49 misses -> 34, for +3.3 % detector CPU on
         the --quick set (BENCHMARKS.md, issue 16, session 29).
     local_offset : how much darker than the local mean (grey levels) a pixel of those masks is; about the
         noise the 3 x 3 median leaves.
@@ -240,10 +240,18 @@ def _contours_at(gray: NDArray[np.uint8], bg: NDArray[np.uint8], threshold: floa
     x0, y0, x1, y1 = box if box is not None else (0, 0, gray.shape[1], gray.shape[0])
     g, b = gray[y0:y1, x0:x1], bg[y0:y1, x0:x1]
     mask = cv2.compare(g, cv2.LUT(b, _ratio_lut(threshold)), cv2.CMP_LT)
+    return _traced(mask, smooth, gray.shape, (x0, y0, x1, y1))
+
+
+def _traced(mask: NDArray[np.uint8], smooth: bool, shape: tuple[int, ...], box: tuple[int, int, int, int]
+            ) -> Contours:
+    """The :data:`Contours` of ``mask`` (0 / 255, the box ``(x0, y0, x1, y1)`` of an image of ``shape``),
+    3 x 3 median-smoothed first if ``smooth``."""
+    x0, y0, x1, y1 = box
     if smooth:
         mask = cv2.medianBlur(mask, 3)
     contours, hier = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE, offset=(x0, y0))
-    h, w = gray.shape
+    h, w = shape[:2]
     limits = (x0 if x0 > 0 else -1, y0 if y0 > 0 else -1, x1 - 1 if x1 < w else w, y1 - 1 if y1 < h else h)
     return contours, None if hier is None else hier[0], limits
 
@@ -255,12 +263,7 @@ def _local_contours(gray: NDArray[np.uint8], win: int, offset: float, smooth: bo
     x0, y0, x1, y1 = box
     g = gray[y0:y1, x0:x1]
     mask = cv2.adaptiveThreshold(g, 255, cv2.ADAPTIVE_THRESH_MEAN_C, cv2.THRESH_BINARY_INV, win | 1, offset)
-    if smooth:
-        mask = cv2.medianBlur(mask, 3)
-    contours, hier = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE, offset=(x0, y0))
-    h, w = gray.shape
-    limits = (x0 if x0 > 0 else -1, y0 if y0 > 0 else -1, x1 - 1 if x1 < w else w, y1 - 1 if y1 < h else h)
-    return contours, None if hier is None else hier[0], limits
+    return _traced(mask, smooth, gray.shape, (x0, y0, x1, y1))
 
 
 def _seed_regions(shape: tuple[int, ...], seeds: list[tuple[int, int, int, int]], looser: bool
