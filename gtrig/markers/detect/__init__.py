@@ -51,7 +51,7 @@ __all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", 
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 7
+DETECTOR_VERSION = 8
 
 
 @dataclass(frozen=True)

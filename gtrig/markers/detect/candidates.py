@@ -48,6 +48,16 @@ class CandidateParams:
         specks, and tracing them cost most of the time of the candidate stage (94 ms on one
         1024 x 768 image); smoothed, a few hundred remain. A 2-px-wide border (20 px AprilTag)
         survives the median.
+    local_windows : window sides (pixels) of the local-contrast masks (:func:`_local_contours`), traced
+        after the ratio masks in the same seed boxes. A 20 px tag under Bayer demosaicing, JPEG and 1-1.5 px
+        blur is broken at the stricter ratios and merged with a dark surface or texture at the looser ones
+        (the closing does not separate them): no ratio gives a solid square (the hard bench's misses had
+        solidity 0.36-0.81). A pixel darker than its neighbourhood's mean follows the border's edges
+        instead of its level; 11 px is about half the smallest tag the detector is meant to read well.
+        Empty: off. On the hard bench (seeds 0-3) 49 misses -> 34, for +3.3 % detector CPU on
+        the --quick set (BENCHMARKS.md, issue 16, session 29).
+    local_offset : how much darker than the local mean (grey levels) a pixel of those masks is; about the
+        noise the 3 x 3 median leaves.
     """
 
     ratio_threshold: float = 0.6
@@ -59,6 +69,8 @@ class CandidateParams:
     more_thresholds: tuple[float, ...] = (0.45, 0.75, 0.9)
     scale: int = 4
     smooth: bool = True
+    local_windows: tuple[int, ...] = (11,)
+    local_offset: float = 3.0
 
     def max_side_px(self, shape: tuple[int, ...]) -> float:
         """Largest accepted marker side in an image of ``shape`` (H, W), pixels."""
@@ -187,6 +199,15 @@ def find_candidates(
             out.extend(found)
             if found:  # (the boxes may overlap: a blob in two of them is one candidate)
                 cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
+        # last, the local-contrast masks around the same seeds (:func:`_local_contours`)
+        tasks = [(gray, win, params.local_offset, params.smooth, box)
+                 for win in params.local_windows for box in regions[True][1]]
+        for contours in _threads.ordered_map(_local_contours, tasks, threads):
+            found = _mask_candidates(contours, params, max_side, max_hole_fraction,
+                                     None if trace is None else rejected, covered, regions[True][0], weak=weak)
+            out.extend(found)
+            if found:
+                cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
     # the fallback quads of broken borders, where no sound candidate lies (the first of several wins)
     h, w = gray.shape
     cover = np.zeros(gray.shape, np.uint8)
@@ -219,12 +240,30 @@ def _contours_at(gray: NDArray[np.uint8], bg: NDArray[np.uint8], threshold: floa
     x0, y0, x1, y1 = box if box is not None else (0, 0, gray.shape[1], gray.shape[0])
     g, b = gray[y0:y1, x0:x1], bg[y0:y1, x0:x1]
     mask = cv2.compare(g, cv2.LUT(b, _ratio_lut(threshold)), cv2.CMP_LT)
+    return _traced(mask, smooth, gray.shape, (x0, y0, x1, y1))
+
+
+def _traced(mask: NDArray[np.uint8], smooth: bool, shape: tuple[int, ...], box: tuple[int, int, int, int]
+            ) -> Contours:
+    """The :data:`Contours` of ``mask`` (0 / 255, the box ``(x0, y0, x1, y1)`` of an image of ``shape``),
+    3 x 3 median-smoothed first if ``smooth``."""
+    x0, y0, x1, y1 = box
     if smooth:
         mask = cv2.medianBlur(mask, 3)
     contours, hier = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE, offset=(x0, y0))
-    h, w = gray.shape
+    h, w = shape[:2]
     limits = (x0 if x0 > 0 else -1, y0 if y0 > 0 else -1, x1 - 1 if x1 < w else w, y1 - 1 if y1 < h else h)
     return contours, None if hier is None else hier[0], limits
+
+
+def _local_contours(gray: NDArray[np.uint8], win: int, offset: float, smooth: bool,
+                    box: tuple[int, int, int, int]) -> Contours:
+    """The contours of the pixels darker by more than ``offset`` grey levels than the mean of their
+    ``win`` x ``win`` neighbourhood, in the box ``(x0, y0, x1, y1)`` of the image, in image pixels."""
+    x0, y0, x1, y1 = box
+    g = gray[y0:y1, x0:x1]
+    mask = cv2.adaptiveThreshold(g, 255, cv2.ADAPTIVE_THRESH_MEAN_C, cv2.THRESH_BINARY_INV, win | 1, offset)
+    return _traced(mask, smooth, gray.shape, (x0, y0, x1, y1))
 
 
 def _seed_regions(shape: tuple[int, ...], seeds: list[tuple[int, int, int, int]], looser: bool
