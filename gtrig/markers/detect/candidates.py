@@ -54,8 +54,9 @@ class CandidateParams:
         (the closing does not separate them): no ratio gives a solid square (the hard bench's misses had
         solidity 0.36-0.81). A pixel darker than its neighbourhood's mean follows the border's edges
         instead of its level; 11 px is about half the smallest tag the detector is meant to read well.
-        Empty: off. On the hard bench (seeds 0-3) 49 misses -> 34, for +3.3 % detector CPU on
-        the --quick set (BENCHMARKS.md, issue 16, session 29).
+        Empty: off. On the hard bench (seeds 0-3) 49 misses -> 34; the masks themselves cost 3.3 % of the
+        detector's CPU on the --quick set, the detector's wall 9-16 % idle with the later stages of the
+        extra candidates (BENCHMARKS.md, issue 16, session 29).
     local_offset : how much darker than the local mean (grey levels) a pixel of those masks is; about the
         noise the 3 x 3 median leaves.
     """
