@@ -253,11 +253,6 @@ def _gram(At: NDArray[np.float64], A: NDArray[np.float64]) -> NDArray[np.float64
     return out
 
 
-def _rows(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``a @ b`` for (M, P) and (P, Q), in chunks of rows of ``a``."""
-    return matmul(a, b)
-
-
 def _solve_levels(I: NDArray[np.float64], A: NDArray[np.float64], ridge: NDArray[np.float64]
                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Least squares ``I ~ A c`` for K designs ``A`` (K, N, P) at once, ``ridge`` (P,) added to the
@@ -325,7 +320,7 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
             G = _gram(A0t[None], A0[None])[0]
             G[np.diag_indices_from(G)] += ridge + 1e-9 * np.mean(np.diag(G)) + 1e-12
             dpT = np.ascontiguousarray(dp.T)
-            proj = _rows(A0, np.linalg.solve(G, _gram(A0t[None], dpT[None])[0]))
+            proj = matmul(A0, np.linalg.solve(G, _gram(A0t[None], dpT[None])[0]))
             J = -(dpT - proj).T  # (9, N)
             fresh = True
         A = _gram(J[None], np.ascontiguousarray(J.T)[None])[0]
@@ -369,7 +364,7 @@ def _rank_codes(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[n
     Sm = base.sum() + matmul(codes, F.sum(axis=0))
     Ft = np.ascontiguousarray(F.T)
     G = _gram(Ft[None], F[None])[0]
-    Smm = base @ base + 2.0 * matmul(codes, matmul(Ft, base)) + np.einsum("ci,ci->c", _rows(codes, G), codes)
+    Smm = base @ base + 2.0 * matmul(codes, matmul(Ft, base)) + np.einsum("ci,ci->c", matmul(codes, G), codes)
     SIm = I @ base + matmul(codes, matmul(Ft, I))
     var_m = Smm - Sm * Sm / N
     cov = SIm - I.sum() * Sm / N

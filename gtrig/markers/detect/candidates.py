@@ -186,7 +186,7 @@ def find_candidates(
         regions = {looser: _seed_regions(gray.shape, seeds, looser) for looser in (False, True)}
         # squares already found, filled: a blob of a later threshold centred in one is the same marker
         if out:
-            cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in out], 255)
+            _fill(covered, out)
         # a box's contours do not depend on what the earlier boxes found: with two threads a helper
         # traces the next boxes (OpenCV releases the GIL) while this thread tests the blobs of one
         tasks, looser = [], []
@@ -199,7 +199,7 @@ def find_candidates(
                                      None if trace is None else rejected, covered, regions[loose][0], weak=weak)
             out.extend(found)
             if found:  # (the boxes may overlap: a blob in two of them is one candidate)
-                cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
+                _fill(covered, found)
         # last, the local-contrast masks around the same seeds (:func:`_local_contours`)
         tasks = [(gray, win, params.local_offset, params.smooth, box)
                  for win in params.local_windows for box in regions[True][1]]
@@ -208,7 +208,7 @@ def find_candidates(
                                      None if trace is None else rejected, covered, regions[True][0], weak=weak)
             out.extend(found)
             if found:
-                cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in found], 255)
+                _fill(covered, found)
     # the fallback quads of broken borders, where no sound candidate lies (the first of several wins)
     h, w = gray.shape
     cover = np.zeros(gray.shape, np.uint8)
@@ -255,6 +255,12 @@ def _traced(mask: NDArray[np.uint8], smooth: bool, shape: tuple[int, ...], box: 
     h, w = shape[:2]
     limits = (x0 if x0 > 0 else -1, y0 if y0 > 0 else -1, x1 - 1 if x1 < w else w, y1 - 1 if y1 < h else h)
     return contours, None if hier is None else hier[0], limits
+
+
+def _fill(covered: NDArray[np.uint8], quads: Sequence[NDArray[np.float64]]) -> None:
+    """Paint ``quads`` ((4, 2) px each) into ``covered`` (H, W), in place: a later mask's blob centred in
+    one is the same marker."""
+    cv2.fillPoly(covered, [np.round(q).astype(np.int32).reshape(-1, 1, 2) for q in quads], 255)
 
 
 def _local_contours(gray: NDArray[np.uint8], win: int, offset: float, smooth: bool,
