@@ -253,8 +253,9 @@ class CalibrationReport:
                 f"{len(c.extra.get('rejected', {}))} |"
             )
         net = self.network
-        refined = {n: j for n, j in sorted(net.joint.items()) if j.intrinsics is not None}
-        if any(j.intrinsics.extra.get("refined_in_network") for j in refined.values()):
+        refined = {n: j.intrinsics for n, j in sorted(net.joint.items()) if j.intrinsics is not None}
+        rms_sweep = {n: net.joint[n].rms_px_sweep for n in refined}
+        if any(ji.extra.get("refined_in_network") for ji in refined.values()):
             L += [
                 "",
                 "## Intrinsics refined in the network bundle adjustment (sweeps, pairs, world board)",
@@ -262,12 +263,12 @@ class CalibrationReport:
                 "| camera | fx | fy | cx | cy | sigma fx, fy, cx, cy (px) | sweep RMS in the BA (px) |",
                 "|---" * 7 + "|",
             ]
-            for n, j in refined.items():
-                K, sd = j.intrinsics.camera_matrix, j.intrinsics.extra.get("std", {})
+            for n, ji in refined.items():
+                K, sd = ji.camera_matrix, ji.extra.get("std", {})
                 L.append(
                     f"| {n} | {K[0, 0]:.2f} | {K[1, 1]:.2f} | {K[0, 2]:.2f} | {K[1, 2]:.2f} | "
                     f"{', '.join(f'{sd.get(k, np.nan):.2f}' for k in ('fx', 'fy', 'cx', 'cy'))} | "
-                    f"{j.rms_px_sweep:.3f} |"
+                    f"{rms_sweep[n]:.3f} |"
                 )
         L += [
             "",
@@ -279,19 +280,19 @@ class CalibrationReport:
             "chain - joint (mm / deg) |",
             "|---" * 7 + "|",
         ]
-        for n, c in sorted(net.joint.items()):
-            dch, rch = geo.pose_error(net.chain[n], c.T_world_cam)
+        for n, cp in sorted(net.joint.items()):
+            dch, rch = geo.pose_error(net.chain[n], cp.T_world_cam)
             L.append(
                 f"| {n} | {' > '.join(net.chain_path[n])} | "
-                f"{', '.join(f'{v:.4f}' for v in c.T_world_cam[:3, 3])} | "
-                f"{', '.join(f'{v * 1000:.2f}' for v in c.sigma_pos_m)} | "
-                f"{', '.join(f'{np.degrees(v):.4f}' for v in c.sigma_rot_rad)}"
+                f"{', '.join(f'{v:.4f}' for v in cp.T_world_cam[:3, 3])} | "
+                f"{', '.join(f'{v * 1000:.2f}' for v in cp.sigma_pos_m)} | "
+                f"{', '.join(f'{np.degrees(v):.4f}' for v in cp.sigma_rot_rad)}"
                 + (
                     ""
-                    if c.sigma_rot_rad_fixed_intrinsics is None
-                    else f" ({', '.join(f'{np.degrees(v):.4f}' for v in c.sigma_rot_rad_fixed_intrinsics)})"
+                    if cp.sigma_rot_rad_fixed_intrinsics is None
+                    else f" ({', '.join(f'{np.degrees(v):.4f}' for v in cp.sigma_rot_rad_fixed_intrinsics)})"
                 )
-                + f" | {c.rms_px:.3f} | "
+                + f" | {cp.rms_px:.3f} | "
                 f"{dch * 1000:.2f} / {np.degrees(rch):.4f} |"
             )
         L += ["", "| pair | views | RMS (px) | edge spread (mm / deg) |", "|---" * 4 + "|"]
@@ -300,8 +301,8 @@ class CalibrationReport:
                 f"| {p} | {e.n} | {net.rms_px_pair[p]:.3f} | {e.trans_rms_m * 1000:.2f} / "
                 f"{np.degrees(e.rot_rms_rad):.4f} |"
             )
-        for c, v in sorted(net.rms_px_world.items()):
-            L.append(f"| world board in {c} | | {v:.3f} | |")
+        for cname, v in sorted(net.rms_px_world.items()):
+            L.append(f"| world board in {cname} | | {v:.3f} | |")
         d12 = net.to_dict()["T_board1_board2"]
         L += [
             "",

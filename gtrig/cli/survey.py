@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import typer
@@ -58,7 +59,7 @@ def points(
     refs = read_reference_points(reference, reference_sigma)
     d = read_world_distances(distances, 0.002 if sigma is None else sigma)
     r = estimate_world_points(refs, d, on_ambiguity=on_ambiguity, on_outlier=on_outlier)
-    extra = {
+    extra: dict[str, Sequence[float]] = {
         "chi2": [p.chi2 for p in r.points],
         "dof": [p.dof for p in r.points],
         "rms_residual_m": [p.rms_residual_m for p in r.points],
@@ -128,7 +129,7 @@ def poses(
         on_ambiguity=on_ambiguity,
         on_outlier=on_outlier,
     )
-    extra = {
+    extra: dict[str, Sequence[float]] = {
         "chi2": [p.chi2 for p in r.poses],
         "dof": [p.dof for p in r.poses],
         "basin_radius_m": [p.basin.radius_m if p.basin else float("nan") for p in r.poses],

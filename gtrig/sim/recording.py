@@ -24,7 +24,7 @@ from gtrig.errors import InputError
 from gtrig.io.atomic import atomic_open, atomic_write_text
 from gtrig.io.tum import Trajectory, write_tum
 from gtrig.rig.load import dump_rig
-from gtrig.rig.models import Rig
+from gtrig.rig.models import Camera, Rig
 from gtrig.sim.config import SimConfig
 from gtrig.sim.gtroom import VALIDATION_POSES, WORLD_POINT_NAMES, Scene, continuous_path, make_scene
 from gtrig.sim.lasers import configure_scene, with_scanner_stamp_sigma
@@ -129,7 +129,14 @@ def write_laser_object(out: Path) -> None:
 def _camera_offsets(scene: Scene) -> list[float]:
     # free-running cameras: each starts at its own phase of the 10 Hz period
     rng = np.random.default_rng([scene.seed, 7])
-    return [float(rng.uniform(0, 1.0 / c.rate_hz)) for c in scene.rig_true.cameras]
+    return [float(rng.uniform(0, 1.0 / _rate_hz(c))) for c in scene.rig_true.cameras]
+
+
+def _rate_hz(cam: Camera) -> float:
+    # the simulated cameras are video cameras: a still (rate_hz None) is a bug in the scene
+    if cam.rate_hz is None:
+        raise ValueError(f"simulated camera {cam.name} has no rate_hz")
+    return cam.rate_hz
 
 
 def _write_camera_sequence(scene: Scene, motion: RobotMotion, intervals: np.ndarray, folder: Path,
@@ -137,7 +144,7 @@ def _write_camera_sequence(scene: Scene, motion: RobotMotion, intervals: np.ndar
     from gtrig.sim.cameras import render_sequence
 
     for i, (cam, off) in enumerate(zip(scene.rig_true.cameras, _camera_offsets(scene), strict=True)):
-        stamps = camera_stamps(intervals, cam.rate_hz, off)
+        stamps = camera_stamps(intervals, _rate_hz(cam), off)
         render_sequence(scene, cam, motion, stamps, folder / "cameras" / cam.name, cfg,
                         seed=cfg.seed * 1000 + salt * 10 + i)
 
