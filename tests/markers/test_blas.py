@@ -31,6 +31,37 @@ def test_matmul_rows_of_a_transposed_view() -> None:
     np.testing.assert_allclose(matmul(Mt, M), Mt @ M, rtol=1e-12, atol=1e-12)
 
 
-def test_limits_are_openblas_thresholds() -> None:
-    # OpenBLAS threads a gemm above 65536 * GEMM_MULTITHREAD_THRESHOLD (4), a gemv from 2304 * 4
-    assert MAX_GEMM == 262144 and MAX_GEMV == 9215
+class _Recorder(np.ndarray):
+    """An array that records the shapes of every product it is the left operand of."""
+
+    calls: list[tuple[tuple[int, ...], tuple[int, ...]]] = []
+
+    def __matmul__(self, other: np.ndarray) -> np.ndarray:
+        _Recorder.calls.append((self.shape, other.shape))
+        return np.asarray(self) @ other
+
+
+@pytest.mark.parametrize(("a_shape", "b_shape"), [
+    ((10, 36, 324), (10, 324, 36)),
+    ((10, 36, 324), (10, 324, 1)),
+    ((2348, 36), (36,)),
+    ((2348, 36), (36, 36)),
+])
+def test_each_call_stays_under_openblas_threading(a_shape: tuple[int, ...], b_shape: tuple[int, ...]) -> None:
+    # OpenBLAS threads a gemm above 65536 * 4 multiply-adds per matrix, a gemv from 2304 * 4 elements:
+    # every call matmul makes must stay below, and the blocks must cover all rows of a
+    rng = np.random.default_rng(2)
+    a, b = rng.normal(size=a_shape).view(_Recorder), rng.normal(size=b_shape)
+    _Recorder.calls = []
+    got = matmul(a, b)
+    assert len(_Recorder.calls) > 1  # these shapes are above the limits as one call
+    np.testing.assert_allclose(np.asarray(got), np.asarray(a) @ b, rtol=1e-12, atol=1e-12)
+    rows = 0
+    for (sa, sb) in _Recorder.calls:
+        m, k = sa[-2:]
+        if len(sb) == 1 or sb[-1] == 1:
+            assert m * k <= MAX_GEMV < 2304 * 4
+        else:
+            assert m * k * sb[-1] <= MAX_GEMM == 65536 * 4
+        rows += m
+    assert rows == a_shape[-2]
