@@ -460,6 +460,34 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
             truth = scan_truth[name] if kind == "laser" else 0.0
             print(_row(f"{e.source} to GTvision's clock", e, truth))
         print(f"(per-camera and per-scanner fits: {secs:.1f} s wall, loaded machine)")
+        _other_camera_rows(rdir, rig, vis, las, ret, sensors, ck)
+
+
+def _other_camera_rows(rdir: Path, rig, vis: PoseTrack, las: PoseTrack, ret, sensors: list,  # noqa: ANN001
+                       ck: Path) -> None:
+    """The cameras by the other method than the default (whole poses / reprojection), on the same
+    reference (GTlaser restamped by the scanners' offsets just fitted), and by both methods against the
+    true trajectory as reference (the estimators' own limit)."""
+    from gtrig.fusion import sensor_sync as ss
+    from gtrig.io.tum import read_tum
+
+    scanners = [e for e in sensors if e.source.startswith("laser/")]
+    cam_stamps = ss.camera_frame_stamps(rdir, rig)
+    tr = read_tum(rdir / "truth" / "run.tum")
+    true_xyt = PoseTrack(tr.stamps_s, tr.xyz, tr.quat_xyzw).xytheta()
+    true_xyt[:, 2] = np.unwrap(true_xyt[:, 2])
+    truth_ref = ss.Reference(tr.stamps_s, true_xyt, np.gradient(true_xyt, tr.stamps_s, axis=0),
+                             np.tile(np.eye(3) * 1e-10, (tr.stamps_s.size, 1, 1)))
+    other = "reprojection" if ss.CAMERA_METHOD == "pose" else "pose"
+    for label, ref in (("GTlaser", ss.camera_reference(las, ret, scanners)), ("the true trajectory", truth_ref)):
+        methods = (other,) if label == "GTlaser" else ("pose", "reprojection")
+        for m in methods:
+            t0 = time.process_time()
+            ests = (ss.reprojection_offsets(rig, vis, cam_stamps, ref, ck) if m == "reprojection"
+                    else ss.camera_offsets(vis, cam_stamps, ref, checkpoint=ck))
+            print(f"(cameras by {m}, reference {label}: {time.process_time() - t0:.1f} s CPU)")
+            for e in ests:
+                print(_row(f"{e.source} to GTvision's clock ({m}, {label})", e, 0.0))
 
 
 def part_sync_mc(runs: int, duration_s: float = 75.0) -> None:

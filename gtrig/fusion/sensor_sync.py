@@ -50,6 +50,8 @@ from gtrig.io.offsets import Z95
 from gtrig.trajectory import PoseTrack
 
 _NAN2 = (float("nan"), float("nan"))
+#: how cameras are timed by default: "pose" (GTvision's whole poses) or "reprojection" (each camera's corners)
+CAMERA_METHOD = "pose"
 
 
 # ------------------------------------------------------------------------------------------ reference
@@ -608,7 +610,8 @@ def laser_clock(ret: ScannerReturns, laser: PoseTrack, scanners: list[OffsetEsti
 
 def sensor_offsets(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = None,  # noqa: ANN001
                    cameras: bool = True, scanners: bool = True, sequence: str = "run",
-                   checkpoint: str | os.PathLike[str] | None = None) -> list[OffsetEstimate]:
+                   checkpoint: str | os.PathLike[str] | None = None, camera_method: str = CAMERA_METHOD,
+                   ) -> list[OffsetEstimate]:
     """Each scanner's and each camera's clock offset to GTvision's clock (the cameras' share-weighted mean).
 
     Scanners against GTvision smoothed alone (:func:`scanner_offsets`); then GTlaser restamped with the
@@ -616,14 +619,18 @@ def sensor_offsets(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = No
     cameras (:func:`camera_offsets`), which needs ``laser``. ``rig`` holds the calibrated scanners, the hull
     and the cameras. ``checkpoint``: GTvision's checkpoint of detections, which puts each one-camera pose
     at its camera's stamp (:func:`checkpoint_membership`; strongly advised). Add GTvision's own offset to a
-    reference (:func:`to_reference`) for offsets to it.
+    reference (:func:`to_reference`) for offsets to it. ``camera_method``: ``"reprojection"`` (each camera's
+    own corners, :mod:`gtrig.fusion.reprojection_sync`; needs ``checkpoint``) or ``"pose"`` (GTvision's
+    whole poses, :func:`camera_offsets`).
     """
-    return sensor_offsets_and_laser_clock(rec_dir, rig, vision, laser, cameras, scanners, sequence, checkpoint)[0]
+    return sensor_offsets_and_laser_clock(rec_dir, rig, vision, laser, cameras, scanners, sequence, checkpoint,
+                                          camera_method)[0]
 
 
 def sensor_offsets_and_laser_clock(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = None,  # noqa: ANN001
                                    cameras: bool = True, scanners: bool = True, sequence: str = "run",
                                    checkpoint: str | os.PathLike[str] | None = None,
+                                   camera_method: str = CAMERA_METHOD,
                                    ) -> tuple[list[OffsetEstimate], tuple[float, float]]:
     """:func:`sensor_offsets` and GTlaser's clock to GTvision's with its standard error (:func:`laser_clock`;
     nan without ``laser``), seconds."""
@@ -645,10 +652,40 @@ def sensor_offsets_and_laser_clock(rec_dir, rig, vision: PoseTrack, laser: PoseT
     if cameras:
         if laser is None:
             raise InputError("per-camera offsets need GTlaser's track (the cameras' reference)")
-        off = {e.source.split("/", 1)[1]: e.offset_s for e in sc if e.verdict == "ok"}
-        ref = reference_track([fixes_from_track(restamp_laser(laser.usable(), ret, off), "laser")])
-        out += camera_offsets(vision, cam_stamps, ref, checkpoint=checkpoint)
+        ref = camera_reference(laser, ret, sc)
+        if camera_method == "reprojection" and checkpoint is not None:
+            out += reprojection_offsets(rig, vision, cam_stamps, ref, checkpoint)
+        elif camera_method in ("pose", "reprojection"):  # no checkpoint: no corners, the poses only
+            out += camera_offsets(vision, cam_stamps, ref, checkpoint=checkpoint)
+        else:
+            raise ConfigError(f"camera_method {camera_method!r}: 'reprojection' or 'pose'")
     return out, clock
+
+
+def camera_reference(laser: PoseTrack, ret: ScannerReturns, scanners: list[OffsetEstimate]) -> Reference:
+    """The cameras' reference: GTlaser's track restamped by the scanners' ``ok`` offsets (on GTvision's clock,
+    :func:`restamp_laser`), smoothed (:func:`reference_track`)."""
+    from gtrig.fusion.measurements import fixes_from_track
+
+    off = {e.source.split("/", 1)[1]: e.offset_s for e in scanners if e.verdict == "ok"}
+    return reference_track([fixes_from_track(restamp_laser(laser.usable(), ret, off), "laser")])
+
+
+def reprojection_offsets(rig, vision: PoseTrack, cam_stamps: Mapping[str, np.ndarray], ref: Reference,  # noqa: ANN001
+                         checkpoint: str | os.PathLike[str]) -> list[OffsetEstimate]:
+    """:func:`gtrig.fusion.reprojection_sync.camera_offsets_reprojection` on the checkpoint's corners, relative
+    to GTvision's clock (each camera's mean share of GTvision's poses); the pose fit where the checkpoint
+    holds no per-camera corners (one of whole instants)."""
+    from gtrig.fusion.reprojection_sync import camera_offsets_reprojection, read_camera_corners
+    from gtrig.vision.observations import VisionModel
+
+    corners = read_camera_corners(checkpoint, VisionModel.from_rig(rig), cam_stamps)
+    if not corners:
+        return camera_offsets(vision, cam_stamps, ref, checkpoint=checkpoint)
+    _, share = checkpoint_membership(vision.usable().stamps_s, checkpoint, cam_stamps)
+    names = [c for c in cam_stamps if c in corners]
+    mean = dict(zip(list(cam_stamps), share.mean(axis=0), strict=True))
+    return camera_offsets_reprojection({c: corners[c] for c in names}, ref, vision, mean)
 
 
 def to_reference(sensor: OffsetEstimate, vision: OffsetEstimate) -> dict[str, object]:
