@@ -461,6 +461,25 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
             print(_row(f"{e.source} to GTvision's clock", e, truth))
         print(f"(per-camera and per-scanner fits: {secs:.1f} s wall, loaded machine)")
         _other_camera_rows(rdir, rig, vis, las, ret, sensors, ck)
+        _truth_to_odometry(rdir, odo, {"vision": vis, "laser": las}, odo_off)
+
+
+def _truth_to_odometry(rdir: Path, odo: OdometryLog, tracks: dict[str, PoseTrack], odo_off: float) -> None:
+    """The true trajectory, sampled at each source's stamps with its covariances, timed against odometry as
+    the source is: what the odometry alone leaves in the offset (no GT clock error can be in it)."""
+    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.io.tum import read_tum
+
+    tr = read_tum(rdir / "truth" / "run.tum")
+    X = PoseTrack(tr.stamps_s, tr.xyz, tr.quat_xyzw).xytheta()
+    X[:, 2] = np.unwrap(X[:, 2])
+    for name, track in tracks.items():
+        u = track.usable()
+        xyt = np.column_stack([np.interp(u.stamps_s, tr.stamps_s, X[:, k]) for k in range(3)])
+        true_src = PoseTrack.from_xytheta(u.stamps_s, xyt, cov=u.cov_xytheta(), source=name)
+        e = estimate_offset(odo.stamps_s, odo.xytheta[:, 2], u.stamps_s, true_src.yaw_rad(), name)
+        e = refine_by_fusion(e, fixes_from_track(true_src, name), odo)
+        print(_row(f"the true trajectory at {name}'s stamps, to odometry", e, -odo_off))
 
 
 def _other_camera_rows(rdir: Path, rig, vis: PoseTrack, las: PoseTrack, ret, sensors: list,  # noqa: ANN001
@@ -468,6 +487,10 @@ def _other_camera_rows(rdir: Path, rig, vis: PoseTrack, las: PoseTrack, ret, sen
     """The cameras by the other method than the default (whole poses / reprojection), on the same
     reference (GTlaser restamped by the scanners' offsets just fitted), and by both methods against the
     true trajectory as reference (the estimators' own limit)."""
+    from dataclasses import replace
+
+    import yaml
+
     from gtrig.fusion import sensor_sync as ss
     from gtrig.io.tum import read_tum
 
@@ -479,7 +502,11 @@ def _other_camera_rows(rdir: Path, rig, vis: PoseTrack, las: PoseTrack, ret, sen
     truth_ref = ss.Reference(tr.stamps_s, true_xyt, np.gradient(true_xyt, tr.stamps_s, axis=0),
                              np.tile(np.eye(3) * 1e-10, (tr.stamps_s.size, 1, 1)))
     other = "reprojection" if ss.CAMERA_METHOD == "pose" else "pose"
-    for label, ref in (("GTlaser", ss.camera_reference(las, ret, scanners)), ("the true trajectory", truth_ref)):
+    clocks = yaml.safe_load((rdir / "truth" / "laser_clocks.yaml").read_text())["run"]["clock_offsets_s"]
+    true_scanners = [replace(e, offset_s=float(clocks[e.source.split("/", 1)[1]]), verdict="ok") for e in scanners]
+    for label, ref in (("GTlaser", ss.camera_reference(las, ret, scanners)),
+                       ("GTlaser on the true scanner clocks", ss.camera_reference(las, ret, true_scanners)),
+                       ("the true trajectory", truth_ref)):
         methods = (other,) if label == "GTlaser" else ("pose", "reprojection")
         for m in methods:
             t0 = time.process_time()
