@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gtrig.markers.detect._blas import MAX_GEMM, MAX_GEMV, matmul
+from gtrig.markers.detect._blas import MAX_GEMM, MAX_GEMV, gram, matmul
 
 
 @pytest.mark.parametrize(("a_shape", "b_shape"), [
@@ -65,3 +65,15 @@ def test_each_call_stays_under_openblas_threading(a_shape: tuple[int, ...], b_sh
             assert m * k * sb[-1] <= MAX_GEMM == 65536 * 4
         rows += m
     assert rows == a_shape[-2]
+
+
+@pytest.mark.parametrize("shape", [(4, 324, 36), (2, 81, 9), (1, 7, 3), (0, 324, 36)])
+def test_gram_is_the_normal_matrix(shape: tuple[int, int, int]) -> None:
+    # unblur_cells' M^T M per quad: the product, exactly symmetric, in blocks of K below the limit
+    rng = np.random.default_rng(3)
+    M = rng.normal(size=shape)
+    got = gram(M)
+    assert got.shape == (shape[0], shape[2], shape[2])
+    np.testing.assert_allclose(got, M.transpose(0, 2, 1) @ M, rtol=1e-12, atol=1e-12)
+    assert np.array_equal(got, got.transpose(0, 2, 1))
+    assert MAX_GEMM // (shape[2] ** 2) * shape[2] ** 2 <= MAX_GEMM

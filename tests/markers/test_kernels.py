@@ -208,3 +208,18 @@ def test_helper_pool_works_in_a_forked_child() -> None:
     ctx = mp.get_context("fork")
     with ctx.Pool(1) as pool:
         assert pool.apply_async(_threads.run_split, (abs, [(-3,), (-4,)])).get(timeout=60) == [3, 4]
+
+
+def test_sides_traced_counts_the_traced_bins() -> None:
+    # a 40 px square's outline traced whole passes; with a gap over half of one side's middle it fails
+    from gtrig.markers.detect.candidates import BROKEN_BORDER_TRACED
+
+    a = np.array([[0.0, 0.0], [40.0, 0.0], [40.0, 40.0], [0.0, 40.0]])
+    sides = np.hypot(*(np.roll(a, -1, axis=0) - a).T)
+    t = np.arange(0, 40)
+    whole = np.concatenate([np.column_stack([t, 0 * t]), np.column_stack([0 * t + 40, t]),
+                            np.column_stack([40 - t, 0 * t + 40]), np.column_stack([0 * t, 40 - t])]).astype(float)
+    sel = _kernels.side_points(whole, a)
+    assert _kernels.sides_traced(whole, sel, a, sides, BROKEN_BORDER_TRACED)
+    gap = whole[~((whole[:, 1] == 0) & (whole[:, 0] > 8) & (whole[:, 0] < 24))]
+    assert not _kernels.sides_traced(gap, _kernels.side_points(gap, a), a, sides, BROKEN_BORDER_TRACED)

@@ -661,3 +661,37 @@ def nearest_codes(words: NDArray[np.uint64], table: NDArray[np.uint64]
                 d2 = di
         best[k], h1[k], h2[k] = b, d1, d2
     return best, h1, h2
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def sides_traced(pts: NDArray[np.float64], sel: NDArray[np.bool_], a: NDArray[np.float64],
+                 sides: NDArray[np.float64], share: float) -> bool:
+    """Whether the contour points ``pts`` (P, 2) trace each side of the quad ``a`` (4, 2) over at
+    least ``share`` of its middle 70 % (:func:`.candidates._broken_border_quad`): of the 2 px bins
+    along side ``i`` (length ``sides[i]``, px) from 15 % of it on, those holding one of its points
+    ``sel[i]`` (4, P) number at least ``share * ceil(0.35 sides[i])``; every side needs 3 points."""
+    P = pts.shape[0]
+    for i in range(4):
+        j = (i + 1) % 4
+        tx, ty = (a[j, 0] - a[i, 0]) / sides[i], (a[j, 1] - a[i, 1]) / sides[i]
+        off = 0.15 * sides[i]
+        count = 0
+        top = 0
+        for k in range(P):
+            if sel[i, k]:
+                count += 1
+                top = max(top, int(max(math.floor(((pts[k, 0] - a[i, 0]) * tx + (pts[k, 1] - a[i, 1]) * ty - off)
+                                                  / 2.0), 0.0)))
+        if count < 3:
+            return False
+        seen = np.zeros(top + 1, np.bool_)
+        bins = 0
+        for k in range(P):
+            if sel[i, k]:
+                b = int(max(math.floor(((pts[k, 0] - a[i, 0]) * tx + (pts[k, 1] - a[i, 1]) * ty - off) / 2.0), 0.0))
+                if not seen[b]:
+                    seen[b] = True
+                    bins += 1
+        if bins < share * math.ceil(0.7 * sides[i] / 2.0):
+            return False
+    return True

@@ -7,7 +7,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import ndtr
 
-from gtrig.markers.detect._blas import matmul
+from gtrig.markers.detect._blas import gram, matmul
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.edges import quad_homographies
 from gtrig.markers.detect.sampling import bilinear
@@ -114,8 +114,9 @@ def unblur_cells(
     M = (Y[..., :, None] * X[..., None, :]).reshape(Q, len(mx), d * d)
     r = (vals - black[:, None]) / contrast[:, None] - (1.0 - S)
     Mt = M.transpose(0, 2, 1)
-    # in row blocks: one (d^2, S) x (S, d^2) product per quad is past OpenBLAS's threading threshold
-    A = matmul(Mt, M)
+    # the normal matrix by syrk (half a gemm's work), in blocks OpenBLAS keeps in one thread: one
+    # (d^2, S) x (S, d^2) product per quad is past its threading threshold
+    A = gram(M)
     lam = 1e-2 * np.trace(A, axis1=1, axis2=2) / (d * d)
     w = np.linalg.solve(A + lam[:, None, None] * np.eye(d * d), matmul(Mt, r[..., None]) + lam[:, None, None] * 0.5)
     return w.reshape(Q, d, d)
