@@ -45,7 +45,7 @@ import time
 import weakref
 from array import array
 from collections import OrderedDict
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -70,7 +70,7 @@ CHECKPOINT_VERSION = 5
 SEQUENCES = ("run", "validation")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)  # slots: a run holds one per instant (no __dict__ each)
 class Instant:
     """The images that make one instant: ``stamp_s`` and ``(camera, row in its frame index)``."""
 
@@ -227,7 +227,11 @@ def _arr(a: np.ndarray | None) -> Any:
 # recording's length (issue 24): the detections in their checkpoint (one JSON line per chunk, read back
 # a line at a time), the estimates in a temporary file of pickled blocks (one block per chunk of
 # instants). What stays in memory per instant is a few bytes (a line number, a flag, an offset).
-_CACHED_BLOCKS = 64  # parsed lines / blocks kept: several chunks of every camera around the instants in use
+# what is read back is read in time order (a chunk of instants at a time, as its chunk is submitted):
+# the current line of each camera, and the current block of estimates, are all that is needed; a few
+# more keep a re-read (a retried chunk, the motion pass right after the estimation) off the disk
+_CACHED_LINES = 16
+_CACHED_BLOCKS = 4
 
 
 class _Spill(Sequence[Any]):
@@ -352,7 +356,7 @@ class _DetectionFile:
             d = json.loads(self._f.readline())
             got = {int(r): _views_from_json(d["camera"], int(r), v) for r, v in d["frames"]}
             self._cache[k] = got
-            if len(self._cache) > _CACHED_BLOCKS:
+            if len(self._cache) > _CACHED_LINES:
                 self._cache.popitem(last=False)
         else:
             self._cache.move_to_end(k)
@@ -563,13 +567,13 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
 
 
 # ----------------------------------------------------------------------------------------- the runner
-def _key(rig: Rig, sequence: str, detector: str, paths: dict[str, list[str]], rec: Path | None = None) -> str:
+def _key(rig: Rig, sequence: str, detector: str, paths: dict[str, Iterable[str]], rec: Path | None = None) -> str:
     """What the checkpointed detections depend on: the images, the detector, the lenses and the markers'
     families and sizes; not the poses, the estimator's options nor how images group into instants, so a
     re-estimation with a newly calibrated rig or other settings reuses them. The images count by their
-    path inside the recording ``rec``, so a recording moved or copied elsewhere keeps its detections."""
-    if rec is not None:
-        paths = {c: [os.path.relpath(p, rec) for p in ps] for c, ps in paths.items()}
+    path inside the recording ``rec``, so a recording moved or copied elsewhere keeps its detections.
+    ``paths`` (camera: its images' paths) is read once, a path at a time: the key of an hour's 144,000
+    images is hashed without their list."""
     doc_rig = rig_to_dict(rig)
     for c in doc_rig["cameras"]:
         for k in ("T_world_cam", "pose_cov", "stamp_sigma_s"):
@@ -580,8 +584,17 @@ def _key(rig: Rig, sequence: str, detector: str, paths: dict[str, list[str]], re
         c["dist_coeffs"] = [float(f"{v:.9g}") for v in c["dist_coeffs"]]
     markers = [{k: m[k] for k in ("family", "id", "side_m")} for m in doc_rig["robot"]["markers"]]
     doc = {"v": CHECKPOINT_VERSION, "cameras": doc_rig["cameras"], "markers": markers, "sequence": sequence,
-           "detector": detector, "paths": paths}
-    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:20]
+           "detector": detector, "paths": {}}
+    # the hash of json.dumps(doc with the paths, sort_keys=True), its "paths" value written piece by piece
+    head, tail = json.dumps(doc, sort_keys=True).split('"paths": {}')
+    h = hashlib.sha256((head + '"paths": {').encode())
+    for k, cam in enumerate(sorted(paths)):
+        h.update(((", " if k else "") + json.dumps(cam) + ": [").encode())
+        for j, p in enumerate(paths[cam]):
+            h.update(((", " if j else "") + json.dumps(p if rec is None else os.path.relpath(p, rec))).encode())
+        h.update(b"]")
+    h.update(("}" + tail).encode())
+    return h.hexdigest()[:20]
 
 
 #: detections by camera and row of its frame index
@@ -948,15 +961,15 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     indices = camera_indices(rec, sequence, rig)
     intervals = read_static_intervals(rec / "validation" / "poses.csv") if sequence == "validation" else None
     instants = make_instants(indices, sequence, sync_tol_s, intervals)
-    paths = {name: [ix.source(i) for i in range(len(ix))] for name, ix in indices.items()}
     if chunk_size is None:
         # at least 32 chunks where the sequence allows, so that an interruption loses little; it depends
         # on the sequence alone, never on the workers, so a run resumed with other workers finds the same
         chunk_size = min(16, max(1, sum(len(ins.images) for ins in instants) // 32))
     chunks = detection_chunks(instants, indices, chunk_size)
     # a new version of the detector's code makes other detections: not the checkpoint's
+    # the workers read their chunk's images by path; the client keeps no list of them
+    paths = {name: map(ix.source, range(len(ix))) for name, ix in indices.items()}
     key = _key(rig, sequence, f"{det.name}/{det.version}", paths, rec)
-    del paths  # the workers read their chunk's images by path; the client keeps no list of them
     ctx = WorkerContext.of(rig, detector)
     _seed(ctx, model, det)
     dets = _open_checkpoint(None if checkpoint is None else Path(checkpoint), key, stale_checkpoint, indices)
