@@ -30,6 +30,10 @@ is bit-identical; a line cut by a crash is dropped and its chunk detected again)
 checkpoint of other images, another detector, other lenses or other markers is refused; one written
 before the camera or marker poses were calibrated again, or with other estimator settings, is reused
 (detection does not depend on them).
+
+Memory: the client's state does not grow with the recording (issue 24) beyond its index (frame
+indices, instants): detections are read back from the checkpoint (or a temporary file) a line at a time,
+each stage's estimates are written to a temporary file chunk by chunk and read back in time order.
 """
 
 from __future__ import annotations
