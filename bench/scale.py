@@ -218,6 +218,8 @@ def main() -> None:
     ap.add_argument("--throughput-seconds", type=float, default=24.0)
     ap.add_argument("--modes", nargs="*", default=["pool:1", "dask:1", "pool:2", "dask:2"])
     ap.add_argument("--work", type=Path, default=Path("/tmp/gtrig_scale"))
+    ap.add_argument("--memory-mode", default="dask:2",
+                    help="executor of the seeded memory runs (--fractions): pool:N, dask:N or tcp:N")
     ap.add_argument("--end-to-end", nargs="*", default=[], metavar="MODE",
                     help="also detect every image of the whole --minutes run (no seeded checkpoint) on each MODE "
                          "(pool:N, dask:N, tcp:N); resumable: rerun to continue from its checkpoint")
@@ -269,8 +271,9 @@ def main() -> None:
         counts = make_long(a.source, rec, 60 * minutes)
         ck = a.work / f"long_{minutes:g}min.ck"
         lines = seed_checkpoint(rec, rig, cycle_ck, ck)
-        r = _child([str(rec), str(rig), "dask:2", str(ck)])
-        print(f"{minutes:g} min: {sum(counts.values())} images ({len(counts)} cameras), {r['instants']} instants, "
+        r = _child([str(rec), str(rig), a.memory_mode, str(ck)])
+        print(f"{minutes:g} min on {a.memory_mode}: {sum(counts.values())} images ({len(counts)} cameras), "
+              f"{r['instants']} instants, "
               f"{lines} detection chunks from the checkpoint; end to end {r['wall_s']:.0f} s wall, client CPU "
               f"{r['client_cpu_s']:.0f} s, workers' CPU {r['worker_cpu_s']:.0f} s; client peak "
               f"{r['client_peak_mb']:.0f} MB, worker peak {r['worker_peak_mb']:.0f} MB", flush=True)

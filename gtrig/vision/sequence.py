@@ -30,6 +30,10 @@ is bit-identical; a line cut by a crash is dropped and its chunk detected again)
 checkpoint of other images, another detector, other lenses or other markers is refused; one written
 before the camera or marker poses were calibrated again, or with other estimator settings, is reused
 (detection does not depend on them).
+
+Memory: the client's state does not grow with the recording (issue 24) beyond its index (frame
+indices, instants): detections are read back from the checkpoint (or a temporary file) a line at a time,
+each stage's estimates are written to a temporary file chunk by chunk and read back in time order.
 """
 
 from __future__ import annotations
@@ -39,8 +43,13 @@ import hashlib
 import json
 import logging
 import os
+import pickle
+import tempfile
 import time
-from collections.abc import Callable, Sequence
+import weakref
+from array import array
+from collections import OrderedDict
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -65,7 +74,7 @@ CHECKPOINT_VERSION = 5
 SEQUENCES = ("run", "validation")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)  # slots: a run holds one per instant (no __dict__ each)
 class Instant:
     """The images that make one instant: ``stamp_s`` and ``(camera, row in its frame index)``."""
 
@@ -80,8 +89,10 @@ class VisionResult:
     Attributes
     ----------
     sequence : "run" or "validation"
-    estimates : one per instant, in time order (failed ones included, with their reason)
-    observations : the detections of each instant (same order)
+    estimates : one per instant, in time order (failed ones included, with their reason); from
+        :func:`run_recording` a sequence read back from a temporary file, so that the client's memory does
+        not grow with the recording (pickling it makes a tuple)
+    observations : the detections of each instant (same order), read back from the detections' file
     images_per_camera : number of images read per camera
     detector : which corner detector was used
     seconds : wall time of the parallel pass (images read, detection), of the corner-noise
@@ -91,8 +102,8 @@ class VisionResult:
     """
 
     sequence: str
-    estimates: tuple[FrameEstimate, ...]
-    observations: tuple[FrameObservations, ...] = field(repr=False)
+    estimates: Sequence[FrameEstimate]
+    observations: Sequence[FrameObservations] = field(repr=False)
     images_per_camera: dict[str, int]
     detector: str
     planar: bool
@@ -102,26 +113,37 @@ class VisionResult:
     def localized(self) -> tuple[FrameEstimate, ...]:
         return tuple(e for e in self.estimates if e.ok)
 
+    def _localized_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(stamps (M,), T_world_robot (M, 4, 4), cov (M, 6, 6))`` of the localized poses, gathered one
+        estimate at a time (the estimates themselves are not kept: a long run's are on disk)."""
+        stamps, Ts, covs = [], [], []
+        for e in self.estimates:
+            if e.ok:
+                stamps.append(e.stamp_s)
+                Ts.append(e.T_world_robot)
+                covs.append(e.cov_6x6)
+        if not stamps:
+            return np.zeros(0), np.zeros((0, 4, 4)), np.zeros((0, 6, 6))
+        # an OK estimate has a covariance; one without (a hand-made result) still gives a trajectory
+        cov = np.stack(covs) if all(c is not None for c in covs) else None  # type: ignore[arg-type]
+        return np.array(stamps), np.stack(Ts), cov  # type: ignore[arg-type,return-value]
+
     def trajectory(self) -> Trajectory:
         """The localized poses as ``T_world_robot`` (TUM)."""
-        ok = self.localized()
-        if not ok:
+        stamps, T, _ = self._localized_arrays()
+        if not len(stamps):
             return Trajectory(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)))
-        return Trajectory.from_matrices(np.array([e.stamp_s for e in ok]),
-                                        np.stack([e.T_world_robot for e in ok]))  # type: ignore[misc]
+        return Trajectory.from_matrices(stamps, T)
 
     def to_pose_track(self) -> PoseTrack:
         """The localized poses as the one pose-track type: ``T_world_robot`` with the full (6, 6)
         covariance over the world-frame perturbation (x, y, z, rx, ry, rz), every pose OK (an instant that
         failed has no pose). A planar run's file carries the x, y, yaw marginal
         (:func:`write_pose_track_files`)."""
-        ok = self.localized()
-        if not ok:
+        stamps, T, cov = self._localized_arrays()
+        if not len(stamps):
             return PoseTrack.empty("GTvision", "se3")
-        return PoseTrack.from_matrices(np.array([e.stamp_s for e in ok]),
-                                       np.stack([e.T_world_robot for e in ok]),  # type: ignore[misc]
-                                       cov=np.stack([e.cov_6x6 for e in ok]),  # type: ignore[misc]
-                                       cov_kind="se3", source="GTvision")
+        return PoseTrack.from_matrices(stamps, T, cov=cov, cov_kind="se3", source="GTvision")
 
     def covariances(self) -> np.ndarray:
         """(M, 6, 6), or (M, 3, 3) over x, y, yaw when planar, for the localized poses."""
@@ -204,6 +226,188 @@ def _arr(a: np.ndarray | None) -> Any:
     return None if a is None else np.asarray(a, dtype=float).tolist()
 
 
+# ------------------------------------------------------------------------------- streamed state
+# The client's state over a recording is kept on disk, not in memory, so that it does not grow with the
+# recording's length (issue 24): the detections in their checkpoint (one JSON line per chunk, read back
+# a line at a time), the estimates in a temporary file of pickled blocks (one block per chunk of
+# instants). What stays in memory per instant is a few bytes (a line number, a flag, an offset).
+# what is read back is read in time order (a chunk of instants at a time, as its chunk is submitted):
+# the current line of each camera, and the current block of estimates, are all that is needed; a few
+# more keep a re-read (a retried chunk, the motion pass right after the estimation) off the disk
+_CACHED_LINES = 16
+_CACHED_BLOCKS = 4
+
+
+class _Spill(Sequence[Any]):
+    """``n`` items in blocks of ``block`` consecutive ones, each block pickled to a temporary file as it
+    is made (blocks may come in any order) and read back on demand (the last ``_CACHED_BLOCKS`` kept)."""
+
+    def __init__(self, n: int, block: int) -> None:
+        self._n, self._block = n, max(1, block)
+        nb = -(-n // self._block)
+        self._at = np.full(nb, -1, np.int64)
+        self._size = np.zeros(nb, np.int64)
+        self._f = tempfile.TemporaryFile()  # noqa: SIM115 (lives as long as this sequence)
+        weakref.finalize(self, self._f.close)
+        self._cache: OrderedDict[int, list[Any]] = OrderedDict()
+
+    def put(self, b: int, items: Sequence[Any]) -> None:
+        """Block ``b``'s items (``block`` of them; fewer for the last)."""
+        want = min(self._block, self._n - b * self._block)
+        if len(items) != want:
+            raise ValueError(f"block {b}: {len(items)} items, expected {want}")
+        data = pickle.dumps(list(items), protocol=5)
+        self._f.seek(0, os.SEEK_END)
+        self._at[b], self._size[b] = self._f.tell(), len(data)
+        self._f.write(data)
+
+    def block(self, b: int) -> list[Any]:
+        got = self._cache.get(b)
+        if got is None:
+            if self._at[b] < 0:
+                raise KeyError(f"block {b} was never written")
+            self._f.seek(int(self._at[b]))
+            got = pickle.loads(self._f.read(int(self._size[b])))  # noqa: S301 (this run's own file)
+            self._cache[b] = got
+            if len(self._cache) > _CACHED_BLOCKS:
+                self._cache.popitem(last=False)
+        else:
+            self._cache.move_to_end(b)
+        return got
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(self._n))]
+        i = int(i)
+        if i < 0:
+            i += self._n
+        if not 0 <= i < self._n:
+            raise IndexError(i)
+        return self.block(i // self._block)[i % self._block]
+
+    def __iter__(self) -> Iterator[Any]:
+        for b in range(len(self._at)):
+            yield from self.block(b)
+
+    def __reduce__(self) -> tuple[Any, ...]:  # pickled (the pipeline's cache): a tuple of the items
+        return (tuple, (tuple(self),))
+
+
+def _spill_in_order(items: Iterator[Any], n: int, block: int) -> _Spill:
+    """``n`` items of an iterator into a :class:`_Spill`, a block at a time."""
+    out, buf, b = _Spill(n, block), [], 0
+    for x in items:
+        buf.append(x)
+        if len(buf) == out._block:
+            out.put(b, buf)
+            buf, b = [], b + 1
+    if buf:
+        out.put(b, buf)
+    return out
+
+
+class _DetectionFile:
+    """The detections of a run, in their checkpoint file (or a temporary one): where each camera's row
+    is (its chunk's line) and whether it holds a marker, in memory; the views read back a line at a time.
+
+    The file is opened for reading and appending; a chunk's line is written, flushed, and indexed as it
+    completes (an interrupted run resumes from the lines on disk)."""
+
+    def __init__(self, indices: dict[str, FrameIndex], f: Any) -> None:
+        self._f = f
+        weakref.finalize(self, f.close)
+        self._line = {c: np.full(len(ix), -1, np.int32) for c, ix in indices.items()}
+        self._marked = {c: np.zeros(len(ix), bool) for c, ix in indices.items()}
+        self._offset = array("q")
+        self._cache: OrderedDict[int, dict[int, tuple[MarkerView, ...]]] = OrderedDict()
+
+    def index(self, offset: int, camera: str, rows: dict[int, bool]) -> None:
+        """The line at ``offset`` holds ``camera``'s ``rows`` (row: any marker seen)."""
+        if camera not in self._line:
+            return  # a camera the rig no longer has: its views were never used
+        k = len(self._offset)
+        self._offset.append(offset)
+        line, marked = self._line[camera], self._marked[camera]
+        for r, m in rows.items():
+            if 0 <= r < len(line):  # a later line wins, as a dict update did
+                line[r], marked[r] = k, m
+
+    def append(self, camera: str, frames: list[list[Any]]) -> None:
+        """One finished chunk: written as one line (the checkpoint's JSON form) and indexed."""
+        self._f.seek(0, os.SEEK_END)
+        at = self._f.tell()
+        self._f.write((json.dumps({"camera": camera, "frames": frames}) + "\n").encode())
+        self._f.flush()
+        self.index(at, camera, {int(r): bool(v) for r, v in frames})
+
+    def has(self, camera: str, row: int) -> bool:
+        return bool(self._line[camera][row] >= 0)
+
+    def marked(self, ins: Instant) -> bool:
+        """Any marker seen in one of the instant's images."""
+        return any(bool(self._marked[c][i]) for c, i in ins.images)
+
+    def views(self, camera: str, row: int) -> tuple[MarkerView, ...]:
+        k = int(self._line[camera][row])
+        if k < 0:
+            raise KeyError((camera, row))
+        got = self._cache.get(k)
+        if got is None:
+            self._f.seek(self._offset[k])
+            d = json.loads(self._f.readline())
+            got = {int(r): _views_from_json(d["camera"], int(r), v) for r, v in d["frames"]}
+            self._cache[k] = got
+            if len(self._cache) > _CACHED_LINES:
+                self._cache.popitem(last=False)
+        else:
+            self._cache.move_to_end(k)
+        return got[row]
+
+    def close(self) -> None:
+        self._f.flush()
+
+
+class _LazyObservations(Sequence[FrameObservations]):
+    """The observations of each instant, made from the detections' file when asked for."""
+
+    def __init__(self, instants: Sequence[Instant], dets: _DetectionFile) -> None:
+        self._instants, self._dets = instants, dets
+
+    def __len__(self) -> int:
+        return len(self._instants)
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(len(self)))]
+        ins = self._instants[i]
+        return FrameObservations(ins.stamp_s, tuple(v for cam, r in ins.images for v in self._dets.views(cam, r)),
+                                 tuple(sorted({c for c, _ in ins.images})), tuple(ins.images))
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (tuple, (tuple(self),))
+
+
+class _Lazy(Sequence[Any]):
+    """``n`` items, item ``i`` made by ``make(i)`` each time it is asked for (the chunks of a map: made
+    as they are submitted, so that their arguments are never all in memory at once)."""
+
+    def __init__(self, n: int, make: Callable[[int], Any]) -> None:
+        self._n, self._make = n, make
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(self._n))]
+        if not 0 <= i < self._n:
+            raise IndexError(i)
+        return self._make(i)
+
+
 # --------------------------------------------------------------------------------------- the workers
 @dataclass(frozen=True)
 class WorkerContext:
@@ -280,26 +484,40 @@ def _instant_label(obs: Sequence[FrameObservations]) -> str:
 
 
 def _map_in_chunks(fn: Callable[..., list[Any]], items: Sequence[Any], args: Callable[[list[Any]], tuple[Any, ...]],
-                   label: Callable[[list[Any]], str], chunk_size: int, executor: Any, workers: int) -> list[Any]:
-    """``fn(*args(chunk))`` over consecutive chunks of ``items``, results concatenated in order."""
+                   label: Callable[[list[Any]], str], chunk_size: int, executor: Any, workers: int,
+                   spill: bool = False) -> Sequence[Any]:
+    """``fn(*args(chunk))`` over consecutive chunks of ``items``, results concatenated in order: a list, or
+    with ``spill`` a :class:`_Spill` written chunk by chunk as they finish. A chunk's items are taken from
+    ``items`` when it is submitted (``items`` may be read from disk)."""
     from gtrig.executor import Chunk, map_chunks
 
-    parts = [list(items[i:i + chunk_size]) for i in range(0, len(items), chunk_size)]
+    n = len(items)
+    n_chunks = -(-n // chunk_size)
+
+    def chunk(k: int) -> Chunk:
+        part = [items[i] for i in range(k * chunk_size, min(n, (k + 1) * chunk_size))]
+        return Chunk(args(part), label(part))
+
+    if spill:
+        store = _Spill(n, chunk_size)
+        map_chunks(fn, _Lazy(n_chunks, chunk), store.put, executor=executor, workers=workers)
+        return store
     out: dict[int, list[Any]] = {}
-    map_chunks(fn, [Chunk(args(p), label(p)) for p in parts], out.__setitem__, executor=executor, workers=workers)
-    return [x for i in range(len(parts)) for x in out[i]]
+    map_chunks(fn, _Lazy(n_chunks, chunk), out.__setitem__, executor=executor, workers=workers)
+    return [x for i in range(n_chunks) for x in out[i]]
 
 
-def _estimate_all(ctx: WorkerContext, obs: list[FrameObservations], options: VisionOptions, chunk_size: int,
-                  executor: Any, workers: int) -> list[FrameEstimate]:
+def _estimate_all(ctx: WorkerContext, obs: Sequence[FrameObservations], options: VisionOptions, chunk_size: int,
+                  executor: Any, workers: int, spill: bool = False) -> Sequence[FrameEstimate]:
     """Every instant estimated again from its detections (no image read), in parallel chunks."""
     return _map_in_chunks(_estimate_chunk, obs, lambda p: (ctx, p, options), _instant_label, chunk_size,
-                          executor, workers)
+                          executor, workers, spill)
 
 
 def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, cameras: Sequence[str],
                     estimate: Callable[[VisionOptions, list[FrameObservations]], list[FrameEstimate]],
                     max_rounds: int = 1, tol: float = 0.05, sample: int = 300, rig_component: bool = False,
+                    with_views: Sequence[int] | None = None,
                     ) -> tuple[VisionOptions, list[tuple[tuple[str, float], ...]]]:
     """Variance factors of the corner covariances from the residuals of the sequence's instants
     (:mod:`gtrig.vision.noise`; one step by default, see there why).
@@ -308,8 +526,9 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
     sequence (their redundancy, thousands of corners, pins a factor to a few per cent; estimating every
     instant at every round would cost more than the detection). ``estimate(opts, observations)``
     estimates a list of instants. With ``max_rounds`` > 1 the factors are re-estimated with the new
-    ones until none moves by more than ``tol`` (relative). Returns the options with the final factors and the history of
-    factors (one entry per round).
+    ones until none moves by more than ``tol`` (relative). ``with_views``: the indices of the instants
+    that hold a view, when the caller knows them (``obs`` is then read only at the sample, not scanned).
+    Returns the options with the final factors and the history of factors (one entry per round).
 
     With ``rig_component`` the residuals are split between two components: the corners of each camera
     (their own chi-square over their redundancy) and the rig's stated uncertainty (its nuisance priors',
@@ -322,7 +541,8 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
     """
     from gtrig.vision.noise import estimate_corner_scale, estimate_rig_scale, scale_change
 
-    with_views = [i for i, o in enumerate(obs) if o.views]
+    if with_views is None:
+        with_views = [i for i, o in enumerate(obs) if o.views]
     if len(with_views) > sample:
         with_views = [with_views[int(k)] for k in np.linspace(0, len(with_views) - 1, sample).round()]
     sub = [obs[i] for i in with_views]
@@ -351,13 +571,13 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
 
 
 # ----------------------------------------------------------------------------------------- the runner
-def _key(rig: Rig, sequence: str, detector: str, paths: dict[str, list[str]], rec: Path | None = None) -> str:
+def _key(rig: Rig, sequence: str, detector: str, paths: dict[str, Iterable[str]], rec: Path | None = None) -> str:
     """What the checkpointed detections depend on: the images, the detector, the lenses and the markers'
     families and sizes; not the poses, the estimator's options nor how images group into instants, so a
     re-estimation with a newly calibrated rig or other settings reuses them. The images count by their
-    path inside the recording ``rec``, so a recording moved or copied elsewhere keeps its detections."""
-    if rec is not None:
-        paths = {c: [os.path.relpath(p, rec) for p in ps] for c, ps in paths.items()}
+    path inside the recording ``rec``, so a recording moved or copied elsewhere keeps its detections.
+    ``paths`` (camera: its images' paths) is read once, a path at a time: the key of an hour's 144,000
+    images is hashed without their list."""
     doc_rig = rig_to_dict(rig)
     for c in doc_rig["cameras"]:
         for k in ("T_world_cam", "pose_cov", "stamp_sigma_s"):
@@ -368,8 +588,17 @@ def _key(rig: Rig, sequence: str, detector: str, paths: dict[str, list[str]], re
         c["dist_coeffs"] = [float(f"{v:.9g}") for v in c["dist_coeffs"]]
     markers = [{k: m[k] for k in ("family", "id", "side_m")} for m in doc_rig["robot"]["markers"]]
     doc = {"v": CHECKPOINT_VERSION, "cameras": doc_rig["cameras"], "markers": markers, "sequence": sequence,
-           "detector": detector, "paths": paths}
-    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:20]
+           "detector": detector, "paths": {}}
+    # the hash of json.dumps(doc with the paths, sort_keys=True), its "paths" value written piece by piece
+    head, tail = json.dumps(doc, sort_keys=True).split('"paths": {}')
+    h = hashlib.sha256((head + '"paths": {').encode())
+    for k, cam in enumerate(sorted(paths)):
+        h.update(((", " if k else "") + json.dumps(cam) + ": [").encode())
+        for j, p in enumerate(paths[cam]):
+            h.update(((", " if j else "") + json.dumps(p if rec is None else os.path.relpath(p, rec))).encode())
+        h.update(b"]")
+    h.update(("}" + tail).encode())
+    return h.hexdigest()[:20]
 
 
 #: detections by camera and row of its frame index
@@ -379,9 +608,18 @@ Detections = dict[str, dict[int, tuple[MarkerView, ...]]]
 def _load_checkpoint(path: Path, key: str) -> tuple[Detections, int]:
     """The detections in ``path`` and the length of its good part (a line cut by an interruption, and
     what follows it, is dropped: that chunk is detected again)."""
-    if not path.is_file():
-        return {}, 0
     dets: Detections = {}
+    good = _scan_checkpoint(path, key, lambda at, cam, got: dets.setdefault(cam, {}).update(got))
+    return dets, good
+
+
+def _scan_checkpoint(path: Path, key: str,
+                     on_line: Callable[[int, str, dict[int, tuple[MarkerView, ...]]], None]) -> int:
+    """``on_line(offset, camera, {row: views})`` for every good line of the checkpoint ``path``, in file
+    order; returns the length of its good part (0: no usable checkpoint). Each line is parsed in full, so
+    a damaged one is never trusted, and dropped once looked at."""
+    if not path.is_file():
+        return 0
     with open(path, "rb") as f:
         first = f.readline()
         try:
@@ -391,7 +629,7 @@ def _load_checkpoint(path: Path, key: str) -> tuple[Detections, int]:
         if not isinstance(head, dict) or not isinstance(head.get("key"), str):
             # not what run_recording writes (a corrupt or foreign file): never trusted, started afresh
             log.warning("%s: not a GTvision checkpoint (corrupt header); starting afresh", path)
-            return {}, 0
+            return 0
         if head["key"] != key:
             raise InputError(f"{path}: checkpoint of another run (other images, detector, lenses or markers); "
                              "delete it or choose another output")
@@ -405,30 +643,43 @@ def _load_checkpoint(path: Path, key: str) -> tuple[Detections, int]:
                 break  # a line cut by an interruption, or damaged: never trusted, detected again
             if not line.endswith(b"\n"):
                 break
-            dets.setdefault(cam, {}).update(got)
+            on_line(good, cam, got)
             good += len(line)
-    return dets, good
+    return good
 
 
-def _open_checkpoint(ck: Path, key: str, stale: str) -> tuple[Detections, Any]:
-    """The detections already in the checkpoint ``ck`` and the file opened to append the next chunks."""
+def _open_checkpoint(ck: Path | None, key: str, stale: str, indices: dict[str, FrameIndex]) -> _DetectionFile:
+    """The detections' file: the checkpoint ``ck`` (its good lines indexed, opened to append the next
+    chunks) or, without one, a temporary file (the detections are read back from disk either way)."""
+    if ck is None:
+        f = tempfile.TemporaryFile()  # noqa: SIM115 (owned by the _DetectionFile)
+        f.write((json.dumps({"key": key, "version": CHECKPOINT_VERSION}) + "\n").encode())
+        return _DetectionFile(indices, f)
+    lines: list[tuple[int, str, dict[int, bool]]] = []
+
+    def keep(at: int, cam: str, got: dict[int, tuple[MarkerView, ...]]) -> None:
+        lines.append((at, cam, {r: bool(v) for r, v in got.items()}))
+
     try:
-        dets, good = _load_checkpoint(ck, key)
+        good = _scan_checkpoint(ck, key, keep)
     except InputError as err:
         if stale != "restart":
             raise
         log.warning("%s; starting afresh", err)
-        dets, good = {}, 0
+        good, lines = 0, []
     ck.parent.mkdir(parents=True, exist_ok=True)
     if good == 0:
-        f = open(ck, "w", encoding="utf-8")  # noqa: SIM115
-        f.write(json.dumps({"key": key, "version": CHECKPOINT_VERSION}) + "\n")
+        f = open(ck, "w+b")  # noqa: SIM115
+        f.write((json.dumps({"key": key, "version": CHECKPOINT_VERSION}) + "\n").encode())
         f.flush()
+        lines = []
     else:
-        with open(ck, "r+b") as g:  # drop a torn last line
-            g.truncate(good)
-        f = open(ck, "a", encoding="utf-8")  # noqa: SIM115
-    return dets, f
+        f = open(ck, "r+b")  # noqa: SIM115
+        f.truncate(good)  # drop a torn last line
+    out = _DetectionFile(indices, f)
+    for at, cam, rows in lines:
+        out.index(at, cam, rows)
+    return out
 
 
 def detection_chunks(instants: Sequence[Instant], indices: dict[str, FrameIndex], chunk_size: int
@@ -447,65 +698,67 @@ def detection_chunks(instants: Sequence[Instant], indices: dict[str, FrameIndex]
 
 
 def _detect_all(ctx: WorkerContext, chunks: list[tuple[str, list[int]]], indices: dict[str, FrameIndex],
-                dets: Detections, ckf: Any, executor: Any, workers: int,
+                dets: _DetectionFile, executor: Any, workers: int,
                 progress: Callable[[int, int], None] | None) -> None:
-    """The chunks not in ``dets`` detected on the workers, each appended to the checkpoint ``ckf`` as one
+    """The chunks not in ``dets`` detected on the workers, each appended to the detections' file as one
     line as it completes (the images are read by the workers, never sent from here)."""
     from gtrig.executor import Chunk, map_chunks
 
-    jobs = []
-    for cam, rows in chunks:
+    def job(k: int) -> Chunk:
+        cam, rows = chunks[k]
         ix = indices[cam]
         label = f"camera {cam}, {ix.stamps_s[rows[0]]:.3f}-{ix.stamps_s[rows[-1]]:.3f} s"
-        jobs.append(Chunk((ctx, cam, rows, [ix.source(i) for i in rows]), label))
-    todo = [k for k, (cam, rows) in enumerate(chunks) if not all(i in dets.get(cam, {}) for i in rows)]
+        return Chunk((ctx, cam, rows, [ix.source(i) for i in rows]), label)
+
+    jobs = _Lazy(len(chunks), job)
+    todo = [k for k, (cam, rows) in enumerate(chunks) if not all(dets.has(cam, i) for i in rows)]
     if len(todo) < len(chunks):
         log.info("resuming: %d of %d detection chunks already checkpointed", len(chunks) - len(todo), len(chunks))
 
     def record(k: int, frames: list[list[Any]]) -> None:
-        cam = chunks[k][0]
-        if ckf is not None:  # one line per finished chunk: an interrupted run resumes from here
-            ckf.write(json.dumps({"camera": cam, "frames": frames}) + "\n")
-            ckf.flush()
-        dets.setdefault(cam, {}).update((int(r), _views_from_json(cam, int(r), v)) for r, v in frames)
+        dets.append(chunks[k][0], frames)  # one line per finished chunk: an interrupted run resumes from here
 
     map_chunks(_process_chunk, jobs, record, executor=executor, workers=workers, todo=todo, progress=progress)
 
 
-def _observations(instants: Sequence[Instant], dets: Detections) -> list[FrameObservations]:
-    return [FrameObservations(ins.stamp_s, tuple(v for cam, i in ins.images for v in dets[cam][i]),
-                              tuple(sorted({c for c, _ in ins.images})), tuple(ins.images)) for ins in instants]
-
-
-def _resolve_flips(model: VisionModel, obs: list[FrameObservations], ests: list[FrameEstimate],
+def _resolve_flips(model: VisionModel, obs: Sequence[FrameObservations], ests: Sequence[FrameEstimate],
                    options: VisionOptions) -> list[FrameEstimate]:
     """Re-estimate ambiguous instants with the previous localized pose, in time order."""
+    return list(_iter_flips(model, obs, ests, options))
+
+
+def _iter_flips(model: VisionModel, obs: Sequence[FrameObservations], ests: Sequence[FrameEstimate],
+                options: VisionOptions) -> Iterator[FrameEstimate]:
+    """:func:`_resolve_flips` one instant at a time (the previous localized pose is all it keeps); the
+    observations are read only for the ambiguous instants."""
     last: FrameEstimate | None = None
-    out = []
-    for o, e in zip(obs, ests, strict=True):
-        if e.status is Status.AMBIGUOUS and last is not None and \
-                o.stamp_s - last.stamp_s <= options.previous_max_gap_s:
+    if len(obs) != len(ests):
+        raise ValueError(f"{len(obs)} instants but {len(ests)} estimates")
+    for i, e in enumerate(ests):
+        o = obs[i] if e.status is Status.AMBIGUOUS and last is not None else None
+        if o is not None and last is not None and o.stamp_s - last.stamp_s <= options.previous_max_gap_s:
             assert last.T_world_robot is not None
             e = estimate_frame(model, o, options, PreviousPose(last.T_world_robot))
             if e.ok:
                 e = replace(e, reason="flip resolved by the previous pose")
         if e.ok:
             last = e
-        out.append(e)
-    return out
+        yield e
 
 
 def camera_time_offsets(obs: Sequence[FrameObservations], indices: dict[str, FrameIndex]
                         ) -> list[dict[str, float]]:
     """Per instant, each camera's image stamp minus the instant's stamp, seconds (the mean of its
     images' stamps: cameras that are not triggered together fall up to ``sync_tol_s`` apart)."""
-    out = []
-    for o in obs:
-        per: dict[str, list[float]] = {}
-        for cam, row in o.frames:
-            per.setdefault(cam, []).append(float(indices[cam].stamps_s[row]) - o.stamp_s)
-        out.append({c: float(np.mean(v)) for c, v in per.items()})
-    return out
+    return [_time_offsets(o.stamp_s, o.frames, indices) for o in obs]
+
+
+def _time_offsets(stamp_s: float, frames: Sequence[tuple[str, int]], indices: dict[str, FrameIndex]
+                  ) -> dict[str, float]:
+    per: dict[str, list[float]] = {}
+    for cam, row in frames:
+        per.setdefault(cam, []).append(float(indices[cam].stamps_s[row]) - stamp_s)
+    return {c: float(np.mean(v)) for c, v in per.items()}
 
 
 def _moving_instant(model: VisionModel, o: FrameObservations, options: VisionOptions, first: FrameEstimate,
@@ -525,7 +778,7 @@ def compensate_motion(model: VisionModel, obs: Sequence[FrameObservations], ests
                       offsets: Sequence[dict[str, float]], stamp_sigma_s: dict[str, float],
                       options: VisionOptions, *, max_gap_s: float = 0.5, chunk_size: int = 16,
                       context: WorkerContext | None = None, executor: Any = None, workers: int = 1
-                      ) -> tuple[list[FrameEstimate], set[int]]:
+                      ) -> tuple[Sequence[FrameEstimate], set[int]]:
     """The moving instants estimated again with their cameras' exposure times.
 
     Two things the first estimate of an instant cannot know, from the velocity of the neighbouring
@@ -545,48 +798,121 @@ def compensate_motion(model: VisionModel, obs: Sequence[FrameObservations], ests
     error moves its view exactly as the robot's motion over that time would, so for a single camera the
     nuisance equals :func:`with_timing_uncertainty`'s term on the pose and the estimate is unchanged.
 
-    Returns the estimates and the indices of those whose covariance now includes the timing; an instant
-    whose second estimate fails keeps its first.
+    Returns the estimates (a list for a list of ``ests``, else a sequence over them and the new ones,
+    which are kept on disk) and the indices of those whose covariance now includes the timing; an
+    instant whose second estimate fails keeps its first. ``obs``, ``ests`` and ``offsets`` are read
+    instant by instant, never copied.
     """
+    ok, T, vel = _ok_velocities(ests, max_gap_s)
+    if len(ok) < 2:
+        return list(ests), set()
+    sigma = {c: stamp_sigma_s.get(c, 0.0) for c in model.cameras}
+
+    def moves(k: int) -> bool:  # some camera of instant ok[k] to move or to give its jitter
+        i = int(ok[k])
+        return bool(np.any(vel[k])) and len(obs[i].cameras_with_views()) >= 2 and any(
+            c in model.cameras and (abs(dt) > 1e-6 or sigma[c] > 0) for c, dt in offsets[i].items())
+
+    # the instants estimated again: a few bytes each; their arguments are made as their chunk is sent
+    jobs = np.array([k for k in range(len(ok)) if moves(k)], dtype=np.int64)
+
+    def job(j: int) -> tuple[Any, ...]:
+        k = int(jobs[j])
+        i = int(ok[k])
+        deltas, extra = _camera_motion(model, vel[k], T[k], offsets[i], sigma)
+        return obs[i], ests[i], deltas, extra
+
+    items = _Lazy(len(jobs), job)
+    if context is None:  # ``model`` is not a rig's: estimated here
+        res: Sequence[FrameEstimate] = [_moving_instant(model, o, options, e, d, x) for o, e, d, x in items]
+    else:
+        res = _map_in_chunks(_moving_chunk, items, lambda p: (context, p, options),
+                             lambda p: _instant_label([it[0] for it in p]), chunk_size, executor, workers,
+                             spill=not isinstance(ests, list))
+    at = ok[jobs] if len(jobs) else np.zeros(0, np.int64)
+    good = np.fromiter((e.ok for e in res), bool, len(at))
+    done = {int(i) for i in at[good]}
+    log.info("%d moving instants estimated again with their cameras' exposure times", len(done))
+    if isinstance(ests, list):
+        out = list(ests)
+        for i, g, e in zip(at, good, res, strict=True):
+            if g:
+                out[int(i)] = e
+        return out, done
+    return _Merged(ests, at[good], _Lazy(int(good.sum()), _Picked(res, np.flatnonzero(good)))), done
+
+
+def _ok_velocities(ests: Sequence[FrameEstimate], max_gap_s: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The indices (M,) of the localized estimates, their poses (M, 4, 4) and velocities (M, 6)
+    (:func:`pose_velocities`), gathered one estimate at a time."""
+    ok, Ts, stamps = [], [], []
+    for i, e in enumerate(ests):
+        if e.ok:
+            ok.append(i)
+            Ts.append(e.T_world_robot)
+            stamps.append(e.stamp_s)
+    if len(ok) < 2:
+        return np.array(ok, np.int64), np.zeros((len(ok), 4, 4)), np.zeros((len(ok), 6))
+    T = np.stack(Ts)  # type: ignore[arg-type]
+    return np.array(ok, np.int64), T, pose_velocities(np.array(stamps), T, max_gap_s)
+
+
+def _camera_motion(model: VisionModel, vel: np.ndarray, T: np.ndarray, offsets: dict[str, float],
+                   sigma: dict[str, float]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Per camera of one instant, the motion ``(4, 4)`` over its exposure offset and its jitter's
+    nuisance covariance (:func:`compensate_motion`)."""
     from gtrig.vision.covariance import timing_camera_covariance
 
-    ok = [i for i, e in enumerate(ests) if e.ok]
-    out = list(ests)
-    if len(ok) < 2:
-        return out, set()
-    T = np.stack([ests[i].T_world_robot for i in ok])  # type: ignore[misc]
-    vel = pose_velocities(np.array([ests[i].stamp_s for i in ok]), T, max_gap_s)
-    jobs: list[tuple[int, tuple[Any, ...]]] = []
-    for k, i in enumerate(ok):
-        if not np.any(vel[k]) or len(obs[i].cameras_with_views()) < 2:
+    t = T[:3, 3]
+    deltas, extra = {}, {}
+    for c, dt in offsets.items():
+        if c not in model.cameras:
             continue
-        t = T[k][:3, 3]
-        deltas, extra = {}, {}
-        for c, dt in offsets[i].items():
-            if c not in model.cameras:
-                continue
-            if abs(dt) > 1e-6:
-                D = np.eye(4)
-                D[:3, :3] = Rotation.from_rotvec(vel[k, 3:] * dt).as_matrix()
-                D[:3, 3] = t + vel[k, :3] * dt - D[:3, :3] @ t
-                deltas[c] = D
-            sig = stamp_sigma_s.get(c, 0.0)
-            if sig > 0:
-                extra[c] = timing_camera_covariance(vel[k], T[k], model.cameras[c].T_world_cam[:3, 3], sig)
-        if deltas or extra:
-            jobs.append((i, (obs[i], ests[i], deltas, extra)))
-    if context is None:  # ``model`` is not a rig's: estimated here
-        res = [_moving_instant(model, o, options, e, d, x) for _, (o, e, d, x) in jobs]
-    else:
-        res = _map_in_chunks(_moving_chunk, [it for _, it in jobs], lambda p: (context, p, options),
-                             lambda p: _instant_label([it[0] for it in p]), chunk_size, executor, workers)
-    done: set[int] = set()
-    for (i, _), e in zip(jobs, res, strict=True):
-        if e.ok:
-            out[i] = e
-            done.add(i)
-    log.info("%d moving instants estimated again with their cameras' exposure times", len(done))
-    return out, done
+        if abs(dt) > 1e-6:
+            D = np.eye(4)
+            D[:3, :3] = Rotation.from_rotvec(vel[3:] * dt).as_matrix()
+            D[:3, 3] = t + vel[:3] * dt - D[:3, :3] @ t
+            deltas[c] = D
+        if sigma[c] > 0:
+            extra[c] = timing_camera_covariance(vel, T, model.cameras[c].T_world_cam[:3, 3], sigma[c])
+    return deltas, extra
+
+
+@dataclass(frozen=True)
+class _Picked:
+    """Item ``idx[j]`` of ``items`` as item ``j``."""
+
+    items: Sequence[Any]
+    idx: np.ndarray
+
+    def __call__(self, j: int) -> Any:
+        return self.items[int(self.idx[j])]
+
+
+class _Merged(Sequence[FrameEstimate]):
+    """``base`` with the instants ``at`` (sorted) replaced by ``new`` (same order)."""
+
+    def __init__(self, base: Sequence[FrameEstimate], at: np.ndarray, new: Sequence[FrameEstimate]) -> None:
+        self._base, self._at, self._new = base, at, new
+
+    def __len__(self) -> int:
+        return len(self._base)
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(len(self)))]
+        j = int(np.searchsorted(self._at, i))
+        return self._new[j] if j < len(self._at) and self._at[j] == i else self._base[i]
+
+    def __iter__(self) -> Iterator[FrameEstimate]:
+        j = 0
+        for i, e in enumerate(self._base):
+            if j < len(self._at) and self._at[j] == i:
+                yield self._new[j]
+                j += 1
+            else:
+                yield e
 
 
 def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "validation",
@@ -639,76 +965,80 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     indices = camera_indices(rec, sequence, rig)
     intervals = read_static_intervals(rec / "validation" / "poses.csv") if sequence == "validation" else None
     instants = make_instants(indices, sequence, sync_tol_s, intervals)
-    paths = {name: [ix.source(i) for i in range(len(ix))] for name, ix in indices.items()}
     if chunk_size is None:
         # at least 32 chunks where the sequence allows, so that an interruption loses little; it depends
         # on the sequence alone, never on the workers, so a run resumed with other workers finds the same
         chunk_size = min(16, max(1, sum(len(ins.images) for ins in instants) // 32))
     chunks = detection_chunks(instants, indices, chunk_size)
     # a new version of the detector's code makes other detections: not the checkpoint's
+    # the workers read their chunk's images by path; the client keeps no list of them
+    paths = {name: map(ix.source, range(len(ix))) for name, ix in indices.items()}
     key = _key(rig, sequence, f"{det.name}/{det.version}", paths, rec)
-    del paths  # the workers read their chunk's images by path; the client keeps no list of them
     ctx = WorkerContext.of(rig, detector)
     _seed(ctx, model, det)
-    dets: Detections = {}
-    ckf = None
-    if checkpoint is not None:
-        dets, ckf = _open_checkpoint(Path(checkpoint), key, stale_checkpoint)
+    dets = _open_checkpoint(None if checkpoint is None else Path(checkpoint), key, stale_checkpoint, indices)
     t_par = time.perf_counter()
     try:
-        _detect_all(ctx, chunks, indices, dets, ckf, executor, workers, progress)
+        _detect_all(ctx, chunks, indices, dets, executor, workers, progress)
     finally:
-        if ckf:
-            ckf.close()
+        dets.close()
     t_par = time.perf_counter() - t_par
-    obs = _observations(instants, dets)
-    del dets
+    obs = _LazyObservations(instants, dets)  # read back from the detections' file as needed
     t_noise = time.perf_counter()
     if estimate_noise and not opts.corner_scale:
+        marked = [k for k, ins in enumerate(instants) if dets.marked(ins)]
         opts, history = calibrate_noise(obs, opts, sorted(indices),
                                         lambda o, x: _estimate_all(ctx, x, o, chunk_size, executor, workers),
                                         max_rounds=10 if opts.rig_variance_component else 1,
-                                        rig_component=opts.rig_variance_component)
+                                        rig_component=opts.rig_variance_component, with_views=marked)
+        del marked
         for k, sc in enumerate(history):
             log.info("corner noise, round %d: variance factors %s", k + 1,
                      ", ".join(f"{c} {f:.3g}" for c, f in sc))
     t_noise = time.perf_counter() - t_noise
     t_est = time.perf_counter()
-    ests = _estimate_all(ctx, obs, opts, chunk_size, executor, workers)
-    ests = _resolve_flips(model, obs, ests, opts)
+    # every stage streams: its estimates are written to disk chunk by chunk and read back in time order
+    ests: Sequence[FrameEstimate] = _estimate_all(ctx, obs, opts, chunk_size, executor, workers, spill=True)
+    ests = _spill_in_order(_iter_flips(model, obs, ests, opts), len(ests), chunk_size)
     stamp_sigma = {c.name: c.stamp_sigma_s for c in rig.cameras}
     timed: set[int] = set()
     if sequence == "run":
-        ests, timed = compensate_motion(model, obs, ests, camera_time_offsets(obs, indices), stamp_sigma, opts,
+        offsets = _Lazy(len(instants), lambda i: _time_offsets(instants[i].stamp_s, instants[i].images, indices))
+        ests, timed = compensate_motion(model, obs, ests, offsets, stamp_sigma, opts,
                                         chunk_size=chunk_size, context=ctx, executor=executor, workers=workers)
     t_est = time.perf_counter() - t_est
+    frame_cov = None if rig.robot.markers_frame_cov is None else np.asarray(rig.robot.markers_frame_cov, float)
+    timing = stamp_sigma if sequence == "run" and any(v > 0 for v in stamp_sigma.values()) else None
+    final = _spill_in_order(_logged(_iter_finished(ests, timing, timed, frame_cov)), len(ests), chunk_size)
+    counts = {name: len(ix) for name, ix in indices.items()}
+    return VisionResult(sequence, final, obs, counts, det_name, planar,
+                        {"parallel": t_par, "noise": t_noise, "estimate": t_est,
+                         "total": time.perf_counter() - t_start},
+                        opts.corner_scale)
+
+
+def _logged(ests: Iterator[FrameEstimate]) -> Iterator[FrameEstimate]:
+    """The estimates as they pass, each failed one logged."""
     for e in ests:  # an empty view is the common case in a run: not worth a line each
         if not e.ok:
             log.log(logging.DEBUG if e.status is Status.NO_MARKER else logging.INFO,
                     "t=%.6f not localized: %s: %s", e.stamp_s, e.status.value, e.reason)
-    counts = {name: len(ix) for name, ix in indices.items()}
-    res = VisionResult(sequence, tuple(ests), tuple(obs), counts, det_name, planar,
-                       {"parallel": t_par, "noise": t_noise, "estimate": t_est,
-                        "total": time.perf_counter() - t_start},
-                       opts.corner_scale)
-    res = with_timing_uncertainty(res, stamp_sigma, skip=timed)
-    if rig.robot.markers_frame_cov is not None:
-        res = with_robot_frame_uncertainty(res, np.asarray(rig.robot.markers_frame_cov, float))
-    return res
+        yield e
 
 
 def with_robot_frame_uncertainty(result: VisionResult, cov_frame_6x6: np.ndarray) -> VisionResult:
     """A new result whose pose covariances include a common error of the robot frame itself
     (``cov_frame_6x6`` over (dt, dphi) in robot axes, e.g. from
     :func:`gtrig.vision.covariance.anchor_frame_covariance`); the poses are unchanged."""
+    return replace(result, estimates=tuple(_with_frame(e, cov_frame_6x6) for e in result.estimates))
+
+
+def _with_frame(e: FrameEstimate, cov_frame_6x6: np.ndarray) -> FrameEstimate:
     from gtrig.vision.covariance import add_robot_frame_covariance
 
-    ests = tuple(
-        replace(e, cov_6x6=add_robot_frame_covariance(e.T_world_robot, e.cov_6x6, cov_frame_6x6))
-        if e.cov_6x6 is not None and e.T_world_robot is not None else e
-        for e in result.estimates
-    )
-    return replace(result, estimates=ests)
+    if e.cov_6x6 is None or e.T_world_robot is None:
+        return e
+    return replace(e, cov_6x6=add_robot_frame_covariance(e.T_world_robot, e.cov_6x6, cov_frame_6x6))
 
 
 def with_timing_uncertainty(result: VisionResult, stamp_sigma_s: dict[str, float],
@@ -725,20 +1055,27 @@ def with_timing_uncertainty(result: VisionResult, stamp_sigma_s: dict[str, float
     whose indices are in ``skip`` (their cameras' timing is in their covariance already,
     :func:`compensate_motion`). Poses are unchanged.
     """
-    ok = [i for i, e in enumerate(result.estimates) if e.ok]
-    if result.sequence != "run" or len(ok) < 2 or not any(v > 0 for v in stamp_sigma_s.values()):
+    ests = result.estimates
+    if result.sequence != "run" or not any(v > 0 for v in stamp_sigma_s.values()):
         return result
-    ests = list(result.estimates)
-    T = np.stack([ests[i].T_world_robot for i in ok])  # type: ignore[misc]
-    vel = pose_velocities(np.array([ests[i].stamp_s for i in ok]), T, max_gap_s)
-    for k, i in enumerate(ok):
-        e = ests[i]
-        if i in skip:
-            continue
-        sig = max((stamp_sigma_s.get(cam, 0.0) for cam, _ in e.views), default=0.0)
-        if sig > 0 and e.cov_6x6 is not None:
-            ests[i] = replace(e, cov_6x6=e.cov_6x6 + sig**2 * np.outer(vel[k], vel[k]))
-    return replace(result, estimates=tuple(ests))
+    return replace(result, estimates=tuple(_iter_finished(ests, stamp_sigma_s, skip, None, max_gap_s)))
+
+
+def _iter_finished(ests: Sequence[FrameEstimate], stamp_sigma_s: dict[str, float] | None,
+                   skip: set[int] | frozenset[int], cov_frame_6x6: np.ndarray | None, max_gap_s: float = 0.5
+                   ) -> Iterator[FrameEstimate]:
+    """The estimates one by one with the timing term of :func:`with_timing_uncertainty` (None: none),
+    then the robot frame's error of :func:`with_robot_frame_uncertainty` (None: none)."""
+    ok, _, vel = _ok_velocities(ests, max_gap_s) if stamp_sigma_s else (np.zeros(0, np.int64), None, None)
+    timed = stamp_sigma_s is not None and len(ok) >= 2
+    k = 0
+    for i, e in enumerate(ests):
+        if timed and k < len(ok) and ok[k] == i:
+            sig = max((stamp_sigma_s.get(cam, 0.0) for cam, _ in e.views), default=0.0)  # type: ignore[union-attr]
+            if i not in skip and sig > 0 and e.cov_6x6 is not None:
+                e = replace(e, cov_6x6=e.cov_6x6 + sig**2 * np.outer(vel[k], vel[k]))  # type: ignore[index]
+            k += 1
+        yield e if cov_frame_6x6 is None else _with_frame(e, cov_frame_6x6)
 
 
 def file_track(result: VisionResult) -> PoseTrack:

@@ -1,0 +1,112 @@
+"""The client's memory does not grow with the recording's length (issue 24): GTvision's run over a
+recording three times longer peaks (tracemalloc, in this process) at about the same memory.
+
+The recordings are made without images being detected: a cycle of synthetic detections (noisy corners
+of the markers each camera sees, :func:`gtrig.vision.synthetic.synthetic_observations`) is written to
+the detection checkpoint for every row of a ``timestamps.csv`` that repeats the cycle, so the run goes
+straight to estimation, the stage whose state grew with the length (every instant's detections and
+estimate kept for the flips and the motion compensation). The corner-noise calibration is left out:
+its sample is bounded by construction (at most 300 instants with markers, :func:`calibrate_noise`), and
+a test long enough to fill it would take minutes."""
+
+from __future__ import annotations
+
+import json
+import tracemalloc
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from gtrig.io.frames import write_frame_index
+from gtrig.rig.load import dump_rig
+from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
+from gtrig.vision.detect import make_detector
+from gtrig.vision.estimate import VisionOptions
+from gtrig.vision.sequence import (
+    CHECKPOINT_VERSION,
+    _key,
+    _views_to_json,
+    camera_indices,
+    detection_chunks,
+    make_instants,
+    run_recording,
+)
+from gtrig.vision.synthetic import CornerNoise, synthetic_observations, visible_views
+
+CYCLE = 24  # distinct instants: the robot creeping past validation pose 4, then out of sight (as a run)
+SEEN = 2  # instants of the cycle with markers, seen by two cameras (a run's 30 %: 1/12 keeps the test fast)
+CHUNK = 4  # instants per chunk: the short run already fills the client's bounded caches of chunks
+
+
+def make_recording(out: Path, instants: int, seed: int = 1) -> tuple[Path, object]:
+    """A run of ``instants`` instants at 10 Hz (every camera's images one blank file, stamps 1 ms apart
+    so that each instant holds all cameras) and its seeded detection checkpoint ``out/ck.jsonl``."""
+    scene = make_scene(0)
+    rig = scene.rig_true
+    rng = np.random.default_rng(seed)
+    x, y, th = VALIDATION_POSES[3]
+    # the first instants of the cycle in view, moving 2 cm a step; the rest out of sight (no marker)
+    poses = [scene.T_world_robot(x + 0.02 * k * np.cos(th), y + 0.02 * k * np.sin(th), th) for k in range(SEEN)]
+    cams = [c.name for c in rig.cameras]
+    seeing = sorted({c for T in poses for c, _, _ in visible_views(rig, T)})[:2]
+    views = {(c, k): _views_to_json(synthetic_observations(rig, poses[k], 0.1 * k, rng, CornerNoise(0.2),
+                                                           cameras=(c,)).views) if k < SEEN and c in seeing else []
+             for c in cams for k in range(CYCLE)}
+    for j, cam in enumerate(rig.cameras):
+        folder = out / "run" / "cameras" / cam.name
+        folder.mkdir(parents=True)
+        cv2.imwrite(str(folder / "blank.png"), np.zeros((2, 2), np.uint8))
+        write_frame_index(folder, 0.1 * np.arange(instants) + 0.001 * j, ["blank.png"] * instants)
+    dump_rig(rig, out / "rig.yaml")
+    indices = camera_indices(out, "run", rig)
+    det = make_detector(rig, "auto")
+    key = _key(rig, "run", f"{det.name}/{det.version}",
+               {n: [ix.source(i) for i in range(len(ix))] for n, ix in indices.items()}, out)
+    with open(out / "ck.jsonl", "w", encoding="utf-8") as f:
+        f.write(json.dumps({"key": key, "version": CHECKPOINT_VERSION}) + "\n")
+        for cam, rows in detection_chunks(make_instants(indices, "run"), indices, CHUNK):
+            f.write(json.dumps({"camera": cam, "frames": [[r, views[(cam, r % CYCLE)]] for r in rows]}) + "\n")
+    return out, rig
+
+
+def peak_of_run(rec: Path, rig: object) -> tuple[int, int]:
+    """(tracemalloc peak in bytes of one GTvision run in this process, instants)."""
+    tracemalloc.start()
+    try:
+        res = run_recording(rec, rig, "run", True, workers=1, checkpoint=rec / "ck.jsonl",  # type: ignore[arg-type]
+                            options=VisionOptions(), chunk_size=CHUNK, estimate_noise=False)
+        n = len(res.estimates)
+        assert sum(e.ok for e in res.estimates) == n * SEEN // CYCLE
+        del res
+        return tracemalloc.get_traced_memory()[1], n
+    finally:
+        tracemalloc.stop()
+
+
+def index_bytes(rec: Path, rig: object) -> int:
+    """Bytes held by the recording's index alone: its cameras' frame indices, the instants and the
+    detection chunks (read whole before anything runs; the part of the client that still grows)."""
+    tracemalloc.start()
+    try:
+        indices = camera_indices(rec, "run", rig)  # type: ignore[arg-type]
+        plan = (indices, make_instants(indices, "run"))
+        plan += (detection_chunks(plan[1], indices, CHUNK),)  # type: ignore[assignment]
+        return tracemalloc.get_traced_memory()[0]
+    finally:
+        tracemalloc.stop()
+
+
+def test_client_memory_is_flat_in_the_recording_length(tmp_path: Path) -> None:
+    peak_of_run(*make_recording(tmp_path / "warm", CYCLE))  # imports and first-use caches not measured
+    short = make_recording(tmp_path / "short", 120)
+    long = make_recording(tmp_path / "long", 360)
+    p1, n1 = peak_of_run(*short)
+    p3, n3 = peak_of_run(*long)
+    i1, i3 = index_bytes(*short), index_bytes(*long)
+    print(f"tracemalloc peak: {n1} instants {p1 / 1e6:.3f} MB (index {i1 / 1e6:.3f}), {n3} instants "
+          f"{p3 / 1e6:.3f} MB (index {i3 / 1e6:.3f}); {(p3 - p1) / (n3 - n1):.0f} bytes per instant, "
+          f"{(p3 - i3 - p1 + i1) / (n3 - n1):.0f} beyond the index")
+    assert n3 == 3 * n1
+    # beyond the index, the run's own state (detections, estimates, chunks in flight) is flat
+    assert p3 - i3 < 1.3 * (p1 - i1)
