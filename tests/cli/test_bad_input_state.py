@@ -51,6 +51,7 @@ def test_checkpoint_of_another_run_is_refused(tmp_path: Path) -> None:
 def test_survey_adjust_second_output_failing_writes_neither(d: Path, tmp_path: Path,
                                                             monkeypatch: pytest.MonkeyPatch) -> None:
     import gtrig.io.survey_csv as sc
+    import gtrig.survey.recording  # noqa: F401  (imported first under the patch, it would keep `fail`)
 
     o = tmp_path / "o"
     o.mkdir()
