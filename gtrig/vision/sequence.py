@@ -49,7 +49,7 @@ import time
 import weakref
 from array import array
 from collections import OrderedDict
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -515,7 +515,7 @@ def _estimate_all(ctx: WorkerContext, obs: Sequence[FrameObservations], options:
 
 
 def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, cameras: Sequence[str],
-                    estimate: Callable[[VisionOptions, list[FrameObservations]], list[FrameEstimate]],
+                    estimate: Callable[[VisionOptions, list[FrameObservations]], Sequence[FrameEstimate]],
                     max_rounds: int = 1, tol: float = 0.05, sample: int = 300, rig_component: bool = False,
                     with_views: Sequence[int] | None = None,
                     ) -> tuple[VisionOptions, list[tuple[tuple[str, float], ...]]]:
@@ -571,7 +571,7 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
 
 
 # ----------------------------------------------------------------------------------------- the runner
-def _key(rig: Rig, sequence: str, detector: str, paths: dict[str, Iterable[str]], rec: Path | None = None) -> str:
+def _key(rig: Rig, sequence: str, detector: str, paths: Mapping[str, Iterable[str]], rec: Path | None = None) -> str:
     """What the checkpointed detections depend on: the images, the detector, the lenses and the markers'
     families and sizes; not the poses, the estimator's options nor how images group into instants, so a
     re-estimation with a newly calibrated rig or other settings reuses them. The images count by their
@@ -592,8 +592,8 @@ def _key(rig: Rig, sequence: str, detector: str, paths: dict[str, Iterable[str]]
     # the hash of json.dumps(doc with the paths, sort_keys=True), its "paths" value written piece by piece
     head, tail = json.dumps(doc, sort_keys=True).split('"paths": {}')
     h = hashlib.sha256((head + '"paths": {').encode())
-    for k, cam in enumerate(sorted(paths)):
-        h.update(((", " if k else "") + json.dumps(cam) + ": [").encode())
+    for i_cam, cam in enumerate(sorted(paths)):
+        h.update(((", " if i_cam else "") + json.dumps(cam) + ": [").encode())
         for j, p in enumerate(paths[cam]):
             h.update(((", " if j else "") + json.dumps(p if rec is None else os.path.relpath(p, rec))).encode())
         h.update(b"]")
