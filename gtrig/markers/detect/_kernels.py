@@ -671,6 +671,7 @@ def sides_traced(pts: NDArray[np.float64], sel: NDArray[np.bool_], a: NDArray[np
     along side ``i`` (length ``sides[i]``, px) from 15 % of it on, those holding one of its points
     ``sel[i]`` (4, P) number at least ``share * ceil(0.35 sides[i])``; every side needs 3 points."""
     P = pts.shape[0]
+    bin_of = np.empty(P, np.int64)  # the bins of side i's points, the first ``count`` entries
     for i in range(4):
         j = (i + 1) % 4
         tx, ty = (a[j, 0] - a[i, 0]) / sides[i], (a[j, 1] - a[i, 1]) / sides[i]
@@ -679,19 +680,18 @@ def sides_traced(pts: NDArray[np.float64], sel: NDArray[np.bool_], a: NDArray[np
         top = 0
         for k in range(P):
             if sel[i, k]:
+                b = int(max(math.floor(((pts[k, 0] - a[i, 0]) * tx + (pts[k, 1] - a[i, 1]) * ty - off) / 2.0), 0.0))
+                bin_of[count] = b
                 count += 1
-                top = max(top, int(max(math.floor(((pts[k, 0] - a[i, 0]) * tx + (pts[k, 1] - a[i, 1]) * ty - off)
-                                                  / 2.0), 0.0)))
+                top = max(top, b)
         if count < 3:
             return False
         seen = np.zeros(top + 1, np.bool_)
         bins = 0
-        for k in range(P):
-            if sel[i, k]:
-                b = int(max(math.floor(((pts[k, 0] - a[i, 0]) * tx + (pts[k, 1] - a[i, 1]) * ty - off) / 2.0), 0.0))
-                if not seen[b]:
-                    seen[b] = True
-                    bins += 1
+        for m in range(count):
+            if not seen[bin_of[m]]:
+                seen[bin_of[m]] = True
+                bins += 1
         if bins < share * math.ceil(0.7 * sides[i] / 2.0):
             return False
     return True

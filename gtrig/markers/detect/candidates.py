@@ -11,8 +11,9 @@ applied in 8 bits (:func:`dark_mask`).
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -188,26 +189,18 @@ def find_candidates(
         if out:
             _fill(covered, out)
         # a box's contours do not depend on what the earlier boxes found: with two threads a helper
-        # traces the next boxes (OpenCV releases the GIL) while this thread tests the blobs of one
-        tasks, looser = [], []
-        for thr in more:
-            loose = thr > params.ratio_threshold
-            tasks += [(gray, bg, thr, params.smooth, box) for box in regions[loose][1]]
-            looser += [loose] * len(regions[loose][1])
-        for loose, contours in zip(looser, _threads.ordered_map(_contours_at, tasks, threads), strict=True):
+        # traces the next boxes (OpenCV releases the GIL) while this thread tests the blobs of one; the
+        # further ratio thresholds first, the local-contrast masks (:func:`_local_contours`) last
+        jobs = [(_contours_at, (gray, bg, thr, params.smooth, box), regions[thr > params.ratio_threshold][0])
+                for thr in more for box in regions[thr > params.ratio_threshold][1]]
+        jobs += [(_local_contours, (gray, win, params.local_offset, params.smooth, box), regions[True][0])
+                 for win in params.local_windows for box in regions[True][1]]
+        traced = _threads.ordered_map(_call, [(fn, args) for fn, args, _ in jobs], threads)
+        for (_, _, region), contours in zip(jobs, traced, strict=True):
             found = _mask_candidates(contours, params, max_side, max_hole_fraction,
-                                     None if trace is None else rejected, covered, regions[loose][0], weak=weak)
+                                     None if trace is None else rejected, covered, region, weak=weak)
             out.extend(found)
             if found:  # (the boxes may overlap: a blob in two of them is one candidate)
-                _fill(covered, found)
-        # last, the local-contrast masks around the same seeds (:func:`_local_contours`)
-        tasks = [(gray, win, params.local_offset, params.smooth, box)
-                 for win in params.local_windows for box in regions[True][1]]
-        for contours in _threads.ordered_map(_local_contours, tasks, threads):
-            found = _mask_candidates(contours, params, max_side, max_hole_fraction,
-                                     None if trace is None else rejected, covered, regions[True][0], weak=weak)
-            out.extend(found)
-            if found:
                 _fill(covered, found)
     # the fallback quads of broken borders, where no sound candidate lies (the first of several wins)
     h, w = gray.shape
@@ -255,6 +248,11 @@ def _traced(mask: NDArray[np.uint8], smooth: bool, shape: tuple[int, ...], box: 
     h, w = shape[:2]
     limits = (x0 if x0 > 0 else -1, y0 if y0 > 0 else -1, x1 - 1 if x1 < w else w, y1 - 1 if y1 < h else h)
     return contours, None if hier is None else hier[0], limits
+
+
+def _call(fn: Callable[..., Contours], args: tuple[Any, ...]) -> Contours:
+    """``fn(*args)``: one tracing job of :func:`find_candidates` (its masks come from two functions)."""
+    return fn(*args)
 
 
 def _fill(covered: NDArray[np.uint8], quads: Sequence[NDArray[np.float64]]) -> None:
