@@ -36,7 +36,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
+from gtrig.evaluate.associate import nearest_indices
 from gtrig.fusion.sensor_sync import Reference, _jackknife, _near_reference, _ridge, _score, _verdict
 from gtrig.fusion.sync import OffsetEstimate
 from gtrig.trajectory import PoseTrack
@@ -130,19 +132,8 @@ def out_of_plane(vision: PoseTrack, t: np.ndarray, window_s: float = 1.0, tol_s:
     cs = [np.r_[0.0, np.cumsum(a)] for a in (T[:, 2, 3], rx, ry)]
     zm, ax, ay = ((c[hi] - c[lo]) / np.maximum(n, 1) for c in cs)
     z[near] = zm[near]
-    R_tilt[near] = _small_rotation(ax[near], ay[near])
+    R_tilt[near] = Rotation.from_rotvec(np.column_stack([ax[near], ay[near], np.zeros(int(near.sum()))])).as_matrix()
     return z, R_tilt
-
-
-def _small_rotation(ax: np.ndarray, ay: np.ndarray) -> np.ndarray:
-    """Rotations (M, 3, 3) by the rotation vectors (ax, ay, 0), radians."""
-    th = np.hypot(ax, ay)
-    k = np.column_stack([ax, ay, np.zeros_like(ax)]) / np.maximum(th, 1e-300)[:, None]
-    Kx = np.zeros((ax.size, 3, 3))
-    Kx[:, 0, 2], Kx[:, 1, 2] = k[:, 1], -k[:, 0]
-    Kx[:, 2, 0], Kx[:, 2, 1] = -k[:, 1], k[:, 0]
-    s, c = np.sin(th)[:, None, None], np.cos(th)[:, None, None]
-    return np.eye(3) + s * Kx + (1 - c) * Kx @ Kx
 
 
 def _rz(yaw: np.ndarray) -> np.ndarray:
@@ -207,8 +198,7 @@ def image_corrections(cc: CameraCorners, pose: np.ndarray, z: np.ndarray, R_tilt
 
 def _cov_at(ref: Reference, t: np.ndarray) -> np.ndarray:
     """The reference's marginal covariance (M, 3, 3) at its nearest grid stamp to each of ``t``."""
-    k = np.clip(np.searchsorted(ref.stamps_s, t), 1, ref.stamps_s.size - 1)
-    k = np.where(t - ref.stamps_s[k - 1] < ref.stamps_s[k] - t, k - 1, k)
+    _, k = nearest_indices(t, ref.stamps_s, np.inf)
     return ref.cov[k]
 
 
