@@ -601,18 +601,6 @@ def _key(rig: Rig, sequence: str, detector: str, paths: Mapping[str, Iterable[st
     return h.hexdigest()[:20]
 
 
-#: detections by camera and row of its frame index
-Detections = dict[str, dict[int, tuple[MarkerView, ...]]]
-
-
-def _load_checkpoint(path: Path, key: str) -> tuple[Detections, int]:
-    """The detections in ``path`` and the length of its good part (a line cut by an interruption, and
-    what follows it, is dropped: that chunk is detected again)."""
-    dets: Detections = {}
-    good = _scan_checkpoint(path, key, lambda at, cam, got: dets.setdefault(cam, {}).update(got))
-    return dets, good
-
-
 def _scan_checkpoint(path: Path, key: str,
                      on_line: Callable[[int, str, dict[int, tuple[MarkerView, ...]]], None]) -> int:
     """``on_line(offset, camera, {row: views})`` for every good line of the checkpoint ``path``, in file

@@ -15,7 +15,14 @@ from bad_input_kit import refused, runner
 
 from gtrig.cli.main import app
 from gtrig.errors import FormatError, InputError
-from gtrig.vision.sequence import _load_checkpoint
+from gtrig.vision.sequence import _scan_checkpoint
+
+
+def _load_checkpoint(path: Path, key: str) -> tuple[dict[str, dict[int, tuple[object, ...]]], int]:
+    """The detections of every good line of the checkpoint (by camera and row) and its good length."""
+    dets: dict[str, dict[int, tuple[object, ...]]] = {}
+    good = _scan_checkpoint(path, key, lambda at, cam, got: dets.setdefault(cam, {}).update(got))
+    return dets, good
 
 
 @pytest.mark.parametrize(("text", "rows"), [
