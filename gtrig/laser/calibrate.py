@@ -127,8 +127,7 @@ def object_outlines(objects: np.ndarray | Sequence[np.ndarray]) -> list[np.ndarr
 
 
 def _to_world(xyt: np.ndarray, p: np.ndarray) -> np.ndarray:
-    c, s = np.cos(xyt[2]), np.sin(xyt[2])
-    return p @ np.array([[c, s], [-s, c]]) + xyt[:2]
+    return _rot_rows(p, xyt[2]) + xyt[:2]
 
 
 def calibrate_scanners(
@@ -214,11 +213,7 @@ def calibrate_scanners(
             G = np.zeros((3 * S, S + n_bias))
             stats = {"overlap": [(0, 0.0)] * S, "object": [(0, 0.0)] * S}
             pw = [_to_world(x[i], geoms[i][0]) for i in range(S)]
-            nw = [
-                geoms[i][1]
-                @ np.array([[np.cos(x[i, 2]), np.sin(x[i, 2])], [-np.sin(x[i, 2]), np.cos(x[i, 2])]])
-                for i in range(S)
-            ]
+            nw = [_rot_rows(geoms[i][1], x[i, 2]) for i in range(S)]
             trees = [cKDTree(p) for p in pw]
             ray = [_rot_rows(geoms[i][0] / np.linalg.norm(geoms[i][0], axis=1, keepdims=True), x[i, 2])
                    for i in range(S)]  # (n, 2) unit beam directions in the world
