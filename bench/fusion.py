@@ -383,11 +383,16 @@ def _row(name: str, e, truth_s: float) -> str:  # noqa: ANN001
     return f"| {name} | {truth_s * 1e3:+.3f} | {_ms(e)} | {err:+.3f} | {cover} |"
 
 
+def _true_xytheta(truth) -> np.ndarray:  # noqa: ANN001 (gtrig Trajectory)
+    """(N, 3) the true trajectory's x, y (m) and unwrapped yaw (rad)."""
+    return np.column_stack([truth.xyz[:, 0], truth.xyz[:, 1], np.unwrap(truth.yaw_rad())])
+
+
 def apparent_offset(track: PoseTrack, truth) -> float:  # noqa: ANN001 (gtrig Trajectory)
     """A diagnostic with the truth: the time offset that best explains ``track``'s errors against the true
     trajectory (least squares of ``z(t) - p(t) = -v(t) tau + b``, positions and 0.3 m/rad-weighted yaw), s."""
     T = truth.stamps_s
-    X = np.column_stack([truth.xyz[:, 0], truth.xyz[:, 1], np.unwrap(truth.yaw_rad())])
+    X = _true_xytheta(truth)
     V = np.gradient(X, T, axis=0)
     u = track.usable()
     g = np.column_stack([np.interp(u.stamps_s, T, X[:, k]) for k in range(3)])
@@ -464,19 +469,17 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
             truth = scan_truth[name] if kind == "laser" else 0.0
             print(_row(f"{e.source} to GTvision's clock", e, truth))
         print(f"(per-camera and per-scanner fits: {secs:.1f} s wall, loaded machine)")
-        _other_camera_rows(rdir, rig, vis, las, ret, sensors, ck)
-        _truth_to_odometry(rdir, odo, {"vision": vis, "laser": las}, odo_off)
+        _other_camera_rows(rdir, rig, vis, las, ret, sensors, ck, true_run, scan_truth)
+        _truth_to_odometry(true_run, odo, {"vision": vis, "laser": las}, odo_off)
 
 
-def _truth_to_odometry(rdir: Path, odo: OdometryLog, tracks: dict[str, PoseTrack], odo_off: float) -> None:
-    """The true trajectory, sampled at each source's stamps with its covariances, timed against odometry as
-    the source is: what the odometry alone leaves in the offset (no GT clock error can be in it)."""
+def _truth_to_odometry(tr, odo: OdometryLog, tracks: dict[str, PoseTrack], odo_off: float) -> None:  # noqa: ANN001
+    """The true trajectory ``tr`` (truth/run.tum), sampled at each source's stamps with its covariances, timed
+    against odometry as the source is: what the odometry alone leaves in the offset (no GT clock error can be
+    in it)."""
     from gtrig.fusion.sync import estimate_offset, refine_by_fusion
-    from gtrig.io.tum import read_tum
 
-    tr = read_tum(rdir / "truth" / "run.tum")
-    X = PoseTrack(tr.stamps_s, tr.xyz, tr.quat_xyzw).xytheta()
-    X[:, 2] = np.unwrap(X[:, 2])
+    X = _true_xytheta(tr)
     for name, track in tracks.items():
         u = track.usable()
         xyt = np.column_stack([np.interp(u.stamps_s, tr.stamps_s, X[:, k]) for k in range(3)])
@@ -487,26 +490,21 @@ def _truth_to_odometry(rdir: Path, odo: OdometryLog, tracks: dict[str, PoseTrack
 
 
 def _other_camera_rows(rdir: Path, rig, vis: PoseTrack, las: PoseTrack, ret, sensors: list,  # noqa: ANN001
-                       ck: Path) -> None:
+                       ck: Path, tr, clocks: dict[str, float]) -> None:  # noqa: ANN001
     """The cameras by the other method than the default (whole poses / reprojection), on the same
     reference (GTlaser restamped by the scanners' offsets just fitted), and by both methods against the
-    true trajectory as reference (the estimators' own limit)."""
+    true trajectory ``tr`` as reference (the estimators' own limit); ``clocks``: the scanners' true clock
+    offsets (truth/laser_clocks.yaml), s."""
     from dataclasses import replace
 
-    import yaml
-
     from gtrig.fusion import sensor_sync as ss
-    from gtrig.io.tum import read_tum
 
     scanners = [e for e in sensors if e.source.startswith("laser/")]
     cam_stamps = ss.camera_frame_stamps(rdir, rig)
-    tr = read_tum(rdir / "truth" / "run.tum")
-    true_xyt = PoseTrack(tr.stamps_s, tr.xyz, tr.quat_xyzw).xytheta()
-    true_xyt[:, 2] = np.unwrap(true_xyt[:, 2])
+    true_xyt = _true_xytheta(tr)
     truth_ref = ss.Reference(tr.stamps_s, true_xyt, np.gradient(true_xyt, tr.stamps_s, axis=0),
                              np.tile(np.eye(3) * 1e-10, (tr.stamps_s.size, 1, 1)))
     other = "reprojection" if ss.CAMERA_METHOD == "pose" else "pose"
-    clocks = yaml.safe_load((rdir / "truth" / "laser_clocks.yaml").read_text())["run"]["clock_offsets_s"]
     true_scanners = [replace(e, offset_s=float(clocks[e.source.split("/", 1)[1]]), verdict="ok") for e in scanners]
     for label, ref in (("GTlaser", ss.camera_reference(las, ret, scanners)),
                        ("GTlaser on the true scanner clocks", ss.camera_reference(las, ret, true_scanners)),
