@@ -357,14 +357,18 @@ def part_seeds(root: Path) -> None:
                       f"({int(near.sum())} poses) | | | | | | |")
         print(f"|  | fused: {rep.seconds:.2f} s, {sum(int(v['rejected']) for v in rep.sources.values())} fixes "
               f"rejected, {len(fused)} poses | | | | | | |")
-        # a 3 s gap cut out of both sources, mid-run: the bridged poses against their ellipses
-        g0 = float(odo.stamps_s[0]) + 30.0
+        # a 3 s gap cut out of both sources, mid-run (a quick recording is shorter than a minute): the
+        # bridged poses against their ellipses
+        g0 = min(float(odo.stamps_s[0]) + 30.0, 0.5 * (float(odo.stamps_s[0]) + float(odo.stamps_s[-1])) - 1.5)
         cut = {n: t.select((t.stamps_s < g0) | (t.stamps_s > g0 + 3.0)) for n, t in (("vision", vis), ("laser", las))}
         bridged, _ = fuse([fixes_from_track(t, n) for n, t in cut.items()], odo)
         b = bridged.status == 2
         e = errs(bridged)[b]
         q = np.einsum("ni,nij,nj->n", e, np.linalg.inv(bridged.cov[b]), e)
         p = np.hypot(e[:, 0], e[:, 1]) * 1e3
+        if not b.any():
+            print("|  | 3 s gap: no pose bridged (the sources do not both see the robot there) | | | | | | |")
+            continue
         print(f"|  | 3 s gap: {int(b.sum())} bridged poses, max error {p.max():.2f} mm, NEES/dof {q.mean() / 3:.2f}, "
               f"inside 3 sigma {np.mean(q < 14.16) * 100:.1f} % | | | | | | |")
 
