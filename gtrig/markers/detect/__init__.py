@@ -42,8 +42,15 @@ from gtrig.markers.detect.blurred import BlurredParams, find_blurred_candidates,
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
 from gtrig.markers.detect.decode import sample_cells, unblur_cells
-from gtrig.markers.detect.edges import (CLIP_HIGH, fit_edges, gather_band, intersect_corners, marker_context,
-                                        trim_outer, white_extent)
+from gtrig.markers.detect.edges import (
+    CLIP_HIGH,
+    fit_edges,
+    gather_band,
+    intersect_corners,
+    marker_context,
+    trim_outer,
+    white_extent,
+)
 from gtrig.markers.detect.tone import Tone, to_levels, to_light
 from gtrig.markers.families import _codebook, decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily

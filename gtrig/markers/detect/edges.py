@@ -204,9 +204,9 @@ def white_extent(
     ends where the profile first falls :data:`WHITE_END_DROP` of the contrast below the white
     level; the paper's end is then where it is half-way between the white level and the lowest bin
     beyond (linearly interpolated between bin centres: a step's half-way point, whatever the
-    surround's level), and the band ends :data:`WHITE_END_SIGMAS` blur sigmas before that. Only a fall ends it: a sharpening halo rises
-    above the plateau and settles back, and a surround brighter than the paper is rare. Edges
-    whose profile shows no such fall keep ``w_out``.
+    surround's level), and the band ends :data:`WHITE_END_SIGMAS` blur sigmas before that. Only a
+    fall ends it: a sharpening halo rises above the plateau and settles back, and a surround brighter
+    than the paper is rare. Edges whose profile shows no such fall keep ``w_out``.
 
     Parameters
     ----------
