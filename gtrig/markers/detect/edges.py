@@ -218,7 +218,8 @@ def white_extent(
     Returns
     -------
     (E,) the outer limit (pixels beyond the line), at most ``w_out`` and at least ``min(w_out,
-    max(1, sigma))`` (a margin narrower than that biases any step fit; the band keeps a ramp to fit).
+    max(1.5, sigma))`` (a margin narrower than that biases any step fit; the band keeps a ramp to fit,
+    1.5 px as the small markers' outer band: a 20 px tag on a one-cell quiet zone needs it).
     """
     E = len(p0)
     w_in = np.broadcast_to(np.asarray(w_in, np.float64), (E,))
@@ -277,7 +278,7 @@ def white_extent(
     frac = np.where(ok, (prev - level) / np.where(ok, prev - cur, 1.0), 1.0)
     d_end = np.where(ok, centre[np.maximum(kk - 1, 0)] + np.clip(frac, 0.0, 1.0) * PROFILE_STEP_PX, d_end)
     lim = d_end - WHITE_END_SIGMAS * sigma[rows]
-    floor = np.minimum(w_out[rows], np.maximum(1.0, sigma[rows]))
+    floor = np.minimum(w_out[rows], np.maximum(1.5, sigma[rows]))
     out[rows] = np.clip(lim, floor, w_out[rows])
     return out
 
