@@ -42,7 +42,15 @@ from gtrig.markers.detect.blurred import BlurredParams, find_blurred_candidates,
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
 from gtrig.markers.detect.decode import sample_cells, unblur_cells
-from gtrig.markers.detect.edges import CLIP_HIGH, fit_edges, gather_band, intersect_corners, marker_context
+from gtrig.markers.detect.edges import (
+    CLIP_HIGH,
+    fit_edges,
+    gather_band,
+    intersect_corners,
+    marker_context,
+    trim_outer,
+    white_extent,
+)
 from gtrig.markers.detect.tone import Tone, to_levels, to_light
 from gtrig.markers.families import _codebook, decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily
@@ -51,7 +59,12 @@ __all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", 
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 8
+DETECTOR_VERSION = 9
+
+#: how far beyond the outer band (blur sigmas) :func:`.edges.white_extent` looks for the paper's end:
+#: with the band ending 1.9 sigma before the paper (a 3 sigma + 5 px margin under the 5 px band) the
+#: foot of its blurred end still moved the corners 0.02-0.03 px outward (session 33)
+WHITE_LOOK_SIGMAS = 3.0
 
 
 @dataclass(frozen=True)
@@ -125,7 +138,14 @@ class DetectorParams:
         5 px beyond ``3 sigma`` the band reaches the plateaus: the grid photo's block residual 0.888 ->
         0.775 px (0.681 with ``tone="srgb"``, SUBPIX 0.733), the ChArUco photos' 0.322-0.508 ->
         0.312-0.495 px, the simulator's RMS at blur 1 px 0.074 -> 0.070 px, for 6 % more CPU
-        (1.5 px until session 28; BENCHMARKS.md, issue 16).
+        (1.5 px until session 28; BENCHMARKS.md, issue 16). Its outer (white) half ends where the
+        paper does (``white_end``, ``margin_cells``).
+    white_end : end each edge's outer band where its white quiet zone ends, measured from the image
+        (:func:`.edges.white_extent`): a band reaching past the paper into a darker surround moves the
+        line outward (the simulator's 12 mm margins, 4.7 px: +0.08-0.21 px per corner with the 5 px
+        band; session 33, BENCHMARKS.md issue 18), while wide margins keep the whole band.
+    margin_cells : the printed white margin around the black square, in cells, when the caller knows
+        it: the outer band then also ends ``2 sigma`` before it (the measured end still applies).
     max_blur_px : edges blurrier than this are rejected.
     min_contrast : smallest accepted white - black difference (grey levels).
     max_rel_rms : largest accepted residual RMS / contrast of an edge fit.
@@ -155,6 +175,8 @@ class DetectorParams:
 
     candidates: CandidateParams = field(default_factory=CandidateParams)
     band_px: float = 5.0
+    white_end: bool = True
+    margin_cells: float | None = None
     max_blur_px: float = 5.0
     min_contrast: float = 12.0
     max_rel_rms: float = 0.25
@@ -510,7 +532,18 @@ class MarkerDetector:
                 w_in = np.maximum(1.0, np.minimum(w, border + 0.5 * cell))
                 w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
                 excl = np.minimum(sigma, 0.3 * L)
-            samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
+            if p.margin_cells is not None:
+                w_out = np.maximum(1.0, np.minimum(w_out, p.margin_cells * cell - 2.0 * sigma))
+            if p.white_end:
+                # the band's white half must not reach past the paper into the surround: the profile is
+                # read WHITE_LOOK_SIGMAS further out, so that a paper's end just beyond the band is seen
+                # (its blurred foot inside the band moves the line too)
+                w_look = w_out + WHITE_LOOK_SIGMAS * sigma
+                samples = gather_band(gray, p0, p1, w_in, w_look, excl, und)
+                w_out = np.minimum(w_out, white_extent(samples, p0, p1, sigma, w_in, w_look))
+                samples = trim_outer(samples, p0, p1, w_out)
+            else:
+                samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
             if p.tone != "linear":
                 samples = dataclasses.replace(samples, val=to_light(samples.val, p.tone))
             if fit is None:

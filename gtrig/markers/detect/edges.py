@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -166,6 +167,135 @@ def gather_band(
     edge = edge[sel]
     return EdgeSamples(np.column_stack([px[sel], py[sel]]), gray[iy[sel], ix[sel]].astype(np.float64), edge,
                        _starts(edge, E))
+
+
+#: width of the bins of :func:`white_extent`'s across-edge profile (pixels)
+PROFILE_STEP_PX = 0.5
+#: fall below the white level, in units of the edge's contrast, that ends the white plateau: deeper
+#: than a phone's sharpening halo settles back from its overshoot (the grid photo's tenth percentile
+#: stays within 0.09 of its white level from 2 to 14 px beyond the edge), shallow enough to catch any
+#: surround that would move the line (session 33, BENCHMARKS.md issue 18)
+WHITE_END_DROP = 0.25
+#: how far (in blur sigmas) the band stops short of the paper's end: the surround's blurred step is
+#: 0.6 % of its fall there (1.5 sigma, 7 %, left 0.02-0.04 px outward on a mid-grey surround)
+WHITE_END_SIGMAS = 2.5
+
+
+def white_extent(
+    samples: EdgeSamples,
+    p0: NDArray[np.float64],
+    p1: NDArray[np.float64],
+    sigma: NDArray[np.float64],
+    w_in: NDArray[np.float64],
+    w_out: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Each edge's outer band limit where its white quiet zone ends, measured from the image.
+
+    Outside a marker's black border lies white paper, and beyond it whatever the marker is stuck on.
+    The step model sees only black and white: pixels of a darker surround in the band lower the
+    fitted white level and tilt the shading, and the line moves outward (0.1-0.2 px on the
+    simulator's 12 mm margins, 4.7 px at its cameras, with a band 5 px beyond ``3 sigma``). The
+    band must therefore end before the paper does, however wide ``w_out`` allows.
+
+    The mean of each edge's band pixels is taken in bins of :data:`PROFILE_STEP_PX` across the edge
+    (``d``, pixels, > 0 outside; the mean, not the median, since the fit's bias follows the mean
+    deficit). The black level is the darkest bin inside (``-w_in <= d <= -sigma``), the white level
+    the mean over ``2 sigma <= d <= 2 sigma + 1``; walking outward from ``2 sigma``, the plateau
+    ends where the profile first falls :data:`WHITE_END_DROP` of the contrast below the white
+    level; the paper's end is then where it is half-way between the white level and the lowest bin
+    beyond (linearly interpolated between bin centres: a step's half-way point, whatever the
+    surround's level), and the band ends :data:`WHITE_END_SIGMAS` blur sigmas before that. Only a
+    fall ends it: a sharpening halo rises above the plateau and settles back, and a surround brighter
+    than the paper is rare. Edges whose profile shows no such fall keep ``w_out``.
+
+    Parameters
+    ----------
+    samples : band pixels of :func:`gather_band` with the limits ``w_in``, ``w_out`` (fit coordinates).
+    p0, p1 : (E, 2) the edges' end points, the line the band was gathered around (fit coordinates).
+    sigma : (E,) current blur estimate (pixels).
+    w_in, w_out : (E,) the band's inner and outer half-widths (pixels).
+
+    Returns
+    -------
+    (E,) the outer limit (pixels beyond the line), at most ``w_out`` and at least ``min(w_out,
+    max(1.5, sigma))`` (a margin narrower than that biases any step fit; the band keeps a ramp to fit,
+    1.5 px as the small markers' outer band: a 20 px tag on a one-cell quiet zone needs it).
+    """
+    E = len(p0)
+    w_in = np.broadcast_to(np.asarray(w_in, np.float64), (E,))
+    w_out = np.broadcast_to(np.asarray(w_out, np.float64), (E,))
+    sigma = np.broadcast_to(np.asarray(sigma, np.float64), (E,))
+    out = w_out.copy()
+    if E == 0 or len(samples.val) == 0:
+        return out
+    t = p1 - p0
+    t = t / np.hypot(t[:, 0], t[:, 1])[:, None]
+    e = samples.edge
+    rel = samples.xy - p0[e]
+    d = rel[:, 0] * t[e, 1] - rel[:, 1] * t[e, 0]  # n = (t_y, -t_x), as gather_band's
+    lo = float(np.max(w_in))
+    nb = int(np.ceil((lo + float(np.max(w_out))) / PROFILE_STEP_PX)) + 1
+    k = np.clip(np.floor((d + lo) / PROFILE_STEP_PX).astype(np.int64), 0, nb - 1)
+    flat = e * nb + k
+    cnt = np.bincount(flat, minlength=E * nb).reshape(E, nb)
+    tot = np.bincount(flat, weights=samples.val, minlength=E * nb).reshape(E, nb)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        prof = np.where(cnt >= 3, tot / cnt, np.nan)  # a bin of a couple of pixels says little
+    centre = (np.arange(nb) + 0.5) * PROFILE_STEP_PX - lo  # (nb,)
+    c = centre[None, :]
+    s = sigma[:, None]
+    inside = (c >= -w_in[:, None]) & (c <= -s)
+    near = (c >= 2.0 * s) & (c <= 2.0 * s + 1.0)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: edges left as they are
+        black = np.nanmin(np.where(inside, prof, np.nan), axis=1)
+        white = np.nanmean(np.where(near, prof, np.nan), axis=1)
+    thr = white - WHITE_END_DROP * (white - black)
+    below = (c >= 2.0 * s) & (c <= w_out[:, None]) & (prof < thr[:, None])
+    below &= np.isfinite((white - black)[:, None]) & ((white - black) > 0)[:, None]
+    has = below.any(axis=1)
+    if not has.any():
+        return out
+    rows = np.flatnonzero(has)
+    first = np.argmax(below[rows], axis=1)
+    # the paper's end is where the profile is half-way down to the surround (the lowest bin beyond the
+    # first fall); a fixed fall of WHITE_END_DROP would place it late on a surround that is only a
+    # little darker than the paper
+    after = np.arange(nb)[None, :] >= first[:, None]
+    reach = c <= w_out[:, None]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        low = np.nanmin(np.where(after & reach[rows], prof[rows], np.nan), axis=1)
+    half = np.minimum(0.5 * (white[rows] + low), thr[rows])
+    fall = (c >= 2.0 * s[rows]) & reach[rows] & (prof[rows] < half[:, None])
+    kk = np.where(fall.any(axis=1), np.argmax(fall, axis=1), first)
+    level = np.where(fall.any(axis=1), half, thr[rows])
+    d_end = centre[kk].copy()
+    # interpolate between the crossing bin and the one before it, when that one is above the level
+    prev = prof[rows, np.maximum(kk - 1, 0)]
+    cur = prof[rows, kk]
+    ok = (kk > 0) & np.isfinite(prev) & (prev > cur)
+    frac = np.where(ok, (prev - level) / np.where(ok, prev - cur, 1.0), 1.0)
+    d_end = np.where(ok, centre[np.maximum(kk - 1, 0)] + np.clip(frac, 0.0, 1.0) * PROFILE_STEP_PX, d_end)
+    lim = d_end - WHITE_END_SIGMAS * sigma[rows]
+    floor = np.minimum(w_out[rows], np.maximum(1.5, sigma[rows]))
+    out[rows] = np.clip(lim, floor, w_out[rows])
+    return out
+
+
+def trim_outer(samples: EdgeSamples, p0: NDArray[np.float64], p1: NDArray[np.float64],
+               w_out: NDArray[np.float64]) -> EdgeSamples:
+    """``samples`` without the pixels beyond ``w_out[e]`` (E,) outside their edge ``p0 -> p1`` (fit
+    coordinates; the distance as in :func:`gather_band`)."""
+    t = p1 - p0
+    t = t / np.hypot(t[:, 0], t[:, 1])[:, None]
+    e = samples.edge
+    rel = samples.xy - p0[e]
+    keep = rel[:, 0] * t[e, 1] - rel[:, 1] * t[e, 0] <= np.asarray(w_out, np.float64)[e]
+    if keep.all():
+        return samples
+    edge = e[keep]
+    return EdgeSamples(samples.xy[keep], samples.val[keep], edge, _starts(edge, len(p0)))
 
 
 def _starts(edge: NDArray[np.int64], E: int) -> NDArray[np.int64]:
