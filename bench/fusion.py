@@ -363,12 +363,12 @@ def part_seeds(root: Path) -> None:
         cut = {n: t.select((t.stamps_s < g0) | (t.stamps_s > g0 + 3.0)) for n, t in (("vision", vis), ("laser", las))}
         bridged, _ = fuse([fixes_from_track(t, n) for n, t in cut.items()], odo)
         b = bridged.status == 2
-        e = errs(bridged)[b]
-        q = np.einsum("ni,nij,nj->n", e, np.linalg.inv(bridged.cov[b]), e)
-        p = np.hypot(e[:, 0], e[:, 1]) * 1e3
         if not b.any():
             print("|  | 3 s gap: no pose bridged (the sources do not both see the robot there) | | | | | | |")
             continue
+        e = errs(bridged)[b]
+        q = np.einsum("ni,nij,nj->n", e, np.linalg.inv(bridged.cov[b]), e)
+        p = np.hypot(e[:, 0], e[:, 1]) * 1e3
         print(f"|  | 3 s gap: {int(b.sum())} bridged poses, max error {p.max():.2f} mm, NEES/dof {q.mean() / 3:.2f}, "
               f"inside 3 sigma {np.mean(q < 14.16) * 100:.1f} % | | | | | | |")
 

@@ -228,11 +228,8 @@ def white_extent(
     out = w_out.copy()
     if E == 0 or len(samples.val) == 0:
         return out
-    t = p1 - p0
-    t = t / np.hypot(t[:, 0], t[:, 1])[:, None]
     e = samples.edge
-    rel = samples.xy - p0[e]
-    d = rel[:, 0] * t[e, 1] - rel[:, 1] * t[e, 0]  # n = (t_y, -t_x), as gather_band's
+    d = _across(samples, p0, p1)
     lo = float(np.max(w_in))
     nb = int(np.ceil((lo + float(np.max(w_out))) / PROFILE_STEP_PX)) + 1
     k = np.clip(np.floor((d + lo) / PROFILE_STEP_PX).astype(np.int64), 0, nb - 1)
@@ -287,15 +284,21 @@ def trim_outer(samples: EdgeSamples, p0: NDArray[np.float64], p1: NDArray[np.flo
                w_out: NDArray[np.float64]) -> EdgeSamples:
     """``samples`` without the pixels beyond ``w_out[e]`` (E,) outside their edge ``p0 -> p1`` (fit
     coordinates; the distance as in :func:`gather_band`)."""
+    keep = _across(samples, p0, p1) <= np.asarray(w_out, np.float64)[samples.edge]
+    if keep.all():
+        return samples
+    edge = samples.edge[keep]
+    return EdgeSamples(samples.xy[keep], samples.val[keep], edge, _starts(edge, len(p0)))
+
+
+def _across(samples: EdgeSamples, p0: NDArray[np.float64], p1: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(N,) each band pixel's signed distance across its edge ``p0 -> p1`` (pixels, > 0 outside: the
+    normal ``(t_y, -t_x)`` of :func:`gather_band`)."""
     t = p1 - p0
     t = t / np.hypot(t[:, 0], t[:, 1])[:, None]
     e = samples.edge
     rel = samples.xy - p0[e]
-    keep = rel[:, 0] * t[e, 1] - rel[:, 1] * t[e, 0] <= np.asarray(w_out, np.float64)[e]
-    if keep.all():
-        return samples
-    edge = e[keep]
-    return EdgeSamples(samples.xy[keep], samples.val[keep], edge, _starts(edge, len(p0)))
+    return rel[:, 0] * t[e, 1] - rel[:, 1] * t[e, 0]
 
 
 def _starts(edge: NDArray[np.int64], E: int) -> NDArray[np.int64]:
