@@ -448,7 +448,13 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
               f"{a_l:+.3f} ms)")
         t0 = time.perf_counter()
         ck = res / "gt_vision_run.checkpoint"
-        sensors, clock = sensor_offsets_and_laser_clock(rdir, rig, vis, las, checkpoint=ck)
+        # as the pipeline: the cameras refined jointly with odometry, on GTvision's offset to it
+        uv = vis.usable()
+        ev = refine_by_fusion(estimate_offset(odo.stamps_s, odo.xytheta[:, 2], uv.stamps_s, uv.yaw_rad(), "vision"),
+                              fixes_from_track(vis, "vision"), odo)
+        sensors, clock = sensor_offsets_and_laser_clock(
+            rdir, rig, vis, las, checkpoint=ck, odometry=odo,
+            odometry_offset_s=ev.offset_s if ev.verdict == "ok" else float("nan"))
         secs = time.perf_counter() - t0
         print(f"(GTlaser's clock to GTvision's from the scanners: {clock[0] * 1e3:+.3f} ms, sigma "
               f"{clock[1] * 1e3:.3f}; truth {laser_truth * 1e3:+.3f})")
@@ -508,12 +514,12 @@ def _other_camera_rows(rdir: Path, rig, vis: PoseTrack, las: PoseTrack, ret, sen
     true_xyt = _true_xytheta(tr)
     truth_ref = ss.Reference(tr.stamps_s, true_xyt, np.gradient(true_xyt, tr.stamps_s, axis=0),
                              np.tile(np.eye(3) * 1e-10, (tr.stamps_s.size, 1, 1)))
-    other = "reprojection" if ss.CAMERA_METHOD == "pose" else "pose"
+    other = ("reprojection", "pose") if ss.CAMERA_METHOD == "pose" else ("pose",)  # pose: GTlaser alone
     true_scanners = [replace(e, offset_s=float(clocks[e.source.split("/", 1)[1]]), verdict="ok") for e in scanners]
     for label, ref in (("GTlaser", ss.camera_reference(las, ret, scanners)),
                        ("GTlaser on the true scanner clocks", ss.camera_reference(las, ret, true_scanners)),
                        ("the true trajectory", truth_ref)):
-        methods = (other,) if label == "GTlaser" else ("pose", "reprojection")
+        methods = other if label == "GTlaser" else ("pose", "reprojection")
         for m in methods:
             t0 = time.process_time()
             ests = (ss.reprojection_offsets(rig, vis, cam_stamps, ref, ck) if m == "reprojection"

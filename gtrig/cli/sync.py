@@ -78,7 +78,10 @@ def command(
         ci = "" if est.verdict != "ok" else f" [{est.ci95_s[0] * 1e3:+.2f}, {est.ci95_s[1] * 1e3:+.2f}] ms"
         num = "" if est.verdict != "ok" else f" {est.offset_s * 1e3:+.3f} ms"
         console.print(f"{name}: {est.verdict}{num}{ci} ({est.reason})", highlight=False)
-    sensors, clock = _per_sensor(recording, rig_path, tracks, results, per_camera, per_scanner, source)
+    # the joint camera fit needs GTvision's clock to odometry's: known when odometry is the reference
+    vis = results.get("vision")
+    odo_off = vis.offset_s if ref_track is None and vis is not None and vis.verdict == "ok" else math.nan
+    sensors, clock = _per_sensor(recording, rig_path, tracks, results, per_camera, per_scanner, source, odo, odo_off)
     if ref_track is None and "vision" in results and "laser" in results and math.isfinite(clock[0]):
         from gtrig.fusion.sync import combine_with_laser_clock
 
@@ -109,9 +112,11 @@ def command(
 
 
 def _per_sensor(recording: Path | None, rig_path: Path | None, tracks: dict, results: dict,  # noqa: ANN001
-                per_camera: bool, per_scanner: bool, sources: list[str]) -> tuple[list, tuple[float, float]]:
+                per_camera: bool, per_scanner: bool, sources: list[str], odometry, odometry_offset_s: float,  # noqa: ANN001
+                ) -> tuple[list, tuple[float, float]]:
     """Each camera's / scanner's offset to GTvision's clock (gtrig.fusion.sensor_sync), printed, and
-    GTlaser's clock to GTvision's with its sigma (nan when not measured)."""
+    GTlaser's clock to GTvision's with its sigma (nan when not measured); the cameras' refined jointly with
+    ``odometry`` when ``odometry_offset_s`` (GTvision's clock minus odometry's) is finite."""
     if not (per_camera or per_scanner):
         return [], (float("nan"), float("nan"))
     from gtrig.errors import InputError
@@ -130,7 +135,8 @@ def _per_sensor(recording: Path | None, rig_path: Path | None, tracks: dict, res
                       "one-camera pose of a multi-camera instant)", highlight=False)
         ck = None
     out, clock = sensor_offsets_and_laser_clock(recording, load_rig(rig_path), tracks["vision"], tracks.get("laser"),
-                                                per_camera, per_scanner, checkpoint=ck)
+                                                per_camera, per_scanner, checkpoint=ck, odometry=odometry,
+                                                odometry_offset_s=odometry_offset_s)
     for e in out:
         num = "" if e.verdict != "ok" else (f" {e.offset_s * 1e3:+.3f} ms [{e.ci95_s[0] * 1e3:+.2f}, "
                                             f"{e.ci95_s[1] * 1e3:+.2f}] to GTvision's clock")

@@ -46,6 +46,7 @@ from gtrig.evaluate.associate import nearest_indices
 from gtrig.fusion.fuse import FusionOptions, fuse
 from gtrig.fusion.measurements import Fixes
 from gtrig.fusion.sync import OffsetEstimate, Verdict
+from gtrig.io.odometry import OdometryLog
 from gtrig.io.offsets import Z95
 from gtrig.trajectory import PoseTrack
 
@@ -260,7 +261,8 @@ def restamp_vision(track: PoseTrack, checkpoint: str | os.PathLike[str],
 def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray], ref: Reference,
                    block_s: float = 5.0, max_ci_s: float = 0.01, search_s: float = 0.02, min_instants: int = 20,
                    huber_k: float = 3.0, checkpoint: str | os.PathLike[str] | None = None,
-                   relative: bool = True) -> list[OffsetEstimate]:
+                   relative: bool = True, membership: tuple[np.ndarray, np.ndarray] | None = None,
+                   ) -> list[OffsetEstimate]:
     """Every camera's clock offset to the reference's clock, one fit over GTvision's instants.
 
     An instant of cameras ``c`` sees the reference at its stamp minus ``sum_c share_c tau_c``
@@ -282,6 +284,8 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
         stamp shares it.
     relative : True: offsets to GTvision's clock (the cameras' share-weighted mean over the instants, so
         the reference's own clock and any along-track shift of it cancel); False: to the reference's clock.
+    membership : (times, share) of ``vision.usable()``'s poses, already read (:func:`checkpoint_membership`);
+        it replaces ``checkpoint`` (for repeated fits).
 
     Returns
     -------
@@ -294,7 +298,9 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
         from gtrig.errors import InputError
 
         raise InputError("per-camera offsets need GTvision's covariances (track.tum,cov.csv)")
-    if checkpoint is not None:
+    if membership is not None:
+        when, share = membership
+    elif checkpoint is not None:
         when, share = checkpoint_membership(u.stamps_s, checkpoint, camera_stamps_s)
     else:
         when, share = u.stamps_s, camera_membership(u.stamps_s, camera_stamps_s)
@@ -630,10 +636,13 @@ def sensor_offsets(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = No
 def sensor_offsets_and_laser_clock(rec_dir, rig, vision: PoseTrack, laser: PoseTrack | None = None,  # noqa: ANN001
                                    cameras: bool = True, scanners: bool = True, sequence: str = "run",
                                    checkpoint: str | os.PathLike[str] | None = None,
-                                   camera_method: str = CAMERA_METHOD,
+                                   camera_method: str = CAMERA_METHOD, odometry: OdometryLog | None = None,
+                                   odometry_offset_s: float = float("nan"),
                                    ) -> tuple[list[OffsetEstimate], tuple[float, float]]:
     """:func:`sensor_offsets` and GTlaser's clock to GTvision's with its standard error (:func:`laser_clock`;
-    nan without ``laser``), seconds."""
+    nan without ``laser``), seconds. With ``odometry`` and a finite ``odometry_offset_s`` (GTvision's clock
+    minus odometry's, ``gtrig sync``), the pose fit's camera offsets are refined in the joint fit of GTvision,
+    GTlaser and odometry (:mod:`gtrig.fusion.joint_camera_sync`)."""
     from gtrig.errors import ConfigError, InputError
     from gtrig.fusion.measurements import fixes_from_track
 
@@ -656,7 +665,13 @@ def sensor_offsets_and_laser_clock(rec_dir, rig, vision: PoseTrack, laser: PoseT
         if camera_method == "reprojection" and checkpoint is not None:
             out += reprojection_offsets(rig, vision, cam_stamps, ref, checkpoint)
         elif camera_method in ("pose", "reprojection"):  # no checkpoint: no corners, the poses only
-            out += camera_offsets(vision, cam_stamps, ref, checkpoint=checkpoint)
+            cams = camera_offsets(vision, cam_stamps, ref, checkpoint=checkpoint)
+            if odometry is not None and np.isfinite(odometry_offset_s) and camera_method == "pose":
+                from gtrig.fusion.joint_camera_sync import joint_camera_offsets
+
+                cams = joint_camera_offsets(vision, cam_stamps, restamp_laser(laser.usable(), ret, _ok_offsets(sc)),
+                                            odometry, odometry_offset_s, cams, checkpoint=checkpoint)
+            out += cams
         else:
             raise ConfigError(f"camera_method {camera_method!r}: 'reprojection' or 'pose'")
     return out, clock
@@ -667,8 +682,12 @@ def camera_reference(laser: PoseTrack, ret: ScannerReturns, scanners: list[Offse
     :func:`restamp_laser`), smoothed (:func:`reference_track`)."""
     from gtrig.fusion.measurements import fixes_from_track
 
-    off = {e.source.split("/", 1)[1]: e.offset_s for e in scanners if e.verdict == "ok"}
-    return reference_track([fixes_from_track(restamp_laser(laser.usable(), ret, off), "laser")])
+    return reference_track([fixes_from_track(restamp_laser(laser.usable(), ret, _ok_offsets(scanners)), "laser")])
+
+
+def _ok_offsets(scanners: list[OffsetEstimate]) -> dict[str, float]:
+    """Each scanner's ``ok`` offset by its name (``laser/<name>``)."""
+    return {e.source.split("/", 1)[1]: e.offset_s for e in scanners if e.verdict == "ok"}
 
 
 def reprojection_offsets(rig, vision: PoseTrack, cam_stamps: Mapping[str, np.ndarray], ref: Reference,  # noqa: ANN001

@@ -88,8 +88,10 @@ def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict
     if not rig.laser_scanners or "vision" not in results:
         return none
     ck = inp.out / "gt_vision_run.checkpoint"  # GTvision's detections: which camera made each pose
+    vis = results["vision"]
     return sensor_offsets_and_laser_clock(inp.rec, rig, tracks["vision"], tracks["laser"],
-                                          checkpoint=ck if ck.is_file() else None)
+                                          checkpoint=ck if ck.is_file() else None, odometry=_odometry(inp.rec),
+                                          odometry_offset_s=vis.offset_s if vis.verdict == "ok" else math.nan)
 
 
 def _sensor_truth_rows(rec: Path, sensors: list) -> tuple[AccuracyRow, ...]:  # noqa: ANN001
