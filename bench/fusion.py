@@ -303,8 +303,10 @@ def part_gtsam_custom(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
 
 def part_seeds(root: Path) -> None:
     from gtrig.fusion.sync import offset_sigmas
+    from gtrig.io.biascov import read_bias_cov
     from gtrig.io.odometry import read_odometry
     from gtrig.io.offsets import read_offsets
+    from gtrig.pipeline.fusion import BIAS_FILES
     from gtrig.io.posetrack import read_pose_track
     from gtrig.io.tum import read_tum
 
@@ -329,11 +331,19 @@ def part_seeds(root: Path) -> None:
             e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
             return e
 
-        fused, rep = fuse([fixes_from_track(vis), fixes_from_track(las)], odo)
+        # each source's run-constant error as its stage wrote it (considered in the covariance only)
+        bias = {k: read_bias_cov(res / f) for k, f in BIAS_FILES.items() if (res / f).is_file()}
+        for k, b in bias.items():
+            sd = np.sqrt(np.diag(b)) * [1e3, 1e3, np.degrees(1e3)]
+            print(f"|  | {k}: run-constant error considered, sd x {sd[0]:.3f}, y {sd[1]:.3f} mm, yaw {sd[2]:.1f} mdeg "
+                  "| | | | | |")
+        fused, rep = fuse([fixes_from_track(vis), fixes_from_track(las)], odo, FusionOptions(bias_cov=bias))
         rows = [("vision", vis.usable()), ("laser", las.usable()), ("fused", fused)]
+        if bias:
+            rows.append(("fused, no bias term", fuse([fixes_from_track(vis), fixes_from_track(las)], odo)[0]))
         if (res / "sync.yaml").is_file():  # as the pipeline fuses: sync's offsets applied, their sigmas kept
             offs = read_offsets(res / "sync.yaml")
-            opts = FusionOptions(offsets_s=offs, offsets_sigma_s=offset_sigmas(res / "sync.yaml"))
+            opts = FusionOptions(offsets_s=offs, offsets_sigma_s=offset_sigmas(res / "sync.yaml"), bias_cov=bias)
             rows.append(("fused, sync's offsets", fuse([fixes_from_track(vis), fixes_from_track(las)], odo, opts)[0]))
         for name, tr in rows:
             e = errs(tr)
@@ -361,7 +371,7 @@ def part_seeds(root: Path) -> None:
         # bridged poses against their ellipses
         g0 = min(float(odo.stamps_s[0]) + 30.0, 0.5 * (float(odo.stamps_s[0]) + float(odo.stamps_s[-1])) - 1.5)
         cut = {n: t.select((t.stamps_s < g0) | (t.stamps_s > g0 + 3.0)) for n, t in (("vision", vis), ("laser", las))}
-        bridged, _ = fuse([fixes_from_track(t, n) for n, t in cut.items()], odo)
+        bridged, _ = fuse([fixes_from_track(t, n) for n, t in cut.items()], odo, FusionOptions(bias_cov=bias))
         b = bridged.status == 2
         if not b.any():
             print("|  | 3 s gap: no pose bridged (the sources do not both see the robot there) | | | | | | |")
