@@ -21,8 +21,7 @@ import yaml
 
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_write_text
-from gtrig.io.text import read_text
-from gtrig.io.yamlfile import safe_load
+from gtrig.io.yamlfile import load_yaml
 
 FORMAT = "gtrig run-constant error v1"
 AXES = {3: ["x", "y", "yaw"], 2: ["x", "y"]}
@@ -46,12 +45,7 @@ def read_bias_cov(path: str | os.PathLike[str]) -> np.ndarray:
     """The covariance (k, k) of ``path``, checked: the format line, axes x, y[, yaw], finite, symmetric,
     positive semi-definite."""
     p = Path(path)
-    try:
-        doc = safe_load(read_text(p, "YAML file"))
-    except FileNotFoundError:
-        raise FormatError(f"{p}: no such file") from None
-    except yaml.YAMLError as e:
-        raise FormatError(f"{p}: not YAML ({str(e).splitlines()[0]})") from None
+    doc = load_yaml(p)
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise FormatError(f"{p}: not a '{FORMAT}' file (its 'format' line)")
     axes = doc.get("axes")
