@@ -121,6 +121,9 @@ def gtvision(inp: StageInput) -> StageOutput:
         if not static and rig.robot.markers_frame_cov is not None:
             _write_run_bias(inp, np.asarray(rig.robot.markers_frame_cov, float))
             outputs.append("gt_vision_run_bias.yaml")
+        elif not static:
+            # no frame covariance now: an earlier run's file must not reach fusion
+            (inp.out / "gt_vision_run_bias.yaml").unlink(missing_ok=True)
         prod[f"tracks/GTvision/{seq}"] = res.to_pose_track()
         prod[f"vision_results/{seq}"] = replace(res, observations=())  # the detections stay in the checkpoint
         rep = summarize(res)
