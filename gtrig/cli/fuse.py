@@ -17,6 +17,10 @@ def command(
     vision_cov: Path | None = typer.Option(None, "--vision-cov", help="Its covariance CSV."),
     laser: Path | None = typer.Option(None, "--laser", help="GTlaser trajectory (TUM)."),
     laser_cov: Path | None = typer.Option(None, "--laser-cov", help="Its covariance CSV."),
+    vision_bias: Path | None = typer.Option(None, "--vision-bias", help="GTvision's run-constant error "
+                                            "(gt_vision_run_bias.yaml), considered in the covariance."),
+    laser_bias: Path | None = typer.Option(None, "--laser-bias", help="GTlaser's run-constant error "
+                                           "(gt_laser_bias.yaml), considered in the covariance."),
     odometry: Path | None = typer.Option(None, "--odometry", help="Odometry CSV (default REC/run/odometry.csv)."),
     no_odometry: bool = typer.Option(False, "--no-odometry", help="Constant-velocity model instead of odometry."),
     sync: Path | None = typer.Option(None, "--sync", help="sync.yaml from gtrig sync (offsets applied)."),
@@ -34,6 +38,7 @@ def command(
     from gtrig.errors import InputError
     from gtrig.fusion import FusionOptions, fuse_tracks
     from gtrig.fusion.sync import offset_sigmas
+    from gtrig.io.biascov import read_bias_cov
     from gtrig.io.odometry import read_odometry
     from gtrig.io.offsets import read_offsets
     from gtrig.io.posetrack import read_pose_track, write_pose_track
@@ -41,18 +46,24 @@ def command(
     if estimator not in ("batch", "ekf"):
         raise InputError(f"--estimator {estimator!r}: batch or ekf")
     checks.number("--max-gap", max_gap, lo=0.0, lo_open=True, hi=86400.0, unit="s")
-    checks.outputs([rig, vision, vision_cov, laser, laser_cov, odometry, sync], [out, covariance, report])
+    checks.outputs([rig, vision, vision_cov, laser, laser_cov, vision_bias, laser_bias, odometry, sync],
+                   [out, covariance, report])
     if rig is not None:
         from gtrig.rig import load_rig
 
         load_rig(rig)
     tracks = {}
-    for name, tum, cov in (("vision", vision, vision_cov), ("laser", laser, laser_cov)):
+    bias = {}
+    for name, tum, cov, b in (("vision", vision, vision_cov, vision_bias), ("laser", laser, laser_cov, laser_bias)):
         if tum is None:
+            if b is not None:
+                raise InputError(f"--{name}-bias without --{name}")
             continue
         if cov is None:
             raise InputError(f"--{name} needs --{name}-cov: fusion weighs every fix by its covariance")
         tracks[name] = read_pose_track(tum, cov, source=name)
+        if b is not None:
+            bias[name] = read_bias_cov(b)
     if not tracks:
         raise InputError("give at least one source (--vision / --laser)")
     odo = None
@@ -71,7 +82,7 @@ def command(
     offsets = read_offsets(sync) if sync is not None else {}
     sigmas = offset_sigmas(sync) if sync is not None else {}
     opts = FusionOptions(estimator=estimator, rate_hz=rate_hz, offsets_s=offsets,  # type: ignore[arg-type]
-                         offsets_sigma_s=sigmas, max_gap_s=max_gap)
+                         offsets_sigma_s=sigmas, max_gap_s=max_gap, bias_cov=bias)
     track, rep = fuse_tracks(tracks, odo, opts)
     paths = [out, covariance] + ([report] if report else [])
     if report is not None:

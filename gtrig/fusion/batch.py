@@ -6,22 +6,33 @@ fix's whitened residual (IRLS weights); each step solves the bordered block-trid
 matching block of the inverse Gauss-Newton Hessian at the solution (Laplace approximation), parameters'
 uncertainty included. This is the smoothing-and-mapping formulation of Dellaert and Kaess (2006), on a
 chain.
+
+Run-constant source errors (a camera network's or a scanner network's calibration, common to every fix of
+a source) do not average out over fixes, while the marginals shrink as if they did. They are "considered"
+(Schmidt's consider covariance; Bierman 1977, ch. VI): per source s a world-frame bias b_s with covariance
+B_s, not estimated (one run cannot separate it from the truth), its effect on the solution carried into
+the covariance. The solution's sensitivity to it is ``S_s = H^-1 J^T W^T W E_s`` (``E_s`` a unit bias on
+every fix of s), one extra right-hand side per bias dof on the factorisation the marginals use, and each
+node's covariance gains ``sum_s S_s B_s S_s^T`` (:func:`considered_covariance`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from gtrig.fusion.blocktri import solve_chain
-from gtrig.fusion.chain import FactorChain, assemble
+from gtrig.fusion.chain import FactorChain, assemble, bias_rhs
 
 
 @dataclass(frozen=True)
 class BatchResult:
     """X (N, d) node states, K (p,) parameters, cov_x (N, d, d), cov_k (p, p), fix_chi2 (M,) squared
-    whitened residuals at the solution, robust_w (M,) their Huber weights, cost, iterations, converged."""
+    whitened residuals at the solution, robust_w (M,) their Huber weights, cost, iterations, converged;
+    cov_x and cov_k include the considered biases' share, which cov_bias_x (N, d, d) and cov_bias_k (p, p)
+    hold alone (zero without ``bias_cov``)."""
 
     X: np.ndarray
     K: np.ndarray
@@ -32,6 +43,8 @@ class BatchResult:
     cost: float
     iterations: int
     converged: bool
+    cov_bias_x: np.ndarray | None = None
+    cov_bias_k: np.ndarray | None = None
 
 
 def _normal_equations(chain: FactorChain, X: np.ndarray, K: np.ndarray, fix_use: np.ndarray, huber_k: float,
@@ -54,8 +67,72 @@ def _normal_equations(chain: FactorChain, X: np.ndarray, K: np.ndarray, fix_use:
     return float(cost), (Ad, Ao, Bb, C, g, gk), chi2, rw
 
 
+def _bias_columns(chain: FactorChain, bias_cov: Sequence[np.ndarray | None] | None,
+                  ) -> tuple[np.ndarray, list[tuple[int, np.ndarray]]]:
+    """Per fix its source's first bias column (-1: none) and per considered source (first column, B_s)."""
+    col = np.full(chain.fix_node.size, -1, np.int64)
+    blocks: list[tuple[int, np.ndarray]] = []
+    q = 0
+    for k, B in enumerate(bias_cov or ()):
+        if B is None:
+            continue
+        B = np.asarray(B, float)
+        col[chain.fix_source == k] = q
+        blocks.append((q, B))
+        q += B.shape[0]
+    return col, blocks
+
+
+def _considered(chain: FactorChain, X: np.ndarray, K: np.ndarray, sys: tuple[np.ndarray, ...], fix_w: np.ndarray,
+                bias_cov: Sequence[np.ndarray | None] | None, marginals: bool,
+                ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray, np.ndarray]:
+    """The marginals (when asked) and the considered biases' share of them, on one factorisation of the
+    normal equations ``sys`` at ``(X, K)`` whose fixes were weighed by ``fix_w``."""
+    Ad, Ao, Bb, C, g, gk = sys
+    N, d = X.shape
+    p = K.size
+    col, blocks = _bias_columns(chain, bias_cov)
+    q = sum(B.shape[0] for _, B in blocks)
+    R = np.zeros((N, d, q))
+    if q:
+        bias_rhs(X, chain.fix_node, chain.fix_alpha, chain.fix_kind, chain.fix_z, chain.fix_W, chain.fix_lever,
+                 np.ascontiguousarray(fix_w, float), col, R)
+    Sx, Sk, cov_x, cov_k = solve_chain(Ad, Ao, Bb, C, R, np.zeros((p, q)), marginals=marginals)
+    cb_x = np.zeros((N, d, d))
+    cb_k = np.zeros((p, p))
+    for c0, B in blocks:
+        m = B.shape[0]
+        Sxs, Sks = Sx[:, :, c0:c0 + m], Sk[:, c0:c0 + m]
+        cb_x += np.einsum("nak,kl,nbl->nab", Sxs, B, Sxs)
+        cb_k += Sks @ B @ Sks.T
+    return cov_x, cov_k, cb_x, cb_k
+
+
+def considered_covariance(chain: FactorChain, X: np.ndarray, K: np.ndarray, fix_use: np.ndarray,
+                          bias_cov: Sequence[np.ndarray | None]) -> tuple[np.ndarray, np.ndarray]:
+    """The considered biases' share of the covariance of an estimate ``(X, K)`` of ``chain`` that weighed the
+    fixes ``fix_use`` by their covariances alone (the EKF + RTS: to first order the same linear smoother
+    as the least-squares solve, so its sensitivity to a bias is the same ``H^-1 J^T W^T W E_s``).
+
+    Parameters
+    ----------
+    chain : the factors; X (N, d), K (p,) the estimate; fix_use (M,) bool, the fixes it used.
+    bias_cov : per source of ``chain.sources``, its bias covariance (3, 3) over world (x, y, yaw) (m^2,
+        rad^2) for pose fixes, (2, 2) over world (x, y) for position fixes, or None (not considered).
+
+    Returns
+    -------
+    cov_bias_x (N, d, d), cov_bias_k (p, p): what to add to the estimate's covariances.
+    """
+    use = np.asarray(fix_use, bool)
+    _, sys, _, _ = _normal_equations(chain, X, K, use, 0.0)
+    _, _, cb_x, cb_k = _considered(chain, X, K, sys, use.astype(float), bias_cov, marginals=False)
+    return cb_x, cb_k
+
+
 def smooth_batch(chain: FactorChain, X_init: np.ndarray, K_init: np.ndarray, fix_use: np.ndarray | None = None,
-                 huber_k: float = 3.0, max_iter: int = 20, tol: float = 1e-10) -> BatchResult:
+                 huber_k: float = 3.0, max_iter: int = 20, tol: float = 1e-10,
+                 bias_cov: Sequence[np.ndarray | None] | None = None) -> BatchResult:
     """Levenberg-Marquardt from ``(X_init, K_init)`` (the EKF + RTS estimate, or any close start).
 
     Parameters
@@ -65,6 +142,8 @@ def smooth_batch(chain: FactorChain, X_init: np.ndarray, K_init: np.ndarray, fix
     fix_use : (M,) bool, the fixes to use (the gate's verdict); all by default.
     huber_k : Huber threshold in sigmas of a fix's whitened residual norm; 0 for plain least squares.
     max_iter, tol : stop after ``max_iter`` steps or when the relative cost decrease is below ``tol``.
+    bias_cov : per source of ``chain.sources``, the covariance of a run-constant bias of its fixes (see
+        :func:`considered_covariance`), or None; considered in the covariances, not estimated.
 
     Returns
     -------
@@ -105,7 +184,6 @@ def smooth_batch(chain: FactorChain, X_init: np.ndarray, K_init: np.ndarray, fix
             if lam > 1e6:
                 converged = True  # no descent left at this precision
                 break
-    Ad, Ao, Bb, C, g, gk = sys
-    _, _, cov_x, cov_k = solve_chain(Ad, Ao, Bb, C, g, gk, marginals=True)
+    cov_x, cov_k, cb_x, cb_k = _considered(chain, X, K, sys, rw, bias_cov, marginals=True)
     assert cov_x is not None and cov_k is not None
-    return BatchResult(X, K, cov_x, cov_k, chi2, rw, cost, it, converged)
+    return BatchResult(X, K, cov_x + cb_x, cov_k + cb_k, chi2, rw, cost, it, converged, cb_x, cb_k)

@@ -113,12 +113,13 @@ def solve_chain(Ad: np.ndarray, Ao: np.ndarray, Bb: np.ndarray, C: np.ndarray, g
     Parameters
     ----------
     Ad : (N, d, d) diagonal blocks; Ao : (N-1, d, d) blocks A[i, i+1]; Bb : (N, d, p) border;
-    C : (p, p); gx : (N, d), gk : (p,) right-hand side.
+    C : (p, p); gx : (N, d), gk : (p,) right-hand side, or (N, d, c) and (p, c) for c right-hand sides
+        solved on one factorisation (the considered biases' sensitivities, gtrig.fusion.batch).
     marginals : also return the diagonal blocks of the inverse.
 
     Returns
     -------
-    dx (N, d), dk (p,), cov_x (N, d, d) or None, cov_k (p, p) or None.
+    dx (N, d) or (N, d, c), dk (p,) or (p, c), cov_x (N, d, d) or None, cov_k (p, p) or None.
 
     Raises
     ------
@@ -126,24 +127,30 @@ def solve_chain(Ad: np.ndarray, Ao: np.ndarray, Bb: np.ndarray, C: np.ndarray, g
     """
     N, d, _ = Ad.shape
     p = C.shape[0]
-    R = np.concatenate([gx[:, :, None], Bb], axis=2)
+    multi = gx.ndim == 3
+    G = gx if multi else gx[:, :, None]
+    c = G.shape[2]
+    Gk = np.asarray(gk, float).reshape(p, c)
+    R = np.concatenate([G, Bb], axis=2)
     Sinv = np.empty((N, d, d))
     X = np.empty_like(R)
     bad = _forward_backward(Ad, np.ascontiguousarray(Ao), R, Sinv, X)
     if bad >= 0:
         raise ConvergenceError(f"fusion: node {bad} of the chain is unconstrained (no fix, no motion model)")
-    AinvB = X[:, :, 1:]
+    AinvB = X[:, :, c:]
     if p:
         Sk = C - np.einsum("nda,ndb->ab", Bb, AinvB)
         Sk_inv = np.empty((p, p))
         if not chol_inv(Sk, Sk_inv):
             raise ConvergenceError("fusion: the odometry parameters are not observable from these data")
-        dk = Sk_inv @ (gk - np.einsum("nda,nd->a", Bb, X[:, :, 0]))
-        dx = X[:, :, 0] - AinvB @ dk
+        dk = Sk_inv @ (Gk - np.einsum("nda,ndc->ac", Bb, X[:, :, :c]))
+        dx = X[:, :, :c] - np.einsum("ndp,pc->ndc", AinvB, dk)
     else:
         Sk_inv = np.zeros((0, 0))
-        dk = np.zeros(0)
-        dx = X[:, :, 0]
+        dk = np.zeros((0, c))
+        dx = X[:, :, :c]
+    if not multi:
+        dx, dk = dx[:, :, 0], dk[:, 0]
     if not marginals:
         return dx, dk, None, None
     cov = np.empty((N, d, d))

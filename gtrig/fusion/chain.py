@@ -227,3 +227,36 @@ def assemble(X, K, process, proc_u, proc_W, dts, fix_node, fix_alpha, fix_kind, 
                 t += Ekk[r_, a] * ek[r_]
             gk[a] -= t
     return cost
+
+
+@nb.njit(cache=True, nogil=True)
+def bias_rhs(X, fix_node, fix_alpha, fix_kind, fix_z, fix_W, fix_lever, fix_w, fix_col, out):  # noqa: ANN001, ANN201, PLR0913
+    """Right-hand sides (N, d, Q) of the solution's sensitivity to run-constant fix biases, added into the
+    zeroed ``out``: a bias ``b`` added to every measured value of a source moves the residuals
+    ``h - z`` by ``-b``, so the normal equations' right-hand side by ``J^T w W^T W`` per unit bias.
+    ``fix_col`` (M,) is the first of the fix's source's bias columns (-1: no bias considered); a pose
+    fix's bias has 3 columns (x, y, yaw), a position fix's 2 (x, y); ``fix_w`` (M,) the weight each fix
+    had in the solve (the robust loss's, 0 for fixes left out)."""
+    d = X.shape[1]
+    r3 = np.empty(3)
+    Jq = np.empty((3, 3))
+    E3 = np.empty((3, 3))
+    qb = np.empty(3)
+    hb = np.empty(3)
+    for j in range(fix_node.shape[0]):
+        c0 = fix_col[j]
+        w = fix_w[j]
+        if c0 < 0 or w == 0.0:
+            continue
+        i = fix_node[j]
+        al = fix_alpha[j]
+        m = fix_residual(X[i], X[i + 1], al, fix_kind[j], fix_z[j], fix_lever[j], r3, Jq, qb, hb)
+        _mul(fix_W[j], r3, Jq, qb, E3)  # E3 = W Jq
+        for a in range(min(d, 3)):
+            for k in range(m):
+                # (Jq^T W^T W)[a, k] = sum_r E3[r, a] W[r, k]
+                t = 0.0
+                for r_ in range(3):
+                    t += E3[r_, a] * fix_W[j, r_, k]
+                out[i, a, c0 + k] += w * (1.0 - al) * t
+                out[i + 1, a, c0 + k] += w * al * t

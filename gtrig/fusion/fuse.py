@@ -20,7 +20,7 @@ from typing import Literal
 import numpy as np
 
 from gtrig.errors import InputError
-from gtrig.fusion.batch import smooth_batch
+from gtrig.fusion.batch import considered_covariance, smooth_batch
 from gtrig.fusion.chain import PROCESS_CV, PROCESS_ODOMETRY, FactorChain
 from gtrig.fusion.ekf import smooth_ekf
 from gtrig.fusion.init import odom_in_world
@@ -65,6 +65,12 @@ class FusionOptions:
         down-weighted there. 0: off.
     odometry : the odometry noise model; cv : the constant-velocity model (no odometry).
     prior_sigma : (x, y, yaw) sigmas of the start around the robust anchor (m, m, rad).
+    bias_cov : per source, the covariance of the error its fixes share over the whole run (its calibration:
+        the scanners' registration, the robot frame's fit), over world (x, y, yaw) (3 x 3; m^2, rad^2) for
+        a pose source, world (x, y) (2 x 2) for a position source. Considered (Schmidt), not estimated:
+        the poses do not move, each pose's covariance gains ``sum_s S_s B_s S_s^T`` (``S_s`` its
+        sensitivity to that bias, gtrig.fusion.batch), since averaging over fixes cannot shrink it. A
+        source left out adds nothing.
     correlation_s : a source's errors stay correlated over about this long (its calibration and
         model errors change with the pose, not from frame to frame); each fix's covariance is multiplied
         by the number of the same source's fixes within this window, so that a second of 75 Hz fixes
@@ -86,6 +92,7 @@ class FusionOptions:
     cv: ConstantVelocityNoise = ConstantVelocityNoise()
     prior_sigma: tuple[float, float, float] = (0.1, 0.1, 0.1)
     correlation_s: float = 0.5
+    bias_cov: Mapping[str, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -143,6 +150,29 @@ def _decorrelated(f: Fixes, window_s: float) -> Fixes:
     if f.model is FixModel.POSITION:
         cov[:, 2, 2] = 1.0
     return Fixes(f.source, f.stamps_s, f.model, f.value, cov, f.lever_xy)
+
+
+def _bias_covs(fixes: Sequence[Fixes], bias_cov: Mapping[str, np.ndarray], names: set[str],
+               ) -> list[np.ndarray | None]:
+    """Per source (in ``fixes``' order) its checked bias covariance, or None; ``names``: every source given
+    (one without a usable fix may carry a bias covariance too)."""
+    for name in bias_cov:
+        if name not in names:
+            raise InputError(f"fusion: a bias covariance for {name!r}, which is no source ({', '.join(sorted(names))})")
+    out: list[np.ndarray | None] = []
+    for f in fixes:
+        if f.source not in bias_cov:
+            out.append(None)
+            continue
+        B = np.asarray(bias_cov[f.source], float)
+        if B.shape != (f.dim, f.dim):
+            raise InputError(f"fusion: {f.source}'s bias covariance is {B.shape}, its {f.model.value} fixes need "
+                             f"{f.dim} x {f.dim}")
+        if not (np.all(np.isfinite(B)) and np.allclose(B, B.T, rtol=1e-9, atol=1e-18)
+                and np.linalg.eigvalsh(B).min() >= -1e-12 * max(float(np.abs(B).max()), 1e-300)):
+            raise InputError(f"fusion: {f.source}'s bias covariance is not symmetric positive semi-definite")
+        out.append(0.5 * (B + B.T))
+    return out
 
 
 def _check_units(fixes: Sequence[Fixes], odometry: OdometryLog) -> None:
@@ -328,6 +358,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
     """
     t_start = time.perf_counter()
     opts = options or FusionOptions()
+    given = {f.source for f in fixes}
     fixes = [f.shifted(-float(opts.offsets_s.get(f.source, 0.0))) for f in fixes if len(f)]
     if not fixes:
         raise InputError("fusion: no usable fix in any source")
@@ -358,6 +389,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
                       "offset_sigma_s": float(opts.offsets_sigma_s.get(s, 0.0)) if s in opts.offsets_s else 0.0}
                   for s, f in zip(sources, fixes, strict=True)}
     sigma_t = _timing_sigma(opts, sources)
+    bias = _bias_covs(fixes, opts.bias_cov, given)
     out_st, out_xyt, out_cov, out_status, out_reason = [], [], [], [], []
     outliers: list[Outlier] = []
     segments: list[Segment] = []
@@ -377,9 +409,12 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
             if opts.innovation_window_s > 0:
                 chain = replace(chain, fix_W=chain.fix_W / np.sqrt(_innovation_factor(
                     seg, ekf.nis, use, opts.innovation_window_s))[:, None, None])
-            res = smooth_batch(chain, ekf.X, ekf.K, fix_use=use, huber_k=opts.huber_k)
+            res = smooth_batch(chain, ekf.X, ekf.K, fix_use=use, huber_k=opts.huber_k, bias_cov=bias)
             X, K, cov, cov_k, iters = res.X, res.K, res.cov_x, res.cov_k, res.iterations
             huber_w = res.robust_w
+        elif any(B is not None for B in bias):
+            cb_x, cb_k = considered_covariance(chain, X, K, use, bias)
+            cov, cov_k = cov + cb_x, cov_k + cb_k
         cov = _with_timing(stamps, X, cov, sigma_t)
         dims = np.where(seg["kind"] == 0, 3, 2)
         for j in np.flatnonzero(~use):

@@ -125,6 +125,17 @@ def true_odometry_offset(rec: Path) -> float:
     return -float(doc.get("offset_s", 0.0)) if isinstance(doc, dict) else 0.0
 
 
+#: each source's run-constant error, as its stage writes it beside the track (gtrig.io.biascov)
+BIAS_FILES = {"vision": "gt_vision_run_bias.yaml", "laser": "gt_laser_bias.yaml"}
+
+
+def _bias_covs(out: Path, tracks: dict[str, PoseTrack]) -> dict:
+    """Per source fused, its run-constant error's covariance when its stage wrote one (none: nothing)."""
+    from gtrig.io.biascov import read_bias_cov
+
+    return {k: read_bias_cov(out / BIAS_FILES[k]) for k in tracks if (out / BIAS_FILES[k]).is_file()}
+
+
 def fusion(inp: StageInput) -> StageOutput:
     """GTvision and GTlaser smoothed with odometry: one pose per odometry stamp, bridged poses flagged."""
     from gtrig.errors import InputError
@@ -145,7 +156,8 @@ def fusion(inp: StageInput) -> StageOutput:
     sync_yaml = inp.out / "sync.yaml"
     sigmas = offset_sigmas(sync_yaml) if offsets and sync_yaml.is_file() else {}
     opts = FusionOptions(estimator=cfg.estimator, max_gap_s=cfg.max_gap_s, offsets_s=offsets,
-                         offsets_sigma_s={k: v for k, v in sigmas.items() if k in offsets})
+                         offsets_sigma_s={k: v for k, v in sigmas.items() if k in offsets},
+                         bias_cov=_bias_covs(inp.out, tracks))
     fused, report = fuse_tracks(tracks, _odometry(inp.rec), opts)
     names = ("gt_fused.tum", "gt_fused_cov.csv", "fusion_report.json")
     texts = (tum_text(fused), covariance_text(fused), json.dumps(report.to_dict(), indent=1, default=float) + "\n")

@@ -1,5 +1,6 @@
 """Stage ``laser``: GTlaser, the fixed scanners' calibration then hull tracking over the continuous run
-(issue 7), written as the pose track ``gt_laser.tum`` + ``gt_laser_cov.csv``."""
+(issue 7), written as the pose track ``gt_laser.tum`` + ``gt_laser_cov.csv``, and the error its poses
+share over the run (the scanners' calibration) as ``gt_laser_bias.yaml`` (gtrig.io.biascov)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,8 @@ if TYPE_CHECKING:
 def gtlaser(inp: StageInput) -> StageOutput:
     from gtrig.config import apply_to_dataclass
     from gtrig.evaluate.truth import score_on_recording
+    from gtrig.fusion.bias import mean_covariance
+    from gtrig.io.biascov import write_bias_cov
     from gtrig.laser.recording import calibrate_recording, track_recording
     from gtrig.laser.track import TrackSettings, to_pose_track
 
@@ -27,6 +30,10 @@ def gtlaser(inp: StageInput) -> StageOutput:
                           out_cov=inp.out / "gt_laser_cov.csv", settings=settings, scanner_cov=report.cov_xytheta,
                           executor=inp.executor, workers=inp.workers, progress=inp.progress)
     track = to_pose_track(res)
+    # the scanners' registration error is one draw for the whole run: every pose shares it, so fusion
+    # considers it as a bias rather than averaging it away (its share of a typical pose's covariance)
+    write_bias_cov(inp.out / "gt_laser_bias.yaml", "GTlaser",
+                   {"scanners' calibration": mean_covariance(res.cov_calibration[res.ok])})
     counts = res.counts()
     share = 100 * counts["ok"] / max(len(res), 1)
     checks = (
@@ -40,7 +47,7 @@ def gtlaser(inp: StageInput) -> StageOutput:
                     counts["ambiguous"] == 0),
     )
     prod = {"rig": rig, "laser_report": report, "laser_result": res, "tracks/GTlaser/run": track}
-    outputs = ("gt_laser.tum", "gt_laser_cov.csv")
+    outputs = ("gt_laser.tum", "gt_laser_cov.csv", "gt_laser_bias.yaml")
     if not inp.has_truth:
         return StageOutput(prod, checks=checks, outputs=outputs)
     acc = score_on_recording(track, inp.rec, "run", expected_stamps_s=res.stamps_s)

@@ -65,6 +65,19 @@ def _against_survey(inp: StageInput, res: VisionResult) -> list[AccuracyRow]:
     ]
 
 
+def _write_run_bias(inp: StageInput, frame_cov_6x6: np.ndarray) -> None:
+    """``gt_vision_run_bias.yaml``: the robot frame's fit (where the markers put the robot frame, the same
+    error on every pose of the run, robot axes) as fusion's considered bias, averaged over the heading.
+    The cameras' calibration is common to the run too, but GTvision marginalises it per pose without
+    keeping its share, so it is not in the file (docs/fusion.md)."""
+    from gtrig.fusion.bias import heading_averaged
+    from gtrig.io.biascov import write_bias_cov
+    from gtrig.vision.covariance import PLANAR_INDEX
+
+    planar = frame_cov_6x6[np.ix_(PLANAR_INDEX, PLANAR_INDEX)]
+    write_bias_cov(inp.out / "gt_vision_run_bias.yaml", "GTvision", {"robot frame": heading_averaged(planar)})
+
+
 def gtvision(inp: StageInput) -> StageOutput:
     from gtrig.evaluate.truth import score_on_recording, visible_localized
     from gtrig.io.frames import read_frame_index
@@ -105,6 +118,12 @@ def gtvision(inp: StageInput) -> StageOutput:
         track = file_track(res)
         write_pose_track(track, inp.out / f"gt_vision_{seq}.tum", inp.out / f"gt_vision_{seq}_cov.csv")
         outputs += [f"gt_vision_{seq}.tum", f"gt_vision_{seq}_cov.csv"]
+        if not static and rig.robot.markers_frame_cov is not None:
+            _write_run_bias(inp, np.asarray(rig.robot.markers_frame_cov, float))
+            outputs.append("gt_vision_run_bias.yaml")
+        elif not static:
+            # no frame covariance now: an earlier run's file must not reach fusion
+            (inp.out / "gt_vision_run_bias.yaml").unlink(missing_ok=True)
         prod[f"tracks/GTvision/{seq}"] = res.to_pose_track()
         prod[f"vision_results/{seq}"] = replace(res, observations=())  # the detections stay in the checkpoint
         rep = summarize(res)

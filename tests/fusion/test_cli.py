@@ -67,3 +67,28 @@ def test_per_sensor_sync_needs_the_rig(tmp_path, run) -> None:
                                  "--out", str(tmp_path / "s.yaml")])
     assert r.exit_code == 2 and "--rig" in r.output and len(r.output.strip().splitlines()) == 1
     assert not (tmp_path / "s.yaml").exists()
+
+
+def test_fuse_considers_the_sources_bias_files(tmp_path, run) -> None:
+    from gtrig.io.biascov import write_bias_cov
+
+    args = _files(tmp_path, run)
+    write_bias_cov(tmp_path / "lb.yaml", "GTlaser", {"scanners' calibration": np.diag([1e-3, 1e-3, 4e-4]) ** 2})
+    outs = []
+    for extra, name in (([], "a"), (["--laser-bias", str(tmp_path / "lb.yaml")], "b")):
+        r = CliRunner().invoke(app, ["fuse", *args, *extra, "--out", str(tmp_path / f"{name}.tum"),
+                                     "--covariance", str(tmp_path / f"{name}.csv")])
+        assert r.exit_code == 0, r.output
+        outs.append(read_pose_track(tmp_path / f"{name}.tum", tmp_path / f"{name}.csv"))
+    plain, cons = outs
+    np.testing.assert_array_equal(cons.xyz, plain.xyz)
+    # the laser's 1 mm run-constant error cannot average out: every pose's x sigma grows
+    assert np.all(cons.cov[:, 0, 0] > plain.cov[:, 0, 0])
+    # a bias file that is not one, and one for a source not given: one line, exit 2, nothing written
+    (tmp_path / "bad.yaml").write_text("format: something else\n")
+    for extra in (["--laser-bias", str(tmp_path / "bad.yaml")], ["--vision-bias", str(tmp_path / "lb.yaml")]):
+        a = args if "--laser-bias" in extra else args[4:]
+        r = CliRunner().invoke(app, ["fuse", *a, *extra, "--out", str(tmp_path / "c.tum"),
+                                     "--covariance", str(tmp_path / "c.csv")])
+        assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1, r.output
+        assert not (tmp_path / "c.tum").exists()

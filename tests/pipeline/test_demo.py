@@ -30,8 +30,9 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_demo_quick_runs_every_stage_against_truth(demo: Path, tmp_path: Path) -> None:
     out = demo
     res = out / "results"
-    for name in ("rig.calibrated.yaml", "markers.yaml", "gt_laser.tum", "gt_laser_cov.csv",
-                 "gt_vision_validation.tum", "gt_vision_run.tum", "survey/world_points.csv", "accuracy.csv"):
+    for name in ("rig.calibrated.yaml", "markers.yaml", "gt_laser.tum", "gt_laser_cov.csv", "gt_laser_bias.yaml",
+                 "gt_vision_validation.tum", "gt_vision_run.tum", "gt_vision_run_bias.yaml", "survey/world_points.csv",
+                 "accuracy.csv"):
         assert (res / name).is_file(), name
     # the demo ends with the one-page report (its content is tests/report's)
     assert 'src="data:image/png;base64,' in (out / "report.html").read_text(encoding="utf-8")
