@@ -22,6 +22,26 @@ def _scene(seed: int, tilt: float, gain: float, blur: float = 2.0):
     return render(SHAPE, markers, blur_px=blur, noise=3.0, gain=gain, gradient=0.3, background=bg, rng=rng)
 
 
+def _checked_reads(dets: list, truths: list, blur_range: tuple[float, float] | None = None) -> int:
+    """How many of ``truths`` the detections ``dets`` read, asserting no wrong ID, one detection per
+    marker, corners within 0.6 px of the printed ones, a positive definite corner covariance and, if
+    given, the fitted blur (px) within ``blur_range``."""
+    ids = {t.marker_id for t in truths}
+    assert all(d.id in ids for d in dets), "wrong ID"
+    found = 0
+    for t in truths:
+        m = [d for d in dets if d.id == t.marker_id]
+        if m:
+            found += 1
+            assert len(m) == 1
+            # corners as printed, like the first path's
+            assert np.abs(m[0].corners_px - t.corners_px).max() < 0.6
+            assert np.all(np.linalg.eigvalsh(m[0].corner_cov) > 0)
+            if blur_range is not None:
+                assert blur_range[0] < m[0].blur_px < blur_range[1]
+    return found
+
+
 def test_blurred_small_markers_found_with_right_id_and_corners() -> None:
     """20 px AprilTag 36h11 at blur 2 px, 0 and 30 deg tilt, full and dim light: the first path alone
     reads at most a quarter of them; with the second all but one are found (one dim, tilted marker
@@ -31,20 +51,9 @@ def test_blurred_small_markers_found_with_right_id_and_corners() -> None:
     found = total = first = 0
     for seed, (tilt, gain) in enumerate([(0, 230.0), (30, 230.0), (0, 70.0), (30, 70.0)]):
         img, truths = _scene(seed, tilt, gain)
-        dets = det.detect(img)
         first += len(sharp_only.detect(img))
-        ids = {t.marker_id for t in truths}
-        assert all(d.id in ids for d in dets), "wrong ID"
-        for t in truths:
-            m = [d for d in dets if d.id == t.marker_id]
-            total += 1
-            if m:
-                found += 1
-                assert len(m) == 1
-                # corners as printed, like the first path's
-                assert np.abs(m[0].corners_px - t.corners_px).max() < 0.6
-                assert np.all(np.linalg.eigvalsh(m[0].corner_cov) > 0)
-                assert 1.5 < m[0].blur_px < 2.6
+        found += _checked_reads(det.detect(img), truths, (1.5, 2.6))
+        total += len(truths)
     assert first <= 4
     assert found >= total - 1
 
@@ -71,15 +80,9 @@ def test_blurred_reads_demosaiced_compressed_prints() -> None:
                              paper_texture=0.04, bayer=True, jpeg_quality=80)
         img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
         assert image_noise(img) < 0.25 * 3.0
-        dets = det.detect(img)
+        found += _checked_reads(det.detect(img), truths)
+        total += len(truths)
         ids = {t.marker_id for t in truths}
-        assert all(d.id in ids for d in dets), "wrong ID"
-        for t in truths:
-            m = [d for d in dets if d.id == t.marker_id]
-            total += 1
-            if m:
-                found += 1
-                assert np.abs(m[0].corners_px - t.corners_px).max() < 0.6
         old += len({d.id for d in no_texture.detect(img)} & ids)
         first += len({d.id for d in sharp_only.detect(img)} & ids)
     assert found >= total - 1
