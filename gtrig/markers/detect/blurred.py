@@ -15,8 +15,9 @@ what the first one left:
    the square and half a cell around it, the model being the blurred-box one of
    :func:`.edges.marker_context` with the levels and the 36 cells' light free (linear, solved inside:
    variable projection), so the quad converges before any code is assumed. Clutter that this model
-   cannot fit to about the image noise (:func:`image_noise`) stops here, most of it at the first
-   evaluation;
+   cannot fit to about the expected misfit of a real marker stops here, most of it at the first
+   evaluation. That misfit is the image noise (:func:`image_noise`) and a share of the contrast
+   (``texture_share``): a printed, photographed marker is not the model's ideal box;
 3. ranking: every code of the family in its 4 rotations through that geometry, the levels solved
    per code from sums linear and quadratic in the code, and a
    screen on the leader's margin and excess residual;
@@ -66,11 +67,19 @@ class BlurredParams:
         since a blurred border never gets as dark as a sharp one.
     min_side_px, max_side_px : side range of the candidates; larger markers are the first path's.
     min_solidity : contour area / hull area.
-    max_free_misfit : the code-free fit's residual SD may be at most this many times the image noise
-        (no code can fit better than the model with free cells, so clutter stops here, before the
-        codes are tried).
-    max_start_misfit : the free model's residual SD at the candidate's geometry above which the fit
-        is abandoned after its first evaluation (cheap rejection of clutter).
+    max_free_misfit : the code-free fit's residual SD may be at most this many times the expected
+        misfit of a marker (no code can fit better than the model with free cells, so clutter stops
+        here, before the codes are tried).
+    texture_share : the expected misfit of a marker at its true corners beyond the image noise, as a
+        share of its contrast: the expected residual variance is ``noise^2 + (texture_share *
+        contrast)^2``. Paper and toner texture, print gain, JPEG ringing at the edges and demosaicing
+        zips all scale with the marker's contrast, and :func:`image_noise` does not see them (it reads
+        the fine-grained noise that JPEG and demosaicing smooth away: 0.35-1.4 grey levels on
+        ``bench/markers.py --hard`` images rendered with 2-5). Measured at the true corners of that
+        set's 20 px markers: 2.4-12 % of the contrast, median 4-5 %.
+    max_start_misfit : the free model's residual SD at the candidate's geometry, in units of the
+        expected misfit, above which the fit is abandoned after its first evaluation (cheap rejection
+        of clutter).
     max_start_share : ... or when the SD of its misfit beyond the noise exceeds this share of the
         fitted contrast (0.03-0.10 for the bench's markers, up to several for clutter).
     max_excess_sd : the best code's excess residual over the free fit may exceed its chi-square
@@ -103,6 +112,7 @@ class BlurredParams:
     max_side_px: float = 38.0
     min_solidity: float = 0.85
     max_free_misfit: float = 2.0
+    texture_share: float = 0.05
     max_start_misfit: float = 8.0
     max_start_share: float = 0.15
     max_excess_sd: float = 5.0
@@ -270,7 +280,8 @@ def _solve_levels(I: NDArray[np.float64], A: NDArray[np.float64], ridge: NDArray
 
 def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[np.float64], sig: float,
                   n: int, border: int, code: NDArray[np.float64] | None, iterations: int,
-                  stop_start: Callable[[float, float], bool] | None = None, stop_sse_iter: float = np.inf
+                  stop_start: Callable[[float, float], bool] | None = None,
+                  stop_iter: Callable[[float, float], bool] | None = None
                   ) -> tuple[NDArray[np.float64], float, float, NDArray[np.float64], NDArray[np.float64]]:
     """Corners and blur of one marker fitted to the pixels ``px`` (N, 2) of values ``I`` (N,) by
     damped Gauss-Newton, with the levels (and without ``code`` the cells' whiteness) solved linearly
@@ -279,8 +290,8 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
 
     Returns corners (4, 2), blur, residual sum of squares, the linear coefficients and the last
     Gauss-Newton normal matrix ``J^T J`` (9, 9) of the 8 corner coordinates and the blur (NaN without
-    iterations); when ``stop_start(sse, contrast)`` holds at the start it returns at once, when after
-    an iteration the residual exceeds ``stop_sse_iter`` it stops there.
+    iterations); when ``stop_start(sse, contrast)`` holds at the start it returns at once, when
+    ``stop_iter(sse, contrast)`` holds after an iteration it stops there.
     """
     d2 = (n - 2 * border) ** 2
     if code is None:
@@ -345,7 +356,7 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
             th, sse, c, res, Acur = tn, sn, cn, rn[0], An
             lam *= 0.3
             fresh = False
-            if np.abs(step[:8]).max() < 0.01 or sse > stop_sse_iter:
+            if np.abs(step[:8]).max() < 0.01 or (stop_iter is not None and stop_iter(sse, float(c[0, 1]))):
                 break
         elif fresh or J is None:
             break
@@ -419,7 +430,8 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
     codes : (C, d, d) every code of the family in every rotation as read in a quad's orientation.
     n, border : cells per side (border included) and border width, cells.
     params : :class:`BlurredParams`.
-    noise : SD of the image noise, grey levels (:func:`image_noise`).
+    noise : SD of the image noise, grey levels (:func:`image_noise`); each candidate's expected
+        residual variance adds ``(params.texture_share * contrast)^2`` to its square.
 
     Returns
     -------
@@ -428,7 +440,11 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
     C = codes.shape[0]
     Wc = codes.reshape(C, -1).astype(np.float64)
     d2 = Wc.shape[1]
-    var = max(noise, 0.5) ** 2
+    var_noise = max(noise, 0.5) ** 2
+
+    def expected_var(contrast: float) -> float:
+        # a marker's misfit beyond the noise scales with its contrast (texture_share in BlurredParams)
+        return var_noise + (params.texture_share * max(contrast, 0.0)) ** 2
     # the right code's excess residual is chi-square(d2): mean d2, SD sqrt(2 d2)
     max_excess = d2 + params.max_excess_sd * np.sqrt(2.0 * d2)
     out = []
@@ -446,26 +462,30 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
         def hopeless(sse0: float, contrast: float, dof: int = dof_h) -> bool:
             # at the candidate's geometry a marker's misfit is a small share of its contrast (the
             # corners are within a pixel or two); clutter's is not, or there is no contrast at all
-            excess_sd = np.sqrt(max(sse0 / dof - var, 0.0))
-            return (sse0 > params.max_start_misfit**2 * var * dof or contrast < params.min_contrast
-                    or excess_sd > params.max_start_share * contrast)
+            excess_sd = np.sqrt(max(sse0 / dof - var_noise, 0.0))
+            return (sse0 > params.max_start_misfit**2 * expected_var(contrast) * dof
+                    or contrast < params.min_contrast or excess_sd > params.max_start_share * contrast)
+
+        def misfit(sse1: float, contrast: float, dof: int = dof_h) -> bool:
+            # after an iteration of the free fit: beyond what any marker of this contrast leaves
+            return sse1 > (1.1 * params.max_free_misfit) ** 2 * expected_var(contrast) * dof
         screen = _spread_subset(px, N // params.screen_px)
         if screen.sum() < half.sum():
             _, _, sse_q, cq, _ = _fit_geometry(px[screen], I[screen], quad, 1.5, n, border, None, 0)
             if hopeless(sse_q, float(cq[1]), max(int(screen.sum()) - 11 - d2, 1)):
                 continue
         q1, s1, sse_free, cf, _ = _fit_geometry(px[half], I[half], quad, 1.5, n, border, None, params.iterations,
-                                                stop_start=hopeless,
-                                                stop_sse_iter=(1.1 * params.max_free_misfit) ** 2 * var * dof_h)
-        if not half.all() and sse_free <= (params.max_free_misfit**2) * var * dof_h:
+                                                stop_start=hopeless, stop_iter=misfit)
+        if not half.all() and sse_free <= (params.max_free_misfit**2) * expected_var(float(cf[1])) * dof_h:
             # the free model's residual on every pixel, for the excess test of the codes' fits
             _, _, sse_free, cf, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0)
         else:
             sse_free *= dof / dof_h
         s2 = sse_free / dof
+        var = expected_var(float(cf[1]))
         if (s2 > (params.max_free_misfit**2) * var or cf[1] < params.min_contrast
                 or np.abs(q1 - quad).max() > params.max_shift_px):
-            log.debug("blurred candidate at (%.0f, %.0f): free fit SD %.2f (noise %.2f), contrast %.0f, "
+            log.debug("blurred candidate at (%.0f, %.0f): free fit SD %.2f (expected %.2f), contrast %.0f, "
                       "shift %.1f px: rejected", *quad.mean(axis=0), np.sqrt(s2), np.sqrt(var), cf[1],
                       np.abs(q1 - quad).max())
             continue
@@ -509,7 +529,7 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
         margin = (min(rest) - sse_b) / s2
         ok = (excess <= max(max_excess, params.excess_share * margin) and margin >= params.min_margin
               and cb[1] >= params.min_contrast and np.abs(qb - quad).max() <= params.max_shift_px)
-        log.debug("blurred candidate: code %d, residual SD %.2f (noise %.2f), excess %.0f, margin %.0f -> %s",
+        log.debug("blurred candidate: code %d, residual SD %.2f (expected %.2f), excess %.0f, margin %.0f -> %s",
                   best, np.sqrt(s2), np.sqrt(var), excess, margin, ok)
         if ok:
             s2b = sse_b / max(N - 11, 1)
