@@ -38,6 +38,7 @@ from gtrig.geometry import wrap_angle
 from gtrig.laser.acquire import acquire
 from gtrig.laser.fuse import FramedPoints
 from gtrig.laser.hull_icp import (
+    HullFitBatch,
     HullModel,
     IcpSettings,
     assigned_sides,
@@ -395,36 +396,89 @@ def _refine_with_side_bias(
     """Estimate the sides' range bias over the OK frames (:mod:`gtrig.laser.side_bias`) and fit those
     frames again with their points corrected by it and de-skewed with the smoothed velocity; ``raw``
     and ``raw_cov`` are updated in place. Ambiguous frames (their sides may be swapped by the pi
-    symmetry) are left out."""
+    symmetry) are left out.
+
+    The points are made, corrected and fitted a time window of :data:`COVARIANCE_WINDOW_FRAMES` frames
+    at a time (issue 24: the whole run's at once peaked at ~35 kB per frame); between windows only
+    per-frame arrays are kept (poses, covariances, each frame's reduced normal equations). Each pass's
+    correction is made again from the poses and biases of the passes before it, and the windows' fits
+    iterate as one fit of every frame would (:func:`_fit_windows`): the same bits as one pass over the
+    whole run."""
     ok = (status == OK) & np.isfinite(raw[:, 0])
     prior = _bias_prior(st)
     if ok.sum() < 10 or not np.any(prior):  # (a zero prior: the bias is known to be nil)
         return SideBias.prior(prior)
-    pt, fid = _frame_points_of(fp, ok)
-    vel = _track_velocities(stamps, smoothed, track_id)[ok][fid]
-    xy = compensate_motion(fp.xy_world[pt], fp.dt_s[pt], vel, smoothed[ok][fid, :2])
-    sid, d = fp.scanner_index[pt], fp.dir_world[pt]
-    beta = np.zeros(4)
+    W = COVARIANCE_WINDOW_FRAMES
+    windows = [(a, min(fp.n_frames, a + W)) for a in range(0, fp.n_frames, W)]
+    windows = [(a, b) for a, b in windows if ok[a:b].any()]
+    # each window's rows in the arrays over the OK frames
+    rows = np.cumsum([0] + [int(ok[a:b].sum()) for a, b in windows])
+    vel = _track_velocities(stamps, smoothed, track_id)
+    S, sig = fp.scanner_xy_world, fp.sigma_m
+    poses = [raw[ok]]  # the OK frames' poses each pass starts from
+    betas = [np.zeros(4)]  # the total correction of the points after each pass
+
+    def points(w: int, passes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Window ``w``'s OK points de-skewed and corrected by the first ``passes`` passes: (M, 2) world
+        points, (M,) their frame among the window's OK frames, scanner index, (M, 2) beam directions."""
+        a, b = windows[w]
+        win, sel = _window(fp, a, b), ok[a:b]
+        pt, fid = _frame_points_of(win, sel)
+        xy = compensate_motion(win.xy_world[pt], win.dt_s[pt], vel[a:b][sel][fid], smoothed[a:b][sel][fid, :2])
+        sid, d = win.scanner_index[pt], win.dir_world[pt]
+        for m in range(passes):
+            side = assigned_sides(model, xy, fid, sid, S, d, sig, poses[m][rows[w]:rows[w + 1]], st.icp)
+            xy = xy - ((betas[m + 1] - betas[m])[side])[:, None] * d
+        return xy, fid, sid, d
+
     bias = SideBias.prior(prior)
-    pose, cov = raw[ok], raw_cov[ok]
-    for _ in range(iterations):
-        eqs = side_bias_normal_equations(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
-        N, u = reduced_normal_equations(*eqs)
+    cov = raw_cov[ok]
+    for it in range(iterations):
+        pose = poses[it]
+        Nu = []
+        for w in range(len(windows)):
+            xy, fid, sid, d = points(w, it)
+            eqs = side_bias_normal_equations(model, xy, fid, sid, S, d, sig, pose[rows[w]:rows[w + 1]], st.icp)
+            Nu.append(reduced_normal_equations(*eqs))
+        N = np.concatenate([n for n, _ in Nu])
         # the prior holds the total bias: solve for it with the points' current correction undone
-        u = u - np.einsum("kab,b->ka", N, beta)
+        u = np.concatenate([u for _, u in Nu]) - np.einsum("kab,b->ka", N, betas[it])
         bias = estimate_side_bias(N, u, stamps[ok], prior)
-        side = assigned_sides(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
-        xy = xy - ((bias.bias_m - beta)[side])[:, None] * d
-        beta = bias.bias_m
-        fits = fit_hull_batch(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
-        good = ~fits.degenerate & (fits.n_points >= st.icp.min_points)
-        pose = np.where(good[:, None], fits.xytheta, pose)
-        cov = np.where(good[:, None, None], fits.cov_xytheta, cov)
-    raw[ok], raw_cov[ok] = pose, cov
+        betas.append(bias.bias_m)
+
+        def fit(w: int, min_iterations: int, it: int = it) -> HullFitBatch:
+            xy, fid, sid, d = points(w, it + 1)
+            return fit_hull_batch(model, xy, fid, sid, S, d, sig, poses[it][rows[w]:rows[w + 1]], st.icp,
+                                  min_iterations=min_iterations)
+
+        fits = _fit_windows(fit, len(windows))
+        good = np.concatenate([~f.degenerate & (f.n_points >= st.icp.min_points) for f in fits])
+        poses.append(np.where(good[:, None], np.concatenate([f.xytheta for f in fits]), pose))
+        cov = np.where(good[:, None, None], np.concatenate([f.cov_xytheta for f in fits]), cov)
+    raw[ok], raw_cov[ok] = poses[-1], cov
     log.info("hull sides' range bias %s mm (std %s mm, variance factor %.2f over %d blocks)",
              np.array2string(1000 * bias.bias_m, precision=1),
              np.array2string(1000 * np.sqrt(np.diag(bias.cov)), precision=2), bias.variance_factor, bias.n_blocks)
     return bias
+
+
+def _fit_windows(fit: Callable[[int, int], HullFitBatch], n_windows: int) -> list[HullFitBatch]:
+    """The hull fits of ``n_windows`` windows of frames, ``fit(w, min_iterations)`` fitting window ``w``
+    (:func:`gtrig.laser.hull_icp.fit_hull_batch`), iterated as one fit of all their frames would be.
+
+    One fit stops at the first iteration where every frame has converged, and a frame's pose changes
+    with every iteration done; a window's own stop is never after the whole fit's, so the latest stop
+    is a lower bound of it: the windows that stopped earlier are fitted again to at least that many
+    iterations, until all stop at the same one (usually one round more for a few windows)."""
+    fits = [fit(w, 0) for w in range(n_windows)]
+    while fits:
+        g = max(f.iterations for f in fits)
+        redo = [w for w, f in enumerate(fits) if f.iterations < g]
+        if not redo:
+            break
+        for w in redo:
+            fits[w] = fit(w, g)
+    return fits
 
 
 def _smooth_tracks(
