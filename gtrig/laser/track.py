@@ -29,14 +29,14 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from gtrig.geometry import wrap_angle
 from gtrig.laser.acquire import acquire
-from gtrig.laser.fuse import FramedPoints
+from gtrig.laser.fuse import FramedPoints, FrameSource
 from gtrig.laser.hull_icp import (
     HullFitBatch,
     HullModel,
@@ -390,7 +390,7 @@ def _track_velocities(stamps_s: np.ndarray, xytheta: np.ndarray, track_id: np.nd
 
 
 def _refine_with_side_bias(
-    fp: FramedPoints, model: HullModel, st: TrackSettings, stamps: np.ndarray, smoothed: np.ndarray,
+    fp: FrameSource, model: HullModel, st: TrackSettings, stamps: np.ndarray, smoothed: np.ndarray,
     track_id: np.ndarray, status: np.ndarray, raw: np.ndarray, raw_cov: np.ndarray, iterations: int = 2,
 ) -> SideBias:
     """Estimate the sides' range bias over the OK frames (:mod:`gtrig.laser.side_bias`) and fit those
@@ -422,7 +422,7 @@ def _refine_with_side_bias(
         """Window ``w``'s OK points de-skewed and corrected by the first ``passes`` passes: (M, 2) world
         points, (M,) their frame among the window's OK frames, scanner index, (M, 2) beam directions."""
         a, b = windows[w]
-        win, sel = _window(fp, a, b), ok[a:b]
+        win, sel = fp.window(a, b, scans=False), ok[a:b]
         pt, fid = _frame_points_of(win, sel)
         xy = compensate_motion(win.xy_world[pt], win.dt_s[pt], vel[a:b][sel][fid], smoothed[a:b][sel][fid, :2])
         sid, d = win.scanner_index[pt], win.dir_world[pt]
@@ -520,24 +520,17 @@ def _smooth_tracks(
 COVARIANCE_WINDOW_FRAMES = 256
 
 
-def _window(fp: FramedPoints, a: int, b: int) -> FramedPoints:
-    """Frames ``[a, b)`` of ``fp``: their points, without the raw scans (only the fits' points travel)."""
-    p0, p1 = int(fp.frame_start[a]), int(fp.frame_start[b])
-    return replace(fp, frame_stamps_s=fp.frame_stamps_s[a:b], frame_start=fp.frame_start[a:b + 1] - p0,
-                   xy_world=fp.xy_world[p0:p1], scanner_index=fp.scanner_index[p0:p1],
-                   dir_world=fp.dir_world[p0:p1], dt_s=fp.dt_s[p0:p1], scan_of_frame=fp.scan_of_frame[:, a:b],
-                   ranges_m=(), masks=(), beam_dirs=())
-
-
-def _window_covariances(fp: FramedPoints, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
+def _window_covariances(part: FrameSource, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
                         scanner_cov: np.ndarray | None, st: TrackSettings
                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    # (on a worker: a source read from the logs on disk makes its points here, issue 24)
+    fp = part.window(0, part.n_frames, scans=False)
     bias = None if cov_bias is None else surface_bias_covariance(fp, model, raw, cov_bias, st.icp)
     cal = None if scanner_cov is None else calibration_covariance(fp, model, raw, scanner_cov, st.icp)
     return bias, cal
 
 
-def frame_covariances(fp: FramedPoints, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
+def frame_covariances(fp: FrameSource, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
                       scanner_cov: np.ndarray | None, st: TrackSettings, executor: Any = None, workers: int = 1,
                       progress: Callable[[int, int], None] | None = None
                       ) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -549,13 +542,13 @@ def frame_covariances(fp: FramedPoints, model: HullModel, raw: np.ndarray, cov_b
 
     F = fp.n_frames
     edges = list(range(0, F, COVARIANCE_WINDOW_FRAMES)) + [F]
-    chunks = [Chunk((_window(fp, a, b), model, raw[a:b], cov_bias, scanner_cov, st),
+    chunks = [Chunk((fp.part(a, b), model, raw[a:b], cov_bias, scanner_cov, st),
                     f"frames {a}-{b - 1} ({fp.frame_stamps_s[a]:.3f}-{fp.frame_stamps_s[b - 1]:.3f} s)")
               for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
     parts: dict[int, tuple[np.ndarray | None, np.ndarray | None]] = {}
     map_chunks(_window_covariances, chunks, parts.__setitem__, executor=executor, workers=workers, progress=progress)
     if not parts:
-        return _window_covariances(fp, model, raw, cov_bias, scanner_cov, st)
+        return _window_covariances(fp.part(0, F), model, raw, cov_bias, scanner_cov, st)
     out: list[np.ndarray | None] = []
     for k in (0, 1):
         pieces = [parts[i][k] for i in range(len(chunks))]
@@ -563,28 +556,35 @@ def frame_covariances(fp: FramedPoints, model: HullModel, raw: np.ndarray, cov_b
     return out[0], out[1]
 
 
-def timing_covariance(fp: FramedPoints, stamps_s: np.ndarray, xytheta: np.ndarray, track_id: np.ndarray) -> np.ndarray:
-    """Covariance (F, 3, 3) of the poses due to the scanners' clock offsets: a frame's fit holds at the
-    mean of its points' true times, off from its stamp by the points' share-weighted mean offset
-    (standard deviation ``sqrt(sum_s w_s^2 sigma_s^2)``, offsets independent between scanners), so the
-    pose is off by that times its velocity (from the smoothed poses of its own track)."""
-    F = fp.n_frames
+def timing_covariance(points: np.ndarray, stamp_sigma_s: np.ndarray | None, stamps_s: np.ndarray,
+                      xytheta: np.ndarray, track_id: np.ndarray) -> np.ndarray:
+    """Covariance (F, 3, 3) of the poses due to the scanners' clock offsets (standard deviations
+    ``stamp_sigma_s`` (S,), seconds): a frame's fit holds at the mean of its points' true times, off
+    from its stamp by the points' share-weighted mean offset (standard deviation
+    ``sqrt(sum_s w_s^2 sigma_s^2)``, offsets independent between scanners; ``points`` (F, S) is each
+    frame's count of points from each scanner), so the pose is off by that times its velocity (from the
+    smoothed poses of its own track)."""
+    F = len(stamps_s)
     out = np.zeros((F, 3, 3))
-    sig = fp.stamp_sigma_s
+    sig = stamp_sigma_s
     if sig is None or not np.any(sig > 0):
         return out
-    counts = np.diff(fp.frame_start)
-    fid = np.repeat(np.arange(F), counts)
-    S = len(sig)
-    n = np.bincount(fid * S + fp.scanner_index, minlength=F * S).reshape(F, S).astype(float)
+    n = np.asarray(points, dtype=float)
     w = n / np.maximum(n.sum(axis=1, keepdims=True), 1.0)
     var_t = (w**2) @ (sig**2)
     vel = _track_velocities(stamps_s, xytheta, track_id)
     return var_t[:, None, None] * np.einsum("fi,fj->fij", vel, vel)
 
 
+def points_per_scanner(fp: FramedPoints) -> np.ndarray:
+    """(F, S) each frame's count of points from each scanner (for :func:`timing_covariance`)."""
+    F, S = fp.n_frames, len(fp.sigma_m)
+    fid = np.repeat(np.arange(F), np.diff(fp.frame_start))
+    return np.bincount(fid * S + fp.scanner_index, minlength=F * S).reshape(F, S)
+
+
 def track_frames(
-    fp: FramedPoints,
+    fp: FrameSource,
     model: HullModel,
     settings: TrackSettings = TrackSettings(),
     scanner_cov: np.ndarray | None = None,
@@ -598,7 +598,10 @@ def track_frames(
     Parameters
     ----------
     fp
-        Foreground points of the sequence, in the world, by frame (:func:`gtrig.laser.fuse.frame_points`).
+        Foreground points of the sequence, in the world, by frame: all of them
+        (:func:`gtrig.laser.fuse.frame_points`) or a source that reads them a time window of
+        :data:`COVARIANCE_WINDOW_FRAMES` frames at a time (:class:`gtrig.laser.recording.LoggedFrames`:
+        then no pass holds more than a window's points, issue 24).
     model
         The hull outline (:meth:`HullModel.from_hull`).
     settings
@@ -632,14 +635,29 @@ def track_frames(
     qd = np.array([st.predict_accel_std_mps2**2] * 2 + [st.predict_ang_accel_std_radps2**2])
     Pv_unknown = np.diag([st.max_speed_mps**2, st.max_speed_mps**2, st.max_turn_rate_radps**2])
 
+    # the frames are walked a window at a time (the filter's state between windows is its predictor);
+    # each frame's count of points per scanner is kept for the timing term
+    counts = np.zeros((F, len(fp.sigma_m)), dtype=np.int64)
+    win: FramedPoints | None = None
+    w0 = 0  # the window's first frame
+
+    def window_at(k: int) -> FramedPoints:
+        """The window holding frames ``[k, k + chunk_frames)`` (or up to the last); ``k`` never decreases."""
+        nonlocal win, w0
+        if win is None or (k + st.chunk_frames > w0 + win.n_frames and w0 + win.n_frames < F):
+            w0, win = k, fp.window(k, min(F, k + max(COVARIANCE_WINDOW_FRAMES, st.chunk_frames)))
+            counts[w0:w0 + win.n_frames] = points_per_scanner(win)
+        return win
+
     pred_state: _Predictor | None = None  # the tracking filter of the current track
     tracking = False
     fails = 0
     last_pose_frame = -1  # last OK frame of any track
     k = 0
     while k < F:
+        wf = window_at(k)
         if not tracking:
-            sl = fp.frame(k)
+            sl = wf.frame(k - w0)
             prior, radius, inherited = None, None, False
             gap = np.inf if last_pose_frame < 0 else stamps[k] - stamps[last_pose_frame]
             if gap <= st.prior_max_gap_s:
@@ -651,15 +669,15 @@ def track_frames(
             if sl.stop - sl.start >= st.icp.min_points:
                 acq = acquire(
                     model,
-                    fp.xy_world[sl],
-                    fp.scanner_index[sl],
-                    fp.scanner_xy_world,
-                    fp.dir_world[sl],
-                    fp.sigma_m,
+                    wf.xy_world[sl],
+                    wf.scanner_index[sl],
+                    wf.scanner_xy_world,
+                    wf.dir_world[sl],
+                    wf.sigma_m,
                     st.icp,
                     prior_xytheta=prior,
                     search_radius_m=radius,
-                    free_rays=fp.free_rays(k),
+                    free_rays=wf.free_rays(k - w0),
                 )
             if acq is None or acq.fit.rms_m > st.max_rms_m:
                 reasons[k] = "hull not found"
@@ -707,10 +725,10 @@ def track_frames(
         end = k + n_fit
         pred, pred_cov = pred[:n_fit], pred_cov[:n_fit]
         vel = pred_state.x[3:]
-        sl = slice(int(fp.frame_start[k]), int(fp.frame_start[end]))
-        fid = np.repeat(np.arange(end - k), np.diff(fp.frame_start[k : end + 1]))
-        xy = fp.xy_world[sl]
-        dt = fp.dt_s[sl]
+        sl = slice(int(wf.frame_start[k - w0]), int(wf.frame_start[end - w0]))
+        fid = np.repeat(np.arange(end - k), np.diff(wf.frame_start[k - w0 : end - w0 + 1]))
+        xy = wf.xy_world[sl]
+        dt = wf.dt_s[sl]
         # motion within the frame: bring each point back to the frame time
         pc = pred[fid]
         xy = compensate_motion(xy, dt, vel, pc)
@@ -723,10 +741,10 @@ def track_frames(
             model,
             xy[near],
             fid[near],
-            fp.scanner_index[sl][near],
-            fp.scanner_xy_world,
-            fp.dir_world[sl][near],
-            fp.sigma_m,
+            wf.scanner_index[sl][near],
+            wf.scanner_xy_world,
+            wf.dir_world[sl][near],
+            wf.sigma_m,
             pred,
             st.icp,
         )
@@ -803,7 +821,7 @@ def track_frames(
         # frame: after smoothing
         cov = cov + np.nan_to_num(cov_bias)
     # the scanners' clocks: the motion a stamp offset hides (the rig's stamp_sigma_s)
-    cov = cov + timing_covariance(fp, stamps, xytheta, track_id)
+    cov = cov + timing_covariance(counts, fp.stamp_sigma_s, stamps, xytheta, track_id)
     if cov_cal is not None:
         cov = cov + cov_cal
     else:
