@@ -188,6 +188,14 @@ class FrameLayout:
         j = self.nearest[s]
         return int(np.searchsorted(j, a, "left")), int(np.searchsorted(j, b, "left"))
 
+    def part(self, a: int, b: int) -> FrameLayout:
+        """Frames ``[a, b)`` and the scans :meth:`scans` gives for them (frame indices from 0 at ``a``)."""
+        lohi = [self.scans(i, a, b) for i in range(len(self.nearest))]
+        def cut(arrays: tuple[np.ndarray, ...], minus: int = 0) -> tuple[np.ndarray, ...]:
+            return tuple(x[lo:hi] - minus if minus else x[lo:hi] for x, (lo, hi) in zip(arrays, lohi, strict=True))
+
+        return FrameLayout(self.frame_stamps_s[a:b], cut(self.stamps_s), cut(self.nearest, a), cut(self.joins))
+
 
 def frame_layout(scanners: Sequence[LaserScanner], stamps_s: Sequence[np.ndarray]) -> FrameLayout:
     """The frames of a sequence and the frame each scan joins (the grouping of :func:`frame_points`).
