@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import yaml
@@ -33,6 +33,7 @@ from gtrig.rig.load import load_rig
 from gtrig.rig.models import LaserScanner, Rig
 
 log = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
 OBJECT_FILE = "calib/laser_object.yaml"
 
@@ -47,13 +48,19 @@ def read_scanner_logs(folder: str | os.PathLike[str], rig: Rig, what: str = "seq
     FormatError
         From :func:`gtrig.io.scans.read_scans`: wrong beam count, time stamps not increasing...
     """
+    return _scanner_files(folder, rig, what, read_scans)
+
+
+def _scanner_files(folder: str | os.PathLike[str], rig: Rig, what: str,
+                   reader: Callable[[Path, LaserScanner], _T]) -> dict[str, _T]:
+    """``reader(<folder>/<scanner>.csv, scanner)`` of every scanner of ``rig`` (read or indexed)."""
     folder = Path(folder)
     out = {}
     for s in rig.laser_scanners:
         p = folder / f"{s.name}.csv"
         if not p.is_file():
             raise InputError(f"scanner {s.name}: no {what} scans ({p} is missing)")
-        out[s.name] = read_scans(p, s)
+        out[s.name] = reader(p, s)
     return out
 
 
@@ -244,13 +251,7 @@ def logged_frames(
     """The frames of ``seq_dir/lasers/<scanner>.csv`` as :class:`LoggedFrames` (each log indexed, not
     read: :func:`gtrig.io.scans.index_scans`), and the rig, moved onto the reference clock of
     ``clocks`` (:func:`gtrig.laser.clock.on_clock`) when given."""
-    folder = Path(seq_dir) / "lasers"
-    rows = {}
-    for s in rig.laser_scanners:
-        p = folder / f"{s.name}.csv"
-        if not p.is_file():
-            raise InputError(f"scanner {s.name}: no sequence scans ({p} is missing)")
-        rows[s.name] = index_scans(p, s)
+    rows = _scanner_files(Path(seq_dir) / "lasers", rig, "sequence", index_scans)
     if clocks:
         rig, _ = on_clock(rig, {}, clocks)
         rows = {k: v.shifted(clocks[k].offset_s) if k in clocks else v for k, v in rows.items()}
