@@ -28,6 +28,7 @@ The loop (journal paper, section 6, with the additions of issue 7):
 from __future__ import annotations
 
 import logging
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -418,43 +419,68 @@ def _refine_with_side_bias(
     poses = [raw[ok]]  # the OK frames' poses each pass starts from
     betas = [np.zeros(4)]  # the total correction of the points after each pass
 
+    # a source read from the logs makes each window's points once; the pass's three other readings of
+    # them come from a temporary file (parsing the logs' text again cost ~1/3 of GTlaser's CPU)
+    spill = None if isinstance(fp, FramedPoints) else tempfile.TemporaryFile()
+    placed: dict[int, int] = {}
+
+    def made(w: int) -> tuple[np.ndarray, ...]:
+        """Window ``w``'s OK points as the source makes them: (M, 2) world points, (M,) firing times
+        after the frame's stamp, their frame among the window's OK frames, scanner index, (M, 2) beam
+        directions."""
+        if spill is not None and w in placed:
+            spill.seek(placed[w])
+            return tuple(np.load(spill) for _ in range(5))
+        a, b = windows[w]
+        win = fp.window(a, b, scans=False)
+        pt, fid = _frame_points_of(win, ok[a:b])
+        out = (win.xy_world[pt], win.dt_s[pt], fid, win.scanner_index[pt], win.dir_world[pt])
+        if spill is not None:
+            placed[w] = spill.seek(0, 2)
+            for x in out:
+                np.save(spill, x)
+        return out
+
     def points(w: int, passes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Window ``w``'s OK points de-skewed and corrected by the first ``passes`` passes: (M, 2) world
         points, (M,) their frame among the window's OK frames, scanner index, (M, 2) beam directions."""
         a, b = windows[w]
-        win, sel = fp.window(a, b, scans=False), ok[a:b]
-        pt, fid = _frame_points_of(win, sel)
-        xy = compensate_motion(win.xy_world[pt], win.dt_s[pt], vel[a:b][sel][fid], smoothed[a:b][sel][fid, :2])
-        sid, d = win.scanner_index[pt], win.dir_world[pt]
+        sel = ok[a:b]
+        p, dt, fid, sid, d = made(w)
+        xy = compensate_motion(p, dt, vel[a:b][sel][fid], smoothed[a:b][sel][fid, :2])
         for m in range(passes):
             side = assigned_sides(model, xy, fid, sid, S, d, sig, poses[m][rows[w]:rows[w + 1]], st.icp)
             xy = xy - ((betas[m + 1] - betas[m])[side])[:, None] * d
         return xy, fid, sid, d
 
-    bias = SideBias.prior(prior)
-    cov = raw_cov[ok]
-    for it in range(iterations):
-        pose = poses[it]
-        Nu = []
-        for w in range(len(windows)):
-            xy, fid, sid, d = points(w, it)
-            eqs = side_bias_normal_equations(model, xy, fid, sid, S, d, sig, pose[rows[w]:rows[w + 1]], st.icp)
-            Nu.append(reduced_normal_equations(*eqs))
-        N = np.concatenate([n for n, _ in Nu])
-        # the prior holds the total bias: solve for it with the points' current correction undone
-        u = np.concatenate([u for _, u in Nu]) - np.einsum("kab,b->ka", N, betas[it])
-        bias = estimate_side_bias(N, u, stamps[ok], prior)
-        betas.append(bias.bias_m)
+    try:
+        bias = SideBias.prior(prior)
+        cov = raw_cov[ok]
+        for it in range(iterations):
+            pose = poses[it]
+            Nu = []
+            for w in range(len(windows)):
+                xy, fid, sid, d = points(w, it)
+                eqs = side_bias_normal_equations(model, xy, fid, sid, S, d, sig, pose[rows[w]:rows[w + 1]], st.icp)
+                Nu.append(reduced_normal_equations(*eqs))
+            N = np.concatenate([n for n, _ in Nu])
+            # the prior holds the total bias: solve for it with the points' current correction undone
+            u = np.concatenate([u for _, u in Nu]) - np.einsum("kab,b->ka", N, betas[it])
+            bias = estimate_side_bias(N, u, stamps[ok], prior)
+            betas.append(bias.bias_m)
 
-        def fit(w: int, min_iterations: int, it: int = it) -> HullFitBatch:
-            xy, fid, sid, d = points(w, it + 1)
-            return fit_hull_batch(model, xy, fid, sid, S, d, sig, poses[it][rows[w]:rows[w + 1]], st.icp,
-                                  min_iterations=min_iterations)
+            def fit(w: int, min_iterations: int, it: int = it) -> HullFitBatch:
+                xy, fid, sid, d = points(w, it + 1)
+                return fit_hull_batch(model, xy, fid, sid, S, d, sig, poses[it][rows[w]:rows[w + 1]], st.icp,
+                                      min_iterations=min_iterations)
 
-        fits = _fit_windows(fit, len(windows))
-        good = np.concatenate([~f.degenerate & (f.n_points >= st.icp.min_points) for f in fits])
-        poses.append(np.where(good[:, None], np.concatenate([f.xytheta for f in fits]), pose))
-        cov = np.where(good[:, None, None], np.concatenate([f.cov_xytheta for f in fits]), cov)
+            fits = _fit_windows(fit, len(windows))
+            good = np.concatenate([~f.degenerate & (f.n_points >= st.icp.min_points) for f in fits])
+            poses.append(np.where(good[:, None], np.concatenate([f.xytheta for f in fits]), pose))
+            cov = np.where(good[:, None, None], np.concatenate([f.cov_xytheta for f in fits]), cov)
+    finally:
+        if spill is not None:
+            spill.close()
     raw[ok], raw_cov[ok] = poses[-1], cov
     log.info("hull sides' range bias %s mm (std %s mm, variance factor %.2f over %d blocks)",
              np.array2string(1000 * bias.bias_m, precision=1),
@@ -469,7 +495,7 @@ def _fit_windows(fit: Callable[[int, int], HullFitBatch], n_windows: int) -> lis
     One fit stops at the first iteration where every frame has converged, and a frame's pose changes
     with every iteration done; a window's own stop is never after the whole fit's, so the latest stop
     is a lower bound of it: the windows that stopped earlier are fitted again to at least that many
-    iterations, until all stop at the same one (usually one round more for a few windows)."""
+    iterations, until all stop at the same one (on the simulated 75 s runs no window needed it)."""
     fits = [fit(w, 0) for w in range(n_windows)]
     while fits:
         g = max(f.iterations for f in fits)
