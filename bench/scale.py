@@ -19,9 +19,14 @@ Measured, each in its own process (so each peak is its own):
   noise, flips, motion compensation and the written track, on ``--minutes`` and on fractions of it to
   show how the client's peak grows with the recording's length.
 
+GTlaser's client memory against the laser log's length (``--laser-minutes``): a full recording's
+``run/lasers/*.csv`` repeated, lap after lap, with their stamps moved on by the log's length (the robot
+jumps back at each seam: the track is lost and found again), tracked in a process of its own.
+
 Usage::
 
     python bench/scale.py --source REC --rig RESULTS/rig.calibrated.yaml --minutes 60 --work /tmp/scale
+    python bench/scale.py --laser-source REC --rig RESULTS/rig.calibrated.yaml --laser-minutes 5 15 --work W
 """
 
 from __future__ import annotations
@@ -182,6 +187,59 @@ def seed_checkpoint(long_rec: Path, rig_path: Path, cycle_ck: Path, out_ck: Path
     return n_lines
 
 
+def make_long_laser(source: Path, out: Path, seconds: float) -> int:
+    """``out/run/lasers/<scanner>.csv``: ``source``'s run scans repeated for ``seconds`` (each repeat's
+    stamps moved on by the log's length, written with 9 decimals as the simulator does), ``out/background``
+    linked to ``source``'s. Returns the repeats."""
+    import numpy as np
+
+    from gtrig.io.scans import index_scans
+
+    logs = sorted((source / "run" / "lasers").glob("*.csv"))
+    rows = [index_scans(p) for p in logs]
+    first = min(float(r.stamps_s[0]) for r in rows)
+    last = max(float(r.stamps_s[-1]) for r in rows)
+    period = last - first + float(np.median(np.diff(rows[0].stamps_s)))
+    reps = max(1, int(round(seconds / period)))
+    (out / "run" / "lasers").mkdir(parents=True, exist_ok=True)
+    if not (out / "background").exists():
+        (out / "background").symlink_to((source / "background").resolve())
+    for p in logs:
+        dst = out / "run" / "lasers" / p.name
+        if dst.is_file():
+            continue
+        tmp = dst.with_suffix(".tmp")
+        with open(p, encoding="utf-8") as f:
+            header, body = f.readline(), f.readlines()
+        with open(tmp, "w", encoding="utf-8") as g:
+            g.write(header)
+            for k in range(reps):
+                for line in body:
+                    t, rest = line.split(",", 1)
+                    g.write(f"{float(t) + k * period:.9f},{rest}")
+        tmp.rename(dst)
+    return reps
+
+
+def child_laser(rec: Path, rig_path: Path, mode: str) -> dict[str, object]:
+    """GTlaser's run of ``rec`` (``track_recording``) on ``mode`` (pool:N or dask:N), in this process: frames,
+    wall, the client's CPU and peak RSS, the pool workers' peak RSS."""
+    from gtrig.executor import open_executor
+    from gtrig.laser.recording import track_recording
+    from gtrig.rig.load import load_rig
+
+    kind, n = mode.split(":")
+    t0, c0 = time.time(), time.process_time()
+    with open_executor(f"local:{n}" if kind == "dask" else None) as ex:
+        res = track_recording(rec, "run", rig=load_rig(rig_path), executor=ex, workers=int(n))
+    out = {"mode": mode, "frames": len(res), "ok": res.counts()["ok"], "wall_s": time.time() - t0,
+           "client_cpu_s": time.process_time() - c0}
+    # (ru_maxrss is in kB here; MB = 1000 kB, as lasermem.py and the GTlaser figures of BENCHMARKS.md)
+    out["client_peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
+    out["pool_worker_peak_mb"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e3
+    return out
+
+
 def _child(args: list[str]) -> dict[str, object]:
     cmd = [sys.executable, __file__, "--child", *args]
     env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
@@ -223,8 +281,34 @@ def main() -> None:
     ap.add_argument("--end-to-end", nargs="*", default=[], metavar="MODE",
                     help="also detect every image of the whole --minutes run (no seeded checkpoint) on each MODE "
                          "(pool:N, dask:N, tcp:N); resumable: rerun to continue from its checkpoint")
+    ap.add_argument("--laser-source", type=Path, help="a full recording whose laser logs --laser-minutes repeats")
+    ap.add_argument("--laser-minutes", type=float, nargs="*", default=[],
+                    help="GTlaser's client memory on laser logs this long (minutes, each in its own process)")
+    ap.add_argument("--laser-mode", default="pool:2", help="executor of the GTlaser runs: pool:N or dask:N")
     ap.add_argument("--child", nargs="*", help=argparse.SUPPRESS)
+    ap.add_argument("--laser-child", nargs=3, help=argparse.SUPPRESS)
     a = ap.parse_args()
+    if a.laser_child:
+        rec, rig, mode = a.laser_child
+        print(json.dumps(child_laser(Path(rec), Path(rig), mode)))
+        return
+    if a.laser_minutes:
+        if a.laser_source is None or a.rig is None:
+            ap.error("--laser-minutes needs --laser-source REC and --rig RIG")
+        env = dict(os.environ, PYTHONPATH=str(REPO))
+        for minutes in a.laser_minutes:
+            rec = a.work / f"laser_{minutes:g}min"
+            reps = make_long_laser(a.laser_source, rec, 60 * minutes)
+            cmd = [sys.executable, __file__, "--laser-child", str(rec), str(a.rig), a.laser_mode]
+            r = subprocess.run(cmd, capture_output=True, text=True, env=env)
+            if r.returncode != 0:
+                raise RuntimeError(f"{' '.join(cmd)} failed:\n{r.stderr[-3000:]}")
+            d = json.loads(r.stdout.strip().splitlines()[-1])
+            print(f"GTlaser {minutes:g} min ({reps} repeats of {a.laser_source}) on {a.laser_mode}: "
+                  f"{d['frames']} frames ({d['ok']} OK), {d['wall_s']:.0f} s wall, client CPU "
+                  f"{d['client_cpu_s']:.0f} s; client peak "
+                  f"{d['client_peak_mb']:.0f} MB, pool worker peak {d['pool_worker_peak_mb']:.0f} MB", flush=True)
+        return
     if a.child:
         rec, rig, mode, ck = a.child
         print(json.dumps(child_vision(Path(rec), Path(rig), mode, Path(ck) if ck != "-" else None)))

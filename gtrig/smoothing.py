@@ -72,6 +72,10 @@ def rts_smooth(
     return rts_smooth_varying(stamps_s, z_xytheta, R_z, np.broadcast_to(qd, (len(stamps_s), 3)))
 
 
+#: frames per block of :func:`rts_smooth_varying`'s backward pass (its memory: a block's states, not a track's)
+SMOOTH_BLOCK_FRAMES = 256
+
+
 def rts_smooth_varying(
     stamps_s: np.ndarray, z_xytheta: np.ndarray, R_z: np.ndarray, qd: np.ndarray, order: int = 2
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -89,41 +93,73 @@ def rts_smooth_varying(
         2: constant velocity (state pose, velocity); 3: constant acceleration (pose, velocity,
         acceleration), which follows a robot braking into a bend without the lag a constant-velocity
         model needs a loose process noise to avoid, so it can average over more frames.
+
+    The forward filter keeps its state only at the start of each block of :data:`SMOOTH_BLOCK_FRAMES`
+    frames; the backward pass runs it again over each block, from the last, from that state (the
+    same operations, so the same bits): an hour-long track holds a block's predicted and filtered
+    states, not ~4 kB per frame of them (issue 24), for a second forward pass.
     """
     n = len(stamps_s)
     m = 3 * order
     dt = np.r_[0.0, np.diff(stamps_s)]
-    F, Q = white_noise_model(dt, np.asarray(qd, dtype=float), order)
+    qd = np.broadcast_to(np.asarray(qd, dtype=float), (n, 3))
     meas = np.isfinite(z_xytheta[:, 0])
-    xf = np.zeros((n, m))
-    Pf = np.zeros((n, m, m))
-    xp = np.zeros((n, m))
-    Pp = np.zeros((n, m, m))
     first = int(np.flatnonzero(meas)[0])
     x = np.zeros(m)
     x[:3] = z_xytheta[first]
     P = np.eye(m)
     P[:3, :3] = R_z[first]
-    for k in range(n):
-        if k > 0:
-            Fk = F[k]
-            x = Fk @ x
-            P = Fk @ P @ Fk.T + Q[k]
-        xp[k], Pp[k] = x, P
-        if meas[k]:
-            Kg = P[:, :3] @ np.linalg.inv(P[:3, :3] + R_z[k])
-            x = x + Kg @ (z_xytheta[k] - x[:3])
-            P = P - Kg @ P[:3, :]
-            P = 0.5 * (P + P.T)
-        xf[k], Pf[k] = x, P
-    # smoother gains C_k = Pf_k F_{k+1}^T Pp_{k+1}^-1, all at once
-    C = np.zeros((n, m, m))
-    if n > 1:
-        C[:-1] = Pf[:-1] @ np.swapaxes(F[1:], 1, 2) @ np.linalg.inv(Pp[1:])
-    xs = xf.copy()
-    Ps = Pf.copy()
-    for k in range(n - 2, -1, -1):
-        Ck = C[k]
-        xs[k] = xf[k] + Ck @ (xs[k + 1] - xp[k + 1])
-        Ps[k] = Pf[k] + Ck @ (Ps[k + 1] - Pp[k + 1]) @ Ck.T
-    return xs[:, :3], Ps[:, :3, :3]
+    W = SMOOTH_BLOCK_FRAMES
+    starts = list(range(0, n, W))
+
+    def forward(k0: int, x: np.ndarray, P: np.ndarray, keep: bool) -> tuple[np.ndarray, np.ndarray, tuple]:
+        """The filter over frames ``[k0, k0 + W)`` from the state before ``k0``: the state after, and
+        with ``keep`` the block's transitions, predicted and filtered states."""
+        k1 = min(n, k0 + W)
+        F, Q = white_noise_model(dt[k0:k1], qd[k0:k1], order)
+        kept = (F, np.zeros((k1 - k0, m)), np.zeros((k1 - k0, m, m)), np.zeros((k1 - k0, m)),
+                np.zeros((k1 - k0, m, m))) if keep else ()
+        for i, k in enumerate(range(k0, k1)):
+            if k > 0:
+                Fk = F[i]
+                x = Fk @ x
+                P = Fk @ P @ Fk.T + Q[i]
+            if keep:
+                kept[1][i], kept[2][i] = x, P
+            if meas[k]:
+                Kg = P[:, :3] @ np.linalg.inv(P[:3, :3] + R_z[k])
+                x = x + Kg @ (z_xytheta[k] - x[:3])
+                P = P - Kg @ P[:3, :]
+                P = 0.5 * (P + P.T)
+            if keep:
+                kept[3][i], kept[4][i] = x, P
+        return x, P, kept
+
+    checkpoints = []
+    for k0 in starts:
+        checkpoints.append((x, P))
+        x, P, _ = forward(k0, x, P, False)
+    xs_out = np.zeros((n, 3))
+    Ps_out = np.zeros((n, 3, 3))
+    nxt: tuple = ()  # the later block's first frame: transition, predicted state, smoothed state
+    for b in range(len(starts) - 1, -1, -1):
+        k0 = starts[b]
+        _, _, (F, xp, Pp, xf, Pf) = forward(k0, *checkpoints[b], True)
+        L = len(xf)
+        if nxt:
+            F1 = np.concatenate([F[1:], nxt[0][None]])
+            xp1, Pp1 = np.concatenate([xp[1:], nxt[1][None]]), np.concatenate([Pp[1:], nxt[2][None]])
+        else:
+            F1, xp1, Pp1 = F[1:], xp[1:], Pp[1:]
+        # smoother gains C_k = Pf_k F_{k+1}^T Pp_{k+1}^-1, a block at once
+        C = Pf[:len(F1)] @ np.swapaxes(F1, 1, 2) @ np.linalg.inv(Pp1)
+        xs, Ps = (nxt[3], nxt[4]) if nxt else (xf[L - 1], Pf[L - 1])
+        if not nxt:
+            xs_out[k0 + L - 1], Ps_out[k0 + L - 1] = xs[:3], Ps[:3, :3]
+        for i in range(len(C) - 1, -1, -1):
+            Ck = C[i]
+            xs = xf[i] + Ck @ (xs - xp1[i])
+            Ps = Pf[i] + Ck @ (Ps - Pp1[i]) @ Ck.T
+            xs_out[k0 + i], Ps_out[k0 + i] = xs[:3], Ps[:3, :3]
+        nxt = (F[0], xp[0], Pp[0], xs, Ps)
+    return xs_out, Ps_out

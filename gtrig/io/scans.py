@@ -8,7 +8,7 @@ every error is one line naming the file and line.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Protocol
 
@@ -161,6 +161,173 @@ def read_scans(
         raise FormatError(f"{p}:{line_no[i]}: infinite range (write nan for no return)")
     _check_unit(p, ranges, getattr(scanner, "range_max_m", None))
     return ScanLog(stamps, np.ascontiguousarray(ranges))
+
+
+@dataclass(frozen=True)
+class ScanRows:
+    """Where each scan of a scan CSV is, to read the scans a few at a time (:func:`index_scans`): a
+    recording's hours of scans are never in memory at once (issue 24; 20 bytes per scan).
+
+    Attributes
+    ----------
+    path : the file.
+    beams : ranges per scan.
+    stamps_s : (N,) strictly increasing seconds (as :class:`ScanLog`).
+    starts : (N,) byte offset of each scan's line.
+    line_no : (N,) its 1-based line number (for messages).
+    end : byte offset where the last scan's line ends.
+    """
+
+    path: Path
+    beams: int
+    stamps_s: np.ndarray
+    starts: np.ndarray
+    line_no: np.ndarray
+    end: int
+
+    def __len__(self) -> int:
+        return int(self.stamps_s.size)
+
+    def shifted(self, offset_s: float) -> ScanRows:
+        """The same scans with ``offset_s`` subtracted from their stamps (another clock)."""
+        return replace(self, stamps_s=self.stamps_s - offset_s)
+
+    def part(self, lo: int, hi: int) -> ScanRows:
+        """Scans ``[lo, hi)`` (their indices from 0)."""
+        end = int(self.starts[hi]) if hi < len(self) else self.end
+        return replace(self, stamps_s=self.stamps_s[lo:hi], starts=self.starts[lo:hi], line_no=self.line_no[lo:hi],
+                       end=end)
+
+    def read(self, lo: int, hi: int) -> np.ndarray:
+        """(hi - lo, beams) the ranges of scans ``[lo, hi)``, metres, the values :func:`read_scans` reads.
+
+        Raises
+        ------
+        FormatError
+            The file changed since it was indexed.
+        """
+        if hi <= lo:
+            return np.zeros((0, self.beams))
+        end = int(self.starts[hi]) if hi < len(self) else self.end
+        try:
+            with open(self.path, "rb") as f:
+                f.seek(int(self.starts[lo]))
+                data = f.read(end - int(self.starts[lo]))
+            lines = [t for t in data.decode("utf-8").splitlines() if _is_data(t)]
+        except (OSError, UnicodeDecodeError):
+            lines = []
+        if len(lines) != hi - lo:
+            raise FormatError(f"{self.path}: changed while it was read (scans {lo + 1}-{hi} are not where they were)")
+        a = parse_numbers(self.path, lines, [int(n) for n in self.line_no[lo:hi]], self.beams + 1)
+        return np.ascontiguousarray(a[:, 1:])
+
+
+def _is_data(line: str) -> bool:
+    """A data line of a CSV (:func:`data_lines` skips blank and ``#`` lines)."""
+    return bool(line.strip()) and not line.lstrip().startswith("#")
+
+
+#: data lines parsed at a time by :func:`index_scans` (bounds its memory: ~2 MB of text at 180 beams)
+INDEX_BLOCK_LINES = 2048
+
+
+def index_scans(
+    path: str | os.PathLike[str], scanner: _HasBeams | None = None, *, beams: int | None = None
+) -> ScanRows:
+    """Index a scan CSV: validate it as :func:`read_scans` does, a block of :data:`INDEX_BLOCK_LINES`
+    lines at a time, and keep only each scan's stamp and place (:class:`ScanRows`).
+
+    Parameters
+    ----------
+    As :func:`read_scans`.
+
+    Raises
+    ------
+    FormatError
+        The error :func:`read_scans` gives for the same file (a file found wrong here is read again
+        whole by it, for the same one line); also lines that end other than in ``\\n`` or
+        ``\\r\\n``, which a block-wise reading cannot place.
+    """
+    p = Path(path)
+    expected = scanner.beams if scanner is not None else beams
+    range_max = getattr(scanner, "range_max_m", None)
+    stamps: list[np.ndarray] = []
+    starts: list[int] = []
+    line_no: list[int] = []
+    block: list[str] = []
+    n_beams = -1
+    # the unit check of read_scans (median of the finite ranges beyond twice the maximum range),
+    # decided exactly from counts and the two values either side of the limit
+    n_fin = n_over = 0
+    below, above = -np.inf, np.inf
+
+    def refuse() -> FormatError:
+        read_scans(p, scanner, beams=beams)  # raises the same one-line error as the whole file's reading
+        return FormatError(f"{p}: line ends other than '\\n' or '\\r\\n' (a scan CSV is read by lines)")
+
+    def flush() -> bool:
+        nonlocal n_fin, n_over, below, above
+        try:
+            a = parse_numbers(p, block, line_no[-len(block):], n_beams + 1)
+        except FormatError:
+            return False
+        r = a[:, 1:]
+        if np.any(r < 0) or np.any(np.isinf(r)):
+            return False
+        stamps.append(a[:, 0].copy())
+        if range_max is not None:
+            lim = 2.0 * float(range_max)
+            fin = r[np.isfinite(r)]
+            n_fin += fin.size
+            over = fin > lim
+            n_over += int(over.sum())
+            if over.any():
+                above = min(above, float(fin[over].min()))
+            if not over.all():
+                below = max(below, float(fin[~over].max()))
+        block.clear()
+        return True
+
+    try:
+        f = open(p, "rb")
+    except OSError:
+        raise refuse() from None
+    with f:
+        pos = 0
+        for no, raw in enumerate(f, 1):
+            at, pos = pos, pos + len(raw)
+            try:
+                text = raw.decode("utf-8")
+            except UnicodeDecodeError:
+                raise refuse() from None
+            t = text.splitlines()
+            if len(t) > 1:
+                raise refuse()
+            line = t[0] if t else ""
+            if not _is_data(line):
+                continue
+            if n_beams < 0:
+                names = [h.strip() for h in line.strip().split(",")]
+                n_beams = len(names) - 1
+                if (names[0] != "timestamp" or n_beams < 1 or names[1:] != [f"r_{i}" for i in range(n_beams)]
+                        or (expected is not None and n_beams != expected)):
+                    raise refuse()
+                continue
+            starts.append(at)
+            line_no.append(no)
+            block.append(line)
+            if len(block) >= INDEX_BLOCK_LINES and not flush():
+                raise refuse()
+    if n_beams < 0 or (block and not flush()):
+        raise refuse()
+    st = np.concatenate(stamps) if stamps else np.zeros(0)
+    if not np.all(np.isfinite(st)) or np.any(np.diff(st) <= 0):
+        raise refuse()
+    # the median of n values is beyond the limit when more than half are; with exactly half, when the
+    # mean of the two middle ones (the largest below, the smallest beyond) is
+    if n_fin and (2 * n_over > n_fin or (2 * n_over == n_fin and 0.5 * (below + above) > 2.0 * float(range_max))):
+        raise refuse()
+    return ScanRows(p, n_beams, st, np.array(starts, dtype=np.int64), np.array(line_no, dtype=np.int64), pos)
 
 
 _ZERO4 = np.frombuffer("".join(f"{i:04d}" for i in range(10000)).encode(), np.uint8).reshape(10000, 4)

@@ -10,7 +10,8 @@ then walks the frames through ``frame_start``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 
@@ -62,6 +63,20 @@ class FramedPoints:
     def frame(self, k: int) -> slice:
         return slice(int(self.frame_start[k]), int(self.frame_start[k + 1]))
 
+    def window(self, a: int, b: int, scans: bool = True) -> FramedPoints:
+        """Frames ``[a, b)`` (frame indices from 0 at ``a``): views of their points and, with ``scans``,
+        of the raw scans (the global search's free-space test reads them), as :class:`FrameSource`."""
+        p0, p1 = int(self.frame_start[a]), int(self.frame_start[b])
+        raw = {} if scans else {"ranges_m": (), "masks": (), "beam_dirs": ()}
+        return replace(self, frame_stamps_s=self.frame_stamps_s[a:b], frame_start=self.frame_start[a:b + 1] - p0,
+                       xy_world=self.xy_world[p0:p1], scanner_index=self.scanner_index[p0:p1],
+                       dir_world=self.dir_world[p0:p1], dt_s=self.dt_s[p0:p1],
+                       scan_of_frame=self.scan_of_frame[:, a:b], **raw)  # type: ignore[arg-type]
+
+    def part(self, a: int, b: int) -> FramedPoints:
+        """Frames ``[a, b)`` to send to a worker: their points, without the raw scans."""
+        return self.window(a, b, scans=False)
+
     def free_rays(self, k: int, range_max_m: float = 30.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Beams of frame ``k`` that are not foreground: origins (R, 2), unit directions (R, 2) and the
         range (R,) up to which each saw free space (``range_max_m`` where there was no return)."""
@@ -77,6 +92,35 @@ class FramedPoints:
         if not o:
             return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
         return np.concatenate(o), np.concatenate(d), np.concatenate(r)
+
+
+class FrameSource(Protocol):
+    """The frames of a sequence, read a time window at a time: :class:`FramedPoints` (all in memory)
+    or :class:`gtrig.laser.recording.LoggedFrames` (from the scan logs on disk, issue 24)."""
+
+    @property
+    def frame_stamps_s(self) -> np.ndarray: ...  # (F,) seconds
+
+    @property
+    def scanner_xy_world(self) -> np.ndarray: ...  # (S, 2) world frame, metres
+
+    @property
+    def sigma_m(self) -> np.ndarray: ...  # (S,) range noise, metres
+
+    @property
+    def stamp_sigma_s(self) -> np.ndarray | None: ...  # (S,) clock offsets' standard deviation, seconds
+
+    @property
+    def n_frames(self) -> int: ...
+
+    def window(self, a: int, b: int, scans: bool = True) -> FramedPoints:
+        """Frames ``[a, b)`` as :class:`FramedPoints`, frame indices from 0 at ``a`` (with the raw scans
+        of those frames when ``scans``)."""
+        ...
+
+    def part(self, a: int, b: int) -> FrameSource:
+        """Frames ``[a, b)`` as a small picklable source (what a worker is sent; its frames from 0)."""
+        ...
 
 
 def beam_dirs_world(scanner: LaserScanner, T_world_scanner: np.ndarray | None = None) -> np.ndarray:
@@ -116,6 +160,164 @@ def check_stamps(stamps_s: np.ndarray, what: str) -> None:
         )
 
 
+@dataclass(frozen=True)
+class FrameLayout:
+    """Which scan of each scanner joins which frame, without the scans' ranges: what cutting a sequence
+    into time windows of frames needs (:func:`frame_layout`; 17 bytes per scan).
+
+    Attributes
+    ----------
+    frame_stamps_s : (F,) time of each frame (a reference-scanner stamp), seconds.
+    stamps_s : per scanner, (N_s,) its scan stamps, seconds (the frames' clock).
+    nearest : per scanner, (N_s,) the frame nearest each scan (non-decreasing).
+    joins : per scanner, (N_s,) whether the scan joins that frame (within half a reference period).
+    """
+
+    frame_stamps_s: np.ndarray
+    stamps_s: tuple[np.ndarray, ...]
+    nearest: tuple[np.ndarray, ...]
+    joins: tuple[np.ndarray, ...]
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.frame_stamps_s.size)
+
+    def scans(self, s: int, a: int, b: int) -> tuple[int, int]:
+        """The scans ``[lo, hi)`` of scanner ``s`` nearest the frames ``[a, b)`` (those that join them
+        and the scans between them that join none)."""
+        j = self.nearest[s]
+        return int(np.searchsorted(j, a, "left")), int(np.searchsorted(j, b, "left"))
+
+    def part(self, a: int, b: int) -> FrameLayout:
+        """Frames ``[a, b)`` and the scans :meth:`scans` gives for them (frame indices from 0 at ``a``)."""
+        lohi = [self.scans(i, a, b) for i in range(len(self.nearest))]
+        def cut(arrays: tuple[np.ndarray, ...], minus: int = 0) -> tuple[np.ndarray, ...]:
+            return tuple(x[lo:hi] - minus if minus else x[lo:hi] for x, (lo, hi) in zip(arrays, lohi, strict=True))
+
+        return FrameLayout(self.frame_stamps_s[a:b], cut(self.stamps_s), cut(self.nearest, a), cut(self.joins))
+
+
+def frame_layout(scanners: Sequence[LaserScanner], stamps_s: Sequence[np.ndarray]) -> FrameLayout:
+    """The frames of a sequence and the frame each scan joins (the grouping of :func:`frame_points`).
+
+    Parameters
+    ----------
+    scanners
+        The scanners (their rates and beam timing).
+    stamps_s
+        Per scanner, (N_s,) strictly increasing scan stamps, seconds (one clock).
+    """
+    if not scanners:
+        raise InputError("no laser scanners in the rig")
+    for s, st in zip(scanners, stamps_s, strict=True):
+        check_stamps(st, f"scanner {s.name}")
+    ref = int(np.argmax([len(st) for st in stamps_s]))
+    ref_st = np.asarray(stamps_s[ref], dtype=float)
+    if ref_st.size == 0:
+        raise InputError("no scans in the sequence")
+    half = 0.5 / scanners[ref].rate_hz
+    ref_delays = beam_delays_s(scanners[ref])
+    ref_mid = 0.5 * (ref_delays[0] + ref_delays[-1])
+    nearest, joins = [], []
+    for s, st in zip(scanners, stamps_s, strict=True):
+        st = np.asarray(st, dtype=float)
+        # a scan joins the frame whose reference sweep is nearest in the middle of the sweeps: scanners
+        # whose stamps refer to different instants of the sweep (start, end) still pair up right
+        delays = beam_delays_s(s)
+        mid = st + 0.5 * (delays[0] + delays[-1]) - ref_mid
+        if len(ref_st) == 1:
+            j = np.zeros(len(st), dtype=np.intp)
+        else:
+            j = np.clip(np.searchsorted(ref_st, mid), 1, len(ref_st) - 1)
+            j = np.where(np.abs(ref_st[j - 1] - mid) <= np.abs(ref_st[j] - mid), j - 1, j)
+        nearest.append(j)
+        joins.append(np.abs(mid - ref_st[j]) <= half * 1.0001)
+    return FrameLayout(ref_st.copy(), tuple(np.asarray(st, dtype=float) for st in stamps_s), tuple(nearest),
+                       tuple(joins))
+
+
+def window_points(
+    scanners: Sequence[LaserScanner],
+    layout: FrameLayout,
+    a: int,
+    b: int,
+    ranges_m: Sequence[np.ndarray],
+    masks: Sequence[np.ndarray],
+) -> FramedPoints:
+    """The frames ``[a, b)`` of ``layout`` as :class:`FramedPoints` (frame indices from 0 at ``a``).
+
+    Parameters
+    ----------
+    scanners
+        The scanners of ``layout``, with their (calibrated) ``T_world_scanner``.
+    layout
+        :func:`frame_layout` of the sequence.
+    a, b
+        The window's frames.
+    ranges_m, masks
+        Per scanner, (hi - lo, B_s) the ranges (metres) and foreground masks of its scans ``[lo, hi)`` =
+        ``layout.scans(s, a, b)``.
+
+    Each point's values and the points' order are those of :func:`frame_points` over the whole sequence
+    (every value is computed point by point), so windows give the same bits as one pass.
+    """
+    ref_st = layout.frame_stamps_s
+    xy, sid, dirs, dts, fidx = [], [], [], [], []
+    origins, all_dirs = [], []
+    scan_of_frame = np.full((len(scanners), b - a), -1, dtype=np.intp)
+    for i, (s, r, m) in enumerate(zip(scanners, ranges_m, masks, strict=True)):
+        T = s.T_world_scanner.matrix()
+        origins.append(T[:2, 3].copy())
+        dd = beam_dirs_world(s, T)
+        all_dirs.append(dd / np.linalg.norm(dd, axis=1, keepdims=True))
+        lo, hi = layout.scans(i, a, b)
+        if hi <= lo:
+            continue
+        j, keep_scan = layout.nearest[i][lo:hi], layout.joins[i][lo:hi]
+        delays = beam_delays_s(s)
+        dt = layout.stamps_s[i][lo:hi] - ref_st[j]
+        scan_of_frame[i, j[keep_scan] - a] = np.flatnonzero(keep_scan)
+        mm = m & keep_scan[:, None]
+        n_idx, b_idx = np.nonzero(mm)
+        d = beam_dirs_world(s, T)
+        rr = r[n_idx, b_idx]
+        xy.append(T[:2, 3] + rr[:, None] * d[b_idx])
+        dn = d[b_idx]
+        dirs.append(dn / np.linalg.norm(dn, axis=1, keepdims=True))
+        sid.append(np.full(n_idx.size, i, dtype=np.int32))
+        dts.append(dt[n_idx] + delays[b_idx])
+        fidx.append(j[n_idx] - a)
+    if xy:
+        fi = np.concatenate(fidx)
+        order = np.argsort(fi, kind="stable")
+        xy_a = np.concatenate(xy)[order]
+        sid_a = np.concatenate(sid)[order]
+        dir_a = np.concatenate(dirs)[order]
+        dt_a = np.concatenate(dts)[order]
+        fi = fi[order]
+    else:
+        fi = np.zeros(0, dtype=int)
+        xy_a, dir_a = np.zeros((0, 2)), np.zeros((0, 2))
+        sid_a, dt_a = np.zeros(0, dtype=np.int32), np.zeros(0)
+    start = np.searchsorted(fi, np.arange(b - a + 1))
+    return FramedPoints(
+        frame_stamps_s=ref_st[a:b].copy(),
+        frame_start=start,
+        xy_world=np.ascontiguousarray(xy_a),
+        scanner_index=sid_a,
+        dir_world=np.ascontiguousarray(dir_a),
+        dt_s=dt_a,
+        scanner_xy_world=np.array(origins),
+        sigma_m=np.array([s.range_sigma_m for s in scanners]),
+        scanner_names=tuple(s.name for s in scanners),
+        scan_of_frame=scan_of_frame,
+        ranges_m=tuple(np.asarray(r, dtype=float) for r in ranges_m),
+        masks=tuple(masks),
+        beam_dirs=tuple(all_dirs),
+        stamp_sigma_s=np.array([s.stamp_sigma_s for s in scanners]),
+    )
+
+
 def frame_points(
     scanners: Sequence[LaserScanner],
     stamps_s: Sequence[np.ndarray],
@@ -137,74 +339,11 @@ def frame_points(
     """
     if not scanners:
         raise InputError("no laser scanners in the rig")
-    for s, st, r in zip(scanners, stamps_s, ranges_m, strict=True):
+    for s, r in zip(scanners, ranges_m, strict=True):
         if r.shape[1] != s.beams:
             raise InputError(f"scanner {s.name}: scans have {r.shape[1]} beams, the rig says {s.beams}")
-        check_stamps(st, f"scanner {s.name}")
-    ref = int(np.argmax([len(st) for st in stamps_s]))
-    ref_st = np.asarray(stamps_s[ref], dtype=float)
-    if ref_st.size == 0:
-        raise InputError("no scans in the sequence")
-    half = 0.5 / scanners[ref].rate_hz
-    ref_delays = beam_delays_s(scanners[ref])
-    ref_mid = 0.5 * (ref_delays[0] + ref_delays[-1])
-    xy, sid, dirs, dts, fidx = [], [], [], [], []
-    origins, all_dirs = [], []
-    scan_of_frame = np.full((len(scanners), len(ref_st)), -1, dtype=np.intp)
-    for i, (s, st, r, m) in enumerate(zip(scanners, stamps_s, ranges_m, masks, strict=True)):
-        T = s.T_world_scanner.matrix()
-        origins.append(T[:2, 3].copy())
-        dd = beam_dirs_world(s, T)
-        all_dirs.append(dd / np.linalg.norm(dd, axis=1, keepdims=True))
-        if len(st) == 0:
-            continue
-        # a scan joins the frame whose reference sweep is nearest in the middle of the sweeps: scanners
-        # whose stamps refer to different instants of the sweep (start, end) still pair up right
-        delays = beam_delays_s(s)
-        mid = st + 0.5 * (delays[0] + delays[-1]) - ref_mid
-        j = np.clip(np.searchsorted(ref_st, mid), 1, len(ref_st) - 1)
-        j = np.where(np.abs(ref_st[j - 1] - mid) <= np.abs(ref_st[j] - mid), j - 1, j)
-        if len(ref_st) == 1:
-            j = np.zeros(len(st), dtype=int)
-        dt = st - ref_st[j]
-        keep_scan = np.abs(mid - ref_st[j]) <= half * 1.0001
-        scan_of_frame[i, j[keep_scan]] = np.flatnonzero(keep_scan)
-        mm = m & keep_scan[:, None]
-        n_idx, b_idx = np.nonzero(mm)
-        d = beam_dirs_world(s, T)
-        rr = r[n_idx, b_idx]
-        xy.append(T[:2, 3] + rr[:, None] * d[b_idx])
-        dn = d[b_idx]
-        dirs.append(dn / np.linalg.norm(dn, axis=1, keepdims=True))
-        sid.append(np.full(n_idx.size, i, dtype=np.int32))
-        dts.append(dt[n_idx] + delays[b_idx])
-        fidx.append(j[n_idx])
-    if xy:
-        fi = np.concatenate(fidx)
-        order = np.argsort(fi, kind="stable")
-        xy_a = np.concatenate(xy)[order]
-        sid_a = np.concatenate(sid)[order]
-        dir_a = np.concatenate(dirs)[order]
-        dt_a = np.concatenate(dts)[order]
-        fi = fi[order]
-    else:
-        fi = np.zeros(0, dtype=int)
-        xy_a, dir_a = np.zeros((0, 2)), np.zeros((0, 2))
-        sid_a, dt_a = np.zeros(0, dtype=np.int32), np.zeros(0)
-    start = np.searchsorted(fi, np.arange(len(ref_st) + 1))
-    return FramedPoints(
-        frame_stamps_s=ref_st.copy(),
-        frame_start=start,
-        xy_world=np.ascontiguousarray(xy_a),
-        scanner_index=sid_a,
-        dir_world=np.ascontiguousarray(dir_a),
-        dt_s=dt_a,
-        scanner_xy_world=np.array(origins),
-        sigma_m=np.array([s.range_sigma_m for s in scanners]),
-        scanner_names=tuple(s.name for s in scanners),
-        scan_of_frame=scan_of_frame,
-        ranges_m=tuple(np.asarray(r, dtype=float) for r in ranges_m),
-        masks=tuple(masks),
-        beam_dirs=tuple(all_dirs),
-        stamp_sigma_s=np.array([s.stamp_sigma_s for s in scanners]),
-    )
+    layout = frame_layout(scanners, stamps_s)
+    F = layout.n_frames
+    lohi = [layout.scans(i, 0, F) for i in range(len(scanners))]
+    return window_points(scanners, layout, 0, F, [r[lo:hi] for r, (lo, hi) in zip(ranges_m, lohi, strict=True)],
+                         [m[lo:hi] for m, (lo, hi) in zip(masks, lohi, strict=True)])

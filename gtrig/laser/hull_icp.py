@@ -246,6 +246,7 @@ def fit_hull_batch(
     init_xytheta: np.ndarray,
     settings: IcpSettings = IcpSettings(),
     wide_gate_m: float | None = None,
+    min_iterations: int = 0,
 ) -> HullFitBatch:
     """Fit the hull independently in K frames at once (vectorised over all their points).
 
@@ -271,6 +272,11 @@ def fit_hull_batch(
         Gates, robust weighting, stopping rule and degeneracy thresholds.
     wide_gate_m
         Gate of the first iteration (default ``2 * settings.gate_m``), to pull in from a rough start.
+    min_iterations
+        Iterate at least this often (up to ``settings.max_iterations``) before the stopping rule may
+        stop: the batch stops when all its frames have converged, so a batch cut into windows iterates
+        as the whole one would only if every window does as many iterations (GTlaser's side-bias pass,
+        :mod:`gtrig.laser.track`).
 
     Returns
     -------
@@ -306,6 +312,7 @@ def fit_hull_batch(
         pose = pose + delta
         if (
             it > 1
+            and it >= min_iterations
             and np.all(np.hypot(delta[:, 0], delta[:, 1]) < st.tol_m)
             and np.all(np.abs(delta[:, 2]) < st.tol_rad)
         ):

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gtrig.smoothing import white_noise_model
+from gtrig.smoothing import SMOOTH_BLOCK_FRAMES, white_noise_model
 
 
 def innovation_loglik(
@@ -72,13 +72,15 @@ def innovation_loglik_terms(
     P = np.tile(np.eye(m), (G, 1, 1))
     P[:, :3, :3] = R_z[first]
     dts = np.diff(stamps_s[meas])
-    Fs, _ = white_noise_model(dts, np.zeros(3), order)
-    _, Qunit = white_noise_model(dts, np.ones(3), order)  # per unit density, axis by axis
     axis = np.tile(np.arange(3), order)
+    W = SMOOTH_BLOCK_FRAMES  # the steps' transitions made a block at a time (a track's would be ~1.3 kB a step)
     for n_k, k in enumerate(meas[1:]):
-        F = Fs[n_k]
+        if n_k % W == 0:
+            Fs, _ = white_noise_model(dts[n_k:n_k + W], np.zeros(3), order)
+            _, Qunit = white_noise_model(dts[n_k:n_k + W], np.ones(3), order)  # per unit density, axis by axis
+        F = Fs[n_k % W]
         x = x @ F.T
-        Qg = Qunit[n_k][None] * np.sqrt(qd[:, axis][:, :, None] * qd[:, axis][:, None, :])
+        Qg = Qunit[n_k % W][None] * np.sqrt(qd[:, axis][:, :, None] * qd[:, axis][:, None, :])
         P = F @ P @ F.T + Qg
         S = P[:, :3, :3] + R_z[k]
         Si = np.linalg.inv(S)
@@ -123,10 +125,16 @@ def local_ml_process_noise(
     a = np.asarray(accel_std_grid_mps2, dtype=float)
     b = np.asarray(ang_accel_std_grid_radps2, dtype=float)
     terms = innovation_loglik_terms(stamps_s, z_xytheta, R_z, a**2, b**2, order)  # (n, A, B)
-    c = np.concatenate([np.zeros((1,) + terms.shape[1:]), np.cumsum(terms, axis=0)])
+    shape = terms.shape[1:]
+    c = np.zeros((len(terms) + 1,) + shape)
+    np.cumsum(terms, axis=0, out=c[1:])
+    del terms
     t = np.asarray(stamps_s, dtype=float)
     lo = np.searchsorted(t, t - window_s / 2, side="left")
     hi = np.searchsorted(t, t + window_s / 2, side="right")
-    ll = (c[hi] - c[lo]).reshape(len(t), -1)
-    i, j = np.unravel_index(np.argmax(ll, axis=1), terms.shape[1:])
+    best = np.zeros(len(t), dtype=np.intp)
+    for k0 in range(0, len(t), SMOOTH_BLOCK_FRAMES):  # the windows' sums a block at a time
+        k1 = k0 + SMOOTH_BLOCK_FRAMES
+        best[k0:k1] = np.argmax((c[hi[k0:k1]] - c[lo[k0:k1]]).reshape(len(lo[k0:k1]), -1), axis=1)
+    i, j = np.unravel_index(best, shape)
     return a[i], b[j]

@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import yaml
@@ -18,20 +19,21 @@ import yaml
 from gtrig.errors import ConfigError, FormatError, InputError
 from gtrig.io.atomic import atomic_open
 from gtrig.io.posetrack import write_pose_track
-from gtrig.io.scans import ScanLog, read_scans
+from gtrig.io.scans import ScanLog, ScanRows, index_scans, read_scans
 from gtrig.io.text import read_text
 from gtrig.io.yamlfile import safe_load
 from gtrig.laser.background import BackgroundModel, build_background
 from gtrig.laser.calibrate import CalibrationReport, calibrate_scanners, calibrated_rig, object_outlines
 from gtrig.laser.clock import ScannerClock, on_clock
 from gtrig.laser.foreground import foreground_mask, foreground_threshold
-from gtrig.laser.fuse import frame_points
+from gtrig.laser.fuse import FramedPoints, FrameLayout, frame_layout, window_points
 from gtrig.laser.hull_icp import HullModel
 from gtrig.laser.track import OK, TrackResult, TrackSettings, to_pose_track, track_frames
 from gtrig.rig.load import load_rig
-from gtrig.rig.models import Rig
+from gtrig.rig.models import LaserScanner, Rig
 
 log = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
 OBJECT_FILE = "calib/laser_object.yaml"
 
@@ -46,13 +48,19 @@ def read_scanner_logs(folder: str | os.PathLike[str], rig: Rig, what: str = "seq
     FormatError
         From :func:`gtrig.io.scans.read_scans`: wrong beam count, time stamps not increasing...
     """
+    return _scanner_files(folder, rig, what, read_scans)
+
+
+def _scanner_files(folder: str | os.PathLike[str], rig: Rig, what: str,
+                   reader: Callable[[Path, LaserScanner], _T]) -> dict[str, _T]:
+    """``reader(<folder>/<scanner>.csv, scanner)`` of every scanner of ``rig`` (read or indexed)."""
     folder = Path(folder)
     out = {}
     for s in rig.laser_scanners:
         p = folder / f"{s.name}.csv"
         if not p.is_file():
             raise InputError(f"scanner {s.name}: no {what} scans ({p} is missing)")
-        out[s.name] = read_scans(p, s)
+        out[s.name] = reader(p, s)
     return out
 
 
@@ -176,6 +184,83 @@ def read_calibration_cov(path: str | os.PathLike[str], rig: Rig) -> np.ndarray:
     return cov
 
 
+@dataclass(frozen=True)
+class LoggedFrames:
+    """The frames of a sequence read from its scan logs on disk a time window at a time
+    (:class:`gtrig.laser.fuse.FrameSource`; issue 24): in memory only the scans' stamps and places
+    (:class:`gtrig.io.scans.ScanRows`) and which frame each joins (:class:`gtrig.laser.fuse.FrameLayout`),
+    about 40 bytes per scan; a window's ranges are read, masked and turned into world points when it
+    is asked for, by the client or by the worker a part of it is sent to (the recording on a path both
+    see, as the cameras' images, docs/scale.md). The points are those of
+    :func:`gtrig.laser.fuse.frame_points` over the whole logs, bit for bit.
+
+    Attributes
+    ----------
+    scanners : the scanners (calibrated poses, on the frames' clock).
+    rows : per scanner, where its scans are (the part of its log this source covers).
+    thresholds : per scanner, (B_s,) its foreground threshold, metres (:func:`foreground_threshold`).
+    layout : the frames and the frame each scan joins.
+    """
+
+    scanners: tuple[LaserScanner, ...]
+    rows: tuple[ScanRows, ...]
+    thresholds: tuple[np.ndarray, ...]
+    layout: FrameLayout
+
+    @property
+    def frame_stamps_s(self) -> np.ndarray:
+        return self.layout.frame_stamps_s
+
+    @property
+    def n_frames(self) -> int:
+        return self.layout.n_frames
+
+    @property
+    def scanner_xy_world(self) -> np.ndarray:
+        return np.array([s.T_world_scanner.matrix()[:2, 3] for s in self.scanners])
+
+    @property
+    def sigma_m(self) -> np.ndarray:
+        return np.array([s.range_sigma_m for s in self.scanners])
+
+    @property
+    def stamp_sigma_s(self) -> np.ndarray:
+        return np.array([s.stamp_sigma_s for s in self.scanners])
+
+    def window(self, a: int, b: int, scans: bool = True) -> FramedPoints:
+        """Frames ``[a, b)`` read from the logs (:class:`gtrig.laser.fuse.FrameSource`)."""
+        ranges, masks = [], []
+        for i, (r, th) in enumerate(zip(self.rows, self.thresholds, strict=True)):
+            lo, hi = self.layout.scans(i, a, b)
+            ranges.append(r.read(lo, hi))
+            masks.append(foreground_mask(ranges[-1], th))
+        fp = window_points(self.scanners, self.layout, a, b, ranges, masks)
+        return fp if scans else replace(fp, ranges_m=(), masks=(), beam_dirs=())
+
+    def part(self, a: int, b: int) -> LoggedFrames:
+        """Frames ``[a, b)``: the places of their scans only, a few kB to send to a worker."""
+        lohi = [self.layout.scans(i, a, b) for i in range(len(self.scanners))]
+        return replace(self, rows=tuple(r.part(lo, hi) for r, (lo, hi) in zip(self.rows, lohi, strict=True)),
+                       layout=self.layout.part(a, b))
+
+
+def logged_frames(
+    rig: Rig, seq_dir: str | os.PathLike[str], backgrounds: list[BackgroundModel],
+    clocks: Mapping[str, ScannerClock] | None = None,
+) -> tuple[Rig, LoggedFrames]:
+    """The frames of ``seq_dir/lasers/<scanner>.csv`` as :class:`LoggedFrames` (each log indexed, not
+    read: :func:`gtrig.io.scans.index_scans`), and the rig, moved onto the reference clock of
+    ``clocks`` (:func:`gtrig.laser.clock.on_clock`) when given."""
+    rows = _scanner_files(Path(seq_dir) / "lasers", rig, "sequence", index_scans)
+    if clocks:
+        rig, _ = on_clock(rig, {}, clocks)
+        rows = {k: v.shifted(clocks[k].offset_s) if k in clocks else v for k, v in rows.items()}
+    scs = tuple(rig.laser_scanners)
+    layout = frame_layout(scs, [rows[s.name].stamps_s for s in scs])
+    return rig, LoggedFrames(scs, tuple(rows[s.name] for s in scs),
+                             tuple(foreground_threshold(b) for b in backgrounds), layout)
+
+
 def track_sequence(
     rig: Rig,
     seq_dir: str | os.PathLike[str],
@@ -189,22 +274,16 @@ def track_sequence(
     ``scanner_cov`` (3 S, 3 S) is the scanners' calibration covariance, propagated into each pose;
     ``clocks``: per scanner, its offset to a reference clock (:mod:`gtrig.laser.clock`): the scans are
     moved onto that clock first and the track is on it; ``parallel``: ``executor``, ``workers``,
-    ``progress`` of :func:`gtrig.laser.track.track_frames`."""
+    ``progress`` of :func:`gtrig.laser.track.track_frames`. The logs are read a time window at a time
+    (:class:`LoggedFrames`), by the workers too: the client's memory grows by per-frame results only."""
     if not rig.laser_scanners:
         raise InputError("the rig has no laser scanners")
     if rig.robot.hull is None:
         raise ConfigError("rig: robot.hull: missing field: GTlaser tracks the robot's hull (length_m, width_m, "
                           "z_min_m, z_max_m)")
-    logs = read_scanner_logs(Path(seq_dir) / "lasers", rig, "sequence")
-    if clocks:
-        rig, logs = on_clock(rig, logs, clocks)
-    scs = rig.laser_scanners
-    masks = [
-        foreground_mask(logs[s.name].ranges_m, foreground_threshold(b))
-        for s, b in zip(scs, backgrounds, strict=True)
-    ]
-    fp = frame_points(scs, [logs[s.name].stamps_s for s in scs], [logs[s.name].ranges_m for s in scs], masks)
-    return track_frames(fp, HullModel.from_hull(rig.robot.hull), settings or TrackSettings(), scanner_cov, **parallel)
+    _, frames = logged_frames(rig, seq_dir, backgrounds, clocks)
+    return track_frames(frames, HullModel.from_hull(rig.robot.hull), settings or TrackSettings(), scanner_cov,
+                        **parallel)
 
 
 def track_recording(

@@ -28,16 +28,18 @@ The loop (journal paper, section 6, with the additions of issue 7):
 from __future__ import annotations
 
 import logging
+import tempfile
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from gtrig.geometry import wrap_angle
 from gtrig.laser.acquire import acquire
-from gtrig.laser.fuse import FramedPoints
+from gtrig.laser.fuse import FramedPoints, FrameSource
 from gtrig.laser.hull_icp import (
+    HullFitBatch,
     HullModel,
     IcpSettings,
     assigned_sides,
@@ -389,42 +391,120 @@ def _track_velocities(stamps_s: np.ndarray, xytheta: np.ndarray, track_id: np.nd
 
 
 def _refine_with_side_bias(
-    fp: FramedPoints, model: HullModel, st: TrackSettings, stamps: np.ndarray, smoothed: np.ndarray,
+    fp: FrameSource, model: HullModel, st: TrackSettings, stamps: np.ndarray, smoothed: np.ndarray,
     track_id: np.ndarray, status: np.ndarray, raw: np.ndarray, raw_cov: np.ndarray, iterations: int = 2,
 ) -> SideBias:
     """Estimate the sides' range bias over the OK frames (:mod:`gtrig.laser.side_bias`) and fit those
     frames again with their points corrected by it and de-skewed with the smoothed velocity; ``raw``
     and ``raw_cov`` are updated in place. Ambiguous frames (their sides may be swapped by the pi
-    symmetry) are left out."""
+    symmetry) are left out.
+
+    The points are made, corrected and fitted a time window of :data:`COVARIANCE_WINDOW_FRAMES` frames
+    at a time (issue 24: the whole run's at once peaked at ~35 kB per frame); between windows only
+    per-frame arrays are kept (poses, covariances, each frame's reduced normal equations). Each pass's
+    correction is made again from the poses and biases of the passes before it, and the windows' fits
+    iterate as one fit of every frame would (:func:`_fit_windows`): the same bits as one pass over the
+    whole run."""
     ok = (status == OK) & np.isfinite(raw[:, 0])
     prior = _bias_prior(st)
     if ok.sum() < 10 or not np.any(prior):  # (a zero prior: the bias is known to be nil)
         return SideBias.prior(prior)
-    pt, fid = _frame_points_of(fp, ok)
-    vel = _track_velocities(stamps, smoothed, track_id)[ok][fid]
-    xy = compensate_motion(fp.xy_world[pt], fp.dt_s[pt], vel, smoothed[ok][fid, :2])
-    sid, d = fp.scanner_index[pt], fp.dir_world[pt]
-    beta = np.zeros(4)
-    bias = SideBias.prior(prior)
-    pose, cov = raw[ok], raw_cov[ok]
-    for _ in range(iterations):
-        eqs = side_bias_normal_equations(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
-        N, u = reduced_normal_equations(*eqs)
-        # the prior holds the total bias: solve for it with the points' current correction undone
-        u = u - np.einsum("kab,b->ka", N, beta)
-        bias = estimate_side_bias(N, u, stamps[ok], prior)
-        side = assigned_sides(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
-        xy = xy - ((bias.bias_m - beta)[side])[:, None] * d
-        beta = bias.bias_m
-        fits = fit_hull_batch(model, xy, fid, sid, fp.scanner_xy_world, d, fp.sigma_m, pose, st.icp)
-        good = ~fits.degenerate & (fits.n_points >= st.icp.min_points)
-        pose = np.where(good[:, None], fits.xytheta, pose)
-        cov = np.where(good[:, None, None], fits.cov_xytheta, cov)
-    raw[ok], raw_cov[ok] = pose, cov
+    W = COVARIANCE_WINDOW_FRAMES
+    windows = [(a, min(fp.n_frames, a + W)) for a in range(0, fp.n_frames, W)]
+    windows = [(a, b) for a, b in windows if ok[a:b].any()]
+    # each window's rows in the arrays over the OK frames
+    rows = np.cumsum([0] + [int(ok[a:b].sum()) for a, b in windows])
+    vel = _track_velocities(stamps, smoothed, track_id)
+    S, sig = fp.scanner_xy_world, fp.sigma_m
+    poses = [raw[ok]]  # the OK frames' poses each pass starts from
+    betas = [np.zeros(4)]  # the total correction of the points after each pass
+
+    # a source read from the logs makes each window's points once; the pass's three other readings of
+    # them come from a temporary file (parsing the logs' text again cost ~1/3 of GTlaser's CPU)
+    spill = None if isinstance(fp, FramedPoints) else tempfile.TemporaryFile()
+    placed: dict[int, int] = {}
+
+    def made(w: int) -> tuple[np.ndarray, ...]:
+        """Window ``w``'s OK points as the source makes them: (M, 2) world points, (M,) firing times
+        after the frame's stamp, their frame among the window's OK frames, scanner index, (M, 2) beam
+        directions."""
+        if spill is not None and w in placed:
+            spill.seek(placed[w])
+            return tuple(np.load(spill) for _ in range(5))
+        a, b = windows[w]
+        win = fp.window(a, b, scans=False)
+        pt, fid = _frame_points_of(win, ok[a:b])
+        out = (win.xy_world[pt], win.dt_s[pt], fid, win.scanner_index[pt], win.dir_world[pt])
+        if spill is not None:
+            placed[w] = spill.seek(0, 2)
+            for x in out:
+                np.save(spill, x)
+        return out
+
+    def points(w: int, passes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Window ``w``'s OK points de-skewed and corrected by the first ``passes`` passes: (M, 2) world
+        points, (M,) their frame among the window's OK frames, scanner index, (M, 2) beam directions."""
+        a, b = windows[w]
+        sel = ok[a:b]
+        p, dt, fid, sid, d = made(w)
+        xy = compensate_motion(p, dt, vel[a:b][sel][fid], smoothed[a:b][sel][fid, :2])
+        for m in range(passes):
+            side = assigned_sides(model, xy, fid, sid, S, d, sig, poses[m][rows[w]:rows[w + 1]], st.icp)
+            xy = xy - ((betas[m + 1] - betas[m])[side])[:, None] * d
+        return xy, fid, sid, d
+
+    try:
+        bias = SideBias.prior(prior)
+        cov = raw_cov[ok]
+        for it in range(iterations):
+            pose = poses[it]
+            Nu = []
+            for w in range(len(windows)):
+                xy, fid, sid, d = points(w, it)
+                eqs = side_bias_normal_equations(model, xy, fid, sid, S, d, sig, pose[rows[w]:rows[w + 1]], st.icp)
+                Nu.append(reduced_normal_equations(*eqs))
+            N = np.concatenate([n for n, _ in Nu])
+            # the prior holds the total bias: solve for it with the points' current correction undone
+            u = np.concatenate([u for _, u in Nu]) - np.einsum("kab,b->ka", N, betas[it])
+            bias = estimate_side_bias(N, u, stamps[ok], prior)
+            betas.append(bias.bias_m)
+
+            def fit(w: int, min_iterations: int, it: int = it) -> HullFitBatch:
+                xy, fid, sid, d = points(w, it + 1)
+                return fit_hull_batch(model, xy, fid, sid, S, d, sig, poses[it][rows[w]:rows[w + 1]], st.icp,
+                                      min_iterations=min_iterations)
+
+            fits = _fit_windows(fit, len(windows))
+            good = np.concatenate([~f.degenerate & (f.n_points >= st.icp.min_points) for f in fits])
+            poses.append(np.where(good[:, None], np.concatenate([f.xytheta for f in fits]), pose))
+            cov = np.where(good[:, None, None], np.concatenate([f.cov_xytheta for f in fits]), cov)
+    finally:
+        if spill is not None:
+            spill.close()
+    raw[ok], raw_cov[ok] = poses[-1], cov
     log.info("hull sides' range bias %s mm (std %s mm, variance factor %.2f over %d blocks)",
              np.array2string(1000 * bias.bias_m, precision=1),
              np.array2string(1000 * np.sqrt(np.diag(bias.cov)), precision=2), bias.variance_factor, bias.n_blocks)
     return bias
+
+
+def _fit_windows(fit: Callable[[int, int], HullFitBatch], n_windows: int) -> list[HullFitBatch]:
+    """The hull fits of ``n_windows`` windows of frames, ``fit(w, min_iterations)`` fitting window ``w``
+    (:func:`gtrig.laser.hull_icp.fit_hull_batch`), iterated as one fit of all their frames would be.
+
+    One fit stops at the first iteration where every frame has converged, and a frame's pose changes
+    with every iteration done; a window's own stop is never after the whole fit's, so the latest stop
+    is a lower bound of it: the windows that stopped earlier are fitted again to at least that many
+    iterations, until all stop at the same one (on the simulated 75 s runs no window needed it)."""
+    fits = [fit(w, 0) for w in range(n_windows)]
+    while fits:
+        g = max(f.iterations for f in fits)
+        redo = [w for w, f in enumerate(fits) if f.iterations < g]
+        if not redo:
+            break
+        for w in redo:
+            fits[w] = fit(w, g)
+    return fits
 
 
 def _smooth_tracks(
@@ -466,24 +546,17 @@ def _smooth_tracks(
 COVARIANCE_WINDOW_FRAMES = 256
 
 
-def _window(fp: FramedPoints, a: int, b: int) -> FramedPoints:
-    """Frames ``[a, b)`` of ``fp``: their points, without the raw scans (only the fits' points travel)."""
-    p0, p1 = int(fp.frame_start[a]), int(fp.frame_start[b])
-    return replace(fp, frame_stamps_s=fp.frame_stamps_s[a:b], frame_start=fp.frame_start[a:b + 1] - p0,
-                   xy_world=fp.xy_world[p0:p1], scanner_index=fp.scanner_index[p0:p1],
-                   dir_world=fp.dir_world[p0:p1], dt_s=fp.dt_s[p0:p1], scan_of_frame=fp.scan_of_frame[:, a:b],
-                   ranges_m=(), masks=(), beam_dirs=())
-
-
-def _window_covariances(fp: FramedPoints, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
+def _window_covariances(part: FrameSource, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
                         scanner_cov: np.ndarray | None, st: TrackSettings
                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    # (on a worker: a source read from the logs on disk makes its points here, issue 24)
+    fp = part.window(0, part.n_frames, scans=False)
     bias = None if cov_bias is None else surface_bias_covariance(fp, model, raw, cov_bias, st.icp)
     cal = None if scanner_cov is None else calibration_covariance(fp, model, raw, scanner_cov, st.icp)
     return bias, cal
 
 
-def frame_covariances(fp: FramedPoints, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
+def frame_covariances(fp: FrameSource, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
                       scanner_cov: np.ndarray | None, st: TrackSettings, executor: Any = None, workers: int = 1,
                       progress: Callable[[int, int], None] | None = None
                       ) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -495,13 +568,13 @@ def frame_covariances(fp: FramedPoints, model: HullModel, raw: np.ndarray, cov_b
 
     F = fp.n_frames
     edges = list(range(0, F, COVARIANCE_WINDOW_FRAMES)) + [F]
-    chunks = [Chunk((_window(fp, a, b), model, raw[a:b], cov_bias, scanner_cov, st),
+    chunks = [Chunk((fp.part(a, b), model, raw[a:b], cov_bias, scanner_cov, st),
                     f"frames {a}-{b - 1} ({fp.frame_stamps_s[a]:.3f}-{fp.frame_stamps_s[b - 1]:.3f} s)")
               for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
     parts: dict[int, tuple[np.ndarray | None, np.ndarray | None]] = {}
     map_chunks(_window_covariances, chunks, parts.__setitem__, executor=executor, workers=workers, progress=progress)
     if not parts:
-        return _window_covariances(fp, model, raw, cov_bias, scanner_cov, st)
+        return _window_covariances(fp.part(0, F), model, raw, cov_bias, scanner_cov, st)
     out: list[np.ndarray | None] = []
     for k in (0, 1):
         pieces = [parts[i][k] for i in range(len(chunks))]
@@ -509,28 +582,35 @@ def frame_covariances(fp: FramedPoints, model: HullModel, raw: np.ndarray, cov_b
     return out[0], out[1]
 
 
-def timing_covariance(fp: FramedPoints, stamps_s: np.ndarray, xytheta: np.ndarray, track_id: np.ndarray) -> np.ndarray:
-    """Covariance (F, 3, 3) of the poses due to the scanners' clock offsets: a frame's fit holds at the
-    mean of its points' true times, off from its stamp by the points' share-weighted mean offset
-    (standard deviation ``sqrt(sum_s w_s^2 sigma_s^2)``, offsets independent between scanners), so the
-    pose is off by that times its velocity (from the smoothed poses of its own track)."""
-    F = fp.n_frames
+def timing_covariance(points: np.ndarray, stamp_sigma_s: np.ndarray | None, stamps_s: np.ndarray,
+                      xytheta: np.ndarray, track_id: np.ndarray) -> np.ndarray:
+    """Covariance (F, 3, 3) of the poses due to the scanners' clock offsets (standard deviations
+    ``stamp_sigma_s`` (S,), seconds): a frame's fit holds at the mean of its points' true times, off
+    from its stamp by the points' share-weighted mean offset (standard deviation
+    ``sqrt(sum_s w_s^2 sigma_s^2)``, offsets independent between scanners; ``points`` (F, S) is each
+    frame's count of points from each scanner), so the pose is off by that times its velocity (from the
+    smoothed poses of its own track)."""
+    F = len(stamps_s)
     out = np.zeros((F, 3, 3))
-    sig = fp.stamp_sigma_s
+    sig = stamp_sigma_s
     if sig is None or not np.any(sig > 0):
         return out
-    counts = np.diff(fp.frame_start)
-    fid = np.repeat(np.arange(F), counts)
-    S = len(sig)
-    n = np.bincount(fid * S + fp.scanner_index, minlength=F * S).reshape(F, S).astype(float)
+    n = np.asarray(points, dtype=float)
     w = n / np.maximum(n.sum(axis=1, keepdims=True), 1.0)
     var_t = (w**2) @ (sig**2)
     vel = _track_velocities(stamps_s, xytheta, track_id)
     return var_t[:, None, None] * np.einsum("fi,fj->fij", vel, vel)
 
 
+def points_per_scanner(fp: FramedPoints) -> np.ndarray:
+    """(F, S) each frame's count of points from each scanner (for :func:`timing_covariance`)."""
+    F, S = fp.n_frames, len(fp.sigma_m)
+    fid = np.repeat(np.arange(F), np.diff(fp.frame_start))
+    return np.bincount(fid * S + fp.scanner_index, minlength=F * S).reshape(F, S)
+
+
 def track_frames(
-    fp: FramedPoints,
+    fp: FrameSource,
     model: HullModel,
     settings: TrackSettings = TrackSettings(),
     scanner_cov: np.ndarray | None = None,
@@ -544,7 +624,10 @@ def track_frames(
     Parameters
     ----------
     fp
-        Foreground points of the sequence, in the world, by frame (:func:`gtrig.laser.fuse.frame_points`).
+        Foreground points of the sequence, in the world, by frame: all of them
+        (:func:`gtrig.laser.fuse.frame_points`) or a source that reads them a time window of
+        :data:`COVARIANCE_WINDOW_FRAMES` frames at a time (:class:`gtrig.laser.recording.LoggedFrames`:
+        then no pass holds more than a window's points, issue 24).
     model
         The hull outline (:meth:`HullModel.from_hull`).
     settings
@@ -578,14 +661,29 @@ def track_frames(
     qd = np.array([st.predict_accel_std_mps2**2] * 2 + [st.predict_ang_accel_std_radps2**2])
     Pv_unknown = np.diag([st.max_speed_mps**2, st.max_speed_mps**2, st.max_turn_rate_radps**2])
 
+    # the frames are walked a window at a time (the filter's state between windows is its predictor);
+    # each frame's count of points per scanner is kept for the timing term
+    counts = np.zeros((F, len(fp.sigma_m)), dtype=np.int64)
+    win: FramedPoints | None = None
+    w0 = 0  # the window's first frame
+
+    def window_at(k: int) -> FramedPoints:
+        """The window holding frames ``[k, k + chunk_frames)`` (or up to the last); ``k`` never decreases."""
+        nonlocal win, w0
+        if win is None or (k + st.chunk_frames > w0 + win.n_frames and w0 + win.n_frames < F):
+            w0, win = k, fp.window(k, min(F, k + max(COVARIANCE_WINDOW_FRAMES, st.chunk_frames)))
+            counts[w0:w0 + win.n_frames] = points_per_scanner(win)
+        return win
+
     pred_state: _Predictor | None = None  # the tracking filter of the current track
     tracking = False
     fails = 0
     last_pose_frame = -1  # last OK frame of any track
     k = 0
     while k < F:
+        wf = window_at(k)
         if not tracking:
-            sl = fp.frame(k)
+            sl = wf.frame(k - w0)
             prior, radius, inherited = None, None, False
             gap = np.inf if last_pose_frame < 0 else stamps[k] - stamps[last_pose_frame]
             if gap <= st.prior_max_gap_s:
@@ -597,15 +695,15 @@ def track_frames(
             if sl.stop - sl.start >= st.icp.min_points:
                 acq = acquire(
                     model,
-                    fp.xy_world[sl],
-                    fp.scanner_index[sl],
-                    fp.scanner_xy_world,
-                    fp.dir_world[sl],
-                    fp.sigma_m,
+                    wf.xy_world[sl],
+                    wf.scanner_index[sl],
+                    wf.scanner_xy_world,
+                    wf.dir_world[sl],
+                    wf.sigma_m,
                     st.icp,
                     prior_xytheta=prior,
                     search_radius_m=radius,
-                    free_rays=fp.free_rays(k),
+                    free_rays=wf.free_rays(k - w0),
                 )
             if acq is None or acq.fit.rms_m > st.max_rms_m:
                 reasons[k] = "hull not found"
@@ -653,10 +751,10 @@ def track_frames(
         end = k + n_fit
         pred, pred_cov = pred[:n_fit], pred_cov[:n_fit]
         vel = pred_state.x[3:]
-        sl = slice(int(fp.frame_start[k]), int(fp.frame_start[end]))
-        fid = np.repeat(np.arange(end - k), np.diff(fp.frame_start[k : end + 1]))
-        xy = fp.xy_world[sl]
-        dt = fp.dt_s[sl]
+        sl = slice(int(wf.frame_start[k - w0]), int(wf.frame_start[end - w0]))
+        fid = np.repeat(np.arange(end - k), np.diff(wf.frame_start[k - w0 : end - w0 + 1]))
+        xy = wf.xy_world[sl]
+        dt = wf.dt_s[sl]
         # motion within the frame: bring each point back to the frame time
         pc = pred[fid]
         xy = compensate_motion(xy, dt, vel, pc)
@@ -669,10 +767,10 @@ def track_frames(
             model,
             xy[near],
             fid[near],
-            fp.scanner_index[sl][near],
-            fp.scanner_xy_world,
-            fp.dir_world[sl][near],
-            fp.sigma_m,
+            wf.scanner_index[sl][near],
+            wf.scanner_xy_world,
+            wf.dir_world[sl][near],
+            wf.sigma_m,
             pred,
             st.icp,
         )
@@ -749,7 +847,7 @@ def track_frames(
         # frame: after smoothing
         cov = cov + np.nan_to_num(cov_bias)
     # the scanners' clocks: the motion a stamp offset hides (the rig's stamp_sigma_s)
-    cov = cov + timing_covariance(fp, stamps, xytheta, track_id)
+    cov = cov + timing_covariance(counts, fp.stamp_sigma_s, stamps, xytheta, track_id)
     if cov_cal is not None:
         cov = cov + cov_cal
     else:

@@ -1,12 +1,14 @@
-"""Scan CSV files: round trip, one-line errors naming file and line, read speed."""
+"""Scan CSV files: round trip, one-line errors naming file and line, read speed; the block-wise index that
+reads them a few scans at a time (the same values and the same errors)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+import gtrig.io.scans as scans
 from gtrig.errors import FormatError
-from gtrig.io.scans import ScanLog, read_scans, write_scans
+from gtrig.io.scans import ScanLog, index_scans, read_scans, write_scans
 from gtrig.sim.gtroom import make_scene
 
 
@@ -51,11 +53,12 @@ def test_comments_blank_lines_and_empty(tmp_path) -> None:  # type: ignore[no-un
         ("timestamp,r_0,r_1\nnan,1,3.0\n", 2, "time stamp"),
     ],
 )
-def test_bad_lines_name_file_and_line(tmp_path, body, line, words) -> None:  # type: ignore[no-untyped-def]
+@pytest.mark.parametrize("reader", [read_scans, index_scans])
+def test_bad_lines_name_file_and_line(tmp_path, body, line, words, reader) -> None:  # type: ignore[no-untyped-def]
     p = tmp_path / "bad.csv"
     p.write_text(body)
     with pytest.raises(FormatError) as e:
-        read_scans(p, beams=2)
+        reader(p, beams=2)
     msg = str(e.value)
     assert "\n" not in msg and f"{p}:{line}:" in msg and words in msg
 
@@ -68,14 +71,15 @@ def test_bad_lines_name_file_and_line(tmp_path, body, line, words) -> None:  # t
         ("", "empty file"),
     ],
 )
-def test_bad_files(tmp_path, body, words) -> None:  # type: ignore[no-untyped-def]
+@pytest.mark.parametrize("reader", [read_scans, index_scans])
+def test_bad_files(tmp_path, body, words, reader) -> None:  # type: ignore[no-untyped-def]
     p = tmp_path / "bad.csv"
     p.write_text(body)
     with pytest.raises(FormatError) as e:
-        read_scans(p, beams=2)
+        reader(p, beams=2)
     assert "\n" not in str(e.value) and str(p) in str(e.value) and words in str(e.value)
     with pytest.raises(FormatError, match="no such file"):
-        read_scans(tmp_path / "missing.csv")
+        reader(tmp_path / "missing.csv")
 
 
 def test_reads_a_large_file_quickly(tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -87,3 +91,47 @@ def test_reads_a_large_file_quickly(tmp_path) -> None:  # type: ignore[no-untype
     back = read_scans(tmp_path / "big.csv", beams=180)
     # about 0.15 s on one idle core for 3000 x 180; generous for loaded CI machines
     assert time.perf_counter() - t < 3.0 and len(back) == 3000
+
+
+def test_index_reads_the_values_read_scans_reads(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Blocks of 7 lines, comments and blank lines between scans, CRLF line ends: every run of scans read
+    through the index is bit for bit what the whole file's reading gives."""
+    monkeypatch.setattr(scans, "INDEX_BLOCK_LINES", 7)
+    log = _log(n=60, beams=5)
+    write_scans(tmp_path / "s.csv", log)
+    lines = (tmp_path / "s.csv").read_text().splitlines()
+    body = lines[:1] + [x for i, x in enumerate(lines[1:]) for x in ((x, "# c", "") if i % 9 == 4 else (x,))]
+    (tmp_path / "s.csv").write_bytes(("\r\n".join(["# head"] + body) + "\r\n").encode())
+    whole = read_scans(tmp_path / "s.csv", beams=5)
+    ix = index_scans(tmp_path / "s.csv", beams=5)
+    assert ix.beams == 5 and len(ix) == 60
+    assert ix.stamps_s.tobytes() == whole.stamps_s.tobytes()
+    for lo, hi in ((0, 60), (0, 1), (13, 29), (59, 60), (30, 30)):
+        assert ix.read(lo, hi).tobytes() == whole.ranges_m[lo:hi].tobytes(), (lo, hi)
+    part = ix.part(13, 29)
+    assert part.read(0, 16).tobytes() == whole.ranges_m[13:29].tobytes()
+    assert part.read(15, 16).tobytes() == whole.ranges_m[28:29].tobytes()
+    np.testing.assert_array_equal(ix.shifted(0.5).stamps_s, whole.stamps_s - 0.5)
+
+
+@pytest.mark.parametrize(("values", "refused"), [
+    ([1.0, 25.0, 25.0], True),  # median 25 m, beyond twice 10 m
+    ([1.0, 1.0, 25.0], False),
+    ([19.0, 22.0], True),  # the even case: exactly half beyond, the middle two's mean 20.5 m is beyond
+    ([17.0, 22.0], False),  # ... and 19.5 m is not
+])
+def test_index_refuses_millimetres_as_read_scans_does(tmp_path, monkeypatch, values, refused) -> None:  # type: ignore[no-untyped-def]
+    """The unit check (median of every finite range beyond twice the maximum range) decided block by block
+    gives what the whole file's median does, also when exactly half the ranges are beyond the limit."""
+    from types import SimpleNamespace
+
+    monkeypatch.setattr(scans, "INDEX_BLOCK_LINES", 1)
+    p = tmp_path / "u.csv"
+    p.write_text("timestamp,r_0\n" + "".join(f"{k + 1}.0,{v}\n" for k, v in enumerate(values)) + "9.0,nan\n")
+    sc = SimpleNamespace(beams=1, range_max_m=10.0)
+    for reader in (read_scans, index_scans):
+        if refused:
+            with pytest.raises(FormatError, match="millimetres"):
+                reader(p, sc)
+        else:
+            assert len(reader(p, sc)) == len(values) + 1

@@ -79,15 +79,19 @@ def test_gtvision_identical_on_every_executor(run_rec, executors, tmp_path: Path
         assert _vision_bytes(res, tmp_path, name) == want, name
 
 
-def test_gtlaser_identical_on_every_executor(executors, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_gtlaser_identical_on_every_executor(executors, monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """GTlaser's whole result is the same bits on every executor, cut into time windows or not, and read
+    from the logs on disk a window at a time (the workers reading theirs) as from all scans in memory."""
     import dataclasses
 
     import gtrig.laser.track as track
+    from gtrig.io.scans import ScanLog, index_scans, read_scans, write_scans
     from gtrig.laser import synth
     from gtrig.laser.background import build_background
     from gtrig.laser.foreground import foreground_mask, foreground_threshold
-    from gtrig.laser.fuse import frame_points
+    from gtrig.laser.fuse import frame_layout, frame_points
     from gtrig.laser.hull_icp import HullModel
+    from gtrig.laser.recording import LoggedFrames
     from tests.laser.conftest import make_scanner
 
     walls = synth.rectangle_segments([[-4, -3], [4, -3], [4, 3], [-4, 3]])
@@ -101,9 +105,16 @@ def test_gtlaser_identical_on_every_executor(executors, monkeypatch: pytest.Monk
     bg = synth.scan_sequence(scs, walls, None, None, bst, rng)
     st = [np.arange(0, 1.2, 1 / 75) + 0.003 * i for i in range(3)]
     run = synth.scan_sequence(scs, walls, hull, lambda t: np.array([-1 + 0.3 * t, 0.2 * t, 0.3 + 0.1 * t]), st, rng)
-    masks = [foreground_mask(r, foreground_threshold(build_background(b, s))) for r, b, s in zip(run, bg, scs,
-                                                                                                 strict=True)]
+    # the run as logs on disk, read back (the written ranges are rounded to 0.1 mm)
+    for s, t, r in zip(scs, st, run, strict=True):
+        write_scans(tmp_path / f"{s.name}.csv", ScanLog(t, r))
+    logs = [read_scans(tmp_path / f"{s.name}.csv", s) for s in scs]
+    st, run = [g.stamps_s for g in logs], [g.ranges_m for g in logs]
+    thresholds = [foreground_threshold(build_background(b, s)) for b, s in zip(bg, scs, strict=True)]
+    masks = [foreground_mask(r, th) for r, th in zip(run, thresholds, strict=True)]
     fp = frame_points(scs, st, run, masks)
+    rows = tuple(index_scans(tmp_path / f"{s.name}.csv", s) for s in scs)
+    logged = LoggedFrames(scs, rows, tuple(thresholds), frame_layout(scs, [r.stamps_s for r in rows]))
     cal = np.diag(np.tile([1e-6, 1e-6, np.radians(0.02) ** 2], len(scs)))
     model = HullModel.from_hull(hull)
 
@@ -122,6 +133,7 @@ def test_gtlaser_identical_on_every_executor(executors, monkeypatch: pytest.Monk
     monkeypatch.setattr(track, "COVARIANCE_WINDOW_FRAMES", 16)  # cut in time windows, in the client
     for how in ({"workers": 1}, {"workers": 2}, {"executor": executors["local:2"]}, {"executor": executors["tcp"]}):
         assert fields(track.track_frames(fp, model, scanner_cov=cal, **how)) == fields(ref), how  # type: ignore[arg-type]
+        assert fields(track.track_frames(logged, model, scanner_cov=cal, **how)) == fields(ref), ("logged", how)  # type: ignore[arg-type]
 
 
 RESUMABLE = """

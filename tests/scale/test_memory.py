@@ -1,5 +1,6 @@
 """The client's memory does not grow with the recording's length (issue 24): GTvision's run over a
-recording three times longer peaks (tracemalloc, in this process) at about the same memory.
+recording three times longer peaks (tracemalloc, in this process) at about the same memory; so does
+GTlaser's, beyond its per-frame result (:func:`test_gtlaser_client_memory_is_flat_in_the_log_length`).
 
 The recordings are made without images being detected: a cycle of synthetic detections (noisy corners
 of the markers each camera sees, :func:`gtrig.vision.synthetic.synthetic_observations`) is written to
@@ -110,3 +111,78 @@ def test_client_memory_is_flat_in_the_recording_length(tmp_path: Path) -> None:
     assert n3 == 3 * n1
     # beyond the index, the run's own state (detections, estimates, chunks in flight) is flat
     assert p3 - i3 < 1.3 * (p1 - i1)
+
+
+LASER_CYCLE = 600  # frames of one lap of the simulated robot (8 s at 75 Hz); the long log is three laps
+
+
+def laser_logs(out: Path, laps: int) -> tuple[Path, object, list]:
+    """A robot driving laps of a circle (1.2 m radius, 0.94 m/s) in a rectangular room watched by three
+    scanners at 75 Hz: ``out/lasers/<scanner>.csv`` (the first lap's scans repeated with their stamps
+    moved on by a lap, so the longer log costs no more to make), the rig and the backgrounds."""
+    from gtrig.io.scans import ScanLog, write_scans
+    from gtrig.laser import synth
+    from gtrig.laser.background import build_background
+    from tests.laser.conftest import make_scanner
+
+    walls = synth.rectangle_segments([[-4, -3], [4, -3], [4, 3], [-4, 3]])
+    scs = (make_scanner("a", -3.6, -2.6, np.radians(35)), make_scanner("b", 3.6, -2.2, np.radians(150)),
+           make_scanner("c", 3.6, 2.6, np.radians(-145)))
+    base = make_scene(0).rig_true
+    rig = base.model_copy(update={"laser_scanners": scs})
+    hull = rig.robot.hull
+    lap_s = LASER_CYCLE / 75.0
+    w = 2 * np.pi / lap_s
+
+    def pose(t: float) -> np.ndarray:
+        return np.array([1.2 * np.cos(w * t), 1.2 * np.sin(w * t), w * t + np.pi / 2])
+
+    rng = np.random.default_rng(4)
+    bg = synth.scan_sequence(scs, walls, None, None, [np.arange(0, 0.4, 1 / 75) + 0.002 * i for i in range(3)], rng)
+    lap = [np.arange(LASER_CYCLE) / 75.0 + 0.003 * i for i in range(3)]
+    run = synth.scan_sequence(scs, walls, hull, pose, lap, rng)
+    (out / "lasers").mkdir(parents=True)
+    for s, t, r in zip(scs, lap, run, strict=True):
+        write_scans(out / "lasers" / f"{s.name}.csv",
+                    ScanLog(np.concatenate([t + k * lap_s for k in range(laps)]), np.tile(r, (laps, 1))))
+    return out, rig, [build_background(b, s) for b, s in zip(bg, scs, strict=True)]
+
+
+def laser_peak(seq: Path, rig: object, backgrounds: list) -> tuple[int, int, int]:
+    """(tracemalloc peak of one GTlaser run of ``seq`` in this process, its frames, the bytes of its
+    result: the per-frame output every run keeps)."""
+    import sys
+
+    from gtrig.laser.recording import track_sequence
+
+    tracemalloc.start()
+    try:
+        res = track_sequence(rig, seq, backgrounds, workers=1)  # type: ignore[arg-type]
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert res.counts()["ok"] > 0.95 * len(res)
+    kept = sum(np.asarray(getattr(res, f)).nbytes for f in ("stamps_s", "xytheta", "cov_xytheta", "status",
+               "raw_xytheta", "raw_cov_xytheta", "n_points", "n_sides", "rms_m", "track_id", "cov_calibration"))
+    return peak, len(res), kept + sum(sys.getsizeof(r) for r in res.reasons)
+
+
+def test_gtlaser_client_memory_is_flat_in_the_log_length(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """GTlaser's client over a log three times longer: its peak beyond the result grows by well under a kB
+    a frame (it held every scan, every point and the side-bias pass's arrays of them, ~52 kB a frame, in
+    session 33; now a window's, and per frame only the poses, covariances and stamps of the filters).
+    The logs are indexed in blocks of 200 lines: a block (2,048 lines, ~8 MB, by default) is bounded by
+    construction, and one longer than the short log would be counted as growth."""
+    import gtrig.io.scans as scans
+
+    monkeypatch.setattr(scans, "INDEX_BLOCK_LINES", 200, raising=False)  # (raising: the test runs on older code too)
+    short, long = laser_logs(tmp_path / "short", 1), laser_logs(tmp_path / "long", 3)
+    laser_peak(*short)  # imports and first-use caches not measured
+    p1, n1, r1 = laser_peak(*short)
+    p3, n3, r3 = laser_peak(*long)
+    growth = ((p3 - r3) - (p1 - r1)) / (n3 - n1)
+    print(f"GTlaser tracemalloc peak: {n1} frames {p1 / 1e6:.2f} MB (result {r1 / 1e6:.2f}), {n3} frames "
+          f"{p3 / 1e6:.2f} MB (result {r3 / 1e6:.2f}); {(p3 - p1) / (n3 - n1):.0f} bytes per frame, {growth:.0f} "
+          "beyond the result")
+    assert n3 == 3 * n1
+    assert growth < 1000
