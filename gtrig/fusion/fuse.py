@@ -367,6 +367,10 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
     sources = tuple(f.source for f in fixes)
     if len(set(sources)) != len(sources):
         raise InputError(f"fusion: two sources share a name ({', '.join(sources)})")
+    # the sources' span, before fixes outside the odometry are dropped: a node of the odometry inside it
+    # gets a pose even where the nearest fixes beyond it lie past the odometry's ends
+    span0 = min(float(f.stamps_s[0]) for f in fixes)
+    span1 = max(float(f.stamps_s[-1]) for f in fixes)
     if odometry is not None:
         if len(odometry) < 2:
             raise InputError("fusion: the odometry has fewer than two records")
@@ -393,9 +397,13 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
     out_st, out_xyt, out_cov, out_status, out_reason = [], [], [], [], []
     outliers: list[Outlier] = []
     segments: list[Segment] = []
-    for a, b in _segments(fx["stamps"], opts.max_gap_s):
+    cuts = _segments(fx["stamps"], opts.max_gap_s)
+    for a, b in cuts:
         seg = {k: v[a:b] for k, v in fx.items()}
         t0, t1 = float(seg["stamps"][0]), float(seg["stamps"][-1])
+        # the first and last segments reach to the sources' span (their nodes past the kept fixes exist)
+        lo = span0 if a == cuts[0][0] else t0
+        hi = span1 if b == cuts[-1][1] else t1
         stamps = _node_stamps(t0, t1, odometry, opts.rate_hz)
         if stamps.size < 2:
             continue
@@ -428,7 +436,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
             per_source[s]["used"] += float(np.sum(use[m]))
             per_source[s]["rejected"] += float(np.sum(~use[m]))
             per_source[s]["downweighted"] += float(np.sum(use[m] & (huber_w[m] < 1.0)))
-        in_span = (stamps >= t0) & (stamps <= t1)
+        in_span = (stamps >= min(t0, lo)) & (stamps <= max(t1, hi))
         br, gap = _bridged(stamps, np.unique(seg["stamps"][use]), opts.bridge_after_s)
         br = br[in_span]
         gap = gap[in_span]

@@ -171,3 +171,20 @@ def test_a_stretch_disagreeing_with_the_prediction_is_down_weighted(run) -> None
     assert np.abs(e).mean() < 0.8 * np.abs(e_plain).mean()
     q, q_plain = nees(track, run.motion)[near], nees(plain, run.motion)[near]
     assert q.mean() < q_plain.mean()  # and its covariance is the more honest there
+
+
+def test_odometry_ending_inside_the_sources_span_still_gives_its_last_stamps_poses(run) -> None:
+    """The sources run on past the odometry (their last fixes lie after its last record, as on the simulated
+    runs by a few ms): the fixes beyond it are dropped, but every odometry stamp inside the sources' span,
+    up to its last, gets a pose."""
+    from gtrig.io.odometry import OdometryLog
+
+    o = run.odometry
+    n = o.stamps_s.size - 40  # the odometry ends 0.8 s before the sources
+    cut = OdometryLog(o.stamps_s[:n], o.xytheta[:n], o.v_mps[:n], o.omega_radps[:n])
+    track, _ = fuse_tracks({"vision": run.vision, "laser": run.laser}, cut, INDEP)
+    lo = min(run.vision.stamps_s[0], run.laser.stamps_s[0])
+    inside = cut.stamps_s[cut.stamps_s >= lo]
+    assert run.laser.stamps_s[-1] > cut.stamps_s[-1]
+    np.testing.assert_array_equal(track.stamps_s, inside)
+    assert np.hypot(*planar_errors(track, run.motion)[-1, :2]) < 0.005
