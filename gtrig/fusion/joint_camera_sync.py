@@ -106,10 +106,10 @@ def joint_camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.nda
     tau = np.where(ok, values(first), 0.0)
     base = values(fit(tau))
     w = np.full(tau.size, np.nan)
-    for c in np.flatnonzero(ok & np.isfinite(base)):
+    for k in np.flatnonzero(ok & np.isfinite(base)):
         probe = tau.copy()
-        probe[c] += PROBE_S
-        w[c] = (values(fit(probe))[c] - base[c]) / PROBE_S
+        probe[k] += PROBE_S
+        w[k] = (values(fit(probe))[k] - base[k]) / PROBE_S
     usable = ok & np.isfinite(base) & np.isfinite(w) & (w < MAX_WEIGHT)
     w = np.clip(np.where(usable, w, 0.0), 0.0, MAX_WEIGHT)
     for _ in range(steps):
