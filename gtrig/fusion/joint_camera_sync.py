@@ -19,7 +19,7 @@ jackknife interval is scaled by ``1 / (1 - w)``), since the smoothing follows th
 the same share. Offsets are relative to GTvision's clock, as the pose fit's.
 
 Measured on the three simulated seeds (BENCHMARKS.md, issue 18, session 34): largest camera error 0.69 /
-0.80 / 1.18 ms against GTlaser, 0.27 / 0.99 / 0.94 ms jointly.
+0.80 / 1.18 ms against GTlaser, 0.36 / 0.97 / 0.93 ms jointly (the pipeline).
 """
 
 from __future__ import annotations
