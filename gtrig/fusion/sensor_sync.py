@@ -563,22 +563,30 @@ def scanner_offsets(ret: ScannerReturns, ref: Reference, corners_xy: np.ndarray,
     return out
 
 
-def recording_returns(rec_dir, rig, sequence: str = "run") -> ScannerReturns:  # noqa: ANN001
+def recording_returns(rec_dir, rig, sequence: str = "run", window_frames: int = 256) -> ScannerReturns:  # noqa: ANN001
     """The foreground returns GTlaser fits on ``rec_dir/<sequence>``: the fixed scanners' logs, the
-    background models of ``rec_dir/background`` and the scanners' calibrated poses in ``rig``."""
+    background models of ``rec_dir/background`` and the scanners' calibrated poses in ``rig``.
+
+    The logs are read ``window_frames`` frames at a time (:class:`gtrig.laser.recording.LoggedFrames`, the
+    same points bit for bit as the whole logs' reading): only the returns are kept, about 4 kB per frame
+    at the simulated rates, not the scans' ranges and text (issue 24: the whole reading peaked at about
+    22 kB per frame)."""
     from pathlib import Path
 
-    from gtrig.laser.foreground import foreground_mask, foreground_threshold
-    from gtrig.laser.fuse import frame_points
-    from gtrig.laser.recording import load_backgrounds, read_scanner_logs
+    from gtrig.laser.recording import load_backgrounds, logged_frames
 
     rec = Path(rec_dir)
-    scs = rig.laser_scanners
-    logs = read_scanner_logs(rec / sequence / "lasers", rig, "sequence")
-    bgs = load_backgrounds(rec / "background", rig)
-    masks = [foreground_mask(logs[s.name].ranges_m, foreground_threshold(b)) for s, b in zip(scs, bgs, strict=True)]
-    fp = frame_points(scs, [logs[s.name].stamps_s for s in scs], [logs[s.name].ranges_m for s in scs], masks)
-    return ScannerReturns.from_framed(fp)
+    _, frames = logged_frames(rig, rec / sequence, load_backgrounds(rec / "background", rig))
+    F = frames.n_frames
+    parts = [ScannerReturns.from_framed(frames.window(a, min(a + window_frames, F), scans=False))
+             for a in range(0, max(F, 1), window_frames)]
+    first = parts[0]
+    return replace(first, stamps_s=np.concatenate([r.stamps_s for r in parts]),
+                   xy_world=np.concatenate([r.xy_world for r in parts]),
+                   scanner_index=np.concatenate([r.scanner_index for r in parts]),
+                   dir_world=np.concatenate([r.dir_world for r in parts]),
+                   frame_index=np.concatenate([r.frame_index + k * window_frames for k, r in enumerate(parts)]),
+                   frame_stamps_s=np.concatenate([r.frame_stamps_s for r in parts]))
 
 
 def camera_frame_stamps(rec_dir, rig, sequence: str = "run") -> dict[str, np.ndarray]:  # noqa: ANN001

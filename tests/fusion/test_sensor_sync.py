@@ -12,6 +12,7 @@ from gtrig.fusion.sensor_sync import (
     camera_offsets,
     checkpoint_membership,
     hull_distances,
+    recording_returns,
     reference_track,
     restamp_laser,
     scanner_offsets,
@@ -242,3 +243,44 @@ def test_laser_clock_is_the_poses_mean_share_weighted_scanner_offset() -> None:
     assert clock == pytest.approx(0.5 * 0.004 - 0.5 * 0.002)
     assert sigma == pytest.approx(np.hypot(0.5 * 0.001, 0.5 * 0.002))
     assert np.isnan(laser_clock(ret, track, [est("a", 0.004, 0.001), est("b", 0.0, 0.0, "ambiguous")])[0])
+
+
+def test_recording_returns_read_a_window_at_a_time_are_the_whole_logs_returns(tmp_path) -> None:  # noqa: ANN001
+    """The scanners' returns for the per-scanner offsets, read from the logs a few frames at a time, are
+    the returns of the whole logs read at once, bit for bit (issue 24: only the returns stay in memory)."""
+    from types import SimpleNamespace
+
+    from gtrig.io.scans import ScanLog, read_scans, write_scans
+    from gtrig.laser import synth
+    from gtrig.laser.background import build_background
+    from gtrig.laser.foreground import foreground_mask, foreground_threshold
+    from gtrig.laser.fuse import frame_points
+    from gtrig.rig.models import Hull
+    from tests.laser.conftest import make_scanner
+
+    walls = synth.rectangle_segments([[-4, -3], [4, -3], [4, 3], [-4, 3]])
+    scs = (make_scanner("a", -3.6, -2.6, np.radians(35)), make_scanner("b", 3.6, -2.2, np.radians(150)))
+    hull = Hull(length_m=0.78, width_m=0.57, z_min_m=0.05, z_max_m=0.55)
+    rng = np.random.default_rng(6)
+    bst = [np.arange(0, 0.4, 1 / 75) + 0.002 * i for i in range(2)]
+    st = [np.arange(0, 1.0, 1 / 75) + 0.003 * i for i in range(2)]
+    for folder, stamps, ranges in (
+            ("background", bst, synth.scan_sequence(scs, walls, None, None, bst, rng)),
+            ("run", st, synth.scan_sequence(scs, walls, hull, lambda t: np.array([-1 + 0.3 * t, 0.2 * t, 0.3]),
+                                            st, rng))):
+        (tmp_path / folder / "lasers").mkdir(parents=True)
+        for s, t, r in zip(scs, stamps, ranges, strict=True):
+            write_scans(tmp_path / folder / "lasers" / f"{s.name}.csv", ScanLog(t, r))
+    rig = SimpleNamespace(laser_scanners=list(scs))
+    logs = [read_scans(tmp_path / "run" / "lasers" / f"{s.name}.csv", s) for s in scs]
+    bg = [build_background(read_scans(tmp_path / "background" / "lasers" / f"{s.name}.csv", s).ranges_m, s)
+          for s in scs]
+    masks = [foreground_mask(g.ranges_m, foreground_threshold(b)) for g, b in zip(logs, bg, strict=True)]
+    whole = ScannerReturns.from_framed(frame_points(scs, [g.stamps_s for g in logs], [g.ranges_m for g in logs], masks))
+    assert whole.stamps_s.size > 500
+    for w in (7, 10**6):
+        got = recording_returns(tmp_path, rig, window_frames=w)
+        assert got.names == whole.names
+        for k in ("stamps_s", "xy_world", "scanner_index", "dir_world", "origin_xy", "sigma_m", "frame_index",
+                  "frame_stamps_s"):
+            np.testing.assert_array_equal(getattr(got, k), getattr(whole, k), err_msg=f"{k}, windows of {w}")
