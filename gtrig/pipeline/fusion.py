@@ -50,7 +50,7 @@ def sync(inp: StageInput) -> StageOutput:
         if track.cov is not None and est.verdict == "ok":
             est = refine_by_fusion(est, fixes_from_track(track, name), odo)
         results[name] = est
-    sensors, clock = _sensor_offsets(inp, tracks, results) if cfg.sync_per_sensor else ([], (math.nan, math.nan))
+    sensors, clock = _sensor_offsets(inp, tracks, results, odo) if cfg.sync_per_sensor else ([], (math.nan, math.nan))
     if "vision" in results and "laser" in results:
         # one offset for the GT system: the two sources' estimates made consistent with GTlaser's clock
         # to GTvision's (the scanners'), far better known than either offset to odometry
@@ -75,7 +75,7 @@ def sync(inp: StageInput) -> StageOutput:
     return StageOutput({"clock_offsets": offsets}, rows, checks, ("sync.yaml",))
 
 
-def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict,  # noqa: ANN001
+def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict, odo: OdometryLog,  # noqa: ANN001
                     ) -> tuple[list, tuple[float, float]]:
     """Each camera's and scanner's offset to GTvision's clock, when both GT sources and the scanners exist,
     and GTlaser's clock to GTvision's with its sigma (nan when not measured)."""
@@ -90,7 +90,7 @@ def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict
     ck = inp.out / "gt_vision_run.checkpoint"  # GTvision's detections: which camera made each pose
     vis = results["vision"]
     return sensor_offsets_and_laser_clock(inp.rec, rig, tracks["vision"], tracks["laser"],
-                                          checkpoint=ck if ck.is_file() else None, odometry=_odometry(inp.rec),
+                                          checkpoint=ck if ck.is_file() else None, odometry=odo,
                                           odometry_offset_s=vis.offset_s if vis.verdict == "ok" else math.nan)
 
 
