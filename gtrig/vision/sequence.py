@@ -2,14 +2,8 @@
 processes (checkpointed), the corner noise calibrated on the sequence's residuals, every instant
 estimated in parallel, then flips left ambiguous resolved in time order.
 
-Instants
---------
-* ``run``: the images of all cameras whose time stamps agree within ``sync_tol_s`` form one instant
-  (free-running cameras rarely agree, so an instant is then one camera's frame; GTvision never mixes
-  images of a moving robot taken at different times).
-* ``validation``: the robot stands still during each interval of ``validation/poses.csv``, so all the
-  images of all cameras inside one interval are one instant, stamped at the interval's middle (the
-  stamps of ``truth/validation.tum``).
+Instants: which images make one pose (:mod:`gtrig.vision.instants`): in ``run``, the images of all
+cameras whose stamps agree within ``sync_tol_s``; in ``validation``, every image of a static interval.
 
 Corner noise: the detector's corner covariances are scaled by a variance factor per camera,
 estimated from the residuals of (a sample of) this sequence's instants, iterated with the estimates
@@ -66,20 +60,13 @@ from gtrig.rig.models import Rig
 from gtrig.trajectory import PoseTrack
 from gtrig.vision.estimate import FrameEstimate, Status, VisionOptions, estimate_frame
 from gtrig.vision.init import PreviousPose
+from gtrig.vision.instants import Instant, Instants, make_instants  # re-exported for their callers
 from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel
 
 log = logging.getLogger(__name__)
 
 CHECKPOINT_VERSION = 5
 SEQUENCES = ("run", "validation")
-
-
-@dataclass(frozen=True, slots=True)  # slots: a run holds one per instant (no __dict__ each)
-class Instant:
-    """The images that make one instant: ``stamp_s`` and ``(camera, row in its frame index)``."""
-
-    stamp_s: float
-    images: tuple[tuple[str, int], ...]
 
 
 @dataclass(frozen=True)
@@ -192,33 +179,6 @@ def read_static_intervals(path: Path) -> np.ndarray:
             except (ValueError, IndexError):
                 raise FormatError(f"{path}:{line}: expected 'pose,start_s,end_s'") from None
     return np.array(rows).reshape(-1, 2)
-
-
-def make_instants(indices: dict[str, FrameIndex], sequence: str, sync_tol_s: float = 0.005,
-                  intervals_s: np.ndarray | None = None) -> list[Instant]:
-    """Group the images of all cameras into instants (see the module docstring)."""
-    if sequence == "validation":
-        if intervals_s is None:
-            raise InputError("the validation sequence needs its static intervals")
-        out = []
-        for t0, t1 in intervals_s:
-            imgs: list[tuple[str, int]] = []
-            for name in sorted(indices):
-                st = indices[name].stamps_s
-                imgs.extend((name, int(i)) for i in np.flatnonzero((st >= t0) & (st <= t1)))
-            out.append(Instant(float(0.5 * (t0 + t1)), tuple(imgs)))
-        return out
-    allf = sorted((float(ix.stamps_s[i]), name, i) for name, ix in indices.items() for i in range(len(ix)))
-    out = []
-    group: list[tuple[float, str, int]] = []
-    for t, name, i in allf:
-        if group and (t - group[0][0] > sync_tol_s or any(g[1] == name for g in group)):
-            out.append(Instant(float(np.mean([g[0] for g in group])), tuple((g[1], g[2]) for g in group)))
-            group = []
-        group.append((t, name, i))
-    if group:
-        out.append(Instant(float(np.mean([g[0] for g in group])), tuple((g[1], g[2]) for g in group)))
-    return out
 
 
 # ---------------------------------------------------------------------------------- (de)serialising
@@ -674,13 +634,17 @@ def detection_chunks(instants: Sequence[Instant], indices: dict[str, FrameIndex]
                      ) -> list[tuple[str, list[int]]]:
     """The detection work: for each camera, the rows of its frame index that some instant uses, in
     runs of ``chunk_size`` consecutive ones (a camera and a time window)."""
-    rows: dict[str, set[int]] = {}
-    for ins in instants:
-        for cam, i in ins.images:
-            rows.setdefault(cam, set()).add(i)
+    if isinstance(instants, Instants):
+        rows = {cam: r.tolist() for cam, r in instants.camera_rows().items()}
+    else:
+        used: dict[str, set[int]] = {}
+        for ins in instants:
+            for cam, i in ins.images:
+                used.setdefault(cam, set()).add(i)
+        rows = {cam: sorted(r) for cam, r in used.items()}
     out: list[tuple[str, list[int]]] = []
     for cam in sorted(rows):
-        r = sorted(rows[cam])
+        r = rows[cam]
         out.extend((cam, r[k:k + chunk_size]) for k in range(0, len(r), chunk_size))
     return out
 
