@@ -1,0 +1,97 @@
+"""Candidates from the quiet zone: the bright ring of paper around a marker, traced as a ring.
+
+A printed marker is a dark square inside a margin of bare paper (its quiet zone). The dark masks of
+:mod:`.candidates` and :mod:`.blurred` look for the dark square itself, against an estimate of the
+paper's brightness (a closing) or of the local mean. On the harder bench's 20 px tags on textured
+backgrounds both fail in two ways (BENCHMARKS.md, issue 16, session 35): the closing follows the
+texture's peaks, so the dark background and the marker become one dark region; and the 2.5 px border,
+demosaiced and blurred, breaks next to white data cells, so the marker's blob is C-shaped or in
+fragments. The paper around the marker is the one part of it that is brighter than everything near it,
+whatever the background and whatever the cells: pixels brighter than the mean of a neighbourhood about
+half a marker wide trace the quiet zone as a closed ring, and the hole of that ring is the marker's
+outline. A border broken next to a white cell only notches that hole by a cell (its solidity stays
+above 0.9 where the dark blob's was 0.4-0.8).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from gtrig.markers.detect.candidates import _NEXT, _ordered_cw, robust_quad
+
+__all__ = ["quiet_zone_quads"]
+
+
+def bright_mask(gray: NDArray[np.uint8], window: int, offset: float) -> NDArray[np.uint8]:
+    """Pixels brighter by more than ``offset`` grey levels than the mean of their ``window`` x ``window``
+    neighbourhood (``window`` made odd), 3 x 3 median-smoothed (the image noise leaves single pixels
+    there), as a 0 / 255 (H, W) uint8 mask of the (H, W) uint8 image ``gray``."""
+    mask = cv2.adaptiveThreshold(gray, 255, cv2.ADAPTIVE_THRESH_MEAN_C, cv2.THRESH_BINARY, window | 1, -offset)
+    return cv2.medianBlur(mask, 3)
+
+
+def quiet_zone_quads(gray: NDArray[np.uint8], window: int, offset: float, min_side_px: float, max_side_px: float,
+                     min_solidity: float) -> list[NDArray[np.float64]]:
+    """Quads of the holes of the bright mask (:func:`bright_mask`) that are convex quadrilaterals.
+
+    Parameters
+    ----------
+    gray : (H, W) uint8 image.
+    window, offset : the bright mask's neighbourhood (pixels) and margin over its mean (grey levels).
+    min_side_px, max_side_px : side range of the quads, pixels.
+    min_solidity : least hole area / convex hull area.
+
+    Returns
+    -------
+    list of (4, 2) float64 quads, clockwise on screen, image pixels (OpenCV convention). A hole is the
+    inner edge of the quiet zone, which is the marker's outer edge to within the blur.
+    """
+    contours, hier = cv2.findContours(bright_mask(gray, window, offset), cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    if hier is None:
+        return []
+    hier = hier[0]
+    lengths = np.fromiter(map(len, contours), int, len(contours))
+    # RETR_CCOMP: the holes are the contours with a parent; a hole is traced on the dark pixels just
+    # inside the ring, so its outline is about as long as the marker's
+    lo, hi = 4 * min_side_px * 0.8, 4 * max_side_px * 1.3
+    out = []
+    for i in np.flatnonzero((hier[:, 3] >= 0) & (lengths >= lo) & (lengths <= hi)):
+        q = _hole_quad(contours[i], min_side_px, max_side_px, min_solidity)
+        if q is not None:
+            out.append(q)
+    return out
+
+
+def _hole_quad(c: NDArray[np.int32], min_side_px: float, max_side_px: float, min_solidity: float
+               ) -> NDArray[np.float64] | None:
+    """The quad (4, 2), clockwise on screen, of the hole contour ``c`` when it is a solid convex
+    quadrilateral of the side range, else None."""
+    area = cv2.contourArea(c)
+    if area < 0.5 * min_side_px**2 or area > 1.3 * max_side_px**2:
+        return None
+    hull = cv2.convexHull(c)
+    hull_area = cv2.contourArea(hull)
+    if hull_area <= 0 or area / hull_area < min_solidity:
+        return None
+    approx = cv2.approxPolyDP(hull, 0.05 * cv2.arcLength(hull, True), True)
+    if len(approx) != 4 or not cv2.isContourConvex(approx):
+        return None
+    a = _ordered_cw(approx.reshape(4, 2).astype(np.float64))
+    sides = np.hypot(*(a[_NEXT] - a).T)
+    if sides.min() < 0.7 * min_side_px or sides.min() < 0.4 * sides.max():
+        return None
+    q = robust_quad(c, a)
+    q = _ordered_cw(a if q is None else q)
+    # OpenCV traces a hole on the ring's own pixels, the innermost bright ones, whose centres lie outside
+    # the marker's edge (on the hard bench's 20-30 px tags the quads' sides came out 1.5 px long, median;
+    # read from there the second path's fit started outside the border and lost 4 of 6 tags it reads from
+    # the true corners): the quad is shrunk by that much about its centre
+    ctr = q.mean(axis=0)
+    side = float(np.hypot(*(q[_NEXT] - q).T).mean())
+    return ctr + (q - ctr) * max(0.5, 1.0 - HOLE_EXCESS_PX / side)
+
+
+#: how much longer (pixels) a side of a hole's quad is than the marker's (see :func:`_hole_quad`)
+HOLE_EXCESS_PX = 1.5
