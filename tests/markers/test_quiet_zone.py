@@ -65,7 +65,7 @@ def test_hole_quad_is_the_marker_outline(kind: str) -> None:
         img, _, truth = _scene(kind, seed)
         assert truth is not None
         quads = quiet_zone_quads(img, p.quiet_windows[0], p.quiet_offset, p.min_side_px, p.max_side_px,
-                                 p.min_solidity)
+                                 p.min_solidity, p.ratio_threshold)
         near = [q for q in quads if np.linalg.norm(q.mean(axis=0) - truth.mean(axis=0)) < 5]
         if not near:
             continue

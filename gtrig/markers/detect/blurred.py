@@ -70,7 +70,8 @@ class BlurredParams:
     min_solidity : contour area / hull area.
     quiet_windows : window sides (pixels) of the quiet-zone candidates (:func:`.quiet.quiet_zone_quads`:
         the holes of the mask of pixels brighter than their neighbourhood's mean, the paper ring around a
-        marker), added where no candidate of the dark mask lies. 11 px is about half the smallest marker
+        marker, on the smoothed image; a hole's darkest tenth must be darker than ``ratio_threshold`` times
+        the ring), added where no candidate of the dark mask lies. 11 px is about half the smallest marker
         this path reads (the ring of a 20 px tag is 2-5 px wide; at 21-31 px windows the dark background
         around a thin ring lowers the mean less than the marker's own dark half does, and the ring breaks).
         Empty: off.
@@ -208,7 +209,9 @@ def find_blurred_candidates(gray: NDArray[np.uint8], params: BlurredParams, max_
         q = robust_quad(c, a)
         # the blob's corners are rounded by the blur: the hull's vertices are then a fair start
         out.append(_ordered_cw(a if q is None else q))
-    return out + _quiet_candidates(gray, params, out)
+    # the quiet zone traced on the same smoothed image: its noise (sigma 3 on the --quick set) left specks
+    # in the bright mask of the raw image that cost a third more tracing, for the same markers read
+    return out + _quiet_candidates(g, params, out)
 
 
 def _quiet_candidates(gray: NDArray[np.uint8], params: BlurredParams, own: list[NDArray[np.float64]]
@@ -220,7 +223,7 @@ def _quiet_candidates(gray: NDArray[np.uint8], params: BlurredParams, own: list[
     for win in params.quiet_windows:
         polys = [np.asarray(q, np.float32).reshape(-1, 1, 2) for q in own + out]
         for q in quiet_zone_quads(gray, win, params.quiet_offset, params.min_side_px, params.max_side_px,
-                                  params.min_solidity):
+                                  params.min_solidity, params.ratio_threshold):
             ctr = tuple(map(float, q.mean(axis=0)))
             if all(cv2.pointPolygonTest(p, ctr, False) < 0 for p in polys):
                 out.append(q)
