@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from gtrig.markers.detect import _kernels
 from gtrig.markers.detect._blas import matmul
-from gtrig.markers.detect.candidates import _ordered_cw, dark_mask, robust_quad
+from gtrig.markers.detect.candidates import dark_mask, solid_quad
 from gtrig.markers.detect.edges import quad_homographies
 from gtrig.markers.detect.quiet import quiet_zone_quads
 
@@ -191,24 +191,9 @@ def find_blurred_candidates(gray: NDArray[np.uint8], params: BlurredParams, max_
     lo, hi = 4 * params.min_side_px * 0.8, 4 * params.max_side_px * 1.3
     out = []
     for i in np.flatnonzero((hier[:, 3] < 0) & (lengths >= lo) & (lengths <= hi)):
-        c = contours[i]
-        area = cv2.contourArea(c)
-        if area < 0.5 * params.min_side_px**2 or area > 1.3 * params.max_side_px**2:
-            continue
-        hull = cv2.convexHull(c)
-        hull_area = cv2.contourArea(hull)
-        if hull_area <= 0 or area / hull_area < params.min_solidity:
-            continue
-        approx = cv2.approxPolyDP(hull, 0.05 * cv2.arcLength(hull, True), True)
-        if len(approx) != 4 or not cv2.isContourConvex(approx):
-            continue
-        a = _ordered_cw(approx.reshape(4, 2).astype(np.float64))
-        sides = np.hypot(*(a[_NEXT] - a).T)
-        if sides.min() < 0.7 * params.min_side_px or sides.min() < 0.4 * sides.max():
-            continue
-        q = robust_quad(c, a)
-        # the blob's corners are rounded by the blur: the hull's vertices are then a fair start
-        out.append(_ordered_cw(a if q is None else q))
+        q = solid_quad(contours[i], params.min_side_px, params.max_side_px, params.min_solidity)
+        if q is not None:
+            out.append(q)
     # the quiet zone traced on the same smoothed image: its noise (sigma 3 on the --quick set) left specks
     # in the bright mask of the raw image that cost a third more tracing, for the same markers read
     return out + _quiet_candidates(g, params, out)

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from gtrig.markers.detect.candidates import _NEXT, _ordered_cw, robust_quad
+from gtrig.markers.detect.candidates import _NEXT, solid_quad
 
 __all__ = ["quiet_zone_quads"]
 
@@ -88,22 +88,9 @@ def _hole_quad(c: NDArray[np.int32], min_side_px: float, max_side_px: float, min
                ) -> NDArray[np.float64] | None:
     """The quad (4, 2), clockwise on screen, of the hole contour ``c`` when it is a solid convex
     quadrilateral of the side range, else None."""
-    area = cv2.contourArea(c)
-    if area < 0.5 * min_side_px**2 or area > 1.3 * max_side_px**2:
+    q = solid_quad(c, min_side_px, max_side_px, min_solidity)
+    if q is None:
         return None
-    hull = cv2.convexHull(c)
-    hull_area = cv2.contourArea(hull)
-    if hull_area <= 0 or area / hull_area < min_solidity:
-        return None
-    approx = cv2.approxPolyDP(hull, 0.05 * cv2.arcLength(hull, True), True)
-    if len(approx) != 4 or not cv2.isContourConvex(approx):
-        return None
-    a = _ordered_cw(approx.reshape(4, 2).astype(np.float64))
-    sides = np.hypot(*(a[_NEXT] - a).T)
-    if sides.min() < 0.7 * min_side_px or sides.min() < 0.4 * sides.max():
-        return None
-    q = robust_quad(c, a)
-    q = _ordered_cw(a if q is None else q)
     # OpenCV traces a hole on the ring's own pixels, the innermost bright ones, whose centres lie outside
     # the marker's edge (on the hard bench's 20-30 px tags the quads' sides came out 1.5 px long, median,
     # on the raw image; read from there the second path's fit started outside the border and lost 4 of 6
