@@ -45,8 +45,9 @@ from numpy.typing import NDArray
 
 from gtrig.markers.detect import _kernels
 from gtrig.markers.detect._blas import matmul
-from gtrig.markers.detect.candidates import _ordered_cw, dark_mask, robust_quad
+from gtrig.markers.detect.candidates import dark_mask, solid_quad
 from gtrig.markers.detect.edges import quad_homographies
+from gtrig.markers.detect.quiet import quiet_zone_quads
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +68,15 @@ class BlurredParams:
         since a blurred border never gets as dark as a sharp one.
     min_side_px, max_side_px : side range of the candidates; larger markers are the first path's.
     min_solidity : contour area / hull area.
+    quiet_windows : window sides (pixels) of the quiet-zone candidates (:func:`.quiet.quiet_zone_quads`:
+        the holes of the mask of pixels brighter than their neighbourhood's mean, the paper ring around a
+        marker, on the smoothed image; a hole's darkest tenth must be darker than ``ratio_threshold`` times
+        the ring), added where no candidate of the dark mask lies. 11 px is about half the smallest marker
+        this path reads (the ring of a 20 px tag is 2-5 px wide; at 21-31 px windows the dark background
+        around a thin ring lowers the mean less than the marker's own dark half does, and the ring breaks).
+        Empty: off.
+    quiet_offset : how much brighter than that mean (grey levels) a pixel of the ring is; about the noise
+        the 3 x 3 median leaves.
     max_free_misfit : the code-free fit's residual SD may be at most this many times the expected
         misfit of a marker (no code can fit better than the model with free cells, so clutter stops
         here, before the codes are tried).
@@ -111,6 +121,8 @@ class BlurredParams:
     min_side_px: float = 12.0
     max_side_px: float = 38.0
     min_solidity: float = 0.85
+    quiet_windows: tuple[int, ...] = (11,)
+    quiet_offset: float = 3.0
     max_free_misfit: float = 2.0
     texture_share: float = 0.05
     max_start_misfit: float = 8.0
@@ -179,24 +191,27 @@ def find_blurred_candidates(gray: NDArray[np.uint8], params: BlurredParams, max_
     lo, hi = 4 * params.min_side_px * 0.8, 4 * params.max_side_px * 1.3
     out = []
     for i in np.flatnonzero((hier[:, 3] < 0) & (lengths >= lo) & (lengths <= hi)):
-        c = contours[i]
-        area = cv2.contourArea(c)
-        if area < 0.5 * params.min_side_px**2 or area > 1.3 * params.max_side_px**2:
-            continue
-        hull = cv2.convexHull(c)
-        hull_area = cv2.contourArea(hull)
-        if hull_area <= 0 or area / hull_area < params.min_solidity:
-            continue
-        approx = cv2.approxPolyDP(hull, 0.05 * cv2.arcLength(hull, True), True)
-        if len(approx) != 4 or not cv2.isContourConvex(approx):
-            continue
-        a = _ordered_cw(approx.reshape(4, 2).astype(np.float64))
-        sides = np.hypot(*(a[_NEXT] - a).T)
-        if sides.min() < 0.7 * params.min_side_px or sides.min() < 0.4 * sides.max():
-            continue
-        q = robust_quad(c, a)
-        # the blob's corners are rounded by the blur: the hull's vertices are then a fair start
-        out.append(_ordered_cw(a if q is None else q))
+        q = solid_quad(contours[i], params.min_side_px, params.max_side_px, params.min_solidity)
+        if q is not None:
+            out.append(q)
+    # the quiet zone traced on the same smoothed image: its noise (sigma 3 on the --quick set) left specks
+    # in the bright mask of the raw image that cost a third more tracing, for the same markers read
+    return out + _quiet_candidates(g, params, out)
+
+
+def _quiet_candidates(gray: NDArray[np.uint8], params: BlurredParams, own: list[NDArray[np.float64]]
+                      ) -> list[NDArray[np.float64]]:
+    """The quiet-zone quads (:func:`.quiet.quiet_zone_quads`, each (4, 2)) of ``gray`` whose centre lies in
+    none of the quads ``own`` (the dark mask's candidates: the same marker, read once) nor in an earlier
+    window's quad."""
+    out: list[NDArray[np.float64]] = []
+    for win in params.quiet_windows:
+        polys = [np.asarray(q, np.float32).reshape(-1, 1, 2) for q in own + out]
+        for q in quiet_zone_quads(gray, win, params.quiet_offset, params.min_side_px, params.max_side_px,
+                                  params.min_solidity, params.ratio_threshold):
+            ctr = tuple(map(float, q.mean(axis=0)))
+            if all(cv2.pointPolygonTest(p, ctr, False) < 0 for p in polys):
+                out.append(q)
     return out
 
 

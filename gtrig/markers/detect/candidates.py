@@ -158,6 +158,34 @@ def robust_quad(contour: NDArray[np.int32], approx: NDArray[np.float64]) -> NDAr
     return q if ok else None
 
 
+def solid_quad(c: NDArray[np.int32], min_side_px: float, max_side_px: float, min_solidity: float
+               ) -> NDArray[np.float64] | None:
+    """The quad (4, 2), clockwise on screen, of the contour ``c`` ((N, 1, 2) pixels) of a small blob or hole
+    when it is a solid convex quadrilateral of sides ``min_side_px`` - ``max_side_px``, else None (the
+    second path's test: no hole tests, a blurred marker's blob has none).
+
+    Tests: area, solidity (area / hull area >= ``min_solidity``), a four-vertex convex approximation of
+    the hull, its shortest side; the quad is the robust one (:func:`robust_quad`), or the hull's vertices
+    when that fails (a blurred blob's corners are rounded: they are then a fair start).
+    """
+    area = cv2.contourArea(c)
+    if area < 0.5 * min_side_px**2 or area > 1.3 * max_side_px**2:
+        return None
+    hull = cv2.convexHull(c)
+    hull_area = cv2.contourArea(hull)
+    if hull_area <= 0 or area / hull_area < min_solidity:
+        return None
+    approx = cv2.approxPolyDP(hull, 0.05 * cv2.arcLength(hull, True), True)
+    if len(approx) != 4 or not cv2.isContourConvex(approx):
+        return None
+    a = _ordered_cw(approx.reshape(4, 2).astype(np.float64))
+    sides = np.hypot(*(a[_NEXT] - a).T)
+    if sides.min() < 0.7 * min_side_px or sides.min() < 0.4 * sides.max():
+        return None
+    q = robust_quad(c, a)
+    return _ordered_cw(a if q is None else q)
+
+
 def find_candidates(
     gray: NDArray[np.uint8], params: CandidateParams, max_hole_fraction: float | None = None,
     trace: list | None = None, threads: int = 1,
