@@ -333,11 +333,12 @@ def make_long_run(source: Path, out: Path, seconds: float) -> tuple[dict[str, in
 
 
 def _sample_tree(pid: int, records: Path, before: dict[str, float], samples: list[dict[str, object]],
-                 stop: object, every_s: float = 1.0) -> None:
+                 stop: object, every_s: float = 1.0, journal: Path | None = None) -> None:
     """Every ``every_s`` until ``stop`` is set: the process ``pid``'s RSS and high-water mark (MB), CPU
     seconds, its descendants' RSS (largest, MB) and CPU seconds (summed over every descendant seen, each
     at its last reading), and the stages finished so far (``records``: ``name.pkl`` written as a stage
-    ends; one with its mtime in ``before`` is the copied results' own)."""
+    ends; one with its mtime in ``before`` is the copied results' own); each sample also appended to
+    ``journal`` (JSON lines) as it is taken, so a run cut short still has its figures."""
     import psutil
 
     proc = psutil.Process(pid)
@@ -363,6 +364,9 @@ def _sample_tree(pid: int, records: Path, before: dict[str, float], samples: lis
         samples.append({"t": time.time() - t0, "rss_mb": int(st["VmRSS"]) / 1e3, "hwm_mb": int(st["VmHWM"]) / 1e3,
                         "cpu_s": c.user + c.system, "worker_rss_mb": max(rss), "workers": len(kids),
                         "worker_cpu_s": sum(cpu_of.values()), "done": set(done)})
+        if journal is not None:
+            with open(journal, "a", encoding="utf-8") as f:
+                f.write(json.dumps(dict(samples[-1], done=sorted(done))) + "\n")
         stop.wait(every_s)  # type: ignore[attr-defined]
 
 
@@ -386,7 +390,8 @@ def run_pipeline(rec: Path, out: Path, workers: int, log: Path) -> dict[str, obj
         child = psutil.Popen([sys.executable, "-m", "gtrig", "run", "--recording", str(rec), "--out", str(out),
                               "--workers", str(workers)], stdout=f, stderr=subprocess.STDOUT, env=env)
         stop = threading.Event()
-        th = threading.Thread(target=_sample_tree, args=(child.pid, records, before, samples, stop), daemon=True)
+        th = threading.Thread(target=_sample_tree, args=(child.pid, records, before, samples, stop, 1.0,
+                                                         log.with_suffix(".samples.jsonl")), daemon=True)
         th.start()
         _, status, ru = os.wait4(child.pid, 0)
         stop.set()
