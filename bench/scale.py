@@ -440,10 +440,13 @@ def long_run(source: Path, results: Path, work: Path, minutes: float, workers: i
     rec, out = base / "recording", base / "results"
     t = time.time()
     counts, reps, period = make_long_run(source, rec, 60 * minutes)
-    if not out.exists():
-        shutil.copytree(results, out, symlinks=True)
+    if not out.exists():  # copied and seeded under another name, renamed once complete
+        part = out.with_name(out.name + ".partial")
+        shutil.rmtree(part, ignore_errors=True)
+        shutil.copytree(results, part, symlinks=True)
         lines = seed_checkpoint(rec, results / "rig.calibrated.yaml", results / "gt_vision_run.checkpoint",
-                                out / "gt_vision_run.checkpoint")
+                                part / "gt_vision_run.checkpoint")
+        part.rename(out)
     else:
         lines = -1  # a rerun: the results (and the seeded checkpoint) of the first attempt
     made_s = time.time() - t
