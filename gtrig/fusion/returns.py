@@ -117,6 +117,9 @@ class WindowedReturns(_Frames):
     spool : the binary file of the returns in frame order (``_RECORD`` rows), or None: read from ``frames``.
     frames : the logs (:class:`gtrig.laser.recording.LoggedFrames`) when not spooled.
     window_frames : frames per window of :meth:`windows`.
+
+    Once the ``with`` block of :func:`returns_of_recording` has ended, the spool is gone and
+    :meth:`windows` fails; the per-frame uses (:meth:`frame_shares`, :meth:`frame_of`) go on working.
     """
 
     names: tuple[str, ...]

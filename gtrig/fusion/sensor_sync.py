@@ -492,6 +492,7 @@ def _hull_rows(win: tuple[np.ndarray, ...], ref: Reference, fit: _HullFit, tau: 
 
 
 def _blocks_of(t: np.ndarray, t0: float, block_s: float) -> np.ndarray:
+    """The block of time (index from 0 at ``t0``, ``block_s`` long) of each stamp of ``t`` (M,), seconds."""
     return np.floor((t - t0) / block_s).astype(int)
 
 
