@@ -352,6 +352,8 @@ def _sample_tree(pid: int, records: Path, before: dict[str, float], samples: lis
             kids = proc.children(recursive=True)
         except (psutil.Error, OSError):
             break
+        if "VmRSS" not in st:  # exited: a zombie's status has no memory lines
+            break
         rss = [0.0]
         for k in kids:
             try:
