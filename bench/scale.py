@@ -23,10 +23,17 @@ GTlaser's client memory against the laser log's length (``--laser-minutes``): a 
 ``run/lasers/*.csv`` repeated, lap after lap, with their stamps moved on by the log's length (the robot
 jumps back at each seam: the track is lost and found again), tracked in a process of its own.
 
+The whole pipeline on a long full recording (``--run-minutes``): every sensor of a full recording's run
+(cameras through their timestamps files, scanner logs, odometry, the true trajectory) repeated lap after
+lap with one period, the rest linked; ``gtrig run --workers N`` in a child process into a copy of the short
+run's results (its checkpoints; GTvision's detections seeded from the short run's), sampled every second:
+the client's and the workers' RSS and CPU per stage.
+
 Usage::
 
     python bench/scale.py --source REC --rig RESULTS/rig.calibrated.yaml --minutes 60 --work /tmp/scale
     python bench/scale.py --laser-source REC --rig RESULTS/rig.calibrated.yaml --laser-minutes 5 15 --work W
+    python bench/scale.py --run-source REC --run-results RESULTS --run-minutes 5 15 60 --work W
 """
 
 from __future__ import annotations
@@ -43,9 +50,13 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def make_long(source: Path, out: Path, seconds: float | None) -> dict[str, int]:
+def make_long(source: Path, out: Path, seconds: float | None, lap: tuple[float, float] | None = None,
+              ) -> dict[str, int]:
     """``out/run/cameras/<cam>/``: ``source``'s run images hard-linked once, repeated by a timestamps file
-    ``seconds`` long (None: once); ``out/rig.yaml`` copied. Returns the images per camera."""
+    ``seconds`` long (None: once); ``out/rig.yaml`` copied. Returns the images per camera. ``lap`` =
+    (period, start): every camera's stamps moved on by the one ``period`` (s) a lap and cut at ``start +
+    seconds`` (as :func:`repeat_stamped`, for a recording whose sensors repeat together); default: each
+    camera's own period, a number of images."""
     import shutil
 
     import numpy as np
@@ -60,6 +71,10 @@ def make_long(source: Path, out: Path, seconds: float | None) -> dict[str, int]:
         n = len(ix)
         period = float(ix.stamps_s[-1] - ix.stamps_s[0]) + float(np.median(np.diff(ix.stamps_s)))
         total = n if seconds is None else int(round(seconds / period * n))
+        if lap is not None and seconds is not None:
+            period = lap[0]
+            k = np.arange(n * (int(np.ceil(seconds / period)) + 1))
+            total = int(np.sum(ix.stamps_s[k % n] + (k // n) * period < lap[1] + seconds))
         dst = out / "run" / "cameras" / cam_dir.name
         dst.mkdir(parents=True, exist_ok=True)
         for f in ix.files:
@@ -187,6 +202,39 @@ def seed_checkpoint(long_rec: Path, rig_path: Path, cycle_ck: Path, out_ck: Path
     return n_lines
 
 
+def repeat_stamped(src: Path, dst: Path, period: float, reps: int, end_s: float = float("inf"),
+                   decimals: int = 9) -> int:
+    """``dst``: the rows of the stamped text file ``src`` (CSV or TUM: the stamp is a row's first field;
+    header lines, those whose first field is no number, kept once at the top) repeated ``reps`` times,
+    each repeat's stamps moved on by ``period`` s, written with ``decimals`` decimals, rows at or after
+    ``end_s`` left out; written under a temporary name and renamed. Returns the rows written."""
+    sep = "," if src.suffix == ".csv" else " "
+    with open(src, encoding="utf-8") as f:
+        lines = f.readlines()
+    head = [ln for ln in lines if not _stamp_of(ln, sep)[1]]
+    body = [_stamp_of(ln, sep) + (ln,) for ln in lines if _stamp_of(ln, sep)[1]]
+    tmp = dst.with_name(dst.name + ".tmp")
+    n = 0
+    with open(tmp, "w", encoding="utf-8") as g:
+        g.writelines(head)
+        for k in range(reps):
+            for t, _, ln in body:
+                if t + k * period >= end_s:
+                    break
+                g.write(f"{t + k * period:.{decimals}f}{sep}{ln.split(sep, 1)[1]}")
+                n += 1
+    tmp.rename(dst)
+    return n
+
+
+def _stamp_of(line: str, sep: str) -> tuple[float, bool]:
+    """(the stamp of a row, True) or (nan, False) for a header or blank line."""
+    try:
+        return float(line.split(sep, 1)[0]), True
+    except ValueError:
+        return float("nan"), False
+
+
 def make_long_laser(source: Path, out: Path, seconds: float) -> int:
     """``out/run/lasers/<scanner>.csv``: ``source``'s run scans repeated for ``seconds`` (each repeat's
     stamps moved on by the log's length, written with 9 decimals as the simulator does), ``out/background``
@@ -206,18 +254,8 @@ def make_long_laser(source: Path, out: Path, seconds: float) -> int:
         (out / "background").symlink_to((source / "background").resolve())
     for p in logs:
         dst = out / "run" / "lasers" / p.name
-        if dst.is_file():
-            continue
-        tmp = dst.with_suffix(".tmp")
-        with open(p, encoding="utf-8") as f:
-            header, body = f.readline(), f.readlines()
-        with open(tmp, "w", encoding="utf-8") as g:
-            g.write(header)
-            for k in range(reps):
-                for line in body:
-                    t, rest = line.split(",", 1)
-                    g.write(f"{float(t) + k * period:.9f},{rest}")
-        tmp.rename(dst)
+        if not dst.is_file():
+            repeat_stamped(p, dst, period, reps)
     return reps
 
 
@@ -238,6 +276,197 @@ def child_laser(rec: Path, rig_path: Path, mode: str) -> dict[str, object]:
     out["client_peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
     out["pool_worker_peak_mb"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e3
     return out
+
+
+#: a lap of a long full recording lasts a multiple of this (s): of every simulated sensor's period (cameras
+#: 10 Hz, scanners 75 Hz, odometry 50 Hz), so each sensor's stamps keep their phase from lap to lap
+LAP_GRID_S = 0.2
+
+
+def lap_of(source: Path) -> tuple[float, float]:
+    """(period, start) of ``source``'s run, seconds: the first stamp of any camera, scanner or odometry
+    row, and the shortest multiple of :data:`LAP_GRID_S` longer than the span of them all by at least one
+    grid step (every sensor then repeats with one period: the sensors stay on their clocks)."""
+    import math
+
+    from gtrig.io.frames import read_frame_index
+    from gtrig.io.odometry import read_odometry
+    from gtrig.io.scans import index_scans
+
+    run = source / "run"
+    spans = [index_scans(p).stamps_s for p in sorted((run / "lasers").glob("*.csv"))]
+    spans += [read_frame_index(d).stamps_s for d in sorted((run / "cameras").iterdir()) if d.is_dir()]
+    spans.append(read_odometry(run / "odometry.csv").stamps_s)
+    first, last = min(float(t[0]) for t in spans), max(float(t[-1]) for t in spans)
+    return LAP_GRID_S * (math.floor((last - first) / LAP_GRID_S) + 2), first
+
+
+def make_long_run(source: Path, out: Path, seconds: float) -> tuple[dict[str, int], int, float]:
+    """A full recording ``seconds`` long in ``out`` made of laps of ``source``: its cameras' images (through
+    their timestamps files, :func:`make_long`), its scanner logs, odometry and true trajectory
+    (``truth/run.tum``) repeated with their stamps moved on by one lap period (:func:`lap_of`) and cut at
+    the same time; every other entry (survey, calibration, background, validation, the rest of truth/)
+    linked to ``source``'s. The robot jumps back to the lap's start at each seam. Returns (images per
+    camera, laps begun, the lap's period in seconds)."""
+    import math
+
+    period, start = lap_of(source)
+    end = start + seconds
+    reps = math.ceil(seconds / period)
+    out.mkdir(parents=True, exist_ok=True)
+    for e in source.iterdir():
+        if e.name not in ("run", "truth", "rig.yaml") and not (out / e.name).exists():
+            (out / e.name).symlink_to(e.resolve())
+    (out / "truth").mkdir(exist_ok=True)
+    for e in (source / "truth").iterdir():
+        if e.name != "run.tum" and not (out / "truth" / e.name).exists():
+            (out / "truth" / e.name).symlink_to(e.resolve())
+    todo = [(source / "truth" / "run.tum", out / "truth" / "run.tum", 6),
+            (source / "run" / "odometry.csv", out / "run" / "odometry.csv", 9)]
+    todo += [(p, out / "run" / "lasers" / p.name, 9) for p in sorted((source / "run" / "lasers").glob("*.csv"))]
+    (out / "run" / "lasers").mkdir(parents=True, exist_ok=True)
+    for src, dst, decimals in todo:
+        if not dst.is_file():
+            repeat_stamped(src, dst, period, reps, end, decimals)
+    counts = make_long(source, out, seconds, (period, start))
+    return counts, reps, period
+
+
+def _sample_tree(pid: int, records: Path, before: dict[str, float], samples: list[dict[str, object]],
+                 stop: object, every_s: float = 1.0, journal: Path | None = None) -> None:
+    """Every ``every_s`` until ``stop`` is set: the process ``pid``'s RSS and high-water mark (MB), CPU
+    seconds, its descendants' RSS (largest, MB) and CPU seconds (summed over every descendant seen, each
+    at its last reading), and the stages finished so far (``records``: ``name.pkl`` written as a stage
+    ends; one with its mtime in ``before`` is the copied results' own); each sample also appended to
+    ``journal`` (JSON lines) as it is taken, so a run cut short still has its figures."""
+    import psutil
+
+    proc = psutil.Process(pid)
+    cpu_of: dict[int, float] = {}
+    t0 = time.time()
+    while not stop.is_set():  # type: ignore[attr-defined]
+        try:
+            with open(f"/proc/{pid}/status", encoding="ascii") as f:
+                st = {ln.split(":")[0]: ln.split()[1] for ln in f if ln.startswith(("VmRSS", "VmHWM"))}
+            c = proc.cpu_times()
+            kids = proc.children(recursive=True)
+        except (psutil.Error, OSError):
+            break
+        if "VmRSS" not in st:  # exited: a zombie's status has no memory lines
+            break
+        rss = [0.0]
+        for k in kids:
+            try:
+                rss.append(k.memory_info().rss / 1e6)
+                kc = k.cpu_times()
+                cpu_of[k.pid] = kc.user + kc.system
+            except psutil.Error:
+                continue
+        done = [p.stem for p in records.glob("*.pkl") if p.stat().st_mtime != before.get(p.stem)]
+        samples.append({"t": time.time() - t0, "rss_mb": int(st["VmRSS"]) / 1e3, "hwm_mb": int(st["VmHWM"]) / 1e3,
+                        "cpu_s": c.user + c.system, "worker_rss_mb": max(rss), "workers": len(kids),
+                        "worker_cpu_s": sum(cpu_of.values()), "done": set(done)})
+        if journal is not None:
+            with open(journal, "a", encoding="utf-8") as f:
+                f.write(json.dumps(dict(samples[-1], done=sorted(done))) + "\n")
+        stop.wait(every_s)  # type: ignore[attr-defined]
+
+
+def run_pipeline(rec: Path, out: Path, workers: int, log: Path) -> dict[str, object]:
+    """``gtrig run --recording rec --out out --workers N`` in a child process, sampled (:func:`_sample_tree`)
+    while it runs: wall, the child's own peak RSS (its high-water mark, last sample) and, per stage, the
+    client's and a worker's largest RSS, CPU seconds and wall (a stage ends when its record is written;
+    stages reused from the copied results are not timed). ``log``: the child's output."""
+    import threading
+
+    import psutil
+
+    from gtrig.pipeline import STAGES
+
+    env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    records = out / ".gtrig" / "stages"
+    before = {p.stem: p.stat().st_mtime for p in records.glob("*.pkl")} if records.is_dir() else {}
+    samples: list[dict[str, object]] = []
+    t0 = time.time()
+    with open(log, "w", encoding="utf-8") as f:
+        child = psutil.Popen([sys.executable, "-m", "gtrig", "run", "--recording", str(rec), "--out", str(out),
+                              "--workers", str(workers)], stdout=f, stderr=subprocess.STDOUT, env=env)
+        stop = threading.Event()
+        th = threading.Thread(target=_sample_tree, args=(child.pid, records, before, samples, stop, 1.0,
+                                                         log.with_suffix(".samples.jsonl")), daemon=True)
+        th.start()
+        _, status, ru = os.wait4(child.pid, 0)
+        stop.set()
+        th.join()
+    fresh = {p.stem for p in records.glob("*.pkl") if p.stat().st_mtime != before.get(p.stem)}
+    order = [st.name for st in STAGES if st.name in fresh]
+    return {"wall_s": time.time() - t0, "exit": os.waitstatus_to_exitcode(status),
+            "tree_maxrss_mb": ru.ru_maxrss / 1e3, "client_hwm_mb": max((x["hwm_mb"] for x in samples), default=0.0),
+            "stages": _per_stage(samples, order), "samples": samples}
+
+
+def _per_stage(samples: list[dict[str, object]], order: list[str]) -> list[dict[str, object]]:
+    """Per stage that ran (``order``), from the samples taken after the stage before it had finished and
+    before it had: the client's largest RSS, a worker's largest RSS, the client's and the workers' CPU
+    seconds and the wall (MB, s)."""
+    rows, prev = [], None
+    for name in order:
+        mine = [x for x in samples if name not in x["done"] and (prev is None or prev in x["done"])]  # type: ignore[operator]
+        if mine:
+            a, b = mine[0], mine[-1]
+            rows.append({"stage": name, "wall_s": b["t"] - a["t"],  # type: ignore[operator]
+                         "client_peak_mb": max(x["rss_mb"] for x in mine),  # type: ignore[type-var]
+                         "worker_peak_mb": max(x["worker_rss_mb"] for x in mine),  # type: ignore[type-var]
+                         "client_cpu_s": b["cpu_s"] - a["cpu_s"],  # type: ignore[operator]
+                         "worker_cpu_s": b["worker_cpu_s"] - a["worker_cpu_s"]})  # type: ignore[operator]
+        prev = name
+    tail = [x for x in samples if prev is not None and prev in x["done"]]  # type: ignore[operator]
+    if tail:  # after the last stage: the accuracy tables written and printed
+        rows.append({"stage": "(after the stages)", "wall_s": tail[-1]["t"] - tail[0]["t"],  # type: ignore[operator]
+                     "client_peak_mb": max(x["rss_mb"] for x in tail),  # type: ignore[type-var]
+                     "worker_peak_mb": max(x["worker_rss_mb"] for x in tail),  # type: ignore[type-var]
+                     "client_cpu_s": tail[-1]["cpu_s"] - tail[0]["cpu_s"],  # type: ignore[operator]
+                     "worker_cpu_s": tail[-1]["worker_cpu_s"] - tail[0]["worker_cpu_s"]})  # type: ignore[operator]
+    return rows
+
+
+def long_run(source: Path, results: Path, work: Path, minutes: float, workers: int) -> dict[str, object]:
+    """The whole pipeline on a ``minutes`` long full recording made of laps of ``source``
+    (:func:`make_long_run`), into a copy of ``source``'s ``results`` (its checkpoints and stage records)
+    whose GTvision run checkpoint is seeded from the short run's detections (:func:`seed_checkpoint`: the
+    images repeat); :func:`run_pipeline` measures it. Prints one line per stage and returns the figures
+    (also written to ``work/run_<minutes>min.json``)."""
+    import shutil
+
+    base = work / f"run_{minutes:g}min"
+    rec, out = base / "recording", base / "results"
+    t = time.time()
+    counts, reps, period = make_long_run(source, rec, 60 * minutes)
+    if not out.exists():  # copied and seeded under another name, renamed once complete
+        part = out.with_name(out.name + ".partial")
+        shutil.rmtree(part, ignore_errors=True)
+        shutil.copytree(results, part, symlinks=True)
+        lines = seed_checkpoint(rec, results / "rig.calibrated.yaml", results / "gt_vision_run.checkpoint",
+                                part / "gt_vision_run.checkpoint")
+        part.rename(out)
+    else:
+        lines = -1  # a rerun: the results (and the seeded checkpoint) of the first attempt
+    made_s = time.time() - t
+    r = run_pipeline(rec, out, workers, base / "gtrig_run.log")
+    r.update(minutes=minutes, images=sum(counts.values()), laps=reps, period_s=period, checkpoint_lines=lines,
+             made_s=made_s)
+    with open(base.with_suffix(".json"), "w", encoding="utf-8") as f:
+        json.dump({k: v for k, v in r.items() if k != "samples"} | {
+            "samples": [dict(x, done=sorted(x["done"])) for x in r["samples"]]}, f)  # type: ignore[union-attr]
+    print(f"gtrig run on {minutes:g} min ({reps} laps of {period:g} s of {source}; {sum(counts.values())} images, "
+          f"{len(counts)} cameras; made in {made_s:.0f} s) --workers {workers}: exit {r['exit']}, "
+          f"{r['wall_s']:.0f} s wall; client peak {r['client_hwm_mb']:.0f} MB (its high-water mark), "
+          f"process tree ru_maxrss {r['tree_maxrss_mb']:.0f} MB", flush=True)
+    for st in r["stages"]:  # type: ignore[union-attr]
+        print(f"  {st['stage']}: {st['wall_s']:.0f} s wall, client CPU {st['client_cpu_s']:.0f} s, workers' CPU "
+              f"{st['worker_cpu_s']:.0f} s; client peak {st['client_peak_mb']:.0f} MB, worker peak "
+              f"{st['worker_peak_mb']:.0f} MB", flush=True)
+    return r
 
 
 def _child(args: list[str]) -> dict[str, object]:
@@ -285,12 +514,23 @@ def main() -> None:
     ap.add_argument("--laser-minutes", type=float, nargs="*", default=[],
                     help="GTlaser's client memory on laser logs this long (minutes, each in its own process)")
     ap.add_argument("--laser-mode", default="pool:2", help="executor of the GTlaser runs: pool:N or dask:N")
+    ap.add_argument("--run-source", type=Path, help="a short full recording that --run-minutes repeats")
+    ap.add_argument("--run-results", type=Path, help="its results folder (gtrig run): checkpoints, stage records")
+    ap.add_argument("--run-minutes", type=float, nargs="*", default=[],
+                    help="gtrig run end to end on a full recording this long (minutes, each in its own process)")
+    ap.add_argument("--run-workers", type=int, default=2, help="--workers of those runs")
     ap.add_argument("--child", nargs="*", help=argparse.SUPPRESS)
     ap.add_argument("--laser-child", nargs=3, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.laser_child:
         rec, rig, mode = a.laser_child
         print(json.dumps(child_laser(Path(rec), Path(rig), mode)))
+        return
+    if a.run_minutes:
+        if a.run_source is None or a.run_results is None:
+            ap.error("--run-minutes needs --run-source REC and --run-results RESULTS")
+        for minutes in a.run_minutes:
+            long_run(a.run_source, a.run_results, a.work, minutes, a.run_workers)
         return
     if a.laser_minutes:
         if a.laser_source is None or a.rig is None:

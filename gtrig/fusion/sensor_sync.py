@@ -36,15 +36,16 @@ cost`` over trial offsets: 1 at the estimate.
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.stats import t as student_t
 
-from gtrig.evaluate.associate import nearest_indices
 from gtrig.fusion.fuse import FusionOptions, fuse
 from gtrig.fusion.measurements import Fixes
+from gtrig.fusion.returns import ScannerReturns, WindowedReturns, returns_of_recording
+from gtrig.fusion.returns import recording_returns as recording_returns  # re-exported (benches, tests)
 from gtrig.fusion.sync import OffsetEstimate, Verdict
 from gtrig.io.odometry import OdometryLog
 from gtrig.io.offsets import Z95
@@ -387,58 +388,6 @@ def _camera_curve(fit: tuple[np.ndarray, ...], ref: Reference, tau: np.ndarray, 
 
 
 # ------------------------------------------------------------------------------------------ scanners
-@dataclass(frozen=True)
-class ScannerReturns:
-    """The foreground returns of every fixed scanner (what GTlaser fits), each with its firing time.
-
-    Attributes
-    ----------
-    names : (S,) scanner names. stamps_s : (P,) each return's firing time on its scanner's clock.
-    xy_world : (P, 2) the returns, world frame, metres. scanner_index : (P,) into ``names``.
-    dir_world : (P, 2) unit beam directions. origin_xy : (S, 2) scanner origins. sigma_m : (S,) range noise.
-    frame_index : (P,) GTlaser's frame of each return; frame_stamps_s : (F,) the frames' stamps (GTlaser's
-        pose stamps).
-    """
-
-    names: tuple[str, ...]
-    stamps_s: np.ndarray
-    xy_world: np.ndarray
-    scanner_index: np.ndarray
-    dir_world: np.ndarray
-    origin_xy: np.ndarray
-    sigma_m: np.ndarray
-    frame_index: np.ndarray
-    frame_stamps_s: np.ndarray
-
-    @staticmethod
-    def from_framed(fp) -> ScannerReturns:  # noqa: ANN001 (gtrig.laser.fuse.FramedPoints)
-        """From GTlaser's framed points: a return's firing time is its frame's stamp plus its ``dt_s``."""
-        fid = np.repeat(np.arange(fp.n_frames), np.diff(fp.frame_start))
-        return ScannerReturns(tuple(fp.scanner_names), fp.frame_stamps_s[fid] + fp.dt_s, fp.xy_world,
-                              np.asarray(fp.scanner_index, np.int64), fp.dir_world, fp.scanner_xy_world,
-                              np.asarray(fp.sigma_m, float), fid, fp.frame_stamps_s)
-
-    def frame_shares(self) -> np.ndarray:
-        """(F, S) each scanner's share of each frame's returns."""
-        F, S = self.frame_stamps_s.size, len(self.names)
-        n = np.bincount(self.frame_index * S + self.scanner_index, minlength=F * S).reshape(F, S).astype(float)
-        tot = n.sum(axis=1, keepdims=True)
-        return np.divide(n, tot, out=np.zeros_like(n), where=tot > 0)
-
-    def frame_of(self, stamps_s: np.ndarray, tol_s: float = 2e-6) -> tuple[np.ndarray, np.ndarray]:
-        """The frame (index into ``frame_stamps_s``) of each of ``stamps_s`` (M,), and whether it has one
-        (a frame stamp within ``tol_s``; where not, the index is 0): a GTlaser pose is its frame's. The
-        nearest stamp on either side, since a track read back from a TUM file carries its stamps rounded
-        to the microsecond, up or down (the next frame stamp up only would miss every pose rounded up:
-        2114 of 5614 on seed 0)."""
-        st = np.asarray(stamps_s, float)
-        k = np.zeros(st.size, np.int64)
-        hit = np.zeros(st.size, bool)
-        i_pose, i_frame = nearest_indices(st, self.frame_stamps_s, tol_s)
-        k[i_pose] = i_frame
-        hit[i_pose] = True
-        return k, hit
-
 def restamp_laser(track: PoseTrack, ret: ScannerReturns, offsets_s: Mapping[str, float]) -> PoseTrack:
     """GTlaser's track on the clock the scanners' offsets refer to: GTlaser fits a frame's returns of all
     scanners in one pose, so that pose holds at the frame stamp minus the share-weighted mean of their
@@ -496,15 +445,102 @@ def _block_sums(blocks: np.ndarray, B: int, A: np.ndarray, w: np.ndarray, f: np.
     return H_b, g_b
 
 
-def scanner_offsets(ret: ScannerReturns, ref: Reference, corners_xy: np.ndarray, block_s: float = 5.0,
-                    gate_m: float = 0.02, sigma_model_m: float = 0.002, huber_k: float = 3.0,
+@dataclass(frozen=True)
+class _HullFit:
+    """The scanner fit's constants: ``corners`` (C, 2) the hull, robot frame; ``sigma_m`` (S,) each scanner's
+    range noise; the hull model's error, the gate and the Huber threshold (:func:`scanner_offsets`)."""
+
+    corners: np.ndarray
+    sigma_m: np.ndarray
+    sigma_model_m: float
+    gate_m: float
+    huber_k: float
+
+
+def _kept_windows(ret: ScannerReturns | WindowedReturns, ref: Reference,
+                  ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Per window of ``ret``, its returns with reference poses within 50 ms on both sides: stamps (M,),
+    world points (M, 2), scanner indices (M,), beam directions (M, 2), their scanners' origins (M, 2)."""
+    for r in ret.windows():
+        keep = _near_reference(ref, r.stamps_s, 0.05)
+        sid = r.scanner_index[keep]
+        yield r.stamps_s[keep], r.xy_world[keep], sid, r.dir_world[keep], r.origin_xy[sid]
+
+
+def _hull_rows(win: tuple[np.ndarray, ...], ref: Reference, fit: _HullFit, tau: np.ndarray, bias: np.ndarray,
+               dth: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One window's rows of the scanner fit linearised at (``tau`` (S,), ``bias`` (C,), ``dth``): the
+    residuals' derivatives A (M, S + C + 1) by (tau, side biases, hull yaw), the weights w (M,) (0: not the
+    hull's, Huber-reduced beyond ``huber_k``) and the residuals f (M,), metres."""
+    t, p, sid, dirs, org = win
+    S, C = tau.size, bias.size
+    P, V = ref.at(t - tau[sid])
+    P[:, 2] += dth
+    d, k, J, over = hull_distances(fit.corners, P, p, org)
+    f = d - bias[k]
+    cos_i = -(dirs[:, 0] * J[:, 0] + dirs[:, 1] * J[:, 1])
+    var = fit.sigma_m[sid] ** 2 * cos_i**2 + fit.sigma_model_m**2
+    z = np.abs(f) / np.sqrt(var)
+    inl = np.isfinite(f) & (np.abs(f) < fit.gate_m) & (over <= 0.05)
+    w = np.where(inl, np.where(z <= fit.huber_k, 1.0, fit.huber_k / np.maximum(z, 1e-12)) / var, 0.0)
+    f = np.where(inl, f, 0.0)
+    A = np.zeros((t.size, S + C + 1))
+    A[np.arange(t.size), sid] = -(J * V).sum(axis=1)  # d f / d tau_s
+    A[np.arange(t.size), S + k] = -1.0
+    A[:, -1] = J[:, 2]
+    return A, w, f
+
+
+def _blocks_of(t: np.ndarray, t0: float, block_s: float) -> np.ndarray:
+    """The block of time (index from 0 at ``t0``, ``block_s`` long) of each stamp of ``t`` (M,), seconds."""
+    return np.floor((t - t0) / block_s).astype(int)
+
+
+def _scanner_curves(ret: ScannerReturns | WindowedReturns, ref: Reference, fit: _HullFit,
+                    blocks: tuple[float, float, int], weights_at: tuple[np.ndarray, np.ndarray, float],
+                    at: tuple[np.ndarray, np.ndarray, float],
+                    search_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The fit's cost over 41 trial offsets of each scanner (the rest held at ``at`` = (tau, bias, dth)),
+    with the weights of the fit's last pass (linearised at ``weights_at``), summed window by window.
+    ``blocks`` = (first stamp, block_s, B). Returns the trial offsets (S, 41), the costs (S, 41), each
+    scanner's returns with weight (S,) and its blocks of time with any (S,)."""
+    tau, bias, dth = at
+    S = tau.size
+    t0, block_s, B = blocks
+    taus = tau[:, None] + np.linspace(-search_s, search_s, 41)[None, :]
+    cost = np.zeros(taus.shape)
+    n_obs = np.zeros(S, np.int64)
+    seen = np.zeros((S, B), bool)
+    for win in _kept_windows(ret, ref):
+        t, p, sid, _, org = win
+        _, w, _ = _hull_rows(win, ref, fit, *weights_at)
+        for s in range(S):
+            m = (sid == s) & (w > 0)
+            n_obs[s] += int(m.sum())
+            seen[s, _blocks_of(t[m], t0, block_s)] = True
+            for j, ts in enumerate(taus[s]):
+                P, _ = ref.at(t[m] - ts)
+                P[:, 2] += dth
+                dd, kk, _, _ = hull_distances(fit.corners, P, p[m], org[m])
+                cost[s, j] += float(np.sum(w[m] * (dd - bias[kk]) ** 2))
+    return taus, cost, n_obs, seen.sum(axis=1)
+
+
+def scanner_offsets(ret: ScannerReturns | WindowedReturns, ref: Reference, corners_xy: np.ndarray,
+                    block_s: float = 5.0, gate_m: float = 0.02, sigma_model_m: float = 0.002, huber_k: float = 3.0,
                     max_ci_s: float = 0.01, search_s: float = 0.02, min_returns: int = 200,
                     ) -> list[OffsetEstimate]:
     """Every scanner's clock offset to the reference's clock (see the module docstring), one fit.
 
+    The returns are read a window at a time (``ret.windows()``) for each of the fit's passes: one for the
+    first stamp, four Gauss-Newton iterations and the cost curves; what is held across windows is per block
+    of time (the normal equations, (B, n, n)) or per scanner, so the memory does not grow with the
+    recording's length when ``ret`` is a :class:`WindowedReturns` (issue 24).
+
     Parameters
     ----------
-    ret : the scanners' foreground returns (:meth:`ScannerReturns.from_framed`).
+    ret : the scanners' foreground returns (:func:`returns_of_recording`, or in memory:
+        :meth:`ScannerReturns.from_framed`).
     ref : the reference trajectory (:func:`reference_track` of GTvision's poses), its clock.
     corners_xy : (C, 2) the hull's corners, counter-clockwise, robot frame (``rig.robot.hull.corners_xy()``).
     gate_m : returns farther than this from the hull are not the hull's (a leg, a reflection).
@@ -516,77 +552,34 @@ def scanner_offsets(ret: ScannerReturns, ref: Reference, corners_xy: np.ndarray,
     -------
     One :class:`OffsetEstimate` per scanner, named ``laser/<scanner>``, in ``ret.names`` order.
     """
-    keep = _near_reference(ref, ret.stamps_s, 0.05)
-    t, p, sid = ret.stamps_s[keep], ret.xy_world[keep], ret.scanner_index[keep]
-    dirs, org = ret.dir_world[keep], ret.origin_xy[ret.scanner_index[keep]]
     S, C = len(ret.names), int(np.asarray(corners_xy).shape[0])
-    n = S + C + 1  # tau per scanner, a bias per hull side, the hull's yaw in the reference's robot frame
-    tau, bias, dth = np.zeros(S), np.zeros(C), 0.0
-    if t.size == 0:
+    fit = _HullFit(np.asarray(corners_xy, float), np.asarray(ret.sigma_m, float), sigma_model_m, gate_m, huber_k)
+    # the blocks of time count from the first kept return, so a pass over the stamps comes first
+    t0, t1 = np.inf, -np.inf
+    for t, *_ in _kept_windows(ret, ref):
+        if t.size:
+            t0, t1 = min(t0, float(t.min())), max(t1, float(t.max()))
+    if not np.isfinite(t0):
         return [_verdict(f"laser/{nm}", float("nan"), float("inf"), float("inf"), 0, np.zeros(0), np.zeros(0),
                          max_ci_s, 0, min_returns) for nm in ret.names]
-    blocks = np.floor((t - t.min()) / block_s).astype(int)
-    B = int(blocks.max()) + 1
+    B = int(np.floor((t1 - t0) / block_s)) + 1
+    n = S + C + 1  # tau per scanner, a bias per hull side, the hull's yaw in the reference's robot frame
+    state: tuple[np.ndarray, np.ndarray, float] = (np.zeros(S), np.zeros(C), 0.0)
     for _ in range(4):
-        P, V = ref.at(t - tau[sid])
-        P[:, 2] += dth
-        d, k, J, over = hull_distances(corners_xy, P, p, org)
-        f = d - bias[k]
-        cos_i = -(dirs[:, 0] * J[:, 0] + dirs[:, 1] * J[:, 1])
-        var = ret.sigma_m[sid] ** 2 * cos_i**2 + sigma_model_m**2
-        z = np.abs(f) / np.sqrt(var)
-        inl = np.isfinite(f) & (np.abs(f) < gate_m) & (over <= 0.05)
-        w = np.where(inl, np.where(z <= huber_k, 1.0, huber_k / np.maximum(z, 1e-12)) / var, 0.0)
-        f = np.where(inl, f, 0.0)
-        A = np.zeros((t.size, n))
-        A[np.arange(t.size), sid] = -(J * V).sum(axis=1)  # d f / d tau_s
-        A[np.arange(t.size), S + k] = -1.0
-        A[:, -1] = J[:, 2]
-        H_b, g_b = _block_sums(blocks, B, A, w, f)
-        x, se, nb = _jackknife(H_b, g_b, np.arange(S))
-        tau, bias, dth = tau + x[:S], bias + x[S:S + C], dth + float(x[-1])
+        H_b, g_b = np.zeros((B, n, n)), np.zeros((B, n))
+        for win in _kept_windows(ret, ref):
+            A, w, f = _hull_rows(win, ref, fit, *state)
+            h, g = _block_sums(_blocks_of(win[0], t0, block_s), B, A, w, f)
+            H_b += h
+            g_b += g
+        x, se, _ = _jackknife(H_b, g_b, np.arange(S))
+        last, (tau, bias, dth) = state, state
+        state = (tau + x[:S], bias + x[S:S + C], dth + float(x[-1]))
     H = H_b.sum(axis=0)
     white = np.sqrt(np.diag(np.linalg.inv(H + _ridge(H)))[:S])
-    out = []
-    for s, nm in enumerate(ret.names):
-        m = (sid == s) & (w > 0)
-        nb_s = int(np.unique(blocks[m]).size)
-        taus = tau[s] + np.linspace(-search_s, search_s, 41)
-        cost = np.empty(taus.size)
-        for j, ts in enumerate(taus):  # the fit's cost over trial offsets of this scanner, the rest held
-            P, _ = ref.at(t[m] - ts)
-            P[:, 2] += dth
-            dd, kk, _, _ = hull_distances(corners_xy, P, p[m], org[m])
-            cost[j] = float(np.sum(w[m] * (dd - bias[kk]) ** 2))
-        out.append(_verdict(f"laser/{nm}", float(tau[s]), float(se[s]), float(white[s]), nb_s, taus,
-                            _score(cost), max_ci_s, int(m.sum()), min_returns))
-    return out
-
-
-def recording_returns(rec_dir, rig, sequence: str = "run", window_frames: int = 256) -> ScannerReturns:  # noqa: ANN001
-    """The foreground returns GTlaser fits on ``rec_dir/<sequence>``: the fixed scanners' logs, the
-    background models of ``rec_dir/background`` and the scanners' calibrated poses in ``rig``.
-
-    The logs are read ``window_frames`` frames at a time (:class:`gtrig.laser.recording.LoggedFrames`, the
-    same points bit for bit as the whole logs' reading): only the returns are kept, about 4 kB per frame
-    at the simulated rates, not the scans' ranges and text (issue 24: the whole reading peaked at about
-    22 kB per frame)."""
-    from pathlib import Path
-
-    from gtrig.laser.recording import load_backgrounds, logged_frames
-
-    rec = Path(rec_dir)
-    _, frames = logged_frames(rig, rec / sequence, load_backgrounds(rec / "background", rig))
-    F = frames.n_frames
-    parts = [ScannerReturns.from_framed(frames.window(a, min(a + window_frames, F), scans=False))
-             for a in range(0, max(F, 1), window_frames)]
-    first = parts[0]
-    return replace(first, stamps_s=np.concatenate([r.stamps_s for r in parts]),
-                   xy_world=np.concatenate([r.xy_world for r in parts]),
-                   scanner_index=np.concatenate([r.scanner_index for r in parts]),
-                   dir_world=np.concatenate([r.dir_world for r in parts]),
-                   frame_index=np.concatenate([r.frame_index + k * window_frames for k, r in enumerate(parts)]),
-                   frame_stamps_s=np.concatenate([r.frame_stamps_s for r in parts]))
+    taus, cost, n_obs, nb = _scanner_curves(ret, ref, fit, (t0, block_s, B), last, state, search_s)
+    return [_verdict(f"laser/{nm}", float(state[0][s]), float(se[s]), float(white[s]), int(nb[s]), taus[s],
+                     _score(cost[s]), max_ci_s, int(n_obs[s]), min_returns) for s, nm in enumerate(ret.names)]
 
 
 def camera_frame_stamps(rec_dir, rig, sequence: str = "run") -> dict[str, np.ndarray]:  # noqa: ANN001
@@ -661,8 +654,8 @@ def sensor_offsets_and_laser_clock(rec_dir, rig, vision: PoseTrack, laser: PoseT
         raise ConfigError("rig: per-scanner offsets need the fixed scanners and robot.hull")
     cam_stamps = camera_frame_stamps(rec_dir, rig, sequence)
     timed = vision if checkpoint is None else restamp_vision(vision.usable(), checkpoint, cam_stamps)
-    ret = recording_returns(rec_dir, rig, sequence)
-    sc = scanner_offsets(ret, reference_track([fixes_from_track(timed, "vision")]), rig.robot.hull.corners_xy())
+    with returns_of_recording(rec_dir, rig, sequence) as ret:  # an hour's returns: a file, not memory
+        sc = scanner_offsets(ret, reference_track([fixes_from_track(timed, "vision")]), rig.robot.hull.corners_xy())
     if scanners:
         out += sc
     clock = laser_clock(ret, laser, sc) if laser is not None else (float("nan"), float("nan"))

@@ -245,9 +245,9 @@ def test_laser_clock_is_the_poses_mean_share_weighted_scanner_offset() -> None:
     assert np.isnan(laser_clock(ret, track, [est("a", 0.004, 0.001), est("b", 0.0, 0.0, "ambiguous")])[0])
 
 
-def test_recording_returns_read_a_window_at_a_time_are_the_whole_logs_returns(tmp_path) -> None:  # noqa: ANN001
-    """The scanners' returns for the per-scanner offsets, read from the logs a few frames at a time, are
-    the returns of the whole logs read at once, bit for bit (issue 24: only the returns stay in memory)."""
+def _logged_recording(folder):  # noqa: ANN001, ANN202
+    """Two scanners' background and run logs (1 s at 75 Hz, a hull driving by) in ``folder``; returns the
+    rig and the run's returns read from the whole logs at once (:func:`frame_points`)."""
     from types import SimpleNamespace
 
     from gtrig.io.scans import ScanLog, read_scans, write_scans
@@ -264,19 +264,30 @@ def test_recording_returns_read_a_window_at_a_time_are_the_whole_logs_returns(tm
     rng = np.random.default_rng(6)
     bst = [np.arange(0, 0.4, 1 / 75) + 0.002 * i for i in range(2)]
     st = [np.arange(0, 1.0, 1 / 75) + 0.003 * i for i in range(2)]
-    for folder, stamps, ranges in (
+    for sub, stamps, ranges in (
             ("background", bst, synth.scan_sequence(scs, walls, None, None, bst, rng)),
-            ("run", st, synth.scan_sequence(scs, walls, hull, lambda t: np.array([-1 + 0.3 * t, 0.2 * t, 0.3]),
-                                            st, rng))):
-        (tmp_path / folder / "lasers").mkdir(parents=True)
+            ("run", st, synth.scan_sequence(scs, walls, hull, _drive, st, rng))):
+        (folder / sub / "lasers").mkdir(parents=True)
         for s, t, r in zip(scs, stamps, ranges, strict=True):
-            write_scans(tmp_path / folder / "lasers" / f"{s.name}.csv", ScanLog(t, r))
-    rig = SimpleNamespace(laser_scanners=list(scs))
-    logs = [read_scans(tmp_path / "run" / "lasers" / f"{s.name}.csv", s) for s in scs]
-    bg = [build_background(read_scans(tmp_path / "background" / "lasers" / f"{s.name}.csv", s).ranges_m, s)
+            write_scans(folder / sub / "lasers" / f"{s.name}.csv", ScanLog(t, r))
+    rig = SimpleNamespace(laser_scanners=list(scs), hull=hull)
+    logs = [read_scans(folder / "run" / "lasers" / f"{s.name}.csv", s) for s in scs]
+    bg = [build_background(read_scans(folder / "background" / "lasers" / f"{s.name}.csv", s).ranges_m, s)
           for s in scs]
     masks = [foreground_mask(g.ranges_m, foreground_threshold(b)) for g, b in zip(logs, bg, strict=True)]
-    whole = ScannerReturns.from_framed(frame_points(scs, [g.stamps_s for g in logs], [g.ranges_m for g in logs], masks))
+    return rig, ScannerReturns.from_framed(frame_points(scs, [g.stamps_s for g in logs], [g.ranges_m for g in logs],
+                                                        masks))
+
+
+def _drive(t: float) -> np.ndarray:
+    """The hull's pose of :func:`_logged_recording` at ``t`` (s): x, y (m), yaw (rad), world frame."""
+    return np.array([-1 + 0.3 * t, 0.2 * t, 0.3 + 0.4 * t])
+
+
+def test_recording_returns_read_a_window_at_a_time_are_the_whole_logs_returns(tmp_path) -> None:  # noqa: ANN001
+    """The scanners' returns for the per-scanner offsets, read from the logs a few frames at a time, are
+    the returns of the whole logs read at once, bit for bit (issue 24: only the returns stay in memory)."""
+    rig, whole = _logged_recording(tmp_path)
     assert whole.stamps_s.size > 500
     for w in (7, 10**6):
         got = recording_returns(tmp_path, rig, window_frames=w)
@@ -284,3 +295,45 @@ def test_recording_returns_read_a_window_at_a_time_are_the_whole_logs_returns(tm
         for k in ("stamps_s", "xy_world", "scanner_index", "dir_world", "origin_xy", "sigma_m", "frame_index",
                   "frame_stamps_s"):
             np.testing.assert_array_equal(getattr(got, k), getattr(whole, k), err_msg=f"{k}, windows of {w}")
+
+
+@pytest.mark.parametrize(("spool", "window"), [(True, 9), (False, 9), (True, 10**6)])
+def test_scanner_fit_over_windows_of_the_logs_is_the_fit_over_all_returns(tmp_path, spool: bool, window: int,  # noqa: ANN001
+                                                                          ) -> None:
+    """The per-scanner fit summed window by window over returns spooled to a file (or re-read from the
+    logs) gives the fit over all returns in memory, to the order of the sums (bit for bit in one window);
+    the windows are the whole logs' returns; the per-frame uses (shares, frames of stamps) are the same;
+    the spool file is gone after."""
+    from gtrig.fusion.returns import returns_of_recording
+
+    rig, whole = _logged_recording(tmp_path / "rec")
+    t = np.arange(-0.5, 1.5, 0.02)
+    xyt = np.array([_drive(x) for x in t])
+    ref = Reference(t, xyt, np.gradient(xyt, t, axis=0), np.zeros((t.size, 3, 3)))
+    corners = rig.hull.corners_xy()
+    one = scanner_offsets(whole, ref, corners, block_s=0.1, max_ci_s=1.0)
+    spool_dir = tmp_path / "spool"
+    spool_dir.mkdir()
+    with returns_of_recording(tmp_path / "rec", rig, spool=spool, tmp_dir=spool_dir, window_frames=window) as ret:
+        assert len(list(spool_dir.iterdir())) == (1 if spool else 0)
+        parts = list(ret.windows())
+        assert len(parts) > 5 if window < 75 else len(parts) == 1
+        np.testing.assert_array_equal(np.concatenate([r.stamps_s for r in parts]), whole.stamps_s)
+        np.testing.assert_array_equal(np.concatenate([r.frame_index for r in parts]), whole.frame_index)
+        got = scanner_offsets(ret, ref, corners, block_s=0.1, max_ci_s=1.0)
+    assert not list(spool_dir.iterdir())
+    np.testing.assert_array_equal(ret.frame_shares(), whole.frame_shares())
+    some = whole.frame_stamps_s[::3]
+    np.testing.assert_array_equal(ret.frame_of(some)[0], whole.frame_of(some)[0])
+    for a, b in zip(one, got, strict=True):
+        assert a.verdict == b.verdict == "ok", (a.reason, b.reason)
+        assert a.windows == b.windows and a.reason == b.reason
+        if window > 75:
+            assert (b.offset_s, b.ci95_s, b.corr.tolist()) == (a.offset_s, a.ci95_s, a.corr.tolist())
+            continue
+        assert b.offset_s == pytest.approx(a.offset_s, rel=1e-9, abs=1e-12)
+        np.testing.assert_allclose(b.ci95_s, a.ci95_s, rtol=1e-9, atol=1e-12)
+        # the cost curve is not smooth: a return beyond a hull corner is as far from both sides, and which
+        # side it is given flips with the last bit of the trial offset (the sums' order moves it, 1e-16 s)
+        assert np.argmax(b.corr) == np.argmax(a.corr)
+        np.testing.assert_allclose(b.corr, a.corr, atol=0.05)

@@ -116,10 +116,18 @@ def test_client_memory_is_flat_in_the_recording_length(tmp_path: Path) -> None:
 LASER_CYCLE = 600  # frames of one lap of the simulated robot (8 s at 75 Hz); the long log is three laps
 
 
-def laser_logs(out: Path, laps: int) -> tuple[Path, object, list]:
+def circle_pose(t: float) -> np.ndarray:
+    """The robot of :func:`laser_logs` at ``t`` (s): x, y (m), yaw (rad), world frame; one lap per
+    ``LASER_CYCLE`` frames at 75 Hz."""
+    w = 2 * np.pi / (LASER_CYCLE / 75.0)
+    return np.array([1.2 * np.cos(w * t), 1.2 * np.sin(w * t), w * t + np.pi / 2])
+
+
+def laser_logs(out: Path, laps: int, background: Path | None = None) -> tuple[Path, object, list]:
     """A robot driving laps of a circle (1.2 m radius, 0.94 m/s) in a rectangular room watched by three
     scanners at 75 Hz: ``out/lasers/<scanner>.csv`` (the first lap's scans repeated with their stamps
-    moved on by a lap, so the longer log costs no more to make), the rig and the backgrounds."""
+    moved on by a lap, so the longer log costs no more to make), the rig and the backgrounds (their scans
+    written to ``background/lasers/`` too when given)."""
     from gtrig.io.scans import ScanLog, write_scans
     from gtrig.laser import synth
     from gtrig.laser.background import build_background
@@ -132,15 +140,15 @@ def laser_logs(out: Path, laps: int) -> tuple[Path, object, list]:
     rig = base.model_copy(update={"laser_scanners": scs})
     hull = rig.robot.hull
     lap_s = LASER_CYCLE / 75.0
-    w = 2 * np.pi / lap_s
-
-    def pose(t: float) -> np.ndarray:
-        return np.array([1.2 * np.cos(w * t), 1.2 * np.sin(w * t), w * t + np.pi / 2])
-
     rng = np.random.default_rng(4)
-    bg = synth.scan_sequence(scs, walls, None, None, [np.arange(0, 0.4, 1 / 75) + 0.002 * i for i in range(3)], rng)
+    bst = [np.arange(0, 0.4, 1 / 75) + 0.002 * i for i in range(3)]
+    bg = synth.scan_sequence(scs, walls, None, None, bst, rng)
     lap = [np.arange(LASER_CYCLE) / 75.0 + 0.003 * i for i in range(3)]
-    run = synth.scan_sequence(scs, walls, hull, pose, lap, rng)
+    run = synth.scan_sequence(scs, walls, hull, circle_pose, lap, rng)
+    if background is not None:
+        (background / "lasers").mkdir(parents=True)
+        for s, t, r in zip(scs, bst, bg, strict=True):
+            write_scans(background / "lasers" / f"{s.name}.csv", ScanLog(t, r))
     (out / "lasers").mkdir(parents=True)
     for s, t, r in zip(scs, lap, run, strict=True):
         write_scans(out / "lasers" / f"{s.name}.csv",
@@ -184,5 +192,59 @@ def test_gtlaser_client_memory_is_flat_in_the_log_length(tmp_path: Path, monkeyp
     print(f"GTlaser tracemalloc peak: {n1} frames {p1 / 1e6:.2f} MB (result {r1 / 1e6:.2f}), {n3} frames "
           f"{p3 / 1e6:.2f} MB (result {r3 / 1e6:.2f}); {(p3 - p1) / (n3 - n1):.0f} bytes per frame, {growth:.0f} "
           "beyond the result")
+    assert n3 == 3 * n1
+    assert growth < 1000
+
+
+def scanner_sync_peak(rec: Path, rig: object, laps: int) -> tuple[int, int]:
+    """(tracemalloc peak of the per-scanner clock fit of ``rec`` in this process, the frames of its logs):
+    :func:`gtrig.fusion.sensor_sync.sensor_offsets_and_laser_clock` for the scanners only, against a
+    GTvision track of the true circle (10 Hz, 1 mm / 1 mrad noise)."""
+    from gtrig.fusion.sensor_sync import sensor_offsets_and_laser_clock
+    from gtrig.io.scans import index_scans
+    from gtrig.trajectory import PoseTrack
+
+    t = np.arange(0.0, laps * LASER_CYCLE / 75.0, 0.1)
+    z = np.array([circle_pose(x) for x in t]) + np.random.default_rng(5).normal(0, 0.001, (t.size, 3))
+    vision = PoseTrack.from_xytheta(t, z, cov=np.tile(np.eye(3) * 1e-6, (t.size, 1, 1)), source="vision")
+    tracemalloc.start()
+    try:
+        est, _ = sensor_offsets_and_laser_clock(rec, rig, vision, cameras=False)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert [e.source for e in est] == ["laser/a", "laser/b", "laser/c"]
+    return peak, len(index_scans(rec / "run" / "lasers" / "a.csv").stamps_s)
+
+
+def test_scanner_sync_client_memory_is_flat_in_the_log_length(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """The sync stage's per-scanner fit over a log three times longer: its peak grows by well under a kB a
+    frame (it held every foreground return and the fit's rows of them, (P, n), 21 kB a frame here, in
+    session 34; now a window's, and per frame only its stamp and each scanner's count of returns). The
+    fit's windows are made shorter than the short log, so that a window's memory is the same in both."""
+    import gtrig.io.scans as scans
+
+    monkeypatch.setattr(scans, "INDEX_BLOCK_LINES", 200, raising=False)
+    try:
+        import gtrig.fusion.returns as returns
+
+        monkeypatch.setattr(returns, "WINDOW_FRAMES", 150)
+    except ImportError:  # before session 35 (the test then measures the fit that held every return)
+        pass
+    runs = {}
+    for name, laps in (("short", 1), ("long", 3)):
+        rec = tmp_path / name
+        _, rig, _ = laser_logs(rec / "run", laps, rec / "background")
+        cam = rig.cameras[0].name  # type: ignore[attr-defined]
+        folder = rec / "run" / "cameras" / cam
+        folder.mkdir(parents=True)
+        write_frame_index(folder, 0.1 * np.arange(10), ["blank.png"] * 10)  # the camera stamps it reads
+        runs[name] = (rec, rig, laps)
+    scanner_sync_peak(*runs["short"])  # imports and first-use caches not measured
+    p1, n1 = scanner_sync_peak(*runs["short"])
+    p3, n3 = scanner_sync_peak(*runs["long"])
+    growth = (p3 - p1) / (n3 - n1)
+    print(f"per-scanner sync tracemalloc peak: {n1} frames {p1 / 1e6:.2f} MB, {n3} frames {p3 / 1e6:.2f} MB; "
+          f"{growth:.0f} bytes per frame")
     assert n3 == 3 * n1
     assert growth < 1000
