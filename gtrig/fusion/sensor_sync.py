@@ -42,6 +42,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.stats import t as student_t
 
+from gtrig.errors import InputError
 from gtrig.fusion.fuse import FusionOptions, fuse
 from gtrig.fusion.measurements import Fixes
 from gtrig.fusion.returns import ScannerReturns, WindowedReturns, returns_of_recording
@@ -77,10 +78,57 @@ class Reference:
         return (t >= self.stamps_s[0] + margin_s) & (t <= self.stamps_s[-1] - margin_s)
 
 
-def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float = 0.5) -> Reference:
+#: a reference longer than this is smoothed in windows of this length (seconds), each with
+#: :data:`REFERENCE_OVERLAP_S` more fixes on either side (issue 24: one batch over an hour held ~600 MB)
+REFERENCE_WINDOW_S = 600.0
+#: the fixes beyond each window's ends that its smoothing sees: a fix's pull on the constant-velocity
+#: smoothing dies out within seconds, so with 30 s of them the kept part of a window is the whole batch's
+#: to 1e-13 m on a synthetic 1000 s run (tests/fusion/test_sensor_sync.py)
+REFERENCE_OVERLAP_S = 30.0
+
+
+def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float = 0.5,
+                    window_s: float = REFERENCE_WINDOW_S, overlap_s: float = REFERENCE_OVERLAP_S) -> Reference:
     """The fixes smoothed by the constant-velocity model (robust batch MAP, no odometry) on a ``rate_hz``
     grid, one segment per stretch without a gap over ``max_gap_s``; the fits use only times with poses of
-    the reference within 50 ms on both sides, so no gap is interpolated across."""
+    the reference within 50 ms on both sides, so no gap is interpolated across.
+
+    Fixes spanning more than ``window_s`` are smoothed a window of ``window_s`` at a time (each seeing
+    ``overlap_s`` of fixes beyond its ends, its own part kept), so that the memory does not grow with the
+    recording's length; a shorter span is one batch, as before."""
+    t0 = min(float(f.stamps_s[0]) for f in fixes if len(f))
+    t1 = max(float(f.stamps_s[-1]) for f in fixes if len(f))
+    if t1 - t0 <= window_s:
+        return _reference_part(fixes, rate_hz, max_gap_s)
+    parts = []
+    n_win = int(np.ceil((t1 - t0) / window_s))
+    for w in range(n_win):
+        a, b = t0 + w * window_s, (t0 + (w + 1) * window_s if w + 1 < n_win else np.inf)
+        sel = [_fixes_between(f, a - overlap_s, b + overlap_s) for f in fixes]
+        if sum(len(f) for f in sel) < 3:
+            continue
+        try:
+            ref = _reference_part([f for f in sel if len(f)], rate_hz, max_gap_s)
+        except InputError:  # a window of a few scattered fixes (a long gap) has no segment to smooth
+            continue
+        keep = (ref.stamps_s >= a) & (ref.stamps_s < b)
+        parts.append(Reference(ref.stamps_s[keep], ref.xytheta[keep], ref.velocity[keep], ref.cov[keep]))
+    if not parts:
+        raise InputError("fusion: no segment with at least three fixes")
+    xyt = np.concatenate([p.xytheta for p in parts])
+    xyt[:, 2] = np.unwrap(xyt[:, 2])  # each window's yaw was unwrapped from its own start
+    return Reference(np.concatenate([p.stamps_s for p in parts]), xyt, np.concatenate([p.velocity for p in parts]),
+                     np.concatenate([p.cov for p in parts]))
+
+
+def _fixes_between(f: Fixes, a: float, b: float) -> Fixes:
+    """The fixes of ``f`` stamped in ``[a, b]``."""
+    m = (f.stamps_s >= a) & (f.stamps_s <= b)
+    return Fixes(f.source, f.stamps_s[m], f.model, f.value[m], f.cov[m], f.lever_xy)
+
+
+def _reference_part(fixes: list[Fixes], rate_hz: float, max_gap_s: float) -> Reference:
+    """:func:`reference_track` of fixes smoothed in one batch."""
     # no innovation weighting: one source against a constant-velocity prediction has no other to
     # disagree with (its turns would read as disagreement)
     track, _ = fuse(fixes, None, FusionOptions(rate_hz=rate_hz, max_gap_s=max_gap_s, innovation_window_s=0.0))

@@ -337,3 +337,35 @@ def test_scanner_fit_over_windows_of_the_logs_is_the_fit_over_all_returns(tmp_pa
         # side it is given flips with the last bit of the trial offset (the sums' order moves it, 1e-16 s)
         assert np.argmax(b.corr) == np.argmax(a.corr)
         np.testing.assert_allclose(b.corr, a.corr, atol=0.05)
+
+
+def test_reference_in_windows_is_the_whole_batch_and_bounded(tmp_path) -> None:  # noqa: ANN001
+    """A long reference smoothed in windows (each with 30 s of fixes beyond its ends) is the one-batch
+    smoothing to a nanometre and a nanoradian, with a gap inside one window and one across a
+    window's end; and its peak memory is that of a window, not of the whole span."""
+    import tracemalloc
+
+    rng = np.random.default_rng(11)
+    t = np.arange(0.0, 1000.0, 0.1)
+    t = t[~(((t > 130.0) & (t < 133.0)) | ((t > 398.0) & (t < 403.0)))]  # gaps: in a window, across an end
+    xyt = np.column_stack([2.0 * np.cos(0.05 * t) + 0.3 * np.sin(0.31 * t), 1.5 * np.sin(0.05 * t),
+                           0.05 * t + 0.2 * np.sin(0.17 * t)])  # yaw winds past +-pi many times
+    cov = np.tile(np.diag([1e-6, 1e-6, 1e-5]), (t.size, 1, 1))
+    z = xyt + rng.multivariate_normal(np.zeros(3), cov[0], t.size)
+    fixes = [fixes_from_track(PoseTrack.from_xytheta(t, z, cov=cov, source="v"), "v")]
+    tracemalloc.start()
+    try:
+        windowed = reference_track(fixes, window_s=200.0)
+        _, peak_windowed = tracemalloc.get_traced_memory()
+        tracemalloc.reset_peak()
+        whole = reference_track(fixes, window_s=np.inf)
+        _, peak_whole = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert windowed.stamps_s.size == whole.stamps_s.size
+    assert np.abs(windowed.stamps_s - whole.stamps_s).max() < 1e-9  # the same grid (its phase from each start)
+    d = np.abs(windowed.xytheta - whole.xytheta)
+    assert d[:, :2].max() < 1e-9 and d[:, 2].max() < 1e-9  # metres, radians
+    assert np.abs(windowed.velocity - whole.velocity).max() < 1e-7
+    assert np.allclose(windowed.cov, whole.cov, rtol=1e-6, atol=1e-15)
+    assert peak_windowed < 0.5 * peak_whole
