@@ -315,6 +315,7 @@ class _Indexer:
         return True
 
     def header(self, line: str) -> None:
+        """Check the header line (its beam count against the expected one)."""
         names = [h.strip() for h in line.strip().split(",")]
         self.n_beams = len(names) - 1
         if (names[0] != "timestamp" or self.n_beams < 1 or names[1:] != [f"r_{i}" for i in range(self.n_beams)]
@@ -352,6 +353,7 @@ class _Indexer:
         return pos
 
     def run(self) -> ScanRows:
+        """The pass: the file's lines, the last block, then the checks of the whole file."""
         end = self.lines()
         if self.n_beams < 0 or (self.block and not self.flush()):
             raise self.refuse()
@@ -456,7 +458,7 @@ def _cached_rows(p: Path, ranges_file: Path, rows_file: Path) -> ScanRows | None
             stamps, starts, line_no = z["stamps_s"], z["starts"], z["line_no"]
             n_beams, end = int(z["beams"]), int(z["end"])
         size = os.stat(ranges_file).st_size
-    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+    except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile):  # missing, cut short, not ours
         return None
     n = stamps.size
     if starts.shape != (n,) or line_no.shape != (n,) or size != n * n_beams * 8:

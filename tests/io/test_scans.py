@@ -227,6 +227,11 @@ def test_a_changed_log_is_indexed_again_never_read_stale(tmp_path) -> None:  # t
     third = index_scans(p, beams=4, cache=tmp_path / "cache")
     assert third.ranges_file == second.ranges_file and third.ranges_file.stat().st_size == 30 * 4 * 8  # type: ignore[union-attr]
     _same_values(third, read_scans(p, beams=4))
+    rows_file = third.ranges_file.with_name(third.ranges_file.name.replace(".ranges.f8", ".rows.npz"))  # type: ignore[union-attr]
+    for junk in (b"", b"not a zip", rows_file.read_bytes()[:50]):  # a rows file empty, foreign or cut short
+        rows_file.write_bytes(junk)
+        _same_values(index_scans(p, beams=4, cache=tmp_path / "cache"), read_scans(p, beams=4))
+        assert len(rows_file.read_bytes()) > 50  # made again
     # the key holds the beams and the maximum range asked for: another check, other files
     assert index_scans(p, cache=tmp_path / "cache").ranges_file != second.ranges_file
 
