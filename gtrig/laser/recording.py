@@ -6,12 +6,14 @@ The public entry points for the CLI and the demo are :func:`calibrate_recording`
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
-from collections.abc import Callable, Mapping
+import tempfile
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 import numpy as np
 import yaml
@@ -246,12 +248,15 @@ class LoggedFrames:
 
 def logged_frames(
     rig: Rig, seq_dir: str | os.PathLike[str], backgrounds: list[BackgroundModel],
-    clocks: Mapping[str, ScannerClock] | None = None,
+    clocks: Mapping[str, ScannerClock] | None = None, scan_cache: str | os.PathLike[str] | None = None,
 ) -> tuple[Rig, LoggedFrames]:
     """The frames of ``seq_dir/lasers/<scanner>.csv`` as :class:`LoggedFrames` (each log indexed, not
     read: :func:`gtrig.io.scans.index_scans`), and the rig, moved onto the reference clock of
-    ``clocks`` (:func:`gtrig.laser.clock.on_clock`) when given."""
-    rows = _scanner_files(Path(seq_dir) / "lasers", rig, "sequence", index_scans)
+    ``clocks`` (:func:`gtrig.laser.clock.on_clock`) when given. ``scan_cache``: the folder where the
+    logs' parsed ranges are kept (``index_scans(cache=)``): the windows are then read from it, not
+    parsed again; None: from the text."""
+    rows = _scanner_files(Path(seq_dir) / "lasers", rig, "sequence",
+                          lambda p, s: index_scans(p, s, cache=scan_cache))
     if clocks:
         rig, _ = on_clock(rig, {}, clocks)
         rows = {k: v.shifted(clocks[k].offset_s) if k in clocks else v for k, v in rows.items()}
@@ -261,6 +266,26 @@ def logged_frames(
                              tuple(foreground_threshold(b) for b in backgrounds), layout)
 
 
+@contextlib.contextmanager
+def scan_cache_folder(scan_cache: str | os.PathLike[str] | Literal[False] | None) -> Iterator[Path | None]:
+    """The folder :func:`track_sequence` keeps the logs' parsed ranges in: ``scan_cache`` itself; for None
+    a temporary folder (``$TMPDIR``) removed at the end of the block, so that one call parses each log
+    once; for False none (every window parsed from the text)."""
+    if scan_cache is False:
+        yield None
+        return
+    if scan_cache is not None:
+        yield Path(scan_cache)
+        return
+    try:
+        tmp = tempfile.TemporaryDirectory(prefix="gtrig-scans-")
+    except OSError:  # no writable temporary folder: the text is parsed as it is read
+        yield None
+        return
+    with tmp:
+        yield Path(tmp.name)
+
+
 def track_sequence(
     rig: Rig,
     seq_dir: str | os.PathLike[str],
@@ -268,6 +293,7 @@ def track_sequence(
     settings: TrackSettings | None = None,
     scanner_cov: np.ndarray | None = None,
     clocks: Mapping[str, ScannerClock] | None = None,
+    scan_cache: str | os.PathLike[str] | Literal[False] | None = None,
     **parallel: Any,
 ) -> TrackResult:
     """Track the hull through ``seq_dir/lasers/<scanner>.csv`` with the given background models;
@@ -275,15 +301,19 @@ def track_sequence(
     ``clocks``: per scanner, its offset to a reference clock (:mod:`gtrig.laser.clock`): the scans are
     moved onto that clock first and the track is on it; ``parallel``: ``executor``, ``workers``,
     ``progress`` of :func:`gtrig.laser.track.track_frames`. The logs are read a time window at a time
-    (:class:`LoggedFrames`), by the workers too: the client's memory grows by per-frame results only."""
+    (:class:`LoggedFrames`), by the workers too: the client's memory grows by per-frame results only.
+    ``scan_cache``: where the logs' parsed ranges are kept (:func:`scan_cache_folder`; default a temporary
+    folder for the call): each log's text is parsed once, by its indexing, and the tracking passes and the
+    workers read the binary copy (a worker that does not see the folder parses its windows' text)."""
     if not rig.laser_scanners:
         raise InputError("the rig has no laser scanners")
     if rig.robot.hull is None:
         raise ConfigError("rig: robot.hull: missing field: GTlaser tracks the robot's hull (length_m, width_m, "
                           "z_min_m, z_max_m)")
-    _, frames = logged_frames(rig, seq_dir, backgrounds, clocks)
-    return track_frames(frames, HullModel.from_hull(rig.robot.hull), settings or TrackSettings(), scanner_cov,
-                        **parallel)
+    with scan_cache_folder(scan_cache) as cache:
+        _, frames = logged_frames(rig, seq_dir, backgrounds, clocks, cache)
+        return track_frames(frames, HullModel.from_hull(rig.robot.hull), settings or TrackSettings(), scanner_cov,
+                            **parallel)
 
 
 def track_recording(
@@ -295,6 +325,7 @@ def track_recording(
     settings: TrackSettings | None = None,
     scanner_cov: np.ndarray | None = None,
     clocks: Mapping[str, ScannerClock] | None = None,
+    scan_cache: str | os.PathLike[str] | Literal[False] | None = None,
     **parallel: Any,
 ) -> TrackResult:
     """Run GTlaser on one sequence of a recording.
@@ -317,6 +348,9 @@ def track_recording(
     clocks
         Per scanner, its clock offset to a reference clock (:func:`gtrig.laser.clock.clocks_from_sync`):
         the track is then on that clock (:func:`track_sequence`); default: the scanners' own stamps.
+    scan_cache
+        Where the logs' parsed ranges are kept (:func:`track_sequence`): ``gtrig run`` passes
+        ``RESULTS/.gtrig/scans``, so its later stages and a resumed run parse no log again.
     parallel
         ``executor``, ``workers`` and ``progress`` of :func:`gtrig.laser.track.track_frames` (where the
         per-frame covariance terms run; the output does not depend on them).
@@ -328,7 +362,7 @@ def track_recording(
         rig, report = calibrate_recording(rec)
         scanner_cov = report.cov_xytheta if scanner_cov is None else scanner_cov
     bgs = load_backgrounds(rec / "background", rig)
-    res = track_sequence(rig, rec / sequence, bgs, settings, scanner_cov, clocks, **parallel)
+    res = track_sequence(rig, rec / sequence, bgs, settings, scanner_cov, clocks, scan_cache, **parallel)
     if out_tum is not None:
         write_track(res, out_tum, out_cov)
     return res

@@ -13,6 +13,10 @@ if TYPE_CHECKING:
     from gtrig.evaluate.truth import TruthScore
     from gtrig.trajectory import PoseTrack
 
+#: where the run's laser logs' parsed ranges are kept, in the results folder (gtrig.io.scans.index_scans:
+#: the laser stage parses each log once; the laser-clock stage and a resumed run parse none)
+SCAN_CACHE = ".gtrig/scans"
+
 
 def gtlaser(inp: StageInput) -> StageOutput:
     from gtrig.config import apply_to_dataclass
@@ -28,7 +32,8 @@ def gtlaser(inp: StageInput) -> StageOutput:
     settings = apply_to_dataclass(inp.config.laser.track, TrackSettings())
     res = track_recording(inp.rec, sequence="run", rig=rig, out_tum=inp.out / "gt_laser.tum",
                           out_cov=inp.out / "gt_laser_cov.csv", settings=settings, scanner_cov=report.cov_xytheta,
-                          executor=inp.executor, workers=inp.workers, progress=inp.progress)
+                          scan_cache=inp.out / SCAN_CACHE, executor=inp.executor, workers=inp.workers,
+                          progress=inp.progress)
     track = to_pose_track(res)
     # the scanners' registration error is one draw for the whole run: every pose shares it, so fusion
     # considers it as a bias rather than averaging it away (its share of a typical pose's covariance)
@@ -96,8 +101,8 @@ def gtlaser_clock(inp: StageInput) -> StageOutput:
     settings = apply_to_dataclass(inp.config.laser.track, TrackSettings())
     res = track_recording(inp.rec, sequence="run", rig=rig, out_tum=inp.out / "gt_laser_synced.tum",
                           out_cov=inp.out / "gt_laser_synced_cov.csv", settings=settings,
-                          scanner_cov=report.cov_xytheta, clocks=clocks, executor=inp.executor,
-                          workers=inp.workers, progress=inp.progress)
+                          scanner_cov=report.cov_xytheta, clocks=clocks, scan_cache=inp.out / SCAN_CACHE,
+                          executor=inp.executor, workers=inp.workers, progress=inp.progress)
     track = to_pose_track(res)
     est = _offset_to_odometry(inp, track)
     missing = [s.name for s in rig.laser_scanners if s.name not in clocks]

@@ -133,3 +133,34 @@ def test_write_track_refuses_empty(tmp_path, room, sequence):
     assert not res.ok.any()
     with pytest.raises(GtrigError):
         write_track(res, tmp_path / "x.tum")
+
+
+def test_track_recording_parses_each_log_once(tmp_path, room, sequence, monkeypatch):
+    """With a cache folder (what ``gtrig run`` passes) the first run parses each log once (its index) and
+    a second one none, with the same result bit for bit as parsing every window's text (``scan_cache=
+    False``); without one, the call's temporary folder is gone when it returns."""
+    import tempfile
+
+    import gtrig.io.scans as scans
+
+    rig = _write_recording(tmp_path / "rec", room, sequence)
+    text = track_recording(tmp_path / "rec", "run", rig=rig, scan_cache=False)
+    parsed = []
+    parse = scans.ScanRows._parse
+    monkeypatch.setattr(scans.ScanRows, "_parse", lambda self, lo, hi: parsed.append(hi - lo) or parse(self, lo, hi))
+    first = track_recording(tmp_path / "rec", "run", rig=rig, scan_cache=tmp_path / "cache")
+    assert not parsed and len(list((tmp_path / "cache").glob("*.f8"))) == len(rig.laser_scanners)
+
+    def no_index(*a, **k):
+        raise AssertionError("a log was indexed again")
+
+    monkeypatch.setattr(scans, "_Indexer", no_index)
+    again = track_recording(tmp_path / "rec", "run", rig=rig, scan_cache=tmp_path / "cache")
+    assert not parsed
+    for r in (first, again):
+        assert r.xytheta.tobytes() == text.xytheta.tobytes() and r.cov_xytheta.tobytes() == text.cov_xytheta.tobytes()
+    monkeypatch.undo()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    tmp = track_recording(tmp_path / "rec", "run", rig=rig)
+    assert tmp.xytheta.tobytes() == text.xytheta.tobytes() and not list((tmp_path / "tmp").iterdir())

@@ -115,6 +115,10 @@ def test_gtlaser_identical_on_every_executor(executors, monkeypatch: pytest.Monk
     fp = frame_points(scs, st, run, masks)
     rows = tuple(index_scans(tmp_path / f"{s.name}.csv", s) for s in scs)
     logged = LoggedFrames(scs, rows, tuple(thresholds), frame_layout(scs, [r.stamps_s for r in rows]))
+    # ... and from the binary copy of the parsed ranges (index_scans(cache=)), which the workers read
+    cached = dataclasses.replace(logged, rows=tuple(index_scans(tmp_path / f"{s.name}.csv", s, cache=tmp_path / "cache")
+                                        for s in scs))
+    assert all(r.ranges_file is not None for r in cached.rows)
     cal = np.diag(np.tile([1e-6, 1e-6, np.radians(0.02) ** 2], len(scs)))
     model = HullModel.from_hull(hull)
 
@@ -134,6 +138,7 @@ def test_gtlaser_identical_on_every_executor(executors, monkeypatch: pytest.Monk
     for how in ({"workers": 1}, {"workers": 2}, {"executor": executors["local:2"]}, {"executor": executors["tcp"]}):
         assert fields(track.track_frames(fp, model, scanner_cov=cal, **how)) == fields(ref), how  # type: ignore[arg-type]
         assert fields(track.track_frames(logged, model, scanner_cov=cal, **how)) == fields(ref), ("logged", how)  # type: ignore[arg-type]
+        assert fields(track.track_frames(cached, model, scanner_cov=cal, **how)) == fields(ref), ("cached", how)  # type: ignore[arg-type]
 
 
 RESUMABLE = """
