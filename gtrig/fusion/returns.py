@@ -171,12 +171,14 @@ def _log_reads(frames, a: int, b: int, read_frames: int = READ_FRAMES,  # noqa: 
         yield lo, hi, replace(r, frame_index=r.frame_index + lo)
 
 
-def _logs(rec_dir, rig, sequence: str):  # noqa: ANN001, ANN202
-    """The fixed scanners' logs of ``rec_dir/<sequence>`` as LoggedFrames (backgrounds of ``rec_dir``)."""
+def _logs(rec_dir, rig, sequence: str, scan_cache: str | os.PathLike[str] | None = None):  # noqa: ANN001, ANN202
+    """The fixed scanners' logs of ``rec_dir/<sequence>`` as LoggedFrames (backgrounds of ``rec_dir``);
+    ``scan_cache``: the folder of their parsed ranges (``index_scans(cache=)``, GTlaser's, so the logs are
+    not parsed again), None: read from the text."""
     from gtrig.laser.recording import load_backgrounds, logged_frames
 
     rec = Path(rec_dir)
-    return logged_frames(rig, rec / sequence, load_backgrounds(rec / "background", rig))[1]
+    return logged_frames(rig, rec / sequence, load_backgrounds(rec / "background", rig), scan_cache=scan_cache)[1]
 
 
 def recording_returns(rec_dir, rig, sequence: str = "run", window_frames: int = READ_FRAMES) -> ScannerReturns:  # noqa: ANN001
@@ -200,7 +202,8 @@ def recording_returns(rec_dir, rig, sequence: str = "run", window_frames: int = 
 @contextmanager
 def returns_of_recording(rec_dir, rig, sequence: str = "run", spool: bool = True,  # noqa: ANN001
                          tmp_dir: str | os.PathLike[str] | None = None,
-                         window_frames: int | None = None) -> Iterator[WindowedReturns]:
+                         window_frames: int | None = None,
+                         scan_cache: str | os.PathLike[str] | None = None) -> Iterator[WindowedReturns]:
     """The foreground returns of ``rec_dir/<sequence>``'s scanner logs (as :func:`recording_returns`, the
     same values bit for bit) for the time of the ``with`` block, in memory per frame only.
 
@@ -211,12 +214,13 @@ def returns_of_recording(rec_dir, rig, sequence: str = "run", spool: bool = True
         ``TMPDIR``; 42 bytes a return, ~0.9 GB for an hour of the simulated logs) and read back a window
         at a time; it is removed when the block ends. False: every pass parses the logs again.
     window_frames : frames per window of the fit's passes (default :data:`WINDOW_FRAMES`).
+    scan_cache : the folder of the logs' parsed ranges (:func:`gtrig.io.scans.index_scans`), or None.
 
     Yields
     ------
     WindowedReturns
     """
-    frames = _logs(rec_dir, rig, sequence)
+    frames = _logs(rec_dir, rig, sequence, scan_cache)
     F, S = frames.n_frames, len(frames.scanners)
     counts = np.zeros((F, S), np.int64)
     path = None

@@ -687,11 +687,13 @@ def sensor_offsets_and_laser_clock(rec_dir, rig, vision: PoseTrack, laser: PoseT
                                    checkpoint: str | os.PathLike[str] | None = None,
                                    camera_method: str = CAMERA_METHOD, odometry: OdometryLog | None = None,
                                    odometry_offset_s: float = float("nan"),
+                                   scan_cache: str | os.PathLike[str] | None = None,
                                    ) -> tuple[list[OffsetEstimate], tuple[float, float]]:
     """:func:`sensor_offsets` and GTlaser's clock to GTvision's with its standard error (:func:`laser_clock`;
     nan without ``laser``), seconds. With ``odometry`` and a finite ``odometry_offset_s`` (GTvision's clock
     minus odometry's, ``gtrig sync``), the pose fit's camera offsets are refined in the joint fit of GTvision,
-    GTlaser and odometry (:mod:`gtrig.fusion.joint_camera_sync`)."""
+    GTlaser and odometry (:mod:`gtrig.fusion.joint_camera_sync`). ``scan_cache``: the folder of the
+    scanner logs' parsed ranges GTlaser kept (:func:`gtrig.io.scans.index_scans`), read instead of the text."""
     from gtrig.errors import ConfigError, InputError
     from gtrig.fusion.measurements import fixes_from_track
 
@@ -702,7 +704,7 @@ def sensor_offsets_and_laser_clock(rec_dir, rig, vision: PoseTrack, laser: PoseT
         raise ConfigError("rig: per-scanner offsets need the fixed scanners and robot.hull")
     cam_stamps = camera_frame_stamps(rec_dir, rig, sequence)
     timed = vision if checkpoint is None else restamp_vision(vision.usable(), checkpoint, cam_stamps)
-    with returns_of_recording(rec_dir, rig, sequence) as ret:  # an hour's returns: a file, not memory
+    with returns_of_recording(rec_dir, rig, sequence, scan_cache=scan_cache) as ret:  # an hour's: a file
         sc = scanner_offsets(ret, reference_track([fixes_from_track(timed, "vision")]), rig.robot.hull.corners_xy())
     if scanners:
         out += sc

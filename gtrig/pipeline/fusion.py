@@ -80,6 +80,7 @@ def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict
     """Each camera's and scanner's offset to GTvision's clock, when both GT sources and the scanners exist,
     and GTlaser's clock to GTvision's with its sigma (nan when not measured)."""
     from gtrig.fusion.sensor_sync import sensor_offsets_and_laser_clock
+    from gtrig.pipeline.laser import SCAN_CACHE
 
     none: tuple[list, tuple[float, float]] = ([], (math.nan, math.nan))
     rig = inp.products.rig
@@ -91,7 +92,8 @@ def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict
     vis = results["vision"]
     return sensor_offsets_and_laser_clock(inp.rec, rig, tracks["vision"], tracks["laser"],
                                           checkpoint=ck if ck.is_file() else None, odometry=odo,
-                                          odometry_offset_s=vis.offset_s if vis.verdict == "ok" else math.nan)
+                                          odometry_offset_s=vis.offset_s if vis.verdict == "ok" else math.nan,
+                                          scan_cache=inp.out / SCAN_CACHE)  # GTlaser's parsed logs
 
 
 def _sensor_truth_rows(rec: Path, sensors: list) -> tuple[AccuracyRow, ...]:  # noqa: ANN001
