@@ -377,11 +377,11 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
         o0, o1 = float(odometry.stamps_s[0]), float(odometry.stamps_s[-1])
         kept: list[Fixes] = []
         for f in fixes:
-            keep = (f.stamps_s >= o0) & (f.stamps_s <= o1)
-            if not np.any(keep):
+            inside = f.between(o0, o1)
+            if not len(inside):
                 raise InputError(f"fusion: {f.source} ({f.stamps_s[0]:.3f}-{f.stamps_s[-1]:.3f} s) does not overlap "
                                  f"the odometry ({o0:.3f}-{o1:.3f} s); wrong clock or offset?")
-            kept.append(Fixes(f.source, f.stamps_s[keep], f.model, f.value[keep], f.cov[keep], f.lever_xy))
+            kept.append(inside)
         fixes = kept
         _check_units(fixes, odometry)
     fx = _merge([_decorrelated(f, opts.correlation_s) for f in fixes])

@@ -56,6 +56,11 @@ class Fixes:
         """The same fixes with ``dt_s`` added to each stamp (a clock offset applied)."""
         return Fixes(self.source, self.stamps_s + float(dt_s), self.model, self.value, self.cov, self.lever_xy)
 
+    def between(self, t0_s: float, t1_s: float) -> Fixes:
+        """The fixes stamped in ``[t0_s, t1_s]`` (seconds, this source's clock)."""
+        m = (self.stamps_s >= t0_s) & (self.stamps_s <= t1_s)
+        return Fixes(self.source, self.stamps_s[m], self.model, self.value[m], self.cov[m], self.lever_xy)
+
     def kind_code(self) -> int:
         return KIND_POSE if self.model is FixModel.POSE else KIND_POSITION
 

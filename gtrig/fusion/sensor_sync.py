@@ -104,7 +104,7 @@ def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float 
     n_win = int(np.ceil((t1 - t0) / window_s))
     for w in range(n_win):
         a, b = t0 + w * window_s, (t0 + (w + 1) * window_s if w + 1 < n_win else np.inf)
-        sel = [_fixes_between(f, a - overlap_s, b + overlap_s) for f in fixes]
+        sel = [f.between(a - overlap_s, b + overlap_s) for f in fixes]
         if sum(len(f) for f in sel) < 3:
             continue
         try:
@@ -119,12 +119,6 @@ def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float 
     xyt[:, 2] = np.unwrap(xyt[:, 2])  # each window's yaw was unwrapped from its own start
     return Reference(np.concatenate([p.stamps_s for p in parts]), xyt, np.concatenate([p.velocity for p in parts]),
                      np.concatenate([p.cov for p in parts]))
-
-
-def _fixes_between(f: Fixes, a: float, b: float) -> Fixes:
-    """The fixes of ``f`` stamped in ``[a, b]``."""
-    m = (f.stamps_s >= a) & (f.stamps_s <= b)
-    return Fixes(f.source, f.stamps_s[m], f.model, f.value[m], f.cov[m], f.lever_xy)
 
 
 def _reference_part(fixes: list[Fixes], rate_hz: float, max_gap_s: float) -> Reference:

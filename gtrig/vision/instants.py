@@ -79,8 +79,8 @@ class Instants(Sequence[Instant]):
 
     def camera_rows(self) -> dict[str, np.ndarray]:
         """Per camera, the rows of its frame index that some instant uses, sorted, each once."""
-        return {name: np.unique(self.row[self.camera == c]) for c, name in enumerate(self.cameras)
-                if np.any(self.camera == c)}
+        used = {name: np.unique(self.row[self.camera == c]) for c, name in enumerate(self.cameras)}
+        return {name: r for name, r in used.items() if r.size}
 
     @staticmethod
     def from_groups(cameras: Sequence[str], stamp_s: Sequence[float],
