@@ -195,10 +195,13 @@ class PoseTrack:
 
     # --- new tracks from this one (a track is never changed in place) -------------------------------
 
-    def select(self, mask: np.ndarray) -> PoseTrack:
-        """The poses where ``mask`` (bool (N,) or indices) holds."""
+    def select(self, mask: np.ndarray, stamps_s: np.ndarray | None = None) -> PoseTrack:
+        """The poses where ``mask`` (bool (N,) or indices, in the order given) holds; with ``stamps_s``
+        (one per pose selected), those poses at new times, which may order them differently from their
+        old ones (a pose restamped by its camera's clock offset can pass its neighbour)."""
         idx = np.arange(len(self))[np.asarray(mask)]
-        return replace(self, stamps_s=self.stamps_s[idx], xyz=self.xyz[idx], quat_xyzw=self.quat_xyzw[idx],
+        new_stamps = self.stamps_s[idx] if stamps_s is None else np.asarray(stamps_s, dtype=float)
+        return replace(self, stamps_s=new_stamps, xyz=self.xyz[idx], quat_xyzw=self.quat_xyzw[idx],
                        cov=None if self.cov is None else self.cov[idx], status=self.status[idx],
                        reasons=tuple(self.reasons[i] for i in idx))
 

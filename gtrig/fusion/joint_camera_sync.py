@@ -62,7 +62,7 @@ def _restamped(vision: PoseTrack, times_s: np.ndarray) -> PoseTrack:
     """``vision`` (usable poses) at ``times_s``, sorted, a repeated time dropped."""
     order = np.argsort(times_s, kind="stable")
     keep = np.r_[True, np.diff(times_s[order]) > 0]
-    return replace(vision.select(order[keep]), stamps_s=times_s[order][keep])
+    return vision.select(order[keep], stamps_s=times_s[order][keep])
 
 
 def joint_camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray], laser: PoseTrack,

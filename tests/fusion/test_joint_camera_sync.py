@@ -4,7 +4,7 @@ camera's offset better than the pose fit against GTlaser alone, and its interval
 
 import numpy as np
 
-from gtrig.fusion.joint_camera_sync import joint_camera_offsets
+from gtrig.fusion.joint_camera_sync import _restamped, joint_camera_offsets
 from gtrig.fusion.measurements import fixes_from_track
 from gtrig.fusion.sensor_sync import camera_offsets, reference_track
 from gtrig.trajectory import PoseTrack
@@ -57,3 +57,25 @@ def test_joint_fit_beats_gtlaser_alone_and_covers(run) -> None:  # noqa: ANN001
             joint.append(abs(e.offset_s - tau))
     assert np.mean(joint) < 0.7 * np.mean(alone), (np.mean(joint), np.mean(alone))
     assert max(joint) < 0.001
+
+
+def test_restamped_poses_may_pass_each_other() -> None:
+    """Poses moved by their cameras' offsets can change order (two cameras' instants 10 ms apart, one
+    camera 25 ms late): the restamped track keeps each pose with its own data, sorted by the new
+    times, a repeated time once (an hour of the simulated room crashed here before)."""
+    t = np.arange(8) * 0.01
+    xyt = np.column_stack([t, 2 * t, 0.1 * np.arange(8)])
+    cov = np.tile(np.diag([1e-6, 1e-6, 1e-5]), (8, 1, 1))
+    track = PoseTrack.from_xytheta(t, xyt, cov=cov, source="v")
+    late = np.arange(8) % 2 == 0  # the even poses' camera is 25 ms late
+    times = t - np.where(late, 0.025, 0.0)
+    times[7] = times[6] + 0.0  # two poses at one time: the first kept
+    times[6] = times[7]
+    out = _restamped(track, times)
+    assert np.all(np.diff(out.stamps_s) > 0)
+    order = np.argsort(times, kind="stable")
+    kept = order[np.r_[True, np.diff(times[order]) > 0]]
+    assert len(out) == 7 and kept.size == 7
+    np.testing.assert_array_equal(out.stamps_s, times[kept])
+    np.testing.assert_array_equal(out.xytheta(), track.xytheta()[kept])  # each pose kept its own data
+    np.testing.assert_array_equal(out.cov_xytheta(), track.cov_xytheta()[kept])
