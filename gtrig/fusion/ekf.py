@@ -21,6 +21,7 @@ from scipy.stats import chi2
 from gtrig.errors import ConvergenceError
 from gtrig.fusion.chain import FactorChain
 from gtrig.fusion.kernels import chol_inv, fix_residual, odo_predict
+from gtrig.fusion.process import CHUNK
 
 
 @dataclass(frozen=True)
@@ -277,7 +278,11 @@ def smooth_ekf(chain: FactorChain, P0: np.ndarray, Pk: np.ndarray, fix_use: np.n
     """
     N = len(chain)
     d, p = chain.d, chain.p
-    proc_Q = np.linalg.inv(np.einsum("nki,nkj->nij", chain.proc_W, chain.proc_W))
+    # the process covariances (W^T W)^-1, a slice of nodes at a time (no (N, d, d) temporary beside them)
+    proc_Q = np.empty(chain.proc_W.shape)
+    for a in range(0, proc_Q.shape[0], CHUNK):
+        Wa = chain.proc_W[a:a + CHUNK]
+        proc_Q[a:a + CHUNK] = np.linalg.inv(np.einsum("nki,nkj->nij", Wa, Wa))
     gate = np.array([0.0] + [float(chi2.ppf(gate_prob, k)) for k in (1, 2, 3)])
     M = chain.fix_node.size
     use = np.ones(M, bool) if fix_use is None else np.asarray(fix_use, bool)

@@ -197,11 +197,18 @@ def _check_units(fixes: Sequence[Fixes], odometry: OdometryLog) -> None:
                              "is its heading in another unit (degrees?)")
 
 
-def _merge(fixes: Sequence[Fixes]) -> dict[str, np.ndarray]:
-    st = np.concatenate([f.stamps_s for f in fixes])
-    order = np.argsort(st, kind="stable")
+def _merge_order(fixes: Sequence[Fixes]) -> np.ndarray:
+    """The order (M,) that sorts the sources' fixes, concatenated, by stamp (stable: ties by source)."""
+    return np.argsort(np.concatenate([f.stamps_s for f in fixes]), kind="stable")
+
+
+def _merge(fixes: Sequence[Fixes], order: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """The sources' fixes as one set of arrays in ``order`` (:func:`_merge_order`, by default): stamps (M,),
+    z (M, 3), cov (M, 3, 3), kind (M,), lever (M, 2), source (M,) (index into ``fixes``)."""
+    if order is None:
+        order = _merge_order(fixes)
     cat = {
-        "stamps": st,
+        "stamps": np.concatenate([f.stamps_s for f in fixes]),
         "z": np.concatenate([f.value for f in fixes]),
         "cov": np.concatenate([f.cov for f in fixes]),
         "kind": np.concatenate([np.full(len(f), f.kind_code(), np.int64) for f in fixes]),
@@ -281,6 +288,18 @@ def _chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: OdometryLog 
         sources=sources, x0=X[0].copy(), W0=whitening(P0[None])[0], k0=k0,
         Wk=whitening(Pk[None])[0] if Pk.size else np.zeros((0, 0)))
     return chain, X, k0, P0
+
+
+def _without_fix_covariances(fx: dict[str, np.ndarray], seg: dict[str, np.ndarray], chain: FactorChain,
+                             ) -> FactorChain:
+    """``chain`` without its fixes' covariances, which are dropped from ``fx`` and ``seg`` (the merged fixes
+    and the last segment's views of them) too: after the filter, the batch solve weighs each fix by its
+    whitening ``fix_W`` alone, and the two (M, 3, 3) covariances (the decorrelated ones and the gate's)
+    would otherwise be held through its peak."""
+    for d in (fx, seg):
+        d.pop("cov")
+        d.pop("gate_cov")
+    return replace(chain, fix_cov=np.zeros((0, 3, 3)))
 
 
 def _bridged(out_stamps: np.ndarray, accepted_stamps: np.ndarray, after_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -384,10 +403,13 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
             kept.append(inside)
         fixes = kept
         _check_units(fixes, odometry)
-    fx = _merge([_decorrelated(f, opts.correlation_s) for f in fixes])
+    order = _merge_order(fixes)
+    fx = _merge([_decorrelated(f, opts.correlation_s) for f in fixes], order)
     # the gate tests each fix against its own covariance: the decorrelation's inflation is for weighing a
-    # second of correlated fixes, not for deciding whether one fix is an outlier
-    fx["gate_cov"] = _merge(fixes)["cov"] if opts.gate_own_cov else fx["cov"]
+    # second of correlated fixes, not for deciding whether one fix is an outlier (the covariances alone
+    # merged: the other fields are fx's)
+    fx["gate_cov"] = np.concatenate([f.cov for f in fixes])[order] if opts.gate_own_cov else fx["cov"]
+    del order
     per_source = {s: {"offered": float(len(f)), "used": 0.0, "rejected": 0.0, "downweighted": 0.0,
                       "offset_s": float(opts.offsets_s.get(s, 0.0)),
                       "offset_sigma_s": float(opts.offsets_sigma_s.get(s, 0.0)) if s in opts.offsets_s else 0.0}
@@ -410,26 +432,33 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
         chain, X0, k0, P0 = _chain(stamps, seg, odometry, opts, sources)
         _, Pk = opts.odometry.prior() if odometry is not None else (None, np.zeros((0, 0)))
         ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob, gate_cov=seg["gate_cov"])
-        X, K, cov, cov_k, iters = ekf.X, ekf.K, ekf.cov_x, ekf.cov_k, 0
-        use = ekf.accept
+        use, nis = ekf.accept, ekf.nis
         huber_w = np.ones(use.size)
         if opts.estimator == "batch":
+            if (a, b) == cuts[-1]:
+                chain = _without_fix_covariances(fx, seg, chain)
             if opts.innovation_window_s > 0:
                 chain = replace(chain, fix_W=chain.fix_W / np.sqrt(_innovation_factor(
-                    seg, ekf.nis, use, opts.innovation_window_s))[:, None, None])
-            res = smooth_batch(chain, ekf.X, ekf.K, fix_use=use, huber_k=opts.huber_k, bias_cov=bias)
+                    seg, nis, use, opts.innovation_window_s))[:, None, None])
+            X0, K0 = ekf.X, ekf.K
+            del ekf  # its covariances (N, d, d) and filtered states are not the batch solve's: freed first
+            res = smooth_batch(chain, X0, K0, fix_use=use, huber_k=opts.huber_k, bias_cov=bias)
+            del X0
             X, K, cov, cov_k, iters = res.X, res.K, res.cov_x, res.cov_k, res.iterations
             huber_w = res.robust_w
-        elif any(B is not None for B in bias):
-            cb_x, cb_k = considered_covariance(chain, X, K, use, bias)
-            cov, cov_k = cov + cb_x, cov_k + cb_k
+            del res  # its bias share of the covariances (N, d, d), held in cov already
+        else:
+            X, K, cov, cov_k, iters = ekf.X, ekf.K, ekf.cov_x, ekf.cov_k, 0
+            if any(B is not None for B in bias):
+                cb_x, cb_k = considered_covariance(chain, X, K, use, bias)
+                cov, cov_k = cov + cb_x, cov_k + cb_k
         cov = _with_timing(stamps, X, cov, sigma_t)
         dims = np.where(seg["kind"] == 0, 3, 2)
         for j in np.flatnonzero(~use):
-            outliers.append(Outlier(sources[seg["source"][j]], float(seg["stamps"][j]), float(ekf.nis[j]),
+            outliers.append(Outlier(sources[seg["source"][j]], float(seg["stamps"][j]), float(nis[j]),
                                     int(dims[j]), "gate"))
         for j in np.flatnonzero(use & (huber_w < 1.0)):
-            outliers.append(Outlier(sources[seg["source"][j]], float(seg["stamps"][j]), float(ekf.nis[j]),
+            outliers.append(Outlier(sources[seg["source"][j]], float(seg["stamps"][j]), float(nis[j]),
                                     int(dims[j]), "huber"))
         for k, s in enumerate(sources):
             m = seg["source"] == k
