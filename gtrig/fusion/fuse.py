@@ -431,7 +431,8 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
             continue
         chain, X0, k0, P0 = _chain(stamps, seg, odometry, opts, sources)
         _, Pk = opts.odometry.prior() if odometry is not None else (None, np.zeros((0, 0)))
-        ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob, gate_cov=seg["gate_cov"])
+        ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob, gate_cov=seg["gate_cov"],
+                         covariances=opts.estimator != "batch")
         use, nis = ekf.accept, ekf.nis
         huber_w = np.ones(use.size)
         if opts.estimator == "batch":
