@@ -4,6 +4,7 @@ less than the per-node budget (issue 24; bench/fusion_memory.py measures it at 5
 from __future__ import annotations
 
 import tracemalloc
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -51,3 +52,48 @@ def test_smoothing_peak_per_node_within_budget(call, budget: float) -> None:  # 
     n1, p1 = _peak(call, 6.0)
     per_node = (p1 - p0) / (n1 - n0)
     assert 0 < per_node < budget, f"{per_node:.0f} B a node"
+
+
+def test_windowed_smoothing_is_the_one_batch_in_a_windows_memory() -> None:
+    """A run smoothed in windows (60 s cores, 30 s overlaps, far shorter than the default 600 s: the seams'
+    effects at their largest; the odometry parameters from every other core's information) is the one
+    batch to micrometres and tens of microradians, its covariances to 5 % at most (at the run's first
+    seconds; 4e-6 median), the parameters to a tenth of their sigma, the same fixes rejected; and its
+    peak is half the batch's on 8 minutes (a window's working set instead of the run's)."""
+    odo, vision, laser = long_run(8.0, seed=3)
+    tracks = {"vision": vision, "laser": laser}
+    opts = FusionOptions(bias_cov=BIAS)
+    fuse_tracks(*_short(tracks, odo), replace(opts, window_s=20.0))  # warm-up, both paths
+    tracemalloc.start()
+    try:
+        one, r1 = fuse_tracks(tracks, odo, replace(opts, window_s=None))
+        _, peak_one = tracemalloc.get_traced_memory()
+        tracemalloc.reset_peak()
+        base = tracemalloc.get_traced_memory()[0]
+        win, r2 = fuse_tracks(tracks, odo, replace(opts, window_s=60.0))
+        peak_win = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    assert len(r2.segments) == 8 and len(r1.segments) == 1
+    np.testing.assert_array_equal(one.stamps_s, win.stamps_s)
+    np.testing.assert_array_equal(one.status, win.status)
+    e = win.xytheta() - one.xytheta()
+    rel = np.abs(win.cov / one.cov - 1)[:, [0, 1, 2], [0, 1, 2]]
+    assert np.hypot(e[:, 0], e[:, 1]).max() < 2e-5 and np.abs(e[:, 2]).max() < 5e-5  # 7.5 um, 26 urad
+    assert rel.max() < 0.1 and np.median(rel) < 1e-3  # 5 % at the run's first seconds; 4e-6
+    k1, s1 = np.array(r1.segments[0].odometry_params), np.array(r1.segments[0].odometry_params_sigma)
+    for s in r2.segments:
+        assert np.all(np.abs(np.array(s.odometry_params) - k1) < 0.25 * s1)  # 0.11 sigma at most
+    same = [(o.source, o.stamp_s, o.stage) for o in r1.outliers]
+    assert same == [(o.source, o.stamp_s, o.stage) for o in r2.outliers]
+    assert peak_win < 0.6 * peak_one, (peak_win, peak_one)
+
+
+def _short(tracks, odo):  # noqa: ANN001, ANN202
+    """A minute of ``tracks`` and ``odo``, for a warm-up call."""
+    from gtrig.io.odometry import OdometryLog
+
+    t0 = odo.stamps_s[0]
+    m = odo.stamps_s <= t0 + 60.0
+    short = {k: t.select(np.flatnonzero(t.stamps_s <= t0 + 59.0)) for k, t in tracks.items()}
+    return short, OdometryLog(odo.stamps_s[m], odo.xytheta[m], odo.v_mps[m], odo.omega_radps[m])
