@@ -20,7 +20,7 @@ from typing import Literal
 
 import numpy as np
 
-from gtrig.errors import InputError
+from gtrig.errors import ConvergenceError, InputError
 from gtrig.fusion.batch import considered_covariance, smooth_batch
 from gtrig.fusion.chain import PROCESS_CV, PROCESS_ODOMETRY, FactorChain
 from gtrig.fusion.ekf import smooth_ekf
@@ -505,6 +505,20 @@ class _Parts:
                                      tuple(float(v) for v in sig), sm.iterations))
 
 
+    def mark(self) -> tuple[tuple[int, ...], dict[str, dict[str, float]]]:
+        """The state to :meth:`rollback` to: the lists' lengths and the per-source counts."""
+        lists = (self.st, self.xyt, self.cov, self.status, self.reason, self.outliers, self.segments)
+        return tuple(len(x) for x in lists), {k: dict(v) for k, v in self.per_source.items()}
+
+    def rollback(self, mark: tuple[tuple[int, ...], dict[str, dict[str, float]]]) -> None:
+        """Forget what was added since ``mark`` (:meth:`mark`); the per-source counts restored in place."""
+        lens, counts = mark
+        for x, n in zip((self.st, self.xyt, self.cov, self.status, self.reason, self.outliers, self.segments), lens,
+                        strict=True):
+            del x[n:]
+        for k, v in counts.items():
+            self.per_source[k].update(v)
+
     def track(self) -> PoseTrack:
         """The poses gathered, as one track (``source="fusion"``); each list is emptied as it is joined."""
 
@@ -521,7 +535,7 @@ def _windows(fix_stamps: np.ndarray, t0: float, t1: float, opts: FusionOptions,
              ) -> list[tuple[float, float, float, float]]:
     """The windows of a segment of fixes ``fix_stamps`` spanning ``[t0, t1]`` (s): (core start, core end,
     window start, window end) each, equal cores of at most ``opts.window_s``, windows ``window_overlap_s``
-    beyond; none (one batch) when the segment is no longer than a window or a window would hold fewer
+    beyond; none (one batch) when the segment is no longer than a window or a core would hold fewer
     than 10 fixes to start from."""
     if opts.window_s is None or not np.isfinite(opts.window_s) or t1 - t0 <= opts.window_s:
         return []
@@ -530,8 +544,8 @@ def _windows(fix_stamps: np.ndarray, t0: float, t1: float, opts: FusionOptions,
     ov = opts.window_overlap_s
     wins = [(float(edges[i]), float(edges[i + 1]), float(max(t0, edges[i] - ov)), float(min(t1, edges[i + 1] + ov)))
             for i in range(n)]
-    counts = [np.searchsorted(fix_stamps, w1, "right") - np.searchsorted(fix_stamps, w0, "left")
-              for _, _, w0, w1 in wins]
+    counts = [np.searchsorted(fix_stamps, c1, "right") - np.searchsorted(fix_stamps, c0, "left")
+              for c0, c1, _, _ in wins]  # the first pass smooths the cores alone
     return wins if min(counts) >= 10 else []
 
 
@@ -649,8 +663,14 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
         wins = _windows(all_stamps[a:b], t0, t1, opts) if odometry is not None else []
         between = partial(_merge_span, fixes, counts, gate_own_cov=opts.gate_own_cov)
         if wins:
-            _smooth_windows(parts, between, wins, odometry, opts, sources, bias, sigma_t, span)
-            continue
+            mark = parts.mark()
+            try:
+                _smooth_windows(parts, between, wins, odometry, opts, sources, bias, sigma_t, span)
+                continue
+            except (InputError, ConvergenceError):
+                # a window the one batch does not have failed (a start without motion for position-only
+                # fixes, a window the fixes do not pin): this segment in one batch after all
+                parts.rollback(mark)
         seg = between(t0, t1)
         sm = _smooth(stamps, seg, odometry, opts, sources, bias, sigma_t)
         in_span = (stamps >= span[0]) & (stamps <= span[1])

@@ -97,3 +97,30 @@ def _short(tracks, odo):  # noqa: ANN001, ANN202
     m = odo.stamps_s <= t0 + 60.0
     short = {k: t.select(np.flatnonzero(t.stamps_s <= t0 + 59.0)) for k, t in tracks.items()}
     return short, OdometryLog(odo.stamps_s[m], odo.xytheta[m], odo.v_mps[m], odo.omega_radps[m])
+
+
+def test_a_failing_window_falls_back_to_the_one_batch(monkeypatch) -> None:  # noqa: ANN001
+    """A window the one batch does not have may fail where the whole segment does not (a start without
+    motion for position-only fixes): what the windows added is forgotten and the segment is one batch,
+    bit for bit, counts and outliers included."""
+    import importlib
+
+    fuse_mod = importlib.import_module("gtrig.fusion.fuse")
+    odo, vision, laser = long_run(4.0, seed=5)
+    tracks = {"vision": vision, "laser": laser}
+    one, r1 = fuse_tracks(tracks, odo, FusionOptions(window_s=None))
+    real, calls = fuse_mod._smooth, []
+
+    def failing(*a, **k):  # noqa: ANN002, ANN003, ANN202
+        calls.append(1)
+        if len(calls) == 6:  # pass 2's second window: the first window's core is already gathered
+            raise fuse_mod.InputError("fusion: a window without motion")
+        return real(*a, **k)
+
+    monkeypatch.setattr(fuse_mod, "_smooth", failing)
+    win, r2 = fuse_tracks(tracks, odo, FusionOptions(window_s=60.0))
+    assert len(calls) > 6
+    np.testing.assert_array_equal(one.stamps_s, win.stamps_s)
+    np.testing.assert_array_equal(one.xytheta(), win.xytheta())
+    np.testing.assert_array_equal(one.cov, win.cov)
+    assert r1.sources == r2.sources and r1.segments == r2.segments and r1.outliers == r2.outliers
