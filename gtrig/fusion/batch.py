@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gtrig.fusion.blocktri import solve_chain
+from gtrig.fusion.blocktri import CHUNK, solve_chain, solve_chain_inplace
 from gtrig.fusion.chain import FactorChain, assemble, bias_rhs
 
 
@@ -93,17 +93,20 @@ def _considered(chain: FactorChain, X: np.ndarray, K: np.ndarray, sys: tuple[np.
     p = K.size
     col, blocks = _bias_columns(chain, bias_cov)
     q = sum(B.shape[0] for _, B in blocks)
-    R = np.zeros((N, d, q))
+    # the solve's work array [R, B]: the biases' right-hand sides R (N, d, q) made in place beside the border
+    GB = np.zeros((N, d, q + p))
+    GB[:, :, q:] = Bb
     if q:
         bias_rhs(X, chain.fix_node, chain.fix_alpha, chain.fix_kind, chain.fix_z, chain.fix_W, chain.fix_lever,
-                 np.ascontiguousarray(fix_w, float), col, R)
-    Sx, Sk, cov_x, cov_k = solve_chain(Ad, Ao, Bb, C, R, np.zeros((p, q)), marginals=marginals)
+                 np.ascontiguousarray(fix_w, float), col, GB[:, :, :q])
+    Sx, Sk, cov_x, cov_k = solve_chain_inplace(Ad, Ao, Bb, C, GB, np.zeros((p, q)), marginals=marginals)
     cb_x = np.zeros((N, d, d))
     cb_k = np.zeros((p, p))
     for c0, B in blocks:
         m = B.shape[0]
         Sxs, Sks = Sx[:, :, c0:c0 + m], Sk[:, c0:c0 + m]
-        cb_x += np.einsum("nak,kl,nbl->nab", Sxs, B, Sxs)
+        for a in range(0, N, CHUNK):  # by slices of nodes: no (N, d, d) temporary
+            cb_x[a:a + CHUNK] += np.einsum("nak,kl,nbl->nab", Sxs[a:a + CHUNK], B, Sxs[a:a + CHUNK])
         cb_k += Sks @ B @ Sks.T
     return cov_x, cov_k, cb_x, cb_k
 
@@ -128,6 +131,24 @@ def considered_covariance(chain: FactorChain, X: np.ndarray, K: np.ndarray, fix_
     _, sys, _, _ = _normal_equations(chain, X, K, use, 0.0)
     _, _, cb_x, cb_k = _considered(chain, X, K, sys, use.astype(float), bias_cov, marginals=False)
     return cb_x, cb_k
+
+
+def _damped_step(sys: tuple[np.ndarray, ...], lam: float) -> tuple[np.ndarray, np.ndarray]:
+    """The Levenberg-Marquardt step (dx (N, d), dk (p,)) of the normal equations ``sys``, each diagonal
+    entry damped by itself (Marquardt's scaling, ``* (1 + lam)``). The diagonal blocks are damped in
+    place and their diagonal put back bit for bit afterwards, so that no copy of the (N, d, d) blocks is
+    made for the damped system."""
+    Ad, Ao, Bb, C, g, gk = sys
+    d_idx = np.arange(Ad.shape[1])
+    diag = Ad[:, d_idx, d_idx]  # (N, d), a copy (fancy indexing): the undamped diagonal, restored below
+    Ad[:, d_idx, d_idx] *= 1.0 + lam
+    C_l = C.copy()
+    C_l[np.arange(C.shape[0]), np.arange(C.shape[0])] *= 1.0 + lam
+    try:
+        dx, dk, _, _ = solve_chain(Ad, Ao, Bb, C_l, g, gk)
+    finally:
+        Ad[:, d_idx, d_idx] = diag
+    return dx, dk
 
 
 def smooth_batch(chain: FactorChain, X_init: np.ndarray, K_init: np.ndarray, fix_use: np.ndarray | None = None,
@@ -158,15 +179,11 @@ def smooth_batch(chain: FactorChain, X_init: np.ndarray, K_init: np.ndarray, fix
     converged = False
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007
-        Ad, Ao, Bb, C, g, gk = sys
-        # Marquardt's scaling: damp each diagonal entry by itself
-        d_idx = np.arange(Ad.shape[1])
-        Ad_l = Ad.copy()
-        Ad_l[:, d_idx, d_idx] *= 1.0 + lam
-        C_l = C.copy()
-        C_l[np.arange(C.shape[0]), np.arange(C.shape[0])] *= 1.0 + lam
-        dx, dk, _, _ = solve_chain(Ad_l, Ao, Bb, C_l, g, gk)
+        dx, dk = _damped_step(sys, lam)
         X_new, K_new = X + dx, K + dk
+        # one system at a time (each is O(N), two at once would double the peak): the current one is
+        # dropped before the trial's is made, and made again, bit for bit, if the trial is refused
+        sys = sys_new = None
         cost_new, sys_new, chi2_new, rw_new = _normal_equations(chain, X_new, K_new, use, huber_k)
         if cost_new <= cost:
             rel = (cost - cost_new) / max(cost, 1e-300)
@@ -181,9 +198,13 @@ def smooth_batch(chain: FactorChain, X_init: np.ndarray, K_init: np.ndarray, fix
                 break
         else:
             lam *= 10.0
+            sys_new = chi2_new = rw_new = None
+            _, sys, _, _ = _normal_equations(chain, X, K, use, huber_k)
             if lam > 1e6:
                 converged = True  # no descent left at this precision
                 break
+    del dx, X_new, sys_new, chi2_new, rw_new  # the last trial's, not needed through the marginals
     cov_x, cov_k, cb_x, cb_k = _considered(chain, X, K, sys, rw, bias_cov, marginals=True)
     assert cov_x is not None and cov_k is not None
-    return BatchResult(X, K, cov_x + cb_x, cov_k + cb_k, chi2, rw, cost, it, converged, cb_x, cb_k)
+    cov_x += cb_x  # in place: the marginals without the biases' share are not returned
+    return BatchResult(X, K, cov_x, cov_k + cb_k, chi2, rw, cost, it, converged, cb_x, cb_k)

@@ -25,12 +25,13 @@ _jit = nb.njit(cache=True, nogil=True)
 
 
 @_jit
-def _forward_backward(Ad: np.ndarray, Ao: np.ndarray, R: np.ndarray, Sinv: np.ndarray, X: np.ndarray) -> int:
-    """Solve A X = R for (N, d, c) right-hand sides R; fills Sinv (N, d, d) with the inverse forward Schur
-    complements. Returns -1 on success, else the index of the first block that is not positive definite."""
-    N, d, c = R.shape
+def _forward_backward(Ad: np.ndarray, Ao: np.ndarray, Y: np.ndarray, Sinv: np.ndarray) -> int:
+    """Solve A X = Y for (N, d, c) right-hand sides ``Y``, in place: ``Y`` holds X on return (each block
+    of the forward pass is read once by the backward one, so no second (N, d, c) array is needed); fills
+    Sinv (N, d, d) with the inverse forward Schur complements. Returns -1 on success, else the index of
+    the first block that is not positive definite (``Y`` then half eliminated)."""
+    N, d, c = Y.shape
     S = np.empty((d, d))
-    Y = R.copy()
     T = np.empty((d, d))  # Ao_i^T Sinv_i
     for i in range(N):
         for a in range(d):
@@ -57,7 +58,7 @@ def _forward_backward(Ad: np.ndarray, Ao: np.ndarray, R: np.ndarray, Sinv: np.nd
                     Y[i, a, b] -= t
         if not chol_inv(S, Sinv[i]):
             return i
-    # backward: X_i = Sinv_i (Y_i - Ao_i X_{i+1})
+    # backward: X_i = Sinv_i (Y_i - Ao_i X_{i+1}), X_i written over Y_i (Y_{i+1} already holds X_{i+1})
     Z = np.empty((d, c))
     for i in range(N - 1, -1, -1):
         for a in range(d):
@@ -65,14 +66,14 @@ def _forward_backward(Ad: np.ndarray, Ao: np.ndarray, R: np.ndarray, Sinv: np.nd
                 t = Y[i, a, b]
                 if i < N - 1:
                     for k in range(d):
-                        t -= Ao[i, a, k] * X[i + 1, k, b]
+                        t -= Ao[i, a, k] * Y[i + 1, k, b]
                 Z[a, b] = t
         for a in range(d):
             for b in range(c):
                 t = 0.0
                 for k in range(d):
                     t += Sinv[i, a, k] * Z[k, b]
-                X[i, a, b] = t
+                Y[i, a, b] = t
     return -1
 
 
@@ -106,6 +107,11 @@ def _diag_inverse(Ao: np.ndarray, Sinv: np.ndarray, out: np.ndarray) -> None:
                 out[i, b, a] = t
 
 
+#: nodes per slice of the per-node products after the solve (their temporaries stay a slice's, not the
+#: chain's; each node's arithmetic is the same as over the whole chain)
+CHUNK = 4096
+
+
 def solve_chain(Ad: np.ndarray, Ao: np.ndarray, Bb: np.ndarray, C: np.ndarray, gx: np.ndarray, gk: np.ndarray,
                 marginals: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
     """Solve the bordered block-tridiagonal system.
@@ -125,36 +131,50 @@ def solve_chain(Ad: np.ndarray, Ao: np.ndarray, Bb: np.ndarray, C: np.ndarray, g
     ------
     ConvergenceError : the system is singular (a node or a parameter no factor constrains).
     """
-    N, d, _ = Ad.shape
-    p = C.shape[0]
     multi = gx.ndim == 3
     G = gx if multi else gx[:, :, None]
-    c = G.shape[2]
-    Gk = np.asarray(gk, float).reshape(p, c)
-    R = np.concatenate([G, Bb], axis=2)
+    GB = np.concatenate([G, Bb], axis=2)
+    dx, dk, cov, cov_k = solve_chain_inplace(Ad, Ao, Bb, C, GB, np.asarray(gk, float).reshape(C.shape[0], G.shape[2]),
+                                             marginals)
+    if not multi:
+        return dx[:, :, 0].copy(), dk[:, 0], cov, cov_k  # the (N, d, 1 + p) work array freed
+    return dx, dk, cov, cov_k
+
+
+def solve_chain_inplace(Ad: np.ndarray, Ao: np.ndarray, Bb: np.ndarray, C: np.ndarray, GB: np.ndarray,
+                        gk: np.ndarray, marginals: bool = False,
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """:func:`solve_chain` on a work array ``GB`` (N, d, c + p) that holds ``[G, B]`` (the c right-hand
+    sides, then the border ``Bb``) and is overwritten (``A^-1 [G, B]``, then the solution in its first c
+    columns): no copy of the right-hand sides is made. ``gk`` (p, c). Returns dx (N, d, c), a view of
+    ``GB``; dk (p, c); cov_x (N, d, d) and cov_k (p, p), or None."""
+    N, d, _ = Ad.shape
+    p = C.shape[0]
+    c = GB.shape[2] - p
+    X = GB
     Sinv = np.empty((N, d, d))
-    X = np.empty_like(R)
-    bad = _forward_backward(Ad, np.ascontiguousarray(Ao), R, Sinv, X)
+    bad = _forward_backward(Ad, np.ascontiguousarray(Ao), X, Sinv)
     if bad >= 0:
         raise ConvergenceError(f"fusion: node {bad} of the chain is unconstrained (no fix, no motion model)")
     AinvB = X[:, :, c:]
+    dx = X[:, :, :c]
     if p:
         Sk = C - np.einsum("nda,ndb->ab", Bb, AinvB)
         Sk_inv = np.empty((p, p))
         if not chol_inv(Sk, Sk_inv):
             raise ConvergenceError("fusion: the odometry parameters are not observable from these data")
-        dk = Sk_inv @ (Gk - np.einsum("nda,ndc->ac", Bb, X[:, :, :c]))
-        dx = X[:, :, :c] - np.einsum("ndp,pc->ndc", AinvB, dk)
+        dk = Sk_inv @ (gk - np.einsum("nda,ndc->ac", Bb, dx))
+        for a in range(0, N, CHUNK):
+            dx[a:a + CHUNK] -= np.einsum("ndp,pc->ndc", AinvB[a:a + CHUNK], dk)
     else:
         Sk_inv = np.zeros((0, 0))
         dk = np.zeros((0, c))
-        dx = X[:, :, :c]
-    if not multi:
-        dx, dk = dx[:, :, 0], dk[:, 0]
     if not marginals:
         return dx, dk, None, None
     cov = np.empty((N, d, d))
     _diag_inverse(np.ascontiguousarray(Ao), Sinv, cov)
+    del Sinv
     if p:
-        cov += np.einsum("nap,pq,nbq->nab", AinvB, Sk_inv, AinvB)
+        for a in range(0, N, CHUNK):
+            cov[a:a + CHUNK] += np.einsum("nap,pq,nbq->nab", AinvB[a:a + CHUNK], Sk_inv, AinvB[a:a + CHUNK])
     return dx, dk, cov, Sk_inv

@@ -33,8 +33,9 @@ class FactorChain:
     fix_node, fix_alpha : (M,) left node of each fix and its interpolation weight in [0, 1].
     fix_kind : (M,) kernels.KIND_POSE or KIND_POSITION.
     fix_z : (M, 3) measured (x, y, yaw) or (x, y, 0); fix_cov (M, 3, 3) its covariance (the unused row and
-        column of a position fix are zero, with 1 on the diagonal); fix_W (M, 3, 3) its whitening (zero
-        third row for a position fix).
+        column of a position fix are zero, with 1 on the diagonal; the filter's alone: (0, 3, 3) once it
+        has run, in a chain for the batch solve); fix_W (M, 3, 3) its whitening (zero third row for a
+        position fix).
     fix_lever : (M, 2) the measured point in the robot frame (position fixes), metres.
     fix_source : (M,) index into ``sources``; fix_stamps_s : (M,) the fixes' stamps on the output clock.
     x0, W0 : prior on node 0 (d,), (d, d); k0, Wk : prior on the parameters (p,), (p, p).

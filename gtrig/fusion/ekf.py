@@ -21,13 +21,14 @@ from scipy.stats import chi2
 from gtrig.errors import ConvergenceError
 from gtrig.fusion.chain import FactorChain
 from gtrig.fusion.kernels import chol_inv, fix_residual, odo_predict
+from gtrig.fusion.process import CHUNK
 
 
 @dataclass(frozen=True)
 class EkfResult:
-    """X (N, d) smoothed states, K (p,) parameters, cov_x (N, d, d) smoothed covariances, cov_k (p, p),
-    X_filtered (N, d) the forward pass alone, accept (M,) the gate's verdict, nis (M,) each fix's
-    normalised innovation squared."""
+    """X (N, d) smoothed states, K (p,) parameters, cov_x (N, d, d) smoothed covariances ((0, d, d) when
+    not kept), cov_k (p, p), X_filtered (N, d) the forward pass alone, accept (M,) the gate's verdict,
+    nis (M,) each fix's normalised innovation squared."""
 
     X: np.ndarray
     K: np.ndarray
@@ -230,7 +231,9 @@ def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z,
         Xf[i + 1] = m[:d]
     # --- backward (Rauch-Tung-Striebel)
     Xs[N - 1] = m[:d]
-    Ps[N - 1] = P[:d, :d]
+    keep_cov = Ps.shape[0] == N  # an empty Ps: the smoothed covariances are not kept
+    if keep_cov:
+        Ps[N - 1] = P[:d, :d]
     Pz = P.copy()
     mz = m.copy()
     GP = np.empty((d, n))
@@ -255,14 +258,16 @@ def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z,
             for b in range(d):
                 Pz[a, b] = Pxi[a, b]
             mz[a] = Xs[i, a]
-        Ps[i] = Pxi
+        if keep_cov:
+            Ps[i] = Pxi
     Ks[:] = mz[d:]
     Pks[:, :] = Pz[d:, d:]
     return -1
 
 
 def smooth_ekf(chain: FactorChain, P0: np.ndarray, Pk: np.ndarray, fix_use: np.ndarray | None = None,
-               gate_prob: float = 0.9999, gate_cov: np.ndarray | None = None) -> EkfResult:
+               gate_prob: float = 0.9999, gate_cov: np.ndarray | None = None, covariances: bool = True,
+               ) -> EkfResult:
     """Forward EKF (gated) and RTS smoother over ``chain``.
 
     Parameters
@@ -274,16 +279,22 @@ def smooth_ekf(chain: FactorChain, P0: np.ndarray, Pk: np.ndarray, fix_use: np.n
         probability (its own dimension's degrees of freedom) is rejected.
     gate_cov : (M, 3, 3) the fixes' covariances the gate tests against (the prediction's added); by default
         ``chain.fix_cov``, the ones that weigh the update.
+    covariances : keep the smoothed covariances (False: ``cov_x`` is (0, d, d), for a start of the batch
+        solve, which makes its own; N d^2 doubles not held).
     """
     N = len(chain)
     d, p = chain.d, chain.p
-    proc_Q = np.linalg.inv(np.einsum("nki,nkj->nij", chain.proc_W, chain.proc_W))
+    # the process covariances (W^T W)^-1, a slice of nodes at a time (no (N, d, d) temporary beside them)
+    proc_Q = np.empty(chain.proc_W.shape)
+    for a in range(0, proc_Q.shape[0], CHUNK):
+        Wa = chain.proc_W[a:a + CHUNK]
+        proc_Q[a:a + CHUNK] = np.linalg.inv(np.einsum("nki,nkj->nij", Wa, Wa))
     gate = np.array([0.0] + [float(chi2.ppf(gate_prob, k)) for k in (1, 2, 3)])
     M = chain.fix_node.size
     use = np.ones(M, bool) if fix_use is None else np.asarray(fix_use, bool)
     Xs = np.empty((N, d))
     Xf = np.empty((N, d))
-    Ps = np.empty((N, d, d))
+    Ps = np.empty((N if covariances else 0, d, d))
     Ks = np.empty(p)
     Pks = np.empty((p, p))
     accept = np.zeros(M, bool)

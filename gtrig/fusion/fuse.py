@@ -13,13 +13,14 @@ covariance; the report names every rejected fix by source and stamp.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from typing import Literal
 
 import numpy as np
 
-from gtrig.errors import InputError
+from gtrig.errors import ConvergenceError, InputError
 from gtrig.fusion.batch import considered_covariance, smooth_batch
 from gtrig.fusion.chain import PROCESS_CV, PROCESS_ODOMETRY, FactorChain
 from gtrig.fusion.ekf import smooth_ekf
@@ -76,6 +77,12 @@ class FusionOptions:
         by the number of the same source's fixes within this window, so that a second of 75 Hz fixes
         counts as ``1 / correlation_s`` independent ones (effective sample size). 0 treats every fix as
         independent.
+    window_s, window_overlap_s : with odometry, a segment longer than ``window_s`` is smoothed in windows
+        of about ``window_s`` (equal cores) with ``window_overlap_s`` of fixes and nodes beyond each end,
+        so that memory is a window's, not the run's; each core keeps its own poses. The odometry
+        parameters stay a whole-run estimate: a first pass gives each window's information on them,
+        the second smooths each window with the others' as its prior (:func:`_smooth_windows`). None:
+        one batch per segment, whatever its length.
     """
 
     estimator: Literal["batch", "ekf"] = "batch"
@@ -93,6 +100,8 @@ class FusionOptions:
     prior_sigma: tuple[float, float, float] = (0.1, 0.1, 0.1)
     correlation_s: float = 0.5
     bias_cov: Mapping[str, np.ndarray] = field(default_factory=dict)
+    window_s: float | None = 600.0
+    window_overlap_s: float = 30.0
 
 
 @dataclass(frozen=True)
@@ -139,13 +148,21 @@ def _check_fixes(f: Fixes) -> None:
         raise InputError(f"{f.source}: stamps must increase strictly (fix {i + 1}, {f.stamps_s[i]:.6f})")
 
 
-def _decorrelated(f: Fixes, window_s: float) -> Fixes:
-    """``f`` with each covariance multiplied by the count of its source's fixes within ``window_s``."""
+def _decorrelation_counts(f: Fixes, window_s: float) -> np.ndarray | None:
+    """Per fix of ``f`` (M,) the count of its source's fixes within ``window_s`` (s), as floats; None when
+    nothing is decorrelated (``window_s <= 0`` or fewer than two fixes)."""
     if window_s <= 0 or len(f) < 2:
-        return f
+        return None
     lo = np.searchsorted(f.stamps_s, f.stamps_s - window_s / 2, "left")
     hi = np.searchsorted(f.stamps_s, f.stamps_s + window_s / 2, "right")
-    n = np.maximum(hi - lo, 1).astype(float)
+    return np.maximum(hi - lo, 1).astype(float)
+
+
+def _decorrelated(f: Fixes, window_s: float) -> Fixes:
+    """``f`` with each covariance multiplied by the count of its source's fixes within ``window_s``."""
+    n = _decorrelation_counts(f, window_s)
+    if n is None:
+        return f
     cov = f.cov * n[:, None, None]
     if f.model is FixModel.POSITION:
         cov[:, 2, 2] = 1.0
@@ -197,18 +214,62 @@ def _check_units(fixes: Sequence[Fixes], odometry: OdometryLog) -> None:
                              "is its heading in another unit (degrees?)")
 
 
-def _merge(fixes: Sequence[Fixes]) -> dict[str, np.ndarray]:
-    st = np.concatenate([f.stamps_s for f in fixes])
-    order = np.argsort(st, kind="stable")
-    cat = {
-        "stamps": st,
-        "z": np.concatenate([f.value for f in fixes]),
-        "cov": np.concatenate([f.cov for f in fixes]),
-        "kind": np.concatenate([np.full(len(f), f.kind_code(), np.int64) for f in fixes]),
-        "lever": np.concatenate([np.tile(f.lever_xy, (len(f), 1)) for f in fixes]),
-        "source": np.concatenate([np.full(len(f), k, np.int64) for k, f in enumerate(fixes)]),
+def _merge_order(fixes: Sequence[Fixes]) -> np.ndarray:
+    """The order (M,) that sorts the sources' fixes, concatenated, by stamp (stable: ties by source)."""
+    return np.argsort(np.concatenate([f.stamps_s for f in fixes]), kind="stable")
+
+
+def _merge(fixes: Sequence[Fixes], order: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """The sources' fixes as one set of arrays in ``order`` (:func:`_merge_order`, by default): stamps (M,),
+    z (M, 3), cov (M, 3, 3), kind (M,), lever (M, 2), source (M,) (index into ``fixes``)."""
+    if order is None:
+        order = _merge_order(fixes)
+    fields = {
+        "stamps": lambda k, f: f.stamps_s,
+        "z": lambda k, f: f.value,
+        "cov": lambda k, f: f.cov,
+        "kind": lambda k, f: np.full(len(f), f.kind_code(), np.int64),
+        "lever": lambda k, f: np.tile(f.lever_xy, (len(f), 1)),
+        "source": lambda k, f: np.full(len(f), k, np.int64),
     }
-    return {k: v[order] for k, v in cat.items()}
+    # field by field: one field's concatenation is the only temporary at a time
+    return {name: np.concatenate([get(k, f) for k, f in enumerate(fixes)])[order] for name, get in fields.items()}
+
+
+def _decorrelated_cov(fixes: Sequence[Fixes], counts: Sequence[np.ndarray | None], cov: np.ndarray,
+                      order: np.ndarray) -> np.ndarray:
+    """:func:`_decorrelated`'s covariances of the merged fixes, from their own merged ``cov`` (M, 3, 3) in
+    ``order`` and each source's :func:`_decorrelation_counts` (``counts``): the same products, without a
+    decorrelated copy of every source before the merge."""
+    if all(c is None for c in counts):
+        return cov
+    n = np.concatenate([np.ones(len(f)) if c is None else c for f, c in zip(fixes, counts, strict=True)])[order]
+    unused = np.concatenate([np.full(len(f), c is not None and f.model is FixModel.POSITION)
+                             for f, c in zip(fixes, counts, strict=True)])[order]
+    out = cov * n[:, None, None]
+    out[unused, 2, 2] = 1.0  # a position fix's third axis stays 1, as _decorrelated leaves it
+    return out
+
+
+def _merge_span(fixes: Sequence[Fixes], counts: Sequence[np.ndarray | None], t0: float, t1: float,
+                gate_own_cov: bool = True) -> dict[str, np.ndarray]:
+    """Every source's fixes stamped in ``[t0, t1]`` (s), merged (:func:`_merge`; ``source`` indexes
+    ``fixes``), with ``cov`` decorrelated by each source's whole-run ``counts`` and ``gate_cov`` the gate's
+    (the fixes' own covariances, or ``cov`` when not ``gate_own_cov``)."""
+    part, cnt = [], []
+    for f, c in zip(fixes, counts, strict=True):
+        i0, i1 = int(np.searchsorted(f.stamps_s, t0, "left")), int(np.searchsorted(f.stamps_s, t1, "right"))
+        part.append(Fixes(f.source, f.stamps_s[i0:i1], f.model, f.value[i0:i1], f.cov[i0:i1], f.lever_xy))
+        cnt.append(None if c is None else c[i0:i1])
+    order = _merge_order(part)
+    fx = _merge(part, order)
+    # the gate tests each fix against its own covariance: the decorrelation's inflation is for weighing a
+    # second of correlated fixes, not for deciding whether one fix is an outlier
+    fx["gate_cov"] = fx["cov"]
+    fx["cov"] = _decorrelated_cov(part, cnt, fx["gate_cov"], order)
+    if not gate_own_cov:
+        fx["gate_cov"] = fx["cov"]
+    return fx
 
 
 def _segments(stamps: np.ndarray, max_gap_s: float | None) -> list[tuple[int, int]]:
@@ -237,8 +298,10 @@ def _node_stamps(t0: float, t1: float, odometry: OdometryLog | None, rate_hz: fl
 
 
 def _chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: OdometryLog | None, opts: FusionOptions,
-           sources: tuple[str, ...]) -> tuple[FactorChain, np.ndarray, np.ndarray, np.ndarray]:
-    """The factor chain, the start (N, d), the parameters' start and the start's covariance (d, d)."""
+           sources: tuple[str, ...], k_prior: tuple[np.ndarray, np.ndarray] | None = None,
+           ) -> tuple[FactorChain, np.ndarray, np.ndarray, np.ndarray]:
+    """The factor chain, the start (N, d), the parameters' start and the start's covariance (d, d).
+    ``k_prior``: the odometry parameters' prior (mean (3,), covariance (3, 3)); default the options'."""
     N = stamps.size
     node = np.clip(np.searchsorted(stamps, fx["stamps"], "right") - 1, 0, N - 2)
     alpha = np.clip((fx["stamps"] - stamps[node]) / (stamps[node + 1] - stamps[node]), 0.0, 1.0)
@@ -247,7 +310,7 @@ def _chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: OdometryLog 
         odo = interpolate_odometry(odometry, stamps)
         u, qcov = odometry_increments(odo, stamps, opts.odometry)
         proc, d = PROCESS_ODOMETRY, 3
-        k0, Pk = opts.odometry.prior()
+        k0, Pk = opts.odometry.prior() if k_prior is None else k_prior
         proc_W = whitening(qcov)
         odo_fix = interpolate_odometry(odometry, fx["stamps"])
         tol = (0.05, np.deg2rad(3.0))
@@ -281,6 +344,15 @@ def _chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: OdometryLog 
         sources=sources, x0=X[0].copy(), W0=whitening(P0[None])[0], k0=k0,
         Wk=whitening(Pk[None])[0] if Pk.size else np.zeros((0, 0)))
     return chain, X, k0, P0
+
+
+def _without_fix_covariances(seg: dict[str, np.ndarray], chain: FactorChain) -> FactorChain:
+    """``chain`` without its fixes' covariances, which are dropped from ``seg`` (the merged fixes) too:
+    after the filter, the batch solve weighs each fix by its whitening ``fix_W`` alone, and the two
+    (M, 3, 3) covariances (the decorrelated ones and the gate's) would otherwise be held through its peak."""
+    seg.pop("cov")
+    seg.pop("gate_cov")
+    return replace(chain, fix_cov=np.zeros((0, 3, 3)))
 
 
 def _bridged(out_stamps: np.ndarray, accepted_stamps: np.ndarray, after_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -335,6 +407,189 @@ def _with_timing(stamps: np.ndarray, X: np.ndarray, cov: np.ndarray, sigma_t: fl
     return out
 
 
+@dataclass(frozen=True)
+class _Smoothed:
+    """One chain's estimate: X (N, d), K (p,); cov (N, d, d) with the considered biases' and the timing's
+    shares; cov_k (p, p) with the biases' share, cov_k_data (p, p) without it (the data's and the prior's
+    alone); per fix (M,): use (the gate's verdict), nis, huber_w; the batch solve's iterations."""
+
+    X: np.ndarray
+    K: np.ndarray
+    cov: np.ndarray
+    cov_k: np.ndarray
+    cov_k_data: np.ndarray
+    use: np.ndarray
+    nis: np.ndarray
+    huber_w: np.ndarray
+    iterations: int
+
+
+def _smooth(stamps: np.ndarray, seg: dict[str, np.ndarray], odometry: OdometryLog | None, opts: FusionOptions,
+            sources: tuple[str, ...], bias: list[np.ndarray | None], sigma_t: float,
+            k_prior: tuple[np.ndarray, np.ndarray] | None = None) -> _Smoothed:
+    """The gated EKF + RTS, then (``opts.estimator == "batch"``) the robust batch solve, of the fixes ``seg``
+    on the nodes ``stamps``; ``k_prior`` the odometry parameters' prior (default the options'). The
+    fixes' covariances are dropped from ``seg`` once the batch solve no longer needs them."""
+    chain, _, _, P0 = _chain(stamps, seg, odometry, opts, sources, k_prior)
+    Pk = np.zeros((0, 0)) if odometry is None else (opts.odometry.prior() if k_prior is None else k_prior)[1]
+    ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob, gate_cov=seg["gate_cov"],
+                     covariances=opts.estimator != "batch")
+    use, nis = ekf.accept, ekf.nis
+    huber_w = np.ones(use.size)
+    if opts.estimator == "batch":
+        chain = _without_fix_covariances(seg, chain)
+        if opts.innovation_window_s > 0:
+            chain = replace(chain, fix_W=chain.fix_W / np.sqrt(_innovation_factor(
+                seg, nis, use, opts.innovation_window_s))[:, None, None])
+        X0, K0 = ekf.X, ekf.K
+        del ekf  # its covariances (N, d, d) and filtered states are not the batch solve's: freed first
+        res = smooth_batch(chain, X0, K0, fix_use=use, huber_k=opts.huber_k, bias_cov=bias)
+        del X0
+        X, K, cov, cov_k, iters = res.X, res.K, res.cov_x, res.cov_k, res.iterations
+        huber_w = res.robust_w
+        cov_k_data = cov_k - res.cov_bias_k if res.cov_bias_k is not None else cov_k
+        del res  # its bias share of the covariances (N, d, d), held in cov already
+    else:
+        X, K, cov, cov_k, iters = ekf.X, ekf.K, ekf.cov_x, ekf.cov_k, 0
+        cov_k_data = cov_k
+        if any(B is not None for B in bias):
+            cb_x, cb_k = considered_covariance(chain, X, K, use, bias)
+            cov, cov_k = cov + cb_x, cov_k + cb_k
+    cov = _with_timing(stamps, X, cov, sigma_t)
+    return _Smoothed(X, K, cov, cov_k, cov_k_data, use, nis, huber_w, int(iters))
+
+
+class _Parts:
+    """What :func:`fuse` gathers from its chains (segments, or windows' cores), in time order: the poses
+    and their covariances, statuses and reasons, the outliers, one :class:`Segment` per chain, and the
+    per-source counts (``per_source``, updated in place)."""
+
+    def __init__(self, per_source: dict[str, dict[str, float]]) -> None:
+        self.per_source = per_source
+        self.st: list[np.ndarray] = []
+        self.xyt: list[np.ndarray] = []
+        self.cov: list[np.ndarray] = []
+        self.status: list[np.ndarray] = []
+        self.reason: list[str] = []
+        self.outliers: list[Outlier] = []
+        self.segments: list[Segment] = []
+
+    def add(self, sources: tuple[str, ...], seg: dict[str, np.ndarray], fix_keep: np.ndarray, sm: _Smoothed,
+            stamps: np.ndarray, node_keep: np.ndarray, bridge_after_s: float, t01: tuple[float, float]) -> None:
+        """The nodes ``node_keep`` (N,) of ``sm`` on ``stamps`` and the fixes ``fix_keep`` (M,) of ``seg``
+        (a chain's own, or a window's core), as the segment ``t01`` (s)."""
+        use, nis, huber_w = sm.use[fix_keep], sm.nis[fix_keep], sm.huber_w[fix_keep]
+        src, st = seg["source"][fix_keep], seg["stamps"][fix_keep]
+        dims = np.where(seg["kind"][fix_keep] == 0, 3, 2)
+        for j in np.flatnonzero(~use):
+            self.outliers.append(Outlier(sources[src[j]], float(st[j]), float(nis[j]), int(dims[j]), "gate"))
+        for j in np.flatnonzero(use & (huber_w < 1.0)):
+            self.outliers.append(Outlier(sources[src[j]], float(st[j]), float(nis[j]), int(dims[j]), "huber"))
+        for k, s in enumerate(sources):
+            m = src == k
+            self.per_source[s]["used"] += float(np.sum(use[m]))
+            self.per_source[s]["rejected"] += float(np.sum(~use[m]))
+            self.per_source[s]["downweighted"] += float(np.sum(use[m] & (huber_w[m] < 1.0)))
+        # bridges against every accepted fix of the chain (a window's overlaps included: a gap at a core's
+        # end is measured across it)
+        br, gap = _bridged(stamps, np.unique(seg["stamps"][sm.use]), bridge_after_s)
+        br, gap = br[node_keep], gap[node_keep]
+        self.st.append(stamps[node_keep])
+        self.xyt.append(sm.X[node_keep, :3])
+        self.cov.append(sm.cov[node_keep, :3, :3])
+        self.status.append(np.where(br, PoseStatus.BRIDGED, PoseStatus.OK).astype(np.uint8))
+        self.reason += [f"bridged: {g:.2f} s without a fix" if f else "" for f, g in zip(br, gap, strict=True)]
+        sig = np.sqrt(np.diag(sm.cov_k)) if sm.cov_k.size else np.zeros(0)
+        self.segments.append(Segment(t01[0], t01[1], int(node_keep.sum()), int(br.sum()),
+                                     float(gap[br].max()) if br.any() else 0.0, tuple(float(v) for v in sm.K),
+                                     tuple(float(v) for v in sig), sm.iterations))
+
+
+    def mark(self) -> tuple[tuple[int, ...], dict[str, dict[str, float]]]:
+        """The state to :meth:`rollback` to: the lists' lengths and the per-source counts."""
+        lists = (self.st, self.xyt, self.cov, self.status, self.reason, self.outliers, self.segments)
+        return tuple(len(x) for x in lists), {k: dict(v) for k, v in self.per_source.items()}
+
+    def rollback(self, mark: tuple[tuple[int, ...], dict[str, dict[str, float]]]) -> None:
+        """Forget what was added since ``mark`` (:meth:`mark`); the per-source counts restored in place."""
+        lens, counts = mark
+        for x, n in zip((self.st, self.xyt, self.cov, self.status, self.reason, self.outliers, self.segments), lens,
+                        strict=True):
+            del x[n:]
+        for k, v in counts.items():
+            self.per_source[k].update(v)
+
+    def track(self) -> PoseTrack:
+        """The poses gathered, as one track (``source="fusion"``); each list is emptied as it is joined."""
+
+        def joined(parts: list[np.ndarray]) -> np.ndarray:
+            out = np.concatenate(parts)
+            parts.clear()
+            return out
+
+        st, xyt, cov, status = joined(self.st), joined(self.xyt), joined(self.cov), joined(self.status)
+        return PoseTrack.from_xytheta(st, xyt, cov=cov, status=status, reasons=tuple(self.reason), source="fusion")
+
+
+def _windows(fix_stamps: np.ndarray, t0: float, t1: float, opts: FusionOptions,
+             ) -> list[tuple[float, float, float, float]]:
+    """The windows of a segment of fixes ``fix_stamps`` spanning ``[t0, t1]`` (s): (core start, core end,
+    window start, window end) each, equal cores of at most ``opts.window_s``, windows ``window_overlap_s``
+    beyond; none (one batch) when the segment is no longer than a window or a core would hold fewer
+    than 10 fixes to start from."""
+    if opts.window_s is None or not np.isfinite(opts.window_s) or t1 - t0 <= opts.window_s:
+        return []
+    n = int(np.ceil((t1 - t0) / opts.window_s))
+    edges = np.linspace(t0, t1, n + 1)
+    ov = opts.window_overlap_s
+    wins = [(float(edges[i]), float(edges[i + 1]), float(max(t0, edges[i] - ov)), float(min(t1, edges[i + 1] + ov)))
+            for i in range(n)]
+    counts = [np.searchsorted(fix_stamps, c1, "right") - np.searchsorted(fix_stamps, c0, "left")
+              for c0, c1, _, _ in wins]  # the first pass smooths the cores alone
+    return wins if min(counts) >= 10 else []
+
+
+def _smooth_windows(parts: _Parts, between: Callable[[float, float], dict[str, np.ndarray]],
+                    wins: list[tuple[float, float, float, float]],
+                    odometry: OdometryLog, opts: FusionOptions, sources: tuple[str, ...],
+                    bias: list[np.ndarray | None], sigma_t: float, span: tuple[float, float]) -> None:
+    """A long segment smoothed window by window (:func:`_windows`), the odometry parameters a whole-run
+    estimate, into ``parts``: each core's nodes (the first core from ``span[0]``, the last to ``span[1]``)
+    and fixes; ``between(t0, t1)`` merges the fixes stamped in ``[t0, t1]`` (:func:`_merge_span`), one
+    window's at a time.
+
+    The parameters: the first pass smooths each core alone (no overlap, the options' prior) and keeps
+    its information on them, the posterior's minus the prior's; the second smooths each window with the
+    prior plus every other core's information: its posterior on the parameters is then the whole run's
+    (to the cores' coupling through the odometry factor across each seam, the overlaps' fixes counted
+    twice, and the linearisation), and its poses are the whole run's smoothing wherever a core lies
+    further than a few seconds from the ends of its window. The first pass needs no covariances of the
+    poses nor the considered biases (the estimate does not depend on them)."""
+    k0, P0 = opts.odometry.prior()
+    I0 = np.linalg.inv(P0)
+    info, eta = [], []
+    for c0, c1, _, _ in wins:
+        sm = _smooth(_node_stamps(c0, c1, odometry, opts.rate_hz), between(c0, c1), odometry, opts, sources,
+                     [None] * len(bias), 0.0)
+        Iw = np.linalg.inv(sm.cov_k_data)
+        info.append(Iw - I0)
+        eta.append(Iw @ sm.K - I0 @ k0)
+        sm = None  # one window's working set at a time
+    info_all, eta_all = I0 + np.sum(info, axis=0), I0 @ k0 + np.sum(eta, axis=0)
+    for w, (c0, c1, w0, w1) in enumerate(wins):
+        sw, st = between(w0, w1), _node_stamps(w0, w1, odometry, opts.rate_hz)
+        Pw = np.linalg.inv(info_all - info[w])
+        Pw = 0.5 * (Pw + Pw.T)
+        sm = _smooth(st, sw, odometry, opts, sources, bias, sigma_t, k_prior=(Pw @ (eta_all - eta[w]), Pw))
+        lo = span[0] if w == 0 else c0
+        hi = span[1] if w == len(wins) - 1 else c1
+        last = w == len(wins) - 1
+        node_keep = (st >= lo) & ((st <= hi) if last else (st < hi))
+        fix_keep = (sw["stamps"] >= lo) & ((sw["stamps"] <= hi) if last else (sw["stamps"] < hi))
+        parts.add(sources, sw, fix_keep, sm, st, node_keep, opts.bridge_after_s, (c0, c1))
+        sm = sw = None
+
+
 def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: FusionOptions | None = None,
          ) -> tuple[PoseTrack, FusionReport]:
     """Smooth absolute fixes with odometry (or constant velocity) into one trajectory.
@@ -384,78 +639,48 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
             kept.append(inside)
         fixes = kept
         _check_units(fixes, odometry)
-    fx = _merge([_decorrelated(f, opts.correlation_s) for f in fixes])
-    # the gate tests each fix against its own covariance: the decorrelation's inflation is for weighing a
-    # second of correlated fixes, not for deciding whether one fix is an outlier
-    fx["gate_cov"] = _merge(fixes)["cov"] if opts.gate_own_cov else fx["cov"]
+    counts = [_decorrelation_counts(f, opts.correlation_s) for f in fixes]
     per_source = {s: {"offered": float(len(f)), "used": 0.0, "rejected": 0.0, "downweighted": 0.0,
                       "offset_s": float(opts.offsets_s.get(s, 0.0)),
                       "offset_sigma_s": float(opts.offsets_sigma_s.get(s, 0.0)) if s in opts.offsets_s else 0.0}
                   for s, f in zip(sources, fixes, strict=True)}
     sigma_t = _timing_sigma(opts, sources)
     bias = _bias_covs(fixes, opts.bias_cov, given)
-    out_st, out_xyt, out_cov, out_status, out_reason = [], [], [], [], []
-    outliers: list[Outlier] = []
-    segments: list[Segment] = []
-    cuts = _segments(fx["stamps"], opts.max_gap_s)
+    parts = _Parts(per_source)
+    # the fixes are merged segment by segment (or window by window) from the sources, not all at once: the
+    # merged arrays are some 200 B a fix
+    all_stamps = np.sort(np.concatenate([f.stamps_s for f in fixes]))
+    cuts = _segments(all_stamps, opts.max_gap_s)
     for a, b in cuts:
-        seg = {k: v[a:b] for k, v in fx.items()}
-        t0, t1 = float(seg["stamps"][0]), float(seg["stamps"][-1])
+        t0, t1 = float(all_stamps[a]), float(all_stamps[b - 1])
         # the first and last segments reach to the sources' span (their nodes past the kept fixes exist)
         lo = span0 if a == cuts[0][0] else t0
         hi = span1 if b == cuts[-1][1] else t1
         stamps = _node_stamps(t0, t1, odometry, opts.rate_hz)
         if stamps.size < 2:
             continue
-        chain, X0, k0, P0 = _chain(stamps, seg, odometry, opts, sources)
-        _, Pk = opts.odometry.prior() if odometry is not None else (None, np.zeros((0, 0)))
-        ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob, gate_cov=seg["gate_cov"])
-        X, K, cov, cov_k, iters = ekf.X, ekf.K, ekf.cov_x, ekf.cov_k, 0
-        use = ekf.accept
-        huber_w = np.ones(use.size)
-        if opts.estimator == "batch":
-            if opts.innovation_window_s > 0:
-                chain = replace(chain, fix_W=chain.fix_W / np.sqrt(_innovation_factor(
-                    seg, ekf.nis, use, opts.innovation_window_s))[:, None, None])
-            res = smooth_batch(chain, ekf.X, ekf.K, fix_use=use, huber_k=opts.huber_k, bias_cov=bias)
-            X, K, cov, cov_k, iters = res.X, res.K, res.cov_x, res.cov_k, res.iterations
-            huber_w = res.robust_w
-        elif any(B is not None for B in bias):
-            cb_x, cb_k = considered_covariance(chain, X, K, use, bias)
-            cov, cov_k = cov + cb_x, cov_k + cb_k
-        cov = _with_timing(stamps, X, cov, sigma_t)
-        dims = np.where(seg["kind"] == 0, 3, 2)
-        for j in np.flatnonzero(~use):
-            outliers.append(Outlier(sources[seg["source"][j]], float(seg["stamps"][j]), float(ekf.nis[j]),
-                                    int(dims[j]), "gate"))
-        for j in np.flatnonzero(use & (huber_w < 1.0)):
-            outliers.append(Outlier(sources[seg["source"][j]], float(seg["stamps"][j]), float(ekf.nis[j]),
-                                    int(dims[j]), "huber"))
-        for k, s in enumerate(sources):
-            m = seg["source"] == k
-            per_source[s]["used"] += float(np.sum(use[m]))
-            per_source[s]["rejected"] += float(np.sum(~use[m]))
-            per_source[s]["downweighted"] += float(np.sum(use[m] & (huber_w[m] < 1.0)))
-        in_span = (stamps >= min(t0, lo)) & (stamps <= max(t1, hi))
-        br, gap = _bridged(stamps, np.unique(seg["stamps"][use]), opts.bridge_after_s)
-        br = br[in_span]
-        gap = gap[in_span]
-        out_st.append(stamps[in_span])
-        out_xyt.append(X[in_span, :3])
-        out_cov.append(cov[in_span, :3, :3])
-        out_status.append(np.where(br, PoseStatus.BRIDGED, PoseStatus.OK).astype(np.uint8))
-        out_reason += [f"bridged: {g:.2f} s without a fix" if f else "" for f, g in zip(br, gap, strict=True)]
-        sig = np.sqrt(np.diag(cov_k)) if cov_k.size else np.zeros(0)
-        segments.append(Segment(t0, t1, int(in_span.sum()), int(br.sum()), float(gap[br].max()) if br.any() else 0.0,
-                                tuple(float(v) for v in K), tuple(float(v) for v in sig), int(iters)))
-    if not out_st:
+        span = (min(t0, lo), max(t1, hi))
+        wins = _windows(all_stamps[a:b], t0, t1, opts) if odometry is not None else []
+        between = partial(_merge_span, fixes, counts, gate_own_cov=opts.gate_own_cov)
+        if wins:
+            mark = parts.mark()
+            try:
+                _smooth_windows(parts, between, wins, odometry, opts, sources, bias, sigma_t, span)
+                continue
+            except (InputError, ConvergenceError):
+                # a window the one batch does not have failed (a start without motion for position-only
+                # fixes, a window the fixes do not pin): this segment in one batch after all
+                parts.rollback(mark)
+        seg = between(t0, t1)
+        sm = _smooth(stamps, seg, odometry, opts, sources, bias, sigma_t)
+        in_span = (stamps >= span[0]) & (stamps <= span[1])
+        parts.add(sources, seg, np.ones(b - a, bool), sm, stamps, in_span, opts.bridge_after_s, (t0, t1))
+    seg = None  # the last segment's merged fixes are not the track's: freed before it is made
+    if not parts.st:
         raise InputError("fusion: no segment with at least three fixes")
-    st = np.concatenate(out_st)
-    xyt = np.concatenate(out_xyt)
-    track = PoseTrack.from_xytheta(st, xyt, cov=np.concatenate(out_cov), status=np.concatenate(out_status),
-                                   reasons=tuple(out_reason), source="fusion")
+    track = parts.track()
     report = FusionReport(opts.estimator, "odometry" if odometry is not None else "constant velocity", per_source,
-                          tuple(segments), tuple(sorted(outliers, key=lambda o: o.stamp_s)),
+                          tuple(parts.segments), tuple(sorted(parts.outliers, key=lambda o: o.stamp_s)),
                           time.perf_counter() - t_start)
     return track, report
 

@@ -59,6 +59,8 @@ class Fixes:
     def between(self, t0_s: float, t1_s: float) -> Fixes:
         """The fixes stamped in ``[t0_s, t1_s]`` (seconds, this source's clock)."""
         m = (self.stamps_s >= t0_s) & (self.stamps_s <= t1_s)
+        if m.all():
+            return self  # frozen: no copy of every fix when all are inside (fusion's usual case)
         return Fixes(self.source, self.stamps_s[m], self.model, self.value[m], self.cov[m], self.lever_xy)
 
     def kind_code(self) -> int:

@@ -110,7 +110,20 @@ def constant_velocity_cov(dts: np.ndarray, noise: ConstantVelocityNoise) -> np.n
     return cov
 
 
+#: matrices per slice in :func:`whitening` (and the filter's process covariances): their LAPACK temporaries
+#: stay a slice's
+CHUNK = 4096
+
+
 def whitening(cov: np.ndarray) -> np.ndarray:
-    """(N, k, k) upper factors W with W^T W = cov^-1 (so W r is standard normal)."""
-    L = np.linalg.cholesky(np.linalg.inv(cov))  # info = L L^T
-    return np.swapaxes(L, 1, 2)
+    """(N, k, k) upper factors W with W^T W = cov^-1 (so W r is standard normal), C-contiguous.
+
+    Slice by slice (each matrix is factored on its own, so the values are those of one call on all): the
+    inverse and its Cholesky factor are temporaries of a slice, not of all N."""
+    cov = np.asarray(cov, float)
+    out = np.empty(cov.shape)
+    for a in range(0, cov.shape[0], CHUNK):
+        L = np.linalg.cholesky(np.linalg.inv(cov[a:a + CHUNK]))  # info = L L^T
+        out[a:a + CHUNK] = np.swapaxes(L, 1, 2)
+    return out
+
