@@ -77,3 +77,45 @@ def test_gram_is_the_normal_matrix(shape: tuple[int, int, int]) -> None:
     np.testing.assert_allclose(got, M.transpose(0, 2, 1) @ M, rtol=1e-12, atol=1e-12)
     assert np.array_equal(got, got.transpose(0, 2, 1))
     assert MAX_GEMM // (shape[2] ** 2) * shape[2] ** 2 <= MAX_GEMM
+
+
+def _blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_one_thread_holds_while_any_caller_is_inside_and_restores_after() -> None:
+    """BLAS is one thread per call while any of two overlapping callers is inside (the first out must
+    not restore it under the second), and the count from before comes back once both are out."""
+    import threading
+
+    from gtrig.markers.detect._blas import one_thread
+
+    before = _blas_threads()
+    inside, release, seen = threading.Event(), threading.Event(), []
+
+    def second() -> None:
+        with one_thread():
+            inside.set()
+            release.wait(10)
+            seen.append(_blas_threads())
+
+    with one_thread():
+        assert set(_blas_threads()) == {1}
+        t = threading.Thread(target=second)
+        t.start()
+        assert inside.wait(10)
+    release.set()  # the first caller is out, the second still in
+    t.join(10)
+    assert seen and set(seen[0]) == {1}
+    assert _blas_threads() == before
+
+
+def test_detection_leaves_blas_threads_as_they_were() -> None:
+    from gtrig.markers.detect import MarkerDetector
+
+    rng = np.random.default_rng(3)
+    before = _blas_threads()
+    MarkerDetector("aruco_4x4_50").detect(rng.integers(0, 255, (240, 320), dtype=np.uint8))
+    assert _blas_threads() == before

@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gtrig.errors import InputError
-from gtrig.markers.detect import _threads
+from gtrig.markers.detect import _blas, _threads
 from gtrig.markers.detect.blurred import BlurredParams, find_blurred_candidates, image_noise, read_blurred
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
@@ -341,8 +341,14 @@ class MarkerDetector:
         (:func:`_to_gray`). Images too small to hold a marker give no detections.
 
         ``trace``, a list, receives a :class:`Rejection` for every candidate dropped on the way (what
-        ``gtrig markers detect --debug DIR`` draws).
+        ``gtrig markers detect --debug DIR`` draws). BLAS runs in the calling threads meanwhile
+        (:func:`._blas.one_thread`).
         """
+        with _blas.one_thread():
+            return self._detect(image, trace)
+
+    def _detect(self, image: NDArray[np.generic], trace: list[Rejection] | None) -> list[Detection]:
+        """:meth:`detect`."""
         gray = _to_gray(image)
         if min(gray.shape) < max(8, int(self.params.candidates.min_side_px)):
             return []
