@@ -14,13 +14,7 @@ what the first one left:
 2. geometry without the code: the 4 corners and the blur fitted by Gauss-Newton to every pixel of
    the square and half a cell around it, the model being the blurred-box one of
    :func:`.edges.marker_context` with the levels and the 36 cells' light free (linear, solved inside:
-   variable projection), so the quad converges before any code is assumed. Every model here, free or
-   coded, also holds a smooth additive light field over the marker (a quadratic in the pixel
-   coordinates, ``light_degree``): a highlight or a lighting slope lifts black and white alike, the
-   free cells absorb it over the data area and a code's two levels cannot, so without the field the
-   right code's excess residual measures the highlight, not the code (session 36: 7774 and 664
-   chi-square units at the true corners of two glared 20 px markers of the hard set, 1809 and 154
-   with it, their margins 5574 and 756 rising to 12133 and 1046). Clutter that this model
+   variable projection), so the quad converges before any code is assumed. Clutter that this model
    cannot fit to about the expected misfit of a real marker stops here, most of it at the first
    evaluation. That misfit is the image noise (:func:`image_noise`) and a share of the contrast
    (``texture_share``): a printed, photographed marker is not the model's ideal box;
@@ -31,7 +25,18 @@ what the first one left:
    there (a code that beats it is refitted in turn), close runners-up refitted too. The free model
    nests every code's, so the right code's excess residual over it is about chi-square with 36
    degrees of freedom; a read is accepted when that excess is small and the best code beats every
-   other hypothesis by a margin of ``min_margin`` chi-square units.
+   other hypothesis by a margin of ``min_margin`` chi-square units;
+5. the light field, where steps 3-4 read nothing: the same steps again with a smooth additive light field
+   over the marker in the free and every code's model (a quadratic in the pixel coordinates,
+   ``light_degree``; :func:`_read_codes`). A highlight or the light's slope lifts black and white alike;
+   the free cells absorb it over the data area and a code's two levels cannot, so the right code's excess
+   measured the highlight, not the code (session 36: 7774 and 664 chi-square units at the true corners of
+   two glared 20 px markers of the hard set, 1809 and 154 with the field, their margins 5574 and 756
+   rising to 12133 and 1046). The free model still nests every code's, so the excess test keeps its
+   meaning. The flat model goes first because the field's columns share the geometry's information (a
+   plane looks like a shift of the square's blurred edges, a bowl like a change of its size): on markers
+   without glare they only add variance to the corners (``--quick``, 20 px at blur 2 px, 45 deg tilt in
+   dim light: 0.41 -> 0.55 px with the field in every fit).
 
 Measured on ``bench/markers.py --quick`` (blur 2 px, noise 3): the 20 px markers are read with
 margins of 130-9000 chi-square units and corner errors of 0.06-0.4 px; the right code's residual SD
@@ -41,6 +46,7 @@ model's cell corners under shear show.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -119,14 +125,14 @@ class BlurredParams:
         start screen before it; the codes' fits use every pixel.
     iterations : Gauss-Newton iterations of the fit with free cells (at most; in dim light more of
         them let the geometry drift, the free cells taking the border's place).
-    light_degree : degree of the smooth additive light field in every model, free and coded
-        (:func:`_light_basis`; 0: the constant level alone). Glare is light added on top of black and
-        white alike, a Gaussian of 0.2-0.8 marker sides on the hard set, and the lighting's slope over a
-        marker is nearly planar: degree 2 (5 columns besides the constant) cuts the right code's excess
-        residual over the free model by 2-4 times on the hard set's glared 20 px markers (module
-        docstring), while the margin over the next code, a matter of whole cells, stays or grows (the
-        field is smooth, a cell's pattern is not). Degree 1 leaves most of the excess; degree 3 read
-        no more markers on the hard set's seeds 0-3.
+    light_degree : degree of the smooth additive light field of the second reading (step 5 of the
+        module docstring, :func:`_light_basis`; 0: none, the flat reading alone). Glare is light added on
+        top of black and white alike, a Gaussian of 0.2-0.8 marker sides on the hard set, and the
+        lighting's slope over a marker is nearly planar: degree 2 (5 columns besides the constant) cuts
+        the right code's excess residual over the free model by 2-4 times on the hard set's glared
+        20 px markers (module docstring), while the margin over the next code, a matter of whole cells,
+        stays or grows (the field is smooth, a cell's pattern is not). Degree 1 leaves most of the
+        excess; degree 3 read no more markers on the hard set's seeds 0-3.
     """
 
     enabled: bool = True
@@ -475,6 +481,72 @@ def _spread_subset(px: NDArray[np.float64], k: int) -> NDArray[np.bool_]:
     return (x + max(1, k // 2) * y) % k == 0
 
 
+def _read_codes(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[np.float64],
+                start: tuple[NDArray[np.float64], float], sse_free: float, dof: int, Wc: NDArray[np.float64],
+                n: int, border: int, params: BlurredParams, light: NDArray[np.float64] | None, max_excess: float
+                ) -> BlurredRead | None:
+    """Steps 3 and 4 of the module docstring for one candidate ``quad`` (4, 2) whose free fit gave the
+    corners and blur ``start`` and the residual sum of squares ``sse_free`` on ``dof`` degrees of
+    freedom: every code of ``Wc`` (C, d^2) ranked, the leaders refitted, and the read if the best code
+    passes the margin and excess tests (``max_excess``: the chi-square bound of the excess), else None.
+    ``light`` (N, L) (:func:`_light_basis`) or None: the light field's columns in every code's model
+    (``sse_free`` must then be the free model's with them).
+    """
+    q1, s1 = start
+    s2 = sse_free / dof
+    sse = _rank_codes(px, I, q1, s1, n, border, Wc, light)
+    o = np.argsort(sse)[: params.top_codes]
+    excess0, margin0 = (sse[o[0]] - sse_free) / s2, (sse[o[1]] - sse[o[0]]) / s2
+    if margin0 < params.screen_margin or excess0 > max(params.screen_excess, 4.0 * margin0):
+        # before the codes' own fits: clutter that the free cells explain (a dark frame round a
+        # pattern) fits no code by far more than the leader beats the next code
+        log.debug("blurred candidate at (%.0f, %.0f)%s: excess %.0f, margin %.0f at the free geometry: "
+                  "rejected", *quad.mean(axis=0), "" if light is None else " (lit)", excess0, margin0)
+        return None
+
+    def code_fit(q: NDArray[np.float64], sig: float, code: NDArray[np.float64]) -> tuple:
+        return _fit_geometry(px, I, q, sig, n, border, code, params.code_iterations, light=light)
+    # the free cells absorb part of the geometry's misfit (and in dim light let it drift), so the
+    # leader is refitted with its own geometry, and ranked again there; a code that then beats it
+    # is refitted in turn (at most top_codes in all)
+    fits = {int(o[0]): code_fit(q1, s1, Wc[o[0]])}
+    while True:
+        best = min(fits, key=lambda k: fits[k][2])
+        sse = _rank_codes(px, I, fits[best][0], fits[best][1], n, border, Wc, light)
+        sse[list(fits)] = np.inf
+        nxt = int(np.argmin(sse))
+        if sse[nxt] >= fits[best][2] or len(fits) >= params.top_codes:
+            break
+        fits[nxt] = code_fit(fits[best][0], fits[best][1], Wc[nxt])
+    # a refit only lowers a code's residual: the margin at the best geometry bounds the final one
+    rest = [f[2] for k, f in fits.items() if k != best] + [float(sse.min())]
+    if (min(rest) - fits[best][2]) / s2 < params.min_margin:
+        log.debug("blurred candidate at (%.0f, %.0f): margin %.0f after the leader's fit: rejected",
+                  *quad.mean(axis=0), (min(rest) - fits[best][2]) / s2)
+        return None
+    for ci in np.argsort(sse)[:2]:
+        if int(ci) not in fits and (sse[ci] - fits[best][2]) / s2 < params.refit_margin:
+            fits[int(ci)] = code_fit(fits[best][0], fits[best][1], Wc[ci])
+            sse[ci] = np.inf
+    best = min(fits, key=lambda k: fits[k][2])
+    qb, sb, sse_b, cb, JtJ = fits[best]
+    rest = [f[2] for k, f in fits.items() if k != best] + [float(sse.min())]
+    excess = (sse_b - sse_free) / s2
+    margin = (min(rest) - sse_b) / s2
+    ok = (excess <= max(max_excess, params.excess_share * margin) and margin >= params.min_margin
+          and cb[1] >= params.min_contrast and np.abs(qb - quad).max() <= params.max_shift_px)
+    log.debug("blurred candidate%s: code %d, residual SD %.2f, excess %.0f, margin %.0f -> %s",
+              "" if light is None else " (lit)", best, np.sqrt(s2), excess, margin, ok)
+    if not ok:
+        return None
+    N = len(I)
+    s2b = sse_b / max(N - 11 - (0 if light is None else light.shape[1]), 1)
+    with np.errstate(all="ignore"):
+        cov = s2b * np.linalg.pinv(JtJ)[:8, :8]
+    cov = np.stack([cov[2 * k:2 * k + 2, 2 * k:2 * k + 2] for k in range(4)])
+    return BlurredRead(best, qb, cov, sb, float(np.sqrt(s2b)), float(margin))
+
+
 def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDArray[np.uint8], n: int,
                  border: int, params: BlurredParams, noise: float) -> list[BlurredRead]:
     """Read the markers of candidate ``quads`` (Q, 4, 2) by maximum likelihood (module docstring).
@@ -514,13 +586,11 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
         N = len(I)
         if N < 3 * d2:
             continue
-        light = _light_basis(px, quad, params.light_degree)
-        n_light = 0 if light is None else light.shape[1]
-        dof = max(N - 11 - d2 - n_light, 1)
+        dof = max(N - 11 - d2, 1)
         # the free fit only has to bring the geometry close, and the start screen (most of what clutter
         # costs) only to tell a marker's misfit from clutter's: both on a spread subset of the pixels
         half = _spread_subset(px, N // params.subsample_px)
-        dof_h = max(int(half.sum()) - 11 - d2 - n_light, 1)
+        dof_h = max(int(half.sum()) - 11 - d2, 1)
 
         def hopeless(sse0: float, contrast: float, dof: int = dof_h) -> bool:
             # at the candidate's geometry a marker's misfit is a small share of its contrast (the
@@ -534,18 +604,17 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
             return sse1 > (1.1 * params.max_free_misfit) ** 2 * expected_var(contrast) * dof
         screen = _spread_subset(px, N // params.screen_px)
         if screen.sum() < half.sum():
-            dof_q = max(int(screen.sum()) - 11 - d2 - n_light, 1)
-            _, _, sse_q, cq, _ = _fit_geometry(px[screen], I[screen], quad, 1.5, n, border, None, 0,
-                                               light=_rows(light, screen))
+            dof_q = max(int(screen.sum()) - 11 - d2, 1)
+            _, _, sse_q, cq, _ = _fit_geometry(px[screen], I[screen], quad, 1.5, n, border, None, 0)
             if hopeless(sse_q, float(cq[1]), dof_q):
                 log.debug("blurred candidate at (%.0f, %.0f): start SD %.2f, contrast %.0f: rejected",
                           *quad.mean(axis=0), np.sqrt(sse_q / dof_q), cq[1])
                 continue
         q1, s1, sse_free, cf, _ = _fit_geometry(px[half], I[half], quad, 1.5, n, border, None, params.iterations,
-                                                stop_start=hopeless, stop_iter=misfit, light=_rows(light, half))
+                                                stop_start=hopeless, stop_iter=misfit)
         if not half.all() and sse_free <= (params.max_free_misfit**2) * expected_var(float(cf[1])) * dof_h:
             # the free model's residual on every pixel, for the excess test of the codes' fits
-            _, _, sse_free, cf, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0, light=light)
+            _, _, sse_free, cf, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0)
         else:
             sse_free *= dof / dof_h
         s2 = sse_free / dof
@@ -556,52 +625,16 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
                       "shift %.1f px: rejected", *quad.mean(axis=0), np.sqrt(s2), np.sqrt(var), cf[1],
                       np.abs(q1 - quad).max())
             continue
-        sse = _rank_codes(px, I, q1, s1, n, border, Wc, light)
-        o = np.argsort(sse)[: params.top_codes]
-        excess0, margin0 = (sse[o[0]] - sse_free) / s2, (sse[o[1]] - sse[o[0]]) / s2
-        if margin0 < params.screen_margin or excess0 > max(params.screen_excess, 4.0 * margin0):
-            # before the codes' own fits: clutter that the free cells explain (a dark frame round a
-            # pattern) fits no code by far more than the leader beats the next code
-            log.debug("blurred candidate at (%.0f, %.0f): excess %.0f, margin %.0f at the free geometry: "
-                      "rejected", *quad.mean(axis=0), excess0, margin0)
-            continue
-        # the free cells absorb part of the geometry's misfit (and in dim light let it drift), so the
-        # leader is refitted with its own geometry, and ranked again there; a code that then beats it
-        # is refitted in turn (at most top_codes in all)
-        fits = {int(o[0]): _fit_geometry(px, I, q1, s1, n, border, Wc[o[0]], params.code_iterations, light=light)}
-        while True:
-            best = min(fits, key=lambda k: fits[k][2])
-            sse = _rank_codes(px, I, fits[best][0], fits[best][1], n, border, Wc, light)
-            sse[list(fits)] = np.inf
-            nxt = int(np.argmin(sse))
-            if sse[nxt] >= fits[best][2] or len(fits) >= params.top_codes:
-                break
-            fits[nxt] = _fit_geometry(px, I, fits[best][0], fits[best][1], n, border, Wc[nxt],
-                                      params.code_iterations, light=light)
-        # a refit only lowers a code's residual: the margin at the best geometry bounds the final one
-        rest = [f[2] for k, f in fits.items() if k != best] + [float(sse.min())]
-        if (min(rest) - fits[best][2]) / s2 < params.min_margin:
-            log.debug("blurred candidate at (%.0f, %.0f): margin %.0f after the leader's fit: rejected",
-                      *quad.mean(axis=0), (min(rest) - fits[best][2]) / s2)
-            continue
-        for ci in np.argsort(sse)[:2]:
-            if int(ci) not in fits and (sse[ci] - fits[best][2]) / s2 < params.refit_margin:
-                fits[int(ci)] = _fit_geometry(px, I, fits[best][0], fits[best][1], n, border, Wc[ci],
-                                              params.code_iterations, light=light)
-                sse[ci] = np.inf
-        best = min(fits, key=lambda k: fits[k][2])
-        qb, sb, sse_b, cb, JtJ = fits[best]
-        rest = [f[2] for k, f in fits.items() if k != best] + [float(sse.min())]
-        excess = (sse_b - sse_free) / s2
-        margin = (min(rest) - sse_b) / s2
-        ok = (excess <= max(max_excess, params.excess_share * margin) and margin >= params.min_margin
-              and cb[1] >= params.min_contrast and np.abs(qb - quad).max() <= params.max_shift_px)
-        log.debug("blurred candidate: code %d, residual SD %.2f (expected %.2f), excess %.0f, margin %.0f -> %s",
-                  best, np.sqrt(s2), np.sqrt(var), excess, margin, ok)
-        if ok:
-            s2b = sse_b / max(N - 11, 1)
-            with np.errstate(all="ignore"):
-                cov = s2b * np.linalg.pinv(JtJ)[:8, :8]
-            cov = np.stack([cov[2 * k:2 * k + 2, 2 * k:2 * k + 2] for k in range(4)])
-            out.append(BlurredRead(best, qb, cov, sb, float(np.sqrt(s2b)), float(margin), index))
+        # the flat model first: where it reads, its corners are the most precise (the light field's
+        # columns share the geometry's information: a plane looks like a shift of the square's blurred
+        # edges, a bowl like a change of its size); where it does not, the model with the light field
+        read = _read_codes(px, I, quad, (q1, s1), sse_free, dof, Wc, n, border, params, None, max_excess)
+        light = None if read is not None else _light_basis(px, quad, params.light_degree)
+        if light is not None:
+            # the free model with the field too (it nests every code's), at the free fit's geometry
+            _, _, sse_lit, _, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0, light=light)
+            read = _read_codes(px, I, quad, (q1, s1), sse_lit, max(dof - light.shape[1], 1), Wc, n, border,
+                               params, light, max_excess)
+        if read is not None:
+            out.append(dataclasses.replace(read, index=index))
     return out
