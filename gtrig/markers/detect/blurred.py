@@ -133,6 +133,10 @@ class BlurredParams:
         20 px markers (module docstring), while the margin over the next code, a matter of whole cells,
         stays or grows (the field is smooth, a cell's pattern is not). Degree 1 leaves most of the
         excess; degree 3 read no more markers on the hard set's seeds 0-3.
+    light_evidence_sd : the second reading is made only where the light field lowers the free model's
+        residual by more than chance (chi-square with the field's L columns: mean L + this many SDs); a
+        clutter glyph read with the field's freedom on ``--clutter 150`` showed none (1.4 units), the
+        glared markers it reads on the hard set 22-119.
     """
 
     enabled: bool = True
@@ -161,6 +165,7 @@ class BlurredParams:
     subsample_px: int = 200
     screen_px: int = 100
     light_degree: int = 2
+    light_evidence_sd: float = 5.0
 
 
 @dataclass(frozen=True)
@@ -632,9 +637,18 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
         light = None if read is not None else _light_basis(px, quad, params.light_degree)
         if light is not None:
             # the free model with the field too (it nests every code's), at the free fit's geometry
+            n_light = light.shape[1]
             _, _, sse_lit, _, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0, light=light)
-            read = _read_codes(px, I, quad, (q1, s1), sse_lit, max(dof - light.shape[1], 1), Wc, n, border,
-                               params, light, max_excess)
+            # only where the image shows a light field: the flat free model is nested in the lit one, so
+            # without a field its residual drop is about chi-square with n_light degrees of freedom
+            # (clutter read with the field's freedom had none: 1.4 units against 22-119 for glared markers)
+            evidence = (sse_free - sse_lit) / (sse_lit / max(dof - n_light, 1))
+            if evidence > n_light + params.light_evidence_sd * np.sqrt(2.0 * n_light):
+                read = _read_codes(px, I, quad, (q1, s1), sse_lit, max(dof - n_light, 1), Wc, n, border,
+                                   params, light, max_excess)
+            else:
+                log.debug("blurred candidate at (%.0f, %.0f): light field's evidence %.1f: no second reading",
+                          *quad.mean(axis=0), evidence)
         if read is not None:
             out.append(dataclasses.replace(read, index=index))
     return out
