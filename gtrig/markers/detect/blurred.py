@@ -26,17 +26,18 @@ what the first one left:
    nests every code's, so the right code's excess residual over it is about chi-square with 36
    degrees of freedom; a read is accepted when that excess is small and the best code beats every
    other hypothesis by a margin of ``min_margin`` chi-square units;
-5. the light field, where steps 3-4 read nothing: the same steps again with a smooth additive light field
-   over the marker in the free and every code's model (a quadratic in the pixel coordinates,
-   ``light_degree``; :func:`_read_codes`). A highlight or the light's slope lifts black and white alike;
-   the free cells absorb it over the data area and a code's two levels cannot, so the right code's excess
-   measured the highlight, not the code (session 36: 7774 and 664 chi-square units at the true corners of
-   two glared 20 px markers of the hard set, 1809 and 154 with the field, their margins 5574 and 756
-   rising to 12133 and 1046). The free model still nests every code's, so the excess test keeps its
-   meaning. The flat model goes first because the field's columns share the geometry's information (a
-   plane looks like a shift of the square's blurred edges, a bowl like a change of its size): on markers
-   without glare they only add variance to the corners (``--quick``, 20 px at blur 2 px, 45 deg tilt in
-   dim light: 0.41 -> 0.55 px with the field in every fit).
+5. the light field, where steps 3-4 read nothing: the same steps again with a smooth additive light
+   field over the marker in the free and every code's model (a quadratic in the pixel coordinates,
+   ``light_degree``; :func:`_read_codes`), if the image shows one (``light_evidence_sd``). A highlight or
+   the light's slope lifts black and white alike; the free cells absorb it over the data area and a
+   code's two levels cannot, so the right code's excess measured the highlight, not the code (session
+   36: 7774 and 664 chi-square units at the true corners of two glared 20 px markers of the hard set,
+   1809 and 154 with the field, their margins 5574 and 756 rising to 12133 and 1046). The free model
+   still nests every code's, so the excess test keeps its meaning. The flat model goes first because
+   the field's columns share the geometry's information (a plane looks like a shift of the square's
+   blurred edges, a bowl like a change of its size): on markers without glare they only add variance to
+   the corners (``--quick``, 20 px at blur 2 px, 45 deg tilt in dim light: 0.41 -> 0.55 px with the
+   field in every fit).
 
 Measured on ``bench/markers.py --quick`` (blur 2 px, noise 3): the 20 px markers are read with
 margins of 130-9000 chi-square units and corner errors of 0.06-0.4 px; the right code's residual SD
