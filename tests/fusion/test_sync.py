@@ -76,3 +76,30 @@ def test_both_sources_offsets_made_consistent_with_gtlasers_clock(run) -> None:
     # an estimate that is not ok leaves both as they are
     amb = replace(est["laser"], verdict="ambiguous")
     assert combine_with_laser_clock(est["vision"], amb, 0.003, 0.0003) == (est["vision"], amb)
+
+
+@pytest.mark.parametrize("anchored", [False, True])
+def test_refinement_in_windows_is_the_whole_batch_estimate(run, anchored: bool) -> None:
+    """A long source refined a window at a time (the windows' costs summed, so memory is a window's)
+    gives the one-batch offset to a small part of its interval, the same interval within 10 %, and the
+    injected offset inside it; with anchors too (each window takes the anchors within its span)."""
+    lag = 0.3
+    o = run.odometry
+    odo = OdometryLog(o.stamps_s + lag, o.xytheta, o.v_mps, o.omega_radps)
+    src = run.vision.shifted(0.003) if anchored else run.laser
+    anchors = (fixes_from_track(run.laser),) if anchored else ()
+    ref_s, ref = (run.laser.stamps_s, run.laser.yaw_rad()) if anchored else (odo.stamps_s, odo.xytheta[:, 2])
+    est = estimate_offset(ref_s, ref, src.stamps_s, src.yaw_rad(), "src")
+    span = src.stamps_s[-1] - src.stamps_s[0]
+    opts = FusionOptions(correlation_s=0.0)
+    base = run.odometry if anchored else odo
+    whole = refine_by_fusion(est, fixes_from_track(src), base, opts, anchors=anchors, window_s=np.inf)
+    parts = refine_by_fusion(est, fixes_from_track(src), base, opts, anchors=anchors, window_s=span / 3)
+    assert whole.verdict == parts.verdict == "ok"
+    half = 0.5 * (whole.ci95_s[1] - whole.ci95_s[0])
+    assert abs(parts.offset_s - whole.offset_s) < 0.15 * half, (parts.offset_s, whole.offset_s, half)
+    np.testing.assert_allclose(np.diff(parts.ci95_s), np.diff(whole.ci95_s), rtol=0.1)
+    truth = 0.003 if anchored else -lag
+    assert parts.ci95_s[0] <= truth <= parts.ci95_s[1]
+    default = refine_by_fusion(est, fixes_from_track(src), base, opts, anchors=anchors)  # shorter than 600 s
+    assert (default.offset_s, default.ci95_s) == (whole.offset_s, whole.ci95_s)
