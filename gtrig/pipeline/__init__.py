@@ -13,8 +13,8 @@ survey         -                                            survey
 cameras        rig                                          rig, camera_report
 markers        rig                                          rig, marker_calibration
 robot-frame    rig, survey, marker_calibration              rig, frame_fit, vision_validation, hand_frame_cov
-laser          rig                                          rig, laser_report, laser_result, tracks/GTlaser/run
-vision         rig (marker_calibration, frame_fit, ...)     tracks/GTvision/{validation,run}, vision_results
+laser          rig                                          rig, laser_report, tracks/GTlaser/run
+vision         rig (marker_calibration, frame_fit, ...)     tracks/GTvision/{validation,run}
 sync           tracks/GTvision/run, tracks/GTlaser/run, rig  clock_offsets (per camera and scanner too)
 laser-clock    rig, laser_report (clock_offsets, sync.yaml)   tracks/GTlaser-synced/run (GTvision's clock)
 fusion         the same, clock_offsets (*)                  tracks/fusion/run
@@ -44,8 +44,7 @@ if TYPE_CHECKING:
 
     from gtrig.config import RunConfig
 
-_VISION_PRODUCTS = ("tracks/GTvision/validation", "tracks/GTvision/run", "vision_results/validation",
-                    "vision_results/run")
+_VISION_PRODUCTS = ("tracks/GTvision/validation", "tracks/GTvision/run")
 
 _SURVEY_FILES = ("survey/reference_points.csv", "survey/world_distances.csv", "survey/robot_points.csv",
                  "survey/pose_distances.csv")
@@ -62,7 +61,7 @@ STAGES: tuple[Stage, ...] = (
           produces=("rig", "frame_fit", "vision_validation", "hand_frame_cov"),
           reads=("validation/poses.csv", "validation/cameras"), section="vision"),
     Stage("laser", "GTlaser", gtlaser, consumes=("rig",),
-          produces=("rig", "laser_report", "laser_result", "tracks/GTlaser/run"),
+          produces=("rig", "laser_report", "tracks/GTlaser/run"),
           reads=("background/lasers", "run/lasers", "calib/laser_object.yaml"), section="laser"),
     Stage("vision", "GTvision", gtvision, consumes=("rig",),
           uses=("marker_calibration", "frame_fit", "vision_validation", "hand_frame_cov", "survey"),

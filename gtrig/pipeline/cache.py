@@ -91,14 +91,16 @@ def load_record(out: Path, name: str, key: str) -> StageOutput | None:
 def save_record(out: Path, name: str, key: str, output: StageOutput) -> bool:
     """Write the stage's record; False (and a warning) when its products cannot be pickled: the stage
     then runs again next time, which costs time, never correctness."""
-    from gtrig.io.atomic import atomic_write_bytes
+    from gtrig.io.atomic import atomic_open
 
+    # pickled straight into the file: on an hour's recording the products are hundreds of MB, and a
+    # pickle.dumps would hold their copy in memory next to them (the client's peak)
     try:
-        data = pickle.dumps({"key": key, "output": output}, protocol=5)
+        with atomic_open(_path(out, name), "wb") as f:
+            pickle.dump({"key": key, "output": output}, f, protocol=5)
     except (pickle.PicklingError, TypeError, AttributeError) as e:
         log.warning("%s: its products cannot be kept for reuse (%s); it will run again next time", name, e)
         return False
-    atomic_write_bytes(_path(out, name), data)
     return True
 
 

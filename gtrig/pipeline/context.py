@@ -55,7 +55,6 @@ if TYPE_CHECKING:
     from gtrig.calib.recording import CalibrationReport as CameraCalibrationReport
     from gtrig.config import RunConfig
     from gtrig.laser.calibrate import CalibrationReport as LaserCalibrationReport
-    from gtrig.laser.track import TrackResult
     from gtrig.markers.robotcal import RobotCalibration
     from gtrig.rig import Rig
     from gtrig.survey import SurveyResult
@@ -92,8 +91,6 @@ class Products:
     vision_validation : GTvision on the validation stops with its own covariances (before the frame fit).
     hand_frame_cov : (6, 6) the hand-placed anchor's frame covariance the frame fit replaced.
     laser_report : the fixed scanners' calibration report.
-    laser_result : GTlaser's per-frame result (every frame, with its diagnostics).
-    vision_results : GTvision's per-instant results by sequence ("run", "validation").
     clock_offsets : each GT source's clock minus odometry's, seconds, where sync could measure it.
     tracks : pose tracks by name, ``"<source>/<sequence>"`` (``"GTvision/run"``, ``"GTlaser/run"``...).
     """
@@ -106,8 +103,6 @@ class Products:
     vision_validation: VisionResult | None = None
     hand_frame_cov: np.ndarray | None = None
     laser_report: LaserCalibrationReport | None = None
-    laser_result: TrackResult | None = None
-    vision_results: Mapping[str, VisionResult] = field(default_factory=lambda: MappingProxyType({}))
     clock_offsets: Mapping[str, float] | None = None
     tracks: Mapping[str, PoseTrack] = field(default_factory=lambda: MappingProxyType({}))
 
@@ -118,19 +113,15 @@ class Products:
         return getattr(self, name) is not None
 
     def updated(self, changes: Mapping[str, Any]) -> Products:
-        """A new context with ``changes`` (fields, ``tracks/<name>`` entries, ``vision_results/<seq>``)."""
+        """A new context with ``changes`` (fields, ``tracks/<name>`` entries)."""
         plain: dict[str, Any] = {}
         tracks = dict(self.tracks)
-        vis = dict(self.vision_results)
         for k, v in changes.items():
             if k.startswith(TRACK_PREFIX):
                 tracks[k[len(TRACK_PREFIX):]] = v
-            elif k.startswith("vision_results/"):
-                vis[k.split("/", 1)[1]] = v
             else:
                 plain[k] = v
-        return dataclasses.replace(self, tracks=MappingProxyType(tracks), vision_results=MappingProxyType(vis),
-                                   **plain)
+        return dataclasses.replace(self, tracks=MappingProxyType(tracks), **plain)
 
 
 PRODUCT_FIELDS = tuple(f.name for f in dataclasses.fields(Products))
@@ -139,8 +130,6 @@ PRODUCT_FIELDS = tuple(f.name for f in dataclasses.fields(Products))
 def _valid_name(name: str) -> bool:
     if name.startswith(TRACK_PREFIX):
         return len(name) > len(TRACK_PREFIX)
-    if name.startswith("vision_results/"):
-        return True
     return name in PRODUCT_FIELDS
 
 

@@ -51,7 +51,9 @@ def gtlaser(inp: StageInput) -> StageOutput:
         AccuracyRow("GTlaser", "run, frames ambiguous", counts["ambiguous"], f"of {len(res)}", "0",
                     counts["ambiguous"] == 0),
     )
-    prod = {"rig": rig, "laser_report": report, "laser_result": res, "tracks/GTlaser/run": track}
+    # the per-frame result (diagnostics, raw fits) stays here: no later stage reads it, and on an hour's
+    # recording the context would carry ~80 MB of it through every stage (gtrig.laser.recording returns it)
+    prod = {"rig": rig, "laser_report": report, "tracks/GTlaser/run": track}
     outputs = ("gt_laser.tum", "gt_laser_cov.csv", "gt_laser_bias.yaml")
     if not inp.has_truth:
         return StageOutput(prod, checks=checks, outputs=outputs)

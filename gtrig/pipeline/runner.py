@@ -29,6 +29,7 @@ from typing import Any
 from gtrig.config import RunConfig, write_config
 from gtrig.errors import ConfigError, GtrigError, InputError
 from gtrig.io.recording import recording_dir
+from gtrig.memory import release_free_memory
 from gtrig.pipeline import cache
 from gtrig.pipeline.context import AccuracyRow, Products, Stage, StageInput, StageOutput
 from gtrig.pipeline.rows import write_accuracy_csv
@@ -152,6 +153,9 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
                 continue
             st.check_output(result)
             cache.save_record(out_p, st.name, key, result)
+            # what the stage freed goes back to the system before the next one allocates its own: on an
+            # hour's recording the client otherwise held every stage's peak (gtrig.memory, issue 24)
+            release_free_memory()
         products = products.updated(result.products)
         for name in result.products:
             producer_key[name] = key

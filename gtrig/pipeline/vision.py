@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -125,7 +124,6 @@ def gtvision(inp: StageInput) -> StageOutput:
             # no frame covariance now: an earlier run's file must not reach fusion
             (inp.out / "gt_vision_run_bias.yaml").unlink(missing_ok=True)
         prod[f"tracks/GTvision/{seq}"] = res.to_pose_track()
-        prod[f"vision_results/{seq}"] = replace(res, observations=())  # the detections stay in the checkpoint
         rep = summarize(res)
         share = 100 * rep.localized / max(rep.instants, 1)
         checks += [
