@@ -87,12 +87,12 @@ def command(
     paths = [out, covariance] + ([report] if report else [])
     if report is not None:
         from gtrig.io.atomic import atomic_group
-        from gtrig.io.posetrack import covariance_text
-        from gtrig.io.tum import tum_text
+        from gtrig.io.posetrack import covariance_pieces
+        from gtrig.io.tum import tum_pieces, write_pieces
 
         with atomic_group(*paths) as tmps:
-            tmps[0].write_text(tum_text(track), encoding="utf-8", newline="\n")
-            tmps[1].write_text(covariance_text(track), encoding="utf-8", newline="\n")
+            write_pieces(tmps[0], tum_pieces(track))
+            write_pieces(tmps[1], covariance_pieces(track))
             tmps[2].write_text(json.dumps(rep.to_dict(), indent=1), encoding="utf-8")
     else:
         write_pose_track(track, out, covariance)

@@ -20,6 +20,7 @@ import csv
 import io
 import logging
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +28,7 @@ import numpy as np
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_group
 from gtrig.io.text import decode_text, read_bytes
-from gtrig.io.tum import read_tum, tum_text
+from gtrig.io.tum import ROWS_PER_PIECE, read_tum, tum_pieces, write_pieces
 from gtrig.trajectory import COV_AXES, CovKind, PoseStatus, PoseTrack
 
 log = logging.getLogger(__name__)
@@ -36,30 +37,39 @@ _MAGIC = "# gtrig pose covariance v1"
 _LASER_V0 = ("cov_xx", "cov_xy", "cov_xtheta", "cov_yy", "cov_ytheta", "cov_thetatheta")
 
 
+def covariance_pieces(track: PoseTrack, rows: int = ROWS_PER_PIECE) -> Iterator[str]:
+    """:func:`covariance_text` in pieces of ``rows`` rows (their concatenation is the text)."""
+    axes = COV_AXES[track.cov_kind] if track.cov is not None else ()
+    buf = io.StringIO()
+    buf.write(f"{_MAGIC}; source={track.source}; frame_id={track.frame_id}; child_frame_id={track.child_frame_id}\n")
+    csv.writer(buf, lineterminator="\n").writerow(["stamp_s", "status", "reason"] +
+                                                  [f"cov_{a}_{b}" for a in axes for b in axes])
+    yield buf.getvalue()
+    for a in range(0, len(track), rows):
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        for i in range(a, min(a + rows, len(track))):
+            row = [f"{track.stamps_s[i]:.6f}", PoseStatus(int(track.status[i])).name.lower(), track.reasons[i]]
+            if track.cov is not None:
+                row += [repr(float(v)) for v in track.cov[i].ravel()]
+            w.writerow(row)
+        yield buf.getvalue()
+
+
 def covariance_text(track: PoseTrack) -> str:
     """The covariance CSV of ``track`` as text (``track.cov`` may be ``None``: then no covariance columns)."""
-    buf = io.StringIO()
-    buf.write(f"{_MAGIC}; source={track.source}; frame_id={track.frame_id}; "
-              f"child_frame_id={track.child_frame_id}\n")
-    axes = COV_AXES[track.cov_kind] if track.cov is not None else ()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["stamp_s", "status", "reason"] + [f"cov_{a}_{b}" for a in axes for b in axes])
-    for i in range(len(track)):
-        row = [f"{track.stamps_s[i]:.6f}", PoseStatus(int(track.status[i])).name.lower(), track.reasons[i]]
-        if track.cov is not None:
-            row += [repr(float(v)) for v in track.cov[i].ravel()]
-        w.writerow(row)
-    return buf.getvalue()
+    return "".join(covariance_pieces(track))
 
 
 def write_pose_track(track: PoseTrack, tum_path: str | os.PathLike[str],
                      cov_path: str | os.PathLike[str] | None = None) -> None:
-    """Write the TUM file and (when ``cov_path`` is given) the covariance CSV, both or neither."""
+    """Write the TUM file and (when ``cov_path`` is given) the covariance CSV, both or neither, a few
+    thousand rows at a time (never the whole text in memory)."""
     paths = [tum_path] if cov_path is None else [tum_path, cov_path]
-    texts = [tum_text(track)] + ([] if cov_path is None else [covariance_text(track)])
     with atomic_group(*paths) as tmps:
-        for tmp, text in zip(tmps, texts, strict=True):
-            tmp.write_text(text, encoding="utf-8", newline="\n")
+        write_pieces(tmps[0], tum_pieces(track))
+        if cov_path is not None:
+            write_pieces(tmps[1], covariance_pieces(track))
 
 
 def _header_meta(first: str) -> dict[str, str]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -11,7 +12,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig.errors import FormatError
-from gtrig.io.atomic import atomic_write_text
+from gtrig.io.atomic import atomic_group
 from gtrig.io.yamlfile import decode_text_file, read_bytes_file
 
 if TYPE_CHECKING:
@@ -130,16 +131,40 @@ def _trajectory(p: Path, a: np.ndarray) -> Trajectory:
     return Trajectory(stamps, a[:, 1:4].copy(), a[:, 4:8] / n[:, None])
 
 
+#: rows per piece of a text written piece by piece: an hour's track (~270,000 rows) as one string, its rows'
+#: strings and its encoded bytes held at once took ~130 MB of a client's peak (issue 24)
+ROWS_PER_PIECE = 8192
+
+
+def tum_pieces(traj: Trajectory | PoseTrack, rows: int = ROWS_PER_PIECE) -> Iterator[str]:
+    """:func:`tum_text` in pieces of ``rows`` rows (their concatenation is the text)."""
+    yield "# timestamp tx ty tz qx qy qz qw\n"
+    if len(traj.stamps_s) == 0:
+        yield "\n"
+    for a in range(0, len(traj.stamps_s), rows):
+        out = [
+            f"{t:.6f} {x:.9f} {y:.9f} {z:.9f} {qx:.12f} {qy:.12f} {qz:.12f} {qw:.12f}"
+            for t, (x, y, z), (qx, qy, qz, qw) in zip(traj.stamps_s[a:a + rows], traj.xyz[a:a + rows],
+                                                      traj.quat_xyzw[a:a + rows], strict=True)
+        ]
+        yield "\n".join(out) + "\n"
+
+
 def tum_text(traj: Trajectory | PoseTrack) -> str:
     """The TUM text of a trajectory or pose track (microsecond stamps, nanometre positions, 12-digit
     quaternions)."""
-    out = [
-        f"{t:.6f} {x:.9f} {y:.9f} {z:.9f} {qx:.12f} {qy:.12f} {qz:.12f} {qw:.12f}"
-        for t, (x, y, z), (qx, qy, qz, qw) in zip(traj.stamps_s, traj.xyz, traj.quat_xyzw, strict=True)
-    ]
-    return "# timestamp tx ty tz qx qy qz qw\n" + "\n".join(out) + "\n"
+    return "".join(tum_pieces(traj))
+
+
+def write_pieces(path: str | os.PathLike[str], pieces: Iterable[str]) -> None:
+    """Write text ``pieces`` one after the other to ``path`` (UTF-8, ``\\n`` line ends); not atomic: for a
+    temporary of :func:`gtrig.io.atomic.atomic_group`."""
+    with open(path, "w", encoding="utf-8", newline="\n") as f:
+        for piece in pieces:
+            f.write(piece)
 
 
 def write_tum(path: str | os.PathLike[str], traj: Trajectory | PoseTrack) -> None:
     """Write a TUM file atomically (see :func:`tum_text`)."""
-    atomic_write_text(path, tum_text(traj))
+    with atomic_group(path) as (tmp,):
+        write_pieces(tmp, tum_pieces(traj))

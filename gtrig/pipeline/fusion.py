@@ -145,8 +145,8 @@ def fusion(inp: StageInput) -> StageOutput:
     from gtrig.fusion import FusionOptions, fuse_tracks
     from gtrig.fusion.sync import offset_sigmas
     from gtrig.io.atomic import atomic_group
-    from gtrig.io.posetrack import covariance_text
-    from gtrig.io.tum import tum_text
+    from gtrig.io.posetrack import covariance_pieces
+    from gtrig.io.tum import tum_pieces, write_pieces
 
     cfg = inp.config.fusion
     tracks = _sources(inp)
@@ -162,10 +162,11 @@ def fusion(inp: StageInput) -> StageOutput:
                          bias_cov=_bias_covs(inp.out, tracks))
     fused, report = fuse_tracks(tracks, _odometry(inp.rec), opts)
     names = ("gt_fused.tum", "gt_fused_cov.csv", "fusion_report.json")
-    texts = (tum_text(fused), covariance_text(fused), json.dumps(report.to_dict(), indent=1, default=float) + "\n")
+    report_text = json.dumps(report.to_dict(), indent=1, default=float) + "\n"
+    texts = (tum_pieces(fused), covariance_pieces(fused), [report_text])
     with atomic_group(*(inp.out / n for n in names)) as tmps:
-        for tmp, text in zip(tmps, texts, strict=True):
-            tmp.write_text(text, encoding="utf-8")
+        for tmp, pieces in zip(tmps, texts, strict=True):
+            write_pieces(tmp, pieces)
     counts = fused.counts()
     n_out = len(report.outliers)
     checks = (
