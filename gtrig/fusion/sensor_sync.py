@@ -85,6 +85,10 @@ REFERENCE_WINDOW_S = 600.0
 #: smoothing dies out within seconds, so with 30 s of them the kept part of a window is the whole batch's
 #: to 1e-13 m on a synthetic 1000 s run (tests/fusion/test_sensor_sync.py)
 REFERENCE_OVERLAP_S = 30.0
+#: GTvision instants whose normal equations are formed at once in the per-camera fit: an instant's
+#: (n, n) block for n = cameras + 3 x their groups is a few kB, an hour's 40,000 instants at once took
+#: the client ~300 MB over its baseline, four times per fit (issue 24)
+CAMERA_ROWS_PER_BLOCK = 4096
 
 
 def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float = 0.5,
@@ -364,7 +368,6 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
     B = int(blocks.max()) + 1
     tau = np.zeros(C)
     bias = np.zeros((G, 3))
-    rows = np.arange(t.size)
     hub = np.ones(t.size)
     # GTvision's clock is its cameras' share-weighted mean (its poses are stamped with their frames), so
     # the offsets to it are the fitted ones minus that mean: the reference's own clock error drops out.
@@ -381,17 +384,7 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
             r = e - bias[group]
             z2 = np.einsum("mi,mij,mj->m", r, W, r)
             hub = np.where(z2 <= huber_k**2, 1.0, huber_k / np.sqrt(np.maximum(z2, 1e-24)))
-        # z = ref(t - share . tau) + b_group: the residual e + V (share . dtau) - b is linear in (dtau, b)
-        A = np.zeros((t.size, 3, n))
-        A[:, :, :C] = V[:, :, None] * share[:, None, :]
-        for i in range(3):
-            A[rows, i, C + 3 * group + i] = -1.0
-        Hn = np.einsum("m,mia,mij,mjb->mab", hub, A, W, A)
-        gn = np.einsum("m,mia,mij,mj->ma", hub, A, W, e)
-        H_b = np.zeros((B, n, n))
-        g_b = np.zeros((B, n))
-        np.add.at(H_b, blocks, Hn)
-        np.add.at(g_b, blocks, gn)
+        H_b, g_b = _camera_normal_equations(V, share, group, hub, W, e, blocks, B, n)
         x, se, _ = _jackknife(H_b, g_b, np.arange(C), L)
         tau = tau + x[:C]
         bias = x[C:].reshape(G, 3)
@@ -409,6 +402,32 @@ def camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.ndarray],
             e = replace(e, reason=f"{e.reason}; the reference's own offset {common * 1e3:+.2f} ms taken out")
         out.append(e)
     return out
+
+
+def _camera_normal_equations(V: np.ndarray, share: np.ndarray, group: np.ndarray, hub: np.ndarray, W: np.ndarray,
+                             e: np.ndarray, blocks: np.ndarray, n_blocks: int, n: int,
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """The per-camera fit's normal equations summed per time block: (B, n, n) and (B, n).
+
+    The residual ``e`` (M, 3) of ``z = ref(t - share . tau) + b_group`` is linear in the unknowns (the
+    cameras' offset steps, then each group's (3,) bias): the design's rows are ``V (share . dtau)`` for the
+    reference's velocities ``V`` (M, 3) and cameras' shares ``share`` (M, C), and ``-b`` for the instant's
+    ``group`` (M,); ``hub`` (M,) Huber weights, ``W`` (M, 3, 3) GTvision's information, ``blocks`` (M,)
+    each instant's time block. The instants are taken :data:`CAMERA_ROWS_PER_BLOCK` at a time, added in their order (the
+    same sums as all at once), so the memory is a block's, not the run's."""
+    C = share.shape[1]
+    H_b = np.zeros((n_blocks, n, n))
+    g_b = np.zeros((n_blocks, n))
+    for a in range(0, len(e), CAMERA_ROWS_PER_BLOCK):
+        s = slice(a, a + CAMERA_ROWS_PER_BLOCK)
+        m = len(e[s])
+        A = np.zeros((m, 3, n))
+        A[:, :, :C] = V[s, :, None] * share[s, None, :]
+        for i in range(3):
+            A[np.arange(m), i, C + 3 * group[s] + i] = -1.0
+        np.add.at(H_b, blocks[s], np.einsum("m,mia,mij,mjb->mab", hub[s], A, W[s], A))
+        np.add.at(g_b, blocks[s], np.einsum("m,mia,mij,mj->ma", hub[s], A, W[s], e[s]))
+    return H_b, g_b
 
 
 def _camera_curve(fit: tuple[np.ndarray, ...], ref: Reference, tau: np.ndarray, c: int, search_s: float,

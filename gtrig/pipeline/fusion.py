@@ -36,6 +36,7 @@ def sync(inp: StageInput) -> StageOutput:
     from gtrig.fusion.sensor_sync import to_reference
     from gtrig.fusion.sync import combine_with_laser_clock, estimate_offset, refine_by_fusion
     from gtrig.io.offsets import write_offsets
+    from gtrig.memory import release_free_memory
 
     cfg = inp.config.fusion
     tracks = _sources(inp)
@@ -50,6 +51,7 @@ def sync(inp: StageInput) -> StageOutput:
         if track.cov is not None and est.verdict == "ok":
             est = refine_by_fusion(est, fixes_from_track(track, name), odo)
         results[name] = est
+    release_free_memory()  # the refinements' smoothings, before the per-sensor fits allocate theirs
     sensors, clock = _sensor_offsets(inp, tracks, results, odo) if cfg.sync_per_sensor else ([], (math.nan, math.nan))
     if "vision" in results and "laser" in results:
         # one offset for the GT system: the two sources' estimates made consistent with GTlaser's clock

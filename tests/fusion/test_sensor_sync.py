@@ -128,6 +128,37 @@ def test_camera_offsets_recovered(run) -> None:  # noqa: ANN001
     assert [e.verdict for e in est[1:]] == ["unobservable", "unobservable"]
 
 
+def test_camera_normal_equations_in_blocks_of_instants_are_the_whole_sums() -> None:
+    """The per-camera fit forms its normal equations a block of instants at a time (an hour's instants at
+    once held ~300 MB): the same sums, to the bit, whatever the block."""
+    import gtrig.fusion.sensor_sync as ss
+
+    rng = np.random.default_rng(3)
+    M, C, G, B = 1000, 4, 3, 7
+    n = C + 3 * G
+    V, e = rng.normal(size=(M, 3)), rng.normal(size=(M, 3))
+    share = rng.random((M, C)) * (rng.random((M, C)) < 0.5)
+    group, blocks = rng.integers(0, G, M), np.sort(rng.integers(0, B, M))
+    a = rng.normal(size=(M, 3, 3))
+    W, hub = a @ a.transpose(0, 2, 1), rng.random(M)
+    whole = ss._camera_normal_equations(V, share, group, hub, W, e, blocks, B, n)
+    old = ss.CAMERA_ROWS_PER_BLOCK
+    try:
+        for rows in (1, 97, 999):
+            ss.CAMERA_ROWS_PER_BLOCK = rows
+            parts = ss._camera_normal_equations(V, share, group, hub, W, e, blocks, B, n)
+            assert all(np.array_equal(x, y) for x, y in zip(whole, parts, strict=True))
+    finally:
+        ss.CAMERA_ROWS_PER_BLOCK = old
+    # and they are the design's: sum over the block's instants of hub A^T W A
+    A = np.zeros((M, 3, n))
+    A[:, :, :C] = V[:, :, None] * share[:, None, :]
+    for i in range(3):
+        A[np.arange(M), i, C + 3 * group + i] = -1.0
+    H0 = np.einsum("m,mia,mij,mjb->ab", hub * (blocks == 0), A, W, A)
+    assert np.allclose(whole[0][0], H0, rtol=1e-12, atol=1e-9)
+
+
 def test_camera_offsets_to_the_cameras_mean_ignore_a_reference_shifted_along_the_motion(run) -> None:  # noqa: ANN001
     """A reference whose robot frame sits 0.8 mm ahead of the truth (GTlaser's hull frame shifted by its
     range biases) looks, at a steady speed, like a clock offset of the reference: the same for every
