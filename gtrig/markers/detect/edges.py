@@ -188,6 +188,7 @@ def white_extent(
     sigma: NDArray[np.float64],
     w_in: NDArray[np.float64],
     w_out: NDArray[np.float64],
+    across: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """Each edge's outer band limit where its white quiet zone ends, measured from the image.
 
@@ -214,6 +215,7 @@ def white_extent(
     p0, p1 : (E, 2) the edges' end points, the line the band was gathered around (fit coordinates).
     sigma : (E,) current blur estimate (pixels).
     w_in, w_out : (E,) the band's inner and outer half-widths (pixels).
+    across : (N,) :func:`across_edge` of ``samples``, ``p0``, ``p1`` if known (else computed).
 
     Returns
     -------
@@ -229,7 +231,7 @@ def white_extent(
     if E == 0 or len(samples.val) == 0:
         return out
     e = samples.edge
-    d = _across(samples, p0, p1)
+    d = across_edge(samples, p0, p1) if across is None else across
     lo = float(np.max(w_in))
     nb = int(np.ceil((lo + float(np.max(w_out))) / PROFILE_STEP_PX)) + 1
     k = np.clip(np.floor((d + lo) / PROFILE_STEP_PX).astype(np.int64), 0, nb - 1)
@@ -281,17 +283,18 @@ def white_extent(
 
 
 def trim_outer(samples: EdgeSamples, p0: NDArray[np.float64], p1: NDArray[np.float64],
-               w_out: NDArray[np.float64]) -> EdgeSamples:
+               w_out: NDArray[np.float64], across: NDArray[np.float64] | None = None) -> EdgeSamples:
     """``samples`` without the pixels beyond ``w_out[e]`` (E,) outside their edge ``p0 -> p1`` (fit
-    coordinates; the distance as in :func:`gather_band`)."""
-    keep = _across(samples, p0, p1) <= np.asarray(w_out, np.float64)[samples.edge]
+    coordinates; the distance as in :func:`gather_band`, ``across`` if known: :func:`across_edge`)."""
+    d = across_edge(samples, p0, p1) if across is None else across
+    keep = d <= np.asarray(w_out, np.float64)[samples.edge]
     if keep.all():
         return samples
     edge = samples.edge[keep]
     return EdgeSamples(samples.xy[keep], samples.val[keep], edge, _starts(edge, len(p0)))
 
 
-def _across(samples: EdgeSamples, p0: NDArray[np.float64], p1: NDArray[np.float64]) -> NDArray[np.float64]:
+def across_edge(samples: EdgeSamples, p0: NDArray[np.float64], p1: NDArray[np.float64]) -> NDArray[np.float64]:
     """(N,) each band pixel's signed distance across its edge ``p0 -> p1`` (pixels, > 0 outside: the
     normal ``(t_y, -t_x)`` of :func:`gather_band`)."""
     t = p1 - p0
@@ -303,10 +306,13 @@ def _across(samples: EdgeSamples, p0: NDArray[np.float64], p1: NDArray[np.float6
 
 def _starts(edge: NDArray[np.int64], E: int) -> NDArray[np.int64]:
     """First index of each of ``E`` edges in ``edge`` (sorted), -1 for edges without pixels."""
-    starts = np.full(E, -1, np.int64)
-    u, first = np.unique(edge, return_index=True)
-    starts[u] = first
-    return starts
+    # a binary search in the sorted indices: np.unique sorted them again (0.13 against 0.013 ms on 30,000
+    # band pixels; called for every band and trim)
+    pos = np.searchsorted(edge, np.arange(E, dtype=edge.dtype))
+    found = np.zeros(E, bool)
+    inside = pos < len(edge)
+    found[inside] = edge[pos[inside]] == np.flatnonzero(inside)
+    return np.where(found, pos, -1).astype(np.int64)
 
 
 def _band_boxes_undistorted(
