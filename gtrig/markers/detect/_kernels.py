@@ -788,3 +788,29 @@ def sparse_gram(M: NDArray[np.float64]) -> NDArray[np.float64]:
         for b in range(a + 1, D):
             A[b, a] = A[a, b]
     return A
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def band_prep(xy: NDArray[np.float64], edge: NDArray[np.int64], mid: NDArray[np.float64], val: NDArray[np.float64],
+              E: int, clip_low: float, clip_high: float
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_],
+                         NDArray[np.float64]]:
+    """The band pixels ``xy`` (N, 2) of :func:`.edges.fit_edges` relative to their edge's middle ``mid``
+    (E, 2): ``X0``, ``X1`` (N,); the pixels per edge (E,), the clipped pixels (N,) (``val`` at or beyond
+    ``clip_low`` / ``clip_high``) and their number per edge (E,), counts as floats."""
+    N = edge.shape[0]
+    X0 = np.empty(N)
+    X1 = np.empty(N)
+    cnt = np.zeros(E)
+    clipped = np.empty(N, np.bool_)
+    n_clipped = np.zeros(E)
+    for i in range(N):
+        k = edge[i]
+        X0[i] = xy[i, 0] - mid[k, 0]
+        X1[i] = xy[i, 1] - mid[k, 1]
+        cnt[k] += 1.0
+        c = val[i] >= clip_high or val[i] <= clip_low
+        clipped[i] = c
+        if c:
+            n_clipped[k] += 1.0
+    return X0, X1, cnt, clipped, n_clipped
