@@ -814,3 +814,47 @@ def band_prep(xy: NDArray[np.float64], edge: NDArray[np.int64], mid: NDArray[np.
         if c:
             n_clipped[k] += 1.0
     return X0, X1, cnt, clipped, n_clipped
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def band_profile(d: NDArray[np.float64], edge: NDArray[np.int64], val: NDArray[np.float64], lo: float, step: float,
+                 nb: int, E: int) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Counts (E, nb) and sums (E, nb) of the band pixels' values ``val`` (N,) in bins of ``step`` pixels
+    across their edge ``edge`` (N,), from ``-lo``, at the signed distances ``d`` (N,); a pixel beyond the
+    first or last bin counts in it (:func:`.edges.white_extent`; its ``np.bincount`` form, sums in the
+    pixels' order)."""
+    cnt = np.zeros((E, nb), np.int64)
+    tot = np.zeros((E, nb))
+    for i in range(d.shape[0]):
+        f = math.floor((d[i] + lo) / step)
+        k = 0 if not (f > 0.0) else (nb - 1 if f > nb - 1 else int(f))
+        cnt[edge[i], k] += 1
+        tot[edge[i], k] += val[i]
+    return cnt, tot
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def band_keep(xy: NDArray[np.float64], val: NDArray[np.float64], edge: NDArray[np.int64], keep: NDArray[np.bool_],
+              E: int) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
+    """The band pixels ``keep`` (N,) of ``xy`` (N, 2), ``val``, ``edge`` (sorted), and each of the ``E``
+    edges' first index among them (-1 for none; :func:`.edges.trim_outer`)."""
+    m = 0
+    for i in range(keep.shape[0]):
+        if keep[i]:
+            m += 1
+    xy2 = np.empty((m, 2))
+    val2 = np.empty(m)
+    edge2 = np.empty(m, np.int64)
+    starts = np.full(E, -1, np.int64)
+    j = 0
+    for i in range(keep.shape[0]):
+        if keep[i]:
+            xy2[j, 0] = xy[i, 0]
+            xy2[j, 1] = xy[i, 1]
+            val2[j] = val[i]
+            k = edge[i]
+            edge2[j] = k
+            if starts[k] < 0:
+                starts[k] = j
+            j += 1
+    return xy2, val2, edge2, starts

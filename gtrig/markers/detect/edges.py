@@ -234,10 +234,9 @@ def white_extent(
     d = across_edge(samples, p0, p1) if across is None else across
     lo = float(np.max(w_in))
     nb = int(np.ceil((lo + float(np.max(w_out))) / PROFILE_STEP_PX)) + 1
-    k = np.clip(np.floor((d + lo) / PROFILE_STEP_PX).astype(np.int64), 0, nb - 1)
-    flat = e * nb + k
-    cnt = np.bincount(flat, minlength=E * nb).reshape(E, nb)
-    tot = np.bincount(flat, weights=samples.val, minlength=E * nb).reshape(E, nb)
+    # the bins' counts and sums in one compiled pass (the same sums, in the pixels' order)
+    cnt, tot = _kernels.band_profile(np.ascontiguousarray(d, np.float64), np.ascontiguousarray(e, np.int64),
+                                     np.ascontiguousarray(samples.val, np.float64), lo, PROFILE_STEP_PX, nb, E)
     with np.errstate(invalid="ignore", divide="ignore"):
         prof = np.where(cnt >= 3, tot / cnt, np.nan)  # a bin of a couple of pixels says little
     centre = (np.arange(nb) + 0.5) * PROFILE_STEP_PX - lo  # (nb,)
@@ -290,8 +289,11 @@ def trim_outer(samples: EdgeSamples, p0: NDArray[np.float64], p1: NDArray[np.flo
     keep = d <= np.asarray(w_out, np.float64)[samples.edge]
     if keep.all():
         return samples
-    edge = samples.edge[keep]
-    return EdgeSamples(samples.xy[keep], samples.val[keep], edge, _starts(edge, len(p0)))
+    # the kept pixels copied in one compiled pass (three NumPy gathers and a search before)
+    xy, val, edge, starts = _kernels.band_keep(np.ascontiguousarray(samples.xy, np.float64),
+                                               np.ascontiguousarray(samples.val, np.float64),
+                                               np.ascontiguousarray(samples.edge, np.int64), keep, len(p0))
+    return EdgeSamples(xy, val, edge, starts)
 
 
 def across_edge(samples: EdgeSamples, p0: NDArray[np.float64], p1: NDArray[np.float64]) -> NDArray[np.float64]:
