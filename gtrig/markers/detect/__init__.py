@@ -44,6 +44,7 @@ from gtrig.markers.detect.candidates import CandidateParams, find_candidates
 from gtrig.markers.detect.decode import sample_cells, unblur_cells
 from gtrig.markers.detect.edges import (
     CLIP_HIGH,
+    across_edge,
     fit_edges,
     gather_band,
     intersect_corners,
@@ -546,8 +547,9 @@ class MarkerDetector:
                 # (its blurred foot inside the band moves the line too)
                 w_look = w_out + WHITE_LOOK_SIGMAS * sigma
                 samples = gather_band(gray, p0, p1, w_in, w_look, excl, und)
-                w_out = np.minimum(w_out, white_extent(samples, p0, p1, sigma, w_in, w_look))
-                samples = trim_outer(samples, p0, p1, w_out)
+                d = across_edge(samples, p0, p1)  # (both steps need it)
+                w_out = np.minimum(w_out, white_extent(samples, p0, p1, sigma, w_in, w_look, d))
+                samples = trim_outer(samples, p0, p1, w_out, d)
             else:
                 samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
             if p.tone != "linear":

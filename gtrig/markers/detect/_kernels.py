@@ -695,3 +695,166 @@ def sides_traced(pts: NDArray[np.float64], sel: NDArray[np.bool_], a: NDArray[np
         if bins < share * math.ceil(0.7 * sides[i] / 2.0):
             return False
     return True
+
+
+#: a blurred cell profile below this share of its peak (1) is left out of the cell reading's normal
+#: equations: far from a cell its profile is a Gaussian tail of 1e-14 and less, which moves the solved
+#: whiteness by about as much while it multiplies the work
+_CELL_TINY = 1e-14
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _grid_ndtr(t: float, s: float, n: int, F: NDArray[np.float64]) -> None:
+    """``F[k] = Phi((t - k) / s)`` for the grid lines ``k = 0..n`` (libm's erfc, as SciPy's ``ndtr``).
+
+    Beyond 8.5 SDs below ``t`` the CDF is 1 to the last bit of a double, beyond 9 SDs above it less
+    than 1e-19: those lines are set without the erfc (most of the cost; a sharp marker's sample is
+    within 9 SDs of 2-4 lines of a 13-line grid).
+    """
+    lo = max(0, int(math.ceil(t - 8.5 * s)))
+    hi = min(n, int(math.floor(t + 9.0 * s)))
+    inv = 1.0 / (s * math.sqrt(2.0))
+    for k in range(0, min(lo, n + 1)):
+        F[k] = 1.0
+    for k in range(lo, hi + 1):
+        F[k] = 0.5 * math.erfc((k - t) * inv)
+    for k in range(max(hi + 1, lo), n + 1):
+        F[k] = 0.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def unblur_rows(px: NDArray[np.float64], mu: NDArray[np.float64], Hm: NDArray[np.float64],
+                vals: NDArray[np.float64], sigma: NDArray[np.float64], black: NDArray[np.float64],
+                contrast: NDArray[np.float64], n: int, border: int
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """The design ``M`` (Q, S, D), ``D = d^2``, and residual ``r`` (Q, S) of :func:`.decode.unblur_cells`'
+    least squares, from its samples ``px`` (Q, S, 2) in fit coordinates (marker units ``mu`` (S, 3),
+    homographies ``Hm`` (Q, 3, 3) to them, image values ``vals`` (Q, S)), and per quad the number of
+    entries of ``M`` set (Q,).
+
+    ``M``'s row of a sample is the outer product of the cells' blurred profiles across the two axes,
+    ``Y_i X_j``; a profile below :data:`_CELL_TINY` (a Gaussian tail, far from the sample) is left 0.
+    """
+    Q, S = px.shape[0], px.shape[1]
+    d = n - 2 * border
+    D = d * d
+    M = np.zeros((Q, S, D))
+    r = np.empty((Q, S))
+    nnz = np.zeros(Q, np.int64)
+    Fx = np.empty(n + 1)
+    Fy = np.empty(n + 1)
+    for q in range(Q):
+        h = Hm[q]
+        for s in range(S):
+            x, y = px[q, s, 0], px[q, s, 1]
+            w3 = abs(h[2, 0] * x + h[2, 1] * y + h[2, 2])
+            mx, my = mu[s, 0], mu[s, 1]
+            sx = sigma[q] * math.hypot(h[0, 0] - mx * h[2, 0], h[0, 1] - mx * h[2, 1]) / w3 * n
+            sy = sigma[q] * math.hypot(h[1, 0] - my * h[2, 0], h[1, 1] - my * h[2, 1]) / w3 * n
+            _grid_ndtr(mx * n, sx, n, Fx)
+            _grid_ndtr(my * n, sy, n, Fy)
+            r[q, s] = (vals[q, s] - black[q]) / contrast[q] - (1.0 - (Fx[0] - Fx[n]) * (Fy[0] - Fy[n]))
+            for i in range(d):
+                yi = Fy[border + i] - Fy[border + i + 1]
+                if abs(yi) <= _CELL_TINY:
+                    continue
+                for j in range(d):
+                    xj = Fx[border + j] - Fx[border + j + 1]
+                    if abs(xj) > _CELL_TINY:
+                        M[q, s, i * d + j] = yi * xj
+                        nnz[q] += 1
+    return M, r, nnz
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def sparse_gram(M: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``M^T M`` (D, D) of one sparse design ``M`` (S, D), summing only the products of each row's
+    non-zero entries (a sharp marker's sample touches 1-4 of the d^2 cells)."""
+    S, D = M.shape
+    A = np.zeros((D, D))
+    idx = np.empty(D, np.int64)
+    for s in range(S):
+        m = 0
+        for k in range(D):
+            if M[s, k] != 0.0:
+                idx[m] = k
+                m += 1
+        for a in range(m):
+            ka = idx[a]
+            va = M[s, ka]
+            for b in range(a, m):
+                A[ka, idx[b]] += va * M[s, idx[b]]
+    for a in range(D):
+        for b in range(a + 1, D):
+            A[b, a] = A[a, b]
+    return A
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def band_prep(xy: NDArray[np.float64], edge: NDArray[np.int64], mid: NDArray[np.float64], val: NDArray[np.float64],
+              E: int, clip_low: float, clip_high: float
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_],
+                         NDArray[np.float64]]:
+    """The band pixels ``xy`` (N, 2) of :func:`.edges.fit_edges` relative to their edge's middle ``mid``
+    (E, 2): ``X0``, ``X1`` (N,); the pixels per edge (E,), the clipped pixels (N,) (``val`` at or beyond
+    ``clip_low`` / ``clip_high``) and their number per edge (E,), counts as floats."""
+    N = edge.shape[0]
+    X0 = np.empty(N)
+    X1 = np.empty(N)
+    cnt = np.zeros(E)
+    clipped = np.empty(N, np.bool_)
+    n_clipped = np.zeros(E)
+    for i in range(N):
+        k = edge[i]
+        X0[i] = xy[i, 0] - mid[k, 0]
+        X1[i] = xy[i, 1] - mid[k, 1]
+        cnt[k] += 1.0
+        c = val[i] >= clip_high or val[i] <= clip_low
+        clipped[i] = c
+        if c:
+            n_clipped[k] += 1.0
+    return X0, X1, cnt, clipped, n_clipped
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def band_profile(d: NDArray[np.float64], edge: NDArray[np.int64], val: NDArray[np.float64], lo: float, step: float,
+                 nb: int, E: int) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Counts (E, nb) and sums (E, nb) of the band pixels' values ``val`` (N,) in bins of ``step`` pixels
+    across their edge ``edge`` (N,), from ``-lo``, at the signed distances ``d`` (N,); a pixel beyond the
+    first or last bin counts in it (:func:`.edges.white_extent`; its ``np.bincount`` form, sums in the
+    pixels' order)."""
+    cnt = np.zeros((E, nb), np.int64)
+    tot = np.zeros((E, nb))
+    for i in range(d.shape[0]):
+        f = math.floor((d[i] + lo) / step)
+        k = 0 if not (f > 0.0) else (nb - 1 if f > nb - 1 else int(f))
+        cnt[edge[i], k] += 1
+        tot[edge[i], k] += val[i]
+    return cnt, tot
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def band_keep(xy: NDArray[np.float64], val: NDArray[np.float64], edge: NDArray[np.int64], keep: NDArray[np.bool_],
+              E: int) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
+    """The band pixels ``keep`` (N,) of ``xy`` (N, 2), ``val``, ``edge`` (sorted), and each of the ``E``
+    edges' first index among them (-1 for none; :func:`.edges.trim_outer`)."""
+    m = 0
+    for i in range(keep.shape[0]):
+        if keep[i]:
+            m += 1
+    xy2 = np.empty((m, 2))
+    val2 = np.empty(m)
+    edge2 = np.empty(m, np.int64)
+    starts = np.full(E, -1, np.int64)
+    j = 0
+    for i in range(keep.shape[0]):
+        if keep[i]:
+            xy2[j, 0] = xy[i, 0]
+            xy2[j, 1] = xy[i, 1]
+            val2[j] = val[i]
+            k = edge[i]
+            edge2[j] = k
+            if starts[k] < 0:
+                starts[k] = j
+            j += 1
+    return xy2, val2, edge2, starts

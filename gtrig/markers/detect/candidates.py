@@ -320,12 +320,20 @@ def _seed_regions(shape: tuple[int, ...], seeds: list[tuple[int, int, int, int]]
         mx, my = np.maximum(h - w, 0) + big, np.maximum(w - h, 0) + big
     else:
         mx = my = np.full(len(x), 2, np.int64)
-    _kernels.fill_boxes(region, np.column_stack([np.maximum(x - mx, 0), np.maximum(y - my, 0),
-                                                 np.minimum(x + w + mx, w_img - 1), np.minimum(y + h + my, h_img - 1)]))
+    boxes_px = np.column_stack([np.maximum(x - mx, 0), np.maximum(y - my, 0),
+                                np.minimum(x + w + mx, w_img - 1), np.minimum(y + h + my, h_img - 1)])
+    _kernels.fill_boxes(region, boxes_px)
     # parts less than 16 px apart share a box (on an 8 x coarser grid, dilated by one): each box costs a
     # few OpenCV calls, and clutter leaves tens of small seeds
-    coarse = cv2.dilate(cv2.resize(region, ((w_img + 7) // 8, (h_img + 7) // 8), interpolation=cv2.INTER_AREA),
-                        np.ones((3, 3), np.uint8))
+    if h_img % 8 == 0 and w_img % 8 == 0:
+        # the area average by a whole factor of 8 is each 8 x 8 block's mean (rounded; 255 / 64 rounds to
+        # 4), non-zero exactly where a box reaches the block: filled on the coarse grid directly, without
+        # the pass over the whole image (0.5 ms of a 1024 x 768 image's 50)
+        small = np.zeros((h_img // 8, w_img // 8), np.uint8)
+        _kernels.fill_boxes(small, boxes_px // 8)
+    else:
+        small = cv2.resize(region, ((w_img + 7) // 8, (h_img + 7) // 8), interpolation=cv2.INTER_AREA)
+    coarse = cv2.dilate(small, np.ones((3, 3), np.uint8))
     parts, _ = cv2.findContours(coarse, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     boxes = []
     for c in parts:

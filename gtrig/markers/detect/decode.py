@@ -5,12 +5,16 @@ from __future__ import annotations
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import ndtr
 
+from gtrig.markers.detect import _kernels
 from gtrig.markers.detect._blas import gram, matmul
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.edges import quad_homographies
 from gtrig.markers.detect.sampling import bilinear
+
+#: share of the design's entries set (:func:`._kernels.unblur_rows`) below which its normal matrix is summed
+#: sparsely (:func:`._kernels.sparse_gram`), above which by BLAS's syrk
+SPARSE_SHARE = 0.15
 
 # sub-samples per cell, as offsets from its centre in cell units (the middle half of the cell)
 _OFFS = np.array([-0.25, 0.0, 0.25])
@@ -98,25 +102,20 @@ def unblur_cells(
     if undist is not None:
         flat = undist.to_raw(flat)
     vals = bilinear(gray, flat[:, 0], flat[:, 1]).reshape(Q, -1)
-    k = np.arange(n + 1, dtype=np.float64)
-    x, y = px[..., 0], px[..., 1]  # (Q, S)
-    H = Hm[:, None]  # (Q, 1, 3, 3)
-    w3 = H[..., 2, 0] * x + H[..., 2, 1] * y + H[..., 2, 2]
-    mx, my = mu[:, 0], mu[:, 1]
-    sig = sigma[:, None]
-    sx = sig * np.hypot(H[..., 0, 0] - mx * H[..., 2, 0], H[..., 0, 1] - mx * H[..., 2, 1]) / np.abs(w3) * n
-    sy = sig * np.hypot(H[..., 1, 0] - my * H[..., 2, 0], H[..., 1, 1] - my * H[..., 2, 1]) / np.abs(w3) * n
-    Fx = ndtr((mx[:, None] * n - k) / sx[..., None])  # (Q, S, n + 1)
-    Fy = ndtr((my[:, None] * n - k) / sy[..., None])
-    X = (Fx[..., :-1] - Fx[..., 1:])[..., border : n - border]  # (Q, S, d)
-    Y = (Fy[..., :-1] - Fy[..., 1:])[..., border : n - border]
-    S = (Fx[..., 0] - Fx[..., -1]) * (Fy[..., 0] - Fy[..., -1])
-    M = (Y[..., :, None] * X[..., None, :]).reshape(Q, len(mx), d * d)
-    r = (vals - black[:, None]) / contrast[:, None] - (1.0 - S)
-    Mt = M.transpose(0, 2, 1)
-    # the normal matrix by syrk (half a gemm's work), in blocks OpenBLAS keeps in one thread: one
-    # (d^2, S) x (S, d^2) product per quad is past its threading threshold
-    A = gram(M)
+    # the design by the compiled kernel (every sample's product of the cells' profiles across the two
+    # axes, 0 where negligible); its normal matrix by syrk where it is dense, by the products of each
+    # row's non-zero entries where it is sparse (sharp markers: 1-4 of the d^2 per row)
+    M, r, nnz = _kernels.unblur_rows(np.ascontiguousarray(px), np.ascontiguousarray(mu), np.ascontiguousarray(Hm),
+                                     np.ascontiguousarray(vals, np.float64), np.ascontiguousarray(sigma, np.float64),
+                                     np.ascontiguousarray(black, np.float64),
+                                     np.ascontiguousarray(contrast, np.float64), n, border)
+    dense = nnz > SPARSE_SHARE * M.shape[1] * M.shape[2]
+    A = np.empty((Q, d * d, d * d))
+    if dense.any():
+        A[dense] = gram(M[dense])
+    for i in np.flatnonzero(~dense):
+        A[i] = _kernels.sparse_gram(M[i])
+    rhs = matmul(M.transpose(0, 2, 1), r[..., None])[..., 0]
     lam = 1e-2 * np.trace(A, axis1=1, axis2=2) / (d * d)
-    w = np.linalg.solve(A + lam[:, None, None] * np.eye(d * d), matmul(Mt, r[..., None]) + lam[:, None, None] * 0.5)
+    w = np.linalg.solve(A + lam[:, None, None] * np.eye(d * d), rhs[..., None] + lam[:, None, None] * 0.5)
     return w.reshape(Q, d, d)
