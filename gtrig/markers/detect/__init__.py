@@ -60,7 +60,7 @@ __all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", 
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 12
+DETECTOR_VERSION = 13
 
 #: how far beyond the outer band (blur sigmas) :func:`.edges.white_extent` looks for the paper's end:
 #: with the band ending 1.9 sigma before the paper (a 3 sigma + 5 px margin under the 5 px band) the
@@ -407,8 +407,8 @@ class MarkerDetector:
         return self._codes
 
     def _blurred_candidates(self, gray: NDArray[np.uint8]) -> tuple[list[NDArray[np.float64]], float]:
-        """The second path's candidate quads (:func:`.blurred.find_blurred_candidates`) and the image's
-        noise SD (:func:`.blurred.image_noise`)."""
+        """The second path's candidates (:func:`.blurred.find_blurred_candidates`: each (A, 4, 2), outlines
+        of one place) and the image's noise SD (:func:`.blurred.image_noise`)."""
         p = self.params
         quads = find_blurred_candidates(gray, p.blurred, p.candidates.max_side_px(gray.shape), p.candidates.scale)
         return quads, image_noise(gray) if quads else float("nan")
@@ -416,9 +416,9 @@ class MarkerDetector:
     def _read_tasks(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float]
                     ) -> list[tuple[object, ...]]:
         """:func:`.blurred.read_blurred`'s arguments for each candidate of ``cands`` on its own (its
-        loop reads them independently)."""
+        outlines read in order until one reads)."""
         quads, noise = cands
-        return [(gray, q[None], self._all_codes(), self.spec.cells, self.spec.border_cells, self.params.blurred, noise)
+        return [(gray, q, self._all_codes(), self.spec.cells, self.spec.border_cells, self.params.blurred, noise, True)
                 for q in quads]
 
     def _blurred_ahead(self, gray: NDArray[np.uint8],
@@ -436,7 +436,7 @@ class MarkerDetector:
             return
         ahead.set_result((cands, reads))
         if cands[0]:
-            reads.work(_outside(cands[0], first.result()))
+            reads.work(_outside([q[0] for q in cands[0]], first.result()))
 
     def _detect_blurred(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float],
                         found: list[Detection], trace: list[Rejection] | None = None,
@@ -451,7 +451,8 @@ class MarkerDetector:
         It works in raw pixels: over a marker of at most ``max_side_px`` the lens distortion is close
         to a homography.
         """
-        quads_all, _noise = cands
+        # each candidate is one or more outlines of one place (A, 4, 2), its first the one it is known by
+        quads_all = [q[0] for q in cands[0]]
         # a candidate whose centre lies inside a detection is that marker (or a part of it)
         todo = _outside(quads_all, [d.corners_px for d in found])
         quads = [quads_all[i] for i in todo]

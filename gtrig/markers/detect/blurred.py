@@ -9,8 +9,12 @@ what the first one left:
 
 1. candidates (:func:`find_blurred_candidates`): the dark mask of a smoothed image at a looser
    ratio, where a blurred marker is one dark blob inside its white quiet zone; only small blobs
-   (the first path finds the large ones) and no hole tests (the blob has none). The detector drops
-   those whose centre lies in a marker the first path found;
+   (the first path finds the large ones) and no hole tests (the blob has none); and the holes of the
+   quiet zone's bright ring (:mod:`.quiet`) at two window sizes. Each candidate is one or more
+   outlines of one place; the detector drops those whose centre lies in a marker the first path found.
+   Of a candidate's outlines, and the best of them moved onto the marker's outer edge
+   (:mod:`.outline`: the reader's basin is about a pixel, an outline can be 1-4 px off), the one of
+   least misfit at the start screen is read (:func:`_starts`);
 2. geometry without the code: the 4 corners and the blur fitted by Gauss-Newton to every pixel of
    the square and half a cell around it, the model being the blurred-box one of
    :func:`.edges.marker_context` with the levels and the 36 cells' light free (linear, solved inside:
@@ -60,6 +64,7 @@ from gtrig.markers.detect import _kernels
 from gtrig.markers.detect._blas import matmul
 from gtrig.markers.detect.candidates import dark_mask, solid_quad
 from gtrig.markers.detect.edges import quad_homographies
+from gtrig.markers.detect.outline import snap_to_border
 from gtrig.markers.detect.quiet import quiet_zone_quads
 
 log = logging.getLogger(__name__)
@@ -83,13 +88,27 @@ class BlurredParams:
     min_solidity : contour area / hull area.
     quiet_windows : window sides (pixels) of the quiet-zone candidates (:func:`.quiet.quiet_zone_quads`:
         the holes of the mask of pixels brighter than their neighbourhood's mean, the paper ring around a
-        marker, on the smoothed image; a hole's darkest tenth must be darker than ``ratio_threshold`` times
-        the ring), added where no candidate of the dark mask lies. 11 px is about half the smallest marker
-        this path reads (the ring of a 20 px tag is 2-5 px wide; at 21-31 px windows the dark background
-        around a thin ring lowers the mean less than the marker's own dark half does, and the ring breaks).
-        Empty: off.
+        marker, on the smoothed image), in order. 11 px is about half the smallest marker this path reads
+        (the ring of a 20 px tag is 2-5 px wide; at 21-31 px windows the dark background around a thin
+        ring lowers the mean less than the marker's own dark half does, and the ring breaks); 7 px keeps
+        the ring closed where a bright surface or a white cell next to a thin quiet zone pulls the 11 px
+        mean up (session 37: with the other changes of that session, (7, 11) missed 20 of the hard
+        bench's 1080 markers of >= 20 px on seeds 0-3, 5, 6, (7,) alone 26). A hole whose centre lies in
+        an earlier candidate is kept as a further outline of that candidate
+        (:func:`find_blurred_candidates`). Empty: off.
     quiet_offset : how much brighter than that mean (grey levels) a pixel of the ring is; about the noise
         the 3 x 3 median leaves.
+    quiet_min_solidity : least area / hull area of a quiet-zone hole. Looser than the dark blobs'
+        ``min_solidity``: a white cell next to a border broken by blur and demosaicing joins the ring and
+        notches the hole by a cell (solidity 0.75-0.85 on the hard bench's missed 20 px tags), while its
+        hull stays the marker's outline, and the reader starts from the outline moved onto the edge.
+    quiet_ink_ratio : a hole's darkest tenth must be darker than this share of its ring's median. The
+        ring is traced on its innermost bright pixels, already on the blurred border's slope: a
+        low-contrast 20 px tag (paper 118, border 95 grey levels after the 1 px smoothing) reads 0.77-0.82.
+    snap_reach_px : the reader's further start, the best outline of a candidate moved onto the marker's
+        outer edge within this distance (pixels) (:func:`.outline.snap_to_border`, :func:`_starts`); 0: off.
+    max_starts : starts read per candidate at most, those of least misfit at the start screen first
+        (:func:`_start_share`); each further one costs a free fit where the first fails, mostly on clutter.
     max_free_misfit : the code-free fit's residual SD may be at most this many times the expected
         misfit of a marker (no code can fit better than the model with free cells, so clutter stops
         here, before the codes are tried).
@@ -146,8 +165,12 @@ class BlurredParams:
     min_side_px: float = 12.0
     max_side_px: float = 38.0
     min_solidity: float = 0.85
-    quiet_windows: tuple[int, ...] = (11,)
+    quiet_windows: tuple[int, ...] = (7, 11)
     quiet_offset: float = 3.0
+    quiet_min_solidity: float = 0.75
+    quiet_ink_ratio: float = 0.85
+    snap_reach_px: float = 3.0
+    max_starts: int = 1
     max_free_misfit: float = 2.0
     texture_share: float = 0.05
     max_start_misfit: float = 8.0
@@ -196,7 +219,10 @@ _NEXT = np.array([1, 2, 3, 0])
 
 def find_blurred_candidates(gray: NDArray[np.uint8], params: BlurredParams, max_side_bg: float,
                             scale: int = 4) -> list[NDArray[np.float64]]:
-    """Quads (each (4, 2), clockwise on screen) of small dark blobs of the smoothed image.
+    """Candidates of the second path: small dark blobs of the smoothed image and the holes of its
+    quiet-zone masks, each as an (A, 4, 2) array of A >= 1 outlines (clockwise on screen, pixels) of the
+    same place, to be read in order (:func:`read_blurred` with ``alternatives``): a dark blob's quad,
+    then the quiet-zone holes whose centre lies in it, window by window.
 
     Parameters
     ----------
@@ -211,35 +237,48 @@ def find_blurred_candidates(gray: NDArray[np.uint8], params: BlurredParams, max_
     # RETR_CCOMP puts a blob lying in a hole of a larger dark region (a marker in its quiet zone on a
     # dark background) at the top level again
     contours, hier = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
-    if hier is None:
-        return []
-    hier = hier[0]
-    lengths = np.fromiter(map(len, contours), int, len(contours))
-    lo, hi = 4 * params.min_side_px * 0.8, 4 * params.max_side_px * 1.3
-    out = []
-    for i in np.flatnonzero((hier[:, 3] < 0) & (lengths >= lo) & (lengths <= hi)):
-        q = solid_quad(contours[i], params.min_side_px, params.max_side_px, params.min_solidity)
-        if q is not None:
-            out.append(q)
+    groups: list[list[NDArray[np.float64]]] = []
+    if hier is not None:
+        hier = hier[0]
+        lengths = np.fromiter(map(len, contours), int, len(contours))
+        lo, hi = 4 * params.min_side_px * 0.8, 4 * params.max_side_px * 1.3
+        for i in np.flatnonzero((hier[:, 3] < 0) & (lengths >= lo) & (lengths <= hi)):
+            q = solid_quad(contours[i], params.min_side_px, params.max_side_px, params.min_solidity)
+            if q is not None:
+                groups.append([q])
     # the quiet zone traced on the same smoothed image: its noise (sigma 3 on the --quick set) left specks
     # in the bright mask of the raw image that cost a third more tracing, for the same markers read
-    return out + _quiet_candidates(g, params, out)
+    _quiet_candidates(g, params, groups)
+    return [np.stack(grp) for grp in groups]
 
 
-def _quiet_candidates(gray: NDArray[np.uint8], params: BlurredParams, own: list[NDArray[np.float64]]
-                      ) -> list[NDArray[np.float64]]:
-    """The quiet-zone quads (:func:`.quiet.quiet_zone_quads`, each (4, 2)) of ``gray`` whose centre lies in
-    none of the quads ``own`` (the dark mask's candidates: the same marker, read once) nor in an earlier
-    window's quad."""
-    out: list[NDArray[np.float64]] = []
+def _quiet_candidates(gray: NDArray[np.uint8], params: BlurredParams, groups: list[list[NDArray[np.float64]]]
+                      ) -> None:
+    """Add the quiet-zone quads (:func:`.quiet.quiet_zone_quads`, each (4, 2)) of ``gray``, window by
+    window, to ``groups`` (lists of outlines of one place, each (4, 2)): a quad whose centre lies in a
+    group's first outline joins that group as a further outline to read (the dark blob's outline or a
+    hole of another window may be the one off the marker: a notched hole, a blob bulging into a
+    neighbour), unless it repeats one of them to within ``_SAME_PX``; any other starts a group."""
     for win in params.quiet_windows:
-        polys = [np.asarray(q, np.float32).reshape(-1, 1, 2) for q in own + out]
+        polys = [np.asarray(grp[0], np.float32).reshape(-1, 1, 2) for grp in groups]
         for q in quiet_zone_quads(gray, win, params.quiet_offset, params.min_side_px, params.max_side_px,
-                                  params.min_solidity, params.ratio_threshold):
+                                  params.quiet_min_solidity, params.quiet_ink_ratio):
             ctr = tuple(map(float, q.mean(axis=0)))
-            if all(cv2.pointPolygonTest(p, ctr, False) < 0 for p in polys):
-                out.append(q)
-    return out
+            home = next((k for k, p in enumerate(polys) if cv2.pointPolygonTest(p, ctr, False) >= 0), None)
+            if home is None:
+                groups.append([q])
+            elif all(_quad_distance(q, o) > _SAME_PX for o in groups[home]):
+                groups[home].append(q)
+
+
+#: outlines of one place closer than this (pixels, largest corner distance) are read once
+_SAME_PX = 0.5
+
+
+def _quad_distance(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    """Largest corner distance (pixels) between quads ``a`` and ``b`` (each (4, 2), clockwise), over the
+    four ways of pairing their corners."""
+    return min(float(np.abs(np.roll(a, k, axis=0) - b).max()) for k in range(4))
 
 
 def image_noise(gray: NDArray[np.uint8]) -> float:
@@ -554,7 +593,7 @@ def _read_codes(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[n
 
 
 def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDArray[np.uint8], n: int,
-                 border: int, params: BlurredParams, noise: float) -> list[BlurredRead]:
+                 border: int, params: BlurredParams, noise: float, alternatives: bool = False) -> list[BlurredRead]:
     """Read the markers of candidate ``quads`` (Q, 4, 2) by maximum likelihood (module docstring).
 
     The model with free cells nests every code's model, so for the right code the excess residual
@@ -571,10 +610,15 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
     params : :class:`BlurredParams`.
     noise : SD of the image noise, grey levels (:func:`image_noise`); each candidate's expected
         residual variance adds ``(params.texture_share * contrast)^2`` to its square.
+    alternatives : the quads are outlines of one candidate (:func:`find_blurred_candidates`): they are
+        read in order and the first read is the only one returned.
+
+    Each quad is read from its own geometry and, where that reads nothing, from the quad moved onto
+    the marker's outer edge (:func:`_starts`).
 
     Returns
     -------
-    The accepted reads.
+    The accepted reads (their ``index`` the quad's).
     """
     C = codes.shape[0]
     Wc = codes.reshape(C, -1).astype(np.float64)
@@ -587,69 +631,119 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
     # the right code's excess residual is chi-square(d2): mean d2, SD sqrt(2 d2)
     max_excess = d2 + params.max_excess_sd * np.sqrt(2.0 * d2)
     out = []
-    for index, quad in enumerate(quads):
-        px, I = _pixels(gray, quad, n, 0.5)
-        N = len(I)
-        if N < 3 * d2:
-            continue
-        dof = max(N - 11 - d2, 1)
-        # the free fit only has to bring the geometry close, and the start screen (most of what clutter
-        # costs) only to tell a marker's misfit from clutter's: both on a spread subset of the pixels
-        half = _spread_subset(px, N // params.subsample_px)
-        dof_h = max(int(half.sum()) - 11 - d2, 1)
-
-        def hopeless(sse0: float, contrast: float, dof: int = dof_h) -> bool:
-            # at the candidate's geometry a marker's misfit is a small share of its contrast (the
-            # corners are within a pixel or two); clutter's is not, or there is no contrast at all
-            excess_sd = np.sqrt(max(sse0 / dof - var_noise, 0.0))
-            return (sse0 > params.max_start_misfit**2 * expected_var(contrast) * dof
-                    or contrast < params.min_contrast or excess_sd > params.max_start_share * contrast)
-
-        def misfit(sse1: float, contrast: float, dof: int = dof_h) -> bool:
-            # after an iteration of the free fit: beyond what any marker of this contrast leaves
-            return sse1 > (1.1 * params.max_free_misfit) ** 2 * expected_var(contrast) * dof
-        screen = _spread_subset(px, N // params.screen_px)
-        if screen.sum() < half.sum():
-            dof_q = max(int(screen.sum()) - 11 - d2, 1)
-            _, _, sse_q, cq, _ = _fit_geometry(px[screen], I[screen], quad, 1.5, n, border, None, 0)
-            if hopeless(sse_q, float(cq[1]), dof_q):
-                log.debug("blurred candidate at (%.0f, %.0f): start SD %.2f, contrast %.0f: rejected",
-                          *quad.mean(axis=0), np.sqrt(sse_q / dof_q), cq[1])
-                continue
-        q1, s1, sse_free, cf, _ = _fit_geometry(px[half], I[half], quad, 1.5, n, border, None, params.iterations,
-                                                stop_start=hopeless, stop_iter=misfit)
-        if not half.all() and sse_free <= (params.max_free_misfit**2) * expected_var(float(cf[1])) * dof_h:
-            # the free model's residual on every pixel, for the excess test of the codes' fits
-            _, _, sse_free, cf, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0)
-        else:
-            sse_free *= dof / dof_h
-        s2 = sse_free / dof
-        var = expected_var(float(cf[1]))
-        if (s2 > (params.max_free_misfit**2) * var or cf[1] < params.min_contrast
-                or np.abs(q1 - quad).max() > params.max_shift_px):
-            log.debug("blurred candidate at (%.0f, %.0f): free fit SD %.2f (expected %.2f), contrast %.0f, "
-                      "shift %.1f px: rejected", *quad.mean(axis=0), np.sqrt(s2), np.sqrt(var), cf[1],
-                      np.abs(q1 - quad).max())
-            continue
-        # the flat model first: where it reads, its corners are the most precise (the light field's
-        # columns share the geometry's information: a plane looks like a shift of the square's blurred
-        # edges, a bowl like a change of its size); where it does not, the model with the light field
-        read = _read_codes(px, I, quad, (q1, s1), sse_free, dof, Wc, n, border, params, None, max_excess)
-        light = None if read is not None else _light_basis(px, quad, params.light_degree)
-        if light is not None:
-            # the free model with the field too (it nests every code's), at the free fit's geometry
-            n_light = light.shape[1]
-            _, _, sse_lit, _, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0, light=light)
-            # only where the image shows a light field: the flat free model is nested in the lit one, so
-            # without a field its residual drop is about chi-square with n_light degrees of freedom
-            # (clutter read with the field's freedom had none: 1.4 units against 22-119 for glared markers)
-            evidence = (sse_free - sse_lit) / (sse_lit / max(dof - n_light, 1))
-            if evidence > n_light + params.light_evidence_sd * np.sqrt(2.0 * n_light):
-                read = _read_codes(px, I, quad, (q1, s1), sse_lit, max(dof - n_light, 1), Wc, n, border,
-                                   params, light, max_excess)
-            else:
-                log.debug("blurred candidate at (%.0f, %.0f): light field's evidence %.1f: no second reading",
-                          *quad.mean(axis=0), evidence)
-        if read is not None:
-            out.append(dataclasses.replace(read, index=index))
+    for group in [list(range(len(quads)))] if alternatives else [[i] for i in range(len(quads))]:
+        for index, start in _starts(gray, quads, group, n, border, params, var_noise, d2):
+            read = _read_one(gray, start, Wc, n, border, params, var_noise, expected_var, max_excess)
+            if read is not None:
+                out.append(dataclasses.replace(read, index=index))
+                break
     return out
+
+
+def _starts(gray: NDArray[np.uint8], quads: NDArray[np.float64], group: list[int], n: int, border: int,
+            params: BlurredParams, var_noise: float, d2: int) -> list[tuple[int, NDArray[np.float64]]]:
+    """Geometries to read the outlines ``quads[group]`` (each (4, 2)) of one candidate from, in order, with
+    the index of the outline each comes from: at most ``params.max_starts`` of the outlines and of the
+    best one moved onto the marker's outer edge (:func:`.outline.snap_to_border`), least misfit at the
+    start screen first (:func:`_start_share`; it grows with a start's distance from the marker, and only
+    the fits from the best are paid for). The reader's basin is about a pixel, a candidate's outline can
+    be 1-4 px off."""
+    starts = [(i, quads[i]) for i in group]
+    share = [_start_share(gray, q, n, border, params, var_noise, d2) for _, q in starts]
+    best = int(np.argmin(share))
+    # a start is moved onto the edge only where the model's misfit there is within twice what the start
+    # screen passes: the 151 outlines of markers of seeds 0-2 of the hard bench showed 0.05-0.30 of
+    # their contrast (10th-99th percentile), half the clutter's outlines more than 0.16
+    snapped = (None if params.snap_reach_px <= 0 or not share[best] <= 2.0 * params.max_start_share
+               else snap_to_border(gray, starts[best][1], n, params.snap_reach_px))
+    if snapped is not None and np.abs(snapped - starts[best][1]).max() >= 0.1:
+        starts.append((starts[best][0], snapped))
+        share.append(_start_share(gray, snapped, n, border, params, var_noise, d2))
+    # those the start screen rejects are not read
+    starts = [starts[j] for j in np.argsort(share, kind="stable") if share[j] <= params.max_start_share]
+    return starts[:params.max_starts]
+
+
+def _start_share(gray: NDArray[np.uint8], quad: NDArray[np.float64], n: int, border: int, params: BlurredParams,
+                 var_noise: float, d2: int) -> float:
+    """The start screen of :func:`read_blurred` at the geometry ``quad`` (4, 2), on a spread subset of
+    about ``params.screen_px`` of its pixels: the free model's misfit beyond the noise as a share of its
+    fitted contrast, or inf where the screen rejects the start for another reason (too few pixels, too
+    little contrast, a misfit beyond ``params.max_start_misfit`` times the expected one)."""
+    px, I = _pixels(gray, quad, n, 0.5)
+    if len(I) < 3 * d2:
+        return np.inf
+    screen = _spread_subset(px, len(I) // params.screen_px)
+    dof = max(int(screen.sum()) - 11 - d2, 1)
+    _, _, sse, c, _ = _fit_geometry(px[screen], I[screen], quad, 1.5, n, border, None, 0)
+    contrast = float(c[1])
+    expected = var_noise + (params.texture_share * max(contrast, 0.0)) ** 2
+    if contrast < params.min_contrast or sse > params.max_start_misfit**2 * expected * dof:
+        log.debug("blurred candidate at (%.0f, %.0f): start SD %.2f, contrast %.0f: rejected",
+                  *quad.mean(axis=0), np.sqrt(sse / dof), contrast)
+        return np.inf
+    return float(np.sqrt(max(sse / dof - var_noise, 0.0)) / contrast)
+
+
+def _read_one(gray: NDArray[np.uint8], quad: NDArray[np.float64], Wc: NDArray[np.float64], n: int, border: int,
+              params: BlurredParams, var_noise: float, expected_var: Callable[[float], float], max_excess: float
+              ) -> BlurredRead | None:
+    """Steps 2-5 of the module docstring for one geometry ``quad`` (4, 2) (:func:`read_blurred`'s
+    arguments and its closures ``expected_var`` and ``max_excess``): the read, or None."""
+    d2 = Wc.shape[1]
+    px, I = _pixels(gray, quad, n, 0.5)
+    N = len(I)
+    if N < 3 * d2:
+        return None
+    dof = max(N - 11 - d2, 1)
+    # the free fit only has to bring the geometry close, and the start screen (most of what clutter
+    # costs) only to tell a marker's misfit from clutter's: both on a spread subset of the pixels
+    half = _spread_subset(px, N // params.subsample_px)
+    dof_h = max(int(half.sum()) - 11 - d2, 1)
+
+    def hopeless(sse0: float, contrast: float, dof: int = dof_h) -> bool:
+        # at the candidate's geometry a marker's misfit is a small share of its contrast (the
+        # corners are within a pixel or two); clutter's is not, or there is no contrast at all
+        excess_sd = np.sqrt(max(sse0 / dof - var_noise, 0.0))
+        return (sse0 > params.max_start_misfit**2 * expected_var(contrast) * dof
+                or contrast < params.min_contrast or excess_sd > params.max_start_share * contrast)
+
+    def misfit(sse1: float, contrast: float, dof: int = dof_h) -> bool:
+        # after an iteration of the free fit: beyond what any marker of this contrast leaves
+        return sse1 > (1.1 * params.max_free_misfit) ** 2 * expected_var(contrast) * dof
+    # the start screen on fewer pixels was passed (:func:`_starts`)
+    q1, s1, sse_free, cf, _ = _fit_geometry(px[half], I[half], quad, 1.5, n, border, None, params.iterations,
+                                            stop_start=hopeless, stop_iter=misfit)
+    if not half.all() and sse_free <= (params.max_free_misfit**2) * expected_var(float(cf[1])) * dof_h:
+        # the free model's residual on every pixel, for the excess test of the codes' fits
+        _, _, sse_free, cf, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0)
+    else:
+        sse_free *= dof / dof_h
+    s2 = sse_free / dof
+    var = expected_var(float(cf[1]))
+    if (s2 > (params.max_free_misfit**2) * var or cf[1] < params.min_contrast
+            or np.abs(q1 - quad).max() > params.max_shift_px):
+        log.debug("blurred candidate at (%.0f, %.0f): free fit SD %.2f (expected %.2f), contrast %.0f, "
+                  "shift %.1f px: rejected", *quad.mean(axis=0), np.sqrt(s2), np.sqrt(var), cf[1],
+                  np.abs(q1 - quad).max())
+        return None
+    # the flat model first: where it reads, its corners are the most precise (the light field's
+    # columns share the geometry's information: a plane looks like a shift of the square's blurred
+    # edges, a bowl like a change of its size); where it does not, the model with the light field
+    read = _read_codes(px, I, quad, (q1, s1), sse_free, dof, Wc, n, border, params, None, max_excess)
+    light = None if read is not None else _light_basis(px, quad, params.light_degree)
+    if light is not None:
+        # the free model with the field too (it nests every code's), at the free fit's geometry
+        n_light = light.shape[1]
+        _, _, sse_lit, _, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0, light=light)
+        # only where the image shows a light field: the flat free model is nested in the lit one, so
+        # without a field its residual drop is about chi-square with n_light degrees of freedom
+        # (clutter read with the field's freedom had none: 1.4 units against 22-119 for glared markers)
+        evidence = (sse_free - sse_lit) / (sse_lit / max(dof - n_light, 1))
+        if evidence > n_light + params.light_evidence_sd * np.sqrt(2.0 * n_light):
+            read = _read_codes(px, I, quad, (q1, s1), sse_lit, max(dof - n_light, 1), Wc, n, border,
+                               params, light, max_excess)
+        else:
+            log.debug("blurred candidate at (%.0f, %.0f): light field's evidence %.1f: no second reading",
+                      *quad.mean(axis=0), evidence)
+    return read
