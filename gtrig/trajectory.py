@@ -30,6 +30,8 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from gtrig import geometry as geo
+
 CovKind = Literal["se3", "xyyaw", "xyz"]
 
 COV_AXES: dict[str, tuple[str, ...]] = {
@@ -166,10 +168,7 @@ class PoseTrack:
 
     def yaw_rad(self) -> np.ndarray:
         """(N,) heading of the body x axis projected on the world x-y plane, wrapped to (-pi, pi]."""
-        if not len(self):
-            return np.zeros(0)
-        R = Rotation.from_quat(self.quat_xyzw).as_matrix()
-        return np.arctan2(R[:, 1, 0], R[:, 0, 0])
+        return geo.yaw_of_quats(self.quat_xyzw)
 
     def xytheta(self) -> np.ndarray:
         """(N, 3) planar poses ``x, y, yaw``."""

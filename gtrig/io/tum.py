@@ -57,8 +57,9 @@ class Trajectory:
 
     def yaw_rad(self) -> np.ndarray:
         """(N,) heading of the body x axis projected on the world x-y plane."""
-        R = Rotation.from_quat(self.quat_xyzw).as_matrix()
-        return np.arctan2(R[:, 1, 0], R[:, 0, 0])
+        from gtrig.geometry import yaw_of_quats
+
+        return yaw_of_quats(self.quat_xyzw)
 
 
 def read_tum(path: str | os.PathLike[str]) -> Trajectory:
