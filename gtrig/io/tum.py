@@ -76,7 +76,6 @@ def read_tum(path: str | os.PathLike[str]) -> Trajectory:
     data = read_bytes_file(p)
     fast = parse_numeric(data, (8,), comma=False)
     if fast is not None:
-        del data  # the file's bytes (an hour's truth: 83 MB) need not stand under the trajectory's copies
         return _trajectory(p, fast.values)
     lines = decode_text_file(p, data).splitlines()
     a = _fast_rows(lines)
