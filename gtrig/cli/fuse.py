@@ -84,18 +84,8 @@ def command(
     opts = FusionOptions(estimator=estimator, rate_hz=rate_hz, offsets_s=offsets,  # type: ignore[arg-type]
                          offsets_sigma_s=sigmas, max_gap_s=max_gap, bias_cov=bias)
     track, rep = fuse_tracks(tracks, odo, opts)
-    paths = [out, covariance] + ([report] if report else [])
-    if report is not None:
-        from gtrig.io.atomic import atomic_group
-        from gtrig.io.posetrack import covariance_pieces
-        from gtrig.io.tum import tum_pieces, write_pieces
-
-        with atomic_group(*paths) as tmps:
-            write_pieces(tmps[0], tum_pieces(track))
-            write_pieces(tmps[1], covariance_pieces(track))
-            tmps[2].write_text(json.dumps(rep.to_dict(), indent=1), encoding="utf-8")
-    else:
-        write_pose_track(track, out, covariance)
+    extra = {report: json.dumps(rep.to_dict(), indent=1)} if report is not None else None
+    write_pose_track(track, out, covariance, extra=extra)
     c = track.counts()
     console.print(f"{out}: {len(track)} poses ({c['ok']} observed, {c['bridged']} bridged), {rep.estimator}, "
                   f"{rep.seconds:.2f} s", highlight=False)

@@ -20,7 +20,7 @@ import csv
 import io
 import logging
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -62,14 +62,19 @@ def covariance_text(track: PoseTrack) -> str:
 
 
 def write_pose_track(track: PoseTrack, tum_path: str | os.PathLike[str],
-                     cov_path: str | os.PathLike[str] | None = None) -> None:
-    """Write the TUM file and (when ``cov_path`` is given) the covariance CSV, both or neither, a few
-    thousand rows at a time (never the whole text in memory)."""
-    paths = [tum_path] if cov_path is None else [tum_path, cov_path]
+                     cov_path: str | os.PathLike[str] | None = None,
+                     extra: Mapping[Path, str] | None = None) -> None:
+    """Write the TUM file and (when ``cov_path`` is given) the covariance CSV, a few thousand rows at a
+    time (never the whole text in memory), and the texts of ``extra`` (path -> text, e.g. a report
+    written with the track): all of them or none."""
+    texts = dict(extra or {})
+    paths = [tum_path] + ([] if cov_path is None else [cov_path]) + list(texts)
     with atomic_group(*paths) as tmps:
         write_pieces(tmps[0], tum_pieces(track))
         if cov_path is not None:
             write_pieces(tmps[1], covariance_pieces(track))
+        for tmp, text in zip(tmps[len(paths) - len(texts):], texts.values(), strict=True):
+            write_pieces(tmp, [text])
 
 
 def _header_meta(first: str) -> dict[str, str]:

@@ -12,6 +12,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig.errors import FormatError
+from gtrig.geometry import yaw_of_quats
 from gtrig.io.atomic import atomic_group
 from gtrig.io.yamlfile import decode_text_file, read_bytes_file
 
@@ -57,8 +58,6 @@ class Trajectory:
 
     def yaw_rad(self) -> np.ndarray:
         """(N,) heading of the body x axis projected on the world x-y plane."""
-        from gtrig.geometry import yaw_of_quats
-
         return yaw_of_quats(self.quat_xyzw)
 
 

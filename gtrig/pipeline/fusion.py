@@ -146,9 +146,8 @@ def fusion(inp: StageInput) -> StageOutput:
     from gtrig.evaluate.truth import score_track
     from gtrig.fusion import FusionOptions, fuse_tracks
     from gtrig.fusion.sync import offset_sigmas
-    from gtrig.io.atomic import atomic_group
-    from gtrig.io.posetrack import covariance_pieces
-    from gtrig.io.tum import read_tum, tum_pieces, write_pieces
+    from gtrig.io.posetrack import write_pose_track
+    from gtrig.io.tum import read_tum
 
     cfg = inp.config.fusion
     tracks = _sources(inp)
@@ -165,10 +164,7 @@ def fusion(inp: StageInput) -> StageOutput:
     fused, report = fuse_tracks(tracks, _odometry(inp.rec), opts)
     names = ("gt_fused.tum", "gt_fused_cov.csv", "fusion_report.json")
     report_text = json.dumps(report.to_dict(), indent=1, default=float) + "\n"
-    texts = (tum_pieces(fused), covariance_pieces(fused), [report_text])
-    with atomic_group(*(inp.out / n for n in names)) as tmps:
-        for tmp, pieces in zip(tmps, texts, strict=True):
-            write_pieces(tmp, pieces)
+    write_pose_track(fused, inp.out / names[0], inp.out / names[1], extra={inp.out / names[2]: report_text})
     counts = fused.counts()
     n_out = len(report.outliers)
     checks = (

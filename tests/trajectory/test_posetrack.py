@@ -116,3 +116,30 @@ def test_written_piece_by_piece_is_the_whole_text(tmp_path, n):
         if n:
             back = read_pose_track(tmp_path / "t.tum", tmp_path / "t_cov.csv")
             assert back.reasons == reasons and np.array_equal(back.stamps_s, track.stamps_s)
+
+
+def test_extra_files_written_with_the_track_or_not_at_all(tmp_path, monkeypatch):
+    """A report written with a track (``extra``) lands with it, and a failure part-way leaves no file."""
+    track = PoseTrack.from_xytheta(np.arange(5.0), np.zeros((5, 3)))
+    paths = tmp_path / "t.tum", tmp_path / "t_cov.csv", tmp_path / "report.json"
+    write_pose_track(track, paths[0], paths[1], extra={paths[2]: '{"a": 1}\n'})
+    assert paths[2].read_text(encoding="utf-8") == '{"a": 1}\n'
+    assert len(read_pose_track(paths[0], paths[1])) == 5
+    for p in paths:
+        p.unlink()
+
+    import gtrig.io.posetrack as pt
+
+    real = pt.write_pieces
+
+    def broken(path, pieces):
+        # the report's temporary (named after it) is written last: the track's two are on disk by then
+        if ".json" in str(path):
+            raise OSError("disk full")
+        real(path, pieces)
+
+    monkeypatch.setattr(pt, "write_pieces", broken)
+    with pytest.raises(OSError, match="disk full"):
+        write_pose_track(track, paths[0], paths[1], extra={paths[2]: "{}\n"})
+    assert not any(p.exists() for p in paths)
+    assert not list(tmp_path.iterdir())
