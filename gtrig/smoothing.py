@@ -112,12 +112,13 @@ def rts_smooth_varying(
     W = SMOOTH_BLOCK_FRAMES
     starts = list(range(0, n, W))
 
-    def forward(k0: int, x: np.ndarray, P: np.ndarray, keep: bool) -> tuple[np.ndarray, np.ndarray, tuple]:
+    def forward(k0: int, x: np.ndarray, P: np.ndarray, keep: bool
+                ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
         """The filter over frames ``[k0, k0 + W)`` from the state before ``k0``: the state after, and
         with ``keep`` the block's transitions, predicted and filtered states."""
         k1 = min(n, k0 + W)
         F, Q = white_noise_model(dt[k0:k1], qd[k0:k1], order)
-        kept = (F, np.zeros((k1 - k0, m)), np.zeros((k1 - k0, m, m)), np.zeros((k1 - k0, m)),
+        kept: tuple[np.ndarray, ...] = (F, np.zeros((k1 - k0, m)), np.zeros((k1 - k0, m, m)), np.zeros((k1 - k0, m)),
                 np.zeros((k1 - k0, m, m))) if keep else ()
         for i, k in enumerate(range(k0, k1)):
             if k > 0:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -116,9 +117,8 @@ def noise_texture(
 ) -> Texture:
     """A smooth random texture (bilinear value noise) over ``[-extent, extent]^2`` metres."""
     n = int(2 * extent_m / cell_m) + 2
-    grid = rng.normal(0, 1, (n, n)).astype(np.float32)
-    grid = cv2.GaussianBlur(grid, (0, 0), 1.0)
-    grid = (grid / grid.std() * amp + mean).astype(np.float32)
+    noise = cv2.GaussianBlur(rng.normal(0, 1, (n, n)).astype(np.float32), (0, 0), 1.0)
+    grid = (noise / noise.std() * amp + mean).astype(np.float32)
 
     def tex(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         gx = np.nan_to_num((x.ravel() + extent_m) / cell_m, posinf=0.0, neginf=0.0).astype(np.float32)
@@ -186,11 +186,11 @@ def render(
     dist = np.asarray(dist, dtype=float).ravel()
     x0, y0, x1, y1 = roi if roi is not None else (0, 0, w, h)
     x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w, x1), min(h, y1)
-    full = np.full((h, w), background)
+    full = np.full((h, w), background, dtype=float)
     if x1 > x0 and y1 > y0:
         xy = _ray_grid(K, dist, size, ss)[y0 * ss : y1 * ss, x0 * ss : x1 * ss]
         rays_c = np.concatenate([xy, np.ones(xy.shape[:2] + (1,))], axis=-1)
-        img = np.full(xy.shape[:2], background)
+        sub = np.full(xy.shape[:2], background)
         depth = np.full(xy.shape[:2], np.inf)
         for pl in planes:
             T_plane_cam = geo.inv_T(pl.T_world_plane) @ T_world_cam
@@ -202,9 +202,9 @@ def render(
                 py = tp[1] + s * d[..., 1]
                 val = pl.texture(px, py)
             hit = (s > 0) & (s < depth) & np.isfinite(val)
-            img[hit] = val[hit]
+            sub[hit] = val[hit]
             depth[hit] = s[hit]
-        full[y0:y1, x0:x1] = img.reshape(y1 - y0, ss, x1 - x0, ss).mean(axis=(1, 3))
+        full[y0:y1, x0:x1] = sub.reshape(y1 - y0, ss, x1 - x0, ss).mean(axis=(1, 3))
     img = full
     if blur_sigma_px > 0:
         img = cv2.GaussianBlur(img, (0, 0), blur_sigma_px)
@@ -221,7 +221,7 @@ def render_board_view(
     T_cam_board: np.ndarray,
     board: Board,
     rng: np.random.Generator | None = None,
-    **kw: float,
+    **kw: Any,
 ) -> np.ndarray:
     """One chessboard on a plain background, the board at ``T_cam_board``."""
     sheet = geo.project_points(geo.transform_points(T_cam_board, board_outline_points(board, 1.1)), K, dist)
@@ -236,7 +236,7 @@ def render_board_view(
         rng=rng,
         roi=(int(lo[0]), int(lo[1]), int(hi[0]), int(hi[1])),
         **kw,
-    )  # type: ignore[arg-type]
+    )
 
 
 def sample_double_board(

@@ -183,7 +183,7 @@ def smooth_batch(chain: FactorChain, X_init: np.ndarray, K_init: np.ndarray, fix
         X_new, K_new = X + dx, K + dk
         # one system at a time (each is O(N), two at once would double the peak): the current one is
         # dropped before the trial's is made, and made again, bit for bit, if the trial is refused
-        sys = sys_new = None
+        sys = sys_new = None  # type: ignore[assignment]
         cost_new, sys_new, chi2_new, rw_new = _normal_equations(chain, X_new, K_new, use, huber_k)
         if cost_new <= cost:
             rel = (cost - cost_new) / max(cost, 1e-300)
@@ -198,7 +198,7 @@ def smooth_batch(chain: FactorChain, X_init: np.ndarray, K_init: np.ndarray, fix
                 break
         else:
             lam *= 10.0
-            sys_new = chi2_new = rw_new = None
+            sys_new = chi2_new = rw_new = None  # type: ignore[assignment]
             _, sys, _, _ = _normal_equations(chain, X, K, use, huber_k)
             if lam > 1e6:
                 converged = True  # no descent left at this precision

@@ -286,7 +286,7 @@ def smooth_ekf(chain: FactorChain, P0: np.ndarray, Pk: np.ndarray, fix_use: np.n
     d, p = chain.d, chain.p
     # the process covariances (W^T W)^-1, a slice of nodes at a time (no (N, d, d) temporary beside them)
     proc_Q = np.empty(chain.proc_W.shape)
-    for a in range(0, proc_Q.shape[0], CHUNK):
+    for a in range(0, len(proc_Q), CHUNK):
         Wa = chain.proc_W[a:a + CHUNK]
         proc_Q[a:a + CHUNK] = np.linalg.inv(np.einsum("nki,nkj->nij", Wa, Wa))
     gate = np.array([0.0] + [float(chi2.ppf(gate_prob, k)) for k in (1, 2, 3)])

@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from functools import partial
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -513,8 +513,9 @@ class _Parts:
     def rollback(self, mark: tuple[tuple[int, ...], dict[str, dict[str, float]]]) -> None:
         """Forget what was added since ``mark`` (:meth:`mark`); the per-source counts restored in place."""
         lens, counts = mark
-        for x, n in zip((self.st, self.xyt, self.cov, self.status, self.reason, self.outliers, self.segments), lens,
-                        strict=True):
+        kept: tuple[list[Any], ...] = (self.st, self.xyt, self.cov, self.status, self.reason, self.outliers,
+                                       self.segments)
+        for x, n in zip(kept, lens, strict=True):
             del x[n:]
         for k, v in counts.items():
             self.per_source[k].update(v)
@@ -574,7 +575,7 @@ def _smooth_windows(parts: _Parts, between: Callable[[float, float], dict[str, n
         Iw = np.linalg.inv(sm.cov_k_data)
         info.append(Iw - I0)
         eta.append(Iw @ sm.K - I0 @ k0)
-        sm = None  # one window's working set at a time
+        del sm  # one window's working set at a time
     info_all, eta_all = I0 + np.sum(info, axis=0), I0 @ k0 + np.sum(eta, axis=0)
     for w, (c0, c1, w0, w1) in enumerate(wins):
         sw, st = between(w0, w1), _node_stamps(w0, w1, odometry, opts.rate_hz)
@@ -587,7 +588,7 @@ def _smooth_windows(parts: _Parts, between: Callable[[float, float], dict[str, n
         node_keep = (st >= lo) & ((st <= hi) if last else (st < hi))
         fix_keep = (sw["stamps"] >= lo) & ((sw["stamps"] <= hi) if last else (sw["stamps"] < hi))
         parts.add(sources, sw, fix_keep, sm, st, node_keep, opts.bridge_after_s, (c0, c1))
-        sm = sw = None
+        del sm, sw
 
 
 def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: FusionOptions | None = None,
@@ -663,6 +664,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
         wins = _windows(all_stamps[a:b], t0, t1, opts) if odometry is not None else []
         between = partial(_merge_span, fixes, counts, gate_own_cov=opts.gate_own_cov)
         if wins:
+            assert odometry is not None  # (windows are made only with odometry)
             mark = parts.mark()
             try:
                 _smooth_windows(parts, between, wins, odometry, opts, sources, bias, sigma_t, span)
@@ -675,7 +677,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
         sm = _smooth(stamps, seg, odometry, opts, sources, bias, sigma_t)
         in_span = (stamps >= span[0]) & (stamps <= span[1])
         parts.add(sources, seg, np.ones(b - a, bool), sm, stamps, in_span, opts.bridge_after_s, (t0, t1))
-    seg = None  # the last segment's merged fixes are not the track's: freed before it is made
+    seg = None  # type: ignore[assignment]  # the last segment's merged fixes are not the track's: freed before it is made
     if not parts.st:
         raise InputError("fusion: no segment with at least three fixes")
     track = parts.track()

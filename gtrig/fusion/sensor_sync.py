@@ -449,7 +449,7 @@ def _camera_curve(fit: tuple[np.ndarray, ...], ref: Reference, tau: np.ndarray, 
 
 
 # ------------------------------------------------------------------------------------------ scanners
-def restamp_laser(track: PoseTrack, ret: ScannerReturns, offsets_s: Mapping[str, float]) -> PoseTrack:
+def restamp_laser(track: PoseTrack, ret: ScannerReturns | WindowedReturns, offsets_s: Mapping[str, float]) -> PoseTrack:
     """GTlaser's track on the clock the scanners' offsets refer to: GTlaser fits a frame's returns of all
     scanners in one pose, so that pose holds at the frame stamp minus the share-weighted mean of their
     offsets (each scanner's share of the frame's returns; a scanner without an offset counts as 0).
@@ -653,7 +653,8 @@ def camera_frame_stamps(rec_dir, rig, sequence: str = "run") -> dict[str, np.nda
 
 
 # ------------------------------------------------------------------------------------------ together
-def laser_clock(ret: ScannerReturns, laser: PoseTrack, scanners: list[OffsetEstimate]) -> tuple[float, float]:
+def laser_clock(ret: ScannerReturns | WindowedReturns, laser: PoseTrack, scanners: list[OffsetEstimate]
+                ) -> tuple[float, float]:
     """GTlaser's clock to GTvision's (s) and its standard error: the mean over GTlaser's usable poses of
     each frame's share-weighted scanner offsets (:func:`restamp_laser`'s shift), the scanners' errors taken
     as independent; ``(nan, nan)`` unless every scanner with returns in those frames has an ``ok`` offset."""
@@ -741,7 +742,8 @@ def sensor_offsets_and_laser_clock(rec_dir, rig, vision: PoseTrack, laser: PoseT
     return out, clock
 
 
-def camera_reference(laser: PoseTrack, ret: ScannerReturns, scanners: list[OffsetEstimate]) -> Reference:
+def camera_reference(laser: PoseTrack, ret: ScannerReturns | WindowedReturns, scanners: list[OffsetEstimate]
+                     ) -> Reference:
     """The cameras' reference: GTlaser's track restamped by the scanners' ``ok`` offsets (on GTvision's clock,
     :func:`restamp_laser`), smoothed (:func:`reference_track`)."""
     from gtrig.fusion.measurements import fixes_from_track

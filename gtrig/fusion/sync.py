@@ -338,12 +338,12 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
     edges = np.r_[-np.inf, f.stamps_s[0] + window_s * np.arange(1, n_win), np.inf]
     parts = [_RefineWindow.of(f.between(edges[w], np.nextafter(edges[w + 1], -np.inf)), anchors, c, margin,
                               odometry, opts) for w in range(n_win)]
-    parts = [w for w in parts if w is not None]
-    if not parts:
+    windows = [w for w in parts if w is not None]
+    if not windows:
         return estimate
 
     def cost(offset: float) -> float:
-        return float(sum(w.cost(offset, odometry, opts) for w in parts))
+        return float(sum(w.cost(offset, odometry, opts) for w in windows))
 
     res = minimize_scalar(cost, bounds=(c - half_width_s, c + half_width_s), method="bounded",
                           options={"xatol": 2e-5})
@@ -365,7 +365,7 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
     return OffsetEstimate(estimate.source, "ok", best, (best - half, best + half), estimate.coarse_s, estimate.peak,
                           estimate.second_peak, estimate.lags_s, estimate.corr, estimate.windows,
                           f"peak {estimate.peak:.3f} at {estimate.coarse_s:+.3f} s, heading fit {c * 1e3:+.2f} ms; "
-                          f"refined by the fusion's fit ({sum(int(w.use.sum()) for w in parts)} fixes)")
+                          f"refined by the fusion's fit ({sum(int(w.use.sum()) for w in windows)} fixes)")
 
 
 def offset_sigmas(path: str | os.PathLike[str]) -> dict[str, float]:

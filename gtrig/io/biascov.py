@@ -49,7 +49,7 @@ def read_bias_cov(path: str | os.PathLike[str]) -> np.ndarray:
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise FormatError(f"{p}: not a '{FORMAT}' file (its 'format' line)")
     axes = doc.get("axes")
-    if axes not in AXES.values():
+    if not isinstance(axes, list) or axes not in AXES.values():
         raise FormatError(f"{p}: axes must be [x, y, yaw] or [x, y], got {axes!r}")
     if doc.get("frame_id", "world") != "world":
         raise FormatError(f"{p}: frame_id must be world, got {doc.get('frame_id')!r}")

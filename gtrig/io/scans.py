@@ -249,7 +249,7 @@ def _read_binary_rows(path: Path, first: int, n: int, beams: int) -> np.ndarray 
     try:
         with open(path, "rb") as f:
             f.seek(first * beams * 8)
-            got = f.readinto(memoryview(out).cast("B"))
+            got = f.readinto(memoryview(out.data).cast("B"))
     except OSError:
         return None
     return out.astype(float, copy=False) if got == out.nbytes else None
@@ -363,8 +363,8 @@ class _Indexer:
         # the median of n values is beyond the limit when more than half are; with exactly half, when the
         # mean of the two middle ones (the largest below, the smallest beyond) is
         n_fin, n_over = self.n_fin, self.n_over
-        if n_fin and (2 * n_over > n_fin
-                      or (2 * n_over == n_fin and 0.5 * (self.below + self.above) > 2.0 * float(self.range_max))):
+        limit = 2.0 * float(self.range_max or 0.0)  # (no values are over without a maximum range)
+        if n_fin and (2 * n_over > n_fin or (2 * n_over == n_fin and 0.5 * (self.below + self.above) > limit)):
             raise self.refuse()
         return ScanRows(self.p, self.n_beams, st, np.array(self.starts, dtype=np.int64),
                         np.array(self.line_no, dtype=np.int64), end)

@@ -56,10 +56,10 @@ def innovation_loglik_terms(
     """Per-frame terms (n, A, B) of :func:`innovation_loglik` (zero where a frame is not measured,
     and at the first measured frame)."""
     A, B = len(q_lin), len(q_ang)
-    qd = np.zeros((A, B, 3))
-    qd[..., 0] = qd[..., 1] = np.asarray(q_lin, dtype=float)[:, None]
-    qd[..., 2] = np.asarray(q_ang, dtype=float)[None, :]
-    qd = qd.reshape(-1, 3)
+    qd_grid = np.zeros((A, B, 3))
+    qd_grid[..., 0] = qd_grid[..., 1] = np.asarray(q_lin, dtype=float)[:, None]
+    qd_grid[..., 2] = np.asarray(q_ang, dtype=float)[None, :]
+    qd = qd_grid.reshape(-1, 3)
     G = qd.shape[0]
     m = 3 * order
     meas = np.flatnonzero(np.isfinite(z_xytheta[:, 0]))

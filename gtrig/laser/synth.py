@@ -7,6 +7,8 @@ truth is exact and cheap to build.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -127,7 +129,7 @@ def swept_scan_sequence(
     scanners: tuple[LaserScanner, ...],
     static_segments: ArrayLike,
     hull: Hull,
-    planar_poses_at: object,
+    planar_poses_at: Callable[[np.ndarray], np.ndarray],
     stamps_s: list[np.ndarray],
     rng: np.random.Generator,
 ) -> list[np.ndarray]:
@@ -147,7 +149,7 @@ def swept_scan_sequence(
         dirs = dirs[:, :2] / np.linalg.norm(dirs[:, :2], axis=1, keepdims=True)
         r_static = cast_rays(T[:2, 3], dirs, static, np.inf)
         t_beam = np.asarray(st, dtype=float)[:, None] + s.beam_delays_s()[None, :]  # (N, B)
-        poses = np.asarray(planar_poses_at(t_beam.ravel()), dtype=float).reshape(*t_beam.shape, 3)  # type: ignore[operator]
+        poses = np.asarray(planar_poses_at(t_beam.ravel()), dtype=np.float64).reshape(*t_beam.shape, 3)
         c, sn = np.cos(poses[..., 2]), np.sin(poses[..., 2])
         # hull corners (N, B, 4, 2) at each beam's instant, then its sides against that beam only
         cw = np.stack([c[..., None] * corners_r[:, 0] - sn[..., None] * corners_r[:, 1],

@@ -831,7 +831,7 @@ def track_frames(
         idx = np.flatnonzero(track_id == tid)
         if ambiguous:
             status[idx[status[idx] == OK]] = AMBIGUOUS
-            for j in idx:
+            for j in idx.tolist():
                 reasons[j] = reasons[j] or "heading ambiguous (pi symmetry, no motion, no recent pose)"
 
     xytheta, cov = _smooth_tracks(stamps, raw, raw_cov, status, track_id, len(tracks), st)

@@ -167,7 +167,7 @@ def _is_bch(family: MarkerFamily) -> bool:
 
 
 @functools.cache
-def _opencv_dict(family: MarkerFamily):  # type: ignore[no-untyped-def]
+def _opencv_dict(family: MarkerFamily):
     import cv2
 
     return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, _OPENCV_DICTS[family.value]))
@@ -335,10 +335,11 @@ def decode_batch(
     rot = best % 4
     # a pattern as close to another ID as to the best is ambiguous
     ambiguous = second <= h if table.shape[0] > 1 else np.zeros_like(h, bool)
+    lims = np.full(len(ids), lim)
     if lim <= spec.max_correction:
         # within the family's tolerance each ID has its own (the BCH family; see id_correction)
-        lim = np.minimum(lim, id_correction(fam)[ids])
-    ids = np.where((h <= lim) & ~ambiguous, ids, -1)
+        lims = np.minimum(lims, id_correction(fam)[ids])
+    ids = np.where((h <= lims) & ~ambiguous, ids, -1)
     return ids.astype(np.int64), rot.astype(np.int64), h.astype(np.int64)
 
 

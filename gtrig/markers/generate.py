@@ -103,14 +103,14 @@ class SheetLayout:
         c = self.cells
         x0, y0 = self.marker_xy_mm
         cm = self.cell_mm
-        out = []
+        out: list[tuple[float, float, float, float]] = []
         for r in range(c.shape[0]):
             row = np.concatenate([[1], c[r], [1]]).astype(np.int8)
             d = np.diff(row)
             starts = np.flatnonzero(d == -1)
             ends = np.flatnonzero(d == 1)
             for a, b in zip(starts, ends, strict=True):
-                out.append((x0 + a * cm, y0 + r * cm, (b - a) * cm, cm))
+                out.append((float(x0 + a * cm), float(y0 + r * cm), float((b - a) * cm), float(cm)))
         return out
 
 

@@ -215,7 +215,7 @@ def render(
         val = np.where(in_sq, np.where(cells[ci, cj] > 0, paper, ink), paper).astype(np.float32)
         if paper_texture > 0:
             grain = cv2.GaussianBlur(rng.normal(0.0, 1.0, val.shape).astype(np.float32), (0, 0), 0.5 * ss)
-            grain *= paper_texture / max(float(grain.std()), 1e-9)
+            grain = grain * np.float32(paper_texture / max(float(grain.std()), 1e-9))
             val = val * (1.0 + grain)
         hr = np.where(inside_paper, val, base)
         if blur_px > 0:

@@ -225,7 +225,7 @@ def bundle_adjust(views: Sequence[View], side_m: Mapping[int, float], T_cam_robo
         Hcc, Hcm, Hmm, gc, gm = _normal(pb, w, e, Jc, Jm, n_img, n_free)
         while True:
             S, rhs, Dinv = _schur(Hcc, Hcm, Hmm, gc, gm, lam)
-            dm = np.linalg.solve(S, -rhs) if n_free else np.zeros(0)
+            dm = np.asarray(np.linalg.solve(S, -rhs) if n_free else np.zeros(0), dtype=np.float64)
             dc = -np.einsum("nij,nj->ni", Dinv, gc + np.einsum("nmij,mj->ni", Hcm, dm.reshape(n_free, 6)))
             Tc_new = _apply(Tc, dc)
             Tm_new = Tm.copy()

@@ -80,13 +80,13 @@ def undistort_normalised(camera: CameraIntrinsics, uv: Array) -> tuple[Array, Ar
     distortion ``d uv / d xn`` at them (to carry covariances: ``cov_n = J^-1 cov_px J^-T``)."""
     uv = np.asarray(uv, float).reshape(-1, 2)
     K, dist = camera.camera_matrix, camera.dist_coeffs
-    xn = cv2.undistortPoints(uv.reshape(-1, 1, 2), K, dist).reshape(-1, 2)
+    xn = np.asarray(cv2.undistortPoints(uv.reshape(-1, 1, 2), K, dist).reshape(-1, 2), dtype=np.float64)
     # OpenCV's fixed-point iteration stops short (~0.01 px near the image corners for strong radial
     # distortion); a few Newton steps on the forward model make it exact
     for _ in range(4):
         J = _distortion_jacobian(K, dist, xn)
         r = geo.project_points(np.c_[xn, np.ones(len(xn))], K, dist) - uv
-        xn = xn - np.linalg.solve(J, r[:, :, None])[:, :, 0]
+        xn = np.asarray(xn - np.linalg.solve(J, r[:, :, None])[:, :, 0], dtype=np.float64)
     J = _distortion_jacobian(K, dist, xn)
     return xn, J
 
