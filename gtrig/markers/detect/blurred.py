@@ -157,6 +157,15 @@ class BlurredParams:
         residual by more than chance (chi-square with the field's L columns: mean L + this many SDs); a
         clutter glyph read with the field's freedom on ``--clutter 150`` showed none (1.4 units), the
         glared markers it reads on the hard set 22-119.
+    free_cells_off : a code that fails the excess test (and the screen's) is still accepted when the free
+        model's cells, each read at half the contrast, are that code within this many cells and every
+        other code is more than twice as many cells further (:func:`_cells_agree`); None: off. Where
+        demosaicing, JPEG and texture leave a misfit spread over the whole marker, the free cells absorb a
+        little of it in every cell and the right code's excess grows with the contrast as a few wrong
+        cells' would (the hard bench's 3/20/12/365: excess 1810 against a margin of 6068, its free cells
+        0 cells off the code), while a pattern that is not a code is whole cells off: on clutter the free
+        cells lay at least 6 cells off their leader (1344 candidates that reached these tests: 300 hard
+        scenes of seed 102 and 400 ``--clutter`` scenes of seed 101, session 38).
     """
 
     enabled: bool = True
@@ -190,6 +199,7 @@ class BlurredParams:
     screen_px: int = 100
     light_degree: int = 2
     light_evidence_sd: float = 5.0
+    free_cells_off: int | None = 2
 
 
 @dataclass(frozen=True)
@@ -526,25 +536,42 @@ def _spread_subset(px: NDArray[np.float64], k: int) -> NDArray[np.bool_]:
     return (x + max(1, k // 2) * y) % k == 0
 
 
+def _cells_agree(cells: NDArray[np.float64], Wc: NDArray[np.float64], best: int, params: BlurredParams) -> bool:
+    """Whether the free model's cells ``cells`` (d^2,), whiteness 0 (black) to 1 (white), each read at 0.5,
+    are within ``params.free_cells_off`` cells of the code ``Wc[best]`` (Wc (C, d^2) every code) while every
+    other code is at least ``2 free_cells_off + 1`` cells further."""
+    k = params.free_cells_off
+    if k is None:
+        return False
+    off = np.count_nonzero((cells[None] > 0.5) != (Wc > 0.5), axis=1)
+    h = int(off[best])
+    off[best] = np.iinfo(off.dtype).max
+    log.debug("free cells: %d off the leader, %d off the next code", h, int(off.min()))
+    return h <= k and int(off.min()) > h + 2 * k
+
+
 def _read_codes(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[np.float64],
                 start: tuple[NDArray[np.float64], float], sse_free: float, dof: int, Wc: NDArray[np.float64],
-                n: int, border: int, params: BlurredParams, light: NDArray[np.float64] | None, max_excess: float
-                ) -> BlurredRead | None:
+                n: int, border: int, params: BlurredParams, light: NDArray[np.float64] | None, max_excess: float,
+                cells: NDArray[np.float64]) -> BlurredRead | None:
     """Steps 3 and 4 of the module docstring for one candidate ``quad`` (4, 2) whose free fit gave the
     corners and blur ``start`` and the residual sum of squares ``sse_free`` on ``dof`` degrees of
     freedom: every code of ``Wc`` (C, d^2) ranked, the leaders refitted, and the read if the best code
     passes the margin and excess tests (``max_excess``: the chi-square bound of the excess), else None.
     ``light`` (N, L) (:func:`_light_basis`) or None: the light field's columns in every code's model
-    (``sse_free`` must then be the free model's with them).
+    (``sse_free`` must then be the free model's with them). ``cells`` (d^2,): the free model's cells'
+    whiteness there (:func:`_cells_agree`).
     """
     q1, s1 = start
     s2 = sse_free / dof
     sse = _rank_codes(px, I, q1, s1, n, border, Wc, light)
     o = np.argsort(sse)[: params.top_codes]
     excess0, margin0 = (sse[o[0]] - sse_free) / s2, (sse[o[1]] - sse[o[0]]) / s2
-    if margin0 < params.screen_margin or excess0 > max(params.screen_excess, 4.0 * margin0):
+    if margin0 < params.screen_margin or (excess0 > max(params.screen_excess, 4.0 * margin0)
+                                          and not _cells_agree(cells, Wc, int(o[0]), params)):
         # before the codes' own fits: clutter that the free cells explain (a dark frame round a
-        # pattern) fits no code by far more than the leader beats the next code
+        # pattern) fits no code by far more than the leader beats the next code; unless the free cells
+        # themselves read as the leader (a misfit spread over a marker, not cells off the code)
         log.debug("blurred candidate at (%.0f, %.0f)%s: excess %.0f, margin %.0f at the free geometry: "
                   "rejected", *quad.mean(axis=0), "" if light is None else " (lit)", excess0, margin0)
         return None
@@ -578,7 +605,9 @@ def _read_codes(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[n
     rest = [f[2] for k, f in fits.items() if k != best] + [float(sse.min())]
     excess = (sse_b - sse_free) / s2
     margin = (min(rest) - sse_b) / s2
-    ok = (excess <= max(max_excess, params.excess_share * margin) and margin >= params.min_margin
+    # the excess is a misfit spread over the marker where the free cells read as the code itself
+    ok = ((excess <= max(max_excess, params.excess_share * margin) or _cells_agree(cells, Wc, best, params))
+          and margin >= params.min_margin
           and cb[1] >= params.min_contrast and np.abs(qb - quad).max() <= params.max_shift_px)
     log.debug("blurred candidate%s: code %d, residual SD %.2f, excess %.0f, margin %.0f -> %s",
               "" if light is None else " (lit)", best, np.sqrt(s2), excess, margin, ok)
@@ -730,19 +759,20 @@ def _read_one(gray: NDArray[np.uint8], quad: NDArray[np.float64], Wc: NDArray[np
     # the flat model first: where it reads, its corners are the most precise (the light field's
     # columns share the geometry's information: a plane looks like a shift of the square's blurred
     # edges, a bowl like a change of its size); where it does not, the model with the light field
-    read = _read_codes(px, I, quad, (q1, s1), sse_free, dof, Wc, n, border, params, None, max_excess)
+    read = _read_codes(px, I, quad, (q1, s1), sse_free, dof, Wc, n, border, params, None, max_excess,
+                       cf[2:2 + d2] / max(float(cf[1]), 1e-9))
     light = None if read is not None else _light_basis(px, quad, params.light_degree)
     if light is not None:
         # the free model with the field too (it nests every code's), at the free fit's geometry
         n_light = light.shape[1]
-        _, _, sse_lit, _, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0, light=light)
+        _, _, sse_lit, c_lit, _ = _fit_geometry(px, I, q1, s1, n, border, None, 0, light=light)
         # only where the image shows a light field: the flat free model is nested in the lit one, so
         # without a field its residual drop is about chi-square with n_light degrees of freedom
         # (clutter read with the field's freedom had none: 1.4 units against 22-119 for glared markers)
         evidence = (sse_free - sse_lit) / (sse_lit / max(dof - n_light, 1))
         if evidence > n_light + params.light_evidence_sd * np.sqrt(2.0 * n_light):
             read = _read_codes(px, I, quad, (q1, s1), sse_lit, max(dof - n_light, 1), Wc, n, border,
-                               params, light, max_excess)
+                               params, light, max_excess, c_lit[2:2 + d2] / max(float(c_lit[1]), 1e-9))
         else:
             log.debug("blurred candidate at (%.0f, %.0f): light field's evidence %.1f: no second reading",
                       *quad.mean(axis=0), evidence)
