@@ -263,7 +263,9 @@ class MarkerDetector:
         bmask = self._border_mask()
         tol = self.spec.max_correction + 2 if self.params.max_hamming is None else self.params.max_hamming + 2
         ids, rot, ham = decode_batch(self.spec.family, bits[:, bc:-bc, bc:-bc], tol)
-        border_white = bits[:, bmask].sum(axis=1)
+        # a border cell under a highlight passes the midway level while it stays dark beside its own paper
+        # (:meth:`_locally_white`, as the final decoder judges it)
+        border_white = (bits.astype(bool) & self._locally_white(v))[:, bmask].sum(axis=1)
         ok_contrast = contrast >= self.params.min_contrast
         # the blur model only matters where the blur is a good part of a cell (a 1.5 px blur leaves the
         # cells of 5 px and more readable one by one): larger candidates that read as no code are clutter
