@@ -60,7 +60,7 @@ __all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", 
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 13
+DETECTOR_VERSION = 14
 
 #: how far beyond the outer band (blur sigmas) :func:`.edges.white_extent` looks for the paper's end:
 #: with the band ending 1.9 sigma before the paper (a 3 sigma + 5 px margin under the 5 px band) the
