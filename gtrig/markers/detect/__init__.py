@@ -168,7 +168,9 @@ class DetectorParams:
         which OpenCV's own ArUco detector uses too, and which GTvision's worker processes set to 1).
         With two or more a helper thread runs, beside the first path, the second path's candidate
         stage and its reads, and traces the further thresholds' boxes ahead of the blob tests; the
-        edge fits are split between two threads (:mod:`._threads`); the output is the same.
+        edge fits are split between two threads (:mod:`._threads`); the output is the same. OpenCV's own
+        pool is held to one thread during a detection (:func:`._threads.opencv_one_thread`): these threads
+        share the work instead.
     tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored
         levels back to light, where the blurred-step model holds.
@@ -342,14 +344,16 @@ class MarkerDetector:
         (:func:`_to_gray`). Images too small to hold a marker give no detections.
 
         ``trace``, a list, receives a :class:`Rejection` for every candidate dropped on the way (what
-        ``gtrig markers detect --debug DIR`` draws). BLAS runs in the calling threads meanwhile
-        (:func:`._blas.one_thread`).
+        ``gtrig markers detect --debug DIR`` draws). BLAS and OpenCV run in the calling threads meanwhile
+        (:func:`._blas.one_thread`, :func:`._threads.opencv_one_thread`): the detection's own threads
+        (``DetectorParams.threads``, by default OpenCV's setting as it was on the call) share the work.
         """
-        with _blas.one_thread():
-            return self._detect(image, trace)
+        nt = _threads.threads(self.params.threads)
+        with _blas.one_thread(), _threads.opencv_one_thread():
+            return self._detect(image, trace, nt)
 
-    def _detect(self, image: NDArray[np.generic], trace: list[Rejection] | None) -> list[Detection]:
-        """:meth:`detect`."""
+    def _detect(self, image: NDArray[np.generic], trace: list[Rejection] | None, nt: int) -> list[Detection]:
+        """:meth:`detect` with ``nt`` threads."""
         gray = _to_gray(image)
         if min(gray.shape) < max(8, int(self.params.candidates.min_side_px)):
             return []
@@ -357,8 +361,8 @@ class MarkerDetector:
         if not self.params.blurred.enabled:
             # without the second path the first path keeps to the markers it reads plainly (those read
             # only through the blur model are the second path's regime, where its corners are better)
-            return _dedupe([d for d in self._detect_sharp(gray, trace) if id(d) not in self._provisional])
-        if _threads.threads(self.params.threads) < 2:
+            return _dedupe([d for d in self._detect_sharp(gray, trace, threads=nt) if id(d) not in self._provisional])
+        if nt < 2:
             cands = self._blurred_candidates(gray)
             dets = self._detect_sharp(gray, trace)
             return self._merge_paths(gray, dets, cands, trace)
@@ -373,7 +377,7 @@ class MarkerDetector:
         kept: Future[list[NDArray[np.float64]] | None] = Future()
         jobs = [_threads.helper_pool().submit(self._blurred_ahead, gray, ahead, first, kept)]
         try:
-            dets = self._detect_sharp(gray, trace, first, kept)
+            dets = self._detect_sharp(gray, trace, first, kept, nt)
             cands, reads = ahead.result()
             try:
                 return self._merge_paths(gray, dets, cands, trace, reads, jobs)
@@ -517,12 +521,13 @@ class MarkerDetector:
 
     def _detect_sharp(self, gray: NDArray[np.uint8], trace: list[Rejection] | None = None,
                       first: Future[list[NDArray[np.float64]]] | None = None,
-                      kept: Future[list[NDArray[np.float64]] | None] | None = None) -> list[Detection]:
-        """The first path: candidates, edge fits and decoding (module docstring, steps 1-5); ``first``
-        receives the candidates (raw pixels) as soon as they are found, ``kept`` those the pre-decoder
-        keeps (raw pixels; None with a lens model, whose undistorted quads are not raw pixels)."""
+                      kept: Future[list[NDArray[np.float64]] | None] | None = None, threads: int = 1
+                      ) -> list[Detection]:
+        """The first path: candidates, edge fits and decoding (module docstring, steps 1-5) with ``threads``
+        threads; ``first`` receives the candidates (raw pixels) as soon as they are found, ``kept`` those the
+        pre-decoder keeps (raw pixels; None with a lens model, whose undistorted quads are not raw pixels)."""
         p = self.params
-        nt = _threads.threads(p.threads)
+        nt = threads
         quads = find_candidates(gray, p.candidates, self._hole_frac, trace, nt)
         if first is not None:
             first.set_result(quads)
