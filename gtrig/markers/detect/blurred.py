@@ -61,7 +61,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gtrig.markers.detect import _kernels
-from gtrig.markers.detect._blas import matmul
+from gtrig.markers.detect._blas import matmul, one_thread
 from gtrig.markers.detect.candidates import dark_mask, solid_quad
 from gtrig.markers.detect.edges import quad_homographies
 from gtrig.markers.detect.outline import snap_to_border
@@ -331,32 +331,28 @@ def _prediction_jacobian(px: NDArray[np.float64], quad: NDArray[np.float64], sig
                                   np.ascontiguousarray(cells, np.float64).reshape(d, d), float(contrast))
 
 
-# products are split so that each BLAS call stays below OpenBLAS's threading threshold (:mod:`._blas`): on a loaded
-# machine its threads cost 50-100 times the single-threaded time of these small products
-_CHUNK = 512
-
-
-def _gram(At: NDArray[np.float64], A: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``At @ A`` for (K, P, N) and (K, N, Q), accumulated over chunks of N."""
-    out = np.zeros((A.shape[0], At.shape[1], A.shape[2]))
-    for s0 in range(0, A.shape[1], _CHUNK):
-        out += matmul(At[:, :, s0:s0 + _CHUNK], A[:, s0:s0 + _CHUNK])
-    return out
+# The normal matrices below are products of a C-contiguous matrix with its own transpose, which NumPy
+# computes by syrk (one triangle, mirrored: exactly symmetric, half the multiplications), in one BLAS call
+# each: the reader runs inside :func:`._blas.one_thread` (:func:`read_blurred`), so no call is threaded.
+# (Until session 38 each product was a batched gemm over chunks of 512 pixels, summed in Python: a fifth of
+# the reads' time in copies and calls.)
 
 
 def _solve_levels(I: NDArray[np.float64], A: NDArray[np.float64], ridge: NDArray[np.float64]
                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Least squares ``I ~ A c`` for K designs ``A`` (K, N, P) at once, ``ridge`` (P,) added to the
+    """Least squares ``I ~ A c`` (``I`` (N,)) for K designs ``A`` (K, N, P), ``ridge`` (P,) added to the
     normal equations' diagonal. Returns residuals (K, N) and coefficients (K, P)."""
-    # contiguous operands: numpy's batched matmul on a transposed view is 300 times slower here
-    A = np.ascontiguousarray(A)
-    At = np.ascontiguousarray(np.swapaxes(A, 1, 2))
-    AtA = _gram(At, A)
-    diag = np.arange(A.shape[2])
-    # a relative floor on the diagonal keeps a degenerate design (no pixel inside) solvable
-    AtA[:, diag, diag] += ridge + 1e-9 * AtA[:, diag, diag].mean(axis=1, keepdims=True) + 1e-12
-    c = np.linalg.solve(AtA, _gram(At, np.broadcast_to(I[None, :, None], (len(A), len(I), 1))))
-    return I[None] - np.einsum("knp,kp->kn", A, c[..., 0]), c[..., 0]
+    K, N, P = A.shape
+    r, c = np.empty((K, N)), np.empty((K, P))
+    diag = np.arange(P)
+    for k in range(K):
+        Ak = np.ascontiguousarray(A[k])
+        AtA = Ak.T @ Ak
+        # a relative floor on the diagonal keeps a degenerate design (no pixel inside) solvable
+        AtA[diag, diag] += ridge + 1e-9 * AtA[diag, diag].mean() + 1e-12
+        c[k] = np.linalg.solve(AtA, Ak.T @ I)
+        r[k] = I - Ak @ c[k]
+    return r, c
 
 
 def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[np.float64], sig: float,
@@ -413,15 +409,14 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
             cells = c[0, 2:2 + d2] if code is None else c[0, 1] * code
             dp = _prediction_jacobian(px, th[:8].reshape(4, 2), th[8], n, border, cells, c[0, 1])
             A0 = np.ascontiguousarray(Acur[0])
-            A0t = np.ascontiguousarray(A0.T)
-            G = _gram(A0t[None], A0[None])[0]
+            G = A0.T @ A0
             G[np.diag_indices_from(G)] += ridge + 1e-9 * np.mean(np.diag(G)) + 1e-12
             dpT = np.ascontiguousarray(dp.T)
-            proj = matmul(A0, np.linalg.solve(G, _gram(A0t[None], dpT[None])[0]))
-            J = -(dpT - proj).T  # (9, N)
+            proj = A0 @ np.linalg.solve(G, A0.T @ dpT)
+            J = np.ascontiguousarray(-(dpT - proj).T)  # (9, N)
             fresh = True
-        A = _gram(J[None], np.ascontiguousarray(J.T)[None])[0]
-        g = matmul(J, res)
+        A = J @ J.T
+        g = J @ res
         improved = False
         for _try in range(3):
             step = -np.linalg.solve(A + lam * (np.diag(np.diag(A)) + 1e-9 * np.eye(9)), g)
@@ -468,8 +463,9 @@ def _rank_codes(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[n
         F = F - Q @ (Q.T @ F)
     N = float(len(I))
     Sm = base.sum() + matmul(codes, F.sum(axis=0))
+    F = np.ascontiguousarray(F)
     Ft = np.ascontiguousarray(F.T)
-    G = _gram(Ft[None], F[None])[0]
+    G = F.T @ F
     Smm = base @ base + 2.0 * matmul(codes, matmul(Ft, base)) + np.einsum("ci,ci->c", matmul(codes, G), codes)
     SIm = I @ base + matmul(codes, matmul(Ft, I))
     var_m = Smm - Sm * Sm / N
@@ -624,12 +620,13 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
     # the right code's excess residual is chi-square(d2): mean d2, SD sqrt(2 d2)
     max_excess = d2 + params.max_excess_sd * np.sqrt(2.0 * d2)
     out = []
-    for group in [list(range(len(quads)))] if alternatives else [[i] for i in range(len(quads))]:
-        for index, start, pixels in _starts(gray, quads, group, n, border, params, var_noise, d2):
-            read = _read_one(pixels, start, Wc, n, border, params, var_noise, expected_var, max_excess)
-            if read is not None:
-                out.append(dataclasses.replace(read, index=index))
-                break
+    with one_thread():  # (the detector holds it already; the products below are small)
+        for group in [list(range(len(quads)))] if alternatives else [[i] for i in range(len(quads))]:
+            for index, start, pixels in _starts(gray, quads, group, n, border, params, var_noise, d2):
+                read = _read_one(pixels, start, Wc, n, border, params, var_noise, expected_var, max_excess)
+                if read is not None:
+                    out.append(dataclasses.replace(read, index=index))
+                    break
     return out
 
 
