@@ -131,3 +131,45 @@ def test_seed_regions_coarse_grid_is_the_area_resize(shape: tuple[int, int]) -> 
                 x, y, bw, bh = cv2.boundingRect(c)
                 ref.append((max(8 * x - 4, 0), max(8 * y - 4, 0), min(8 * (x + bw) + 4, w), min(8 * (y + bh) + 4, h)))
             assert boxes == ref
+
+
+def _square_pixels_numpy(gray: np.ndarray, quad: np.ndarray, n: int, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """blurred._pixels before session 38: the box's grid, its marker coordinates and the mask in NumPy."""
+    h, w = gray.shape
+    x0, y0 = np.maximum(np.floor(quad.min(axis=0) - 4), 0).astype(int)
+    x1, y1 = np.minimum(np.ceil(quad.max(axis=0) + 4), [w - 1, h - 1]).astype(int)
+    if x1 <= x0 or y1 <= y0:
+        return np.zeros((0, 2)), np.zeros(0)
+    yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+    px = np.stack([xx.ravel(), yy.ravel()], -1).astype(np.float64)
+    H = quad_homographies(quad[None])[0]
+    w3 = H[2, 0] * px[:, 0] + H[2, 1] * px[:, 1] + H[2, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mx = (H[0, 0] * px[:, 0] + H[0, 1] * px[:, 1] + H[0, 2]) / w3
+        my = (H[1, 0] * px[:, 0] + H[1, 1] * px[:, 1] + H[1, 2]) / w3
+    lim = reach / n
+    keep = (mx > -lim) & (mx < 1 + lim) & (my > -lim) & (my < 1 + lim)
+    return px[keep], gray[yy.ravel()[keep], xx.ravel()[keep]].astype(np.float64)
+
+
+def test_square_pixels_match_the_numpy_form() -> None:
+    # the second path's pixels of a candidate, bit for bit: random quads (tilted, perspective, some
+    # degenerate so that the horizon crosses the box) at the image's sides and inside
+    from gtrig.markers.detect.blurred import _pixels
+
+    rng = np.random.default_rng(3)
+    gray = rng.integers(0, 256, (120, 160), dtype=np.uint8)
+    for k in range(300):
+        ctr = rng.uniform([-5, -5], [165, 125])
+        side = rng.uniform(8, 45)
+        ang = rng.uniform(0, np.pi / 2)
+        sq = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], float) * side / 2
+        rot = np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
+        quad = ctr + sq @ rot.T + rng.normal(0, 0.15 * side if k % 10 else side, (4, 2))
+        want = _square_pixels_numpy(gray, quad, 8, 0.5)
+        got = _pixels(gray, quad, 8, 0.5)
+        if len(want[0]) == 0:
+            assert len(got[0]) == 0
+            continue
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])

@@ -119,3 +119,31 @@ def test_two_threads_give_the_same_detections_on_clutter() -> None:
         for x, y in zip(a, b, strict=True):
             np.testing.assert_array_equal(x.corners_px, y.corners_px)
             np.testing.assert_array_equal(x.corner_cov, y.corner_cov)
+
+
+def test_opencv_pool_held_to_one_thread_inside_and_restored() -> None:
+    """A detection holds OpenCV's pool to one thread while it runs (its own threads share the work) and
+    restores the caller's setting, also when detections overlap in two threads; the default threads
+    (0) follow the setting as it was on the call."""
+    before = cv2.getNumThreads()
+    seen: list[int] = []
+    try:
+        cv2.setNumThreads(2)
+        with _threads.opencv_one_thread():
+            seen.append(cv2.getNumThreads())
+            with _threads.opencv_one_thread():  # nested (another detection in another thread)
+                seen.append(cv2.getNumThreads())
+            seen.append(cv2.getNumThreads())
+        assert seen == [1, 1, 1]
+        assert cv2.getNumThreads() == 2
+        img = np.full((120, 160), 200, np.uint8)
+        workers = [threading.Thread(target=MarkerDetector(MarkerFamily.APRILTAG_36H11).detect, args=(img,))
+                   for _ in range(3)]
+        for w in workers:
+            w.start()
+        for w in workers:
+            w.join()
+        assert cv2.getNumThreads() == 2
+        assert _threads.threads(0) == 2
+    finally:
+        cv2.setNumThreads(before)

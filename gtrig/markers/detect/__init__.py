@@ -168,7 +168,9 @@ class DetectorParams:
         which OpenCV's own ArUco detector uses too, and which GTvision's worker processes set to 1).
         With two or more a helper thread runs, beside the first path, the second path's candidate
         stage and its reads, and traces the further thresholds' boxes ahead of the blob tests; the
-        edge fits are split between two threads (:mod:`._threads`); the output is the same.
+        edge fits are split between two threads (:mod:`._threads`); the output is the same. OpenCV's own
+        pool is held to one thread during a detection (:func:`._threads.opencv_one_thread`): these threads
+        share the work instead.
     tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored
         levels back to light, where the blurred-step model holds.
@@ -344,14 +346,16 @@ class MarkerDetector:
         (:func:`_to_gray`). Images too small to hold a marker give no detections.
 
         ``trace``, a list, receives a :class:`Rejection` for every candidate dropped on the way (what
-        ``gtrig markers detect --debug DIR`` draws). BLAS runs in the calling threads meanwhile
-        (:func:`._blas.one_thread`).
+        ``gtrig markers detect --debug DIR`` draws). BLAS and OpenCV run in the calling threads meanwhile
+        (:func:`._blas.one_thread`, :func:`._threads.opencv_one_thread`): the detection's own threads
+        (``DetectorParams.threads``, by default OpenCV's setting as it was on the call) share the work.
         """
-        with _blas.one_thread():
-            return self._detect(image, trace)
+        nt = _threads.threads(self.params.threads)
+        with _blas.one_thread(), _threads.opencv_one_thread():
+            return self._detect(image, trace, nt)
 
-    def _detect(self, image: NDArray[np.generic], trace: list[Rejection] | None) -> list[Detection]:
-        """:meth:`detect`."""
+    def _detect(self, image: NDArray[np.generic], trace: list[Rejection] | None, nt: int) -> list[Detection]:
+        """:meth:`detect` with ``nt`` threads."""
         gray = _to_gray(image)
         if min(gray.shape) < max(8, int(self.params.candidates.min_side_px)):
             return []
@@ -359,29 +363,32 @@ class MarkerDetector:
         if not self.params.blurred.enabled:
             # without the second path the first path keeps to the markers it reads plainly (those read
             # only through the blur model are the second path's regime, where its corners are better)
-            return _dedupe([d for d in self._detect_sharp(gray, trace) if id(d) not in self._provisional])
-        if _threads.threads(self.params.threads) < 2:
+            return _dedupe([d for d in self._detect_sharp(gray, trace, threads=nt) if id(d) not in self._provisional])
+        if nt < 2:
             cands = self._blurred_candidates(gray)
             dets = self._detect_sharp(gray, trace)
             return self._merge_paths(gray, dets, cands, trace)
         # the second path beside the first: in a helper thread its candidate stage (OpenCV's filters
         # and contours, which release the GIL), then, once the first path's candidates are known, the
-        # reading of those of its candidates that none of them covers; the others wait for the first
+        # reading of those of its candidates that none of them covers, then, once the pre-decoder has
+        # kept its candidates, of those that no detection can cover; the others wait for the first
         # path's detections (read ahead, most would be read in vain: half of them lie in markers the
         # first path finds, and on the bench those cost twice the others' CPU)
         ahead: Future[tuple[tuple[list[NDArray[np.float64]], float], _threads.Claims]] = Future()
         first: Future[list[NDArray[np.float64]]] = Future()
-        jobs = [_threads.helper_pool().submit(self._blurred_ahead, gray, ahead, first)]
+        kept: Future[list[NDArray[np.float64]] | None] = Future()
+        jobs = [_threads.helper_pool().submit(self._blurred_ahead, gray, ahead, first, kept)]
         try:
-            dets = self._detect_sharp(gray, trace, first)
+            dets = self._detect_sharp(gray, trace, first, kept, nt)
             cands, reads = ahead.result()
             try:
                 return self._merge_paths(gray, dets, cands, trace, reads, jobs)
             finally:
                 reads.skip(range(len(cands[0])))
         finally:
-            if not first.done():
-                first.set_result([])
+            for fut in (first, kept):
+                if not fut.done():
+                    fut.set_result([] if fut is first else None)
             for job in jobs:
                 job.result()  # no read left running into the next image (at most the one in progress)
 
@@ -425,11 +432,14 @@ class MarkerDetector:
 
     def _blurred_ahead(self, gray: NDArray[np.uint8],
                        ahead: Future[tuple[tuple[list[NDArray[np.float64]], float], _threads.Claims]],
-                       first: Future[list[NDArray[np.float64]]]) -> None:
+                       first: Future[list[NDArray[np.float64]]],
+                       kept: Future[list[NDArray[np.float64]] | None]) -> None:
         """The helper thread's part: the second path's candidates (:meth:`_blurred_candidates`), handed
         over in ``ahead`` with their reads (a :class:`._threads.Claims` of :func:`.blurred.read_blurred`
         per candidate), then the reads of those whose centre lies in no quad of ``first`` (the first
-        path's candidates, raw pixels, once known)."""
+        path's candidates, raw pixels, once known), then of those that no detection can cover: whose
+        centre lies more than the largest corner shift outside every quad of ``kept`` (the candidates the
+        pre-decoder kept, raw pixels; None when not known in raw pixels, as with a lens model)."""
         try:
             cands = self._blurred_candidates(gray)
             reads = _threads.Claims(read_blurred, self._read_tasks(gray, cands))
@@ -437,8 +447,17 @@ class MarkerDetector:
             ahead.set_exception(exc)
             return
         ahead.set_result((cands, reads))
-        if cands[0]:
-            reads.work(_outside([q[0] for q in cands[0]], first.result()))
+        if not cands[0]:
+            return
+        centres = [q[0] for q in cands[0]]
+        reads.work(_outside(centres, first.result()))
+        polys = kept.result()
+        if polys is not None:
+            # a detection's corners lie within max_corner_shift_px of its kept quad's, so it lies within
+            # that distance of the quad's hull: a candidate centred further out is read in any case (on
+            # the --quick set, 1.9 per image lie in quads the pre-decoder rejected; read here, they no
+            # longer wait for the edge fits)
+            reads.work(_outside(centres, polys, self.params.max_corner_shift_px + 1.0))
 
     def _detect_blurred(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float],
                         found: list[Detection], trace: list[Rejection] | None = None,
@@ -503,21 +522,28 @@ class MarkerDetector:
             trace.append(Rejection(Qr[k].copy(), "fit", why))
 
     def _detect_sharp(self, gray: NDArray[np.uint8], trace: list[Rejection] | None = None,
-                      first: Future[list[NDArray[np.float64]]] | None = None) -> list[Detection]:
-        """The first path: candidates, edge fits and decoding (module docstring, steps 1-5); ``first``
-        receives the candidates (raw pixels) as soon as they are found."""
+                      first: Future[list[NDArray[np.float64]]] | None = None,
+                      kept: Future[list[NDArray[np.float64]] | None] | None = None, threads: int = 1
+                      ) -> list[Detection]:
+        """The first path: candidates, edge fits and decoding (module docstring, steps 1-5) with ``threads``
+        threads; ``first`` receives the candidates (raw pixels) as soon as they are found, ``kept`` those the
+        pre-decoder keeps (raw pixels; None with a lens model, whose undistorted quads are not raw pixels)."""
         p = self.params
-        nt = _threads.threads(p.threads)
+        nt = threads
         quads = find_candidates(gray, p.candidates, self._hole_frac, trace, nt)
         if first is not None:
             first.set_result(quads)
         if not quads:
+            if kept is not None:
+                kept.set_result([])
             return []
         und = self._undistorter(gray.shape)
         Q0 = np.array(quads)  # (Q, 4, 2) raw
         Q = Q0 if und is None else und.to_undistorted(Q0.reshape(-1, 2)).reshape(-1, 4, 2)
         n = self.spec.cells
         Q, pre_id, pre_rot, pre_ham, pre_bits = self._predecode(gray, Q, und, trace)
+        if kept is not None:
+            kept.set_result(list(Q) if und is None else None)
         retried = self._retried
         if not len(Q):
             return []
@@ -679,8 +705,13 @@ def _fit_reason(fit_ok: bool, b: float, rel: float, sigma: float, p: DetectorPar
     return None
 
 
-def _outside(quads: list[NDArray[np.float64]], polys: list[NDArray[np.float64]]) -> list[int]:
-    """Indices of the ``quads`` (each (4, 2)) whose centre lies inside none of ``polys`` (each (4, 2))."""
+def _outside(quads: list[NDArray[np.float64]], polys: list[NDArray[np.float64]], margin: float = 0.0) -> list[int]:
+    """Indices of the ``quads`` (each (4, 2)) whose centre lies inside none of ``polys`` (each (4, 2)), or
+    with ``margin`` > 0 (pixels), more than ``margin`` outside the convex hull of each."""
+    if margin > 0:
+        hulls = [cv2.convexHull(np.asarray(p, np.float32).reshape(-1, 1, 2)) for p in polys]
+        return [i for i, q in enumerate(quads)
+                if all(cv2.pointPolygonTest(h, tuple(map(float, q.mean(axis=0))), True) < -margin for h in hulls)]
     cv_polys = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in polys]
     return [i for i, q in enumerate(quads)
             if all(cv2.pointPolygonTest(p, tuple(map(float, q.mean(axis=0))), False) < 0 for p in cv_polys)]

@@ -12,6 +12,7 @@ import os
 import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from typing import Any, TypeVar
 
 import cv2
@@ -160,3 +161,34 @@ class Claims:
         if self._errors[k] is not None:
             raise self._errors[k]
         return self._results[k]
+
+
+_CV_LOCK = threading.Lock()
+_CV_STATE: dict[str, int] = {"depth": 0, "saved": 0}
+
+
+@contextmanager
+def opencv_one_thread() -> Iterator[None]:
+    """OpenCV's own thread pool held to one thread while any detection is inside (process-wide, like
+    :func:`._blas.one_thread` for BLAS: the first caller in sets it, the last one out restores it).
+
+    A detection with two threads already runs its parts side by side (the second path's candidates
+    beside the first path's, the traced boxes, the split kernels), so OpenCV splitting each call into
+    stripes only adds threads to cores that are busy: its pool's workers wake for the stripes of small
+    boxes and wait spinning after them. Held to one thread, the GT room's images took 13 % less CPU and
+    6 % less wall time with the detector's two threads (session 38, BENCHMARKS.md issue 16). The results
+    of the OpenCV calls do not depend on the stripes.
+    """
+    with _CV_LOCK:
+        if _CV_STATE["depth"] == 0:
+            _CV_STATE["saved"] = cv2.getNumThreads()
+            if _CV_STATE["saved"] != 1:
+                cv2.setNumThreads(1)
+        _CV_STATE["depth"] += 1
+    try:
+        yield
+    finally:
+        with _CV_LOCK:
+            _CV_STATE["depth"] -= 1
+            if _CV_STATE["depth"] == 0 and _CV_STATE["saved"] != 1:
+                cv2.setNumThreads(_CV_STATE["saved"])

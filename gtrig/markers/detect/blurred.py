@@ -68,7 +68,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gtrig.markers.detect import _kernels
-from gtrig.markers.detect._blas import matmul
+from gtrig.markers.detect._blas import matmul, one_thread
 from gtrig.markers.detect.candidates import dark_mask, solid_quad
 from gtrig.markers.detect.edges import quad_homographies
 from gtrig.markers.detect.outline import snap_to_border
@@ -348,32 +348,28 @@ def _prediction_jacobian(px: NDArray[np.float64], quad: NDArray[np.float64], sig
                                   np.ascontiguousarray(cells, np.float64).reshape(d, d), float(contrast))
 
 
-# products are split so that each BLAS call stays below OpenBLAS's threading threshold (:mod:`._blas`): on a loaded
-# machine its threads cost 50-100 times the single-threaded time of these small products
-_CHUNK = 512
-
-
-def _gram(At: NDArray[np.float64], A: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``At @ A`` for (K, P, N) and (K, N, Q), accumulated over chunks of N."""
-    out = np.zeros((A.shape[0], At.shape[1], A.shape[2]))
-    for s0 in range(0, A.shape[1], _CHUNK):
-        out += matmul(At[:, :, s0:s0 + _CHUNK], A[:, s0:s0 + _CHUNK])
-    return out
+# The normal matrices below are products of a C-contiguous matrix with its own transpose, which NumPy
+# computes by syrk (one triangle, mirrored: exactly symmetric, half the multiplications), in one BLAS call
+# each: the reader runs inside :func:`._blas.one_thread` (:func:`read_blurred`), so no call is threaded.
+# (Until session 38 each product was a batched gemm over chunks of 512 pixels, summed in Python: a fifth of
+# the reads' time in copies and calls.)
 
 
 def _solve_levels(I: NDArray[np.float64], A: NDArray[np.float64], ridge: NDArray[np.float64]
                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Least squares ``I ~ A c`` for K designs ``A`` (K, N, P) at once, ``ridge`` (P,) added to the
+    """Least squares ``I ~ A c`` (``I`` (N,)) for K designs ``A`` (K, N, P), ``ridge`` (P,) added to the
     normal equations' diagonal. Returns residuals (K, N) and coefficients (K, P)."""
-    # contiguous operands: numpy's batched matmul on a transposed view is 300 times slower here
-    A = np.ascontiguousarray(A)
-    At = np.ascontiguousarray(np.swapaxes(A, 1, 2))
-    AtA = _gram(At, A)
-    diag = np.arange(A.shape[2])
-    # a relative floor on the diagonal keeps a degenerate design (no pixel inside) solvable
-    AtA[:, diag, diag] += ridge + 1e-9 * AtA[:, diag, diag].mean(axis=1, keepdims=True) + 1e-12
-    c = np.linalg.solve(AtA, _gram(At, np.broadcast_to(I[None, :, None], (len(A), len(I), 1))))
-    return I[None] - np.einsum("knp,kp->kn", A, c[..., 0]), c[..., 0]
+    K, N, P = A.shape
+    r, c = np.empty((K, N)), np.empty((K, P))
+    diag = np.arange(P)
+    for k in range(K):
+        Ak = np.ascontiguousarray(A[k])
+        AtA = Ak.T @ Ak
+        # a relative floor on the diagonal keeps a degenerate design (no pixel inside) solvable
+        AtA[diag, diag] += ridge + 1e-9 * AtA[diag, diag].mean() + 1e-12
+        c[k] = np.linalg.solve(AtA, Ak.T @ I)
+        r[k] = I - Ak @ c[k]
+    return r, c
 
 
 def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[np.float64], sig: float,
@@ -430,15 +426,14 @@ def _fit_geometry(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray
             cells = c[0, 2:2 + d2] if code is None else c[0, 1] * code
             dp = _prediction_jacobian(px, th[:8].reshape(4, 2), th[8], n, border, cells, c[0, 1])
             A0 = np.ascontiguousarray(Acur[0])
-            A0t = np.ascontiguousarray(A0.T)
-            G = _gram(A0t[None], A0[None])[0]
+            G = A0.T @ A0
             G[np.diag_indices_from(G)] += ridge + 1e-9 * np.mean(np.diag(G)) + 1e-12
             dpT = np.ascontiguousarray(dp.T)
-            proj = matmul(A0, np.linalg.solve(G, _gram(A0t[None], dpT[None])[0]))
-            J = -(dpT - proj).T  # (9, N)
+            proj = A0 @ np.linalg.solve(G, A0.T @ dpT)
+            J = np.ascontiguousarray(-(dpT - proj).T)  # (9, N)
             fresh = True
-        A = _gram(J[None], np.ascontiguousarray(J.T)[None])[0]
-        g = matmul(J, res)
+        A = J @ J.T
+        g = J @ res
         improved = False
         for _try in range(3):
             step = -np.linalg.solve(A + lam * (np.diag(np.diag(A)) + 1e-9 * np.eye(9)), g)
@@ -485,8 +480,9 @@ def _rank_codes(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[n
         F = F - Q @ (Q.T @ F)
     N = float(len(I))
     Sm = base.sum() + matmul(codes, F.sum(axis=0))
+    F = np.ascontiguousarray(F)
     Ft = np.ascontiguousarray(F.T)
-    G = _gram(Ft[None], F[None])[0]
+    G = F.T @ F
     Smm = base @ base + 2.0 * matmul(codes, matmul(Ft, base)) + np.einsum("ci,ci->c", matmul(codes, G), codes)
     SIm = I @ base + matmul(codes, matmul(Ft, I))
     var_m = Smm - Sm * Sm / N
@@ -504,17 +500,10 @@ def _pixels(gray: NDArray[np.uint8], quad: NDArray[np.float64], n: int, reach: f
     x1, y1 = np.minimum(np.ceil(quad.max(axis=0) + 4), [w - 1, h - 1]).astype(int)
     if x1 <= x0 or y1 <= y0:
         return np.zeros((0, 2)), np.zeros(0)
-    yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
-    px = np.stack([xx.ravel(), yy.ravel()], -1).astype(np.float64)
+    # compiled (:func:`._kernels.square_pixels`); a degenerate candidate's horizon can cross the box:
+    # those pixels are not in the square
     H = quad_homographies(quad[None])[0]
-    w3 = H[2, 0] * px[:, 0] + H[2, 1] * px[:, 1] + H[2, 2]
-    # a degenerate candidate's horizon can cross the box: those pixels are not in the square
-    with np.errstate(divide="ignore", invalid="ignore"):
-        mx = (H[0, 0] * px[:, 0] + H[0, 1] * px[:, 1] + H[0, 2]) / w3
-        my = (H[1, 0] * px[:, 0] + H[1, 1] * px[:, 1] + H[1, 2]) / w3
-    lim = reach / n
-    keep = (mx > -lim) & (mx < 1 + lim) & (my > -lim) & (my < 1 + lim)
-    return px[keep], gray[yy.ravel()[keep], xx.ravel()[keep]].astype(np.float64)
+    return _kernels.square_pixels(gray, int(x0), int(y0), int(x1), int(y1), np.ascontiguousarray(H), reach / n)
 
 
 def _light_basis(px: NDArray[np.float64], quad: NDArray[np.float64], degree: int) -> NDArray[np.float64] | None:
@@ -670,25 +659,28 @@ def read_blurred(gray: NDArray[np.uint8], quads: NDArray[np.float64], codes: NDA
     # the right code's excess residual is chi-square(d2): mean d2, SD sqrt(2 d2)
     max_excess = d2 + params.max_excess_sd * np.sqrt(2.0 * d2)
     out = []
-    for group in [list(range(len(quads)))] if alternatives else [[i] for i in range(len(quads))]:
-        for index, start in _starts(gray, quads, group, n, border, params, var_noise, d2):
-            read = _read_one(gray, start, Wc, n, border, params, var_noise, expected_var, max_excess)
-            if read is not None:
-                out.append(dataclasses.replace(read, index=index))
-                break
+    with one_thread():  # (the detector holds it already; the products below are small)
+        for group in [list(range(len(quads)))] if alternatives else [[i] for i in range(len(quads))]:
+            for index, start, pixels in _starts(gray, quads, group, n, border, params, var_noise, d2):
+                read = _read_one(pixels, start, Wc, n, border, params, var_noise, expected_var, max_excess)
+                if read is not None:
+                    out.append(dataclasses.replace(read, index=index))
+                    break
     return out
 
 
 def _starts(gray: NDArray[np.uint8], quads: NDArray[np.float64], group: list[int], n: int, border: int,
-            params: BlurredParams, var_noise: float, d2: int) -> list[tuple[int, NDArray[np.float64]]]:
+            params: BlurredParams, var_noise: float, d2: int
+            ) -> list[tuple[int, NDArray[np.float64], tuple[NDArray[np.float64], NDArray[np.float64]]]]:
     """Geometries to read the outlines ``quads[group]`` (each (4, 2)) of one candidate from, in order, with
-    the index of the outline each comes from: at most ``params.max_starts`` of the outlines and of the
+    the index of the outline each comes from and its pixels (:func:`_pixels` with half a cell around it:
+    the screen's and the read's): at most ``params.max_starts`` of the outlines and of the
     best one moved onto the marker's outer edge (:func:`.outline.snap_to_border`), least misfit at the
     start screen first (:func:`_start_share`; it grows with a start's distance from the marker, and only
     the fits from the best are paid for). The reader's basin is about a pixel, a candidate's outline can
     be 1-4 px off."""
-    starts = [(i, quads[i]) for i in group]
-    share = [_start_share(gray, q, n, border, params, var_noise, d2) for _, q in starts]
+    starts = [(i, quads[i], _pixels(gray, quads[i], n, 0.5)) for i in group]
+    share = [_start_share(pix, q, n, border, params, var_noise, d2) for _, q, pix in starts]
     best = int(np.argmin(share))
     # a start is moved onto the edge only where the model's misfit there is within twice what the start
     # screen passes: the 151 outlines of markers of seeds 0-2 of the hard bench showed 0.05-0.30 of
@@ -696,20 +688,21 @@ def _starts(gray: NDArray[np.uint8], quads: NDArray[np.float64], group: list[int
     snapped = (None if params.snap_reach_px <= 0 or not share[best] <= 2.0 * params.max_start_share
                else snap_to_border(gray, starts[best][1], n, params.snap_reach_px))
     if snapped is not None and np.abs(snapped - starts[best][1]).max() >= 0.1:
-        starts.append((starts[best][0], snapped))
-        share.append(_start_share(gray, snapped, n, border, params, var_noise, d2))
+        starts.append((starts[best][0], snapped, _pixels(gray, snapped, n, 0.5)))
+        share.append(_start_share(starts[-1][2], snapped, n, border, params, var_noise, d2))
     # those the start screen rejects are not read
     starts = [starts[j] for j in np.argsort(share, kind="stable") if share[j] <= params.max_start_share]
     return starts[:params.max_starts]
 
 
-def _start_share(gray: NDArray[np.uint8], quad: NDArray[np.float64], n: int, border: int, params: BlurredParams,
-                 var_noise: float, d2: int) -> float:
-    """The start screen of :func:`read_blurred` at the geometry ``quad`` (4, 2), on a spread subset of
-    about ``params.screen_px`` of its pixels: the free model's misfit beyond the noise as a share of its
-    fitted contrast, or inf where the screen rejects the start for another reason (too few pixels, too
-    little contrast, a misfit beyond ``params.max_start_misfit`` times the expected one)."""
-    px, I = _pixels(gray, quad, n, 0.5)
+def _start_share(pixels: tuple[NDArray[np.float64], NDArray[np.float64]], quad: NDArray[np.float64], n: int,
+                 border: int, params: BlurredParams, var_noise: float, d2: int) -> float:
+    """The start screen of :func:`read_blurred` at the geometry ``quad`` (4, 2) with its ``pixels``
+    (:func:`_pixels`: centres (N, 2), values (N,)), on a spread subset of about ``params.screen_px`` of
+    them: the free model's misfit beyond the noise as a share of its fitted contrast, or inf where the
+    screen rejects the start for another reason (too few pixels, too little contrast, a misfit beyond
+    ``params.max_start_misfit`` times the expected one)."""
+    px, I = pixels
     if len(I) < 3 * d2:
         return np.inf
     screen = _spread_subset(px, len(I) // params.screen_px)
@@ -724,13 +717,14 @@ def _start_share(gray: NDArray[np.uint8], quad: NDArray[np.float64], n: int, bor
     return float(np.sqrt(max(sse / dof - var_noise, 0.0)) / contrast)
 
 
-def _read_one(gray: NDArray[np.uint8], quad: NDArray[np.float64], Wc: NDArray[np.float64], n: int, border: int,
-              params: BlurredParams, var_noise: float, expected_var: Callable[[float], float], max_excess: float
-              ) -> BlurredRead | None:
-    """Steps 2-5 of the module docstring for one geometry ``quad`` (4, 2) (:func:`read_blurred`'s
-    arguments and its closures ``expected_var`` and ``max_excess``): the read, or None."""
+def _read_one(pixels: tuple[NDArray[np.float64], NDArray[np.float64]], quad: NDArray[np.float64],
+              Wc: NDArray[np.float64], n: int, border: int, params: BlurredParams, var_noise: float,
+              expected_var: Callable[[float], float], max_excess: float) -> BlurredRead | None:
+    """Steps 2-5 of the module docstring for one geometry ``quad`` (4, 2) and its ``pixels`` (:func:`_pixels`
+    with half a cell around it, as :func:`_starts` gives them) (:func:`read_blurred`'s other arguments and
+    its closures ``expected_var`` and ``max_excess``): the read, or None."""
     d2 = Wc.shape[1]
-    px, I = _pixels(gray, quad, n, 0.5)
+    px, I = pixels
     N = len(I)
     if N < 3 * d2:
         return None
