@@ -164,6 +164,8 @@ class BlurredParams:
         residual by more than chance (chi-square with the field's L columns: mean L + this many SDs); a
         clutter glyph read with the field's freedom on ``--clutter 150`` showed none (1.4 units), the
         glared markers it reads on the hard set 22-119.
+    first_misfits : read also the first path's candidates rejected for an edge residual where this path has
+        no candidate (``MarkerDetector._read_misfits``).
     free_cells_off : a code that fails the excess test (and the screen's) is still accepted when the free
         model's cells, each read at half the contrast, are that code within this many cells and every
         other code is more than twice as many cells further (:func:`_cells_agree`); None: off. Where
@@ -207,6 +209,7 @@ class BlurredParams:
     light_degree: int = 2
     light_evidence_sd: float = 5.0
     free_cells_off: int | None = 2
+    first_misfits: bool = True
 
 
 @dataclass(frozen=True)
