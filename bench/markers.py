@@ -339,6 +339,7 @@ def _classify_misses(rng: np.random.Generator, n_per_side: int) -> None:
 
 def _bench_photos() -> None:
     """The real photos: markers found per detector, and the ChArUco board-fit residual."""
+    from gtrig.io.imagetone import declared_tone
     from gtrig.markers.detect.boardfit import charuco_marker_corners, grid_fit_rms, grid_local_rms, pose_fit_rms
 
     if not REAL.is_dir():
@@ -351,17 +352,20 @@ def _bench_photos() -> None:
               "img_03.jpg": "aruco_6x6_250", "tagtest.jpg": "apriltag_36h11", "taggridphoto.jpg": "apriltag_36h11"}
     print("real photos (../shared/data/markers_real): markers found; board-fit RMS px (ChArUco: one planar pose "
           "through the tutorial's lens model; tag grid: homography of the 8 x 5 grid with two radial terms / "
-          "a homography per 2 x 2 block of tags); 'gtrig srgb': DetectorParams(tone='srgb'), edges fitted in light")
-    names = ["gtrig", "gtrig srgb"] + [f"cv2 {k}" for k in CV_REFINE] + ["apriltag3"]
+          "a homography per 2 x 2 block of tags); 'gtrig': the tone each file declares, as `gtrig markers detect` "
+          "reads it (gtrig.io.imagetone; every JPEG here: sRGB, edges fitted in light); 'gtrig linear': "
+          "DetectorParams(tone='linear'), edges fitted in the stored levels")
+    names = ["gtrig", "gtrig linear"] + [f"cv2 {k}" for k in CV_REFINE] + ["apriltag3"]
     print(f"{'photo':18s} " + " ".join(f"{n:>20s}" for n in names))
     for photo, fam in photos.items():
         gray = cv2.imread(str(REAL / photo), cv2.IMREAD_GRAYSCALE)
         res: dict[str, dict[int, np.ndarray] | None] = {}
         t0 = time.perf_counter()
-        res["gtrig"] = {d.id: d.corners_px for d in MarkerDetector(fam).detect(gray)}
+        tone = declared_tone(REAL / photo)
+        res["gtrig"] = {d.id: d.corners_px for d in MarkerDetector(fam, params=DetectorParams(tone=tone)).detect(gray)}
         t_g = time.perf_counter() - t0
-        res["gtrig srgb"] = {d.id: d.corners_px
-                             for d in MarkerDetector(fam, params=DetectorParams(tone="srgb")).detect(gray)}
+        res["gtrig linear"] = {d.id: d.corners_px
+                               for d in MarkerDetector(fam, params=DetectorParams(tone="linear")).detect(gray)}
         d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_6X6_250 if fam == "aruco_6x6_250"
                                               else cv2.aruco.DICT_APRILTAG_36h11)
         t_cv = 0.0

@@ -71,8 +71,12 @@ def detect(
     debug: Annotated[Path | None, typer.Option(
         "--debug", help="Folder for one PNG per image: the detections and every rejected candidate with the "
         "stage and reason it was dropped.")] = None,
+    tone: Annotated[str, typer.Option(
+        "--tone", help="How the images store light: auto (as each file declares: JPEG and PNGs with an sRGB "
+        "chunk sRGB, others linear), linear (machine-vision cameras) or srgb (phones, webcams).")] = "auto",
 ) -> None:
     """Detect markers with sub-pixel corners and their covariances; write det.json."""
+    import dataclasses
     import json
 
     import cv2
@@ -82,9 +86,12 @@ def detect(
     from gtrig.errors import FormatError, InputError
     from gtrig.io.atomic import atomic_write_text
     from gtrig.io.frames import check_image_size
+    from gtrig.io.imagetone import declared_tone
     from gtrig.markers.detect import DetectorParams, MarkerDetector
     from gtrig.markers.detect.blurred import BlurredParams
 
+    if tone not in ("auto", "linear", "srgb"):
+        raise InputError(f"--tone {tone!r}: choose auto, linear or srgb")
     files = _image_files(inputs)
     checks.outputs([*files, camera], [out])
     if debug is not None:
@@ -97,8 +104,8 @@ def detect(
 
         cam = read_cam_yaml(camera)
         K, dist, size = cam.camera_matrix, cam.dist_coeffs, cam.image_size
-    params = None if blurred else DetectorParams(blurred=BlurredParams(enabled=False))
-    det = MarkerDetector(family, K, dist, params)
+    base = DetectorParams() if blurred else DetectorParams(blurred=BlurredParams(enabled=False))
+    detectors: dict[str, MarkerDetector] = {}  # one per tone: the undistortion maps are set up once
     images = []
     debug_files: list[tuple[Path, bytes]] = []
     n_det = 0
@@ -111,7 +118,10 @@ def detect(
             raise InputError(f"{f}: {img.shape[1]} x {img.shape[0]} px but {camera} is for "
                              f"{size[0]} x {size[1]}")
         trace: list | None = [] if debug is not None else None
-        dets = det.detect(img, trace)
+        t = declared_tone(f) if tone == "auto" else tone
+        if t not in detectors:
+            detectors[t] = MarkerDetector(family, K, dist, dataclasses.replace(base, tone=t))
+        dets = detectors[t].detect(img, trace)
         if debug is not None:
             from gtrig.markers.detect import _to_gray
             from gtrig.markers.detect.debug import debug_image
@@ -120,7 +130,7 @@ def detect(
             if ok:
                 debug_files.append((debug / f"{f.stem}.debug.png", buf.tobytes()))
         n_det += len(dets)
-        images.append({"file": str(f), "detections": [d.to_json() for d in dets]})
+        images.append({"file": str(f), "tone": t, "detections": [d.to_json() for d in dets]})
     doc = {"family": family.value, "camera": None if camera is None else str(camera), "images": images}
     atomic_write_text(out, json.dumps(doc, indent=1) + "\n")
     if debug is not None:

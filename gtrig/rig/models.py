@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import re
 from enum import StrEnum
-from typing import Annotated, Self
+from typing import Annotated, Literal, Self
 
 import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -134,6 +134,11 @@ class Camera(_Strict):
     #: standard deviation of the image time stamps about the true mid-exposure instants (trigger and
     #: transfer jitter), seconds; GTvision adds the motion it hides to every moving pose's covariance
     stamp_sigma_s: float = Field(default=0.0, ge=0, le=1.0)
+    #: how the camera's image files store light, for the marker detector's edge fits: ``"auto"`` as
+    #: each file declares it (JPEG and PNGs with an sRGB chunk: sRGB; others linear,
+    #: :func:`gtrig.io.imagetone.declared_tone`), ``"linear"`` (machine-vision cameras) or ``"srgb"``
+    #: (phones, webcams, a video's frames from such a camera)
+    tone: Literal["auto", "linear", "srgb"] = "auto"
     #: covariance of ``T_world_cam`` as calibrated: the optical centre's move (world x, y, z, m), then
     #: the rotation ``R_world_cam <- Exp(dphi) R_world_cam`` (about world x, y, z, rad), optionally
     #: followed by the first n lens parameters of :data:`LENS_PARAMETERS` (px, unitless), jointly:

@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from gtrig.errors import InputError
+from gtrig.io.imagetone import DeclaredTone as Tone
 from gtrig.rig.models import MarkerFamily, Rig
 from gtrig.vision.observations import CameraGeometry, MarkerView, views_from_detections
 
@@ -25,7 +26,7 @@ log = logging.getLogger(__name__)
 #: Corner sigma assumed for ArUco's subpixel corners, which come without a covariance, px.
 ARUCO_SIGMA_PX = 0.5
 
-DetectFn = Callable[[np.ndarray, CameraGeometry], list[MarkerView]]
+DetectFn = Callable[[np.ndarray, CameraGeometry, Tone], list[MarkerView]]
 
 
 @dataclass(frozen=True)
@@ -70,8 +71,8 @@ class ArucoDetector:
         self._detector = cv2.aruco.ArucoDetector(dictionary, params)
         self.sigma_px = float(sigma_px)
 
-    def __call__(self, image: np.ndarray, camera: CameraGeometry) -> list[MarkerView]:
-        corners, ids, _ = self._detector.detectMarkers(image)
+    def __call__(self, image: np.ndarray, camera: CameraGeometry, file_tone: Tone = "linear") -> list[MarkerView]:
+        corners, ids, _ = self._detector.detectMarkers(image)  # gradient-based corners: no tone needed
         if ids is None:
             return []
         cov = np.tile(np.eye(2) * self.sigma_px**2, (4, 1, 1))
@@ -94,12 +95,20 @@ class GtrigDetector:
         self.family = fams.pop()
         self.ids = {m.id for m in rig.robot.markers}
         self._cls = detector_class
-        self._per_camera: dict[str, object] = {}  # one detector per camera (its undistortion set up once)
+        self._tone = {c.name: c.tone for c in rig.cameras}
+        # one detector per camera and tone (its undistortion set up once)
+        self._per_camera: dict[tuple[str, str], object] = {}
+        self._params = getattr(importlib.import_module(detector_class.__module__), "DetectorParams", None)
 
-    def __call__(self, image: np.ndarray, camera: CameraGeometry) -> list[MarkerView]:
-        det = self._per_camera.get(camera.name)
+    def __call__(self, image: np.ndarray, camera: CameraGeometry, file_tone: Tone = "linear") -> list[MarkerView]:
+        """The markers of ``image``, a frame of ``camera``; ``file_tone`` is how its file declares its
+        samples (:func:`gtrig.io.imagetone.declared_tone`), used where the rig's camera says ``tone: auto``."""
+        tone = self._tone.get(camera.name, "auto")
+        tone = file_tone if tone == "auto" else tone
+        det = self._per_camera.get((camera.name, tone))
         if det is None:
-            det = self._per_camera[camera.name] = self._cls(self.family, camera.K, camera.dist)
+            args = () if self._params is None else (self._params(tone=tone),)
+            det = self._per_camera[(camera.name, tone)] = self._cls(self.family, camera.K, camera.dist, *args)
         return views_from_detections(camera.name, det.detect(image), self.ids)  # type: ignore[attr-defined]
 
 

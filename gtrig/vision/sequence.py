@@ -53,6 +53,7 @@ from scipy.spatial.transform import Rotation
 
 from gtrig.errors import FormatError, InputError
 from gtrig.io.frames import FrameIndex, read_frame_index, read_image
+from gtrig.io.imagetone import declared_tone
 from gtrig.io.tum import Trajectory
 from gtrig.kinematics import pose_velocities  # moved to the core; re-exported for its callers
 from gtrig.rig.load import rig_to_dict
@@ -427,9 +428,11 @@ def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: 
     st = _state(ctx)
     cam = st["model"].cameras[camera]
     out = []
+    # one camera's files share a format: the first one says how they store light (gtrig.io.imagetone)
+    tone = declared_tone(paths[0]) if paths else "linear"
     for i, path in zip(rows, paths, strict=True):
         img = read_image(path)  # an image file or a video's frame
-        out.append([int(i), _views_to_json(st["detect"](img, cam))])
+        out.append([int(i), _views_to_json(st["detect"](img, cam, tone))])
     return out
 
 

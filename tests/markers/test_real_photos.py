@@ -1,7 +1,9 @@
 """The detector on real photos (../shared/data/markers_real): no exception, recall at least OpenCV's
 ArucoDetector (default parameters, run here on the same image), never a wrong ID, corners that agree
-with OpenCV's, and, on the ChArUco photos, a lower residual of the known board fitted through the
-calibrated lens than any of OpenCV's corner refinements."""
+with OpenCV's, and a lower residual of the known layout fitted to the corners than any of OpenCV's corner
+refinements: the ChArUco board through the calibrated lens, and the phone photo's printed grid of 40
+tags. The detector reads each photo with the tone its file declares, as ``gtrig markers detect`` does
+(JPEG: sRGB, :mod:`gtrig.io.imagetone`)."""
 
 from __future__ import annotations
 
@@ -11,8 +13,9 @@ import cv2
 import numpy as np
 import pytest
 
-from gtrig.markers.detect import MarkerDetector
-from gtrig.markers.detect.boardfit import charuco_marker_corners, pose_fit_rms
+from gtrig.io.imagetone import declared_tone
+from gtrig.markers.detect import DetectorParams, MarkerDetector
+from gtrig.markers.detect.boardfit import charuco_marker_corners, grid_fit_rms, grid_local_rms, pose_fit_rms
 
 REAL = Path(__file__).parents[2] / ".." / "shared" / "data" / "markers_real"
 pytestmark = pytest.mark.skipif(not REAL.is_dir(), reason="../shared/data/markers_real is not beside the repo")
@@ -52,7 +55,7 @@ def results() -> dict[str, tuple[dict[int, np.ndarray], dict[int, np.ndarray], n
     out = {}
     for name, (family, dictionary, _) in PHOTOS.items():
         gray = cv2.imread(str(REAL / name), cv2.IMREAD_GRAYSCALE)
-        dets = MarkerDetector(family).detect(gray)
+        dets = MarkerDetector(family, params=DetectorParams(tone=declared_tone(REAL / name))).detect(gray)
         ids = [d.id for d in dets]
         assert len(ids) == len(set(ids)), f"{name}: an ID detected twice"
         out[name] = ({d.id: d.corners_px for d in dets}, _opencv(gray, dictionary), gray)
@@ -66,16 +69,21 @@ def test_recall_at_least_opencv_and_no_wrong_id(results, name: str) -> None:
     assert set(ours) <= printed, f"{name}: wrong IDs {sorted(set(ours) - printed)}"
     assert len(ours) >= len(theirs), f"{name}: gtrig {len(ours)} markers, OpenCV {len(theirs)}"
     assert set(theirs) <= set(ours), f"{name}: OpenCV finds {sorted(set(theirs) - set(ours))}, gtrig does not"
-    # same markers at the same places, corners in the same (printed) order
+    # same markers at the same places, corners in the same (printed) order: within 2.5 px of one of
+    # OpenCV's refinements (they disagree among themselves by up to 2.4 px on tagtest.jpg's ID 9, a
+    # 36 px tag on a shaded face seen edge-on); a wrong order or a wrong quad is a side away
+    gray = results[name][2]
+    refined = [_opencv(gray, PHOTOS[name][1], r) for r in REFINEMENTS]
     for mid in set(ours) & set(theirs):
         side = np.linalg.norm(np.diff(theirs[mid], axis=0), axis=1).mean()
-        assert np.abs(ours[mid] - theirs[mid]).max() < max(2.5, 0.02 * side), f"{name} id {mid}"
+        off = min(np.abs(ours[mid] - r[mid]).max() for r in refined if mid in r)
+        assert off < max(2.5, 0.02 * side), f"{name} id {mid}: {off:.2f} px from every OpenCV refinement"
 
 
 @pytest.mark.parametrize("name", [n for n in PHOTOS if n.startswith("img_")])
 def test_charuco_board_fit_lower_than_every_opencv_refinement(results, name: str) -> None:
     """One planar pose per photo through the tutorial's lens model: the RMS residual bounds the
-    corner error; gtrig's (0.32-0.51 px on these photos) is below OpenCV's best refinement
+    corner error; gtrig's (0.29-0.48 px on these photos, in light) is below OpenCV's best refinement
     (APRILTAG's, 0.35-0.58 px; SUBPIX 0.78-0.95 px)."""
     ours, _, gray = results[name]
     ours_rms = pose_fit_rms(ours, BOARD, K_CHARUCO, DIST_CHARUCO)
@@ -83,6 +91,25 @@ def test_charuco_board_fit_lower_than_every_opencv_refinement(results, name: str
               for r in REFINEMENTS}
     assert np.isfinite(ours_rms) and ours_rms < 0.6
     assert ours_rms < min(theirs.values()), f"{name}: gtrig {ours_rms:.3f} px, OpenCV {theirs}"
+
+
+def test_grid_photo_fit_lower_than_every_opencv_refinement(results) -> None:
+    """The 12 MP phone photo of AprilTagGrid1to40 (8 columns of 5 tags, ID 1 + 5 column + row): the
+    whole grid's homography with two radial terms, and one homography per 2 x 2 block of tags (which
+    leaves out most of the sheet's unflatness). Fitted in light (the file is a JPEG: sRGB), gtrig's
+    corners leave less than every OpenCV refinement in both (1.44 / 0.68 px against SUBPIX's 1.49 /
+    0.73 px, the best of OpenCV's, with OpenCV 5.1); fitted in the stored levels they did not (1.55 /
+    0.77 px): the phone's tone curve moves a blurred edge's midpoint into the black."""
+    ours, _, gray = results["taggridphoto.jpg"]
+    grid = {i: ((i - 1) // 5, (i - 1) % 5) for i in range(1, 41)}
+    size = (gray.shape[1], gray.shape[0])
+    assert len(ours) == 40
+    theirs = {r: _opencv(gray, "DICT_APRILTAG_36h11", r) for r in REFINEMENTS}
+    for name, fit in (("whole grid", lambda c: grid_fit_rms(c, grid, size)),
+                      ("2 x 2 blocks", lambda c: grid_local_rms(c, grid))):
+        mine = fit(ours)
+        best = {r: fit(c) for r, c in theirs.items()}
+        assert np.isfinite(mine) and mine < min(best.values()), f"{name}: gtrig {mine:.3f} px, OpenCV {best}"
 
 
 def test_board_fit_detects_a_displaced_corner() -> None:
@@ -112,6 +139,8 @@ def test_scaled_grid_photo_no_crash() -> None:
     ("image_320_240_8_marker_id_simple_nr321.png", "artoolkitplus_simple", 321),
 ])
 def test_artoolkitplus_photos(name: str, family: str, mid: int) -> None:
-    """ARToolKitPlus' own sample photos read as their IDs (BCH: thin border), and nothing else."""
+    """ARToolKitPlus' own sample photos read as their IDs (BCH: thin border), and nothing else, in
+    either tone."""
     gray = cv2.imread(str(REAL / name), cv2.IMREAD_GRAYSCALE)
-    assert [d.id for d in MarkerDetector(family).detect(gray)] == [mid]
+    for tone in ("linear", "srgb"):
+        assert [d.id for d in MarkerDetector(family, params=DetectorParams(tone=tone)).detect(gray)] == [mid]

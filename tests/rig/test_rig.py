@@ -97,6 +97,7 @@ INVALID = [
      ["cameras[0]", "principal point"]),
     ("unknown marker family", ("robot", "markers", 0, "family"), "qr", ["robot.markers[0].family"]),
     ("duplicate camera name", ("cameras", 1, "name"), "cam0", ["cameras", "duplicate name 'cam0'"]),
+    ("unknown tone curve", ("cameras", 2, "tone"), "gamma22", ["cameras[2].tone"]),
     ("negative focal length", ("cameras", 0, "camera_matrix"), [[-1500, 0, 512], [0, 1500, 384], [0, 0, 1]],
      ["cameras[0]", "focal lengths"]),
     ("pose covariance 5 x 5", ("cameras", 0, "pose_cov"), [[1e-6] * 5] * 5, ["cameras[0].pose_cov"]),

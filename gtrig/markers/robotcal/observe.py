@@ -125,12 +125,13 @@ def detect_views(files: Sequence[str | os.PathLike[str]], camera: CameraIntrinsi
     views : every view of a known marker, in file order.
     unknown : {ID: count} of decoded markers that are not in ``markers`` (ignored; reported).
     """
-    from gtrig.markers.detect import MarkerDetector
+    from gtrig.io.imagetone import declared_tone
+    from gtrig.markers.detect import DetectorParams, MarkerDetector
 
     by_family: dict[MarkerFamily, set[int]] = {}
     for m in markers:
         by_family.setdefault(MarkerFamily(m.family), set()).add(m.id)
-    detectors = {f: MarkerDetector(f, camera.camera_matrix, camera.dist_coeffs) for f in by_family}
+    detectors: dict[tuple[MarkerFamily, str], MarkerDetector] = {}  # per family and tone, made once
     views: list[View] = []
     unknown: dict[int, int] = {}
     w, h = camera.image_size
@@ -141,7 +142,12 @@ def detect_views(files: Sequence[str | os.PathLike[str]], camera: CameraIntrinsi
             raise FormatError(f"{path}: not a readable image")
         if (img.shape[1], img.shape[0]) != (w, h):
             raise InputError(f"{path}: {img.shape[1]} x {img.shape[0]} px but the camera file is for {w} x {h}")
-        for fam, det in detectors.items():
+        tone = declared_tone(path)  # hand-held photos: a phone's JPEGs store light through sRGB's curve
+        for fam in by_family:
+            det = detectors.get((fam, tone))
+            if det is None:
+                det = detectors[(fam, tone)] = MarkerDetector(fam, camera.camera_matrix, camera.dist_coeffs,
+                                                              DetectorParams(tone=tone))
             dets = det.detect(img)
             seen = [d.id for d in dets]
             for d in dets:
