@@ -251,3 +251,45 @@ def render(
         ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
         out = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
     return out, truths
+
+
+def disk_psf(radius_px: float, ss: int = 8) -> NDArray[np.float64]:
+    """A defocus point-spread function: a uniform disk of ``radius_px`` image pixels, integrated over
+    each pixel (``ss`` x supersampled), summing to 1; (k, k), k odd. Unlike a Gaussian it has a hard
+    rim and zeros in its transfer function."""
+    n = 2 * int(np.ceil(radius_px)) + 1
+    y, x = (np.mgrid[0:n * ss, 0:n * ss] + 0.5) / ss - n / 2.0
+    k = cv2.resize((x * x + y * y <= radius_px * radius_px).astype(np.float64), (n, n), interpolation=cv2.INTER_AREA)
+    return k / k.sum()
+
+
+def motion_psf(length_px: float, angle_rad: float, ss: int = 8) -> NDArray[np.float64]:
+    """A linear motion blur of ``length_px`` image pixels along ``angle_rad`` (from the x axis), one pixel
+    wide, integrated over each pixel (``ss`` x supersampled), summing to 1; (k, k), k odd."""
+    n = int(np.ceil(length_px)) + 3
+    n += 1 - n % 2
+    y, x = (np.mgrid[0:n * ss, 0:n * ss] + 0.5) / ss - n / 2.0
+    along = x * np.cos(angle_rad) + y * np.sin(angle_rad)
+    across = -x * np.sin(angle_rad) + y * np.cos(angle_rad)
+    line = ((np.abs(along) <= length_px / 2.0) & (np.abs(across) <= 0.5)).astype(np.float64)
+    k = cv2.resize(line, (n, n), interpolation=cv2.INTER_AREA)
+    return k / k.sum()
+
+
+def psf_scene(rng: np.random.Generator, psf: str, side: float, family: MarkerFamily | str = "apriltag_36h11",
+              shape: tuple[int, int] = (768, 1024), noise: float = 3.0) -> tuple[NDArray[np.uint8], list[SynthMarker]]:
+    """Three markers of about ``side`` px (IDs drawn from 0-586), tilted up to 50 deg, on clutter, the
+    sharp 8-bit scene then blurred by ``psf`` ("disk R": :func:`disk_psf`, "motion L": :func:`motion_psf`
+    along a random direction; px) with noise of SD ``noise`` added: optics that are not Gaussian, for
+    ``tests/markers/test_psf.py`` and ``bench/markers.py --psf``."""
+    kind, size = psf.split()
+    markers = []
+    for c, mid in zip([(220, 250), (520, 520), (800, 260)], rng.choice(587, 3, replace=False), strict=True):
+        H = homography_from_pose(side, (c[0] + rng.uniform(-40, 40), c[1] + rng.uniform(-40, 40)),
+                                 rng.uniform(0, 50), rng.uniform(0, 360), rng.uniform(0, 360))
+        markers.append((MarkerFamily(family), int(mid), H))
+    bg = clutter_background(shape, rng, n_shapes=40)
+    sharp, truths = render(shape, markers, blur_px=0.0, noise=0.0, background=bg, rng=rng)
+    k = disk_psf(float(size)) if kind == "disk" else motion_psf(float(size), rng.uniform(0, np.pi))
+    img = cv2.filter2D(sharp.astype(np.float64), -1, k, borderType=cv2.BORDER_REFLECT) + rng.normal(0, noise, shape)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8), truths

@@ -28,6 +28,8 @@ Corners are in OpenCV's pixel convention (pixel centres at integer coordinates) 
 from __future__ import annotations
 
 import dataclasses
+import functools
+import math
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Literal
@@ -53,14 +55,14 @@ from gtrig.markers.detect.edges import (
     white_extent,
 )
 from gtrig.markers.detect.tone import Tone, to_levels, to_light
-from gtrig.markers.families import _codebook, decode_batch, family_spec, marker_cells
+from gtrig.markers.families import FamilySpec, _codebook, decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily
 
 __all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", "Rejection", "detect_markers"]
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 14
+DETECTOR_VERSION = 15
 
 #: how far beyond the outer band (blur sigmas) :func:`.edges.white_extent` looks for the paper's end:
 #: with the band ending 1.9 sigma before the paper (a 3 sigma + 5 px margin under the 5 px band) the
@@ -171,6 +173,9 @@ class DetectorParams:
         edge fits are split between two threads (:mod:`._threads`); the output is the same. OpenCV's own
         pool is held to one thread during a detection (:func:`._threads.opencv_one_thread`): these threads
         share the work instead.
+    max_random_decode : a small blurred marker read only through the blur model by the pre-decoder,
+        and not by the second path, keeps at most as many corrected cells as give a random pattern
+        this chance of decoding (36h11: 4 cells; families that correct one cell: 1).
     tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored
         levels back to light, where the blurred-step model holds.
@@ -193,6 +198,7 @@ class DetectorParams:
     unblur: bool = True
     blurred: BlurredParams = field(default_factory=BlurredParams)
     tone: Tone = "linear"
+    max_random_decode: float = 0.005
 
 
 class MarkerDetector:
@@ -400,13 +406,19 @@ class MarkerDetector:
         """The first path's detections ``dets`` with the second path's on its candidates ``cands``
         (read, if given, from ``reads``: :meth:`_blurred_ahead`; ``jobs`` receives the helper's)."""
         # markers read only through the blur model in the pre-decoder are small and blurred: the second
-        # path, whose model is made for them, reads them too, and its reading replaces the first's
+        # path, whose model is made for them, reads them too, and its reading replaces the first's at
+        # that place whatever ID it gives (two IDs at one place cannot both be right: under a defocus
+        # disk a 20 px tag's pre-decoder reading came out as another ID, 5 cells corrected)
         prov = [d for d in dets if id(d) in self._provisional]
         sure = [d for d in dets if id(d) not in self._provisional]
         blurred = self._detect_blurred(gray, cands, sure, trace, reads, jobs)
+        # one the second path does not read either keeps only as many corrected cells as leave a random
+        # pattern little chance to decode (:func:`_unconfirmed_max_hamming`; a clutter glyph, a black
+        # square with two white blobs, read as 36h11's ID 572 with 5 cells corrected, session 39)
         keep = [d for d in prov
-                if not any(b.id == d.id and np.linalg.norm(b.corners_px.mean(axis=0) - d.corners_px.mean(axis=0))
-                           < 0.25 * np.sqrt(_area(d.corners_px)) for b in blurred)]
+                if d.hamming <= _unconfirmed_max_hamming(self.spec, self.params.max_random_decode)
+                and not any(np.linalg.norm(b.corners_px.mean(axis=0) - d.corners_px.mean(axis=0))
+                            < 0.25 * np.sqrt(_area(d.corners_px)) for b in blurred)]
         found = sure + keep + blurred
         return _dedupe(found + self._read_misfits(gray, cands, found))
 
@@ -781,6 +793,22 @@ def _outside(quads: list[NDArray[np.float64]], polys: list[NDArray[np.float64]],
     cv_polys = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in polys]
     return [i for i, q in enumerate(quads)
             if all(cv2.pointPolygonTest(p, tuple(map(float, q.mean(axis=0))), False) < 0 for p in cv_polys)]
+
+
+@functools.lru_cache(maxsize=32)
+def _unconfirmed_max_hamming(spec: FamilySpec, max_rate: float) -> int:
+    """The most corrected cells (at most the family's correction) at which a random pattern of the
+    ``d^2`` data cells decodes to one of the family's codes, in any of 4 rotations, with a probability
+    of at most ``max_rate``: ``4 n_ids sum_k<=h C(d^2, k) / 2^(d^2)``. AprilTag 36h11 (587 IDs, 36 cells):
+    5 cells 1.5 %, 4 cells 0.23 %; ARToolKitPlus simple (512 IDs, correction 1): 1 cell, 1e-6."""
+    n = spec.data_cells**2
+    h, ball = 0, 1
+    while h < spec.max_correction:
+        nxt = ball + math.comb(n, h + 1)
+        if 4 * spec.n_ids * nxt / 2.0**n > max_rate:
+            break
+        h, ball = h + 1, nxt
+    return h
 
 
 def _dedupe(dets: list[Detection]) -> list[Detection]:

@@ -147,6 +147,12 @@ class BlurredParams:
     refit_margin : runner-up codes within this margin of the best, at its geometry, are refitted too.
     code_iterations : Gauss-Newton iterations of a code's own geometry fit.
     min_contrast : least white - black difference, grey levels.
+    max_blur_cells : largest fitted blur (SD), in cells of the fitted square. A pattern of alternate
+        cells keeps ``exp(-pi^2 b^2 / 2)`` of its contrast through a Gaussian of ``b`` cells: 4 % at 0.8
+        (the quick bench's 20 px tags at blur 2 px, read), 0.7 % at 1, 0.02 % at 1.3, where no cell can
+        be told from its neighbour under the noise and a code that wins the ranking was made by the
+        clutter's shape or by a non-Gaussian blur (a defocus disk of 3 px on a 20 px tag read as
+        another ID, an 11 px square at blur 1.8 px read on clutter: an independent render, session 39).
     max_shift_px : largest move of a corner from the candidate to the fit.
     subsample_px, screen_px : about this many pixels (at least) serve the fit with free cells and the
         start screen before it; the codes' fits use every pixel.
@@ -202,6 +208,7 @@ class BlurredParams:
     refit_margin: float = 400.0
     code_iterations: int = 4
     min_contrast: float = 12.0
+    max_blur_cells: float = 1.0
     max_shift_px: float = 4.0
     iterations: int = 3
     subsample_px: int = 200
@@ -609,8 +616,10 @@ def _read_codes(px: NDArray[np.float64], I: NDArray[np.float64], quad: NDArray[n
     margin = (min(rest) - sse_b) / s2
     strict = excess <= max(max_excess, params.excess_share * margin)
     # the excess is a misfit spread over the marker where the free cells read as the code itself
+    cell_px = float(np.linalg.norm(qb - np.roll(qb, -1, axis=0), axis=1).mean()) / n
     ok = ((strict or _cells_agree(cells, Wc, best, params)) and margin >= params.min_margin
-          and cb[1] >= params.min_contrast and np.abs(qb - quad).max() <= params.max_shift_px)
+          and cb[1] >= params.min_contrast and np.abs(qb - quad).max() <= params.max_shift_px
+          and sb <= params.max_blur_cells * cell_px)
     log.debug("blurred candidate%s: code %d, residual SD %.2f, excess %.0f, margin %.0f -> %s%s",
               "" if light is None else " (lit)", best, np.sqrt(s2), excess, margin, ok, "" if strict else " (cells)")
     if not ok:
