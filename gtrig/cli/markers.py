@@ -78,6 +78,7 @@ def detect(
     """Detect markers with sub-pixel corners and their covariances; write det.json."""
     import dataclasses
     import json
+    from typing import cast
 
     import cv2
 
@@ -86,7 +87,7 @@ def detect(
     from gtrig.errors import FormatError, InputError
     from gtrig.io.atomic import atomic_write_text
     from gtrig.io.frames import check_image_size
-    from gtrig.io.imagetone import declared_tone
+    from gtrig.io.imagetone import DeclaredTone, declared_tone
     from gtrig.markers.detect import DetectorParams, MarkerDetector
     from gtrig.markers.detect.blurred import BlurredParams
 
@@ -105,7 +106,7 @@ def detect(
         cam = read_cam_yaml(camera)
         K, dist, size = cam.camera_matrix, cam.dist_coeffs, cam.image_size
     base = DetectorParams() if blurred else DetectorParams(blurred=BlurredParams(enabled=False))
-    detectors: dict[str, MarkerDetector] = {}  # one per tone: the undistortion maps are set up once
+    detectors: dict[DeclaredTone, MarkerDetector] = {}  # one per tone: the undistortion maps are set up once
     images = []
     debug_files: list[tuple[Path, bytes]] = []
     n_det = 0
@@ -118,7 +119,7 @@ def detect(
             raise InputError(f"{f}: {img.shape[1]} x {img.shape[0]} px but {camera} is for "
                              f"{size[0]} x {size[1]}")
         trace: list | None = [] if debug is not None else None
-        t = declared_tone(f) if tone == "auto" else tone
+        t: DeclaredTone = declared_tone(f) if tone == "auto" else cast(DeclaredTone, tone)  # checked above
         if t not in detectors:
             detectors[t] = MarkerDetector(family, K, dist, dataclasses.replace(base, tone=t))
         dets = detectors[t].detect(img, trace)

@@ -151,8 +151,8 @@ class BlurredParams:
         cells keeps ``exp(-pi^2 b^2 / 2)`` of its contrast through a Gaussian of ``b`` cells: 4 % at 0.8
         (the quick bench's 20 px tags at blur 2 px, read), 0.7 % at 1, 0.02 % at 1.3, where no cell can
         be told from its neighbour under the noise and a code that wins the ranking was made by the
-        clutter's shape or by a non-Gaussian blur (a defocus disk of 3 px on a 20 px tag read as
-        another ID, an 11 px square at blur 1.8 px read on clutter: an independent render, session 39).
+        clutter's shape (an 11 px square on clutter under a 2 px defocus disk, fitted blur 1.8 px, read as
+        ID 489: ``tests/markers/test_psf.py``, session 39).
     max_shift_px : largest move of a corner from the candidate to the fit.
     subsample_px, screen_px : about this many pixels (at least) serve the fit with free cells and the
         start screen before it; the codes' fits use every pixel.
