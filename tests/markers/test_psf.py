@@ -3,7 +3,8 @@ whole scene (gtrig.markers.synth.disk_psf, motion_psf), on the bench's cluttered
 models assume a Gaussian blur; where a marker's cells are lost in such a blur it must read nothing,
 never another ID, and a clutter glyph must not read as a marker (session 39: 3 wrong IDs in 360 markers
 before; the second path's read of a square whose blur exceeds a cell, and the pre-decoder's unconfirmed
-blur-model reads at the family's full correction)."""
+blur-model reads at the family's full correction; session 40: a 20 px tag smeared 6 px read as another
+ID with 4 cells corrected, which the solved cells' soft margin refuses, DetectorParams.min_soft_margin)."""
 
 from __future__ import annotations
 
@@ -38,17 +39,9 @@ def outcome() -> tuple[dict[str, list[int]], list[tuple[str, int, int]]]:
     return found, wrong
 
 
-def test_no_wrong_id_under_disk_blur_and_short_motion(outcome) -> None:
+def test_no_wrong_id_under_disk_or_motion_blur(outcome) -> None:
     found, wrong = outcome
-    assert not [w for w in wrong if w[0] != "motion 6"], wrong
+    assert not wrong, wrong
     # where the cells survive the blur (a disk of up to 2 px, motion of 3 px), every marker of 30 px and up
     for psf in ("disk 1", "disk 2", "motion 3"):
         assert found[psf][0] == found[psf][1], (psf, found[psf])
-
-
-@pytest.mark.xfail(strict=True, reason="known: a 20 px tag smeared 6 px by motion (2.4 cells) is read as "
-                   "another ID with 4 cells corrected. A box streak longer than the period of alternate cells "
-                   "inverts them, which the Gaussian cell model cannot see; the edges' blurs do not tell a "
-                   "diagonal streak (all four edges blurred alike) from defocus")
-def test_no_wrong_id_under_long_motion_blur(outcome) -> None:
-    assert not [w for w in outcome[1] if w[0] == "motion 6"], outcome[1]

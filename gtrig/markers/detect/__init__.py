@@ -43,7 +43,7 @@ from gtrig.markers.detect import _blas, _threads
 from gtrig.markers.detect.blurred import BlurredParams, find_blurred_candidates, image_noise, read_blurred
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
-from gtrig.markers.detect.decode import flat_samples, sample_cells, unblur_cells
+from gtrig.markers.detect.decode import flat_samples, sample_cells, soft_code_margin, unblur_cells
 from gtrig.markers.detect.edges import (
     CLIP_HIGH,
     across_edge,
@@ -62,7 +62,7 @@ __all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", 
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 15
+DETECTOR_VERSION = 16
 
 #: how far beyond the outer band (blur sigmas) :func:`.edges.white_extent` looks for the paper's end:
 #: with the band ending 1.9 sigma before the paper (a 3 sigma + 5 px margin under the 5 px band) the
@@ -176,6 +176,12 @@ class DetectorParams:
     max_random_decode : a small blurred marker read only through the blur model by the pre-decoder,
         and not by the second path, keeps at most as many corrected cells as give a random pattern
         this chance of decoding (36h11: 4 cells; families that correct one cell: 1).
+    min_soft_margin : a reading through the blur model (``unblur``) is kept when its code is the one
+        nearest the solved cells in the least-squares sense and leads the runner-up by at least this
+        many chi-square units of the cells' residual variance (:func:`.decode.soft_code_margin`); 0: off.
+        18 units on 36 cells is a lead of half the best code's residual: true readings on the benches
+        (hard set, non-Gaussian blur) lead by 0.8 of it and more (0.79 on a 13 px tag), the wrong
+        readings of markers whose cells a blur has lost by 0.10-0.32.
     tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored
         levels back to light, where the blurred-step model holds.
@@ -199,6 +205,7 @@ class DetectorParams:
     blurred: BlurredParams = field(default_factory=BlurredParams)
     tone: Tone = "linear"
     max_random_decode: float = 0.005
+    min_soft_margin: float = 18.0
 
 
 class MarkerDetector:
@@ -678,13 +685,21 @@ class MarkerDetector:
                 border_white[blurry] = (w0[:, self._border_mask()] > 0.5).sum(axis=1)
         ids, rot, ham = decode_batch(self.spec.family, data, p.max_hamming)
         good = (ids >= 0) & (border_white <= max(0, n // 4 - 1))
+        soft_bad = np.zeros(len(ids), bool)
+        if p.unblur and p.min_soft_margin > 0 and good.any():
+            # the hard reading must be the code nearest the solved cells, and lead the next code clearly
+            # (:func:`.decode.soft_code_margin`): a 20 px tag smeared 6 px by motion read as another ID
+            # with 4 cells corrected led by 0.1 of its residual, every true reading of the benches by 0.8
+            nearest, lead = soft_code_margin(wls, self._all_codes())
+            soft_bad = good & ((nearest != rot * self.spec.n_ids + ids) | (lead < p.min_soft_margin))
+            good &= ~soft_bad
         fine = cell_px >= np.maximum(4.0, 3.0 * blur)  # cells resolved: their insides must be uniform
         self._flat_mixed(mixed, sub, thr, (ids >= 0) & fine, ids, bits, corners, blur)
         good &= ~fine | (mixed <= max(1, n * n // 20))
         # small, blurred markers: the cells read better through the candidate quad (its corners lie
         # inside the square, away from the blurred border); accept that reading when it is strict
         strict = self.spec.max_correction if p.max_hamming is None else p.max_hamming
-        fallback = ~good & (pre_ham[idx] <= strict) & ~fine
+        fallback = ~good & (pre_ham[idx] <= strict) & ~fine & ~soft_bad
         ids = np.where(fallback, pre_id[idx], ids)
         rot = np.where(fallback, pre_rot[idx], rot)
         ham = np.where(fallback, pre_ham[idx], ham)
@@ -693,6 +708,7 @@ class MarkerDetector:
             Qr = Q[idx] if und is None else und.to_raw(Q[idx].reshape(-1, 2)).reshape(-1, 4, 2)
             for k in np.flatnonzero(~good):
                 why = (f"{border_white[k]} white border cells" if border_white[k] > max(0, n // 4 - 1)
+                       else f"the solved cells do not single out code {ids[k]}" if soft_bad[k]
                        else f"{mixed[k]} cells not uniform" if ids[k] >= 0
                        else f"cells {ham[k]} from the nearest code (> {strict})")
                 trace.append(Rejection(Qr[k].copy(), "decode", why))

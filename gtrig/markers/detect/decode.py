@@ -166,3 +166,39 @@ def unblur_cells(
     lam = 1e-2 * np.trace(A, axis1=1, axis2=2) / (d * d)
     w = np.linalg.solve(A + lam[:, None, None] * np.eye(d * d), rhs[..., None] + lam[:, None, None] * 0.5)
     return w.reshape(Q, d, d)
+
+
+def soft_code_margin(
+    whiteness: NDArray[np.floating], codes: NDArray[np.uint8]
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """The code nearest the solved cells in the least-squares sense, and its lead over the runner-up.
+
+    A hard decoder counts wrong cells and forgets by how much each was wrong; the blur model's cell
+    estimates (:func:`unblur_cells`) keep it. A true marker's cells lie near 0 and 1 and its code's
+    residual is small against the at least ``h_min`` cells that separate it from any other code; where
+    the cells are lost (a motion streak longer than two cells, a defocus disk of most of a cell) they
+    scatter across and beyond [0, 1] and the nearest code leads the next one by little, though its
+    hard reading may still lie within the family's correction.
+
+    Parameters
+    ----------
+    whiteness : (Q, d, d) float, the solved data cells (about 0 black, 1 white), in the quads' orientation.
+    codes : (K, d, d) 0 / 1, every code in each rotation as read in a quad's orientation.
+
+    Returns
+    -------
+    best : (Q,) int, index into ``codes`` of the least sum of squared differences ``D1``.
+    margin : (Q,) float, ``(D2 - D1) / (D1 / d^2)``, the runner-up's excess ``D2 - D1`` in units of the
+        cells' residual variance estimated from the best code's own fit (chi-square units).
+    """
+    w = whiteness.reshape(len(whiteness), -1).astype(np.float64)
+    c = codes.reshape(len(codes), -1).astype(np.float64)
+    # |w - c|^2 = |w|^2 - 2 w.c + |c|^2, one product for every code (4096 ids x 4 rotations for BCH)
+    d2 = (w * w).sum(axis=1)[:, None] - 2.0 * (w @ c.T) + (c * c).sum(axis=1)[None, :]
+    two = np.argpartition(d2, 1, axis=1)[:, :2]
+    pair = np.take_along_axis(d2, two, axis=1)
+    order = np.argsort(pair, axis=1)
+    best = np.take_along_axis(two, order[:, :1], axis=1)[:, 0]
+    d1, d2nd = np.take_along_axis(pair, order, axis=1).T
+    var = np.maximum(d1, 1e-12) / w.shape[1]
+    return best.astype(np.int64), (d2nd - d1) / var
