@@ -54,6 +54,7 @@ from gtrig.markers.detect.edges import (
     trim_outer,
     white_extent,
 )
+from gtrig.markers.detect.shading import read_shaded
 from gtrig.markers.detect.tone import Tone, to_levels, to_light
 from gtrig.markers.families import FamilySpec, _codebook, decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily
@@ -62,7 +63,7 @@ __all__ = ["DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", 
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 16
+DETECTOR_VERSION = 17
 
 #: how far beyond the outer band (blur sigmas) :func:`.edges.white_extent` looks for the paper's end:
 #: with the band ending 1.9 sigma before the paper (a 3 sigma + 5 px margin under the 5 px band) the
@@ -153,7 +154,15 @@ class DetectorParams:
     min_contrast : smallest accepted white - black difference (grey levels).
     max_rel_rms : largest accepted residual RMS / contrast of an edge fit.
     max_corner_shift_px : largest move of a corner from the candidate stage to the refined fit.
-    max_hamming : decoder tolerance (default: the family's).
+    max_hamming : decoder tolerance (default: the family's, capped by ``max_random_rate``).
+    max_random_rate : without an explicit ``max_hamming`` the decoder corrects at most as many cells as
+        leave a random pattern of the data cells this chance of decoding to some code in some rotation
+        (:func:`_unconfirmed_max_hamming`). A family with few data cells cannot afford its full
+        correction: ArUco 4x4_50's one cell lets 5.2 % of random patterns decode, and text does it,
+        letters with a hole ("D", "0", "6") read as IDs 17 and 38 with a cell corrected on renders made
+        apart from the project (issue 16, session 42); 5x5_100's three cells let 3.1 % through. At 2 %
+        4x4_50 reads exact codes (as OpenCV's default ``errorCorrectionRate`` 0.6 of its one bit does),
+        5x5_100 corrects 2 cells, 6x6_250 (0.65 %), AprilTag 36h11 (1.5 %) and the BCH family keep theirs.
     passes : edge-fit passes; the first fits plain steps, the next ones hold the modelled light of the
         marker's corners and data cells fixed (:func:`.edges.marker_context`), which two more passes
         make self-consistent (two passes in all leave 0.06 px RMS where three give 0.04 px).
@@ -182,6 +191,10 @@ class DetectorParams:
         18 units on 36 cells is a lead of half the best code's residual: true readings on the benches
         (hard set, non-Gaussian blur) lead by 0.8 of it and more (0.79 on a 13 px tag), the wrong
         readings of markers whose cells a blur has lost by 0.10-0.32.
+    glare_max_residual : a candidate with resolved cells that the plain reading rejects (white border
+        cells, split cells, no code) is read again against black and white levels that vary smoothly
+        across it (:mod:`.shading`: glare on a glossy print) and kept when every cell lies within this
+        share of the contrast from its colour's level; 0: off.
     tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored
         levels back to light, where the blurred-step model holds.
@@ -196,6 +209,7 @@ class DetectorParams:
     max_rel_rms: float = 0.25
     max_corner_shift_px: float = 4.0
     max_hamming: int | None = None
+    max_random_rate: float = 0.02
     passes: int = 3
     iterations: int = 10
     tol: float = 1e-3
@@ -206,6 +220,7 @@ class DetectorParams:
     tone: Tone = "linear"
     max_random_decode: float = 0.005
     min_soft_margin: float = 18.0
+    glare_max_residual: float = 0.3
 
 
 class MarkerDetector:
@@ -235,6 +250,9 @@ class MarkerDetector:
         # hole area of a marker <= its data area
         inner = (self.spec.data_cells / self.spec.cells) ** 2
         self._hole_frac = min(0.9, inner + 0.1)
+        p = self.params
+        self._max_ham = (_unconfirmed_max_hamming(self.spec, p.max_random_rate) if p.max_hamming is None
+                         else int(p.max_hamming))
 
     def _undistorter(self, shape: tuple[int, int]) -> Undistorter | None:
         if self.K is None or not np.any(self.dist):
@@ -276,7 +294,7 @@ class MarkerDetector:
         v = sample_cells(gray, Q, n, und, ring=1)
         bits, contrast = self._bits(v)
         bmask = self._border_mask()
-        tol = self.spec.max_correction + 2 if self.params.max_hamming is None else self.params.max_hamming + 2
+        tol = self._max_ham + 2
         ids, rot, ham = decode_batch(self.spec.family, bits[:, bc:-bc, bc:-bc], tol)
         # a border cell under a highlight passes the midway level while it stays dark beside its own paper
         # (:meth:`_locally_white`, as the final decoder judges it)
@@ -683,7 +701,7 @@ class MarkerDetector:
                 w0 = unblur_cells(gray, corners[blurry], n, 0, np.clip(blur[blurry], 0.3, p.max_blur_px),
                                   ab[0][blurry], ab[1][blurry], und)
                 border_white[blurry] = (w0[:, self._border_mask()] > 0.5).sum(axis=1)
-        ids, rot, ham = decode_batch(self.spec.family, data, p.max_hamming)
+        ids, rot, ham = decode_batch(self.spec.family, data, self._max_ham)
         good = (ids >= 0) & (border_white <= max(0, n // 4 - 1))
         soft_bad = np.zeros(len(ids), bool)
         if p.unblur and p.min_soft_margin > 0 and good.any():
@@ -696,9 +714,11 @@ class MarkerDetector:
         fine = cell_px >= np.maximum(4.0, 3.0 * blur)  # cells resolved: their insides must be uniform
         self._flat_mixed(mixed, sub, thr, (ids >= 0) & fine, ids, bits, corners, blur)
         good &= ~fine | (mixed <= max(1, n * n // 20))
+        if p.glare_max_residual > 0:
+            self._read_glared(vals, sub, np.flatnonzero(~good & fine & ~soft_bad), ids, rot, ham, good)
         # small, blurred markers: the cells read better through the candidate quad (its corners lie
         # inside the square, away from the blurred border); accept that reading when it is strict
-        strict = self.spec.max_correction if p.max_hamming is None else p.max_hamming
+        strict = self._max_ham
         fallback = ~good & (pre_ham[idx] <= strict) & ~fine & ~soft_bad
         ids = np.where(fallback, pre_id[idx], ids)
         rot = np.where(fallback, pre_rot[idx], rot)
@@ -726,6 +746,25 @@ class MarkerDetector:
                 self._provisional.add(id(out[-1]))
         return out
 
+
+    def _read_glared(self, vals: NDArray[np.float64], sub: NDArray[np.float64], cand: NDArray[np.int64],
+                     ids: NDArray[np.int64], rot: NDArray[np.int64], ham: NDArray[np.int64],
+                     good: NDArray[np.bool_]) -> None:
+        """Read the candidates ``cand`` (indices into the arrays, whose cells are resolved and failed the
+        plain reading) against smoothly varying black and white levels (:mod:`.shading`: glare on the
+        print), and set ``ids``, ``rot``, ``ham`` and ``good`` (:meth:`_detect_sharp`'s working arrays,
+        changed in place) where that reading is a code with a black border and uniform cells."""
+        if not len(cand):
+            return
+        p, n, bc = self.params, self.spec.cells, self.spec.border_cells
+        r = read_shaded(vals[cand], sub[cand], n, bc)
+        i2, r2, h2 = decode_batch(self.spec.family, r.bits[:, bc:-bc, bc:-bc], self._max_ham)
+        border_white = r.bits[:, self._border_mask()].sum(axis=1)
+        ok = ((i2 >= 0) & (border_white <= max(0, n // 4 - 1)) & (r.mixed <= max(1, n * n // 20))
+              & (r.contrast >= p.min_contrast) & (r.rel_residual <= p.glare_max_residual))
+        sel = cand[ok]
+        ids[sel], rot[sel], ham[sel] = i2[ok], r2[ok], h2[ok]
+        good[sel] = True
 
     def _read_misfits(self, gray: NDArray[np.uint8], cands: tuple[list[NDArray[np.float64]], float],
                       found: list[Detection]) -> list[Detection]:

@@ -60,6 +60,10 @@ class CandidateParams:
         extra candidates (BENCHMARKS.md, issue 16, session 29).
     local_offset : how much darker than the local mean (grey levels) a pixel of those masks is; about the
         noise the 3 x 3 median leaves.
+    faint_seeds : seed the further thresholds also with the blobs of a local-contrast mask of the
+        closing's small image (:func:`_faint_seeds`; ``faint_window`` small pixels, ``faint_offset`` grey
+        levels), of sides from ``faint_min_side_px`` up: markers veiled by glare, which leave no blob at
+        the first threshold.
     """
 
     ratio_threshold: float = 0.6
@@ -73,6 +77,10 @@ class CandidateParams:
     smooth: bool = True
     local_windows: tuple[int, ...] = (11,)
     local_offset: float = 3.0
+    faint_seeds: bool = True
+    faint_min_side_px: float = 24.0
+    faint_window: int = 15
+    faint_offset: float = 6.0
 
     def max_side_px(self, shape: tuple[int, ...]) -> float:
         """Largest accepted marker side in an image of ``shape`` (H, W), pixels."""
@@ -94,13 +102,50 @@ def closure_normalised(gray: NDArray[np.uint8], max_side_px: float, scale: int =
 
 def _closing_background(gray: NDArray[np.uint8], max_side_px: float, scale: int) -> NDArray[np.uint8]:
     """The closing of ``gray`` (on an image ``scale`` times smaller), upsampled bilinearly, uint8."""
+    _small, closed = _small_closing(gray, max_side_px, scale)
+    return cv2.resize(closed, (gray.shape[1], gray.shape[0]), interpolation=cv2.INTER_LINEAR)
+
+
+def _small_closing(gray: NDArray[np.uint8], max_side_px: float, scale: int
+                   ) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
+    """``gray`` area-averaged ``scale`` times smaller, and its closing by a square a marker wide."""
     h, w = gray.shape
     sw, sh = max(1, w // scale), max(1, h // scale)
     small = cv2.resize(gray, (sw, sh), interpolation=cv2.INTER_AREA)
     k = int(max_side_px / scale) | 1
     k = max(3, k + 2)
     closed = cv2.morphologyEx(small, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_RECT, (k, k)))
-    return cv2.resize(closed, (w, h), interpolation=cv2.INTER_LINEAR)
+    return np.asarray(small, np.uint8), np.asarray(closed, np.uint8)
+
+
+def _faint_seeds(small: NDArray[np.uint8], closed: NDArray[np.uint8], first: float, scale: int, window: int,
+                 offset: float, min_side_px: float, max_side_px: float) -> list[tuple[int, int, int, int]]:
+    """Boxes ``(x, y, w, h)`` (image pixels) of the blobs of the ``scale`` times smaller image ``small``
+    darker by ``offset`` grey levels than the mean of their ``window`` x ``window`` neighbourhood, of a
+    marker's size and about as filled as one, and with less than a fifth of it darker than ``first`` of
+    the closing ``closed`` (a blob the first threshold sees, it has seeded or explained already; a
+    veiled marker shows there only where the highlight thins out).
+
+    The further thresholds look only where the first left a blob (:func:`_seed_regions`); a marker
+    under a veil of glare, its black lifted to 0.75-0.85 of its paper, leaves none at the first one,
+    and nothing else would look there. On a textured background that ratio is the texture's too, so
+    no ratio of the closing separates the marker, while its black is still darker than the paper
+    around it: a local-contrast mask of the small image shows it, where the texture averages out and
+    tracing costs a sixteenth of the pixels (renders made apart from the project, issue 16, session
+    42: 68-90 px markers that OpenCV's adaptive thresholds find).
+    """
+    mask = cv2.adaptiveThreshold(small, 255, cv2.ADAPTIVE_THRESH_MEAN_C, cv2.THRESH_BINARY_INV, window | 1, offset)
+    n, lab, stats, _c = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    x, y, w, h, area = stats[1:].T.astype(np.int64)
+    lo, hi = min_side_px / scale, max_side_px / scale
+    big, short = np.maximum(w, h), np.minimum(w, h)
+    # a marker's blob: its box a marker wide, not a sliver, and a good part of it dark (holes: white cells)
+    keep = (short >= lo) & (big <= hi) & (big <= 3 * short) & (area >= 0.3 * w * h)
+    if keep.any():
+        dark = cv2.compare(small, cv2.LUT(closed, _ratio_lut(first)), cv2.CMP_LT)
+        keep &= np.bincount(lab.ravel(), weights=(dark.ravel() > 0), minlength=n)[1:] < 0.2 * area
+    return [(int(a) * scale, int(b) * scale, int(c) * scale, int(d) * scale)
+            for a, b, c, d in zip(x[keep], y[keep], w[keep], h[keep], strict=True)]
 
 
 @functools.lru_cache(maxsize=8)
@@ -200,10 +245,12 @@ def find_candidates(
     around the blobs the first one left unexplained (:func:`_seed_regions`): a marker the first
     threshold misses leaves there a blob that failed a test (a thin border broken by the white cells,
     a marker merged with a shadowed floor). Tracing three more masks over the whole image cost a
-    quarter of the detector's time on the bench.
+    quarter of the detector's time on the bench. A marker veiled by glare leaves no such blob: the
+    loosest threshold and the local masks also look around the faint seeds (:func:`_faint_seeds`).
     """
     max_side = params.max_side_px(gray.shape)
-    bg = _closing_background(gray, max_side, params.scale)
+    small, closed = _small_closing(gray, max_side, params.scale)
+    bg = cv2.resize(closed, (gray.shape[1], gray.shape[0]), interpolation=cv2.INTER_LINEAR)
     rejected: list = []
     seeds: list[tuple[int, int, int, int]] = []
     weak: list[NDArray[np.float64]] = []
@@ -211,7 +258,10 @@ def find_candidates(
                            max_hole_fraction, None if trace is None else rejected, seeds=seeds, weak=weak)
     covered = np.zeros(gray.shape, np.uint8)
     more = params.more_thresholds
-    if more and seeds:
+    faint = (_faint_seeds(small, closed, params.ratio_threshold, params.scale, params.faint_window,
+                          params.faint_offset, params.faint_min_side_px, max_side)
+             if more and params.faint_seeds else [])
+    if more and (seeds or faint):
         regions = {looser: _seed_regions(gray.shape, seeds, looser) for looser in (False, True)}
         # squares already found, filled: a blob of a later threshold centred in one is the same marker
         if out:
@@ -223,6 +273,16 @@ def find_candidates(
                 for thr in more for box in regions[thr > params.ratio_threshold][1]]
         jobs += [(_local_contours, (gray, win, params.local_offset, params.smooth, box), regions[True][0])
                  for win in params.local_windows for box in regions[True][1]]
+        # a faint seed (ink lifted towards its paper) can only show at the loosest ratio and in the local
+        # masks; where a seed of the first threshold already lets them look, it adds nothing
+        looked = regions[True][0]
+        faint = [b for b in faint if not (looked[b[1] + b[3] // 2, b[0] + b[2] // 2]
+                                          or covered[b[1] + b[3] // 2, b[0] + b[2] // 2])]
+        if faint:
+            f_region, f_boxes = _seed_regions(gray.shape, faint, True)
+            jobs += [(_contours_at, (gray, bg, max(more), params.smooth, box), f_region) for box in f_boxes]
+            jobs += [(_local_contours, (gray, win, params.local_offset, params.smooth, box), f_region)
+                     for win in params.local_windows for box in f_boxes]
         traced = _threads.ordered_map(_call, [(fn, args) for fn, args, _ in jobs], threads)
         for (_, _, region), contours in zip(jobs, traced, strict=True):
             found = _mask_candidates(contours, params, max_side, max_hole_fraction,
