@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import cv2
@@ -30,6 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "tests" / "markers"))
 import independent_render as ir  # noqa: E402
+from markers import _apriltag3, _run  # noqa: E402  (bench/markers.py: the same detectors' calls)
 
 from gtrig.markers.detect import DetectorParams, MarkerDetector  # noqa: E402
 
@@ -43,28 +43,10 @@ def _detectors(family: str) -> dict[str, object]:
         p = cv2.aruco.DetectorParameters()
         p.cornerRefinementMethod = getattr(cv2.aruco, f"CORNER_REFINE_{name}")
         dets[f"cv2 {name}"] = cv2.aruco.ArucoDetector(d, p)
-    if family == "apriltag_36h11":
-        try:
-            from pupil_apriltags import Detector  # type: ignore[import-not-found]
-
-            dets["apriltag3"] = Detector(families="tag36h11", quad_decimate=1.0, refine_edges=True)
-        except ImportError:
-            pass
+    at3 = _apriltag3() if family == "apriltag_36h11" else None  # one for the run: see markers._apriltag3
+    if at3 is not None:
+        dets["apriltag3"] = at3
     return dets
-
-
-def _run(name: str, det: object, gray: np.ndarray) -> tuple[list[tuple[int, np.ndarray]], float]:
-    t0 = time.perf_counter()
-    if name == "gtrig":
-        out = [(d.id, d.corners_px) for d in det.detect(gray)]  # type: ignore[attr-defined]
-    elif name == "apriltag3":
-        # AprilTag 3: corners from the printed top-right, counter-clockwise, pixel centres at +0.5
-        out = [(r.tag_id, r.corners[[1, 0, 3, 2]] - 0.5) for r in det.detect(gray)]  # type: ignore[attr-defined]
-    else:
-        corners, ids, _ = det.detectMarkers(gray)  # type: ignore[attr-defined]
-        out = [] if ids is None else [(int(i), c.reshape(4, 2).astype(float))
-                                      for i, c in zip(ids.ravel(), corners, strict=True)]
-    return out, (time.perf_counter() - t0) * 1000.0
 
 
 def main() -> None:
@@ -97,11 +79,10 @@ def main() -> None:
                         print(f"  miss: frame {k} id {t.id} side {t.side_px:.1f} {t.psf} {t.blur_px:.2f} "
                               f"bayer {frame.bayer} q {frame.jpeg_quality} {frame.tone}")
         for n, s in scores.items():
-            assert s.found is not None and s.total is not None and s.ms is not None
             cells = " ".join(f"{f:>4d}/{t:<4d}" for f, t in zip(s.found, s.total, strict=True))
             print(f"{fam:15s} {n:13s} {cells} {100 * s.recall(20.0):7.2f} {s.wrong:5d} {s.rms(20.0):7.4f} "
                   f"{np.median(s.ms):6.1f}")
-        g, c = np.median(scores["gtrig"].ms or [0]), np.median(scores["cv2 NONE"].ms or [1])
+        g, c = np.median(scores["gtrig"].ms), np.median(scores["cv2 NONE"].ms)
         print(f"{fam:15s} time gtrig / cv2 NONE: {g / c:.2f}x")
 
 

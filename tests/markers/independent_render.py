@@ -23,7 +23,7 @@ top-left first, clockwise), in pixel coordinates with pixel centres at integers.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -351,27 +351,23 @@ class Score:
     """One detector's tally on rendered frames, by side bin: found, total, wrong, squared corner errors."""
 
     bins: tuple[float, ...] = (0.0, 14.0, 20.0, 40.0, 1e9)
-    found: list[int] | None = None
-    total: list[int] | None = None
-    sq_err: list[list[float]] | None = None
+    found: list[int] = field(init=False)
+    total: list[int] = field(init=False)
+    sq_err: list[list[float]] = field(init=False)
     wrong: int = 0
-    ms: list[float] | None = None
-    wrong_dets: list[tuple[int, float]] | None = None  # (ID, side px) of each wrong detection
+    ms: list[float] = field(default_factory=list)
+    wrong_dets: list[tuple[int, float]] = field(default_factory=list)  # (ID, side px) of each wrong one
 
     def __post_init__(self) -> None:
         n = len(self.bins) - 1
         self.found, self.total = [0] * n, [0] * n
         self.sq_err = [[] for _ in range(n)]
-        self.ms = []
-        self.wrong_dets = []
 
     def bin_of(self, side: float) -> int:
         return int(np.searchsorted(self.bins, side, side="right") - 1)
 
     def add(self, frame: Frame, dets: list[tuple[int, np.ndarray]], ms: float) -> set[int]:
         """Score one frame's detections ((ID, (4, 2) corners) each); the IDs found correctly."""
-        assert self.found is not None and self.total is not None and self.sq_err is not None
-        assert self.ms is not None
         self.ms.append(ms)
         truth = {t.id: t for t in frame.truths}
         ok: set[int] = set()
@@ -382,7 +378,6 @@ class Score:
             off = np.inf if t is None else float(np.max(np.linalg.norm(c - t.corners, axis=1)))
             if t is None or mid in ok or off > max(2.0, 0.25 * t.side_px):
                 self.wrong += 1
-                assert self.wrong_dets is not None
                 self.wrong_dets.append((mid, float(np.sqrt(0.5 * abs(_cross2(c[2] - c[0], c[3] - c[1]))))))
                 continue
             ok.add(mid)
@@ -394,12 +389,10 @@ class Score:
         return ok
 
     def recall(self, lo: float = 0.0) -> float:
-        assert self.found is not None and self.total is not None
         i = self.bin_of(lo)
         tot = sum(self.total[i:])
         return sum(self.found[i:]) / tot if tot else float("nan")
 
     def rms(self, lo: float = 0.0) -> float:
-        assert self.sq_err is not None
         e = [x for row in self.sq_err[self.bin_of(lo):] for x in row]
         return float(np.sqrt(np.mean(e))) if e else float("nan")

@@ -59,8 +59,7 @@ def test_renders_have_the_hard_cases(scores: dict[str, dict[str, ir.Score]]) -> 
 def test_recall_at_least_opencv(scores: dict[str, dict[str, ir.Score]], family: str) -> None:
     s = scores[family]
     g = s["gtrig"]
-    assert g.found is not None
-    best_cv = max(sum(s[f"cv2 {r}"].found or []) for r in REFINE)
+    best_cv = max(sum(s[f"cv2 {r}"].found) for r in REFINE)
     assert sum(g.found) >= best_cv, (family, g.found, best_cv)
 
 
@@ -69,8 +68,8 @@ def test_recall_from_20_px(scores: dict[str, dict[str, ir.Score]]) -> None:
     OpenCV 59-79 %, AprilTag 3 78-89 % on 36h11). The misses are at the limit of what the pixels hold:
     streaks of 3-5 px across 3 px cells, veils of glare that lift the ink to the paper's level."""
     def pooled(name: str) -> float:
-        found = sum(sum((s[name].found or [])[2:]) for s in scores.values())
-        return found / sum(sum((s[name].total or [])[2:]) for s in scores.values())
+        found = sum(sum(s[name].found[2:]) for s in scores.values())
+        return found / sum(sum(s[name].total[2:]) for s in scores.values())
 
     g = pooled("gtrig")
     best_cv = max(pooled(f"cv2 {r}") for r in REFINE)
@@ -87,7 +86,7 @@ def test_4x4_wrong_ids_are_glyphs(scores: dict[str, dict[str, ir.Score]]) -> Non
     ID 17 (a black square with a 2 x 2 white block off its centre), an exact code (4 of 60 frames on the
     bench, seed 0; OpenCV reports none). Nothing else is
     read wrongly, and nothing of 20 px or more."""
-    bad = scores["aruco_4x4_50"]["gtrig"].wrong_dets or []
+    bad = scores["aruco_4x4_50"]["gtrig"].wrong_dets
     assert all(mid == 17 and side < 20.0 for mid, side in bad), bad
 
 
