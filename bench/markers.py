@@ -415,7 +415,10 @@ def _bench_floor(images: list[NDArray[np.uint8]]) -> None:
     cv2.setNumThreads(1)
     gd.fit_edges = timed
     try:
-        passes, cv, total, fit_ms, found = [], [], [], 0.0, 0
+        passes: list[float] = []
+        cv: list[float] = []
+        total: list[float] = []
+        found = 0
         for img in images[:2]:  # compiled kernels and caches warm
             det.detect(img)
             _whole_image_passes(img)
