@@ -311,13 +311,13 @@ def part_gtsam_custom(odo: OdometryLog, tracks: list[PoseTrack]) -> None:
 
 
 def part_seeds(root: Path) -> None:
-    from gtrig.fusion.sync import offset_sigmas
     from gtrig.io.biascov import read_bias_cov
     from gtrig.io.odometry import read_odometry
     from gtrig.io.offsets import read_offsets
     from gtrig.io.posetrack import read_pose_track
     from gtrig.io.tum import read_tum
     from gtrig.pipeline.fusion import BIAS_FILES
+    from gtrig.sync.offset import offset_sigmas
 
     print("## acceptance on simulated recordings (the pipeline's GTvision and GTlaser)")
     print("| seed | source | mean pos (mm) | p95 pos (mm) | max pos (mm) | mean yaw (deg) | NEES/dof | in 95 % (%) |")
@@ -434,11 +434,12 @@ def part_sync(root: Path, lags: tuple[float, ...] = (0.05, 0.3, 2.0)) -> None:
     truth/robot_clock.yaml; cameras are on the GT clock, with per-frame jitter only)."""
     import yaml
 
-    from gtrig.fusion.sensor_sync import recording_returns, sensor_offsets_and_laser_clock
-    from gtrig.fusion.sync import combine_with_laser_clock, estimate_offset, refine_by_fusion
     from gtrig.io.odometry import read_odometry
     from gtrig.io.posetrack import read_pose_track
     from gtrig.rig import load_rig
+    from gtrig.sync.offset import combine_with_laser_clock, estimate_offset, refine_by_fusion
+    from gtrig.sync.returns import recording_returns
+    from gtrig.sync.sensors import sensor_offsets_and_laser_clock
 
     for rec in sorted(root.glob("s*")):
         res, rdir = rec / "results", rec / "recording"
@@ -506,7 +507,7 @@ def _truth_to_odometry(tr, odo: OdometryLog, tracks: dict[str, PoseTrack], odo_o
     """The true trajectory ``tr`` (truth/run.tum), sampled at each source's stamps with its covariances, timed
     against odometry as the source is: what the odometry alone leaves in the offset (no GT clock error can be
     in it)."""
-    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
+    from gtrig.sync.offset import estimate_offset, refine_by_fusion
 
     X = _true_xytheta(tr)
     for name, track in tracks.items():
@@ -526,7 +527,7 @@ def _other_camera_rows(rdir: Path, rig, vis: PoseTrack, las: PoseTrack, ret, sen
     offsets (truth/laser_clocks.yaml), s."""
     from dataclasses import replace
 
-    from gtrig.fusion import sensor_sync as ss
+    from gtrig.sync import sensors as ss
 
     scanners = [e for e in sensors if e.source.startswith("laser/")]
     cam_stamps = ss.camera_frame_stamps(rdir, rig)
@@ -552,11 +553,11 @@ def part_sync_mc(runs: int, duration_s: float = 75.0) -> None:
     """Offsets to odometry on ``runs`` synthetic runs of the simulator's path and odometry model (errors
     drawn per run, slip 2 mm per sqrt(m) and wheel), GTlaser-like white fixes (1.2 mm, 1.2 mrad, 75 Hz)
     on the true clock: the estimator's bias, scatter and coverage against odometry."""
-    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
     from gtrig.sim.floor import Floor
     from gtrig.sim.gtroom import continuous_path
     from gtrig.sim.motion import RobotMotion
     from gtrig.sim.odometry import OdometryErrors, simulate_odometry
+    from gtrig.sync.offset import estimate_offset, refine_by_fusion
 
     st, xyth = continuous_path(duration_s=duration_s)
     motion = RobotMotion(st + 100.0, xyth, Floor.flat())

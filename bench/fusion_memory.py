@@ -1,11 +1,11 @@
 """Peak memory of the two smoothings with odometry against the recording's length (issue 24).
 
 The sync stage's joint camera fit smooths GTvision and GTlaser with odometry
-(:func:`gtrig.fusion.joint_camera_sync.joint_reference`, 1 + C + 3 times a run), and the fusion stage
+(:func:`gtrig.sync.joint_cameras.joint_reference`, 1 + C + 3 times a run), and the fusion stage
 smooths them again (:func:`gtrig.fusion.fuse_tracks`, with the offsets' sigmas and the sources' bias
 covariances, as ``gtrig.pipeline.fusion`` calls it). Both estimate the odometry calibration over the
 whole run: one batch. Here each runs on a synthetic run at a recording's rates
-(``tests/fusion/fusion_synth.py: long_run``: odometry 50 Hz, GTlaser 75 Hz, GTvision ``--vision-hz``),
+(``tests/fusion_synth.py: long_run``: odometry 50 Hz, GTlaser 75 Hz, GTvision ``--vision-hz``),
 each length in a child process of its own, after a one-minute warm-up call (numba's caches, lazy imports),
 measured twice:
 
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tests" / "fusion"))
+sys.path.insert(0, str(REPO / "tests"))
 
 #: the pipeline's two smoothings with odometry, by name
 CALLS = ("joint", "fusion")
@@ -46,7 +46,7 @@ def smoothing(call: str, minutes: float, vision_hz: float, seed: int = 0) -> obj
     from fusion_synth import long_run
 
     from gtrig.fusion import FusionOptions, fuse_tracks
-    from gtrig.fusion.joint_camera_sync import joint_reference
+    from gtrig.sync.joint_cameras import joint_reference
 
     odo, vision, laser = long_run(minutes, vision_hz=vision_hz, seed=seed)
     return _call(call, odo, vision, laser, joint_reference, fuse_tracks, FusionOptions)
@@ -72,7 +72,7 @@ def child(call: str, minutes: float, vision_hz: float) -> dict[str, float]:
     from fusion_synth import long_run
 
     from gtrig.fusion import FusionOptions, fuse_tracks
-    from gtrig.fusion.joint_camera_sync import joint_reference
+    from gtrig.sync.joint_cameras import joint_reference
 
     fns = (joint_reference, fuse_tracks, FusionOptions)
     _call(call, *long_run(1.0, vision_hz=vision_hz, seed=1), *fns)  # warm-up: compiled caches, imports

@@ -222,11 +222,13 @@ def vision_stand_in(mot: RobotMotion, t_end: float, jitter_s: float, seed: int, 
 
 def measured_clocks(fp, vision, corners_xy: np.ndarray) -> dict[str, ScannerClock]:  # noqa: ANN001
     """Each scanner's offset to ``vision``'s clock as the pipeline's sync stage measures it
-    (:func:`gtrig.fusion.sensor_sync.scanner_offsets` on GTlaser's framed returns against ``vision``
+    (:func:`gtrig.sync.sensors.scanner_offsets` on GTlaser's framed returns against ``vision``
     smoothed), as :func:`gtrig.laser.clock.clocks_from_sync` reads it from ``sync.yaml``."""
     from gtrig.fusion.measurements import fixes_from_track
-    from gtrig.fusion.sensor_sync import ScannerReturns, reference_track, scanner_offsets
     from gtrig.laser.clock import clocks_from_sync
+    from gtrig.sync.reference import reference_track
+    from gtrig.sync.returns import ScannerReturns
+    from gtrig.sync.scanners import scanner_offsets
 
     est = scanner_offsets(ScannerReturns.from_framed(fp), reference_track([fixes_from_track(vision, "vision")]),
                           corners_xy)

@@ -149,13 +149,13 @@ class LaserConfig(Section):
 
 
 class FusionConfig(Section):
-    """Time sync and fusion (:func:`gtrig.fusion.sync.estimate_offset`, :func:`gtrig.fusion.fuse_tracks`)."""
+    """Time sync and fusion (:func:`gtrig.sync.offset.estimate_offset`, :func:`gtrig.fusion.fuse_tracks`)."""
 
     estimator: Literal["batch", "ekf"] = "batch"
     max_gap_s: float | None = Field(default=None, gt=0, description="end a segment after this long without a fix")
     sync_search_s: float = Field(default=3.0, gt=0, le=60, description="clock offsets searched, both signs (s)")
     sync_per_sensor: bool = Field(default=True, description="also each camera's and scanner's clock offset "
-                                  "(gtrig.fusion.sensor_sync)")
+                                  "(gtrig.sync.sensors)")
 
 
 class RunConfig(Section):

@@ -37,11 +37,11 @@ def command(
     from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.fusion import FusionOptions, fuse_tracks
-    from gtrig.fusion.sync import offset_sigmas
     from gtrig.io.biascov import read_bias_cov
     from gtrig.io.odometry import read_odometry
     from gtrig.io.offsets import read_offsets
     from gtrig.io.posetrack import read_pose_track, write_pose_track
+    from gtrig.sync.offset import offset_sigmas
 
     if estimator not in ("batch", "ekf"):
         raise InputError(f"--estimator {estimator!r}: batch or ekf")

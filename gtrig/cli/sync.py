@@ -32,10 +32,10 @@ def command(
     from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.fusion.measurements import fixes_from_track
-    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
     from gtrig.io.odometry import read_odometry
     from gtrig.io.offsets import CONVENTION, write_offsets
     from gtrig.io.posetrack import read_pose_track
+    from gtrig.sync.offset import estimate_offset, refine_by_fusion
 
     if (per_camera or per_scanner) and (recording is None or rig_path is None):
         raise InputError("--per-camera / --per-scanner need --recording and --rig (the calibrated rig)")
@@ -83,7 +83,7 @@ def command(
     odo_off = vis.offset_s if ref_track is None and vis is not None and vis.verdict == "ok" else math.nan
     sensors, clock = _per_sensor(recording, rig_path, tracks, results, per_camera, per_scanner, source, odo, odo_off)
     if ref_track is None and "vision" in results and "laser" in results and math.isfinite(clock[0]):
-        from gtrig.fusion.sync import combine_with_laser_clock
+        from gtrig.sync.offset import combine_with_laser_clock
 
         results["vision"], results["laser"] = combine_with_laser_clock(results["vision"], results["laser"], *clock)
         for name in ("vision", "laser"):
@@ -92,7 +92,7 @@ def command(
                 console.print(f"{name}: {est.offset_s * 1e3:+.3f} ms [{est.ci95_s[0] * 1e3:+.2f}, "
                               f"{est.ci95_s[1] * 1e3:+.2f}] ({est.reason})", highlight=False)
     if figure is not None:
-        from gtrig.fusion.plots import correlation_figure
+        from gtrig.sync.plots import correlation_figure
 
         correlation_figure(list(results.values()), figure)
         if sensors:
@@ -102,7 +102,7 @@ def command(
     else:
         results_doc = {}
     results_doc.update({k: v.to_dict() for k, v in results.items()})
-    from gtrig.fusion.sensor_sync import to_reference
+    from gtrig.sync.sensors import to_reference
 
     for e in sensors:
         results_doc[e.source] = to_reference(e, results["vision"])
@@ -114,14 +114,14 @@ def command(
 def _per_sensor(recording: Path | None, rig_path: Path | None, tracks: dict, results: dict,  # noqa: ANN001
                 per_camera: bool, per_scanner: bool, sources: list[str], odometry, odometry_offset_s: float,  # noqa: ANN001
                 ) -> tuple[list, tuple[float, float]]:
-    """Each camera's / scanner's offset to GTvision's clock (gtrig.fusion.sensor_sync), printed, and
+    """Each camera's / scanner's offset to GTvision's clock (gtrig.sync.sensors), printed, and
     GTlaser's clock to GTvision's with its sigma (nan when not measured); the cameras' refined jointly with
     ``odometry`` when ``odometry_offset_s`` (GTvision's clock minus odometry's) is finite."""
     if not (per_camera or per_scanner):
         return [], (float("nan"), float("nan"))
     from gtrig.errors import InputError
-    from gtrig.fusion.sensor_sync import sensor_offsets_and_laser_clock
     from gtrig.rig import load_rig
+    from gtrig.sync.sensors import sensor_offsets_and_laser_clock
 
     assert recording is not None and rig_path is not None  # checked before any work
     for need in ("vision", "laser") if per_camera else ("vision",):

@@ -1,6 +1,6 @@
 """One smoothed trajectory from any GT sources and odometry: ``fuse`` and ``fuse_tracks``.
 
-Steps: put every source on the reference (odometry) clock with its offset (gtrig.fusion.sync); split the
+Steps: put every source on the reference (odometry) clock with its offset (gtrig.sync.offset); split the
 span where no source sees the robot for longer than ``max_gap_s``; per segment, nodes at the odometry
 stamps (or a fixed rate), one factor per odometry increment (or constant velocity) and one per fix at
 its own stamp; a robust start (gtrig.fusion.init); the gated EKF + RTS (gtrig.fusion.ekf); then, by

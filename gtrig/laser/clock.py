@@ -4,7 +4,7 @@ A frame's fit holds at the share-weighted mean true time of its points, so a tra
 scanners' own stamps is on no clock in particular: the mean of the scanners' offsets shifts it as a
 whole (at 2 rad/s, 1.6 ms is 0.18 deg of yaw), their differences make the scanners disagree in the
 turns. Neither the common part nor, at low turn rates, the differences can be seen in laser data; a
-reference on another clock can (:mod:`gtrig.fusion.sensor_sync` fits each scanner's returns against
+reference on another clock can (:mod:`gtrig.sync.sensors` fits each scanner's returns against
 GTvision's smoothed track). Here each scanner's stamps are moved onto the reference clock by its
 measured offset before the frames are formed, so the fit, the motion compensation and the smoother
 all run on that clock, and the rig's ``stamp_sigma_s`` of each scanner becomes the standard

@@ -32,6 +32,10 @@ log = logging.getLogger(__name__)
 RECORD_DIR = ".gtrig/stages"
 RECORD_VERSION = 1
 
+#: where the run's laser logs' parsed ranges are kept, in the results folder (gtrig.io.scans.index_scans:
+#: the laser stage parses each log once; the laser-clock stage and a resumed run parse none)
+SCAN_CACHE = ".gtrig/scans"
+
 
 @lru_cache(maxsize=1)
 def code_version() -> str:

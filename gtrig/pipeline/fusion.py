@@ -1,4 +1,4 @@
-"""Stages ``sync`` and ``fusion``: each GT source's clock offset to odometry (gtrig.fusion.sync), then one
+"""Stages ``sync`` and ``fusion``: each GT source's clock offset to odometry (gtrig.sync.offset), then one
 smoothed trajectory from GTvision, GTlaser and odometry (gtrig.fusion), written as the pose track
 ``gt_fused.tum`` + ``gt_fused_cov.csv`` with ``fusion_report.json`` and ``sync.yaml``."""
 
@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gtrig.pipeline.context import AccuracyRow, StageInput, StageOutput
+from gtrig.pipeline.truth import true_odometry_offset
 
 if TYPE_CHECKING:
     from gtrig.io.odometry import OdometryLog
@@ -33,10 +34,10 @@ def sync(inp: StageInput) -> StageOutput:
     """Clock offsets of the GT sources to odometry, each with its 95 % interval and verdict."""
     from gtrig.errors import InputError
     from gtrig.fusion.measurements import fixes_from_track
-    from gtrig.fusion.sensor_sync import to_reference
-    from gtrig.fusion.sync import combine_with_laser_clock, estimate_offset, refine_by_fusion
     from gtrig.io.offsets import write_offsets
     from gtrig.memory import release_free_memory
+    from gtrig.sync.offset import combine_with_laser_clock, estimate_offset, refine_by_fusion
+    from gtrig.sync.sensors import to_reference
 
     cfg = inp.config.fusion
     tracks = _sources(inp)
@@ -81,8 +82,8 @@ def _sensor_offsets(inp: StageInput, tracks: dict[str, PoseTrack], results: dict
                     ) -> tuple[list, tuple[float, float]]:
     """Each camera's and scanner's offset to GTvision's clock, when both GT sources and the scanners exist,
     and GTlaser's clock to GTvision's with its sigma (nan when not measured)."""
-    from gtrig.fusion.sensor_sync import sensor_offsets_and_laser_clock
-    from gtrig.pipeline.laser import SCAN_CACHE
+    from gtrig.pipeline.cache import SCAN_CACHE
+    from gtrig.sync.sensors import sensor_offsets_and_laser_clock
 
     none: tuple[list, tuple[float, float]] = ([], (math.nan, math.nan))
     rig = inp.products.rig
@@ -117,18 +118,6 @@ def _sensor_truth_rows(rec: Path, sensors: list) -> tuple[AccuracyRow, ...]:  # 
     return tuple(rows)
 
 
-def true_odometry_offset(rec: Path) -> float:
-    """The simulated odometry clock minus the GT clock (truth/robot_clock.yaml; 0 when absent). A source's
-    offset to odometry is then its own clock (the GT clock) minus odometry's: ``-offset``."""
-    from gtrig.io.yamlfile import load_yaml
-
-    p = rec / "truth" / "robot_clock.yaml"
-    if not p.is_file():
-        return 0.0
-    doc = load_yaml(p) or {}
-    return -float(doc.get("offset_s", 0.0)) if isinstance(doc, dict) else 0.0
-
-
 #: each source's run-constant error, as its stage writes it beside the track (gtrig.io.biascov)
 BIAS_FILES = {"vision": "gt_vision_run_bias.yaml", "laser": "gt_laser_bias.yaml"}
 
@@ -145,9 +134,9 @@ def fusion(inp: StageInput) -> StageOutput:
     from gtrig.errors import InputError
     from gtrig.evaluate.truth import score_track
     from gtrig.fusion import FusionOptions, fuse_tracks
-    from gtrig.fusion.sync import offset_sigmas
     from gtrig.io.posetrack import write_pose_track
     from gtrig.io.tum import read_tum
+    from gtrig.sync.offset import offset_sigmas
 
     cfg = inp.config.fusion
     tracks = _sources(inp)

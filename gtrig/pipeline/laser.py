@@ -7,15 +7,13 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from gtrig.pipeline.cache import SCAN_CACHE
 from gtrig.pipeline.context import AccuracyRow, StageInput, StageOutput
 
 if TYPE_CHECKING:
     from gtrig.evaluate.truth import TruthScore
     from gtrig.trajectory import PoseTrack
 
-#: where the run's laser logs' parsed ranges are kept, in the results folder (gtrig.io.scans.index_scans:
-#: the laser stage parses each log once; the laser-clock stage and a resumed run parse none)
-SCAN_CACHE = ".gtrig/scans"
 
 
 def gtlaser(inp: StageInput) -> StageOutput:
@@ -127,7 +125,7 @@ def gtlaser_clock(inp: StageInput) -> StageOutput:
     from dataclasses import replace
 
     from gtrig.evaluate.truth import score_on_recording
-    from gtrig.pipeline.fusion import true_odometry_offset
+    from gtrig.pipeline.truth import true_odometry_offset
 
     # the truth is on the GT clock; odometry's clock is off it by the simulated robot clock's offset
     shift = -true_odometry_offset(inp.rec) if clock == "odometry" else 0.0
@@ -138,12 +136,12 @@ def gtlaser_clock(inp: StageInput) -> StageOutput:
 
 def _offset_to_odometry(inp: StageInput, track: PoseTrack) -> float | None:
     """The track's clock offset to odometry, seconds, measured as the sync stage measures a source's
-    (heading correlation refined by the fusion's fit, :mod:`gtrig.fusion.sync`); None when not ``ok``.
+    (heading correlation refined by the fusion's fit, :mod:`gtrig.sync.offset`); None when not ``ok``.
     On GTvision's clock it is another estimate of GTvision's offset (``sync.yaml``, ``vision``), from the
     same odometry."""
     from gtrig.fusion.measurements import fixes_from_track
-    from gtrig.fusion.sync import estimate_offset, refine_by_fusion
     from gtrig.io.odometry import read_odometry
+    from gtrig.sync.offset import estimate_offset, refine_by_fusion
 
     p = inp.rec / "run" / "odometry.csv"
     if not p.is_file():

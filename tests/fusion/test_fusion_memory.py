@@ -11,7 +11,7 @@ import pytest
 from fusion_synth import long_run
 
 from gtrig.fusion import FusionOptions, fuse_tracks
-from gtrig.fusion.joint_camera_sync import joint_reference
+from gtrig.sync.joint_cameras import joint_reference
 
 #: per source, the run-constant error's covariance (x, y, yaw; m^2, rad^2) the fusion stage considers
 BIAS = {"vision": np.diag([0.07e-3, 0.07e-3, 1e-4]) ** 2, "laser": np.diag([1.0e-3, 0.95e-3, 3.8e-4]) ** 2}

@@ -198,10 +198,10 @@ def test_gtlaser_client_memory_is_flat_in_the_log_length(tmp_path: Path, monkeyp
 
 def scanner_sync_peak(rec: Path, rig: object, laps: int) -> tuple[int, int]:
     """(tracemalloc peak of the per-scanner clock fit of ``rec`` in this process, the frames of its logs):
-    :func:`gtrig.fusion.sensor_sync.sensor_offsets_and_laser_clock` for the scanners only, against a
+    :func:`gtrig.sync.sensors.sensor_offsets_and_laser_clock` for the scanners only, against a
     GTvision track of the true circle (10 Hz, 1 mm / 1 mrad noise)."""
-    from gtrig.fusion.sensor_sync import sensor_offsets_and_laser_clock
     from gtrig.io.scans import index_scans
+    from gtrig.sync.sensors import sensor_offsets_and_laser_clock
     from gtrig.trajectory import PoseTrack
 
     t = np.arange(0.0, laps * LASER_CYCLE / 75.0, 0.1)
@@ -226,7 +226,7 @@ def test_scanner_sync_client_memory_is_flat_in_the_log_length(tmp_path: Path, mo
 
     monkeypatch.setattr(scans, "INDEX_BLOCK_LINES", 200, raising=False)
     try:
-        import gtrig.fusion.returns as returns
+        import gtrig.sync.returns as returns
 
         monkeypatch.setattr(returns, "WINDOW_FRAMES", 150)
     except ImportError:  # before session 35 (the test then measures the fit that held every return)

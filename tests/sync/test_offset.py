@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from gtrig.fusion import FusionOptions, fixes_from_track
-from gtrig.fusion.sync import estimate_offset, refine_by_fusion
 from gtrig.io.odometry import OdometryLog
+from gtrig.sync.offset import estimate_offset, refine_by_fusion
 
 
 @pytest.mark.parametrize("lag", [0.05, 0.3, 2.0])
@@ -56,7 +56,7 @@ def test_both_sources_offsets_made_consistent_with_gtlasers_clock(run) -> None:
     """GTlaser's clock 3 ms behind GTvision's: each source's offset to odometry alone scatters by the
     odometry's slip, apart; combined with GTlaser's clock to GTvision's, their difference is that clock
     and both intervals still cover the truth."""
-    from gtrig.fusion.sync import combine_with_laser_clock
+    from gtrig.sync.offset import combine_with_laser_clock
 
     odo = run.odometry
     laser = run.laser.shifted(0.003)

@@ -9,13 +9,13 @@ import pytest
 
 from gtrig import geometry as geo
 from gtrig.fusion.measurements import fixes_from_track
-from gtrig.fusion.reprojection_sync import (
+from gtrig.sync.reference import reference_track
+from gtrig.sync.reprojection import (
     CameraCorners,
     camera_offsets_reprojection,
     image_corrections,
     read_camera_corners,
 )
-from gtrig.fusion.sensor_sync import reference_track
 from gtrig.trajectory import PoseTrack
 from gtrig.vision.observations import CameraGeometry, MarkerView, VisionModel, marker_corners_marker, stack_corners
 

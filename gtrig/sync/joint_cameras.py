@@ -2,7 +2,7 @@
 each camera's poses shifted by its offset, until the offsets fitted against that smoothing reproduce
 themselves.
 
-Why: against GTlaser alone (:func:`gtrig.fusion.sensor_sync.camera_offsets`) a camera's offset inherits
+Why: against GTlaser alone (:func:`gtrig.sync.sensors.camera_offsets`) a camera's offset inherits
 GTlaser's pose errors over that camera's view. Those errors are slow (correlated over seconds, 0.5-0.8 mm
 on the simulated runs) and differ from one part of the room to another (which hull sides the scanners
 see), so they read as 0.5-1.5 ms of offset that differs by camera. Odometry's shape over a few seconds
@@ -32,9 +32,10 @@ import numpy as np
 
 from gtrig.fusion.fuse import FusionOptions, fuse
 from gtrig.fusion.measurements import fixes_from_track
-from gtrig.fusion.sensor_sync import Reference, camera_membership, camera_offsets, checkpoint_membership
-from gtrig.fusion.sync import OffsetEstimate
 from gtrig.io.odometry import OdometryLog
+from gtrig.sync.cameras import camera_membership, camera_offsets, checkpoint_membership
+from gtrig.sync.offset import OffsetEstimate
+from gtrig.sync.reference import Reference
 from gtrig.trajectory import PoseTrack
 
 #: the shift of one camera's poses that measures its weight in the joint smoothing (s)
@@ -58,7 +59,7 @@ def joint_reference(vision: PoseTrack, laser: PoseTrack, odometry: OdometryLog, 
     return Reference(stamps, xyt, np.gradient(xyt, stamps, axis=0), cov)
 
 
-def _restamped(vision: PoseTrack, times_s: np.ndarray) -> PoseTrack:
+def restamped(vision: PoseTrack, times_s: np.ndarray) -> PoseTrack:
     """``vision`` (usable poses) at ``times_s``, sorted, a repeated time dropped."""
     order = np.argsort(times_s, kind="stable")
     keep = np.r_[True, np.diff(times_s[order]) > 0]
@@ -76,7 +77,7 @@ def joint_camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.nda
     vision : GTvision's track with covariances. camera_stamps_s : per camera, its frame stamps.
     laser : GTlaser's track on GTvision's clock (restamped by the scanners' offsets).
     odometry : the wheel odometry; odometry_offset_s : GTvision's clock minus odometry's, seconds.
-    first : the pose fit against GTlaser (:func:`~gtrig.fusion.sensor_sync.camera_offsets`), one per camera
+    first : the pose fit against GTlaser (:func:`~gtrig.sync.sensors.camera_offsets`), one per camera
         in ``camera_stamps_s``'s order: the start, and the answer for a camera the joint fit cannot time.
     checkpoint : GTvision's checkpoint of detections (which camera made each pose, and when).
     steps : Newton steps after the probes.
@@ -95,7 +96,7 @@ def joint_camera_offsets(vision: PoseTrack, camera_stamps_s: Mapping[str, np.nda
         return first
 
     def fit(tau: np.ndarray, relative: bool = False) -> list[OffsetEstimate]:
-        ref = joint_reference(_restamped(u, when - share @ tau), laser, odometry, odometry_offset_s)
+        ref = joint_reference(restamped(u, when - share @ tau), laser, odometry, odometry_offset_s)
         return camera_offsets(u, camera_stamps_s, ref, membership=(when, share), relative=relative)
 
     def values(est: list[OffsetEstimate]) -> np.ndarray:

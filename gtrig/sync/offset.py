@@ -392,7 +392,7 @@ def combine_with_laser_clock(vision: OffsetEstimate, laser: OffsetEstimate, lase
     Each source's offset to odometry scatters by about 1.3 ms on a 75 s run (the odometry's slip), and the
     two scatter apart: applied as they are, the sources disagree by their difference (3.9 ms on seed 0).
     GTlaser's clock to GTvision's is known far better (the scanners' offsets,
-    :func:`gtrig.fusion.sensor_sync.laser_clock`: about 0.3 ms). So: one offset of GTvision's clock,
+    :func:`gtrig.sync.sensors.laser_clock`: about 0.3 ms). So: one offset of GTvision's clock,
     the inverse-variance mean of GTvision's estimate and GTlaser's minus ``laser_to_vision_s``; GTlaser's is
     that plus ``laser_to_vision_s``. Its sigma assumes the two estimates' errors fully correlated (they
     share the odometry): the weighted mean of their sigmas, no narrower than the better one alone.

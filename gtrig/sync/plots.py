@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-from gtrig.fusion.sync import OffsetEstimate
+from gtrig.sync.offset import OffsetEstimate
 
 
 def correlation_figure(estimates: list[OffsetEstimate], path: str | os.PathLike[str]) -> None:

@@ -1,13 +1,13 @@
 """Each camera's clock offset from its own marker corners, by reprojection against a reference trajectory.
 
-The pose fit of :func:`gtrig.fusion.sensor_sync.camera_offsets` compares whole GTvision poses with the
+The pose fit of :func:`gtrig.sync.sensors.camera_offsets` compares whole GTvision poses with the
 reference: a pose of several cameras' views mixes their clocks (GTvision moves it to the instant's mean
 stamp), its planar part carries what the 6-DoF fit coupled in from height and tilt, and a one-marker view
 rests on a resolved planar ambiguity. Here each camera is timed by what it alone saw:
 
 * every image of camera ``c`` with markers, at its frame stamp ``t`` on the camera's clock, sees the robot
   at the reference pose of ``t - tau_c`` (the reference: GTlaser restamped by the scanners' offsets and
-  smoothed, :func:`gtrig.fusion.sensor_sync.reference_track`, on GTvision's clock), moved by a constant
+  smoothed, :func:`gtrig.sync.sensors.reference_track`, on GTvision's clock), moved by a constant
   world-frame bias ``b_c`` (x, y, yaw: that camera's calibration error, as the pose fit's per-camera bias);
   height, roll and pitch are GTvision's at the nearest instant (the floor's tilt; no clock in them);
 * the image's corners are projected through the calibrated camera with the calibrated markers on the
@@ -24,7 +24,7 @@ rests on a resolved planar ambiguity. Here each camera is timed by what it alone
   GTvision's poses, so that an along-track shift of the reference frame (a time offset common to every
   camera) drops out, as in the pose fit.
 
-Verdicts and the cost curve as :func:`gtrig.fusion.sensor_sync._verdict`.
+Verdicts and the cost curve as :func:`gtrig.sync.sensors.offset_verdict`.
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig.evaluate.associate import nearest_indices
-from gtrig.fusion.sensor_sync import Reference, _jackknife, _near_reference, _ridge, _score, _verdict
-from gtrig.fusion.sync import OffsetEstimate
+from gtrig.sync.offset import OffsetEstimate
+from gtrig.sync.reference import Reference, cost_score, jackknife, near_reference, offset_verdict, ridge
 from gtrig.trajectory import PoseTrack
 from gtrig.vision.observations import MarkerView, StackedCorners, VisionModel, stack_corners
 from gtrig.vision.projection import project_cam, whiten
@@ -249,7 +249,7 @@ def _fit_camera(cc: CameraCorners, ref: Reference, z: np.ndarray, R_tilt: np.nda
         np.add.at(H_b, blocks[ok], Hn[ok])
         np.add.at(g_b, blocks[ok], gn[ok])
         H = H_b.sum(axis=0)
-        dx = -np.linalg.solve(H + _ridge(H), g_b.sum(axis=0))
+        dx = -np.linalg.solve(H + ridge(H), g_b.sum(axis=0))
         tau, bias = tau + float(dx[0]), bias + dx[1:]
         if abs(dx[0]) < 1e-7:
             break
@@ -259,7 +259,7 @@ def _fit_camera(cc: CameraCorners, ref: Reference, z: np.ndarray, R_tilt: np.nda
         y, W, _, _ = terms(float(ts), bias)
         cost[j] = float(np.einsum("m,mi,mij,mj->", w_img, y, W, y))
     used = w_img > 0
-    return _CameraFit(tau, bias, H_b, g_b, int(used.sum()), int(np.unique(blocks[used]).size), taus, _score(cost))
+    return _CameraFit(tau, bias, H_b, g_b, int(used.sum()), int(np.unique(blocks[used]).size), taus, cost_score(cost))
 
 
 def camera_offsets_reprojection(corners: Mapping[str, CameraCorners], ref: Reference, vision: PoseTrack,
@@ -275,7 +275,7 @@ def camera_offsets_reprojection(corners: Mapping[str, CameraCorners], ref: Refer
     vision : GTvision's track: the height and tilt of the robot (:func:`out_of_plane`).
     mean_share : each camera's mean share of GTvision's poses (GTvision's clock is that mean of the
         cameras'); the offsets come out relative to it. None: to the reference's clock.
-    block_s, max_ci_s, search_s, huber_k : as :func:`gtrig.fusion.sensor_sync.camera_offsets`.
+    block_s, max_ci_s, search_s, huber_k : as :func:`gtrig.sync.sensors.camera_offsets`.
     min_images : fewer images with markers near the reference: ``unobservable``.
     gate_rms : an image whose whitened reprojection RMS at the reference pose exceeds this is not fitted
         (a false detection or a marker misread), sigmas.
@@ -292,7 +292,7 @@ def camera_offsets_reprojection(corners: Mapping[str, CameraCorners], ref: Refer
     fits: list[_CameraFit | None] = []
     for name in names:
         cc = corners[name]
-        keep = _near_reference(ref, cc.stamps_s, 0.05)
+        keep = near_reference(ref, cc.stamps_s, 0.05)
         if keep.sum() < min_images:
             fits.append(None)
             continue
@@ -312,18 +312,18 @@ def camera_offsets_reprojection(corners: Mapping[str, CameraCorners], ref: Refer
     share = share / share.sum() if mean_share is not None and share.sum() > 0 else np.zeros(C)
     L = np.eye(C) - np.ones((C, 1)) @ share[None, :]
     # the converged fits have zero gradients: the jackknife's solve gives the leave-one-block-out steps
-    _, se, _ = _jackknife(H_b, g_b, np.arange(0, n, 4), L)
+    _, se, _ = jackknife(H_b, g_b, np.arange(0, n, 4), L)
     H = H_b.sum(axis=0)
-    Hinv = np.linalg.inv(H + _ridge(H))[np.ix_(np.arange(0, n, 4), np.arange(0, n, 4))]
+    Hinv = np.linalg.inv(H + ridge(H))[np.ix_(np.arange(0, n, 4), np.arange(0, n, 4))]
     white = np.sqrt(np.maximum(np.diag(L @ Hinv @ L.T), 0.0))
     common = float(share @ tau)
     out = []
     for c, (name, f) in enumerate(zip(names, fits, strict=True)):
         if f is None:
-            out.append(_verdict(f"vision/{name}", float("nan"), float("inf"), float("inf"), 0, np.zeros(0),
+            out.append(offset_verdict(f"vision/{name}", float("nan"), float("inf"), float("inf"), 0, np.zeros(0),
                                 np.zeros(0), max_ci_s, int(corners[name].stamps_s.size), min_images))
             continue
-        e = _verdict(f"vision/{name}", f.tau - common, float(se[c]), float(white[c]), f.n_blocks,
+        e = offset_verdict(f"vision/{name}", f.tau - common, float(se[c]), float(white[c]), f.n_blocks,
                      f.taus - common, f.curve, max_ci_s, f.n_images, min_images)
         out.append(e)
     return out

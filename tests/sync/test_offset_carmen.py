@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gtrig.fusion.sync import estimate_offset
 from gtrig.io.carmen import read_carmen
+from gtrig.sync.offset import estimate_offset
 
 CARMEN = Path(__file__).parents[2] / ".." / "shared" / "data" / "carmen"
 

@@ -4,9 +4,10 @@ camera's offset better than the pose fit against GTlaser alone, and its interval
 
 import numpy as np
 
-from gtrig.fusion.joint_camera_sync import _restamped, joint_camera_offsets
 from gtrig.fusion.measurements import fixes_from_track
-from gtrig.fusion.sensor_sync import camera_offsets, reference_track
+from gtrig.sync.cameras import camera_offsets
+from gtrig.sync.joint_cameras import joint_camera_offsets, restamped
+from gtrig.sync.reference import reference_track
 from gtrig.trajectory import PoseTrack
 
 TAUS = {"a": 0.0015, "b": -0.0015}  # the cameras' stamps minus the true instants
@@ -71,7 +72,7 @@ def test_restamped_poses_may_pass_each_other() -> None:
     times = t - np.where(late, 0.025, 0.0)
     times[7] = times[6] + 0.0  # two poses at one time: the first kept
     times[6] = times[7]
-    out = _restamped(track, times)
+    out = restamped(track, times)
     assert np.all(np.diff(out.stamps_s) > 0)
     order = np.argsort(times, kind="stable")
     kept = order[np.r_[True, np.diff(times[order]) > 0]]

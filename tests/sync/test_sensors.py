@@ -5,18 +5,10 @@ import numpy as np
 import pytest
 
 from gtrig.fusion.measurements import fixes_from_track
-from gtrig.fusion.sensor_sync import (
-    Reference,
-    ScannerReturns,
-    camera_membership,
-    camera_offsets,
-    checkpoint_membership,
-    hull_distances,
-    recording_returns,
-    reference_track,
-    restamp_laser,
-    scanner_offsets,
-)
+from gtrig.sync.cameras import camera_membership, camera_offsets, checkpoint_membership
+from gtrig.sync.reference import Reference, reference_track
+from gtrig.sync.returns import ScannerReturns, recording_returns
+from gtrig.sync.scanners import hull_distances, restamp_laser, scanner_offsets
 from gtrig.trajectory import PoseTrack
 
 HULL = np.array([[-0.3, -0.25], [0.3, -0.25], [0.3, 0.25], [-0.3, 0.25]])  # counter-clockwise, robot frame
@@ -131,7 +123,7 @@ def test_camera_offsets_recovered(run) -> None:  # noqa: ANN001
 def test_camera_normal_equations_in_blocks_of_instants_are_the_whole_sums() -> None:
     """The per-camera fit forms its normal equations a block of instants at a time (an hour's instants at
     once held ~300 MB): the same sums, to the bit, whatever the block."""
-    import gtrig.fusion.sensor_sync as ss
+    import gtrig.sync.cameras as ss
 
     rng = np.random.default_rng(3)
     M, C, G, B = 1000, 4, 3, 7
@@ -255,8 +247,8 @@ def test_checkpoint_membership_reads_the_per_camera_checkpoint(tmp_path) -> None
 
 
 def test_laser_clock_is_the_poses_mean_share_weighted_scanner_offset() -> None:
-    from gtrig.fusion.sensor_sync import laser_clock
-    from gtrig.fusion.sync import OffsetEstimate
+    from gtrig.sync.offset import OffsetEstimate
+    from gtrig.sync.sensors import laser_clock
 
     frames = np.array([10.0, 10.1, 10.2])
     # frame 0: only scanner a; frame 1: a and b half each; frame 2: only b
@@ -335,7 +327,7 @@ def test_scanner_fit_over_windows_of_the_logs_is_the_fit_over_all_returns(tmp_pa
     logs) gives the fit over all returns in memory, to the order of the sums (bit for bit in one window);
     the windows are the whole logs' returns; the per-frame uses (shares, frames of stamps) are the same;
     the spool file is gone after."""
-    from gtrig.fusion.returns import returns_of_recording
+    from gtrig.sync.returns import returns_of_recording
 
     rig, whole = _logged_recording(tmp_path / "rec")
     t = np.arange(-0.5, 1.5, 0.02)
