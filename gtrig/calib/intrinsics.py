@@ -24,9 +24,9 @@ import cv2
 import numpy as np
 
 from gtrig import geometry as geo
-from gtrig.calib.camfile import CameraIntrinsics
 from gtrig.calib.chessboard import Board, Detection, detect_folder
 from gtrig.errors import ConvergenceError, InputError
+from gtrig.io.camfile import CameraIntrinsics
 
 log = logging.getLogger(__name__)
 

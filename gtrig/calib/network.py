@@ -56,10 +56,10 @@ from scipy.spatial.transform import Rotation
 
 from gtrig import geometry as geo
 from gtrig.calib.anchor import board_pose, oriented_board_pose, pose_distance
-from gtrig.calib.camfile import CameraIntrinsics
 from gtrig.calib.chessboard import Board, flip_half_turn
 from gtrig.calib.se3avg import PoseMean, mean_pose
 from gtrig.errors import ConvergenceError, InputError
+from gtrig.io.camfile import CameraIntrinsics
 
 log = logging.getLogger(__name__)
 

@@ -18,7 +18,6 @@ import numpy as np
 import yaml
 
 from gtrig import geometry as geo
-from gtrig.calib.camfile import CameraIntrinsics, read_cam_yaml
 from gtrig.calib.chessboard import Board, BoardsSpec, detect_corners, list_images, read_boards_yaml, read_grey
 from gtrig.calib.intrinsics import IntrinsicsResult, calibrate_intrinsics
 from gtrig.calib.network import (
@@ -31,6 +30,7 @@ from gtrig.calib.network import (
 )
 from gtrig.errors import InputError
 from gtrig.io.atomic import atomic_write_text
+from gtrig.io.camfile import CameraIntrinsics, read_cam_yaml
 from gtrig.rig.load import load_rig
 from gtrig.rig.models import Pose, Rig, pose_cov_rows
 

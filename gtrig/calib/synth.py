@@ -308,8 +308,8 @@ def synthetic_network(
     ``rig_true`` (cameras and their true poses) makes the observations; ``rig_nominal`` gives the
     believed poses; ``intrinsics`` ({name: CameraIntrinsics}) defaults to the true ones.
     """
-    from gtrig.calib.camfile import CameraIntrinsics
     from gtrig.calib.network import NetworkProblem, PairView, WorldView
+    from gtrig.io.camfile import CameraIntrinsics
 
     cams = {c.name: c for c in rig_true.cameras}
     intr = intrinsics or {n: CameraIntrinsics(c.resolution, c.K, c.dist) for n, c in cams.items()}

@@ -25,11 +25,11 @@ def intrinsics(
     figure: Path = typer.Option(None, "--figure", help="Coverage figure (PNG); default: next to --out."),
 ) -> None:
     """Calibrate one camera from chessboard images; write cam.yaml and a coverage figure."""
-    from gtrig.calib.camfile import write_cam_yaml
     from gtrig.calib.chessboard import parse_board
     from gtrig.calib.intrinsics import calibrate_intrinsics
     from gtrig.calib.plots import plot_coverage
     from gtrig.cli import checks
+    from gtrig.io.camfile import write_cam_yaml
 
     b = parse_board(board)
     checks.input_folder("--images", images)
@@ -86,7 +86,6 @@ def network(
     out: Path = typer.Option(..., "--out", help="Calibrated rig.yaml to write (report next to it)."),
 ) -> None:
     """Calibrate the camera network: pairs chained from the world board, then a joint bundle adjustment."""
-    from gtrig.calib.camfile import CameraIntrinsics
     from gtrig.calib.chessboard import read_boards_yaml
     from gtrig.calib.network import NetworkProblem, calibrate_network
     from gtrig.calib.recording import (
@@ -100,6 +99,7 @@ def network(
     )
     from gtrig.cli import checks
     from gtrig.errors import InputError
+    from gtrig.io.camfile import CameraIntrinsics
     from gtrig.rig import load_rig
 
     for opt, folder in (("--pairs", pairs), ("--world-board", world_board)):

@@ -101,7 +101,7 @@ def detect(
     K = dist = None
     size = None
     if camera is not None:
-        from gtrig.calib.camfile import read_cam_yaml
+        from gtrig.io.camfile import read_cam_yaml
 
         cam = read_cam_yaml(camera)
         K, dist, size = cam.camera_matrix, cam.dist_coeffs, cam.image_size
@@ -196,9 +196,9 @@ def calibrate_robot(
 
     import numpy as np
 
-    from gtrig.calib.camfile import read_cam_yaml
     from gtrig.cli import checks
     from gtrig.errors import InputError
+    from gtrig.io.camfile import read_cam_yaml
     from gtrig.markers import robotcal as rc
     from gtrig.rig import dump_rig, load_rig
 

@@ -51,14 +51,14 @@ def _with_file(cfg, path: Path):  # noqa: ANN001, ANN202
 
     from gtrig.errors import ConfigError
     from gtrig.io.yamlfile import load_yaml
-    from gtrig.rig.load import _deep_merge
+    from gtrig.rig.load import deep_merge
     from gtrig.sim.config import SimConfig
 
     doc = load_yaml(path) or {}  # within the YAML limits; one line naming the file
     if not isinstance(doc, dict):
         raise ConfigError(f"{path}: the settings must be a mapping (motion: ..., laser: ...)")
     try:
-        return SimConfig.model_validate(_deep_merge(cfg.model_dump(), doc))
+        return SimConfig.model_validate(deep_merge(cfg.model_dump(), doc))
     except ValidationError as e:
         err = e.errors()[0]
         loc = ".".join(str(p) for p in err["loc"])

@@ -39,11 +39,11 @@ def _format_loc(loc: tuple[str | int, ...]) -> str:
     return s or "(top level)"
 
 
-def _deep_merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+def deep_merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
     out = dict(base)
     for k, v in override.items():
         if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = _deep_merge(out[k], v)
+            out[k] = deep_merge(out[k], v)
         else:
             out[k] = v
     return out
@@ -113,7 +113,7 @@ def load_rig(path: str | os.PathLike[str], overrides: dict[str, Any] | None = No
         raise ConfigError(str(e)) from None
     lines = _line_map(node) if node is not None else {}
     if overrides:
-        data = _deep_merge(data if isinstance(data, dict) else {}, overrides)
+        data = deep_merge(data if isinstance(data, dict) else {}, overrides)
     return rig_from_dict(data, str(p), lines)
 
 

@@ -8,9 +8,9 @@ from typer.testing import CliRunner
 
 from gtrig import geometry as geo
 from gtrig.calib import synth
-from gtrig.calib.camfile import read_cam_yaml
 from gtrig.calib.steady import check_steady
 from gtrig.cli.main import app
+from gtrig.io.camfile import read_cam_yaml
 from gtrig.rig import dump_rig
 from gtrig.sim.gtroom import make_scene
 

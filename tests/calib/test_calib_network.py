@@ -67,7 +67,7 @@ def test_intrinsics_jacobian_matches_finite_differences() -> None:
     from gtrig.calib.network import _apply_intrinsics, _intrinsics_jacobian, _intrinsics_vector
 
     c = make_scene(0).rig_true.cameras[0]
-    from gtrig.calib.camfile import CameraIntrinsics
+    from gtrig.io.camfile import CameraIntrinsics
 
     ci = CameraIntrinsics(c.resolution, c.K, np.r_[c.dist[:4], 0.01])
     rng = np.random.default_rng(0)
@@ -89,8 +89,8 @@ def solved_with_sweeps():
     corners: the bundle adjustment must refine the lenses from the sweeps, pairs and world board."""
     from dataclasses import replace
 
-    from gtrig.calib.camfile import CameraIntrinsics
     from gtrig.calib.network import SweepView
+    from gtrig.io.camfile import CameraIntrinsics
 
     sc = make_scene(1)
     rng = np.random.default_rng(5)
@@ -155,7 +155,7 @@ def test_pose_covariance_includes_the_lens_uncertainty(solved_with_sweeps) -> No
 def test_lens_without_sweep_uses_its_stated_sigmas_as_prior(solved) -> None:
     from dataclasses import replace
 
-    from gtrig.calib.camfile import CameraIntrinsics
+    from gtrig.io.camfile import CameraIntrinsics
 
     sc, prob, held = solved
     # no sweep views and no std: the lenses are held

@@ -7,9 +7,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from gtrig import geometry as geo
-from gtrig.calib.camfile import CameraIntrinsics, read_cam_yaml, write_cam_yaml
 from gtrig.calib.se3avg import elementwise_mean_pose, mean_pose, mean_rotation
 from gtrig.errors import FormatError
+from gtrig.io.camfile import CameraIntrinsics, read_cam_yaml, write_cam_yaml
 
 
 def test_mean_of_symmetric_perturbations_is_the_centre() -> None:

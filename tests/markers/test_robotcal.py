@@ -11,9 +11,9 @@ import pytest
 from typer.testing import CliRunner
 
 from gtrig import geometry as geo
-from gtrig.calib.camfile import read_cam_yaml
 from gtrig.cli.main import app
 from gtrig.errors import InputError
+from gtrig.io.camfile import read_cam_yaml
 from gtrig.markers import robotcal as rc
 from gtrig.markers.robotcal.calibrate import calibrate_from_views
 from gtrig.markers.robotcal.observe import detect_views, image_files
