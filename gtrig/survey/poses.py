@@ -161,6 +161,32 @@ def estimate_poses(
         raise InputError(f"on_ambiguity must be one of {', '.join(ON_AMBIGUITY)}, got {on_ambiguity!r}")
     if on_outlier not in ON_OUTLIER:
         raise InputError(f"on_outlier must be one of {', '.join(ON_OUTLIER)}, got {on_outlier!r}")
+    wnames, wxy, cov_world_joint = _world_arrays(world_points, cov_world_joint)
+    wi, ri = _reading_indices(wnames, robot_points, distances)
+    names = list(dict.fromkeys(distances.group))
+    groups = np.array(distances.group)
+    _check_observable(names, groups, ri, distances)
+    init_map = {} if initial is None else {n: initial.xytheta[i] for i, n in enumerate(initial.names)}
+    ctx = dict(wxy=wxy, cov_w=cov_world_joint, Q=robot_points.xy, sig_q=robot_points.sigma_m, wi=wi, ri=ri,
+               d=distances.distance_m, sd=distances.sigma_m)
+    fit, pose_rows, excluded, warnings = _fit_excluding_outliers(
+        names, groups, distances, ctx, init_map, grid_step_m, on_outlier, alpha, max_exclusions)
+    out = [_pose_estimate(n, i, fit, pose_rows[i], excluded[n], ctx, init_map, multistart, grid_step_m,
+                          ambiguity_chi2, on_ambiguity, warnings) for i, n in enumerate(names)]
+    return PosesResult(
+        tuple(names),
+        np.array([p.xytheta for p in out]).reshape(-1, 3),
+        np.array([p.cov_xytheta for p in out]).reshape(-1, 3, 3),
+        tuple(out),
+        tuple(b for n in names for b in excluded[n]),
+        tuple(warnings),
+    )
+
+
+def _world_arrays(world_points: NamedPoints | tuple[tuple[str, ...], np.ndarray, np.ndarray],
+                  cov_world_joint: np.ndarray | None) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """The world points' names, xy (N, 2) and joint covariance (2N, 2N), block-diagonal from each point's
+    own when no joint one is given."""
     if isinstance(world_points, NamedPoints):
         wnames, wxy = world_points.names, world_points.xy
         wcov = np.array([np.eye(2) * s**2 for s in world_points.sigma_m])
@@ -171,6 +197,12 @@ def estimate_poses(
         cov_world_joint = np.zeros((2 * N, 2 * N))
         for i in range(N):
             cov_world_joint[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = wcov[i]
+    return tuple(wnames), wxy, cov_world_joint
+
+
+def _reading_indices(wnames: tuple[str, ...], robot_points: NamedPoints, distances: Distances
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Each reading's world point and robot point as indices; an unknown name is refused with its line."""
     widx = {n: i for i, n in enumerate(wnames)}
     ridx = robot_points.index()
     wi = np.empty(len(distances.a), dtype=int)
@@ -187,11 +219,11 @@ def estimate_poses(
                 f"(world points: {', '.join(wnames)})"
             )
         wi[k], ri[k] = widx[distances.b[k]], ridx[distances.a[k]]
-    names: list[str] = []
-    for g in distances.group:
-        if g not in names:
-            names.append(g)
-    groups = np.array(distances.group)
+    return wi, ri
+
+
+def _check_observable(names: list[str], groups: np.ndarray, ri: np.ndarray, distances: Distances) -> None:
+    """Every pose needs three readings from two robot points or more (x, y and theta)."""
     for n in names:
         rows = np.flatnonzero(groups == n)
         if rows.size < 3:
@@ -204,32 +236,22 @@ def estimate_poses(
                 f"pose {n}: readings from one robot point only; theta is not observable "
                 f"({distances.source[rows[0]]})"
             )
-    init_map = {}
-    if initial is not None:
-        init_map = {n: initial.xytheta[i] for i, n in enumerate(initial.names)}
-    ctx = dict(
-        wxy=wxy,
-        cov_w=cov_world_joint,
-        Q=robot_points.xy,
-        sig_q=robot_points.sigma_m,
-        wi=wi,
-        ri=ri,
-        d=distances.distance_m,
-        sd=distances.sigma_m,
-    )
 
+
+def _fit_excluding_outliers(names: list[str], groups: np.ndarray, distances: Distances, ctx: dict,
+                            init_map: dict, grid_step_m: float, on_outlier: str, alpha: float,
+                            max_exclusions: int) -> tuple[dict, list[np.ndarray], dict[str, list[BadReading]],
+                                                          list[str]]:
+    """Fit every pose, drop the worst reading of a pose whose readings fail the chi-square test at
+    ``alpha`` (as ``on_outlier`` and ``max_exclusions`` allow), and fit again until none is dropped."""
     active = np.ones(len(distances.a), dtype=bool)
     excluded: dict[str, list[BadReading]] = {n: [] for n in names}
     warnings: list[str] = []
     x_prev: dict[str, np.ndarray] = {}
     while True:
         pose_rows = [np.flatnonzero((groups == n) & active) for n in names]
-        x0 = []
-        for n, r in zip(names, pose_rows, strict=True):
-            if n in x_prev:
-                x0.append(x_prev[n])
-            else:
-                x0.append(_initial_guess(n, r, ctx, init_map.get(n), grid_step_m))
+        x0 = [x_prev[n] if n in x_prev else _initial_guess(n, r, ctx, init_map.get(n), grid_step_m)
+              for n, r in zip(names, pose_rows, strict=True)]
         fit = _fit(pose_rows, np.array(x0), ctx)
         x_prev = {n: fit["x"][i] for i, n in enumerate(names)}
         changed = False
@@ -260,59 +282,34 @@ def estimate_poses(
             record_exclusion(bad, excluded[n], warnings, log)
             changed = True
         if not changed:
-            break
+            return fit, pose_rows, excluded, warnings
 
-    out = []
-    for i, n in enumerate(names):
-        x, t, res = fit["x"][i], fit["tests"][i], fit["residuals"][i]
-        basin = None
-        if multistart:
-            extra = _global_starts(wxy[np.unique(wi[pose_rows[i]])], grid_step_m)
-            if n in init_map:
-                extra = np.vstack([extra, init_map[n]])
-            basin = ms.analyse(
-                fit["models"][i],
-                x,
-                extra,
-                radii=(0.1, 0.25, 0.5, 1.0),
-                ambiguity_chi2=ambiguity_chi2,
-                angle_index=2,
+
+def _pose_estimate(n: str, i: int, fit: dict, rows: np.ndarray, excluded: list[BadReading], ctx: dict,
+                   init_map: dict, multistart: bool, grid_step_m: float, ambiguity_chi2: float,
+                   on_ambiguity: str, warnings: list[str]) -> PoseEstimate:
+    """Pose ``n``'s estimate, its fit statistics and, with ``multistart``, the other basins' analysis; a
+    second pose that fits as well is refused (``on_ambiguity="refuse"``) or warned of."""
+    x, t, res = fit["x"][i], fit["tests"][i], fit["residuals"][i]
+    basin = None
+    if multistart:
+        extra = _global_starts(ctx["wxy"][np.unique(ctx["wi"][rows])], grid_step_m)
+        if n in init_map:
+            extra = np.vstack([extra, init_map[n]])
+        basin = ms.analyse(fit["models"][i], x, extra, radii=(0.1, 0.25, 0.5, 1.0),
+                           ambiguity_chi2=ambiguity_chi2, angle_index=2)
+        if basin.ambiguous:
+            m = basin.alternatives[0]
+            msg = (
+                f"pose {n}: two poses fit the distances: ({x[0]:.4f}, {x[1]:.4f}, {x[2]:.4f}) "
+                f"and ({m.x[0]:.4f}, {m.x[1]:.4f}, {m.x[2]:.4f}) chi2 {m.chi2:.2f}"
             )
-            if basin.ambiguous:
-                m = basin.alternatives[0]
-                msg = (
-                    f"pose {n}: two poses fit the distances: ({x[0]:.4f}, {x[1]:.4f}, {x[2]:.4f}) "
-                    f"and ({m.x[0]:.4f}, {m.x[1]:.4f}, {m.x[2]:.4f}) chi2 {m.chi2:.2f}"
-                )
-                if on_ambiguity == "refuse":
-                    raise ConvergenceError(
-                        f"{msg}; add readings to other world points, or rerun with --on-ambiguity warn"
-                    )
-                log.warning(msg + "; kept the better one")
-                warnings.append(msg)
-        out.append(
-            PoseEstimate(
-                n,
-                x,
-                fit["cov"][i],
-                int(pose_rows[i].size),
-                t.chi2,
-                t.dof,
-                t.p_value,
-                float(np.sqrt(np.mean(res**2))),
-                float(np.max(np.abs(res))),
-                basin,
-                tuple(excluded[n]),
-            )
-        )
-    return PosesResult(
-        tuple(names),
-        np.array([p.xytheta for p in out]).reshape(-1, 3),
-        np.array([p.cov_xytheta for p in out]).reshape(-1, 3, 3),
-        tuple(out),
-        tuple(b for n in names for b in excluded[n]),
-        tuple(warnings),
-    )
+            if on_ambiguity == "refuse":
+                raise ConvergenceError(f"{msg}; add readings to other world points, or rerun with --on-ambiguity warn")
+            log.warning(msg + "; kept the better one")
+            warnings.append(msg)
+    return PoseEstimate(n, x, fit["cov"][i], int(rows.size), t.chi2, t.dof, t.p_value,
+                        float(np.sqrt(np.mean(res**2))), float(np.max(np.abs(res))), basin, tuple(excluded))
 
 
 def _global_starts(W: np.ndarray, step: float) -> np.ndarray:
