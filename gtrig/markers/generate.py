@@ -219,7 +219,7 @@ def png_resolution(size_mm: float, n_cells: int, dpi: float) -> tuple[int, int]:
     return k, int(ppm)
 
 
-def _png_bytes(img: NDArray[np.uint8], px_per_metre: int) -> bytes:
+def png_bytes(img: NDArray[np.uint8], px_per_metre: int) -> bytes:
     """Encode an 8-bit grayscale image as PNG with a ``pHYs`` chunk (pixels per metre)."""
 
     def chunk(tag: bytes, data: bytes) -> bytes:
@@ -272,7 +272,7 @@ def to_png_image(lay: SheetLayout, dpi: float = 600.0) -> tuple[NDArray[np.uint8
 def to_png(lay: SheetLayout, dpi: float = 600.0) -> bytes:
     """The sheet as PNG bytes with its physical resolution stored (see :func:`png_resolution`)."""
     img, ppm, _ = to_png_image(lay, dpi)
-    return _png_bytes(img, ppm)
+    return png_bytes(img, ppm)
 
 
 def write_marker(
