@@ -258,7 +258,7 @@ def ruler(x: float, y: float) -> tuple[list[Box], list[Stroke], list[Text]]:
         strokes.append(Stroke(xm, bar_y, xm, bar_y - ln, 0.1))
         if mm % 10 == 0:
             label = str(mm) if mm < RULER_MM else "100 mm"
-            texts.append(Text(xm - 0.6 * len(str(mm)) * 0.5 * 2.0, bar_y - 4.6, 2.0, label))
+            texts.append(Text(max(x, xm - 0.6 * len(str(mm))), bar_y - 4.6, 2.0, label))  # centred on the tick
     texts.append(Text(x, bar_y + 1.5 + 3.6, LABEL_MM, RULER_TEXT))
     return boxes, strokes, texts
 

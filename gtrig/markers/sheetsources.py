@@ -28,7 +28,7 @@ def parse_ids(text: str, family: MarkerFamily) -> list[int]:
         except ValueError:
             raise InputError(f"--id {text!r}: expected IDs like 14, 3,6,14 or 0-11") from None
         if b < a or a < 0 or b >= n_ids:
-            raise InputError(f"--id {tok!r}: {family.value} has IDs 0 to {n_ids - 1}")
+            raise InputError(f"--id {tok!r}: out of range, {family.value} has IDs 0 to {n_ids - 1}")
         ids.extend(range(a, b + 1))
     if len(set(ids)) != len(ids):
         raise InputError(f"--id {text!r}: an ID is named twice")
