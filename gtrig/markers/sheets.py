@@ -84,7 +84,7 @@ def parse_paper(text: str) -> Paper:
     w, h = sorted((float(m.group(1)), float(m.group(2))))
     if not (RULER_MM + 2 * PAGE_MARGIN_MM <= w and h <= 5000.0):
         raise InputError(f"--paper {text!r}: a sheet is {RULER_MM + 2 * PAGE_MARGIN_MM:g} to 5000 mm a side")
-    return Paper(f"{w:g} x {h:g} mm", w, h)
+    return Paper("custom", w, h)
 
 
 @dataclass(frozen=True)
@@ -140,6 +140,8 @@ class Tile:
     strokes: tuple[Stroke, ...] = ()
     texts: tuple[Text, ...] = ()
     marker: PrintedMarker | None = None
+    #: what its size includes besides the pattern, for a refusal
+    extras: str = "its white margin and label"
 
 
 @dataclass(frozen=True)
@@ -227,7 +229,7 @@ def marker_tile(family: MarkerFamily | str, marker_id: int, side_mm: float) -> T
     texts = tuple(Text(t.x + (w - label_w) / 2, t.y, t.size, t.text) for t in texts)
     return Tile(f"marker {int(marker_id)} ({fam.value}, {side_mm:g} mm)", w, cut + 2 * reach + label_h, boxes,
                 tuple(_cut_marks(x0 - q, y0 - q, cut)), texts,
-                PrintedMarker(fam, int(marker_id), float(side_mm), x0, y0))
+                PrintedMarker(fam, int(marker_id), float(side_mm), x0, y0), "its quiet zone, cut marks and label")
 
 
 def chessboard_tile(cols: int, rows: int, square_mm: float, title: str, notes: Sequence[str] = ()) -> Tile:
@@ -273,8 +275,8 @@ def _too_big(tile: Tile, paper: Paper) -> InputError:
     lw, lh = paper.usable_mm(True)
     pw, ph = paper.oriented(False)
     return InputError(
-        f"{tile.what} does not fit the paper: it needs {tile.w_mm:.0f} x {tile.h_mm:.0f} mm with its white "
-        f"margin, cut marks and label, and {paper.name} ({pw:g} x {ph:g} mm) leaves {uw:.0f} x {uh:.0f} mm "
+        f"{tile.what} does not fit the paper: it needs {tile.w_mm:.0f} x {tile.h_mm:.0f} mm with {tile.extras}, "
+        f"and {paper.name} ({pw:g} x {ph:g} mm) leaves {uw:.0f} x {uh:.0f} mm "
         f"(landscape {lw:.0f} x {lh:.0f}) inside its margins and ruler: choose a larger --paper (a3, or "
         "WIDTHxHEIGHT in mm for a plotter) or a smaller size")
 
