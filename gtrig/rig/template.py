@@ -52,7 +52,8 @@ FIELD_NOTES: dict[str, str] = {
     "world.name": "A short name of the room, printed by `gtrig rig check` and in reports.",
     "world.description": "Free text.",
     "cameras": "The fixed cameras that watch the robot's markers; one entry each.",
-    "cameras[].name": "Folder name of its images: run/cameras/<name>/, calib/intrinsics/<name>/ (plain name).",
+    "cameras[].name": "Folder name of its images: run/cameras/<name>/, calib/intrinsics/<name>/ (plain name), "
+                      "e.g. cam0.",
     "cameras[].resolution": "Image width, height in pixels, as the files hold them.",
     "cameras[].camera_matrix": "OpenCV pinhole K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] in pixels: fx = "
                                "focal length (mm) / pixel pitch (mm), e.g. 8 mm / 0.008 mm = 1000; cx, cy "
@@ -101,11 +102,13 @@ FIELD_NOTES: dict[str, str] = {
                                       "clock (s): 0.001-0.005 for a PC-stamped scanner.",
     "robot": "The robot: its hull, markers, odometry and onboard scanners.",
     "robot.hull": "The box the fixed scanners see (the 'gown'), in the robot frame (x forward, y left, z "
-                  "up, origin on the floor under the odometry centre); leave it out for a vision-only rig.",
+                  "up, origin on the floor under the point whose pose the odometry reports; the simulator: "
+                  "under the robot's centre); leave it out for a vision-only rig.",
     "robot.hull.length_m": "Length along robot x (m), e.g. 0.78.",
     "robot.hull.width_m": "Width along robot y (m), e.g. 0.57.",
-    "robot.hull.z_min_m": "Height of its lower edge above the floor (m).",
-    "robot.hull.z_max_m": "Height of its upper edge (m); the fixed scanners' plane lies between the two.",
+    "robot.hull.z_min_m": "Height of its lower edge above the floor (m), e.g. 0.05.",
+    "robot.hull.z_max_m": "Height of its upper edge (m), e.g. 0.55; the fixed scanners' plane lies between "
+                          "the two.",
     "robot.hull.offset_xy_m": "Centre of the hull in the robot frame (m); 0, 0 when centred on the "
                               "odometry centre.",
     "robot.markers": "The square ID markers on the robot, seen by the fixed cameras. `gtrig markers make "
@@ -126,23 +129,26 @@ FIELD_NOTES: dict[str, str] = {
     "robot.odometry.rate_hz": "Odometry samples per second (Hz), typically 10-100.",
     "robot.onboard_scanners": "2D scanners on the robot (run/onboard/<name>.csv), for scan matching; an "
                               "empty list [] when there are none.",
-    "robot.onboard_scanners[].name": "File name of its scans (plain name).",
+    "robot.onboard_scanners[].name": "File name of its scans: run/onboard/<name>.csv (plain name).",
     "robot.onboard_scanners[].T_robot_scanner": "The scanner in the robot frame: x along the beam at "
                                                 "angle 0, z up.",
     "robot.onboard_scanners[].T_robot_scanner.xyz": "Centre of the mirror in the robot frame (m).",
     "robot.onboard_scanners[].T_robot_scanner.rpy_deg": "Orientation (deg): 0, 0, 0 looks forward, yaw 180 "
                                                         "backward.",
-    "robot.onboard_scanners[].angle_min_rad": "Angle of the first beam (rad).",
-    "robot.onboard_scanners[].angle_increment_rad": "Angle between beams (rad).",
-    "robot.onboard_scanners[].beams": "Ranges per scan (columns of its CSV).",
-    "robot.onboard_scanners[].range_max_m": "Longest valid range (m).",
-    "robot.onboard_scanners[].rate_hz": "Scans per second (Hz).",
+    "robot.onboard_scanners[].angle_min_rad": "Angle of the first beam in the scanner frame (rad), e.g. "
+                                              "-1.5708 for 180 deg.",
+    "robot.onboard_scanners[].angle_increment_rad": "Angle between beams (rad), e.g. 0.017453 = 1 deg.",
+    "robot.onboard_scanners[].beams": "Ranges per scan, the columns of its CSV (181 for 180 deg at 1 deg).",
+    "robot.onboard_scanners[].range_max_m": "Longest valid range (m), e.g. 30 for a SICK LMS, 5.6 for a "
+                                            "Hokuyo URG-04LX.",
+    "robot.onboard_scanners[].rate_hz": "Scans per second (Hz), typically 10-75.",
     "survey": "The hand-laser survey that defines the world frame on the floor (docs/survey.md).",
     "survey.reference_points": "Floor points whose world coordinates are known by definition: O is the "
                                "origin, A lies on the world y axis, B on the x axis; at least 3, spread "
                                "over the tracked area.",
-    "survey.reference_points[].name": "Name used in survey/*.csv.",
-    "survey.reference_points[].xy": "World x, y (m).",
+    "survey.reference_points[].name": "Name used in survey/*.csv, e.g. O, A, B.",
+    "survey.reference_points[].xy": "World x, y (m), by definition: O (0, 0), A (0, d), B (d, 0) for a "
+                                    "reference square of side d, e.g. 2.5.",
     "survey.reference_points[].sigma_m": "One-sigma accuracy of its marking on the floor (m), typically "
                                          "0.0005-0.002.",
     "survey.hand_laser_sigma_m": "One-sigma error of one hand-laser distance (m): the device's datasheet "
