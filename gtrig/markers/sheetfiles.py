@@ -20,14 +20,10 @@ from gtrig.errors import InputError
 from gtrig.io.atomic import atomic_write_bytes, atomic_write_text
 from gtrig.markers.families import family_spec
 from gtrig.markers.generate import MM_PER_INCH, PT_PER_MM, png_bytes, png_resolution
+from gtrig.markers.pdfdoc import pdf_document, pdf_string
 from gtrig.markers.sheets import Page
 
 SUFFIXES = (".pdf", ".svg", ".png")
-
-
-def _pdf_text(s: str) -> str:
-    return s.encode("latin-1", "replace").decode("latin-1").replace("\\", "\\\\").replace("(", "\\(").replace(
-        ")", "\\)")
 
 
 def _page_stream(page: Page) -> bytes:
@@ -44,37 +40,13 @@ def _page_stream(page: Page) -> bytes:
     for s in page.strokes:
         ops.append(f"{s.width * PT_PER_MM:.4f} w {p(s.x0)} {p(H - s.y0)} m {p(s.x1)} {p(H - s.y1)} l S")
     for t in page.texts:
-        ops.append(f"BT /F1 {t.size * PT_PER_MM:.3f} Tf {p(t.x)} {p(H - t.y)} Td ({_pdf_text(t.text)}) Tj ET")
+        ops.append(f"BT /F1 {t.size * PT_PER_MM:.3f} Tf {p(t.x)} {p(H - t.y)} Td ({pdf_string(t.text)}) Tj ET")
     return "\n".join(ops).encode("latin-1")
 
 
 def to_pdf(pages: Sequence[Page]) -> bytes:
     """The sheets as one PDF 1.4 document, one page each at the paper's exact size."""
-    n = len(pages)
-    # objects: 1 catalog, 2 page tree, 3 font, then per page: its page object and its content stream
-    kids = " ".join(f"{4 + 2 * i} 0 R" for i in range(n))
-    objs: list[bytes] = [
-        b"<< /Type /Catalog /Pages 2 0 R >>",
-        f"<< /Type /Pages /Kids [{kids}] /Count {n} >>".encode(),
-        b"<< /Type /Font /Subtype /Type1 /BaseFont /Helvetica /Encoding /WinAnsiEncoding >>",
-    ]
-    for i, page in enumerate(pages):
-        w, h = page.size_mm
-        objs.append((f"<< /Type /Page /Parent 2 0 R /MediaBox [0 0 {w * PT_PER_MM:.4f} {h * PT_PER_MM:.4f}] "
-                     f"/Resources << /Font << /F1 3 0 R >> >> /Contents {5 + 2 * i} 0 R >>").encode())
-        content = _page_stream(page)
-        objs.append(b"<< /Length %d >>\nstream\n" % len(content) + content + b"\nendstream")
-    out = bytearray(b"%PDF-1.4\n%\xe2\xe3\xcf\xd3\n")
-    offsets = []
-    for i, o in enumerate(objs, start=1):
-        offsets.append(len(out))
-        out += b"%d 0 obj\n" % i + o + b"\nendobj\n"
-    xref = len(out)
-    out += b"xref\n0 %d\n0000000000 65535 f \n" % (len(objs) + 1)
-    for off in offsets:
-        out += b"%010d 00000 n \n" % off
-    out += b"trailer\n<< /Size %d /Root 1 0 R >>\nstartxref\n%d\n%%%%EOF\n" % (len(objs) + 1, xref)
-    return bytes(out)
+    return pdf_document([(p.size_mm[0] * PT_PER_MM, p.size_mm[1] * PT_PER_MM, _page_stream(p)) for p in pages])
 
 
 def to_svg(page: Page) -> str:
