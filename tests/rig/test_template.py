@@ -106,3 +106,17 @@ def test_init_refusals(tmp_path: Path) -> None:
     out.write_text("mine\n")
     r = runner.invoke(app, ["rig", "init", "--out", str(out)])
     assert r.exit_code == 2 and "exists" in r.output and out.read_text() == "mine\n"
+
+
+def test_odometry_only_rig_imports_a_bag(tmp_path: Path, shared_dir: Path) -> None:
+    """What the odometry-only template is for: a bag's odometry into a recording, checked against it."""
+    rig = tmp_path / "rig.yaml"
+    assert runner.invoke(app, ["rig", "init", "--odometry-only", "--out", str(rig)]).exit_code == 0
+    topics = tmp_path / "topics.yaml"
+    topics.write_text("sequence: run\nstamp: header\nodometry: /odom\n")
+    out = tmp_path / "rec"
+    r = runner.invoke(app, ["import", "rosbag", str(shared_dir / "data/rosbags/nav2_turtlebot.mcap"),
+                            "--topics", str(topics), "--rig", str(rig), "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert load_rig(out / "rig.yaml") == load_rig(rig)
+    assert len((out / "run/odometry.csv").read_text().splitlines()) == 1 + 2639
