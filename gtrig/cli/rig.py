@@ -17,9 +17,9 @@ app = typer.Typer(help="Rig files: start one from a template, validate and summa
 def init(
     out: Path = typer.Option(..., "--out", help="rig.yaml to write (an existing file is not replaced)."),
     cameras: int | None = typer.Option(
-        None, "--cameras", help="Fixed cameras watching the robot's markers [default: 4].", show_default=False),
+        None, "--cameras", help="Fixed cameras watching the robot's markers (default 4).", show_default=False),
     scanners: int | None = typer.Option(
-        None, "--scanners", help="Fixed 2D laser scanners seeing the robot's hull [default: 4].",
+        None, "--scanners", help="Fixed 2D laser scanners seeing the robot's hull (default 4).",
         show_default=False),
     odometry_only: bool = typer.Option(
         False, "--odometry-only", help="Only the robot's odometry and onboard scanner (importing odometry or "
