@@ -17,26 +17,64 @@ app = typer.Typer(help="Square ID markers: printable sheets, high-accuracy detec
 @app.command("make")
 @handle_errors
 def make(
-    family: Annotated[MarkerFamily, typer.Option("--family", help="Marker family.")],
-    marker_id: Annotated[int, typer.Option("--id", help="Marker ID.")],
-    size_mm: Annotated[float, typer.Option("--size-mm", help="Black square side (border included), mm.")],
-    out: Annotated[Path, typer.Option("--out", help="Output file: .pdf, .svg or .png.")],
+    out: Annotated[Path, typer.Option("--out", help="Output file: .pdf (one page per sheet), or .svg / .png "
+                                      "(one sheet).")],
+    family: Annotated[MarkerFamily | None, typer.Option("--family", help="Marker family (with --id).")] = None,
+    marker_ids: Annotated[str | None, typer.Option(
+        "--id", help="Marker IDs: 14, 3,6,14 or 0-11 (with --family and --size-mm).")] = None,
+    size_mm: Annotated[float | None, typer.Option(
+        "--size-mm", help="Black square side (border included), mm (with --id).")] = None,
+    rig: Annotated[Path | None, typer.Option(
+        "--rig", help="rig.yaml: print every marker of robot.markers (family and side from the rig).")] = None,
+    boards: Annotated[Path | None, typer.Option(
+        "--boards", help="calib/boards.yaml: print the double board's two boards and the world board.")] = None,
+    board: Annotated[str | None, typer.Option(
+        "--board", help="One chessboard COLSxROWSxSQUARE (inner corners, metres), e.g. 9x5x0.03.")] = None,
+    paper: Annotated[str, typer.Option(
+        "--paper", help="a4, letter, a3 or WIDTHxHEIGHT in mm; portrait or landscape is chosen to fit.")] = "a4",
     dpi: Annotated[float, typer.Option("--dpi", help="Minimum resolution of a PNG (dots per inch).")] = 600.0,
 ) -> None:
-    """Write a printable marker at exact physical size, with cut marks and its ID outside the marker."""
-    from gtrig.cli import checks
-    from gtrig.markers.generate import png_resolution, write_marker
+    """Lay markers and chessboards out on printable sheets at exact size, each with a 100 mm scale ruler.
 
-    checks.count("--id", marker_id, lo=0, hi=10**6)
-    checks.number("--size-mm", size_mm, lo=1.0, hi=5000.0, unit="mm", lo_hint="metres given for millimetres")
-    checks.outputs([], [out])
-    lay = write_marker(family, marker_id, size_mm, out, dpi)
-    msg = f"{out}: {family.value} id {marker_id}, black square {size_mm:g} mm"
-    if out.suffix.lower() == ".png":
-        k, ppm = png_resolution(size_mm, lay.cells.shape[0], dpi)
-        msg += (f", {k} px per cell at {ppm * 0.0254:.2f} dpi "
-                f"(printed side {lay.cells.shape[0] * k / ppm * 1000:.3f} mm)")
-    console.print(msg, highlight=False)
+    Several markers share a sheet when they fit; each has a white quiet zone, cut marks and its family,
+    ID and side printed outside the quiet zone. Print at 100 % (no fit-to-page) and check the ruler.
+    """
+    from gtrig.cli import checks
+    from gtrig.errors import InputError
+    from gtrig.markers.sheetfiles import write_sheets
+    from gtrig.markers.sheets import lay_out, marker_tile, parse_paper
+    from gtrig.markers.sheetsources import board_tile, boards_tiles, parse_ids, rig_marker_tiles
+
+    the_paper = parse_paper(paper)
+    checks.outputs([rig, boards], [out])
+    tiles = []
+    if marker_ids is not None or family is not None or size_mm is not None:
+        if marker_ids is None or family is None or size_mm is None:
+            raise InputError("--family, --id and --size-mm go together (or print a rig's markers with --rig)")
+        checks.number("--size-mm", size_mm, lo=5.0, hi=2000.0, unit="mm", lo_hint="metres given for millimetres")
+        tiles += [marker_tile(family, i, size_mm) for i in parse_ids(marker_ids, family)]
+    if rig is not None:
+        from gtrig.rig import load_rig
+
+        tiles += rig_marker_tiles(load_rig(rig), str(rig))
+    if boards is not None:
+        from gtrig.calib.chessboard import read_boards_yaml
+
+        tiles += boards_tiles(read_boards_yaml(boards))
+    if board is not None:
+        from gtrig.calib.chessboard import parse_board
+
+        tiles.append(board_tile(parse_board(board), "chessboard"))
+    if not tiles:
+        raise InputError("nothing to print: give --family, --id and --size-mm, --rig, --boards or --board")
+    pages = lay_out(tiles, the_paper)
+    write_sheets(pages, out, dpi)
+    for i, page in enumerate(pages, start=1):
+        w, h = page.size_mm
+        console.print(f"{out}: sheet {i} of {len(pages)}, {page.paper.name} {page.orientation} "
+                      f"({w:g} x {h:g} mm): {'; '.join(page.contents)}", highlight=False)
+    console.print("print at 100 % (no fit-to-page) and check that each sheet's ruler measures 100 mm",
+                  highlight=False)
 
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm")

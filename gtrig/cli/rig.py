@@ -9,7 +9,47 @@ import typer
 from gtrig.cli.common import console, handle_errors, styled
 from gtrig.errors import ConfigError
 
-app = typer.Typer(help="Rig files: validate and summarise.", no_args_is_help=True)
+app = typer.Typer(help="Rig files: start one from a template, validate and summarise.", no_args_is_help=True)
+
+
+@app.command("init")
+@handle_errors
+def init(
+    out: Path = typer.Option(..., "--out", help="rig.yaml to write (an existing file is not replaced)."),
+    cameras: int | None = typer.Option(
+        None, "--cameras", help="Fixed cameras watching the robot's markers (default 4).", show_default=False),
+    scanners: int | None = typer.Option(
+        None, "--scanners", help="Fixed 2D laser scanners seeing the robot's hull (default 4).",
+        show_default=False),
+    odometry_only: bool = typer.Option(
+        False, "--odometry-only", help="Only the robot's odometry and onboard scanner (importing odometry or "
+        "a bag without the room's sensors); takes no --cameras or --scanners."),
+) -> None:
+    """Write a commented rig.yaml template: every field with what it is, its unit, frame and a typical value."""
+    from gtrig.cli import checks
+    from gtrig.errors import InputError
+    from gtrig.io.atomic import atomic_write_text
+    from gtrig.rig.template import MAX_SENSORS, template_rig, template_text
+
+    checks.count("--cameras", cameras, lo=0, hi=MAX_SENSORS)
+    checks.count("--scanners", scanners, lo=0, hi=MAX_SENSORS)
+    if odometry_only:
+        given = "--cameras" if cameras is not None else "--scanners" if scanners is not None else None
+        if given:
+            raise InputError(f"--odometry-only takes no {given} (its rig has no room sensors)")
+        cameras = scanners = 0
+    else:
+        cameras = 4 if cameras is None else cameras
+        scanners = 4 if scanners is None else scanners
+        if cameras == 0 and scanners == 0:
+            raise InputError("--cameras 0 --scanners 0: a rig without room sensors is --odometry-only")
+    checks.outputs([], [out])
+    if out.exists():
+        raise InputError(f"{out}: exists; a template does not replace a rig (remove it or choose another --out)")
+    atomic_write_text(out, template_text(template_rig(cameras, scanners, odometry_only)))
+    what = "odometry-only rig" if odometry_only else f"{cameras} camera(s), {scanners} scanner(s)"
+    console.print(f"{out}: template with {what}; edit it, then `gtrig rig check {out}`", highlight=False)
+
 
 
 @app.command("check")

@@ -39,6 +39,8 @@ from numpy.typing import NDArray
 from gtrig.errors import InputError
 from gtrig.io.atomic import atomic_write_bytes, atomic_write_text
 from gtrig.markers.families import family_spec, marker_cells
+from gtrig.markers.pdfdoc import pdf_document, pdf_string
+from gtrig.markers.sheets import black_runs
 from gtrig.rig.models import MarkerFamily
 
 MM_PER_INCH = 25.4
@@ -100,18 +102,8 @@ class SheetLayout:
 
     def black_runs_mm(self) -> list[tuple[float, float, float, float]]:
         """Black cells merged into horizontal runs: rectangles (x, y, w, h)."""
-        c = self.cells
         x0, y0 = self.marker_xy_mm
-        cm = self.cell_mm
-        out: list[tuple[float, float, float, float]] = []
-        for r in range(c.shape[0]):
-            row = np.concatenate([[1], c[r], [1]]).astype(np.int8)
-            d = np.diff(row)
-            starts = np.flatnonzero(d == -1)
-            ends = np.flatnonzero(d == 1)
-            for a, b in zip(starts, ends, strict=True):
-                out.append((float(x0 + a * cm), float(y0 + r * cm), float((b - a) * cm), float(cm)))
-        return out
+        return [(b.x, b.y, b.w, b.h) for b in black_runs(self.cells, x0, y0, self.cell_mm)]
 
 
 def layout(family: MarkerFamily | str, marker_id: int, size_mm: float) -> SheetLayout:
@@ -178,30 +170,8 @@ def to_pdf(lay: SheetLayout) -> bytes:
     for a, b, c, d in lay.cut_marks_mm():
         ops.append(f"{p(a)} {p(H - b)} m {p(c)} {p(H - d)} l S")
     lx, ly = lay.label_xy_mm
-    text = lay.label.replace("\\", "\\\\").replace("(", "\\(").replace(")", "\\)")
-    ops.append(f"BT /F1 {LABEL_HEIGHT_MM * PT_PER_MM:.3f} Tf {p(lx)} {p(H - ly)} Td ({text}) Tj ET")
-    content = "\n".join(ops).encode("latin-1")
-    objs = [
-        b"<< /Type /Catalog /Pages 2 0 R >>",
-        b"<< /Type /Pages /Kids [3 0 R] /Count 1 >>",
-        (
-            f"<< /Type /Page /Parent 2 0 R /MediaBox [0 0 {p(lay.width_mm)} {p(H)}] "
-            f"/Resources << /Font << /F1 5 0 R >> >> /Contents 4 0 R >>"
-        ).encode(),
-        b"<< /Length %d >>\nstream\n" % len(content) + content + b"\nendstream",
-        b"<< /Type /Font /Subtype /Type1 /BaseFont /Helvetica >>",
-    ]
-    out = bytearray(b"%PDF-1.4\n%\xe2\xe3\xcf\xd3\n")
-    offsets = []
-    for i, o in enumerate(objs, start=1):
-        offsets.append(len(out))
-        out += b"%d 0 obj\n" % i + o + b"\nendobj\n"
-    xref = len(out)
-    out += b"xref\n0 %d\n0000000000 65535 f \n" % (len(objs) + 1)
-    for off in offsets:
-        out += b"%010d 00000 n \n" % off
-    out += b"trailer\n<< /Size %d /Root 1 0 R >>\nstartxref\n%d\n%%%%EOF\n" % (len(objs) + 1, xref)
-    return bytes(out)
+    ops.append(f"BT /F1 {LABEL_HEIGHT_MM * PT_PER_MM:.3f} Tf {p(lx)} {p(H - ly)} Td ({pdf_string(lay.label)}) Tj ET")
+    return pdf_document([(lay.width_mm * PT_PER_MM, H * PT_PER_MM, "\n".join(ops).encode("latin-1"))])
 
 
 # ----------------------------------------------------------------------------------------- PNG
@@ -219,7 +189,7 @@ def png_resolution(size_mm: float, n_cells: int, dpi: float) -> tuple[int, int]:
     return k, int(ppm)
 
 
-def _png_bytes(img: NDArray[np.uint8], px_per_metre: int) -> bytes:
+def png_bytes(img: NDArray[np.uint8], px_per_metre: int) -> bytes:
     """Encode an 8-bit grayscale image as PNG with a ``pHYs`` chunk (pixels per metre)."""
 
     def chunk(tag: bytes, data: bytes) -> bytes:
@@ -272,7 +242,7 @@ def to_png_image(lay: SheetLayout, dpi: float = 600.0) -> tuple[NDArray[np.uint8
 def to_png(lay: SheetLayout, dpi: float = 600.0) -> bytes:
     """The sheet as PNG bytes with its physical resolution stored (see :func:`png_resolution`)."""
     img, ppm, _ = to_png_image(lay, dpi)
-    return _png_bytes(img, ppm)
+    return png_bytes(img, ppm)
 
 
 def write_marker(

@@ -14,7 +14,9 @@ from typer.testing import CliRunner
 
 from gtrig.cli.main import app
 from gtrig.markers.detect import MarkerDetector
-from gtrig.markers.generate import layout, png_resolution, to_pdf, to_png_image
+from gtrig.markers.generate import layout, png_resolution, to_png_image
+from gtrig.markers.sheetfiles import to_pdf as sheet_pdf
+from gtrig.markers.sheets import lay_out, marker_tile, parse_paper
 from gtrig.rig.models import MarkerFamily
 
 runner = CliRunner()
@@ -49,6 +51,7 @@ def test_png_round_trip_every_family(family: MarkerFamily) -> None:
 
 
 def test_cli_make_formats(tmp_path: Path) -> None:
+    """One marker on an A4 sheet in each format (tests/markers/test_sheets.py reads the sheets back)."""
     for suffix in ("png", "svg", "pdf"):
         out = tmp_path / f"m.{suffix}"
         r = runner.invoke(app, ["markers", "make", "--family", "artoolkitplus_simple", "--id", "14",
@@ -59,22 +62,23 @@ def test_cli_make_formats(tmp_path: Path) -> None:
     k, ppm2 = png_resolution(100.0, 12, 150)
     assert ppm == ppm2 and 150 <= ppm * 0.0254 < 160
     img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_GRAYSCALE)
-    assert img.shape[1] == pytest.approx(layout("artoolkitplus_simple", 14, 100).width_mm * ppm / 1000, abs=1)
+    assert img.shape[1] == pytest.approx(210.0 * ppm / 1000, abs=1)
     svg = (tmp_path / "m.svg").read_text()
-    lay = layout("artoolkitplus_simple", 14, 100)
-    assert f'width="{lay.width_mm:.4f}mm"' in svg and "id 14" in svg
+    assert 'width="210.0000mm"' in svg and "id 14" in svg
     pdf = (tmp_path / "m.pdf").read_bytes()
     assert pdf.startswith(b"%PDF-1.4") and pdf.rstrip().endswith(b"%%EOF")
     box = re.search(rb"/MediaBox \[0 0 ([\d.]+) ([\d.]+)\]", pdf)
-    assert box and float(box.group(1)) == pytest.approx(lay.width_mm * 72 / 25.4, abs=1e-3)
-    # the cross-reference table points at the objects
+    assert box and float(box.group(1)) == pytest.approx(210.0 * 72 / 25.4, abs=1e-3)
+    # the cross-reference table points at the objects (catalog, pages, font, page, content)
     xref = int(pdf[pdf.rindex(b"startxref") + 9 :].split()[0])
     offsets = [int(line[:10]) for line in pdf[xref:].split(b"\n")[3:8]]
     for i, off in enumerate(offsets, start=1):
         assert pdf[off:].startswith(b"%d 0 obj" % i)
-    # the content stream has one black run per row segment of the pattern
-    assert pdf.count(b" re\n") == len(lay.black_runs_mm())
-    assert to_pdf(lay) == pdf
+    # the content stream has one black run per row segment of the pattern, and the ruler's bar
+    lay = layout("artoolkitplus_simple", 14, 100)
+    assert pdf.count(b" re\n") == len(lay.black_runs_mm()) + 1
+    pages = lay_out([marker_tile("artoolkitplus_simple", 14, 100.0)], parse_paper("a4"))
+    assert sheet_pdf(pages) == pdf
 
 
 def test_cli_errors_and_detect(tmp_path: Path) -> None:
