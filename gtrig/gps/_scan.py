@@ -83,6 +83,136 @@ def _number(buf: np.ndarray, a: int, b: int, pow10: np.ndarray) -> float:
     return -v if neg else v
 
 
+@njit(cache=True, inline="always")
+def _sentence_bounds(buf: np.ndarray, a: int, b: int) -> tuple[int, int, int, bool]:
+    """One pass over ``buf[a:b]``: the ``$``, the ``*``, the XOR between them, and whether a byte is not
+    printable ASCII (``d`` and ``star`` are -1 when absent)."""
+    d = -1
+    star = -1
+    x = 0
+    for i in range(a, b):
+        c = buf[i]
+        if c > 126 or (c < 32 and c != 9):
+            return d, star, x, True
+        if d < 0:
+            if c == 36:
+                d = i
+        elif star < 0:
+            if c == 42:
+                star = i
+            else:
+                x ^= c
+    return d, star, x, False
+
+
+@njit(cache=True, inline="always")
+def _prefix_stamp(buf: np.ndarray, a: int, d: int, pow10: np.ndarray) -> float:
+    """The log's own clock before the sentence, ``"seconds,"`` with optional spaces (``nan`` if not a number)."""
+    e = d
+    while e > a and (buf[e - 1] == 32 or buf[e - 1] == 9):
+        e -= 1
+    if e > a and buf[e - 1] == 44:
+        e -= 1
+    while e > a and (buf[e - 1] == 32 or buf[e - 1] == 9):
+        e -= 1
+    return _number(buf, a, e, pow10)
+
+
+@njit(cache=True, inline="always")
+def _checksum(buf: np.ndarray, star: int, b: int, x: int) -> int:
+    """The checksum's state: two hex digits equal to the XOR (full), one equal to its high nibble (the
+    RAWSEEDS logger's truncation), or bad."""
+    nd = b - star - 1
+    if nd == 2:
+        h1 = _hex(buf[star + 1])
+        h2 = _hex(buf[star + 2])
+        return CS_FULL if h1 >= 0 and h2 >= 0 and h1 * 16 + h2 == x else CS_BAD
+    if nd == 1:
+        h1 = _hex(buf[star + 1])
+        return CS_TRUNCATED if h1 >= 0 and h1 == (x >> 4) else CS_BAD
+    return CS_BAD
+
+
+@njit(cache=True, inline="always")
+def _talker(t0: int, t1: int) -> int:
+    """Index of the two-letter talker in :data:`TALKERS`, -1 for another."""
+    if t0 == 71:  # G
+        if t1 == 80:
+            return 0
+        if t1 == 78:
+            return 1
+        if t1 == 76:
+            return 2
+        if t1 == 65:
+            return 3
+        if t1 == 66:
+            return 4
+        if t1 == 81:
+            return 6
+        if t1 == 73:
+            return 7
+    elif t0 == 66 and t1 == 68:
+        return 5
+    return -1
+
+
+@njit(cache=True, inline="always")
+def _sentence_type(s0: int, s1: int, s2: int) -> int:
+    """The sentence type's kind code from its three letters."""
+    if s0 == 71 and s1 == 71 and s2 == 65:
+        return K_GGA
+    if s0 == 71 and s1 == 83 and s2 == 84:
+        return K_GST
+    if s0 == 82 and s1 == 77 and s2 == 67:
+        return K_RMC
+    if s0 == 90 and s1 == 68 and s2 == 65:
+        return K_ZDA
+    if s0 == 71 and s1 == 83 and s2 == 65:
+        return K_GSA
+    if s0 == 71 and s1 == 83 and s2 == 86:
+        return K_GSV
+    return K_OTHER
+
+
+@njit(cache=True, inline="always")
+def _address(buf: np.ndarray, d: int, addr_end: int) -> tuple[int, int]:
+    """(kind, talker) of the address field ``$ttSSS`` in ``buf[d:addr_end]``: a known talker and type, a
+    proprietary ``$P...`` or another well-formed address (other), else bad."""
+    if addr_end - d - 1 == 5:
+        t0 = buf[d + 1]
+        t1 = buf[d + 2]
+        tk = _talker(t0, t1)
+        k = _sentence_type(buf[d + 3], buf[d + 4], buf[d + 5])
+        if tk < 0:
+            k = K_OTHER if (t0 == 80 or (65 <= t0 <= 90 and 65 <= t1 <= 90)) else K_BAD
+        return k, tk
+    if addr_end - d - 1 >= 2 and buf[d + 1] == 80:  # proprietary $P...
+        return K_OTHER, -1
+    return K_BAD, -1
+
+
+@njit(cache=True, inline="always")
+def _fields(buf: np.ndarray, comma: int, body_end: int, li: int, vals: np.ndarray, chars: np.ndarray,
+            pow10: np.ndarray) -> int:
+    """Cut ``buf[comma + 1:body_end]`` at the commas into line ``li`` of ``vals`` and ``chars``; the number of
+    fields (more than :data:`MAX_FIELDS` when the line has too many)."""
+    nf = 0
+    f0 = comma + 1
+    i = f0
+    while True:
+        if i == body_end or buf[i] == 44:
+            if nf >= MAX_FIELDS:
+                return nf + 1
+            if i > f0:
+                chars[nf, li] = buf[f0]
+                vals[nf, li] = _number(buf, f0, i, pow10)
+            nf += 1
+            if i == body_end:
+                return nf
+            f0 = i + 1
+        i += 1
+
+
 @njit(cache=True)
 def scan(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, vals: np.ndarray, chars: np.ndarray,
          nfields: np.ndarray, kind: np.ndarray, talker: np.ndarray, cs: np.ndarray, bad: np.ndarray,
@@ -114,24 +244,7 @@ def scan(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, vals: np.ndarray
             kind[li] = K_BLANK
             continue
         kind[li] = K_BAD
-        # one pass: the '$', the '*', the XOR between them and any byte that is not printable ASCII
-        d = -1
-        star = -1
-        x = 0
-        binary = False
-        for i in range(a, b):
-            c = buf[i]
-            if c > 126 or (c < 32 and c != 9):
-                binary = True
-                break
-            if d < 0:
-                if c == 36:
-                    d = i
-            elif star < 0:
-                if c == 42:
-                    star = i
-                else:
-                    x ^= c
+        d, star, x, binary = _sentence_bounds(buf, a, b)
         if binary:
             bad[li] = B_BINARY
             continue
@@ -139,115 +252,31 @@ def scan(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, vals: np.ndarray
             bad[li] = B_NO_SENTENCE
             continue
         if d > a:
-            # a prefix: the log's own clock, "seconds," with optional spaces
-            e = d
-            while e > a and (buf[e - 1] == 32 or buf[e - 1] == 9):
-                e -= 1
-            if e > a and buf[e - 1] == 44:
-                e -= 1
-            while e > a and (buf[e - 1] == 32 or buf[e - 1] == 9):
-                e -= 1
-            t = _number(buf, a, e, pow10)
+            t = _prefix_stamp(buf, a, d, pow10)
             if np.isnan(t):
                 bad[li] = B_PREFIX
                 continue
             stamp[li] = t
         body_end = b if star < 0 else star
         if star >= 0:
-            nd = b - star - 1
-            if nd == 2:
-                h1 = _hex(buf[star + 1])
-                h2 = _hex(buf[star + 2])
-                if h1 < 0 or h2 < 0 or h1 * 16 + h2 != x:
-                    bad[li] = B_CHECKSUM
-                    cs[li] = CS_BAD
-                    continue
-                cs[li] = CS_FULL
-            elif nd == 1:
-                h1 = _hex(buf[star + 1])
-                if h1 < 0 or h1 != (x >> 4):
-                    bad[li] = B_CHECKSUM
-                    cs[li] = CS_BAD
-                    continue
-                cs[li] = CS_TRUNCATED
-            else:
+            cs[li] = _checksum(buf, star, b, x)
+            if cs[li] == CS_BAD:
                 bad[li] = B_CHECKSUM
-                cs[li] = CS_BAD
                 continue
-        # address field: $ttSSS
         comma = -1
         for i in range(d + 1, body_end):
             if buf[i] == 44:
                 comma = i
                 break
-        addr_end = body_end if comma < 0 else comma
-        k = K_BAD
-        if addr_end - d - 1 == 5:
-            t0 = buf[d + 1]
-            t1 = buf[d + 2]
-            tk = -1
-            if t0 == 71:  # G
-                if t1 == 80:
-                    tk = 0
-                elif t1 == 78:
-                    tk = 1
-                elif t1 == 76:
-                    tk = 2
-                elif t1 == 65:
-                    tk = 3
-                elif t1 == 66:
-                    tk = 4
-                elif t1 == 81:
-                    tk = 6
-                elif t1 == 73:
-                    tk = 7
-            elif t0 == 66 and t1 == 68:
-                tk = 5
-            s0 = buf[d + 3]
-            s1 = buf[d + 4]
-            s2 = buf[d + 5]
-            if s0 == 71 and s1 == 71 and s2 == 65:
-                k = K_GGA
-            elif s0 == 71 and s1 == 83 and s2 == 84:
-                k = K_GST
-            elif s0 == 82 and s1 == 77 and s2 == 67:
-                k = K_RMC
-            elif s0 == 90 and s1 == 68 and s2 == 65:
-                k = K_ZDA
-            elif s0 == 71 and s1 == 83 and s2 == 65:
-                k = K_GSA
-            elif s0 == 71 and s1 == 83 and s2 == 86:
-                k = K_GSV
-            else:
-                k = K_OTHER
-            if tk < 0:
-                k = K_OTHER if (t0 == 80 or (65 <= t0 <= 90 and 65 <= t1 <= 90)) else K_BAD
-            talker[li] = tk
-        elif addr_end - d - 1 >= 2 and buf[d + 1] == 80:  # proprietary $P...
-            k = K_OTHER
+        k, tk = _address(buf, d, body_end if comma < 0 else comma)
+        talker[li] = tk
         if k == K_BAD:
             bad[li] = B_ADDRESS
             continue
         kind[li] = k
         if k == K_OTHER or comma < 0:
             continue
-        # fields
-        nf = 0
-        f0 = comma + 1
-        i = f0
-        while True:
-            if i == body_end or buf[i] == 44:
-                if nf >= MAX_FIELDS:
-                    nf += 1
-                    break
-                if i > f0:
-                    chars[nf, li] = buf[f0]
-                    vals[nf, li] = _number(buf, f0, i, pow10)
-                nf += 1
-                if i == body_end:
-                    break
-                f0 = i + 1
-            i += 1
+        nf = _fields(buf, comma, body_end, li, vals, chars, pow10)
         if nf > MAX_FIELDS:
             kind[li] = K_BAD
             bad[li] = B_TOO_MANY
