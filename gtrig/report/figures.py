@@ -39,33 +39,124 @@ def status_figure(track: PoseTrack, title: str) -> Any:
     return fig
 
 
-def camera_figure(per_camera: dict[str, dict[str, list[float]]], title: str) -> Any:
-    """Per camera: where in the image markers were detected (corner scatter) and detections over time."""
+def camera_coverage_figure(per_camera: dict[str, Any], sizes_px: dict[str, tuple[int, int]], axis: str,
+                           title: str) -> Any:
+    """Per camera (columns): every detected corner in its image, the image's frame drawn at its size (top);
+    the images showing a marker along the recording (bottom). ``per_camera[cam]`` is a
+    gtrig.report.coverage.CameraCoverage; ``axis`` says whether its rows are ``image`` rows or ``time`` (s)."""
     cams = sorted(per_camera)
-    fig, axs = figure(nrows=2, ncols=max(len(cams), 1), figsize=(3.2 * max(len(cams), 1), 5.6), squeeze=False)
-    t0 = min((min(v["t"]) for v in per_camera.values() if v["t"]), default=0.0)
+    n = max(len(cams), 1)
+    fig, axs = figure(nrows=2, ncols=n, figsize=(13, 6.2), squeeze=False,
+                      gridspec_kw={"height_ratios": [3, 1]})
     for j, cam in enumerate(cams):
-        d = per_camera[cam]
+        c = per_camera[cam]
         ax = axs[0, j]
-        ax.plot(d["u"], d["v"], ".", ms=1, alpha=0.4)
-        ax.invert_yaxis()
+        uv = c.uv()
+        ax.plot(uv[:, 0], uv[:, 1], ".", ms=2, alpha=0.5)
+        if cam in sizes_px:
+            w, h = sizes_px[cam]
+            ax.plot([0, w, w, 0, 0], [0, 0, h, h, 0], "k-", lw=0.8)
+            ax.set_xlim(-0.02 * w, 1.02 * w)
+            ax.set_ylim(1.02 * h, -0.02 * h)
+        else:
+            ax.invert_yaxis()
         ax.set_aspect("equal")
-        ax.set_title(f"{cam}: {len(d['t'])} detections", fontsize=9)
-        ax.set_xlabel("u (px)", fontsize=8)
+        ax.set_title(f"{cam}: {c.n_markers} markers in {int(np.sum(c.marked))} images", fontsize=10)
+        ax.set_xlabel("u (px)")
+        if j == 0:
+            ax.set_ylabel("v (px)")
         ax = axs[1, j]
-        if d["t"]:
-            ax.hist(np.asarray(d["t"]) - t0, bins=60, color="c")
-        ax.set_xlabel("time (s)", fontsize=8)
-        ax.set_ylabel("markers per bin", fontsize=8)
+        rows = np.asarray(c.rows, float)
+        marked = np.asarray(c.marked, bool)
+        if rows.size:
+            r0 = rows.min() if axis == "image" else min(min(p.rows) for p in per_camera.values() if p.rows)
+            ax.plot(rows[marked] - r0, np.ones(int(marked.sum())), "|", color="g", ms=12)
+            ax.plot(rows[~marked] - r0, np.zeros(int((~marked).sum())), "|", color="0.6", ms=12)
+        ax.set_yticks([0, 1], ["none", "marker"])
+        ax.set_ylim(-0.6, 1.6)
+        ax.set_xlabel("image number" if axis == "image" else "time (s)")
     fig.suptitle(title)
+    fig.tight_layout()
     return fig
+
+
+def _nice(v: float) -> float:
+    """The largest of 1, 2, 5 x 10^k not above ``v`` (1 at least)."""
+    if v <= 1:
+        return 1.0
+    k = 10 ** np.floor(np.log10(v))
+    return float(max(m * k for m in (1, 2, 5) if m * k <= v))
+
+
+def track_figure(track: PoseTrack, truth: PoseTrack | None, name: str, n_sigma: float = 3.0,
+                 max_ellipses: int = 120) -> tuple[Any, str]:
+    """The x-y path of ``track`` with its ``n_sigma`` position ellipses magnified to be seen (left), and a
+    zoom at true scale on the poses around the middle of the run (right); flagged / bridged / rejected poses
+    marked, the truth in red. Returns the figure and a caption saying how the ellipses are drawn."""
+    fig, (a0, a1) = figure(ncols=2, figsize=(13, 6.0), gridspec_kw={"width_ratios": [1.5, 1]})
+    xy = track.xyz[:, :2]
+    C = track.cov_xytheta() if track.cov is not None and track.cov_kind != "xyz" else track.cov
+    extent = float(np.ptp(xy, axis=0).max()) if len(xy) else 1.0
+    mag = 1.0
+    if C is not None and len(track):
+        sig = float(np.nanmedian(np.sqrt(np.maximum(C[:, 0, 0] + C[:, 1, 1], 0)))) or 1e-12
+        mag = _nice(0.02 * (extent or 1.0) / (n_sigma * sig))  # the median ellipse about 2 % of the path
+    colors = {PoseStatus.FLAGGED: "orange", PoseStatus.BRIDGED: "purple", PoseStatus.REJECTED: "r"}
+    mid = int(np.clip(len(track) // 2, 0, max(len(track) - 1, 0)))
+    half = 0.0
+    for ax, k in ((a0, mag), (a1, 1.0)):
+        ax.plot(xy[:, 0], xy[:, 1], "b.-", lw=0.8, ms=2 if ax is a1 else 0, label=name)
+        if truth is not None:
+            ax.plot(truth.xyz[:, 0], truth.xyz[:, 1], "r-", lw=0.8, alpha=0.8, label="truth")
+        for s, col in colors.items():
+            m = track.status == s
+            if np.any(m):
+                ax.plot(xy[m, 0], xy[m, 1], "x", color=col, ms=5, ls="none", label=f"{s.name.lower()} ({m.sum()})")
+        if C is None or not len(track):
+            continue
+        if ax is a0:
+            idx = np.arange(0, len(track), max(1, len(track) // max_ellipses))
+        else:
+            s_mid = float(np.sqrt(max(C[mid, 0, 0], C[mid, 1, 1], 1e-12)))
+            half = max(4 * n_sigma * s_mid, 2e-3)
+            near = np.flatnonzero(np.all(np.abs(xy - xy[mid]) < half, axis=1))
+            idx = near[:: max(1, near.size // 40)]
+        for i in idx:
+            if np.all(np.isfinite(C[i][:2, :2])):
+                e = ellipse_xy(xy[i], C[i][:2, :2] * k**2, n_sigma)
+                ax.plot(e[:, 0], e[:, 1], "c-", lw=0.7)
+        ax.plot([], [], "c-", lw=0.7, label=f"{n_sigma:g}-sigma ellipse" + (f" x{k:g}" if k > 1 else ", true size"))
+    if C is not None and len(track):
+        a0.add_patch(_box(xy[mid], half))
+        a1.set_xlim(xy[mid, 0] - half, xy[mid, 0] + half)
+        a1.set_ylim(xy[mid, 1] - half, xy[mid, 1] + half)
+        a1.set_title(f"zoom at true scale: {2000 * half:.0f} mm wide (the box on the left)", fontsize=10)
+    a0.set_title(f"{name}: path", fontsize=10)
+    for ax in (a0, a1):
+        ax.set_aspect("equal")
+        ax.grid(True, alpha=0.3)
+        ax.set_xlabel("x (m)")
+        ax.legend(loc="best", fontsize=8)
+    a0.set_ylabel("y (m)")
+    fig.tight_layout()
+    caption = (f"{name}: path (blue) with its {n_sigma:g}-sigma position ellipses (cyan) "
+               + (f"magnified {mag:g}x on the left (every {max(1, len(track) // max_ellipses)}th pose) and at true "
+                  "size in the zoom on the right" if C is not None else "(no covariance in the folder)")
+               + ", flagged / bridged / rejected poses as crosses" + (", truth in red" if truth is not None else ""))
+    return fig, caption
+
+
+def _box(center: np.ndarray, half: float) -> Any:
+    from matplotlib.patches import Rectangle
+
+    return Rectangle((center[0] - half, center[1] - half), 2 * half, 2 * half, fill=False, ec="k", lw=1.0)
 
 
 def survey_figure(points: dict[str, np.ndarray], cov: np.ndarray | None, truth: dict[str, np.ndarray] | None,
                   poses: np.ndarray | None, pose_cov: np.ndarray | None, scale: float) -> Any:
     """Surveyed world points and validation poses with their 3-sigma ellipses magnified ``scale`` times;
     with truth, the error of each point magnified alike."""
-    fig, ax = figure(figsize=(7.5, 6.5))
+    fig, ax = figure(figsize=(13, 7.5))
     names = list(points)
     P = np.array([points[n] for n in names])
     ax.plot(P[:, 0], P[:, 1], "b+", label="world points")
