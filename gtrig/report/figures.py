@@ -46,7 +46,8 @@ def camera_coverage_figure(per_camera: dict[str, Any], sizes_px: dict[str, tuple
     gtrig.report.coverage.CameraCoverage; ``axis`` says whether its rows are ``image`` rows or ``time`` (s)."""
     cams = sorted(per_camera)
     n = max(len(cams), 1)
-    fig, axs = figure(nrows=2, ncols=n, figsize=(13, 6.2), squeeze=False,
+    image_h = 0.75 * 0.85 * 13 / n  # a 4:3 image in its column
+    fig, axs = figure(nrows=2, ncols=n, figsize=(13, min(1.4 * image_h + 1.6, 9.0)), squeeze=False,
                       gridspec_kw={"height_ratios": [3, 1]})
     for j, cam in enumerate(cams):
         c = per_camera[cam]
@@ -140,7 +141,7 @@ def track_figure(track: PoseTrack, truth: PoseTrack | None, name: str, n_sigma: 
     a0.set_ylabel("y (m)")
     fig.tight_layout()
     caption = (f"{name}: path (blue) with its {n_sigma:g}-sigma position ellipses (cyan) "
-               + (f"magnified {mag:g}x on the left (every {max(1, len(track) // max_ellipses)}th pose) and at true "
+               + (f"magnified {mag:g}x on the left (one pose in {max(1, len(track) // max_ellipses)}) and at true "
                   "size in the zoom on the right" if C is not None else "(no covariance in the folder)")
                + ", flagged / bridged / rejected poses as crosses" + (", truth in red" if truth is not None else ""))
     return fig, caption

@@ -8,6 +8,8 @@ from __future__ import annotations
 import html
 import re
 
+from gtrig.report.section import table_html
+
 #: a list item: ``- x``, ``* x``, ``+ x`` (bullets) or ``1. x`` / ``1) x`` (numbered); group 2 is the text
 _ITEM = re.compile(r"^\s*([-*+]|\d+[.)])\s+(.*)$")
 
@@ -48,10 +50,7 @@ def markdown_to_html(text: str) -> str:
             while i < len(lines) and lines[i].strip().startswith("|"):
                 rows.append(_cells(lines[i]))
                 i += 1
-            out.append("<table><thead><tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in head)
-                       + "</tr></thead><tbody>"
-                       + "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows)
-                       + "</tbody></table>")
+            out.append(table_html(head, [[html.escape(c) for c in r] for r in rows]))
             continue
         elif (m := _ITEM.match(s)) is not None:
             if para or (items and ordered != m.group(1)[0].isdigit()):

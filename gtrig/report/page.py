@@ -36,8 +36,8 @@ header p{margin:4px 0 0;font-size:13px;opacity:.85}
 nav{padding:8px 24px;background:#e8eef5;font-size:13px}nav a{margin-right:14px;color:#1f3a5f}
 section{background:#fff;margin:14px 24px;padding:10px 18px;border:1px solid #ddd;border-radius:6px}
 h2{font-size:18px;border-bottom:1px solid #eee;padding-bottom:4px}h3{font-size:15px}h4,h5,h6{font-size:14px}
-table{border-collapse:collapse;font-size:12px;margin:8px 0}th,td{border:1px solid #ccc;padding:3px 7px;text-align:right}
-th{background:#f0f3f7}td:first-child,th:first-child{text-align:left}
+table{border-collapse:collapse;font-size:12px;margin:8px 0}th,td{border:1px solid #ccc;padding:3px 7px;text-align:left}
+th{background:#f0f3f7}td.n{text-align:right;white-space:nowrap}
 .ok{color:#17803d;font-weight:600}.miss{color:#c0392b;font-weight:600}.note{color:#777;font-size:12px}
 .warn{background:#fff5e0;border-left:4px solid #e6a700;padding:6px 10px 6px 26px;font-size:13px}
 p.warn{padding-left:10px}li{margin:2px 0}
@@ -46,9 +46,13 @@ figcaption{font-size:13px;color:#444}
 """
 
 CHECK_JS = """
-window.addEventListener('load',function(){var imgs=document.querySelectorAll('figure img');var ok=0;
-for(var i=0;i<imgs.length;i++){if(imgs[i].complete&&imgs[i].naturalWidth>0){ok++;}}
+window.addEventListener('load',function(){var imgs=document.querySelectorAll('figure img');var ok=0;var pct=100;
+for(var i=0;i<imgs.length;i++){var im=imgs[i];if(im.complete&&im.naturalWidth>0){ok++;}
+var sec=im.closest('section');var cs=getComputedStyle(sec);
+var inner=sec.clientWidth-parseFloat(cs.paddingLeft)-parseFloat(cs.paddingRight);
+pct=Math.min(pct,100*im.getBoundingClientRect().width/inner);}
 document.body.setAttribute('data-figures-loaded',String(ok));
+document.body.setAttribute('data-figure-min-width-pct',String(Math.round(pct)));
 document.body.setAttribute('data-tables',String(document.querySelectorAll('table').length));
 document.body.setAttribute('data-load-ms',String(Math.round(performance.now())));});
 """
@@ -396,6 +400,22 @@ SECTIONS: tuple[tuple[str, Callable[[ResultsInventory], Any]], ...] = (
 )
 
 
+#: what a section reads, named when the folder lacks it
+ABSENT = {
+    "checks of the run": "no summary.csv",
+    "accuracy against truth": "no accuracy.csv and no truth folder: give --truth, the recording's truth/",
+    "pose tracks": "no *.tum",
+    "RTK-GPS": "no gps JSON",
+    "consistency of GT sources": "fewer than two tracks with a covariance",
+    "fusion": "no fusion_report.json",
+    "cameras": "no gt_vision_*.checkpoint holding detections",
+    "scanners": "no sync.yaml with a laser/<scanner> entry",
+    "survey": "no survey/world_points.csv",
+    "calibration": "no calibration/calibration_report.yaml",
+    "time sync": "no sync.yaml and no correlation curve CSV",
+    "stage summaries": "no *.md",
+}
+
 #: sections of verbs outside the pipeline (``gtrig gps``): shown when their files are there, not named when absent
 OPTIONAL_SECTIONS = frozenset({"RTK-GPS"})
 
@@ -423,7 +443,7 @@ def build_report(results_dir: str | Path, truth_dir: str | Path | None = None) -
             continue
         got = [got] if isinstance(got, Section) else (got or [])
         if not got and label not in OPTIONAL_SECTIONS:
-            skipped.append(f"{label}: no input in the folder")
+            skipped.append(f"{label}: no input in the folder ({ABSENT[label]})")
         sections += got
     n_fig = sum(s.n_figures for s in sections)
     when = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")

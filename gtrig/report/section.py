@@ -9,6 +9,7 @@ import base64
 import csv
 import html
 import io
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,6 +30,24 @@ def fit_to_page(fig: Any) -> None:
     w, h = fig.get_size_inches()
     if w > 0 and abs(w - FIG_WIDTH_IN) > 1e-6:
         fig.set_size_inches(FIG_WIDTH_IN, min(h * FIG_WIDTH_IN / w, max(h, MAX_STRETCHED_HEIGHT_IN)))
+
+
+#: a cell shown right-aligned: numbers (one, or several joined by ", ", " / ", " .. "), with "%" or "of N"
+#: after them, or a dash (markup stripped first)
+_NUM = r"[-+]?(?:\d[\d.]*(?:e[-+]?\d+)?|nan|inf)"
+_NUMERIC = re.compile(rf"{_NUM}(?:(?:, | / | \.\. ){_NUM})*(?: ?%| of \d+)?|-", re.IGNORECASE)
+_TAG = re.compile(r"<[^>]+>")
+
+
+def td(cell: str) -> str:
+    """A ``<td>`` of already escaped HTML: numbers right-aligned (class ``n``), text left-aligned."""
+    return f'<td class="n">{cell}</td>' if _NUMERIC.fullmatch(_TAG.sub("", cell).strip()) else f"<td>{cell}</td>"
+
+
+def table_html(header: list[str], rows: list[list[str]]) -> str:
+    """A table of already escaped cells."""
+    return ("<table><thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header) + "</tr></thead><tbody>"
+            + "".join("<tr>" + "".join(td(c) for c in r) + "</tr>" for r in rows) + "</tbody></table>")
 
 
 @dataclass
@@ -58,11 +77,7 @@ class Section:
 
     def table(self, header: list[str], rows: list[list[str]], raw: bool = False) -> None:
         """A table; cells are escaped unless ``raw`` (the caller escaped them and added its own markup)."""
-        esc = (lambda s: s) if raw else html.escape
-        self.parts.append("<table><thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header)
-                          + "</tr></thead><tbody>" + "".join(
-                              "<tr>" + "".join(f"<td>{esc(c)}</td>" for c in r) + "</tr>" for r in rows)
-                          + "</tbody></table>")
+        self.parts.append(table_html(header, rows if raw else [[html.escape(c) for c in r] for r in rows]))
 
     def warnings(self, lines: list[str]) -> None:
         """A list of warnings, one item each."""

@@ -34,7 +34,8 @@ def _sync_yaml(s: Section, path: Path) -> None:
     sources = d.get("sources") or {}
     s.add(f'<p class="note">{html.escape(path.name)}: clock offsets to {html.escape(str(d.get("reference", "?")))}'
           f' ({html.escape(str(d.get("convention", "")))}); per sensor, also to GTvision\'s clock.</p>')
-    rows, warns = [], []
+    rows: list[list[str]] = []
+    missed: dict[str, list[str]] = {}
     for name, v in sources.items():
         if not isinstance(v, dict):
             continue
@@ -44,8 +45,9 @@ def _sync_yaml(s: Section, path: Path) -> None:
                      _interval_ms(v.get("ci95_to_vision_s")), html.escape(str(v.get("windows", "-"))),
                      html.escape(str(v.get("reason", "")))])
         if verdict != "ok":
-            warns.append(f"{name}: {verdict} ({v.get('reason', '')})")
-    s.warnings(warns)
+            missed.setdefault(verdict, []).append(str(name))
+    s.warnings([f"{verdict}, no offset measured: {', '.join(names)} (the table says why)"
+                for verdict, names in missed.items()])
     s.table(["source", "verdict", "offset (ms)", "95 % interval (ms)", "offset to GTvision (ms)",
              "95 % interval (ms)", "windows", "why"], rows, raw=True)
 
