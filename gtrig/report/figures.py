@@ -25,7 +25,7 @@ def status_figure(track: PoseTrack, title: str) -> Any:
             a0.plot(t[m], np.full(int(m.sum()), int(s)), "|", color=c, ms=10, label=f"{s.name.lower()} {m.sum()}")
     a0.set_yticks([int(s) for s in PoseStatus], [s.name.lower() for s in PoseStatus])
     a0.set_ylim(-0.5, 3.5)
-    a0.legend(loc="upper right", fontsize=7, ncol=4)
+    a0.legend(loc="upper right", fontsize=9, ncol=4)
     a0.set_title(title)
     C = track.cov_xytheta() if track.cov is not None and track.cov_kind != "xyz" else track.cov
     if C is not None:
@@ -33,7 +33,7 @@ def status_figure(track: PoseTrack, title: str) -> Any:
                     label="position sigma (mm)")
     if len(t) > 1:
         a1.semilogy(t[1:], 1000 * np.diff(t), "k-", lw=0.5, alpha=0.5, label="gap to previous pose (ms)")
-    a1.legend(loc="upper right", fontsize=7)
+    a1.legend(loc="upper right", fontsize=9)
     a1.grid(True, alpha=0.3)
     a1.set_xlabel("time since first pose (s)")
     return fig
@@ -137,7 +137,7 @@ def track_figure(track: PoseTrack, truth: PoseTrack | None, name: str, n_sigma: 
         ax.set_aspect("equal")
         ax.grid(True, alpha=0.3)
         ax.set_xlabel("x (m)")
-        ax.legend(loc="best", fontsize=8)
+        ax.legend(loc="best", fontsize=9)
     a0.set_ylabel("y (m)")
     fig.tight_layout()
     caption = (f"{name}: path (blue) with its {n_sigma:g}-sigma position ellipses (cyan) "
@@ -181,7 +181,7 @@ def survey_figure(points: dict[str, np.ndarray], cov: np.ndarray | None, truth: 
     ax.set_title(f"survey: 3-sigma ellipses x{scale:g}")
     ax.set_aspect("equal")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
+    ax.legend(loc="best", fontsize=9)
     return fig
 
 
@@ -196,7 +196,7 @@ def bars_figure(groups: dict[str, dict[str, float]], ylabel: str, title: str) ->
     ax.set_xticks(np.arange(len(cams)) + 0.4 - w / 2, cams)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=9)
     ax.grid(True, axis="y", alpha=0.3)
     return fig
 
@@ -212,5 +212,5 @@ def curves_figure(curves: dict[str, tuple[np.ndarray, np.ndarray]], xlabel: str,
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=9)
     return fig

@@ -186,7 +186,8 @@ def _tracks(inv: ResultsInventory) -> list[Section]:
     summary.table(["track", "poses", "span (s)", "rate (Hz)", "ok", "flagged", "bridged", "rejected",
                    "median sigma xy (mm)", "median sigma yaw (deg)", "RMSE vs truth (mm)", "NEES / dof",
                    "within 95 % (%)"], rows)
-    summary.add('<p class="note">Against truth, a planar track is compared in the plane (x, y, yaw).</p>')
+    if inv.truth is not None:
+        summary.add('<p class="note">Against truth, a planar track is compared in the plane (x, y, yaw).</p>')
     return [summary, *out]
 
 
