@@ -39,6 +39,11 @@ def status_figure(track: PoseTrack, title: str) -> Any:
     return fig
 
 
+#: corners drawn per camera at most (every k-th beyond), images drawn one tick each at most
+MAX_CORNERS_DRAWN = 100_000
+MAX_IMAGE_TICKS = 600
+
+
 def camera_coverage_figure(per_camera: dict[str, Any], sizes_px: dict[str, tuple[int, int]], axis: str,
                            title: str) -> Any:
     """Per camera (columns): every detected corner in its image, the image's frame drawn at its size (top);
@@ -53,6 +58,7 @@ def camera_coverage_figure(per_camera: dict[str, Any], sizes_px: dict[str, tuple
         c = per_camera[cam]
         ax = axs[0, j]
         uv = c.uv()
+        uv = uv[:: max(1, len(uv) // MAX_CORNERS_DRAWN)]
         ax.plot(uv[:, 0], uv[:, 1], ".", ms=2, alpha=0.5)
         if cam in sizes_px:
             w, h = sizes_px[cam]
@@ -69,12 +75,19 @@ def camera_coverage_figure(per_camera: dict[str, Any], sizes_px: dict[str, tuple
         ax = axs[1, j]
         rows = np.asarray(c.rows, float)
         marked = np.asarray(c.marked, bool)
-        if rows.size:
-            r0 = rows.min() if axis == "image" else min(min(p.rows) for p in per_camera.values() if p.rows)
+        r0 = (rows.min() if axis == "image" else min(min(p.rows) for p in per_camera.values() if p.rows)
+              ) if rows.size else 0.0
+        if rows.size <= MAX_IMAGE_TICKS:  # one tick per image
             ax.plot(rows[marked] - r0, np.ones(int(marked.sum())), "|", color="g", ms=12)
             ax.plot(rows[~marked] - r0, np.zeros(int((~marked).sum())), "|", color="0.6", ms=12)
-        ax.set_yticks([0, 1], ["none", "marker"])
-        ax.set_ylim(-0.6, 1.6)
+            ax.set_yticks([0, 1], ["none", "marker"])
+            ax.set_ylim(-0.6, 1.6)
+        else:  # the share of images showing a marker, per bin
+            n_all, edges = np.histogram(rows - r0, bins=60)
+            n_marked, _ = np.histogram(rows[marked] - r0, bins=edges)
+            ax.stairs(100 * n_marked / np.maximum(n_all, 1), edges, color="g", fill=True, alpha=0.6)
+            ax.set_ylim(0, 105)
+            ax.set_ylabel("% with a marker" if j == 0 else "")
         ax.set_xlabel("image number" if axis == "image" else "time (s)")
     fig.suptitle(title)
     fig.tight_layout()
