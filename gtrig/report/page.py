@@ -274,7 +274,8 @@ def _survey(inv: ResultsInventory) -> Section | None:
         table.append([n, f"{p[0]:.4f}", f"{p[1]:.4f}", sd, err])
     s.table(["point", "x (m)", "y (m)", "sigma x, y (mm)", "error vs truth (mm)"], table)
     s.figure(survey_figure(pts, cov, truth, poses, pose_cov, 200.0),
-             "world points and validation poses with 3-sigma ellipses (and errors against truth), magnified 200x")
+             "world points (blue) and validation poses (green arrows) with their 3-sigma ellipses"
+             + (" and their errors against truth (red arrows)" if truth else "") + ", magnified 200x")
     return s
 
 
@@ -429,10 +430,12 @@ def build_report(results_dir: str | Path, truth_dir: str | Path | None = None) -
     from gtrig import __version__
 
     inv = inventory(results_dir, truth_dir)
-    if not inv.root.is_dir():
-        from gtrig.errors import InputError
+    from gtrig.errors import InputError
 
+    if not inv.root.is_dir():
         raise InputError(f"{inv.root}: no such results folder")
+    if truth_dir is not None and not Path(truth_dir).is_dir():
+        raise InputError(f"--truth {truth_dir}: no such folder")
     sections: list[Section] = []
     skipped: list[str] = []
     for label, fn in SECTIONS:

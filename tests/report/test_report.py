@@ -140,6 +140,10 @@ def test_markdown_lists_are_lists() -> None:
 def test_missing_folder_is_one_line(tmp_path: Path) -> None:
     res = CliRunner().invoke(app, ["report", str(tmp_path / "nope"), "--out", str(tmp_path / "r.html")])
     assert res.exit_code == 2 and "no such results folder" in res.output and not (tmp_path / "r.html").exists()
+    res = CliRunner().invoke(app, ["report", str(tmp_path), "--out", str(tmp_path / "r.html"), "--truth",
+                                   str(tmp_path / "nope")])
+    assert res.exit_code == 2 and "--truth" in res.output and "no such folder" in res.output
+    assert not (tmp_path / "r.html").exists()
 
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
