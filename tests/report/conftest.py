@@ -1,4 +1,4 @@
-"""The report's results folder (tests/report/report_folder.py), made once per session."""
+"""The report's results folder (tests/report/report_folder.py), made once per test run."""
 
 from __future__ import annotations
 
