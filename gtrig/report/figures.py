@@ -102,6 +102,29 @@ def _nice(v: float) -> float:
     return float(max(m * k for m in (1, 2, 5) if m * k <= v))
 
 
+def _zoom_window(xy: np.ndarray, C: np.ndarray | None, n_sigma: float) -> tuple[int, float]:
+    """The pose the true-scale zoom centres on (the middle one of those with a finite position and
+    covariance) and the zoom's half width (m): four of its ellipses across, 2 mm at least (2 cm without a
+    covariance)."""
+    ok = np.all(np.isfinite(xy), axis=1)
+    if C is not None:
+        ok &= np.all(np.isfinite(C[:, :2, :2].reshape(len(C), -1)), axis=1)
+    cand = np.flatnonzero(ok)
+    mid = int(cand[cand.size // 2]) if cand.size else 0
+    if C is None or not cand.size:
+        return mid, 0.02
+    return mid, max(4 * n_sigma * float(np.sqrt(max(C[mid, 0, 0], C[mid, 1, 1], 1e-12))), 2e-3)
+
+
+def _ellipses(ax: Any, xy: np.ndarray, C: np.ndarray, idx: np.ndarray, k: float, n_sigma: float) -> None:
+    """The ``n_sigma`` position ellipses of the poses ``idx``, magnified ``k`` times."""
+    for i in idx:
+        if np.all(np.isfinite(C[i][:2, :2])) and np.all(np.isfinite(xy[i])):
+            e = ellipse_xy(xy[i], C[i][:2, :2] * k**2, n_sigma)
+            ax.plot(e[:, 0], e[:, 1], "c-", lw=0.7)
+    ax.plot([], [], "c-", lw=0.7, label=f"{n_sigma:g}-sigma ellipse" + (f" x{k:g}" if k > 1 else ", true size"))
+
+
 def track_figure(track: PoseTrack, truth: PoseTrack | None, name: str, n_sigma: float = 3.0,
                  max_ellipses: int = 120) -> tuple[Any, str]:
     """The x-y path of ``track`` with its ``n_sigma`` position ellipses magnified to be seen (left), and a
@@ -110,15 +133,15 @@ def track_figure(track: PoseTrack, truth: PoseTrack | None, name: str, n_sigma: 
     fig, (a0, a1) = figure(ncols=2, figsize=(13, 6.0), gridspec_kw={"width_ratios": [1.5, 1]})
     xy = track.xyz[:, :2]
     C = track.cov_xytheta() if track.cov is not None and track.cov_kind != "xyz" else track.cov
-    extent = float(np.ptp(xy, axis=0).max()) if len(xy) else 1.0
-    mag = 1.0
+    mag, every = 1.0, max(1, len(track) // max_ellipses)
     if C is not None and len(track):
-        sig = float(np.nanmedian(np.sqrt(np.maximum(C[:, 0, 0] + C[:, 1, 1], 0)))) or 1e-12
-        mag = _nice(0.02 * (extent or 1.0) / (n_sigma * sig))  # the median ellipse about 2 % of the path
+        extent = float(np.nanmax(np.ptp(xy, axis=0))) or 1.0
+        sig = float(np.nanmedian(np.sqrt(np.maximum(C[:, 0, 0] + C[:, 1, 1], 0))))
+        if np.isfinite(sig) and sig > 0:
+            mag = _nice(0.02 * extent / (n_sigma * sig))  # the median ellipse about 2 % of the path
+    mid, half = _zoom_window(xy, C, n_sigma)
     colors = {PoseStatus.FLAGGED: "orange", PoseStatus.BRIDGED: "purple", PoseStatus.REJECTED: "r"}
-    mid = int(np.clip(len(track) // 2, 0, max(len(track) - 1, 0)))
-    half = 0.0
-    for ax, k in ((a0, mag), (a1, 1.0)):
+    for ax in (a0, a1):
         ax.plot(xy[:, 0], xy[:, 1], "b.-", lw=0.8, ms=2 if ax is a1 else 0, label=name)
         if truth is not None:
             ax.plot(truth.xyz[:, 0], truth.xyz[:, 1], "r-", lw=0.8, alpha=0.8, label="truth")
@@ -126,21 +149,11 @@ def track_figure(track: PoseTrack, truth: PoseTrack | None, name: str, n_sigma: 
             m = track.status == s
             if np.any(m):
                 ax.plot(xy[m, 0], xy[m, 1], "x", color=col, ms=5, ls="none", label=f"{s.name.lower()} ({m.sum()})")
-        if C is None or not len(track):
-            continue
-        if ax is a0:
-            idx = np.arange(0, len(track), max(1, len(track) // max_ellipses))
-        else:
-            s_mid = float(np.sqrt(max(C[mid, 0, 0], C[mid, 1, 1], 1e-12)))
-            half = max(4 * n_sigma * s_mid, 2e-3)
-            near = np.flatnonzero(np.all(np.abs(xy - xy[mid]) < half, axis=1))
-            idx = near[:: max(1, near.size // 40)]
-        for i in idx:
-            if np.all(np.isfinite(C[i][:2, :2])):
-                e = ellipse_xy(xy[i], C[i][:2, :2] * k**2, n_sigma)
-                ax.plot(e[:, 0], e[:, 1], "c-", lw=0.7)
-        ax.plot([], [], "c-", lw=0.7, label=f"{n_sigma:g}-sigma ellipse" + (f" x{k:g}" if k > 1 else ", true size"))
     if C is not None and len(track):
+        _ellipses(a0, xy, C, np.arange(0, len(track), every), mag, n_sigma)
+        near = np.flatnonzero(np.all(np.abs(xy - xy[mid]) < half, axis=1))
+        _ellipses(a1, xy, C, near[:: max(1, near.size // 40)], 1.0, n_sigma)
+    if len(track):
         a0.add_patch(_box(xy[mid], half))
         a1.set_xlim(xy[mid, 0] - half, xy[mid, 0] + half)
         a1.set_ylim(xy[mid, 1] - half, xy[mid, 1] + half)
@@ -153,9 +166,11 @@ def track_figure(track: PoseTrack, truth: PoseTrack | None, name: str, n_sigma: 
         ax.legend(loc="best", fontsize=9)
     a0.set_ylabel("y (m)")
     fig.tight_layout()
-    caption = (f"{name}: path (blue) with its {n_sigma:g}-sigma position ellipses (cyan) "
-               + (f"magnified {mag:g}x on the left (one pose in {max(1, len(track) // max_ellipses)}) and at true "
-                  "size in the zoom on the right" if C is not None else "(no covariance in the folder)")
+    which = "every pose" if every == 1 else f"one pose in {every}"
+    caption = (f"{name}: path (blue) "
+               + (f"with its {n_sigma:g}-sigma position ellipses (cyan) magnified {mag:g}x on the left ({which}) "
+                  "and at true size in the zoom on the right" if C is not None
+                  else "without ellipses (no covariance in the folder), zoomed on the right")
                + ", flagged / bridged / rejected poses as crosses" + (", truth in red" if truth is not None else ""))
     return fig, caption
 
