@@ -13,9 +13,11 @@ from gtrig.cli.common import console, handle_errors
 def command(
     results: Path = typer.Argument(..., help="A pipeline output folder (e.g. demo_out/results)."),
     out: Path = typer.Option(Path("report.html"), "--out", help="The HTML file to write."),
-    truth: Path | None = typer.Option(None, "--truth", help="The recording's truth/ folder (found beside it)."),
+    truth: Path | None = typer.Option(None, "--truth", help="The recording's truth/ folder (found beside the "
+                                      "results when not given): adds each track's accuracy against it."),
 ) -> None:
-    """One self-contained HTML page of a results folder: accuracy, every stage's summary and figures."""
+    """One self-contained HTML page of a results folder: the run's checks, tracks, sync, fusion, coverage,
+    every stage's summary and figures; with truth, the accuracy."""
     import time
 
     from gtrig.cli import checks

@@ -22,6 +22,10 @@ class ResultsInventory:
     world_points, validation_poses : the survey's outputs.
     sync : CSVs of time-sync correlation curves (a ``sync`` folder or ``*sync*.csv``).
     gps_reports : ``gtrig gps --report`` JSONs (``*gps*.json``: a name holding "gps").
+    summary_csv : ``summary.csv`` (the run's checks).
+    sync_yaml : ``sync.yaml`` (the clock offsets the sync stage measured).
+    fusion_json : ``fusion_report.json``.
+    rig_yaml : the rig the run used (``rig.calibrated.yaml``, else ``rig.yaml``).
     """
 
     root: Path
@@ -35,6 +39,10 @@ class ResultsInventory:
     validation_poses: Path | None
     sync: list[Path] = field(default_factory=list)
     gps_reports: list[Path] = field(default_factory=list)
+    summary_csv: Path | None = None
+    sync_yaml: Path | None = None
+    fusion_json: Path | None = None
+    rig_yaml: Path | None = None
 
 
 def _opt(p: Path) -> Path | None:
@@ -60,4 +68,6 @@ def inventory(root: str | Path, truth: str | Path | None = None) -> ResultsInven
         r, t, tracks, _opt(r / "accuracy.csv"), sorted(list(r.glob("*.md")) + list(r.glob("*/*.md"))),
         _opt(r / "calibration" / "calibration_report.yaml"), sorted(r.glob("gt_vision_*.checkpoint")),
         _opt(r / "survey" / "world_points.csv"), _opt(r / "survey" / "validation_poses.csv"), sync,
-        sorted(set(r.glob("*gps*.json")) | set(r.glob("*/*gps*.json"))))
+        sorted(set(r.glob("*gps*.json")) | set(r.glob("*/*gps*.json"))), _opt(r / "summary.csv"),
+        _opt(r / "sync.yaml"), _opt(r / "fusion_report.json"),
+        _opt(r / "rig.calibrated.yaml") or _opt(r / "rig.yaml"))

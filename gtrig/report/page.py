@@ -1,26 +1,23 @@
 """Build the one-page HTML report of a results folder: everything inline (styles, images as base64 PNG, one
 small script that checks the figures decoded), nothing fetched from the network.
 
-Sections, each shown only when its files are present (the others are named as skipped, with why):
-accuracy against truth (``accuracy.csv``), the pose tracks (summary, path with ellipses and flagged poses,
-errors with 3-sigma bounds against truth, status over time, NEES histogram), RTK-GPS (``gtrig gps --report``'s
-JSON: fix-type shares, lost-fix intervals, the coverage map, satellites and HDOP over time; shown only when
-present, as it is no pipeline stage's), the consistency of two GT
-sources (without truth too), GTvision's per-camera coverage and detections, the survey, the calibration
-(its summary and residuals), time sync, and every stage's Markdown summary.
+Sections, each shown only when its files are present (the others are named as not in the folder, with why):
+the run's checks (``summary.csv``, its misses and unmeasured figures as warnings), accuracy against truth
+(``accuracy.csv`` and, with a truth folder, each track against it), the pose tracks (summary, path with
+ellipses and flagged poses, errors with 3-sigma bounds against truth, status over time, NEES histogram), RTK-GPS
+(``gtrig gps --report``'s JSON; shown only when present, as it is no pipeline stage's), the consistency of two
+GT sources (without truth too), the fusion (``fusion_report.json``), GTvision's per-camera coverage, the fixed
+scanners' coverage, the survey, the calibration (its summary and residuals), time sync (``sync.yaml`` and
+correlation curves), and every stage's Markdown summary.
 """
 
 from __future__ import annotations
 
-import base64
-import csv
 import datetime as _dt
 import html
-import io
 import json
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +25,7 @@ import numpy as np
 
 from gtrig.errors import GtrigError
 from gtrig.report.collect import ResultsInventory, inventory
+from gtrig.report.section import Section, read_csv
 
 log = logging.getLogger(__name__)
 
@@ -38,82 +36,78 @@ header p{margin:4px 0 0;font-size:13px;opacity:.85}
 nav{padding:8px 24px;background:#e8eef5;font-size:13px}nav a{margin-right:14px;color:#1f3a5f}
 section{background:#fff;margin:14px 24px;padding:10px 18px;border:1px solid #ddd;border-radius:6px}
 h2{font-size:18px;border-bottom:1px solid #eee;padding-bottom:4px}h3{font-size:15px}h4,h5,h6{font-size:14px}
-table{border-collapse:collapse;font-size:12px;margin:8px 0}th,td{border:1px solid #ccc;padding:3px 7px;text-align:right}
-th{background:#f0f3f7}td:first-child,th:first-child{text-align:left}
+table{border-collapse:collapse;font-size:12px;margin:8px 0}th,td{border:1px solid #ccc;padding:3px 7px;text-align:left}
+th{background:#f0f3f7}td.n{text-align:right;white-space:nowrap}
 .ok{color:#17803d;font-weight:600}.miss{color:#c0392b;font-weight:600}.note{color:#777;font-size:12px}
-.warn{background:#fff5e0;border-left:4px solid #e6a700;padding:6px 10px;font-size:13px}
-figure{margin:10px 0}figure img{max-width:100%;border:1px solid #eee}figcaption{font-size:12px;color:#555}
+.warn{background:#fff5e0;border-left:4px solid #e6a700;padding:6px 10px 6px 26px;font-size:13px}
+p.warn{padding-left:10px}li{margin:2px 0}
+figure{margin:10px 0}figure img{width:100%;max-width:1300px;height:auto;border:1px solid #eee}
+figcaption{font-size:13px;color:#444}
 """
 
 CHECK_JS = """
-window.addEventListener('load',function(){var imgs=document.querySelectorAll('figure img');var ok=0;
-for(var i=0;i<imgs.length;i++){if(imgs[i].complete&&imgs[i].naturalWidth>0){ok++;}}
+window.addEventListener('load',function(){var imgs=document.querySelectorAll('figure img');var ok=0;var pct=100;
+for(var i=0;i<imgs.length;i++){var im=imgs[i];if(im.complete&&im.naturalWidth>0){ok++;}
+var sec=im.closest('section');var cs=getComputedStyle(sec);
+var inner=sec.clientWidth-parseFloat(cs.paddingLeft)-parseFloat(cs.paddingRight);
+pct=Math.min(pct,100*im.getBoundingClientRect().width/inner);}
 document.body.setAttribute('data-figures-loaded',String(ok));
+document.body.setAttribute('data-figure-min-width-pct',String(Math.round(pct)));
 document.body.setAttribute('data-tables',String(document.querySelectorAll('table').length));
 document.body.setAttribute('data-load-ms',String(Math.round(performance.now())));});
 """
 
 
-@dataclass
-class Section:
-    """One section of the page: an anchor, a title and HTML parts."""
-
-    key: str
-    title: str
-    parts: list[str] = field(default_factory=list)
-    n_figures: int = 0
-
-    def add(self, fragment: str) -> None:
-        self.parts.append(fragment)
-
-    def figure(self, fig: Any, caption: str) -> None:
-        import matplotlib.pyplot as plt
-
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
-        plt.close(fig)
-        data = base64.b64encode(buf.getvalue()).decode("ascii")
-        self.parts.append(f'<figure><img alt="{html.escape(caption)}" src="data:image/png;base64,{data}">'
-                          f"<figcaption>{html.escape(caption)}</figcaption></figure>")
-        self.n_figures += 1
-
-    def table(self, header: list[str], rows: list[list[str]], raw: bool = False) -> None:
-        esc = (lambda s: s) if raw else html.escape
-        self.parts.append("<table><thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header)
-                          + "</tr></thead><tbody>" + "".join(
-                              "<tr>" + "".join(f"<td>{esc(c)}</td>" for c in r) + "</tr>" for r in rows)
-                          + "</tbody></table>")
-
-    def html(self) -> str:
-        return f'<section id="{self.key}"><h2>{html.escape(self.title)}</h2>' + "\n".join(self.parts) + "</section>"
-
-
-def _read_csv(p: Path) -> list[dict[str, str]]:
-    with open(p, encoding="utf-8", newline="") as f:
-        return list(csv.DictReader(row for row in f if not row.startswith("#")))
-
-
 # --- sections ----------------------------------------------------------------------------------------------
 
-def _accuracy(inv: ResultsInventory) -> Section | None:
-    if inv.accuracy is None:
+def _checks(inv: ResultsInventory) -> Section | None:
+    from gtrig.report.checks import checks_section
+
+    if inv.summary_csv is None:
         return None
-    s = Section("accuracy", "Accuracy against truth")
-    rows = []
-    for r in _read_csv(inv.accuracy):
-        ok = r.get("ok", "")
-        mark = {"1": '<span class="ok">ok</span>', "0": '<span class="miss">miss</span>',
-                "True": '<span class="ok">ok</span>', "False": '<span class="miss">miss</span>'}.get(ok, "")
-        try:
-            val = f"{float(r.get('value', 'nan')):.4g}"
-        except ValueError:
-            val = html.escape(r.get("value", ""))
-        rows.append([html.escape(r.get("stage", "")), html.escape(r.get("metric", "")), val,
-                     html.escape(r.get("unit", "")), html.escape(r.get("target", "")), mark])
-    s.table(["stage", "metric", "value", "unit", "target", ""], rows, raw=True)
-    n_miss = sum("miss" in r[-1] for r in rows)
-    s.add(f'<p class="note">{len(rows)} figures, {n_miss} missing their target.</p>')
+    return checks_section(inv.summary_csv, "checks", "Checks of the run",
+                          "The pipeline's own checks (summary.csv), made with or without truth:")
+
+
+def _accuracy(inv: ResultsInventory) -> Section | None:
+    """``accuracy.csv`` and, with a truth folder, each pose track against the truth."""
+    from gtrig.report.checks import checks_section
+
+    s = None
+    if inv.accuracy is not None:
+        s = checks_section(inv.accuracy, "accuracy", "Accuracy against truth",
+                           "The pipeline's accuracy against the simulated truth (accuracy.csv):")
+    rows = _truth_rows(inv)
+    if rows:
+        s = s or Section("accuracy", "Accuracy against truth")
+        s.add("<h3>Each pose track against the truth</h3>")
+        s.table(["track", "compared", "poses paired", "RMSE position (mm)", "max position (mm)",
+                 "RMSE yaw / rotation (deg)", "NEES / dof", "within the GT's 95 % region (%)"], rows)
+        s.add('<p class="note">A planar track (x, y, yaw) is compared in the plane with the truth\'s x, y, yaw: '
+              "the truth's height and tilt are not its error. The truth is interpolated at the track's stamps "
+              "(gaps over 50 ms left out).</p>")
     return s
+
+
+def _truth_rows(inv: ResultsInventory) -> list[list[str]]:
+    from gtrig.report.truth import score_files
+
+    rows = []
+    for name, (tum, _cov) in inv.tracks.items():
+        truth_p = _truth_for(inv, name)
+        if name.startswith("truth") or truth_p is None:
+            continue
+        sc = score_files(tum, truth_p)
+        ev = sc.evaluation
+        how = "in the plane" if sc.planar else "in 3-D"
+        if ev is None:
+            rows.append([name, how, sc.error, "-", "-", "-", "-", "-"])
+            continue
+        g = ev.gt_aware
+        rows.append([name, how, str(len(ev.association.gt)), f"{sc.rmse_mm():.2f}", f"{sc.max_mm():.2f}",
+                     f"{sc.rot_rmse_deg():.3f}", f"{g.mean_d2_per_dof:.2f}" if g is not None else "-",
+                     f"{100 * g.share_resolved:.1f}" if g is not None else "-"])
+    return rows
 
 
 def _truth_for(inv: ResultsInventory, name: str) -> Path | None:
@@ -123,9 +117,52 @@ def _truth_for(inv: ResultsInventory, name: str) -> Path | None:
     return cand if cand.is_file() else None
 
 
-def _tracks(inv: ResultsInventory) -> list[Section]:
+def _track_row(name: str, tr: Any) -> list[str]:
+    """The summary table's row of one track (the truth columns filled by the caller)."""
+    c = tr.counts()
+    C = tr.cov_xytheta() if tr.cov is not None and tr.cov_kind != "xyz" else tr.cov
+    sig = (f"{1000 * np.nanmedian(np.sqrt(C[:, 0, 0] + C[:, 1, 1])):.2f}" if C is not None else "-")
+    sig_yaw = (f"{np.degrees(np.nanmedian(np.sqrt(C[:, 2, 2]))):.3f}" if C is not None and tr.cov_kind != "xyz"
+               else "-")
+    t0, t1 = tr.span_s()
+    rate = (len(tr) - 1) / (t1 - t0) if t1 > t0 else float("nan")
+    return [name, str(len(tr)), f"{t1 - t0:.1f}", f"{rate:.1f}", str(c["ok"]), str(c["flagged"]),
+            str(c["bridged"]), str(c["rejected"]), sig, sig_yaw, "-", "-", "-"]
+
+
+def _track_section(inv: ResultsInventory, name: str, tum: Path, tr: Any, row: list[str]) -> Section:
+    """One track's section (path, errors against truth, d2, status); fills ``row``'s truth columns."""
     from gtrig.evaluate import plots
-    from gtrig.evaluate.slam import evaluate_slam
+    from gtrig.io.formats import read_trajectory
+    from gtrig.report.figures import status_figure, track_figure
+    from gtrig.report.truth import score_files
+
+    sec = Section(f"track-{name.replace('/', '-')}", f"Track {name}")
+    truth_p = _truth_for(inv, name)
+    truth = read_trajectory(truth_p) if truth_p is not None else None
+    fig, caption = track_figure(tr, truth, name)
+    sec.figure(fig, caption)
+    if truth_p is not None:
+        sc = score_files(tum, truth_p)
+        ev = sc.evaluation
+        if ev is None:
+            sec.add(f'<p class="warn">against truth: {html.escape(sc.error)}</p>')
+        else:
+            how = "in the plane (x, y, yaw)" if sc.planar else "in 3-D"
+            sec.figure(plots.error_bounds_figure(ev.association.gt, ev.est_aligned,
+                                                 f"truth - {name} (minus the GT's error), {how}"),
+                       f"{name}: error against truth, {how}, with the GT's own 3-sigma bounds")
+            row[10] = f"{sc.rmse_mm():.2f}"
+            if ev.gt_aware is not None:
+                row[11] = f"{ev.gt_aware.mean_d2_per_dof:.2f}"
+                row[12] = f"{100 * ev.gt_aware.share_resolved:.1f}"
+                sec.figure(plots.d2_figure(ev.gt_aware.d2, len(ev.gt_aware.axes), f"{name} against truth"),
+                           f"{name}: d2 of the error under its covariance, against chi2")
+    sec.figure(status_figure(tr, f"{name}: status over time"), f"{name}: status, sigma and gaps over time")
+    return sec
+
+
+def _tracks(inv: ResultsInventory) -> list[Section]:
     from gtrig.io.formats import read_trajectory
 
     out = []
@@ -141,48 +178,16 @@ def _tracks(inv: ResultsInventory) -> list[Section]:
             continue
         if not len(tr):
             continue
-        c = tr.counts()
-        C = tr.cov_xytheta() if tr.cov is not None and tr.cov_kind != "xyz" else tr.cov
-        sig = (f"{1000 * np.nanmedian(np.sqrt(C[:, 0, 0] + C[:, 1, 1])):.2f}" if C is not None else "-")
-        sig_yaw = (f"{np.degrees(np.nanmedian(np.sqrt(C[:, 2, 2]))):.3f}" if C is not None and tr.cov_kind != "xyz"
-                   else "-")
-        t0, t1 = tr.span_s()
-        rate = (len(tr) - 1) / (t1 - t0) if t1 > t0 else float("nan")
-        row = [name, str(len(tr)), f"{t1 - t0:.1f}", f"{rate:.1f}", str(c["ok"]), str(c["flagged"]),
-               str(c["bridged"]), str(c["rejected"]), sig, sig_yaw, "-", "-", "-"]
-        sec = Section(f"track-{name.replace('/', '-')}", f"Track {name}")
-        truth_p = _truth_for(inv, name)
-        truth = read_trajectory(truth_p) if truth_p is not None else None
-        sec.figure(plots.track_figure(tr, truth, name, "truth"),
-                   f"{name}: path, 3-sigma ellipses, flagged/bridged/rejected poses" + (", truth in red" if truth
-                                                                                          else ""))
-        if truth is not None and len(tr.usable()) >= 2:
-            try:
-                ev = evaluate_slam(tr, truth, metrics="evo", align="none", method="interpolate", max_dt_s=0.05)
-            except GtrigError as e:
-                sec.add(f'<p class="warn">against truth: {html.escape(str(e))}</p>')
-                ev = None
-            if ev is not None:
-                sec.figure(plots.error_bounds_figure(ev.association.gt, ev.est_aligned,
-                                                     f"truth - {name} (minus the GT's error)"),
-                           f"{name}: error against truth with the GT's own 3-sigma bounds")
-                st = ev.ape["trans"].stats() if ev.ape else {}
-                row[10] = f"{1000 * st.get('rmse', float('nan')):.2f}"
-                if ev.gt_aware is not None:
-                    row[11] = f"{ev.gt_aware.mean_d2_per_dof:.2f}"
-                    row[12] = f"{100 * ev.gt_aware.share_resolved:.1f}"
-                    sec.figure(plots.d2_figure(ev.gt_aware.d2, len(ev.gt_aware.axes), f"{name} against truth"),
-                               f"{name}: d2 of the error under its covariance, against chi2")
-        from gtrig.report.figures import status_figure
-
-        sec.figure(status_figure(tr, f"{name}: status over time"), f"{name}: status, sigma and gaps over time")
+        row = _track_row(name, tr)
+        out.append(_track_section(inv, name, tum, tr, row))
         rows.append(row)
-        out.append(sec)
     if not rows:
         return []
     summary.table(["track", "poses", "span (s)", "rate (Hz)", "ok", "flagged", "bridged", "rejected",
                    "median sigma xy (mm)", "median sigma yaw (deg)", "RMSE vs truth (mm)", "NEES / dof",
                    "within 95 % (%)"], rows)
+    if inv.truth is not None:
+        summary.add('<p class="note">Against truth, a planar track is compared in the plane (x, y, yaw).</p>')
     return [summary, *out]
 
 
@@ -198,58 +203,42 @@ def _consistency(inv: ResultsInventory) -> Section | None:
     s = Section("consistency", "Consistency of the GT sources")
     for i in range(len(names)):
         for j in range(i + 1, len(names)):
-            a, b = read_trajectory(inv.tracks[names[i]][0]), read_trajectory(inv.tracks[names[j]][0])
+            ref, other = names[i], names[j]
+            a, b = read_trajectory(inv.tracks[ref][0]), read_trajectory(inv.tracks[other][0])
             if len(b) < len(a):  # the denser source is interpolated at the sparser one's stamps
-                a, b = b, a
-                names[i], names[j] = names[j], names[i]
+                a, b, ref, other = b, a, other, ref
             try:
                 c = compare_sources(a, b, "none", 0.2)
             except GtrigError as e:
-                s.add(f'<p class="note">{html.escape(names[j])} against {html.escape(names[i])}: '
+                s.add(f'<p class="note">{html.escape(other)} against {html.escape(ref)}: '
                       f"{html.escape(str(e))}</p>")
                 continue
-            s.add(f"<h3>{html.escape(names[j])} against {html.escape(names[i])}</h3>")
+            s.add(f"<h3>{html.escape(other)} against {html.escape(ref)}</h3>")
             s.table(["metric", "statistic", "value", "unit"], [[m, st, f"{v:.5g}", u] for m, st, v, u in c.rows()])
-            s.figure(error_bounds_figure(c.association.gt, c.association.est, f"{names[j]} - {names[i]}"),
-                     f"{names[j]} - {names[i]} with {names[i]}'s 3-sigma bounds")
+            s.figure(error_bounds_figure(c.association.gt, c.association.est, f"{other} - {ref}"),
+                     f"{other} - {ref} with {ref}'s 3-sigma bounds")
             if c.d2 is not None:
                 s.figure(d2_figure(c.d2, len(c.axes), "d2 under the sum of both covariances"),
-                         f"{names[j]} against {names[i]}: d2 under both covariances, against chi2")
+                         f"{other} against {ref}: d2 under both covariances, against chi2")
     return s
 
 
 def _cameras(inv: ResultsInventory) -> Section | None:
-    from gtrig.report.figures import camera_figure
+    from gtrig.report.coverage import cameras_section
 
-    if not inv.vision_checkpoints:
-        return None
-    s = Section("cameras", "GTvision: per-camera coverage and detections")
-    for cp in inv.vision_checkpoints:
-        per: dict[str, dict[str, list[float]]] = {}
-        n_obs = 0
-        with open(cp, encoding="utf-8") as f:
-            for line in f:
-                try:
-                    rec = json.loads(line)
-                except json.JSONDecodeError:
-                    continue
-                for item in rec.get("items", []) if isinstance(rec, dict) else []:
-                    obs = item.get("obs") if isinstance(item, dict) else None
-                    if not isinstance(obs, dict):
-                        continue
-                    n_obs += 1
-                    for v in obs.get("views", []):
-                        cam, corners = v[0], np.asarray(v[2], float).reshape(-1, 2)
-                        d = per.setdefault(str(cam), {"t": [], "u": [], "v": []})
-                        d["t"].append(float(obs.get("stamp_s", 0.0)))
-                        d["u"].extend(corners[:, 0].tolist())
-                        d["v"].extend(corners[:, 1].tolist())
-        if per:
-            s.table(["camera", "marker detections", "instants"],
-                    [[c, str(len(d["t"])), str(len(set(d["t"])))] for c, d in sorted(per.items())])
-            s.figure(camera_figure(per, cp.stem), f"{cp.stem}: marker corners in each image and detections "
-                                                   f"over time ({n_obs} instants)")
-    return s if s.n_figures else None
+    return cameras_section(inv.vision_checkpoints, inv.rig_yaml)
+
+
+def _scanners(inv: ResultsInventory) -> Section | None:
+    from gtrig.report.coverage import scanners_section
+
+    return scanners_section(inv.sync_yaml)
+
+
+def _fusion(inv: ResultsInventory) -> Section | None:
+    from gtrig.report.fusion import fusion_section
+
+    return fusion_section(inv.fusion_json)
 
 
 def _survey(inv: ResultsInventory) -> Section | None:
@@ -258,7 +247,7 @@ def _survey(inv: ResultsInventory) -> Section | None:
     if inv.world_points is None:
         return None
     s = Section("survey", "Survey")
-    rows = _read_csv(inv.world_points)
+    rows = read_csv(inv.world_points)
     pts = {r["name"]: np.array([float(r["x"]), float(r["y"])]) for r in rows}
     cov = None
     if rows and "cov_xx" in rows[0]:
@@ -266,11 +255,11 @@ def _survey(inv: ResultsInventory) -> Section | None:
                         for r in rows])
     truth = None
     if inv.truth is not None and (inv.truth / "world_points.csv").is_file():
-        truth = {r["name"]: np.array([float(r["x"]), float(r["y"])]) for r in _read_csv(inv.truth /
+        truth = {r["name"]: np.array([float(r["x"]), float(r["y"])]) for r in read_csv(inv.truth /
                                                                                           "world_points.csv")}
     poses = pose_cov = None
     if inv.validation_poses is not None:
-        vr = _read_csv(inv.validation_poses)
+        vr = read_csv(inv.validation_poses)
         poses = np.array([[float(r["x"]), float(r["y"]), float(r["theta"])] for r in vr])
         if vr and "cov_xx" in vr[0]:
             pose_cov = np.array([[[float(r["cov_xx"]), float(r["cov_xy"])], [float(r["cov_xy"]), float(r["cov_yy"])]]
@@ -285,7 +274,8 @@ def _survey(inv: ResultsInventory) -> Section | None:
         table.append([n, f"{p[0]:.4f}", f"{p[1]:.4f}", sd, err])
     s.table(["point", "x (m)", "y (m)", "sigma x, y (mm)", "error vs truth (mm)"], table)
     s.figure(survey_figure(pts, cov, truth, poses, pose_cov, 200.0),
-             "world points and validation poses with 3-sigma ellipses (and errors against truth), magnified 200x")
+             "world points (blue) and validation poses (green arrows) with their 3-sigma ellipses"
+             + (" and their errors against truth (red arrows)" if truth else "") + ", magnified 200x")
     return s
 
 
@@ -326,27 +316,9 @@ def _calibration(inv: ResultsInventory) -> Section | None:
 
 
 def _sync(inv: ResultsInventory) -> Section | None:
-    from gtrig.report.figures import curves_figure
+    from gtrig.report.sync import sync_section
 
-    curves: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    for p in inv.sync:
-        rows = _read_csv(p)
-        if not rows:
-            continue
-        keys = list(rows[0])
-        xk = next((k for k in keys if "lag" in k or "offset" in k), None)
-        yks = [k for k in keys if k != xk and ("corr" in k or "score" in k or "cost" in k)]
-        if xk is None or not yks:
-            continue
-        x = np.array([float(r[xk]) for r in rows])
-        for yk in yks:
-            curves[f"{p.stem} {yk}"] = (x, np.array([float(r[yk]) for r in rows]))
-    if not curves:
-        return None
-    s = Section("sync", "Time synchronization")
-    s.figure(curves_figure(curves, "lag (s)", "correlation", "sync correlation curves"),
-             "correlation against the clock offset (the maxima marked)")
-    return s
+    return sync_section(inv.sync_yaml, inv.sync)
 
 
 def _gps_section(inv: ResultsInventory, path: Path, key: str) -> Section | None:
@@ -415,17 +387,36 @@ def _summaries(inv: ResultsInventory) -> Section | None:
 
 
 SECTIONS: tuple[tuple[str, Callable[[ResultsInventory], Any]], ...] = (
+    ("checks of the run", _checks),
     ("accuracy against truth", _accuracy),
     ("pose tracks", _tracks),
     ("RTK-GPS", _gps),
     ("consistency of GT sources", _consistency),
+    ("fusion", _fusion),
     ("cameras", _cameras),
+    ("scanners", _scanners),
     ("survey", _survey),
     ("calibration", _calibration),
     ("time sync", _sync),
     ("stage summaries", _summaries),
 )
 
+
+#: what a section reads, named when the folder lacks it
+ABSENT = {
+    "checks of the run": "no summary.csv",
+    "accuracy against truth": "no accuracy.csv and no truth folder: give --truth, the recording's truth/",
+    "pose tracks": "no *.tum",
+    "RTK-GPS": "no gps JSON",
+    "consistency of GT sources": "fewer than two tracks with a covariance",
+    "fusion": "no fusion_report.json",
+    "cameras": "no gt_vision_*.checkpoint holding detections",
+    "scanners": "no sync.yaml with a laser/<scanner> entry",
+    "survey": "no survey/world_points.csv",
+    "calibration": "no calibration/calibration_report.yaml",
+    "time sync": "no sync.yaml and no correlation curve CSV",
+    "stage summaries": "no *.md",
+}
 
 #: sections of verbs outside the pipeline (``gtrig gps``): shown when their files are there, not named when absent
 OPTIONAL_SECTIONS = frozenset({"RTK-GPS"})
@@ -439,10 +430,12 @@ def build_report(results_dir: str | Path, truth_dir: str | Path | None = None) -
     from gtrig import __version__
 
     inv = inventory(results_dir, truth_dir)
-    if not inv.root.is_dir():
-        from gtrig.errors import InputError
+    from gtrig.errors import InputError
 
+    if not inv.root.is_dir():
         raise InputError(f"{inv.root}: no such results folder")
+    if truth_dir is not None and not Path(truth_dir).is_dir():
+        raise InputError(f"--truth {truth_dir}: no such folder")
     sections: list[Section] = []
     skipped: list[str] = []
     for label, fn in SECTIONS:
@@ -454,7 +447,7 @@ def build_report(results_dir: str | Path, truth_dir: str | Path | None = None) -
             continue
         got = [got] if isinstance(got, Section) else (got or [])
         if not got and label not in OPTIONAL_SECTIONS:
-            skipped.append(f"{label}: no input in the folder")
+            skipped.append(f"{label}: no input in the folder ({ABSENT[label]})")
         sections += got
     n_fig = sum(s.n_figures for s in sections)
     when = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")

@@ -58,7 +58,7 @@ def test_gps_section_holds_the_reports_figures_and_tables(gps_page: tuple[Path, 
     assert len(imgs) == 2 and any("coverage map" in a for a in imgs) and any("HDOP" in a for a in imgs), list(imgs)
     # the fix-type shares: every type of the JSON, to the printed 0.1 %, adding up to the whole time
     tables = re.findall(r"<table>(.*?)</table>", sec, re.S)
-    shares = dict(re.findall(r"<tr><td>([^<]+)</td><td>([\d.]+)</td></tr>", tables[0]))
+    shares = dict(re.findall(r'<tr><td>([^<]+)</td><td class="n">([\d.]+)</td></tr>', tables[0]))
     kept = float(shares.pop("kept as ground truth"))
     assert set(shares) == set(rep["fix_share_time"]) and {"rtk_fixed", "rtk_float", "dgps", "no_fix"} <= set(shares)
     for k, v in rep["fix_share_time"].items():
@@ -66,7 +66,8 @@ def test_gps_section_holds_the_reports_figures_and_tables(gps_page: tuple[Path, 
     assert abs(sum(float(v) for v in shares.values()) - 100) < 0.3
     assert abs(kept - 100 * rep["kept_share_time"]) <= 0.051 and abs(kept - float(shares["rtk_fixed"])) < 0.2
     # the lost-fix intervals: one row each, their lengths those of the JSON (8 in this log)
-    rows = re.findall(r"<tr><td>(\d+)</td><td>([\d.]+)</td><td>([\d.]+)</td><td>([\d.]+)</td></tr>", tables[1])
+    rows = re.findall(r'<tr><td class="n">(\d+)</td><td class="n">([\d.]+)</td><td class="n">([\d.]+)</td>'
+                      r'<td class="n">([\d.]+)</td></tr>', tables[1])
     lost = rep["lost_fix_intervals"]
     assert len(rows) == lost["count"] == 8
     assert np.allclose([float(r[3]) for r in rows], [b - a for a, b in lost["intervals"]], atol=0.051)
