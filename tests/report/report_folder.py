@@ -13,7 +13,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig.fusion.fuse import FusionReport, Outlier, Segment
-from gtrig.fusion.sync import OffsetEstimate
+from gtrig.sync.offset import OffsetEstimate
 from gtrig.io.offsets import write_offsets
 from gtrig.io.posetrack import write_pose_track
 from gtrig.io.tum import write_tum
