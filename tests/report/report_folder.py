@@ -13,12 +13,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig.fusion.fuse import FusionReport, Outlier, Segment
-from gtrig.sync.offset import OffsetEstimate
 from gtrig.io.offsets import write_offsets
 from gtrig.io.posetrack import write_pose_track
 from gtrig.io.tum import write_tum
 from gtrig.pipeline.context import AccuracyRow
 from gtrig.pipeline.rows import write_accuracy_csv
+from gtrig.sync.offset import OffsetEstimate
 from gtrig.trajectory import PoseStatus, PoseTrack
 
 #: the truth's robot frame above the floor (m) and its tilt (deg): not a planar track's error
