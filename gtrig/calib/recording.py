@@ -184,8 +184,9 @@ def calibrated_rig(
             ci = refined if refined is not None else _cam(intrinsics[c.name])
             if tuple(ci.image_size) != tuple(c.resolution):
                 raise InputError(
-                    f"camera {c.name}: intrinsics are for {ci.image_size[0]} x {ci.image_size[1]} "
-                    f"images but the rig says {c.resolution[0]} x {c.resolution[1]}"
+                    f"camera {c.name}: its intrinsics (from its calibration images) are for {ci.image_size[0]} x "
+                    f"{ci.image_size[1]} images but the rig's cameras.{c.name}.resolution is {c.resolution[0]} x "
+                    f"{c.resolution[1]}"
                 )
             K = np.asarray(ci.camera_matrix, dtype=float)
             upd["camera_matrix"] = tuple(tuple(float(v) for v in row) for row in K)

@@ -40,7 +40,21 @@ def print_result(result: object, has_truth: bool) -> None:
     if result.reused:
         console.print(f"reused (unchanged since their last run): {', '.join(result.reused)}", highlight=False)
     for name, why in result.skipped.items():
-        console.print(styled("skipped", "yellow"), f"{name}: {why}", highlight=False)
+        if name not in result.refused:
+            console.print(styled("skipped", "yellow"), f"{name}: {why}", highlight=False)
+
+
+def exit_on_refusals(result: object) -> None:
+    """Each stage's refusal as one ``error: <stage>: <why>`` line on stderr, then the run's exit code
+    (2 bad input, 3 no convergence); nothing when every stage asked for gave its result."""
+    from gtrig.cli.common import print_error
+    from gtrig.pipeline import PipelineResult
+
+    assert isinstance(result, PipelineResult)
+    for name, why in result.refused.items():
+        print_error(f"{name}: {why}")
+    if result.exit_code:
+        raise typer.Exit(result.exit_code)
 
 
 @handle_errors
@@ -89,5 +103,4 @@ def command(
                               reuse=not no_reuse, executor=ex, progress=bar.progress)
     print_result(result, (recording / "truth").is_dir())
     console.print(f"finished in {time.perf_counter() - t0:.0f} s; outputs in {out}", highlight=False)
-    if result.exit_code:
-        raise typer.Exit(result.exit_code)  # a stage refused its input: say so to scripts too
+    exit_on_refusals(result)  # a stage refused its input: say so, and to scripts too
