@@ -150,7 +150,7 @@ def load_intrinsics(
         if f.is_file():
             out[c] = read_cam_yaml(f)
         elif (root / c).is_dir():
-            out[c] = calibrate_intrinsics(root / c, board, estimate_k3=estimate_k3)
+            out[c] = calibrate_intrinsics(root / c, board, estimate_k3=estimate_k3, camera=c)
     if not out:
         raise InputError(f"{root}: no <cam>.yaml and no <cam>/ image folder for any of {', '.join(cameras)}")
     return out
