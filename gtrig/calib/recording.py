@@ -332,13 +332,18 @@ class CalibrationReport:
             L += ["", "## Warnings", ""] + [f"- {w}" for w in warns]
         return "\n".join(L) + "\n"
 
+    def texts(self) -> dict[str, str]:
+        """{file name: text} of the report's files: ``calibration_report.md`` and ``.yaml``."""
+        return {
+            "calibration_report.md": self.to_markdown(),
+            "calibration_report.yaml": yaml.safe_dump(_plain(self.to_dict()), sort_keys=False, width=120),
+        }
+
     def write(self, folder: str | os.PathLike[str]) -> None:
         """Write ``calibration_report.md`` and ``calibration_report.yaml`` into ``folder`` (atomically)."""
         d = Path(folder)
-        atomic_write_text(d / "calibration_report.md", self.to_markdown())
-        atomic_write_text(
-            d / "calibration_report.yaml", yaml.safe_dump(_plain(self.to_dict()), sort_keys=False, width=120)
-        )
+        for name, text in self.texts().items():
+            atomic_write_text(d / name, text)
 
 
 def _plain(x: Any) -> Any:
