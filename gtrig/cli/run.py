@@ -16,6 +16,7 @@ def print_result(result: object, has_truth: bool) -> None:
     from rich.table import Table
 
     from gtrig.pipeline import PipelineResult
+    from gtrig.pipeline.rows import check_line
 
     assert isinstance(result, PipelineResult)
 
@@ -35,8 +36,7 @@ def print_result(result: object, has_truth: bool) -> None:
     elif not has_truth:
         console.print("no truth/ in the recording: accuracy is judged by the checks above", highlight=False)
     for w in result.warnings:
-        console.print(styled("warning", "yellow"), f"{w.stage}: {w.metric} is {w.value:.4g} {w.unit} "
-                      f"(expected {w.target})", highlight=False)
+        console.print(styled("warning", "yellow"), check_line(w), highlight=False)
     if result.reused:
         console.print(f"reused (unchanged since their last run): {', '.join(result.reused)}", highlight=False)
     for name, why in result.skipped.items():
