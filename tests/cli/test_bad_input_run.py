@@ -37,6 +37,25 @@ def _laser_recording(root: Path, beams_off: int) -> Path:
     return rec
 
 
+def _camera_recording(root: Path) -> Path:
+    """A recording holding what GTvision reads, its images 64 x 48 where the rig's cameras say otherwise."""
+    import cv2
+
+    rec = root / "rec"
+    doc = _rig_doc()
+    rec.mkdir(parents=True)
+    (rec / "rig.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    (rec / "validation").mkdir()
+    (rec / "validation" / "poses.csv").write_text("pose,start_s,end_s\n1,0.0,1.0\n")
+    for seq in ("validation", "run"):
+        for cam in doc["cameras"]:
+            d = rec / seq / "cameras" / cam["name"]
+            d.mkdir(parents=True)
+            cv2.imwrite(str(d / "0.png"), np.full((48, 64), 128, np.uint8))
+            (d / "timestamps.csv").write_text("frame,stamp_s,file\n0,0.5,0.png\n")
+    return rec
+
+
 def _lines(output: str) -> list[str]:
     return [x for x in output.splitlines() if x.strip()]
 
@@ -53,6 +72,16 @@ def test_a_stage_refusing_its_input_inside_run_is_one_error_line(tmp_path: Path,
     assert "unexpected" not in r.output and "Traceback" not in r.output, r.output
     assert not list(tmp_path.glob("gtrig-crash-*.log"))
     assert not any(x.startswith("skipped") and "laser:" in x for x in _lines(r.output)), r.output
+
+
+def test_images_of_another_size_than_the_rig_says_refused_before_detection(tmp_path: Path) -> None:
+    rec = _camera_recording(tmp_path)
+    r = runner.invoke(app, ["run", "--recording", str(rec), "--out", str(tmp_path / "out"), "--stages", "vision"])
+    assert r.exit_code == 2, r.output
+    errors = [x for x in _lines(r.output) if x.startswith("error:")]
+    assert len(errors) == 1 and errors[0].startswith("error: vision: "), r.output
+    assert "0.png: a 64 x 48 image, but the rig's cameras." in errors[0] and ".resolution is " in errors[0], errors
+    assert not (tmp_path / "out" / "gt_vision_validation.checkpoint").exists()
 
 
 def test_demo_reports_a_refusing_stage_as_one_error_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
