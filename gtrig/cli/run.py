@@ -16,7 +16,7 @@ def print_result(result: object, has_truth: bool) -> None:
     from rich.table import Table
 
     from gtrig.pipeline import PipelineResult
-    from gtrig.pipeline.rows import check_line
+    from gtrig.pipeline.rows import check_line, value_text
 
     assert isinstance(result, PipelineResult)
 
@@ -26,12 +26,12 @@ def print_result(result: object, has_truth: bool) -> None:
     if result.checks:
         t = Table("stage", "check", "value", "expected", "", title="what the recording says without truth")
         for r in result.checks:
-            t.add_row(r.stage, r.metric, f"{r.value:.4g} {r.unit}", r.target, mark(r.ok))
+            t.add_row(r.stage, r.metric, value_text(r), r.target, mark(r.ok))
         console.print(t)
     if result.rows:
         acc = Table("stage", "metric", "value", "target", "", title="accuracy against truth")
         for r in result.rows:
-            acc.add_row(r.stage, r.metric, f"{r.value:.4g} {r.unit}", r.target, mark(r.ok))
+            acc.add_row(r.stage, r.metric, value_text(r), r.target, mark(r.ok))
         console.print(acc)
     elif not has_truth:
         console.print("no truth/ in the recording: accuracy is judged by the checks above", highlight=False)

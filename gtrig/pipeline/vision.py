@@ -133,13 +133,14 @@ def gtvision(inp: StageInput) -> StageOutput:
         # an instant without any marker in view (the robot outside the cameras' fields) is not a failure:
         # the share that says how GTvision does is of the instants where a camera saw a marker
         unseen = rep.failures.get(Status.NO_MARKER.value, 0)
-        share = 100 * rep.localized / max(rep.instants - unseen, 1)
+        seen = rep.instants - unseen
+        share = 100 * rep.localized / seen if seen else math.nan  # no marker ever in view: said above
         checks += [
             AccuracyRow("GTvision", f"{seq}, poses localized", rep.localized, f"of {rep.instants}",
                         "all" if static else "", rep.localized == rep.instants if static else None),
             AccuracyRow("GTvision", f"{seq}, instants with no marker in view", unseen, f"of {rep.instants}"),
             AccuracyRow("GTvision", f"{seq}, instants with a marker in view, localized", share, "%",
-                        f">= {MIN_LOCALIZED_SEEN_PCT:g}", bool(share >= MIN_LOCALIZED_SEEN_PCT)),
+                        f">= {MIN_LOCALIZED_SEEN_PCT:g}", bool(share >= MIN_LOCALIZED_SEEN_PCT) if seen else None),
             AccuracyRow("GTvision", f"{seq}, corner residual RMS", rep.rms_px, "px", "<= 1",
                         bool(rep.rms_px <= 1)),
         ]

@@ -188,9 +188,13 @@ def read_static_intervals(path: Path) -> np.ndarray:
             if not row or row[0].startswith("#"):
                 continue
             try:
-                rows.append((float(row[1]), float(row[2])))
+                start_s, end_s = float(row[1]), float(row[2])
             except (ValueError, IndexError):
                 raise FormatError(f"{path}:{line}: expected 'pose,start_s,end_s'") from None
+            if not (np.isfinite(start_s) and np.isfinite(end_s) and start_s <= end_s):
+                raise FormatError(f"{path}:{line}: start_s {row[1].strip()} and end_s {row[2].strip()} are not an "
+                                  "interval (finite, start before end)")
+            rows.append((start_s, end_s))
     return np.array(rows).reshape(-1, 2)
 
 

@@ -37,8 +37,9 @@ def _laser_recording(root: Path, beams_off: int) -> Path:
     return rec
 
 
-def _camera_recording(root: Path) -> Path:
-    """A recording holding what GTvision reads, its images 64 x 48 where the rig's cameras say otherwise."""
+def _camera_recording(root: Path, poses: str = "1,0.0,1.0\n", rig_size: bool = False) -> Path:
+    """A recording holding what GTvision reads: the validation stops ``poses``, one blank image per camera
+    and sequence, 64 x 48 where the rig's cameras say otherwise (``rig_size``: the rig's size)."""
     import cv2
 
     rec = root / "rec"
@@ -46,12 +47,13 @@ def _camera_recording(root: Path) -> Path:
     rec.mkdir(parents=True)
     (rec / "rig.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
     (rec / "validation").mkdir()
-    (rec / "validation" / "poses.csv").write_text("pose,start_s,end_s\n1,0.0,1.0\n")
+    (rec / "validation" / "poses.csv").write_text("pose,start_s,end_s\n" + poses)
     for seq in ("validation", "run"):
         for cam in doc["cameras"]:
             d = rec / seq / "cameras" / cam["name"]
             d.mkdir(parents=True)
-            cv2.imwrite(str(d / "0.png"), np.full((48, 64), 128, np.uint8))
+            w, h = cam["resolution"] if rig_size else (64, 48)
+            cv2.imwrite(str(d / "0.png"), np.full((h, w), 128, np.uint8))
             (d / "timestamps.csv").write_text("frame,stamp_s,file\n0,0.5,0.png\n")
     return rec
 
@@ -82,6 +84,33 @@ def test_images_of_another_size_than_the_rig_says_refused_before_detection(tmp_p
     assert len(errors) == 1 and errors[0].startswith("error: vision: "), r.output
     assert "0.png: a 64 x 48 image, but the rig's cameras." in errors[0] and ".resolution is " in errors[0], errors
     assert not (tmp_path / "out" / "gt_vision_validation.checkpoint").exists()
+
+
+@pytest.mark.parametrize("poses", ["1,5.0,2.0\n", "1,0.0,nan\n"])
+def test_validation_stops_that_are_not_intervals_refused_naming_the_line(tmp_path: Path, poses: str) -> None:
+    rec = _camera_recording(tmp_path, "# stop 0\n0,0.0,1.0\n" + poses, rig_size=True)
+    r = runner.invoke(app, ["run", "--recording", str(rec), "--out", str(tmp_path / "out"), "--stages", "vision"])
+    assert r.exit_code == 2, r.output
+    errors = [x for x in _lines(r.output) if x.startswith("error:")]
+    assert errors == [f"error: vision: {rec}/validation/poses.csv:4: start_s {poses.split(',')[1]} and end_s "
+                      f"{poses.split(',')[2].strip()} are not an interval (finite, start before end)"], r.output
+
+
+def test_no_marker_in_view_is_said_once_not_as_a_share_of_nothing(tmp_path: Path) -> None:
+    """Blank images: the stops are not localized (a warning); the share of the instants with a marker in
+    view cannot be measured, and is no second warning."""
+    rec = _camera_recording(tmp_path, rig_size=True)
+    out = tmp_path / "out"
+    r = runner.invoke(app, ["run", "--recording", str(rec), "--out", str(out), "--stages", "vision"])
+    assert r.exit_code == 0, r.output
+    warned = [x for x in _lines(r.output) if x.startswith("warning")]
+    assert "warning GTvision: validation, poses localized is 0 of 1 (expected all)" in warned, r.output
+    assert not any("marker in view" in w for w in warned), warned
+    from gtrig.pipeline import read_accuracy_csv
+
+    checks = read_accuracy_csv(out / "summary.csv")
+    assert checks[("GTvision", "validation, instants with no marker in view")] == 1
+    assert np.isnan(checks[("GTvision", "validation, instants with a marker in view, localized")])
 
 
 def test_demo_reports_a_refusing_stage_as_one_error_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
