@@ -63,6 +63,31 @@ def _scalar_type(hint: Any) -> Any | None:
     return None
 
 
+# The ranges of the stages' options, checked at load (a negative gap or a NaN tolerance is refused
+# naming the field before any work). A float is finite and positive, an int at least 1, unless named here.
+_MAY_BE_ZERO = frozenset({
+    "tol_m", "tol_rad", "step_tol", "end_margin_m", "min_jump_m", "min_jump_rad", "min_motion_m",
+    "prior_max_gap_s", "reacquire_gap_s", "floor_std_m", "floor_std_rad", "surface_bias_std_m",
+    "side_bias_std_m", "corner_floor_px", "corner_sigma_floor_px", "previous_max_gap_s",
+})
+_RANGES: dict[str, dict[str, float]] = {
+    "view_p": {"gt": 0, "lt": 1},
+    "image_bad_fraction": {"gt": 0, "le": 1},
+    "frame_scale_level": {"gt": 0, "lt": 1},
+    "smoother_order": {"ge": 2, "le": 3},
+    "min_points": {"ge": 3},
+}
+
+
+def _range(name: str, t: Any) -> dict[str, Any]:
+    """The pydantic ``Field`` constraints of the dataclass option ``name`` of type ``t``."""
+    if t is float:
+        return {"allow_inf_nan": False, **_RANGES.get(name, {"ge": 0} if name in _MAY_BE_ZERO else {"gt": 0})}
+    if t is int:
+        return _RANGES.get(name, {"ge": 0} if name in _MAY_BE_ZERO else {"ge": 1})
+    return {}
+
+
 def section_from_dataclass(name: str, cls: type, exclude: tuple[str, ...] = (),
                            nested: dict[str, type[Section]] | None = None) -> type[Section]:
     """A :class:`Section` with the scalar fields of the frozen dataclass ``cls`` and its defaults
@@ -82,7 +107,7 @@ def section_from_dataclass(name: str, cls: type, exclude: tuple[str, ...] = (),
         d = f.default
         # numpy scalars as plain Python ones (the same value; YAML writes them)
         d = t(d) if t in (int, float) else d
-        fields[f.name] = (t, d)
+        fields[f.name] = (t, Field(default=d, **_range(f.name, t)))
     model = create_model(name, __base__=Section, **fields)
     model.__doc__ = f"Options of :class:`{cls.__module__}.{cls.__qualname__}` (its defaults)."
     return model
@@ -111,7 +136,7 @@ class SurveyConfig(Section):
     multistart: bool = True
     on_ambiguity: Literal["refuse", "warn"] = "refuse"
     on_outlier: Literal["exclude", "refuse", "keep"] = "exclude"
-    alpha: float = Field(default=0.001, gt=0, lt=1)
+    alpha: float = Field(default=0.001, gt=0, lt=1, allow_inf_nan=False)
 
 
 class CamerasConfig(Section):
@@ -123,7 +148,7 @@ class CamerasConfig(Section):
 class MarkersConfig(Section):
     """The markers' calibration on the robot (:func:`gtrig.markers.robotcal.calibrate_markers`)."""
 
-    anchor: int = 14  # the seeds' "dima-marker" (gtrig.markers.robotcal.DEFAULT_ANCHOR)
+    anchor: int = Field(default=14, ge=0)  # the seeds' "dima-marker" (gtrig.markers.robotcal.DEFAULT_ANCHOR)
     options: RobotCalSection = Field(default_factory=RobotCalSection)  # type: ignore[valid-type]
 
 
@@ -132,7 +157,7 @@ class VisionConfig(Section):
 
     detector: Literal["auto", "gtrig", "aruco"] = "auto"
     planar: bool = True
-    sync_tol_s: float = Field(default=0.005, ge=0)
+    sync_tol_s: float = Field(default=0.005, ge=0, allow_inf_nan=False)
     chunk_size: int = Field(default=16, ge=1)
     estimate_noise: bool = True
     options: VisionEstimateSection = Field(default_factory=VisionEstimateSection)  # type: ignore[valid-type]
@@ -152,8 +177,10 @@ class FusionConfig(Section):
     """Time sync and fusion (:func:`gtrig.sync.offset.estimate_offset`, :func:`gtrig.fusion.fuse_tracks`)."""
 
     estimator: Literal["batch", "ekf"] = "batch"
-    max_gap_s: float | None = Field(default=None, gt=0, description="end a segment after this long without a fix")
-    sync_search_s: float = Field(default=3.0, gt=0, le=60, description="clock offsets searched, both signs (s)")
+    max_gap_s: float | None = Field(default=None, gt=0, allow_inf_nan=False,
+                                     description="end a segment after this long without a fix")
+    sync_search_s: float = Field(default=3.0, gt=0, le=60, allow_inf_nan=False,
+                                 description="clock offsets searched, both signs (s)")
     sync_per_sensor: bool = Field(default=True, description="also each camera's and scanner's clock offset "
                                   "(gtrig.sync.sensors)")
 

@@ -37,6 +37,16 @@ class CheckRow:
     reproj_px: float
 
 
+def _check_inside(csv_path: Path, line: int, image: str) -> None:
+    """Refuse an image name that would leave ``IMAGES/<camera>/``: empty, absolute, or with ``..`` parts."""
+    from pathlib import PurePosixPath, PureWindowsPath
+
+    posix, windows = PurePosixPath(image), PureWindowsPath(image)
+    if not image or posix.is_absolute() or windows.is_absolute() or windows.drive or ".." in windows.parts:
+        raise FormatError(f"{csv_path}:{line}: image {image!r} is outside the images folder (an absolute path "
+                          "or '..' parts); name it relative to IMAGES/<camera>/")
+
+
 def read_check_poses(path: str | os.PathLike[str]) -> list[tuple[str, str, np.ndarray, float]]:
     """Rows ``(camera, image, xyz (3,), yaw_deg or NaN)`` of ``POSES.csv``."""
     p = Path(path)
@@ -56,7 +66,9 @@ def read_check_poses(path: str | os.PathLike[str]) -> list[tuple[str, str, np.nd
                 yaw = float(row[5]) if len(row) > 5 and row[5].strip() else math.nan
             except (ValueError, IndexError):
                 raise FormatError(f"{p}:{line}: expected camera,image,x,y,z[,yaw_deg] with numbers") from None
-            out.append((row[0].strip(), row[1].strip(), xyz, yaw))
+            image = row[1].strip()
+            _check_inside(p, line, image)
+            out.append((row[0].strip(), image, xyz, yaw))
     if not out:
         raise FormatError(f"{p}: no rows")
     return out

@@ -108,8 +108,11 @@ def calibrate_views(
     min_reject_px: float = 0.15,
     camera_matrix_guess: np.ndarray | None = None,
     rejected: dict[str, str] | None = None,
+    subject: str = "",
 ) -> IntrinsicsResult:
-    """Calibrate from detections already made (see :func:`calibrate_intrinsics`)."""
+    """Calibrate from detections already made (see :func:`calibrate_intrinsics`); every warning starts
+    with ``subject`` (the camera or its folder) when given."""
+    at = f"{subject}: " if subject else ""
     rejected = dict(rejected or {})
     views = list(views)
     if len(views) < MIN_VIEWS:
@@ -137,7 +140,7 @@ def calibrate_views(
             break
         name = views[worst].file
         rejected[name] = f"outlier: {e[worst]:.3f} px RMS (median {med:.3f} px)"
-        msg = f"rejected {name}: reprojection RMS {e[worst]:.3f} px, {e[worst] / med:.1f} x the median"
+        msg = f"{at}rejected {name}: reprojection RMS {e[worst]:.3f} px, {e[worst] / med:.1f} x the median"
         log.warning(msg)
         warnings.append(msg)
         del views[worst]
@@ -147,20 +150,20 @@ def calibrate_views(
     n_rej = len(warnings)
     if cover < COVERAGE_WARN:
         warnings.append(
-            f"poor coverage: the boards cover {100 * cover:.0f} % of the image; "
+            f"{at}poor coverage: the boards cover {100 * cover:.0f} % of the image; "
             "add views with the board near the image edges and corners"
         )
     normals = Ts[:, :3, 2]
     spread = float(np.degrees(np.max(np.arccos(np.clip(normals @ normals.T, -1, 1)))))
     if np.sum(tilt > TILT_WARN_DEG) < 2 or spread < TILT_WARN_DEG:
         warnings.append(
-            f"poor view variety: tilts {tilt.min():.0f}-{tilt.max():.0f} deg, normals spread "
+            f"{at}poor view variety: tilts {tilt.min():.0f}-{tilt.max():.0f} deg, normals spread "
             f"{spread:.0f} deg; tilt the board by 20-45 deg in different directions"
         )
     std = {n: float(s) for n, s in zip(STD_NAMES, np.asarray(std_int, dtype=float).ravel(), strict=False)}
     if max(std.get("cx", 0.0), std.get("cy", 0.0)) > PP_SIGMA_WARN_PX:
         warnings.append(
-            f"imprecise principal point: sigma cx {std['cx']:.2f} px, cy {std['cy']:.2f} px from "
+            f"{at}imprecise principal point: sigma cx {std['cx']:.2f} px, cy {std['cy']:.2f} px from "
             f"{len(views)} views; add views (a video sweep gives a hundred) with the board near the image "
             "corners"
         )
@@ -190,6 +193,7 @@ def calibrate_intrinsics(
     *,
     estimate_k3: bool = False,
     min_reject_px: float = 0.15,
+    camera: str | None = None,
 ) -> IntrinsicsResult:
     """Calibrate one camera from a folder (or a list) of chessboard images.
 
@@ -203,6 +207,8 @@ def calibrate_intrinsics(
         Also estimate the sixth-order radial coefficient (wide-angle lenses, many views).
     min_reject_px
         Views below this RMS are never rejected as outliers.
+    camera
+        The camera's name: its warnings start with ``camera NAME``, else with the images' folder.
 
     Raises
     ------
@@ -215,6 +221,7 @@ def calibrate_intrinsics(
         files = list(images)
         det = detect_folder(files[0].parent if files else Path("."), board, files)
     rejected = {m: "no board found" for m in det.missing}
+    subject = f"camera {camera}" if camera else str(det.folder)
     for m in det.missing:
         log.warning("%s: no %dx%d board found, image skipped", m, board.cols, board.rows)
     if len(det.found) < MIN_VIEWS:
@@ -229,9 +236,10 @@ def calibrate_intrinsics(
         estimate_k3=estimate_k3,
         min_reject_px=min_reject_px,
         rejected=rejected,
+        subject=subject,
     )
     if det.missing:
-        msg = f"no board in {len(det.missing)} image(s): {', '.join(det.missing[:5])}" + (
+        msg = f"{subject}: no board in {len(det.missing)} image(s): {', '.join(det.missing[:5])}" + (
             " ..." if len(det.missing) > 5 else ""
         )
         cam = res.camera

@@ -150,7 +150,7 @@ def load_intrinsics(
         if f.is_file():
             out[c] = read_cam_yaml(f)
         elif (root / c).is_dir():
-            out[c] = calibrate_intrinsics(root / c, board, estimate_k3=estimate_k3)
+            out[c] = calibrate_intrinsics(root / c, board, estimate_k3=estimate_k3, camera=c)
     if not out:
         raise InputError(f"{root}: no <cam>.yaml and no <cam>/ image folder for any of {', '.join(cameras)}")
     return out
@@ -184,8 +184,9 @@ def calibrated_rig(
             ci = refined if refined is not None else _cam(intrinsics[c.name])
             if tuple(ci.image_size) != tuple(c.resolution):
                 raise InputError(
-                    f"camera {c.name}: intrinsics are for {ci.image_size[0]} x {ci.image_size[1]} "
-                    f"images but the rig says {c.resolution[0]} x {c.resolution[1]}"
+                    f"camera {c.name}: its intrinsics (from its calibration images) are for {ci.image_size[0]} x "
+                    f"{ci.image_size[1]} images but the rig's cameras.{c.name}.resolution is {c.resolution[0]} x "
+                    f"{c.resolution[1]}"
                 )
             K = np.asarray(ci.camera_matrix, dtype=float)
             upd["camera_matrix"] = tuple(tuple(float(v) for v in row) for row in K)
@@ -331,13 +332,18 @@ class CalibrationReport:
             L += ["", "## Warnings", ""] + [f"- {w}" for w in warns]
         return "\n".join(L) + "\n"
 
+    def texts(self) -> dict[str, str]:
+        """{file name: text} of the report's files: ``calibration_report.md`` and ``.yaml``."""
+        return {
+            "calibration_report.md": self.to_markdown(),
+            "calibration_report.yaml": yaml.safe_dump(_plain(self.to_dict()), sort_keys=False, width=120),
+        }
+
     def write(self, folder: str | os.PathLike[str]) -> None:
         """Write ``calibration_report.md`` and ``calibration_report.yaml`` into ``folder`` (atomically)."""
         d = Path(folder)
-        atomic_write_text(d / "calibration_report.md", self.to_markdown())
-        atomic_write_text(
-            d / "calibration_report.yaml", yaml.safe_dump(_plain(self.to_dict()), sort_keys=False, width=120)
-        )
+        for name, text in self.texts().items():
+            atomic_write_text(d / name, text)
 
 
 def _plain(x: Any) -> Any:

@@ -58,14 +58,25 @@ def intrinsics(
         err_console.print(styled("warning:", "yellow"), w)
 
 
-def _report(rig_cal: object, report: object, out: Path) -> None:
-    from gtrig.calib.recording import CalibrationReport
-    from gtrig.rig import dump_rig
+def _report_paths(out: Path) -> list[Path]:
+    """The calibration report's files written beside the calibrated rig ``out``."""
+    return [out.parent / "calibration_report.md", out.parent / "calibration_report.yaml"]
 
-    assert isinstance(report, CalibrationReport)
-    dump_rig(rig_cal, out)  # type: ignore[arg-type]
-    report.write(out.parent)
-    console.print(report.to_markdown(), markup=False, highlight=False)
+
+def _report(rig_cal: object, report: object, out: Path) -> None:
+    """Write the calibrated rig ``out`` and its report beside it, all or none, and print the report."""
+    from gtrig.calib.recording import CalibrationReport
+    from gtrig.io.atomic import atomic_group
+    from gtrig.rig.load import rig_text
+    from gtrig.rig.models import Rig
+
+    assert isinstance(report, CalibrationReport) and isinstance(rig_cal, Rig)
+    report_texts = report.texts()
+    texts = {out: rig_text(rig_cal), **{out.parent / n: t for n, t in report_texts.items()}}
+    with atomic_group(*texts) as tmps:  # the rig and its report: all or none
+        for tmp, text in zip(tmps, texts.values(), strict=True):
+            tmp.write_text(text, encoding="utf-8")
+    console.print(report_texts["calibration_report.md"], markup=False, highlight=False)
     console.print(f"wrote {out}, {out.parent / 'calibration_report.md'} and .yaml")
 
 
@@ -104,7 +115,7 @@ def network(
 
     for opt, folder in (("--pairs", pairs), ("--world-board", world_board)):
         checks.input_folder(opt, folder)
-    checks.outputs([rig, boards], [out])
+    checks.outputs([rig, boards], [out, *_report_paths(out)])
     r = load_rig(rig)
     spec = read_boards_yaml(boards)
     if spec.T_world_board is None:
@@ -141,9 +152,10 @@ def recording(
     from gtrig.cli import checks
 
     checks.input_folder("REC", rec)
-    checks.outputs([rec / "rig.yaml"], [out])
+    out = out or rec / "rig.calibrated.yaml"
+    checks.outputs([rec / "rig.yaml"], [out, *_report_paths(out)])
     rig_cal, report = calibrate_recording(rec, estimate_k3=k3)
-    _report(rig_cal, report, out or rec / "rig.calibrated.yaml")
+    _report(rig_cal, report, out)
 
 
 @app.command("check")

@@ -41,7 +41,8 @@ def _one_line(msg: object) -> str:
     return " ".join(str(msg).split())
 
 
-def _print_error(msg: str) -> None:
+def print_error(msg: str) -> None:
+    """``error: <msg>`` as one line on stderr."""
     # plain text: a file or point name holding Rich markup ("x[/b].yaml") must print as it is
     err_console.print("error: " + _one_line(msg), markup=False, highlight=False, soft_wrap=True)
 
@@ -99,39 +100,42 @@ def handle_errors(fn: F) -> F:
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         from pydantic import ValidationError
+        from typer import Exit
 
         from gtrig.errors import GtrigError
 
         try:
             return fn(*args, **kwargs)
+        except Exit as e:  # a verb's own exit code (a verdict, or a refusal it has already printed)
+            sys.exit(e.exit_code)
         except GtrigError as e:
-            _print_error(str(e))
+            print_error(str(e))
             sys.exit(e.exit_code)
         except KeyboardInterrupt:
             err_console.print("interrupted; rerun the same command to resume where possible", markup=False)
             sys.exit(130)
         except OSError as e:
-            _print_error(_os_error_message(e))
+            print_error(_os_error_message(e))
             sys.exit(2)
         except UnicodeDecodeError as e:
-            _print_error(f"an input is not text ({e.reason} at byte {e.start})")
+            print_error(f"an input is not text ({e.reason} at byte {e.start})")
             sys.exit(2)
         except ValidationError as e:
-            _print_error(_validation_message(e))
+            print_error(_validation_message(e))
             sys.exit(2)
         except MemoryError:
-            _print_error("out of memory: the input is larger than this machine can hold")
+            print_error("out of memory: the input is larger than this machine can hold")
             sys.exit(2)
         except Exception as e:
             if type(e).__name__ == "LinAlgError":  # numpy's: a singular system, from a degenerate input
-                _print_error(f"a degenerate input: the estimate is not determined ({_one_line(e)}); check that "
+                print_error(f"a degenerate input: the estimate is not determined ({_one_line(e)}); check that "
                              "the inputs constrain every unknown")
                 sys.exit(3)
             if logging.getLogger().isEnabledFor(logging.DEBUG):
                 raise
             log_path = _write_crash_log(e)
             where = f"; traceback in {log_path}" if log_path else ""
-            _print_error(f"unexpected {type(e).__name__}: {_one_line(e)[:300]}{where} (please report it)")
+            print_error(f"unexpected {type(e).__name__}: {_one_line(e)[:300]}{where} (please report it)")
             sys.exit(1)
 
     return wrapper  # type: ignore[return-value]
@@ -160,7 +164,7 @@ def _one_line_group() -> type:
                 sys.exit(e.exit_code)
             except click.ClickException as e:
                 where = e.ctx.command_path if isinstance(e, click.UsageError) and e.ctx is not None else "gtrig"
-                _print_error(f"{where}: {e.format_message()} (--help lists the options)")
+                print_error(f"{where}: {e.format_message()} (--help lists the options)")
                 sys.exit(2)
             except typer_exceptions.Abort:
                 err_console.print("interrupted", markup=False)

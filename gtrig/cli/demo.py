@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from gtrig.cli.common import console, handle_errors, styled
-from gtrig.cli.run import print_result
+from gtrig.cli.run import exit_on_refusals, print_result
 from gtrig.cli.scale import chunk_bar, dask_option, executor
 
 
@@ -58,8 +58,7 @@ def command(
     with console.status("writing the report"):
         report = write_report(out / "results", out / "report.html", rec / "truth")
     console.print(f"demo finished in {time.perf_counter() - t0:.0f} s; outputs in {out}; report: {report}")
-    if result.exit_code:
-        raise typer.Exit(result.exit_code)
+    exit_on_refusals(result)
 
 
 def _scanmatch_validate(rec: Path, results: Path) -> None:

@@ -16,6 +16,7 @@ def print_result(result: object, has_truth: bool) -> None:
     from rich.table import Table
 
     from gtrig.pipeline import PipelineResult
+    from gtrig.pipeline.rows import check_line, value_text
 
     assert isinstance(result, PipelineResult)
 
@@ -25,22 +26,35 @@ def print_result(result: object, has_truth: bool) -> None:
     if result.checks:
         t = Table("stage", "check", "value", "expected", "", title="what the recording says without truth")
         for r in result.checks:
-            t.add_row(r.stage, r.metric, f"{r.value:.4g} {r.unit}", r.target, mark(r.ok))
+            t.add_row(r.stage, r.metric, value_text(r), r.target, mark(r.ok))
         console.print(t)
     if result.rows:
         acc = Table("stage", "metric", "value", "target", "", title="accuracy against truth")
         for r in result.rows:
-            acc.add_row(r.stage, r.metric, f"{r.value:.4g} {r.unit}", r.target, mark(r.ok))
+            acc.add_row(r.stage, r.metric, value_text(r), r.target, mark(r.ok))
         console.print(acc)
     elif not has_truth:
         console.print("no truth/ in the recording: accuracy is judged by the checks above", highlight=False)
     for w in result.warnings:
-        console.print(styled("warning", "yellow"), f"{w.stage}: {w.metric} is {w.value:.4g} {w.unit} "
-                      f"(expected {w.target})", highlight=False)
+        console.print(styled("warning", "yellow"), check_line(w), highlight=False)
     if result.reused:
         console.print(f"reused (unchanged since their last run): {', '.join(result.reused)}", highlight=False)
     for name, why in result.skipped.items():
-        console.print(styled("skipped", "yellow"), f"{name}: {why}", highlight=False)
+        if name not in result.refused:
+            console.print(styled("skipped", "yellow"), f"{name}: {why}", highlight=False)
+
+
+def exit_on_refusals(result: object) -> None:
+    """Each stage's refusal as one ``error: <stage>: <why>`` line on stderr, then the run's exit code
+    (2 bad input, 3 no convergence); nothing when every stage asked for gave its result."""
+    from gtrig.cli.common import print_error
+    from gtrig.pipeline import PipelineResult
+
+    assert isinstance(result, PipelineResult)
+    for name, why in result.refused.items():
+        print_error(f"{name}: {why}")
+    if result.exit_code:
+        raise typer.Exit(result.exit_code)
 
 
 @handle_errors
@@ -89,5 +103,4 @@ def command(
                               reuse=not no_reuse, executor=ex, progress=bar.progress)
     print_result(result, (recording / "truth").is_dir())
     console.print(f"finished in {time.perf_counter() - t0:.0f} s; outputs in {out}", highlight=False)
-    if result.exit_code:
-        raise typer.Exit(result.exit_code)  # a stage refused its input: say so to scripts too
+    exit_on_refusals(result)  # a stage refused its input: say so, and to scripts too

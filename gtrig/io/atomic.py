@@ -9,6 +9,7 @@ the umask gives (``mkstemp`` alone would make them 0600).
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from collections.abc import Iterator
@@ -102,7 +103,8 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
 def atomic_group(*paths: str | os.PathLike[str]) -> Iterator[list[Path]]:
     """Write several outputs all or none: yields one temporary path per output (same folder), renamed
     into place together when the block succeeds; on any error every temporary is removed and the
-    previous outputs are left as they were."""
+    previous outputs are left as they were. An output that is a folder is refused before any rename
+    (a rename onto it would fail after the others had been replaced)."""
     finals = [Path(p) for p in paths]
     if len({p.resolve() for p in finals}) != len(finals):
         raise ValueError("two outputs of one group name the same file")
@@ -111,6 +113,9 @@ def atomic_group(*paths: str | os.PathLike[str]) -> Iterator[list[Path]]:
         for p in finals:
             tmps.append(_temporary(p))
         yield tmps
+        for p in finals:
+            if p.is_dir():
+                raise IsADirectoryError(errno.EISDIR, "Is a directory", str(p))
         for t, p in zip(tmps, finals, strict=True):
             os.replace(t, p)
     except BaseException:

@@ -64,7 +64,8 @@ def sync(inp: StageInput) -> StageOutput:
     write_offsets(inp.out / "sync.yaml", "odometry", doc)
     offsets = {k: float(v.offset_s) for k, v in results.items() if v.verdict == "ok"}
     checks = tuple(AccuracyRow("sync", f"{k} clock offset to odometry ({v.verdict})",
-                               1000 * v.offset_s if v.verdict == "ok" else math.nan, "ms", "", v.verdict == "ok")
+                               1000 * v.offset_s if v.verdict == "ok" else math.nan, "ms",
+                               "verdict ok (docs/sync.md)", v.verdict == "ok")
                    for k, v in results.items())
     checks += tuple(AccuracyRow("sync", f"{e.source} clock offset to GTvision's ({e.verdict})",
                                 1000 * e.offset_s if e.verdict == "ok" else math.nan, "ms") for e in sensors)

@@ -100,7 +100,7 @@ def gtlaser_clock(inp: StageInput) -> StageOutput:
         why = ("laser.clock is 'scanners'" if clock == "scanners" else
                f"no scanner offset to {clock}'s clock in sync.yaml" if not clocks else "no scanner calibration")
         return StageOutput(checks=(AccuracyRow("GTlaser", f"track on {clock}'s clock: not made ({why})", math.nan,
-                                               "", "", clock == "scanners"),))
+                                               "", "made from the scanners' offsets", clock == "scanners"),))
     settings = apply_to_dataclass(inp.config.laser.track, TrackSettings())
     res = track_recording(inp.rec, sequence="run", rig=rig, out_tum=inp.out / "gt_laser_synced.tum",
                           out_cov=inp.out / "gt_laser_synced_cov.csv", settings=settings,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -26,6 +27,19 @@ def read_accuracy_csv(path: Path) -> dict[tuple[str, str], float]:
     """{(stage, metric): value} from :func:`write_accuracy_csv`."""
     with open(path, newline="") as f:
         return {(r["stage"], r["metric"]): float(r["value"]) for r in csv.DictReader(f)}
+
+
+def value_text(row: AccuracyRow) -> str:
+    """The row's value with its unit (4 significant digits); ``-`` when it could not be measured."""
+    return "-" if math.isnan(row.value) else f"{row.value:.4g} {row.unit}".rstrip()
+
+
+def check_line(row: AccuracyRow) -> str:
+    """One check as a sentence: ``stage: metric is value unit (expected target)``; a figure that could not
+    be measured (NaN) says so, and an empty target is left out."""
+    value = "not measured" if math.isnan(row.value) else value_text(row)
+    expected = f" (expected {row.target})" if row.target else ""
+    return f"{row.stage}: {row.metric} is {value}{expected}"
 
 
 def in_range(value: float, lo: float, hi: float) -> bool:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +47,8 @@ class PipelineResult:
     checks : the figures that need no truth; ``ok=False`` ones are warnings.
     seconds : wall time per stage run (a reused stage: its lookup).
     skipped : {stage name: why} for the stages that did not give a result.
+    refused : {stage name: the one-line message} for the stages that refused their input (also in
+        ``skipped``); the caller reports each as an error.
     reused : names of the stages taken from their last run.
     products : the final context (rig, survey, pose tracks by name...).
     exit_code : 0, or the largest exit code of the errors that stopped a stage (2 bad input, 3 no
@@ -60,6 +62,7 @@ class PipelineResult:
     reused: tuple[str, ...] = ()
     products: Products = Products()
     exit_code: int = 0
+    refused: dict[str, str] = field(default_factory=dict)
 
     @property
     def warnings(self) -> tuple[AccuracyRow, ...]:
@@ -111,6 +114,7 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
     checks: list[AccuracyRow] = []
     seconds: dict[str, float] = {}
     skipped: dict[str, str] = {}
+    refused: dict[str, str] = {}
     reused: list[str] = []
     rerun = False
     exit_code = 0
@@ -146,8 +150,8 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
             try:
                 result = st.fn(inp)
             except GtrigError as e:
-                log.warning("%s: %s", st.title, e)
-                skipped[st.name] = str(e)
+                log.debug("%s refused its input: %s", st.title, e)  # the caller reports it (``refused``)
+                skipped[st.name] = refused[st.name] = str(e)
                 exit_code = max(exit_code, e.exit_code)
                 seconds[st.name] = time.perf_counter() - t
                 continue
@@ -168,4 +172,5 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
         write_accuracy_csv(out_p / "accuracy.csv", rows)
     if checks:
         write_accuracy_csv(out_p / "summary.csv", checks)
-    return PipelineResult(tuple(rows), seconds, skipped, tuple(checks), tuple(reused), products, exit_code)
+    return PipelineResult(tuple(rows), seconds, skipped, tuple(checks), tuple(reused), products, exit_code,
+                          refused)

@@ -122,7 +122,11 @@ def rig_to_dict(rig: Rig) -> dict[str, Any]:
     return rig.model_dump(mode="json", exclude_none=True)
 
 
+def rig_text(rig: Rig) -> str:
+    """The rig file's text (what :func:`dump_rig` writes)."""
+    return yaml.safe_dump(rig_to_dict(rig), sort_keys=False, default_flow_style=None, width=120)
+
+
 def dump_rig(rig: Rig, path: str | os.PathLike[str]) -> None:
     """Write a rig file atomically."""
-    text = yaml.safe_dump(rig_to_dict(rig), sort_keys=False, default_flow_style=None, width=120)
-    atomic_write_text(path, text)
+    atomic_write_text(path, rig_text(rig))

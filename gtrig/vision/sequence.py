@@ -162,6 +162,18 @@ def camera_indices(rec_dir: Path, sequence: str, rig: Rig) -> dict[str, FrameInd
     return out
 
 
+def check_image_sizes(indices: Mapping[str, FrameIndex], rig: Rig) -> None:
+    """Refuse, before any detection, a camera whose first image is not the size its rig entry says."""
+    for name, ix in indices.items():
+        if not len(ix):
+            continue
+        h, w = read_image(ix.source(0)).shape[:2]
+        want = tuple(int(v) for v in rig.camera(name).resolution)
+        if (w, h) != want:
+            raise InputError(f"{ix.source(0)}: a {w} x {h} image, but the rig's cameras.{name}.resolution is "
+                             f"{want[0]} x {want[1]}")
+
+
 def read_static_intervals(path: Path) -> np.ndarray:
     """``validation/poses.csv`` (pose,start_s,end_s) as (K, 2) seconds."""
     if not path.is_file():
@@ -176,9 +188,13 @@ def read_static_intervals(path: Path) -> np.ndarray:
             if not row or row[0].startswith("#"):
                 continue
             try:
-                rows.append((float(row[1]), float(row[2])))
+                start_s, end_s = float(row[1]), float(row[2])
             except (ValueError, IndexError):
                 raise FormatError(f"{path}:{line}: expected 'pose,start_s,end_s'") from None
+            if not (np.isfinite(start_s) and np.isfinite(end_s) and start_s <= end_s):
+                raise FormatError(f"{path}:{line}: start_s {row[1].strip()} and end_s {row[2].strip()} are not an "
+                                  "interval (finite, start before end)")
+            rows.append((start_s, end_s))
     return np.array(rows).reshape(-1, 2)
 
 
@@ -918,6 +934,7 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     det = make_detector(rig, detector)
     det_name = det.name
     indices = camera_indices(rec, sequence, rig)
+    check_image_sizes(indices, rig)
     intervals = read_static_intervals(rec / "validation" / "poses.csv") if sequence == "validation" else None
     instants = make_instants(indices, sequence, sync_tol_s, intervals)
     if chunk_size is None:

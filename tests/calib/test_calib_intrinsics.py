@@ -99,3 +99,33 @@ def test_imprecise_principal_point_is_warned_about(sweep_dir) -> None:
         assert warned == (sd > PP_SIGMA_WARN_PX), (len(views), sd, res.warnings)
     # four views leave the principal point to within pixels, not tenths
     assert any("imprecise principal point" in w for w in calibrate_views(det.found[:4], BOARD, det.image_size).warnings)
+
+
+def test_every_warning_names_its_camera(sweep_dir, tmp_path) -> None:
+    """A recording's cameras are calibrated one after another: each warning says which one it is about."""
+    from gtrig.calib.recording import load_intrinsics
+
+    cam = tmp_path / "intrinsics" / "cam7"
+    cam.mkdir(parents=True)
+    for n in ("000.png", "001.png", "002.png", "003.png", "blank.jpg"):  # few views, one without a board
+        (cam / n).write_bytes((sweep_dir / n).read_bytes())
+    res = load_intrinsics(tmp_path / "intrinsics", ["cam7"], BOARD)["cam7"]
+    warnings = res.camera.extra["warnings"]
+    assert any("imprecise principal point" in w for w in warnings) and any("no board in" in w for w in warnings)
+    assert all(w.startswith("camera cam7: ") for w in warnings), warnings
+
+
+def test_calib_intrinsics_warnings_name_the_images_folder(sweep_dir, tmp_path) -> None:
+    from typer.testing import CliRunner
+
+    from gtrig.cli.main import app
+
+    few = tmp_path / "left_camera"
+    few.mkdir()
+    for n in ("000.png", "001.png", "002.png", "003.png"):
+        (few / n).write_bytes((sweep_dir / n).read_bytes())
+    r = CliRunner().invoke(app, ["calib", "intrinsics", "--images", str(few), "--board", "9x5x0.03",
+                                 "--out", str(tmp_path / "cam.yaml")])
+    assert r.exit_code == 0, r.output
+    warned = [x for x in r.output.splitlines() if x.startswith("warning:")]
+    assert warned and all(x.startswith(f"warning: {few}: ") for x in warned), r.output

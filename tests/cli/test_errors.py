@@ -109,6 +109,13 @@ def test_atomic_group_all_or_none(tmp_path):
         ta.write_text("new a")
         tb.write_text("new b")
     assert a.read_text() == "new a" and b.read_text() == "new b"
+    # a folder in the way of the second output: refused before the first is replaced
+    c = tmp_path / "c.txt"
+    c.mkdir()
+    with pytest.raises(IsADirectoryError), atomic_group(a, c) as (ta, tc):
+        ta.write_text("newer a")
+        tc.write_text("c")
+    assert a.read_text() == "new a" and c.is_dir() and not list(tmp_path.glob(".*.tmp"))
 
 
 def test_outputs_follow_the_umask(tmp_path):
