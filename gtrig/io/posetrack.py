@@ -242,6 +242,10 @@ def read_pose_track(tum_path: str | os.PathLike[str], cov_path: str | os.PathLik
     if cov_path is None:
         return PoseTrack(traj.stamps_s, traj.xyz, traj.quat_xyzw, source=source)
     stamps, cov, kind, status, reasons, meta = read_covariance_csv(cov_path)
+    if traj.rows is not None and stamps.size > int(traj.rows.max()):  # the TUM file's rows dropped or sorted
+        stamps, status = stamps[traj.rows], status[traj.rows]
+        cov = None if cov is None else cov[traj.rows]
+        reasons = tuple(reasons[i] for i in traj.rows)
     if stamps.shape != traj.stamps_s.shape:
         raise FormatError(f"{cov_path}: {stamps.size} rows, but {tum_path} has {len(traj)} poses")
     bad = np.abs(stamps - traj.stamps_s) > 5e-6

@@ -29,11 +29,14 @@ class Trajectory:
     stamps_s : (N,) strictly increasing seconds.
     xyz : (N, 3) positions, metres.
     quat_xyzw : (N, 4) unit quaternions.
+    rows : (N,) the 0-based pose rows of the file these poses are, when the reader dropped or reordered
+        some (gtrig.io.stamp_order); ``None`` when they are the file's rows in order.
     """
 
     stamps_s: np.ndarray
     xyz: np.ndarray
     quat_xyzw: np.ndarray
+    rows: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for a in (self.stamps_s, self.xyz, self.quat_xyzw):
@@ -118,17 +121,20 @@ def _checked_rows(p: Path, lines: list[str]) -> np.ndarray:
 def _trajectory(p: Path, a: np.ndarray) -> Trajectory:
     if not np.isfinite(a).all():
         raise FormatError(f"{p}: non-finite values")
+    from gtrig.io.stamp_order import stamp_order
+
+    rows = stamp_order(p, a[:, 0])
+    if rows is not None:
+        a = a[rows]
     stamps = a[:, 0].copy()
-    later = np.diff(stamps) > 0
-    if not later.all():
-        raise FormatError(f"{p}: time stamps do not increase at pose {int(np.argmin(later)) + 2}")
     qx, qy, qz, qw = (a[:, k] for k in range(4, 8))
     # np.linalg.norm(q, axis=1)'s sum, in its order (the same bits), without its (n, 4) temporaries
     n = np.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
     off = np.abs(n - 1) > 1e-3
     if off.any():
-        raise FormatError(f"{p}: quaternion of pose {int(np.argmax(off)) + 1} is not unit")
-    return Trajectory(stamps, a[:, 1:4].copy(), a[:, 4:8] / n[:, None])
+        i = int(np.argmax(off)) if rows is None else int(rows[int(np.argmax(off))])
+        raise FormatError(f"{p}: quaternion of pose {i + 1} is not unit")
+    return Trajectory(stamps, a[:, 1:4].copy(), a[:, 4:8] / n[:, None], rows)
 
 
 #: rows per piece of a text written piece by piece: an hour's track (~270,000 rows) as one string, its rows'

@@ -17,9 +17,10 @@ rosbag1    ``NAME.bag`` (ROS 1)                                    see gtrig.io.
 rosbag2    a ROS 2 bag folder (sqlite3) or ``NAME.mcap``           see gtrig.io.rosbag
 =========  =====================================================  =======================================
 
-``.txt`` and ``.csv`` are read by their content (TUM: 8 whitespace-separated numbers, KITTI: 12,
-RAWSEEDS: 4 or 13 comma-separated, EuRoC: a ``#timestamp`` header or 17 comma-separated, csv:
-gtrig's header); writing them needs an explicit ``fmt``.
+``.txt`` and ``.csv`` are read by their content (TUM: 8 numbers separated by whitespace or commas, the
+stamp in seconds; KITTI: 12; RAWSEEDS: 4 or 13 comma-separated; EuRoC: a ``#timestamp`` header, or 8 or
+17 comma-separated with an integer nanosecond stamp; csv: gtrig's header); writing them needs an
+explicit ``fmt``.
 """
 
 from __future__ import annotations
@@ -75,8 +76,10 @@ def sniff_format(path: str | os.PathLike[str]) -> str | None:
         if not s or s.startswith("#"):
             continue
         if "," in s:
-            n = len(s.split(","))
-            return {4: "rawseeds", 13: "rawseeds", 8: "euroc", 17: "euroc"}.get(n)
+            cells = [c.strip() for c in s.split(",")]
+            if len(cells) == 8 and not cells[0].lstrip("+-").isdigit():
+                return "tum"  # TUM with commas: EuRoC's first column is integer nanoseconds
+            return {4: "rawseeds", 13: "rawseeds", 8: "euroc", 17: "euroc"}.get(len(cells))
         return {8: "tum", 12: "kitti"}.get(len(s.split()))
     return None
 
