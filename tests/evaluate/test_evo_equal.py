@@ -30,7 +30,8 @@ def test_ape_rpe_equal_evo(align: str) -> None:
     r, e = evo_sync.associate_trajectories(ref, est, max_diff=0.01)
     e = copy.deepcopy(e)
     e.align(r, correct_scale=align == "sim3")
-    ours = evaluate_slam(read_trajectory(GT), read_trajectory(EST), metrics="evo", align=align)
+    ours = evaluate_slam(read_trajectory(GT), read_trajectory(EST), metrics="evo", align=align, method="nearest",
+                         max_dt_s=0.01)
     assert len(ours.association) == r.num_poses
     assert np.allclose(ours.association.gt.xyz, r.positions_xyz, atol=1e-12)
     PR = evo_metrics.PoseRelation
@@ -41,6 +42,36 @@ def test_ape_rpe_equal_evo(align: str) -> None:
             theirs = m.get_all_statistics()
             got = mine[key].stats()
             assert len(mine[key].values) == len(m.error)
+            for k in STATS:
+                assert abs(got[k] - theirs[k]) < 1e-6, (metric.__name__, key, k, got[k], theirs[k])
+
+
+@pytest.mark.parametrize("align", ["se3", "sim3"])
+def test_default_association_equals_evos_interpolation(align: str) -> None:
+    """The default (auto: the denser GT interpolated at the estimate's stamps, tolerance from the sample
+    periods) gives evo's figures with ``sync_method=interpolation``: same pairs, same APE and RPE."""
+    from evo.core.sync_method import SyncMethod
+
+    ref = evo_files.read_tum_trajectory_file(str(GT))
+    est = evo_files.read_tum_trajectory_file(str(EST))
+    r, e = evo_sync.associate_trajectories(ref, est, max_diff=0.01, sync_method=SyncMethod.interpolation)
+    e = copy.deepcopy(e)
+    e.align(r, correct_scale=align == "sim3")
+    ours = evaluate_slam(read_trajectory(GT), read_trajectory(EST), metrics="evo", align=align)
+    a = ours.association
+    assert (a.method, a.anchor, a.auto, a.max_dt_auto) == ("interpolate-gt", "est", True, True)
+    assert abs(a.max_dt_s - 0.03) < 1e-3  # three of the GT's 10 ms periods
+    assert len(a) == r.num_poses == 785
+    assert np.allclose(a.gt.xyz, r.positions_xyz, atol=1e-9) and np.allclose(ours.est_aligned.xyz, e.positions_xyz, atol=1e-6)
+    s = a.summary()
+    assert s["matched"] + s["anchor_outside"] + s["anchor_in_gaps"] == s["anchor_poses"] == 788
+    PR = evo_metrics.PoseRelation
+    for rel, key in ((PR.translation_part, "trans"), (PR.rotation_angle_rad, "rot"), (PR.full_transformation, "full")):
+        for metric, mine in ((evo_metrics.APE, ours.ape), (evo_metrics.RPE, ours.rpe)):
+            m = metric(rel)
+            m.process_data((r, e))
+            theirs = m.get_all_statistics()
+            got = mine[key].stats()
             for k in STATS:
                 assert abs(got[k] - theirs[k]) < 1e-6, (metric.__name__, key, k, got[k], theirs[k])
 
