@@ -31,12 +31,15 @@ class Trajectory:
     quat_xyzw : (N, 4) unit quaternions.
     rows : (N,) the 0-based pose rows of the file these poses are, when the reader dropped or reordered
         some (gtrig.io.stamp_order); ``None`` when they are the file's rows in order.
+    stamps_ns : (N,) int64 the stamps' exact nanoseconds when the file prints more digits than a float
+        keeps (gtrig.io.stamp_text), else ``None`` (gtrig.stamps.ns_from_seconds gives them).
     """
 
     stamps_s: np.ndarray
     xyz: np.ndarray
     quat_xyzw: np.ndarray
     rows: np.ndarray | None = None
+    stamps_ns: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for a in (self.stamps_s, self.xyz, self.quat_xyzw):
@@ -73,17 +76,24 @@ def read_tum(path: str | os.PathLike[str]) -> Trajectory:
     messages.
     """
     from gtrig.io._numtext import parse_numeric
+    from gtrig.io.stamp_text import needs_text_stamps, text_stamps_ns
 
     p = Path(path)
     data = read_bytes_file(p)
     fast = parse_numeric(data, (8,), comma=False)
+    lines: list[str] | None = None
     if fast is not None:
-        return _trajectory(p, fast.values)
-    lines = decode_text_file(p, data).splitlines()
-    a = _fast_rows(lines)
-    if a is None:
-        a = _checked_rows(p, lines)
-    return _trajectory(p, a)
+        a = fast.values
+    else:
+        lines = decode_text_file(p, data).splitlines()
+        a = _fast_rows(lines)  # type: ignore[assignment]
+        if a is None:
+            a = _checked_rows(p, lines)
+    head = data[:4096].decode("utf-8", "replace").splitlines()
+    ns = None
+    if needs_text_stamps(head):
+        ns = text_stamps_ns(lines if lines is not None else decode_text_file(p, data).splitlines())
+    return _trajectory(p, a, ns)
 
 
 def _fast_rows(lines: list[str]) -> np.ndarray | None:
@@ -118,7 +128,7 @@ def _checked_rows(p: Path, lines: list[str]) -> np.ndarray:
     return np.array(rows)
 
 
-def _trajectory(p: Path, a: np.ndarray) -> Trajectory:
+def _trajectory(p: Path, a: np.ndarray, stamps_ns: np.ndarray | None = None) -> Trajectory:
     if not np.isfinite(a).all():
         raise FormatError(f"{p}: non-finite values")
     from gtrig.io.stamp_order import stamp_order
@@ -126,6 +136,7 @@ def _trajectory(p: Path, a: np.ndarray) -> Trajectory:
     rows = stamp_order(p, a[:, 0])
     if rows is not None:
         a = a[rows]
+        stamps_ns = None if stamps_ns is None else stamps_ns[rows]
     stamps = a[:, 0].copy()
     qx, qy, qz, qw = (a[:, k] for k in range(4, 8))
     # np.linalg.norm(q, axis=1)'s sum, in its order (the same bits), without its (n, 4) temporaries
@@ -134,7 +145,7 @@ def _trajectory(p: Path, a: np.ndarray) -> Trajectory:
     if off.any():
         i = int(np.argmax(off)) if rows is None else int(rows[int(np.argmax(off))])
         raise FormatError(f"{p}: quaternion of pose {i + 1} is not unit")
-    return Trajectory(stamps, a[:, 1:4].copy(), a[:, 4:8] / n[:, None], rows)
+    return Trajectory(stamps, a[:, 1:4].copy(), a[:, 4:8] / n[:, None], rows, stamps_ns)
 
 
 #: rows per piece of a text written piece by piece: an hour's track (~270,000 rows) as one string, its rows'
@@ -142,15 +153,33 @@ def _trajectory(p: Path, a: np.ndarray) -> Trajectory:
 ROWS_PER_PIECE = 8192
 
 
+def integer_stamps_ns(traj: Trajectory | PoseTrack) -> np.ndarray:
+    """(N,) int64 nanoseconds of a trajectory's or pose track's stamps: those it read, else those of its
+    float stamps (gtrig.stamps)."""
+    from gtrig.stamps import ns_from_seconds
+
+    ns = getattr(traj, "stamps_ns", None)
+    return ns if ns is not None else ns_from_seconds(traj.stamps_s)
+
+
+def stamp_texts(traj: Trajectory | PoseTrack, decimals: int | None = None) -> list[str]:
+    """The stamps as every text format writes them (gtrig.stamps.format_seconds): 6 decimals when each is a
+    whole microsecond, else 9."""
+    from gtrig.stamps import format_seconds
+
+    return format_seconds(integer_stamps_ns(traj), decimals)
+
+
 def tum_pieces(traj: Trajectory | PoseTrack, rows: int = ROWS_PER_PIECE) -> Iterator[str]:
     """:func:`tum_text` in pieces of ``rows`` rows (their concatenation is the text)."""
     yield "# timestamp tx ty tz qx qy qz qw\n"
     if len(traj.stamps_s) == 0:
         yield "\n"
+    stamps = stamp_texts(traj)
     for a in range(0, len(traj.stamps_s), rows):
         out = [
-            f"{t:.6f} {x:.9f} {y:.9f} {z:.9f} {qx:.12f} {qy:.12f} {qz:.12f} {qw:.12f}"
-            for t, (x, y, z), (qx, qy, qz, qw) in zip(traj.stamps_s[a:a + rows], traj.xyz[a:a + rows],
+            f"{t} {x:.9f} {y:.9f} {z:.9f} {qx:.12f} {qy:.12f} {qz:.12f} {qw:.12f}"
+            for t, (x, y, z), (qx, qy, qz, qw) in zip(stamps[a:a + rows], traj.xyz[a:a + rows],
                                                       traj.quat_xyzw[a:a + rows], strict=True)
         ]
         yield "\n".join(out) + "\n"

@@ -52,9 +52,12 @@ def rawseeds_text(track: PoseTrack, decimals: int = 6, theta: np.ndarray | None 
     covariance, else 4). ``theta`` overrides the heading (default: :meth:`PoseTrack.yaw_rad`)."""
     th = track.yaw_rad() if theta is None else np.asarray(theta, float)
     cov = track.cov_xytheta()
+    from gtrig.stamps import format_seconds
+
+    stamps = format_seconds(track.integer_stamps_ns(), min(decimals, 9))
     out = []
     for i in range(len(track)):
-        cells = [_fixed(track.stamps_s[i], decimals), _fixed(track.xyz[i, 0], decimals),
+        cells = [stamps[i], _fixed(track.xyz[i, 0], decimals),
                  _fixed(track.xyz[i, 1], decimals), _fixed(th[i], decimals)]
         if cov is not None:
             cells += [repr(float(v)) for v in cov[i].ravel()]
