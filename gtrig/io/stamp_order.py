@@ -54,7 +54,7 @@ def stamp_order(p: Path, stamps_s: np.ndarray, line_numbers: np.ndarray | list[i
         worst = int(back[np.argmin(d[back])])
         if -d[worst] > MAX_STEP_BACK_PERIODS * period:
             raise FormatError(f"{_where(p, worst + 1, line_numbers)}: the time stamp steps back "
-                              f"{-d[worst]:.6g} s ({t[worst]!r} then {t[worst + 1]!r}), over "
+                              f"{-d[worst]:.6g} s ({float(t[worst])!r} then {float(t[worst + 1])!r}), over "
                               f"{MAX_STEP_BACK_PERIODS:g} sample intervals: a clock reset or two runs in one "
                               "file? Split the file or fix its stamps")
     order = np.argsort(t, kind="stable")

@@ -92,8 +92,14 @@ def read_tum(path: str | os.PathLike[str]) -> Trajectory:
     head = data[:4096].decode("utf-8", "replace").splitlines()
     ns = None
     if needs_text_stamps(head):
-        ns = text_stamps_ns(lines if lines is not None else decode_text_file(p, data).splitlines())
-    return _trajectory(p, a, ns)
+        lines = lines if lines is not None else decode_text_file(p, data).splitlines()
+        ns = text_stamps_ns(lines)
+    if fast is not None:
+        numbers = fast.line_numbers
+    else:
+        assert lines is not None
+        numbers = np.array([i for i, s in enumerate(lines, 1) if s.strip() and not s.strip().startswith("#")])
+    return _trajectory(p, a, ns, numbers)
 
 
 def _fast_rows(lines: list[str]) -> np.ndarray | None:
@@ -128,12 +134,13 @@ def _checked_rows(p: Path, lines: list[str]) -> np.ndarray:
     return np.array(rows)
 
 
-def _trajectory(p: Path, a: np.ndarray, stamps_ns: np.ndarray | None = None) -> Trajectory:
+def _trajectory(p: Path, a: np.ndarray, stamps_ns: np.ndarray | None = None,
+                line_numbers: np.ndarray | None = None) -> Trajectory:
     if not np.isfinite(a).all():
         raise FormatError(f"{p}: non-finite values")
     from gtrig.io.stamp_order import stamp_order
 
-    rows = stamp_order(p, a[:, 0])
+    rows = stamp_order(p, a[:, 0], line_numbers)
     if rows is not None:
         a = a[rows]
         stamps_ns = None if stamps_ns is None else stamps_ns[rows]
