@@ -383,7 +383,7 @@ def associate(gt: PoseTrack, est: PoseTrack, method: AssociationChoice = "auto",
     :func:`default_max_dt`. The result says whether the method and the tolerance were chosen."""
     if method not in METHODS:
         raise InputError(f"--associate must be one of {', '.join(METHODS)}, got {method!r}")
-    chosen: AssociationMethod = choose_method(gt, est) if method == "auto" else method  # type: ignore[assignment]
+    chosen: AssociationMethod = choose_method(gt, est) if method == "auto" else method
     tol = default_max_dt(chosen, gt, est) if max_dt_s is None else float(max_dt_s)
     run = {"nearest": associate_nearest, "interpolate": associate_interpolate,
            "interpolate-gt": associate_interpolate_gt}[chosen]

@@ -117,15 +117,17 @@ def read_trajectory(path: str | os.PathLike[str], fmt: str | None = None, **opti
     path : the file (or bag: a ``.bag`` file, a ROS 2 bag folder or ``.mcap``).
     fmt : one of :data:`FORMATS`; ``None``: from the name, else from the content.
     options : per format: ``cov_path`` (tum, gtrig), ``times_path`` (kitti), ``topic``, ``stamp``
-        (bags: see :func:`gtrig.io.rosbag.read_bag_trajectory`).
+        (bags: see :func:`gtrig.io.rosbag.read_bag_trajectory`; without ``topic``, gtrig's ``/gtrig/pose`` or
+        the bag's only trajectory, else an error listing them).
     """
     p = Path(path)
     f = _resolve(p, fmt, reading=True)
     if f in BAG_FORMATS:
         from gtrig.io.rosbag import read_bag_trajectory
+        from gtrig.io.rosbag.trajectory import choose_topic
 
-        if "topic" not in options:
-            raise ConfigError(f"{p}: a bag holds many topics; say which (topic=...)")
+        if options.get("topic") is None:
+            options = {**options, "topic": choose_topic(p)}
         return read_bag_trajectory(p, **options)
     _check_options(f, options, {"tum": {"cov_path"}, "gtrig": {"cov_path"}, "kitti": {"times_path"}})
     if f in ("tum", "gtrig"):

@@ -170,9 +170,47 @@ def read_bag_trajectory(bag: str | os.PathLike[str] | Sequence[str | os.PathLike
                     covs.append(None)
         if not stamps:
             raise InputError(f"{name}: no messages")
+        if not child:
+            child = _child_from_tf(bag, frame.lstrip("/"))
         cov_arr = np.array(covs, float) if all(c is not None for c in covs) else None
         return _make_track(np.array(stamps, np.int64), np.array(xyz, float), np.array(quat, float), cov_arr, name,
                            frame, child, topic)
+
+
+def _child_from_tf(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], frame: str) -> str:
+    """The body frame of a pose message that names none (PoseStamped, PoseWithCovarianceStamped): the one
+    child the bag's TF moves under ``frame`` (a bag gtrig wrote publishes ``world -> robot``), else ``""``."""
+    from gtrig.io.rosbag.tf_tree import tf_edges
+
+    children = {e.child for e in tf_edges(bag, max_messages=200) if e.parent == frame and not e.static}
+    return children.pop() if len(children) == 1 else ""
+
+
+def trajectory_choices(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> list[tuple[str, str]]:
+    """``(topic, what)`` for every trajectory ``bag`` offers: its pose topics (type, message count) and the TF
+    chains gtrig.io.rosbag.tf_tree proposes."""
+    from gtrig.io.rosbag.tf_tree import propose_tf_trajectories, tf_edges
+    from gtrig.io.rosbag.topics import list_topics
+
+    out = [(s.topic, f"{s.msgtype.replace('/msg/', '/')}, {s.count}") for s in list_topics(bag)
+           if s.msgtype in POSE_TYPES]
+    return out + [(t, "TF chain") for t in propose_tf_trajectories(tf_edges(bag))]
+
+
+def choose_topic(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> str:
+    """The trajectory to read when none is named: gtrig's own ``/gtrig/pose`` (with its covariance), or the
+    bag's only trajectory; else an InputError that lists them."""
+    choices = trajectory_choices(bag)
+    topics = [t for t, _ in choices]
+    if "/gtrig/pose" in topics:
+        return "/gtrig/pose"
+    if len(choices) == 1:
+        return topics[0]
+    first = bag if isinstance(bag, (str, os.PathLike)) else bag[0]
+    if not choices:
+        raise InputError(f"{first}: no trajectory in the bag (no pose, odometry, path or TF topic)")
+    raise InputError(f"{first}: {len(choices)} trajectories; choose one with --topic: "
+                     + "; ".join(f"{t} ({w})" for t, w in choices))
 
 
 @contextlib.contextmanager
