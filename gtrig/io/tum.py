@@ -171,9 +171,14 @@ def integer_stamps_ns(traj: Trajectory | PoseTrack) -> np.ndarray:
 
 def stamp_texts(traj: Trajectory | PoseTrack, decimals: int | None = None) -> list[str]:
     """The stamps as every text format writes them (gtrig.stamps.format_seconds): 6 decimals when each is a
-    whole microsecond, else 9."""
-    from gtrig.stamps import format_seconds
+    whole microsecond, else 9. Stamps past what int64 nanoseconds hold (nanoseconds read as seconds) are
+    printed from the floats, ``decimals`` (default 6) of them."""
+    from gtrig.stamps import MAX_NS_STAMP_S, format_seconds
 
+    if getattr(traj, "stamps_ns", None) is None and len(traj.stamps_s) and \
+            not bool(np.all(np.abs(traj.stamps_s) < MAX_NS_STAMP_S)):
+        d = 6 if decimals is None else decimals
+        return [f"{t:.{d}f}" for t in traj.stamps_s]
     return format_seconds(integer_stamps_ns(traj), decimals)
 
 

@@ -160,7 +160,7 @@ def test_refuses_to_overwrite_unless_forced(tmp_path: Path) -> None:
     ("a.txt", "1,0,0,0\n", "tum", FormatError, "the content is rawseeds, but tum"),
     ("a.txt", "hello world\n", None, FormatError, "not a trajectory in any known format"),
     ("a.txt", "1 0 0 0 0 0 0 1\n", "yaml", ConfigError, "is none of"),
-    ("a.csv", "1,0,0,0\n0.5,0,0,0\n", "rawseeds", FormatError, ":2: time stamps do not increase"),
+    ("a.csv", "1,0,0,0\n0.5,0,0,0\n", "rawseeds", FormatError, ":2: the time stamp steps back 0.5 s"),
     ("a.csv", "1,0,0,0\n2,0,x,0\n", "rawseeds", FormatError, ":2: not a number"),
     ("a.csv", "1,0,0,0\n2,0,0\n", "rawseeds", FormatError, ":2: expected 4"),
     ("a.kitti", "1 0 0 0 0 1 0 0 0 0 2 0\n", None, FormatError, ":1: the 3x3 block is not a rotation"),

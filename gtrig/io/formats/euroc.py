@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from gtrig.io.atomic import atomic_write_text
-from gtrig.io.formats._common import LineNumbers, check_stamps, read_lines, read_numeric, unit_quaternions
+from gtrig.io.formats._common import LineNumbers, read_lines, read_numeric, unit_quaternions
+from gtrig.io.stamp_order import stamp_order
 from gtrig.stamps import seconds_from_ns
 from gtrig.trajectory import PoseTrack
 
@@ -34,8 +35,11 @@ def read_euroc(path: str | os.PathLike[str]) -> PoseTrack:
                                             "'#timestamp, p_RS_R_x, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z, ...')")
     if stamps_ns is None:
         stamps_ns = _stamps_ns(p, read_lines(p)[1], numbers)
+    # as evo reads them (gtrig.io.stamp_order); seconds from the first stamp keep the nanoseconds apart
+    keep = stamp_order(p, (stamps_ns - stamps_ns[0]).astype(float) * 1e-9, numbers)
+    if keep is not None:
+        a, numbers, stamps_ns = a[keep], numbers[keep], stamps_ns[keep]
     stamps = seconds_from_ns(stamps_ns)
-    check_stamps(p, stamps, numbers)
     q = unit_quaternions(p, a[:, [5, 6, 7, 4]], numbers)
     return PoseTrack(stamps, a[:, 1:4], q, source=p.parent.name if p.name == "data.csv" else p.stem,
                      stamps_ns=stamps_ns)
