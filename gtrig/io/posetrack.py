@@ -28,7 +28,7 @@ import numpy as np
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_group
 from gtrig.io.text import decode_text, read_bytes
-from gtrig.io.tum import ROWS_PER_PIECE, read_tum, stamp_texts, tum_pieces, write_pieces
+from gtrig.io.tum import ROWS_PER_PIECE, read_tum, stamp_text_pieces, tum_pieces, write_pieces
 from gtrig.trajectory import COV_AXES, CovKind, PoseStatus, PoseTrack
 
 log = logging.getLogger(__name__)
@@ -45,12 +45,11 @@ def covariance_pieces(track: PoseTrack, rows: int = ROWS_PER_PIECE) -> Iterator[
     csv.writer(buf, lineterminator="\n").writerow(["stamp_s", "status", "reason"] +
                                                   [f"cov_{a}_{b}" for a in axes for b in axes])
     yield buf.getvalue()
-    stamps = stamp_texts(track)
-    for a in range(0, len(track), rows):
+    for a, stamps in zip(range(0, len(track), rows), stamp_text_pieces(track, rows), strict=True):
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         for i in range(a, min(a + rows, len(track))):
-            row = [stamps[i], PoseStatus(int(track.status[i])).name.lower(), track.reasons[i]]
+            row = [stamps[i - a], PoseStatus(int(track.status[i])).name.lower(), track.reasons[i]]
             if track.cov is not None:
                 row += [repr(float(v)) for v in track.cov[i].ravel()]
             w.writerow(row)

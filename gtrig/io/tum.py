@@ -173,13 +173,24 @@ def stamp_texts(traj: Trajectory | PoseTrack, decimals: int | None = None) -> li
     """The stamps as every text format writes them (gtrig.stamps.format_seconds): 6 decimals when each is a
     whole microsecond, else 9. Stamps past what int64 nanoseconds hold (nanoseconds read as seconds) are
     printed from the floats, ``decimals`` (default 6) of them."""
-    from gtrig.stamps import MAX_NS_STAMP_S, format_seconds
+    return [t for piece in stamp_text_pieces(traj, len(traj.stamps_s) or 1, decimals) for t in piece]
 
-    if getattr(traj, "stamps_ns", None) is None and len(traj.stamps_s) and \
-            not bool(np.all(np.abs(traj.stamps_s) < MAX_NS_STAMP_S)):
+
+def stamp_text_pieces(traj: Trajectory | PoseTrack, rows: int = ROWS_PER_PIECE, decimals: int | None = None
+                      ) -> Iterator[list[str]]:
+    """:func:`stamp_texts` ``rows`` at a time (one number of decimals for the whole track)."""
+    from gtrig.stamps import MAX_NS_STAMP_S, decimals_needed, format_seconds
+
+    n = len(traj.stamps_s)
+    if getattr(traj, "stamps_ns", None) is None and n and not bool(np.all(np.abs(traj.stamps_s) < MAX_NS_STAMP_S)):
         d = 6 if decimals is None else decimals
-        return [f"{t:.{d}f}" for t in traj.stamps_s]
-    return format_seconds(integer_stamps_ns(traj), decimals)
+        for a in range(0, n, rows):
+            yield [f"{t:.{d}f}" for t in traj.stamps_s[a:a + rows]]
+        return
+    ns = integer_stamps_ns(traj)
+    d = decimals_needed(ns) if decimals is None else decimals
+    for a in range(0, n, rows):
+        yield format_seconds(ns[a:a + rows], d)
 
 
 def tum_pieces(traj: Trajectory | PoseTrack, rows: int = ROWS_PER_PIECE) -> Iterator[str]:
@@ -187,11 +198,10 @@ def tum_pieces(traj: Trajectory | PoseTrack, rows: int = ROWS_PER_PIECE) -> Iter
     yield "# timestamp tx ty tz qx qy qz qw\n"
     if len(traj.stamps_s) == 0:
         yield "\n"
-    stamps = stamp_texts(traj)
-    for a in range(0, len(traj.stamps_s), rows):
+    for a, stamps in zip(range(0, len(traj.stamps_s), rows), stamp_text_pieces(traj, rows), strict=True):
         out = [
             f"{t} {x:.9f} {y:.9f} {z:.9f} {qx:.12f} {qy:.12f} {qz:.12f} {qw:.12f}"
-            for t, (x, y, z), (qx, qy, qz, qw) in zip(stamps[a:a + rows], traj.xyz[a:a + rows],
+            for t, (x, y, z), (qx, qy, qz, qw) in zip(stamps, traj.xyz[a:a + rows],
                                                       traj.quat_xyzw[a:a + rows], strict=True)
         ]
         yield "\n".join(out) + "\n"
