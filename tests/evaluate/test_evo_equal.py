@@ -101,3 +101,24 @@ def test_a_pose_serving_two_pairs() -> None:
     assert len(a) == 3 and np.allclose(a.est.xyz[:2], est.xyz[0]) and np.all(np.diff(a.gt.stamps_s) > 0)
     b = associate_nearest(est, gt, 0.01)  # the GT longer: each estimate pose takes its nearest GT pose
     assert len(b) == 3 and np.allclose(b.gt.xyz, est.xyz[[0, 0, 1]]) and np.allclose(b.dt_s, [-0.002, 0.002, 0])
+
+
+def test_estimate_written_out_of_order_scores_as_evo(tmp_path: Path) -> None:
+    """An estimate whose stamps step back once: gtrig sorts it, evo pairs it as it stands; the APE (which
+    does not depend on the order) is the same to the last digit, and equal to the ordered file's."""
+    rows = [ln for ln in EST.read_text().splitlines() if ln and not ln.startswith("#")]
+    swapped = tmp_path / "est_back.txt"
+    swapped.write_text("\n".join(rows[:300] + [rows[301], rows[300]] + rows[302:]) + "\n")
+    ref = evo_files.read_tum_trajectory_file(str(GT))
+    r, e = evo_sync.associate_trajectories(ref, evo_files.read_tum_trajectory_file(str(swapped)), max_diff=0.01)
+    e = copy.deepcopy(e)
+    e.align(r)
+    m = evo_metrics.APE(evo_metrics.PoseRelation.translation_part)
+    m.process_data((r, e))
+    theirs = m.get_all_statistics()
+    for est in (swapped, EST):
+        ours = evaluate_slam(read_trajectory(GT), read_trajectory(est), metrics="evo", align="se3",
+                             method="nearest", max_dt_s=0.01)
+        got = ours.ape["trans"].stats()
+        for k in STATS:
+            assert abs(got[k] - theirs[k]) < 1e-9, (est.name, k, got[k], theirs[k])
