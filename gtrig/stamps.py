@@ -21,16 +21,19 @@ from __future__ import annotations
 
 import numpy as np
 
+from gtrig.errors import InputError
+
 NS_PER_S = 1_000_000_000
 #: the largest stamp (s) integer nanoseconds hold in int64 (year 2262 as a Unix time)
 MAX_NS_STAMP_S = 9.2e9
 
 
 def ns_from_seconds(stamps_s: np.ndarray) -> np.ndarray:
-    """(N,) int64 nanoseconds of (N,) float seconds (module docstring)."""
+    """(N,) int64 nanoseconds of (N,) float seconds (module docstring); InputError past
+    :data:`MAX_NS_STAMP_S` (nanoseconds read as seconds)."""
     t = np.asarray(stamps_s, dtype=float).reshape(-1)
     if t.size and not bool(np.all(np.abs(t) < MAX_NS_STAMP_S)):
-        raise ValueError(f"a stamp of {float(np.max(np.abs(t))):.4g} s is past what int64 nanoseconds hold "
+        raise InputError(f"a stamp of {float(np.max(np.abs(t))):.4g} s is past what int64 nanoseconds hold "
                          f"({MAX_NS_STAMP_S:g} s): nanoseconds read as seconds?")
     whole = np.floor(t)
     frac = t - whole  # exact (Sterbenz)
