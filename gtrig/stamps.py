@@ -9,7 +9,10 @@ Conventions
 -----------
 - :func:`ns_from_seconds`: the integer nanoseconds of float seconds: the whole microsecond whose decimal
   reads back as the same float when there is one (the shortest decimal, as ``repr`` gives it: a stamp
-  read from ``1700000300.020000`` is ``1700000300020000000`` ns), else the nearest nanosecond.
+  read from ``1700000300.020000`` is ``1700000300020000000`` ns); for a Unix-time stamp (from
+  :data:`EPOCH_SCALE_S` up, where a float's last digit is 30 ns or more) computed in floats, the nearest
+  microsecond (``1700000100.1 + 1.2`` is ``1700000101.300000``, not the float's ``...300000191``); else
+  (a stamp counted from the start of a run) the nearest nanosecond.
 - :func:`ns_from_decimal`: the exact nanoseconds of a decimal text (``"1700000300.019999981"``).
 - :func:`seconds_from_ns`: float seconds from nanoseconds (whole seconds and the rest apart: the float
   nearest the stamp, to one rounding).
@@ -26,6 +29,9 @@ from gtrig.errors import InputError
 NS_PER_S = 1_000_000_000
 #: the largest stamp (s) integer nanoseconds hold in int64 (year 2262 as a Unix time)
 MAX_NS_STAMP_S = 9.2e9
+#: from here up (4.25 years as seconds) a float stamp's last digit is 30 ns or more: its digits past the
+#: microsecond are rounding, and float stamps are taken to the nearest microsecond
+EPOCH_SCALE_S = 2.0**27
 
 
 def ns_from_seconds(stamps_s: np.ndarray) -> np.ndarray:
@@ -41,7 +47,7 @@ def ns_from_seconds(stamps_s: np.ndarray) -> np.ndarray:
     # a whole microsecond count below 2^53 is exact in float64, and IEEE division rounds correctly: the
     # quotient is the float nearest the decimal; equal to t means the decimal reads back as t
     us_total = whole * 1e6 + us
-    exact_us = (np.abs(us_total) < 2.0**53) & (us_total / 1e6 == t)
+    exact_us = ((np.abs(us_total) < 2.0**53) & (us_total / 1e6 == t)) | (np.abs(t) >= EPOCH_SCALE_S)
     sub_ns = np.rint(frac * 1e9).astype(np.int64)
     out = whole.astype(np.int64) * NS_PER_S + np.where(exact_us, us.astype(np.int64) * 1000, sub_ns)
     return out

@@ -86,6 +86,7 @@ def test_nanosecond_stamps_survive_every_export(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("t,ns", [(1700000300.02, 1_700_000_300_020_000_000), (12.3456789, 12_345_678_900),
+                                  (1700000100.1 + 1.2, 1_700_000_101_300_000_000), (1 / 30, 33_333_333),
                                   (1235604664.443286, 1_235_604_664_443_286_000), (-0.5, -500_000_000)])
 def test_ns_of_float_seconds_is_the_shortest_decimal(t: float, ns: int) -> None:
     assert int(ns_from_seconds(np.array([t]))[0]) == ns
