@@ -7,12 +7,12 @@ the one asked for, is a one-line :class:`~gtrig.errors.FormatError`.
 =========  =====================================================  =======================================
 fmt        file                                                   precision kept on a round trip
 =========  =====================================================  =======================================
-tum        ``NAME.tum``: ``t tx ty tz qx qy qz qw``                1 us, 1 nm, 1e-12 quaternion
+tum        ``NAME.tum``: ``t tx ty tz qx qy qz qw``                stamps as read (gtrig.stamps), 1 nm, 1e-12
 gtrig      ``NAME.tum`` + ``NAME_cov.csv`` (status, covariance)    as tum; covariance exact
-kitti      ``NAME.kitti`` (3x4 row-major) + ``NAME_times.txt``     1e-12 relative; stamps 1 ns
+kitti      ``NAME.kitti`` (3x4 row-major) + ``NAME_times.txt``     1e-12 relative; stamps as tum
 euroc      ``state_groundtruth_estimate0/data.csv``                stamps 1 ns, 1 nm, 1e-12 quaternion
 rawseeds   ``t,x,y,theta`` [+ 3x3 covariance], ``*-GROUNDTRUTH``   6 decimals (published); cov exact
-csv        gtrig's one-file CSV (pose, status, covariance)         exact (shortest round-trip repr)
+csv        gtrig's one-file CSV (pose, status, covariance)         stamps as tum; the rest exact
 rosbag1    ``NAME.bag`` (ROS 1)                                    see gtrig.io.rosbag
 rosbag2    a ROS 2 bag folder (sqlite3) or ``NAME.mcap``           see gtrig.io.rosbag
 =========  =====================================================  =======================================

@@ -8,10 +8,11 @@ its covariance on one row.
     12.34,1.5,2.0,0.0,0.0,0.0,0.38268343236508984,0.9238795325112867,0.7853981633974483,ok,,1e-06,...
 
 ``yaw`` (rad, (-pi, pi]) is written for convenience and ignored on reading (the quaternion is the
-pose). ``stamp_s`` is written from the track's integer nanoseconds (gtrig.stamps: the digits it was read
-with) and read back exactly. The covariance columns are those of the covariance CSV (gtrig.io.posetrack): row-major over
-``x, y, yaw`` / ``x, y, z, rx, ry, rz`` / ``x, y, z``, world-frame perturbation. Every number is
-Python's shortest round-trip ``repr``: the format is exact.
+pose). ``stamp_s`` is written from the track's integer nanoseconds, as every format writes them
+(gtrig.stamps: the digits it was read with), and read back exactly. The covariance columns are those of
+the covariance CSV (gtrig.io.posetrack): row-major over ``x, y, yaw`` / ``x, y, z, rx, ry, rz`` /
+``x, y, z``, world-frame perturbation. Every other number is Python's shortest round-trip ``repr``:
+exact.
 """
 
 from __future__ import annotations

@@ -126,12 +126,14 @@ def time_to_ns(stamp: Any) -> int:
 
 
 def s_to_sec_nsec(t: float) -> tuple[int, int]:
-    """Float seconds as ROS ``(sec, nanosec)``: the nanoseconds every gtrig writer prints for them
-    (gtrig.stamps.ns_from_seconds: the whole microsecond when its decimal reads back as ``t``, else the
-    nearest nanosecond)."""
-    from gtrig.stamps import ns_from_seconds
-
-    return divmod(int(ns_from_seconds(np.array([t]))[0]), 1_000_000_000)
+    """Float seconds as ROS ``(sec, nanosec)``, rounded to the nearest nanosecond (a sensor's stamp: the
+    recording's CSV files print 9 decimals, and read back as the same float). A trajectory is written from
+    its integer nanoseconds instead (:meth:`gtrig.trajectory.PoseTrack.integer_stamps_ns`)."""
+    sec = int(np.floor(t))
+    nsec = int(round((t - sec) * 1e9))  # t - sec is exact for floats of one binade
+    if nsec >= 1_000_000_000:
+        sec, nsec = sec + 1, nsec - 1_000_000_000
+    return sec, nsec
 
 
 def s_to_ns(t: float) -> int:
