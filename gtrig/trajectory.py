@@ -31,6 +31,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig import geometry as geo
+from gtrig.stamps import ns_from_seconds, seconds_from_ns
 
 CovKind = Literal["se3", "xyyaw", "xyz"]
 
@@ -39,6 +40,10 @@ COV_AXES: dict[str, tuple[str, ...]] = {
     "xyyaw": ("x", "y", "yaw"),
     "xyz": ("x", "y", "z"),
 }
+
+#: the largest difference (s) between ``stamps_s`` and ``stamps_ns`` that still counts as one stamp: a float
+#: epoch stamp (1.7e9 s) holds 0.24 us; both roundings together stay under it
+NS_AGREE_S = 4e-7
 
 #: indices of (x, y, yaw) inside the se3 block
 PLANAR_INDEX = (0, 1, 5)
@@ -81,6 +86,11 @@ class PoseTrack:
     reasons : N strings, empty for an OK pose: why a pose is flagged, bridged or rejected.
     source : who made the track ("GTvision", "GTlaser", "fusion", "gps", ...).
     frame_id, child_frame_id : the world frame and the body frame (REP 105 names where they apply).
+    stamps_ns : (N,) int64 or ``None``: the stamps as the source gave them, integer nanoseconds (a file's
+        decimal text, a bag's header), so that every writer prints the stamp it read (gtrig.stamps). Kept
+        only while it agrees with ``stamps_s`` (to :data:`NS_AGREE_S`): a track made with new ``stamps_s``
+        (``dataclasses.replace``) drops it. :meth:`integer_stamps_ns` gives it, or the nanoseconds of
+        ``stamps_s`` when it is ``None``.
     """
 
     stamps_s: np.ndarray
@@ -93,6 +103,7 @@ class PoseTrack:
     source: str = ""
     frame_id: str = "world"
     child_frame_id: str = "robot"
+    stamps_ns: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = int(np.asarray(self.stamps_s).size)
@@ -120,6 +131,12 @@ class PoseTrack:
             raise ValueError(f"status ({status.shape}) and reasons ({len(self.reasons)}) must have {n} entries")
         if n > 1 and np.any(np.diff(s) <= 0):
             raise ValueError("stamps_s must increase strictly")
+        if self.stamps_ns is not None:
+            ns = np.asarray(self.stamps_ns).reshape(-1)
+            agree = ns.shape == (n,) and np.issubdtype(ns.dtype, np.integer)
+            if agree and n:
+                agree = bool(np.max(np.abs(seconds_from_ns(ns) - s)) <= NS_AGREE_S)
+            object.__setattr__(self, "stamps_ns", _frozen(ns.astype(np.int64)) if agree else None)
 
     # --- construction -------------------------------------------------------------------------------
 
@@ -153,6 +170,11 @@ class PoseTrack:
 
     def __len__(self) -> int:
         return int(self.stamps_s.size)
+
+    def integer_stamps_ns(self) -> np.ndarray:
+        """(N,) int64 nanoseconds: :attr:`stamps_ns` when the source gave them, else those of
+        :attr:`stamps_s` (gtrig.stamps.ns_from_seconds). Every writer prints these."""
+        return self.stamps_ns if self.stamps_ns is not None else ns_from_seconds(self.stamps_s)
 
     @property
     def planar(self) -> bool:
@@ -200,9 +222,10 @@ class PoseTrack:
         old ones (a pose restamped by its camera's clock offset can pass its neighbour)."""
         idx = np.arange(len(self))[np.asarray(mask)]
         new_stamps = self.stamps_s[idx] if stamps_s is None else np.asarray(stamps_s, dtype=float)
+        ns = self.stamps_ns[idx] if self.stamps_ns is not None and stamps_s is None else None
         return replace(self, stamps_s=new_stamps, xyz=self.xyz[idx], quat_xyzw=self.quat_xyzw[idx],
                        cov=None if self.cov is None else self.cov[idx], status=self.status[idx],
-                       reasons=tuple(self.reasons[i] for i in idx))
+                       reasons=tuple(self.reasons[i] for i in idx), stamps_ns=ns)
 
     def usable(self) -> PoseTrack:
         """Only the poses to use as ground truth (:attr:`ok`)."""
@@ -216,7 +239,8 @@ class PoseTrack:
 
     def shifted(self, dt_s: float) -> PoseTrack:
         """The same poses with ``dt_s`` added to every stamp (a clock offset applied)."""
-        return replace(self, stamps_s=self.stamps_s + float(dt_s))
+        ns = None if self.stamps_ns is None else self.stamps_ns + int(round(float(dt_s) * 1e9))
+        return replace(self, stamps_s=self.stamps_s + float(dt_s), stamps_ns=ns)
 
     def span_s(self) -> tuple[float, float]:
         """(first, last) stamp; ``(nan, nan)`` when empty."""

@@ -26,9 +26,10 @@ def _cols(s: str | None) -> tuple[str, ...] | None:
 def _pair_tum_by_stamp(reference: Path, estimate: Path, ref_t: PoseTable, est_t: PoseTable, max_dt: float
                        ) -> tuple[PoseTable, PoseTable]:
     """TUM poses are named by their stamps, never by their rows: a TUM input with non-integer stamps is paired
-    with the other input by nearest stamp (within ``max_dt``), and both tables renamed by the stamp."""
+    with the other input's pose at the same stamp (the two nearest each other, within ``max_dt``; each pose
+    in one pair at most), and both tables renamed by the reference's stamp."""
     from gtrig.errors import InputError
-    from gtrig.evaluate.associate import nearest_indices
+    from gtrig.evaluate.associate import mutual_nearest_indices
     from gtrig.io.survey_csv import _looks_like_tum
     from gtrig.io.tum import read_tum
 
@@ -42,7 +43,7 @@ def _pair_tum_by_stamp(reference: Path, estimate: Path, ref_t: PoseTable, est_t:
                          "(paired by stamp) or poses named alike")
     sr, se = stamps
     assert sr is not None and se is not None
-    i_r, i_e = nearest_indices(sr, se, max_dt)
+    i_r, i_e = mutual_nearest_indices(sr, se, max_dt)
     if i_r.size == 0:
         raise InputError(f"no pair of TUM stamps within --max-dt {max_dt:g} s")
     names = tuple(f"{sr[i]:.6f}" for i in i_r)
@@ -105,7 +106,8 @@ def poses(
             t.add_row(*r)
         console.print(t)
         if c.missing:
-            console.print(f"not localized: {', '.join(c.missing)}")
+            shown = ", ".join(c.missing[:20]) + (f", ... ({len(c.missing)} in all)" if len(c.missing) > 20 else "")
+            console.print(f"not localized: {shown}", soft_wrap=True)
         if per_pose:
             t = Table("pose", "err x (m)", "err y (m)", "err theta (rad)", "err pos (m)")
             for n, e, p in zip(c.names, c.err_xytheta, c.err_pos_m, strict=True):
@@ -158,9 +160,12 @@ def slam(
     metrics: str = typer.Option("all", "--metrics", help="rawseeds, evo or all."),
     align: str = typer.Option("se3", "--align", help="none, se2, yaw, se3, sim3 (or sim2)."),
     align_interval: str | None = typer.Option(None, "--align-interval", help="T0,T1: fit the alignment there."),
-    assoc: str = typer.Option("nearest", "--associate", help="nearest (evo's) or interpolate (SE(3))."),
+    assoc: str = typer.Option("auto", "--associate", help="auto (the denser track interpolated at the other's "
+                              "stamps), nearest (evo's default), interpolate (the estimate at the GT stamps) "
+                              "or interpolate-gt (the GT at the estimate's stamps)."),
     max_dt: float | None = typer.Option(
-        None, "--max-dt", help="nearest: largest stamp difference (0.01 s); interpolate: longest gap (0.2 s)."
+        None, "--max-dt", help="nearest: largest stamp difference; interpolation: longest interval bridged "
+        "(default: from the sample periods, see docs/evaluation.md)."
     ),
     t_offset: str = typer.Option("0", "--t-offset", help="Seconds added to the estimate's stamps, or auto."),
     rpe_delta: int = typer.Option(1, "--rpe-delta", help="evo RPE step in paired poses."),
@@ -182,7 +187,9 @@ def slam(
         raise InputError(f"--format must be table, csv, md or json, got {fmt!r}")
     checks.choice("--metrics", metrics, ("rawseeds", "evo", "all"))
     checks.choice("--align", align, ("none", "se2", "yaw", "se3", "sim3", "sim2"))
-    checks.choice("--associate", assoc, ("nearest", "interpolate"))
+    from gtrig.evaluate.associate import METHODS
+
+    checks.choice("--associate", assoc, METHODS)
     checks.number("--max-dt", max_dt, lo=0.0, lo_open=True, hi=3600.0, unit="s")
     checks.count("--rpe-delta", rpe_delta, lo=1, hi=10**6)
     if t_offset != "auto":
@@ -221,14 +228,12 @@ def _print_tables(ev: SlamEvaluation) -> None:
 
     from gtrig.evaluate import tables
 
-    a = ev.association.summary()
+    a = ev.association
     console.print(
-        f"paired {a['matched']} poses ({a['method']}, max dt {a['max_dt_s']:g} s, t_offset {a['t_offset_s']:.6g} s)"
-        f" of {a['gt_poses']} GT / {a['est_poses']} estimated; GT skipped: {a['gt_skipped_outside']} outside the "
-        f"estimate, {a['gt_skipped_in_gaps']} in {a['gaps']} gaps ({a['gap_time_s']:.2f} s); alignment "
-        f"{ev.alignment.kind}, scale {ev.alignment.scale:.6f}"
+        a.describe() + f"; {len(a.gaps_s)} gaps ({a.summary()['gap_time_s']:.2f} s); alignment {ev.alignment.kind}, "
+        f"scale {ev.alignment.scale:.6f}"
         + (f"; {ev.n_gt_unusable} GT poses rejected or bridged, not scored" if ev.n_gt_unusable else ""),
-        highlight=False,
+        highlight=False, soft_wrap=True,
     )
     if ev.time_offset is not None:
         to = ev.time_offset

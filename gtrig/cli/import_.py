@@ -19,7 +19,8 @@ def rosbag(
     topics: Path | None = typer.Option(None, "--topics", help="topics.yaml: which topic is which rig sensor."),
     out: Path | None = typer.Option(None, "--out", help="The recording folder to write into."),
     rig: Path | None = typer.Option(None, "--rig", help="The rig (copied to OUT/rig.yaml); default OUT/rig.yaml."),
-    list_: bool = typer.Option(False, "--list", help="Print the topics (type, count, rate) and a topics.yaml."),
+    list_: bool = typer.Option(False, "--list", help="Write a topics.yaml to start from on stdout (the topics' "
+                               "table, with type, count and rate, on stderr): --list > topics.yaml."),
     stamp: str | None = typer.Option(None, "--stamp", help="header or receive (default: topics.yaml's, header)."),
     video: bool = typer.Option(False, "--video", help="One lossless FFV1 video.mkv per camera instead of images."),
     image_format: str = typer.Option("pgm", "--image-format", help="pgm (uncompressed, fastest) or png (lossless, "
@@ -33,14 +34,17 @@ def rosbag(
     if list_:
         from rich.table import Table
 
+        from gtrig.cli.common import err_console
+        from gtrig.io.rosbag.tf_tree import propose_tf_trajectories, tf_edges
         from gtrig.rig import load_rig
 
         summaries = list_topics(bags)
         t = Table("topic", "type", "messages", "rate (Hz)", title=f"{bags[0]}")
         for s in summaries:
             t.add_row(s.topic, s.msgtype, str(s.count), f"{s.rate_hz:.2f}")
-        console.print(t)
-        typer.echo(topics_template(summaries, load_rig(rig) if rig is not None else None), nl=False)
+        err_console.print(t)
+        tf_ids = propose_tf_trajectories(tf_edges(bags))
+        typer.echo(topics_template(summaries, load_rig(rig) if rig is not None else None, tf_ids), nl=False)
         return
     if topics is None or out is None:
         raise InputError("give --topics topics.yaml and --out REC (or --list to start a topics.yaml)")

@@ -48,9 +48,11 @@ class SourceComparison:
     def rows(self) -> list[tuple[str, str, float, str]]:
         """(metric, statistic, value, unit) rows."""
         out: list[tuple[str, str, float, str]] = []
-        for k in ("matched", "gt_poses", "est_poses", "gt_skipped_outside", "gt_skipped_in_gaps", "gaps"):
-            out.append(("pairing", k.replace("gt_", "a_").replace("est_", "b_"),
-                        float(self.association.summary()[k]), ""))
+        counts = self.association.summary()
+        for k, name in (("matched", "matched"), ("gt_poses", "a_poses"), ("est_poses", "b_poses"),
+                        ("anchor_outside", "a_skipped_outside"),
+                        ("anchor_in_gaps", "a_skipped_in_gaps"), ("gaps", "gaps")):
+            out.append(("pairing", name, float(counts[k]), ""))
         for i, ax in enumerate(self.axes):
             unit = "m" if ax in ("x", "y", "z") else "rad"
             out += [(f"b - a {ax}", "mean", float(np.mean(self.errors[:, i])), unit),

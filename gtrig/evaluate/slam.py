@@ -13,12 +13,13 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from gtrig.errors import InputError
 from gtrig.evaluate import gt_aware as ga
 from gtrig.evaluate import metrics_evo, metrics_rawseeds
 from gtrig.evaluate.align import AlignKind, Alignment, apply_alignment, fit_alignment
-from gtrig.evaluate.associate import Association, AssociationMethod, associate
+from gtrig.evaluate.associate import Association, AssociationChoice, associate
 from gtrig.evaluate.time_offset import TimeOffset, estimate_time_offset
 from gtrig.trajectory import PoseTrack
 
@@ -58,7 +59,7 @@ class SlamEvaluation:
         """The figures as rows (evo's statistics, RAWSEEDS' ATE / RPE, GT-aware intervals, pairing counts)."""
         out: list[Row] = []
         for k, v in self.association.summary().items():
-            if k != "method":
+            if not isinstance(v, str):
                 out.append(Row("pairing", self.association.method, k, float(v)))
         out.append(Row("pairing", "alignment " + self.alignment.kind, "scale", self.alignment.scale))
         out.append(Row("pairing", "alignment " + self.alignment.kind, "yaw", self.alignment.yaw_rad, "rad"))
@@ -127,7 +128,7 @@ def _se3_arrays(t: PoseTrack) -> tuple[np.ndarray, np.ndarray]:
 
 
 def evaluate_slam(gt: PoseTrack, est: PoseTrack, *, metrics: MetricSet = "all", align: AlignKind = "se3",
-                  align_interval_s: tuple[float, float] | None = None, method: AssociationMethod = "nearest",
+                  align_interval_s: tuple[float, float] | None = None, method: AssociationChoice = "auto",
                   max_dt_s: float | None = None, t_offset_s: float | Literal["auto"] = 0.0,
                   relations: np.ndarray | None = None, rpe_delta: int = 1) -> SlamEvaluation:
     """Score ``est`` against ``gt`` (module docstring).
@@ -140,7 +141,8 @@ def evaluate_slam(gt: PoseTrack, est: PoseTrack, *, metrics: MetricSet = "all", 
     align : the alignment family (gtrig.evaluate.align); the RAWSEEDS ATE uses the toolkit's 2-D alignment
         (with scale for ``sim3`` / ``sim2``), none for ``none``.
     align_interval_s : fit the alignment on the GT stamps in ``[t0, t1]`` only.
-    method, max_dt_s : the association (gtrig.evaluate.associate).
+    method, max_dt_s : the association (gtrig.evaluate.associate): ``auto`` interpolates the denser track at
+        the other one's stamps; ``max_dt_s`` ``None`` sizes the tolerance from the sample periods.
     t_offset_s : added to the estimate's stamps, or ``"auto"`` to estimate it (gtrig.evaluate.time_offset).
     relations : (m, 5) ``t_i, t_j, dx, dy, dyaw`` for the RAWSEEDS RPE.
     rpe_delta : evo's RPE step, in paired poses.
@@ -166,6 +168,7 @@ def evaluate_slam(gt: PoseTrack, est: PoseTrack, *, metrics: MetricSet = "all", 
                              f"{align_interval_s[1]:g} s")
     al = fit_alignment(assoc.gt.xyz, assoc.est.xyz, align, mask)
     ea = apply_alignment(assoc.est, al)
+    check_quaternion_order(assoc.gt, assoc.est, al.R)
     ape_s = rpe_s = None
     if metrics in ("evo", "all"):
         Rg, tg = _se3_arrays(assoc.gt)
@@ -188,8 +191,9 @@ def evaluate_slam(gt: PoseTrack, est: PoseTrack, *, metrics: MetricSet = "all", 
                         f"{lever.xy_m[1]:+.3f}) m (+-{lever.sigma_m[0]:.3f}, {lever.sigma_m[1]:.3f}) between the "
                         "estimate's frame and the GT's robot frame explains "
                         f"{100 * lever.explained:.0f} % of the error variance")
-    if assoc.n_est_unpaired > 0.5 * assoc.n_est and method == "nearest":
-        warnings.append(f"{assoc.n_est_unpaired} of {assoc.n_est} estimate poses have no GT pose within "
+    if assoc.n_anchor_in_gaps > 0.5 * assoc.n_anchor and assoc.method == "nearest":
+        side = "GT" if assoc.anchor == "gt" else "estimate"
+        warnings.append(f"{assoc.n_anchor_in_gaps} of {assoc.n_anchor} {side} poses have no partner within "
                         f"{assoc.max_dt_s:g} s")
     return SlamEvaluation(assoc, al, ea, ape_s, rpe_s, r_ate, r_rpe, scores, lever, to, n_bad, tuple(warnings))
 
@@ -203,3 +207,43 @@ def check_relations(relations: np.ndarray, gt: PoseTrack, est: PoseTrack) -> Non
         raise InputError(f"the relations' stamps ({np.min(ts):.3f}..{np.max(ts):.3f} s) fall outside both the GT "
                          f"({gt.stamps_s[0]:.3f}..{gt.stamps_s[-1]:.3f} s) and the estimate "
                          f"({est.stamps_s[0]:.3f}..{est.stamps_s[-1]:.3f} s)")
+
+
+#: a rotation error (rad, RMS) that a quaternion read in the wrong order makes likely, and the factor by
+#: which the other order must do better to say so
+_ORDER_SUSPECT_RAD = 0.3
+_ORDER_FACTOR = 4.0
+
+
+def _rms_angle(q_gt_xyzw: np.ndarray, q_est_xyzw: np.ndarray, R_align: np.ndarray) -> float:
+    """RMS angle (rad) of ``R_gt_i^-1 R_align R_est_i`` over the pairs: evo's APE rot after alignment."""
+    rg = Rotation.from_quat(q_gt_xyzw)
+    re = Rotation.from_matrix(R_align) * Rotation.from_quat(q_est_xyzw)
+    return float(np.sqrt(np.mean(np.asarray((rg.inv() * re).magnitude()) ** 2)))
+
+
+def _w_first(q_xyzw: np.ndarray) -> np.ndarray:
+    """The quaternions a file written ``qw qx qy qz`` holds, when it was read as ``qx qy qz qw``."""
+    return np.roll(q_xyzw, -1, axis=1)
+
+
+def check_quaternion_order(gt: PoseTrack, est: PoseTrack, R_align: np.ndarray) -> None:
+    """InputError when one side's quaternions were evidently written w first (``qw qx qy qz``, as EuRoC and
+    evo's own arrays) in a format that puts w last (TUM).
+
+    ``gt`` and ``est`` are paired pose for pose, ``R_align`` (3, 3) the alignment's rotation (fitted on the
+    positions alone, so the same for either reading). As read, the aligned rotations then differ by radians,
+    and reading one side w first makes them agree to a quarter of that or better. An estimate in another body
+    frame than the GT's differs by radians in both readings: it is not refused.
+    """
+    if len(gt) < 3:
+        return
+    as_read = _rms_angle(gt.quat_xyzw, est.quat_xyzw, R_align)
+    if as_read < _ORDER_SUSPECT_RAD:
+        return
+    for side, other in (("estimate", _rms_angle(gt.quat_xyzw, _w_first(est.quat_xyzw), R_align)),
+                        ("GT", _rms_angle(_w_first(gt.quat_xyzw), est.quat_xyzw, R_align))):
+        if other * _ORDER_FACTOR < as_read:
+            raise InputError(f"the {side}'s quaternions look written w first (qw qx qy qz): the aligned "
+                             f"rotations differ by {as_read:.2f} rad (RMS) read as qx qy qz qw (TUM's order) and "
+                             f"by {other:.3f} rad read w first; rewrite the file as qx qy qz qw")

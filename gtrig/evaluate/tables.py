@@ -29,6 +29,7 @@ def rows_json(ev: SlamEvaluation) -> str:
         fam = out.setdefault(r.family, {})
         assert isinstance(fam, dict)
         fam.setdefault(r.metric, {})[r.statistic] = None if not np.isfinite(r.value) else r.value
+    out["association"] = ev.association.summary()
     out["warnings"] = list(ev.warnings)
     return json.dumps(out, indent=2) + "\n"
 
@@ -45,10 +46,9 @@ def evo_matrix(ev: SlamEvaluation) -> list[list[str]]:
 
 def rows_markdown(ev: SlamEvaluation) -> str:
     """Markdown: the pairing line, evo's table, the RAWSEEDS and GT-aware figures, the warnings."""
-    a = ev.association.summary()
-    lines = [f"paired {a['matched']} poses ({a['method']}, max dt {a['max_dt_s']:g} s, offset "
-             f"{a['t_offset_s']:.6g} s); GT skipped: {a['gt_skipped_outside']} outside, {a['gt_skipped_in_gaps']} "
-             f"in {a['gaps']} gaps; alignment {ev.alignment.kind} (scale {ev.alignment.scale:.6f})", ""]
+    a = ev.association
+    lines = [f"{a.describe()}; {len(a.gaps_s)} gaps; alignment {ev.alignment.kind} (scale "
+             f"{ev.alignment.scale:.6f})", ""]
     if ev.time_offset is not None:
         to = ev.time_offset
         lines += [f"time offset estimated: {to.offset_s:+.5f} s (95 % {to.low_s:+.5f} .. {to.high_s:+.5f})", ""]

@@ -28,7 +28,7 @@ import numpy as np
 from gtrig.errors import FormatError
 from gtrig.io.atomic import atomic_group
 from gtrig.io.text import decode_text, read_bytes
-from gtrig.io.tum import ROWS_PER_PIECE, read_tum, tum_pieces, write_pieces
+from gtrig.io.tum import ROWS_PER_PIECE, read_tum, stamp_text_pieces, tum_pieces, write_pieces
 from gtrig.trajectory import COV_AXES, CovKind, PoseStatus, PoseTrack
 
 log = logging.getLogger(__name__)
@@ -45,11 +45,11 @@ def covariance_pieces(track: PoseTrack, rows: int = ROWS_PER_PIECE) -> Iterator[
     csv.writer(buf, lineterminator="\n").writerow(["stamp_s", "status", "reason"] +
                                                   [f"cov_{a}_{b}" for a in axes for b in axes])
     yield buf.getvalue()
-    for a in range(0, len(track), rows):
+    for a, stamps in zip(range(0, len(track), rows), stamp_text_pieces(track, rows), strict=True):
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         for i in range(a, min(a + rows, len(track))):
-            row = [f"{track.stamps_s[i]:.6f}", PoseStatus(int(track.status[i])).name.lower(), track.reasons[i]]
+            row = [stamps[i - a], PoseStatus(int(track.status[i])).name.lower(), track.reasons[i]]
             if track.cov is not None:
                 row += [repr(float(v)) for v in track.cov[i].ravel()]
             w.writerow(row)
@@ -240,8 +240,12 @@ def read_pose_track(tum_path: str | os.PathLike[str], cov_path: str | os.PathLik
     """A pose track from a TUM file and, optionally, its covariance CSV (same rows, stamps checked)."""
     traj = read_tum(tum_path)
     if cov_path is None:
-        return PoseTrack(traj.stamps_s, traj.xyz, traj.quat_xyzw, source=source)
+        return PoseTrack(traj.stamps_s, traj.xyz, traj.quat_xyzw, source=source, stamps_ns=traj.stamps_ns)
     stamps, cov, kind, status, reasons, meta = read_covariance_csv(cov_path)
+    if traj.rows is not None and stamps.size > int(traj.rows.max()):  # the TUM file's rows dropped or sorted
+        stamps, status = stamps[traj.rows], status[traj.rows]
+        cov = None if cov is None else cov[traj.rows]
+        reasons = tuple(reasons[i] for i in traj.rows)
     if stamps.shape != traj.stamps_s.shape:
         raise FormatError(f"{cov_path}: {stamps.size} rows, but {tum_path} has {len(traj)} poses")
     bad = np.abs(stamps - traj.stamps_s) > 5e-6
@@ -253,4 +257,4 @@ def read_pose_track(tum_path: str | os.PathLike[str], cov_path: str | os.PathLik
         raise FormatError(f"{cov_path}: a covariance is not symmetric")
     return PoseTrack(traj.stamps_s, traj.xyz, traj.quat_xyzw, cov, kind, status, reasons,
                      source or meta.get("source", ""), meta.get("frame_id", "world"),
-                     meta.get("child_frame_id", "robot"))
+                     meta.get("child_frame_id", "robot"), traj.stamps_ns)

@@ -36,8 +36,8 @@ def test_interpolation_gaps_and_span() -> None:
     assert np.max(ang) < 1e-4
     s = a.summary()
     assert s["gaps"] == 1 and 1.0 < s["gap_time_s"] < 1.1
-    assert abs(s["gt_skipped_in_gaps"] - 103) <= 4 and 400 <= s["gt_skipped_outside"] <= 405
-    assert s["matched"] + s["gt_skipped_in_gaps"] + s["gt_skipped_outside"] == len(gt)
+    assert abs(s["anchor_in_gaps"] - 103) <= 4 and 400 <= s["anchor_outside"] <= 405
+    assert s["matched"] + s["anchor_in_gaps"] + s["anchor_outside"] == len(gt)
 
 
 def test_time_offset_recovered_with_interval() -> None:

@@ -30,7 +30,8 @@ def test_ape_rpe_equal_evo(align: str) -> None:
     r, e = evo_sync.associate_trajectories(ref, est, max_diff=0.01)
     e = copy.deepcopy(e)
     e.align(r, correct_scale=align == "sim3")
-    ours = evaluate_slam(read_trajectory(GT), read_trajectory(EST), metrics="evo", align=align)
+    ours = evaluate_slam(read_trajectory(GT), read_trajectory(EST), metrics="evo", align=align, method="nearest",
+                         max_dt_s=0.01)
     assert len(ours.association) == r.num_poses
     assert np.allclose(ours.association.gt.xyz, r.positions_xyz, atol=1e-12)
     PR = evo_metrics.PoseRelation
@@ -41,6 +42,37 @@ def test_ape_rpe_equal_evo(align: str) -> None:
             theirs = m.get_all_statistics()
             got = mine[key].stats()
             assert len(mine[key].values) == len(m.error)
+            for k in STATS:
+                assert abs(got[k] - theirs[k]) < 1e-6, (metric.__name__, key, k, got[k], theirs[k])
+
+
+@pytest.mark.parametrize("align", ["se3", "sim3"])
+def test_default_association_equals_evos_interpolation(align: str) -> None:
+    """The default (auto: the denser GT interpolated at the estimate's stamps, tolerance from the sample
+    periods) gives evo's figures with ``sync_method=interpolation``: same pairs, same APE and RPE."""
+    from evo.core.sync_method import SyncMethod
+
+    ref = evo_files.read_tum_trajectory_file(str(GT))
+    est = evo_files.read_tum_trajectory_file(str(EST))
+    r, e = evo_sync.associate_trajectories(ref, est, max_diff=0.01, sync_method=SyncMethod.interpolation)
+    e = copy.deepcopy(e)
+    e.align(r, correct_scale=align == "sim3")
+    ours = evaluate_slam(read_trajectory(GT), read_trajectory(EST), metrics="evo", align=align)
+    a = ours.association
+    assert (a.method, a.anchor, a.auto, a.max_dt_auto) == ("interpolate-gt", "est", True, True)
+    assert abs(a.max_dt_s - 0.03) < 1e-3  # three of the GT's 10 ms periods
+    assert len(a) == r.num_poses == 785
+    assert np.allclose(a.gt.xyz, r.positions_xyz, atol=1e-9)
+    assert np.allclose(ours.est_aligned.xyz, e.positions_xyz, atol=1e-6)
+    s = a.summary()
+    assert s["matched"] + s["anchor_outside"] + s["anchor_in_gaps"] == s["anchor_poses"] == 788
+    PR = evo_metrics.PoseRelation
+    for rel, key in ((PR.translation_part, "trans"), (PR.rotation_angle_rad, "rot"), (PR.full_transformation, "full")):
+        for metric, mine in ((evo_metrics.APE, ours.ape), (evo_metrics.RPE, ours.rpe)):
+            m = metric(rel)
+            m.process_data((r, e))
+            theirs = m.get_all_statistics()
+            got = mine[key].stats()
             for k in STATS:
                 assert abs(got[k] - theirs[k]) < 1e-6, (metric.__name__, key, k, got[k], theirs[k])
 
@@ -69,3 +101,24 @@ def test_a_pose_serving_two_pairs() -> None:
     assert len(a) == 3 and np.allclose(a.est.xyz[:2], est.xyz[0]) and np.all(np.diff(a.gt.stamps_s) > 0)
     b = associate_nearest(est, gt, 0.01)  # the GT longer: each estimate pose takes its nearest GT pose
     assert len(b) == 3 and np.allclose(b.gt.xyz, est.xyz[[0, 0, 1]]) and np.allclose(b.dt_s, [-0.002, 0.002, 0])
+
+
+def test_estimate_written_out_of_order_scores_as_evo(tmp_path: Path) -> None:
+    """An estimate whose stamps step back once: gtrig sorts it, evo pairs it as it stands; the APE (which
+    does not depend on the order) is the same to the last digit, and equal to the ordered file's."""
+    rows = [ln for ln in EST.read_text().splitlines() if ln and not ln.startswith("#")]
+    swapped = tmp_path / "est_back.txt"
+    swapped.write_text("\n".join(rows[:300] + [rows[301], rows[300]] + rows[302:]) + "\n")
+    ref = evo_files.read_tum_trajectory_file(str(GT))
+    r, e = evo_sync.associate_trajectories(ref, evo_files.read_tum_trajectory_file(str(swapped)), max_diff=0.01)
+    e = copy.deepcopy(e)
+    e.align(r)
+    m = evo_metrics.APE(evo_metrics.PoseRelation.translation_part)
+    m.process_data((r, e))
+    theirs = m.get_all_statistics()
+    for est in (swapped, EST):
+        ours = evaluate_slam(read_trajectory(GT), read_trajectory(est), metrics="evo", align="se3",
+                             method="nearest", max_dt_s=0.01)
+        got = ours.ape["trans"].stats()
+        for k in STATS:
+            assert abs(got[k] - theirs[k]) < 1e-9, (est.name, k, got[k], theirs[k])

@@ -61,7 +61,8 @@ def test_self_is_perfect_json(tmp_path: Path) -> None:
                               "--align", "none"])
     assert res.exit_code == 0, res.output
     out = json.loads(res.stdout)
-    assert out["evo"]["APE trans"]["rmse"] < 1e-9 and out["pairing"]["nearest"]["matched"] == 300
+    assert out["evo"]["APE trans"]["rmse"] < 1e-9 and out["pairing"]["interpolate-gt"]["matched"] == 300
+    assert out["association"]["chosen"] == "auto"
     assert out["gt-aware"]["indistinguishable from GT"]["verdict"] == 1.0
 
 

@@ -38,7 +38,7 @@ def test_tum_reads_the_real_file(shared_dir: Path) -> None:
     "text,fragment",
     [
         ("1 2 3 4 0 0 0 1\n2 2 3 4 0 0 0\n", ":2: expected 8 values"),
-        ("1 2 3 4 0 0 0 1\n1 2 3 4 0 0 0 1\n", "do not increase"),
+        ("1 2 3 4 0 0 0 1\n2 2 3 4 0 0 0 1\n3 2 3 4 0 0 0 1\n-500 2 3 4 0 0 0 1\n", "steps back 503 s"),
         ("1 2 x 4 0 0 0 1\n", ":1: not a number"),
         ("1 2 3 4 0 0 0 2\n", "not unit"),
         ("# only a comment\n", "no poses"),

@@ -7,19 +7,20 @@ the one asked for, is a one-line :class:`~gtrig.errors.FormatError`.
 =========  =====================================================  =======================================
 fmt        file                                                   precision kept on a round trip
 =========  =====================================================  =======================================
-tum        ``NAME.tum``: ``t tx ty tz qx qy qz qw``                1 us, 1 nm, 1e-12 quaternion
+tum        ``NAME.tum``: ``t tx ty tz qx qy qz qw``                stamps as read (gtrig.stamps), 1 nm, 1e-12
 gtrig      ``NAME.tum`` + ``NAME_cov.csv`` (status, covariance)    as tum; covariance exact
-kitti      ``NAME.kitti`` (3x4 row-major) + ``NAME_times.txt``     1e-12 relative; stamps 1 ns
+kitti      ``NAME.kitti`` (3x4 row-major) + ``NAME_times.txt``     1e-12 relative; stamps as tum
 euroc      ``state_groundtruth_estimate0/data.csv``                stamps 1 ns, 1 nm, 1e-12 quaternion
 rawseeds   ``t,x,y,theta`` [+ 3x3 covariance], ``*-GROUNDTRUTH``   6 decimals (published); cov exact
-csv        gtrig's one-file CSV (pose, status, covariance)         exact (shortest round-trip repr)
+csv        gtrig's one-file CSV (pose, status, covariance)         stamps as tum; the rest exact
 rosbag1    ``NAME.bag`` (ROS 1)                                    see gtrig.io.rosbag
 rosbag2    a ROS 2 bag folder (sqlite3) or ``NAME.mcap``           see gtrig.io.rosbag
 =========  =====================================================  =======================================
 
-``.txt`` and ``.csv`` are read by their content (TUM: 8 whitespace-separated numbers, KITTI: 12,
-RAWSEEDS: 4 or 13 comma-separated, EuRoC: a ``#timestamp`` header or 17 comma-separated, csv:
-gtrig's header); writing them needs an explicit ``fmt``.
+``.txt`` and ``.csv`` are read by their content (TUM: 8 numbers separated by whitespace or commas, the
+stamp in seconds; KITTI: 12; RAWSEEDS: 4 or 13 comma-separated; EuRoC: a ``#timestamp`` header, or 8 or
+17 comma-separated with an integer nanosecond stamp; csv: gtrig's header); writing them needs an
+explicit ``fmt``.
 """
 
 from __future__ import annotations
@@ -75,8 +76,10 @@ def sniff_format(path: str | os.PathLike[str]) -> str | None:
         if not s or s.startswith("#"):
             continue
         if "," in s:
-            n = len(s.split(","))
-            return {4: "rawseeds", 13: "rawseeds", 8: "euroc", 17: "euroc"}.get(n)
+            cells = [c.strip() for c in s.split(",")]
+            if len(cells) == 8 and not cells[0].lstrip("+-").isdigit():
+                return "tum"  # TUM with commas: EuRoC's first column is integer nanoseconds
+            return {4: "rawseeds", 13: "rawseeds", 8: "euroc", 17: "euroc"}.get(len(cells))
         return {8: "tum", 12: "kitti"}.get(len(s.split()))
     return None
 
@@ -114,15 +117,17 @@ def read_trajectory(path: str | os.PathLike[str], fmt: str | None = None, **opti
     path : the file (or bag: a ``.bag`` file, a ROS 2 bag folder or ``.mcap``).
     fmt : one of :data:`FORMATS`; ``None``: from the name, else from the content.
     options : per format: ``cov_path`` (tum, gtrig), ``times_path`` (kitti), ``topic``, ``stamp``
-        (bags: see :func:`gtrig.io.rosbag.read_bag_trajectory`).
+        (bags: see :func:`gtrig.io.rosbag.read_bag_trajectory`; without ``topic``, gtrig's ``/gtrig/pose`` or
+        the bag's only trajectory, else an error listing them).
     """
     p = Path(path)
     f = _resolve(p, fmt, reading=True)
     if f in BAG_FORMATS:
         from gtrig.io.rosbag import read_bag_trajectory
+        from gtrig.io.rosbag.trajectory import choose_topic
 
-        if "topic" not in options:
-            raise ConfigError(f"{p}: a bag holds many topics; say which (topic=...)")
+        if options.get("topic") is None:
+            options = {**options, "topic": choose_topic(p)}
         return read_bag_trajectory(p, **options)
     _check_options(f, options, {"tum": {"cov_path"}, "gtrig": {"cov_path"}, "kitti": {"times_path"}})
     if f in ("tum", "gtrig"):

@@ -8,9 +8,11 @@ its covariance on one row.
     12.34,1.5,2.0,0.0,0.0,0.0,0.38268343236508984,0.9238795325112867,0.7853981633974483,ok,,1e-06,...
 
 ``yaw`` (rad, (-pi, pi]) is written for convenience and ignored on reading (the quaternion is the
-pose). The covariance columns are those of the covariance CSV (gtrig.io.posetrack): row-major over
-``x, y, yaw`` / ``x, y, z, rx, ry, rz`` / ``x, y, z``, world-frame perturbation. Every number is
-Python's shortest round-trip ``repr``: the format is exact.
+pose). ``stamp_s`` is written from the track's integer nanoseconds, as every format writes them
+(gtrig.stamps: the digits it was read with), and read back exactly. The covariance columns are those of
+the covariance CSV (gtrig.io.posetrack): row-major over ``x, y, yaw`` / ``x, y, z, rx, ry, rz`` /
+``x, y, z``, world-frame perturbation. Every other number is Python's shortest round-trip ``repr``:
+exact.
 """
 
 from __future__ import annotations
@@ -38,8 +40,11 @@ def csv_text(track: PoseTrack) -> str:
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(list(POSE_COLUMNS) + [f"cov_{a}_{b}" for a in axes for b in axes])
     yaw = track.yaw_rad()
+    from gtrig.io.tum import stamp_texts
+
+    stamps = stamp_texts(track)
     for i in range(len(track)):
-        row = [repr(float(v)) for v in (track.stamps_s[i], *track.xyz[i], *track.quat_xyzw[i], yaw[i])]
+        row = [stamps[i]] + [repr(float(v)) for v in (*track.xyz[i], *track.quat_xyzw[i], yaw[i])]
         row += [PoseStatus(int(track.status[i])).name.lower(), track.reasons[i]]
         if track.cov is not None:
             row += [repr(float(v)) for v in track.cov[i].ravel()]
@@ -75,7 +80,7 @@ def read_csv(path: str | os.PathLike[str]) -> PoseTrack:
     body = rows[1:]
     if not body:
         raise FormatError(f"{p}: no poses")
-    nums, status, reasons, numbers = [], [], [], []
+    nums, status, reasons, numbers, stamp_cells = [], [], [], [], []
     for line, r in body:
         if len(r) != len(header):
             raise FormatError(f"{p}:{line}: {len(r)} values, the header has {len(header)}")
@@ -90,6 +95,7 @@ def read_csv(path: str | os.PathLike[str]) -> PoseTrack:
                               f"{', '.join(s.name.lower() for s in PoseStatus)}") from None
         reasons.append(r[10])
         numbers.append(line)
+        stamp_cells.append(r[0])
     a = np.array(nums, float)
     if not np.all(np.isfinite(a[:, :8])):
         raise FormatError(f"{p}:{numbers[int(np.argmax(~np.all(np.isfinite(a[:, :8]), axis=1)))]}: a pose is "
@@ -100,5 +106,8 @@ def read_csv(path: str | os.PathLike[str]) -> PoseTrack:
     if kind is not None:
         dim = len(COV_AXES[kind])
         cov = a[:, 9:].reshape(-1, dim, dim)
+    from gtrig.stamps import ns_from_decimals
+
     return PoseTrack(a[:, 0], a[:, 1:4], q, cov, kind or "se3", np.array(status, np.uint8), tuple(reasons),
-                     meta.get("source", p.stem), meta.get("frame_id", "world"), meta.get("child_frame_id", "robot"))
+                     meta.get("source", p.stem), meta.get("frame_id", "world"), meta.get("child_frame_id", "robot"),
+                     ns_from_decimals(stamp_cells))

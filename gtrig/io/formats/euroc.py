@@ -18,7 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from gtrig.io.atomic import atomic_write_text
-from gtrig.io.formats._common import LineNumbers, check_stamps, read_lines, read_numeric, unit_quaternions
+from gtrig.io.formats._common import LineNumbers, read_lines, read_numeric, unit_quaternions
+from gtrig.io.stamp_order import stamp_order
+from gtrig.stamps import seconds_from_ns
 from gtrig.trajectory import PoseTrack
 
 HEADER = ("#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], "
@@ -31,31 +33,33 @@ def read_euroc(path: str | os.PathLike[str]) -> PoseTrack:
     """A EuRoC ground-truth CSV as a pose track (no covariance)."""
     p, a, numbers, stamps_ns = read_numeric(path, (8, 17), ",", "8 or 17 comma-separated values (EuRoC "
                                             "'#timestamp, p_RS_R_x, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z, ...')")
-    if stamps_ns is not None:
-        stamps = stamps_ns // 1_000_000_000 + (stamps_ns % 1_000_000_000) * 1e-9
-    else:
-        stamps = _stamps_s(p, read_lines(p)[1], numbers)
-    check_stamps(p, stamps, numbers)
+    if stamps_ns is None:
+        stamps_ns = _stamps_ns(p, read_lines(p)[1], numbers)
+    # as evo reads them (gtrig.io.stamp_order); seconds from the first stamp keep the nanoseconds apart
+    keep = stamp_order(p, (stamps_ns - stamps_ns[0]).astype(float) * 1e-9, numbers)
+    if keep is not None:
+        a, numbers, stamps_ns = a[keep], numbers[keep], stamps_ns[keep]
+    stamps = seconds_from_ns(stamps_ns)
     q = unit_quaternions(p, a[:, [5, 6, 7, 4]], numbers)
-    return PoseTrack(stamps, a[:, 1:4], q, source=p.parent.name if p.name == "data.csv" else p.stem)
+    return PoseTrack(stamps, a[:, 1:4], q, source=p.parent.name if p.name == "data.csv" else p.stem,
+                     stamps_ns=stamps_ns)
 
 
-def _stamps_s(p: Path, lines: list[str], numbers: LineNumbers) -> np.ndarray:
-    """Seconds from the first cells, line by line (stamps not all plain integers)."""
-    # integer nanoseconds (1.4e18 is past float64's 2^53): seconds and the rest split as integers first
-    out = np.empty(len(numbers))
+def _stamps_ns(p: Path, lines: list[str], numbers: LineNumbers) -> np.ndarray:
+    """Integer nanoseconds from the first cells, line by line (stamps not all plain integers)."""
+    out = np.empty(len(numbers), np.int64)
     for k, n in enumerate(numbers):
         cell = lines[n - 1].split(",", 1)[0].strip()
         try:
             ns = int(cell)
         except ValueError:
             ns = int(round(float(cell)))
-        out[k] = ns // 1_000_000_000 + (ns % 1_000_000_000) * 1e-9
+        out[k] = ns
     return out
 
 
 def euroc_text(track: PoseTrack) -> str:
-    stamps_ns = np.rint(track.stamps_s * 1e9).astype(np.int64)
+    stamps_ns = track.integer_stamps_ns()
     if len(track) > 1:
         vel = np.gradient(track.xyz, track.stamps_s, axis=0)
     else:

@@ -3,7 +3,8 @@
 line, as KITTI's ``sequences/NN/times.txt``).
 
 gtrig writes ``NAME.kitti`` (or ``NAME.txt``) and ``NAME_times.txt`` beside it. Precision kept: 13
-significant digits for the matrix (``%.12e``: 1e-12 relative), stamps 1 ns (``%.9f``). The reader
+significant digits for the matrix (``%.12e``: 1e-12 relative); stamps as the TUM writer prints them
+(gtrig.stamps: 6 decimals when each is a whole microsecond, else 9: the digits they were read with). The reader
 takes the times file given, else ``NAME_times.txt``, else ``times.txt`` in the same folder; without
 any it numbers the poses 0, 1, 2, ... seconds and says so (KITTI poses alone carry no time).
 
@@ -45,6 +46,7 @@ def read_kitti(path: str | os.PathLike[str], times_path: str | os.PathLike[str] 
     for tp in candidates:
         if tp.is_file() or times_path is not None:
             tpp, t, tn, _ = read_numeric(tp, (1,), None, "one time stamp per line")
+            stamps_ns = _exact_ns(tpp)
             if len(t) != len(a):
                 if times_path is None and tp.name == "times.txt":
                     continue
@@ -55,14 +57,26 @@ def read_kitti(path: str | os.PathLike[str], times_path: str | os.PathLike[str] 
     else:
         log.warning("%s: no times file beside it (%s): poses numbered 0, 1, 2, ... s", p, times_path_for(p).name)
         stamps = np.arange(len(a), dtype=float)
-    return PoseTrack.from_matrices(stamps, T, source=p.stem)
+        stamps_ns = None
+    return PoseTrack.from_matrices(stamps, T, source=p.stem, stamps_ns=stamps_ns)
+
+
+def _exact_ns(p: Path) -> np.ndarray | None:
+    """The times file's stamps as exact nanoseconds when it prints more digits than a float keeps."""
+    from gtrig.io.formats._common import read_lines
+    from gtrig.io.stamp_text import needs_text_stamps, text_stamps_ns
+
+    lines = read_lines(p)[1]
+    return text_stamps_ns(lines) if needs_text_stamps(lines) else None
 
 
 def kitti_text(track: PoseTrack) -> tuple[str, str]:
     """(poses text, times text)."""
     M = track.matrices()[:, :3, :].reshape(-1, 12)
     poses = "".join(" ".join(f"{v:.12e}" for v in row) + "\n" for row in M)
-    times = "".join(f"{t:.9f}\n" for t in track.stamps_s)
+    from gtrig.io.tum import stamp_texts
+
+    times = "".join(f"{t}\n" for t in stamp_texts(track))
     return poses, times
 
 

@@ -24,16 +24,18 @@ from pathlib import Path
 import numpy as np
 
 from gtrig.io.atomic import atomic_write_text
-from gtrig.io.formats._common import check_stamps, read_numeric
+from gtrig.io.formats._common import read_numeric
+from gtrig.io.stamp_order import stamp_order
 from gtrig.trajectory import PoseTrack
 
 
 def read_rawseeds_rows(path: str | os.PathLike[str]) -> np.ndarray:
-    """(N, 4) or (N, 13) the numbers of a RAWSEEDS file as printed (theta on the file's own branch)."""
+    """(N, 4) or (N, 13) the numbers of a RAWSEEDS file as printed (theta on the file's own branch), in time
+    order (a repeated stamp dropped, one a little back sorted: gtrig.io.stamp_order)."""
     p, a, numbers, _ = read_numeric(path, (4, 13), ",", "4 ('t,x,y,theta') or 13 (plus a 3x3 covariance) "
                                     "comma-separated values")
-    check_stamps(p, a[:, 0], numbers)
-    return a
+    keep = stamp_order(p, a[:, 0], numbers)  # as evo reads them (gtrig.io.stamp_order)
+    return a if keep is None else a[keep]
 
 
 def read_rawseeds(path: str | os.PathLike[str]) -> PoseTrack:
@@ -52,9 +54,12 @@ def rawseeds_text(track: PoseTrack, decimals: int = 6, theta: np.ndarray | None 
     covariance, else 4). ``theta`` overrides the heading (default: :meth:`PoseTrack.yaw_rad`)."""
     th = track.yaw_rad() if theta is None else np.asarray(theta, float)
     cov = track.cov_xytheta()
+    from gtrig.io.tum import stamp_texts
+
+    stamps = stamp_texts(track, min(decimals, 9))
     out = []
     for i in range(len(track)):
-        cells = [_fixed(track.stamps_s[i], decimals), _fixed(track.xyz[i, 0], decimals),
+        cells = [stamps[i], _fixed(track.xyz[i, 0], decimals),
                  _fixed(track.xyz[i, 1], decimals), _fixed(th[i], decimals)]
         if cov is not None:
             cells += [repr(float(v)) for v in cov[i].ravel()]

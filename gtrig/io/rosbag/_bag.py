@@ -120,8 +120,15 @@ def ns_to_s(ns: int) -> float:
     return ns // 1_000_000_000 + (ns % 1_000_000_000) * 1e-9
 
 
+def time_to_ns(stamp: Any) -> int:
+    """ROS ``Time`` (``sec``, ``nanosec``) as integer nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
 def s_to_sec_nsec(t: float) -> tuple[int, int]:
-    """Float seconds as ROS ``(sec, nanosec)``, rounded to the nearest nanosecond."""
+    """Float seconds as ROS ``(sec, nanosec)``, rounded to the nearest nanosecond (a sensor's stamp: the
+    recording's CSV files print 9 decimals, and read back as the same float). A trajectory is written from
+    its integer nanoseconds instead (:meth:`gtrig.trajectory.PoseTrack.integer_stamps_ns`)."""
     sec = int(np.floor(t))
     nsec = int(round((t - sec) * 1e9))  # t - sec is exact for floats of one binade
     if nsec >= 1_000_000_000:
@@ -135,15 +142,24 @@ def s_to_ns(t: float) -> int:
 
 
 def ros_time(ts: Any, t: float) -> Any:
-    sec, nsec = s_to_sec_nsec(t)
+    return ros_time_ns(ts, s_to_ns(t))
+
+
+def ros_time_ns(ts: Any, t_ns: int) -> Any:
+    sec, nsec = divmod(int(t_ns), 1_000_000_000)
     return ts.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
 
 
 def header(ts: Any, ros_version: RosVersion, t: float, frame_id: str, seq: int = 0) -> Any:
+    return header_ns(ts, ros_version, s_to_ns(t), frame_id, seq)
+
+
+def header_ns(ts: Any, ros_version: RosVersion, t_ns: int, frame_id: str, seq: int = 0) -> Any:
+    """A ``std_msgs/Header`` stamped ``t_ns`` (integer nanoseconds)."""
     H = ts.types["std_msgs/msg/Header"]
     if ros_version == 1:
-        return H(seq=seq, stamp=ros_time(ts, t), frame_id=frame_id)
-    return H(stamp=ros_time(ts, t), frame_id=frame_id)
+        return H(seq=seq, stamp=ros_time_ns(ts, t_ns), frame_id=frame_id)
+    return H(stamp=ros_time_ns(ts, t_ns), frame_id=frame_id)
 
 
 def serialize(ts: Any, ros_version: RosVersion, msg: Any) -> bytes:
@@ -194,10 +210,14 @@ class BagWriter:
 
     def write(self, topic: str, t_receive_s: float, msg: Any) -> None:
         """Serialize ``msg`` on ``topic`` at receive time ``t_receive_s``."""
+        self.write_ns(topic, s_to_ns(t_receive_s), msg)
+
+    def write_ns(self, topic: str, t_receive_ns: int, msg: Any) -> None:
+        """Serialize ``msg`` on ``topic`` at receive time ``t_receive_ns`` (integer nanoseconds)."""
         conn = self._conns.get(topic)
         if conn is None:
             conn = self._conns[topic] = self._writer.add_connection(topic, msg.__msgtype__, typestore=self.ts)
-        self._writer.write(conn, s_to_ns(t_receive_s), serialize(self.ts, self.ros_version, msg))
+        self._writer.write(conn, int(t_receive_ns), serialize(self.ts, self.ros_version, msg))
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
         try:

@@ -176,7 +176,7 @@ def import_bag(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     bag : a ROS 1 ``.bag`` (or several), a ROS 2 bag folder or ``.mcap``.
     topics : topics.yaml (path, mapping or :class:`TopicsConfig`).
     out : the recording folder; its ``rig.yaml`` is the rig checked against (``rig_path`` is copied
-        there when given).
+        there when given). A topics.yaml of odometry and trajectories only needs no rig.
     stamp : ``"header"`` or ``"receive"``; default topics.yaml's.
     video : one FFV1 ``video.mkv`` per camera (lossless) instead of image files.
     image_format : ``"pgm"`` (uncompressed: the import runs at the speed of the bag's reading) or
@@ -190,18 +190,20 @@ def import_bag(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
         raise InputError(f"stamp must be 'header' or 'receive', got {which!r}")
     root = Path(out)
     rig_file = Path(rig_path) if rig_path is not None else root / "rig.yaml"
-    if not rig_file.is_file():
-        raise InputError(f"{rig_file}: no rig (give --rig RIG, or import into a recording that has rig.yaml)")
-    rig = load_rig(rig_file)
+    sensors = bool(cfg.cameras or cfg.lasers or cfg.onboard)
+    if not rig_file.is_file() and (sensors or rig_path is not None):
+        raise InputError(f"{rig_file}: no rig (give --rig RIG, or import into a recording that has rig.yaml; "
+                         "odometry and trajectories alone need none)")
+    rig = load_rig(rig_file) if rig_file.is_file() else None
     seq_dir = root / cfg.sequence
     if seq_dir.exists() and not force:
         raise InputError(f"{seq_dir}: exists; refusing to overwrite it (use --force)")
     if rig_path is not None and (root / "rig.yaml").exists() and not force and \
             (root / "rig.yaml").read_bytes() != rig_file.read_bytes():
         raise InputError(f"{root / 'rig.yaml'}: exists and differs from {rig_file} (use --force)")
-    cams = {c.name: c for c in rig.cameras}
-    fixed = {s.name: s for s in rig.laser_scanners}
-    onboard = {s.name: s for s in rig.robot.onboard_scanners}
+    cams = {c.name: c for c in rig.cameras} if rig is not None else {}
+    fixed = {s.name: s for s in rig.laser_scanners} if rig is not None else {}
+    onboard = {s.name: s for s in rig.robot.onboard_scanners} if rig is not None else {}
     streams: dict[str, _Stream] = {}
     for kind, mapping, known in (("camera", cfg.cameras, cams), ("laser", cfg.lasers, fixed),
                                  ("onboard", cfg.onboard, onboard)):

@@ -103,9 +103,11 @@ def list_topics(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) 
     return out
 
 
-def topics_template(summaries: Sequence[TopicSummary], rig: Any = None) -> str:
-    """A topics.yaml to start from: every image, scan and odometry topic under a guessed sensor name
-    (the rig's name when the topic contains it), the pose topics as trajectories."""
+def topics_template(summaries: Sequence[TopicSummary], rig: Any = None, tf_trajectories: Sequence[str] = ()
+                    ) -> str:
+    """A topics.yaml to start from, valid as it is: every image, scan and odometry topic under a guessed
+    sensor name (the rig's name when the topic contains it), the pose topics as trajectories, and the TF
+    chains ``tf_trajectories`` (gtrig.io.rosbag.tf_tree.propose_tf_trajectories) as trajectories too."""
 
     def name_for(topic: str, names: Sequence[str], prefix: str, k: int) -> str:
         for n in names:
@@ -118,7 +120,7 @@ def topics_template(summaries: Sequence[TopicSummary], rig: Any = None) -> str:
     onb = [s.name for s in rig.robot.onboard_scanners] if rig is not None else []
     doc: dict[str, Any] = {"sequence": "run", "stamp": "header", "cameras": {}, "lasers": {}, "onboard": {},
                            "odometry": None, "trajectories": {}}
-    from gtrig.io.rosbag.trajectory import POSE_TYPES, TF_TYPE
+    from gtrig.io.rosbag.trajectory import POSE_TYPES
 
     for s in summaries:
         if s.msgtype in IMAGE_TYPES:
@@ -131,9 +133,9 @@ def topics_template(summaries: Sequence[TopicSummary], rig: Any = None) -> str:
             doc["odometry"] = s.topic
         elif s.msgtype in POSE_TYPES and s.msgtype != ODOM_TYPE:
             doc["trajectories"][s.topic.strip("/").replace("/", "_") or "pose"] = s.topic
-        elif s.msgtype == TF_TYPE and s.topic == "/tf":
-            doc["trajectories"]["tf"] = "/tf:odom.base_link  # PARENT.CHILD: edit"
+    for tf_id in tf_trajectories:
+        parent, child = tf_id.split(":", 1)[1].split(".", 1)
+        doc["trajectories"][f"tf_{parent}_{child}".replace("/", "_")] = tf_id
     lines = ["# gtrig import rosbag --topics: map the bag's topics to the rig's sensors (docs/interchange.md)"]
     text = yaml.safe_dump({k: v for k, v in doc.items() if v not in ({}, None)}, sort_keys=False)
-    return "\n".join(lines) + "\n" + text.replace("'/tf:odom.base_link  # PARENT.CHILD: edit'",
-                                                  "/tf:odom.base_link  # PARENT.CHILD: edit")
+    return "\n".join(lines) + "\n" + text

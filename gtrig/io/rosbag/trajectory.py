@@ -37,11 +37,11 @@ from gtrig.io.rosbag._bag import (
     RosVersion,
     Storage,
     deserialize,
-    header,
-    ns_to_s,
+    header_ns,
     open_bag,
-    time_to_s,
+    time_to_ns,
 )
+from gtrig.stamps import seconds_from_ns
 from gtrig.trajectory import PoseTrack
 
 log = logging.getLogger(__name__)
@@ -80,24 +80,26 @@ def _pose_of(msg: Any) -> tuple[list[float], list[float], np.ndarray | None]:
     return [p.x, p.y, p.z], [q.x, q.y, q.z, q.w], cov
 
 
-def _monotonic(stamps: np.ndarray, where: str) -> np.ndarray:
+def _monotonic(stamps_ns: np.ndarray, where: str) -> np.ndarray:
     """Indices to keep: equal stamps dropped (warned), backwards an error."""
-    d = np.diff(stamps)
+    d = np.diff(stamps_ns)
     back = np.flatnonzero(d < 0)
     if back.size:
+        from gtrig.stamps import format_seconds
+
         i = int(back[0]) + 1
-        raise FormatError(f"{where}: stamps go backwards at message {i + 1} ({stamps[i - 1]:.9f} then "
-                          f"{stamps[i]:.9f})")
-    keep = np.concatenate([[True], d > 0]) if len(stamps) else np.zeros(0, bool)
+        a, b = format_seconds(stamps_ns[i - 1:i + 1], 9)
+        raise FormatError(f"{where}: stamps go backwards at message {i + 1} ({a} then {b})")
+    keep = np.concatenate([[True], d > 0]) if len(stamps_ns) else np.zeros(0, bool)
     if not np.all(keep):
         log.warning("%s: %d messages repeat the previous stamp (the first of each kept)", where,
                     int(np.sum(~keep)))
     return np.flatnonzero(keep)
 
 
-def _make_track(stamps: np.ndarray, xyz: np.ndarray, quat: np.ndarray, covs: np.ndarray | None, where: str,
+def _make_track(stamps_ns: np.ndarray, xyz: np.ndarray, quat: np.ndarray, covs: np.ndarray | None, where: str,
                 frame_id: str, child_frame_id: str, source: str) -> PoseTrack:
-    keep = _monotonic(stamps, where)
+    keep = _monotonic(stamps_ns, where)
     q = quat[keep]
     n = np.linalg.norm(q, axis=1)
     if np.any(np.abs(n - 1) > 1e-3):
@@ -106,8 +108,9 @@ def _make_track(stamps: np.ndarray, xyz: np.ndarray, quat: np.ndarray, covs: np.
     q = np.where(np.abs(n - 1)[:, None] > 1e-12, q / n[:, None], q)
     q[q[:, 3] < 0] *= -1
     cov, kind = rcov.from_ros(covs[keep]) if covs is not None else (None, "se3")
-    return PoseTrack(stamps[keep], xyz[keep], q, cov, kind, source=source, frame_id=frame_id or "world",
-                     child_frame_id=child_frame_id or "base_link")
+    ns = stamps_ns[keep]
+    return PoseTrack(seconds_from_ns(ns), xyz[keep], q, cov, kind, source=source, frame_id=frame_id or "world",
+                     child_frame_id=child_frame_id or "base_link", stamps_ns=ns)
 
 
 def read_bag_trajectory(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], topic: str,
@@ -146,7 +149,7 @@ def read_bag_trajectory(bag: str | os.PathLike[str] | Sequence[str | os.PathLike
                 last_path = (msg, t_ns)
                 continue
             with _standard_fields(name, conn.msgtype):
-                stamps.append(time_to_s(msg.header.stamp) if stamp == "header" else ns_to_s(t_ns))
+                stamps.append(time_to_ns(msg.header.stamp) if stamp == "header" else int(t_ns))
                 p, q, c = _pose_of(msg)
                 frame = frame or str(msg.header.frame_id)
             xyz.append(p)
@@ -160,16 +163,54 @@ def read_bag_trajectory(bag: str | os.PathLike[str] | Sequence[str | os.PathLike
                 frame = str(msg.header.frame_id)
                 for ps in msg.poses:
                     # a path's poses carry their own stamps; the receive time is the path's
-                    stamps.append(time_to_s(ps.header.stamp) if stamp == "header" else ns_to_s(t_ns))
+                    stamps.append(time_to_ns(ps.header.stamp) if stamp == "header" else int(t_ns))
                     p, q, _ = _pose_of(ps)
                     xyz.append(p)
                     quat.append(q)
                     covs.append(None)
         if not stamps:
             raise InputError(f"{name}: no messages")
+        if not child:
+            child = _child_from_tf(bag, frame.lstrip("/"))
         cov_arr = np.array(covs, float) if all(c is not None for c in covs) else None
-        return _make_track(np.array(stamps, float), np.array(xyz, float), np.array(quat, float), cov_arr, name,
+        return _make_track(np.array(stamps, np.int64), np.array(xyz, float), np.array(quat, float), cov_arr, name,
                            frame, child, topic)
+
+
+def _child_from_tf(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], frame: str) -> str:
+    """The body frame of a pose message that names none (PoseStamped, PoseWithCovarianceStamped): the one
+    child the bag's TF moves under ``frame`` (a bag gtrig wrote publishes ``world -> robot``), else ``""``."""
+    from gtrig.io.rosbag.tf_tree import tf_edges
+
+    children = {e.child for e in tf_edges(bag, max_messages=200) if e.parent == frame and not e.static}
+    return children.pop() if len(children) == 1 else ""
+
+
+def trajectory_choices(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> list[tuple[str, str]]:
+    """``(topic, what)`` for every trajectory ``bag`` offers: its pose topics (type, message count) and the TF
+    chains gtrig.io.rosbag.tf_tree proposes."""
+    from gtrig.io.rosbag.tf_tree import propose_tf_trajectories, tf_edges
+    from gtrig.io.rosbag.topics import list_topics
+
+    out = [(s.topic, f"{s.msgtype.replace('/msg/', '/')}, {s.count}") for s in list_topics(bag)
+           if s.msgtype in POSE_TYPES]
+    return out + [(t, "TF chain") for t in propose_tf_trajectories(tf_edges(bag))]
+
+
+def choose_topic(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> str:
+    """The trajectory to read when none is named: gtrig's own ``/gtrig/pose`` (with its covariance), or the
+    bag's only trajectory; else an InputError that lists them."""
+    choices = trajectory_choices(bag)
+    topics = [t for t, _ in choices]
+    if "/gtrig/pose" in topics:
+        return "/gtrig/pose"
+    if len(choices) == 1:
+        return topics[0]
+    first = bag if isinstance(bag, (str, os.PathLike)) else bag[0]
+    if not choices:
+        raise InputError(f"{first}: no trajectory in the bag (no pose, odometry, path or TF topic)")
+    raise InputError(f"{first}: {len(choices)} trajectories; choose one with --topic: "
+                     + "; ".join(f"{t} ({w})" for t, w in choices))
 
 
 @contextlib.contextmanager
@@ -191,8 +232,8 @@ def _read_tf(reader: Any, tf: tuple[str, str, str], stamp: StampSource, name: st
     conns = [c for c in reader.connections if c.topic in topics]
     if not any(c.topic == tf_topic for c in conns):
         raise InputError(f"{reader.paths[0]}: no topic {tf_topic}")
-    # edges[child] = (parent, static, [stamps], [xyz], [quat])
-    edges: dict[str, tuple[str, bool, list[float], list[list[float]], list[list[float]]]] = {}
+    # edges[child] = (parent, static, [stamps in integer ns], [xyz], [quat])
+    edges: dict[str, tuple[str, bool, list[int], list[list[float]], list[list[float]]]] = {}
     for conn, t_ns, raw in reader.messages(conns):
         if conn.msgtype != TF_TYPE:
             raise InputError(f"{reader.paths[0]}:{conn.topic}: a {conn.msgtype}, not a {TF_TYPE}")
@@ -205,7 +246,7 @@ def _read_tf(reader: Any, tf: tuple[str, str, str], stamp: StampSource, name: st
                 if e[0] != p:
                     raise FormatError(f"{reader.paths[0]}:{conn.topic}: frame {c} has two parents, {e[0]} and {p}")
                 xyz, q, _ = _pose_of(ts)
-                e[2].append(time_to_s(ts.header.stamp) if stamp == "header" else ns_to_s(t_ns))
+                e[2].append(time_to_ns(ts.header.stamp) if stamp == "header" else int(t_ns))
                 e[3].append(xyz)
                 e[4].append(q)
 
@@ -236,7 +277,7 @@ def _read_tf(reader: Any, tf: tuple[str, str, str], stamp: StampSource, name: st
             inside &= (stamps >= st[0]) & (stamps <= st[-1])
         stamps = stamps[inside]
     else:
-        stamps = np.array([series[f][0][-1] for f in down_child + down_parent][:1] or [0.0])
+        stamps = np.array([series[f][0][-1] for f in down_child + down_parent][:1] or [0], np.int64)
     if not len(stamps):
         raise InputError(f"{name}: the moving links of the chain {parent} -> {child} never overlap in time")
 
@@ -256,9 +297,10 @@ def _read_tf(reader: Any, tf: tuple[str, str, str], stamp: StampSource, name: st
     return _make_track(stamps, T[:, :3, 3], q, None, name, parent, child, f"{tf_topic}:{parent}.{child}")
 
 
-def _edge_series(e: tuple[str, bool, list[float], list[list[float]], list[list[float]]], frame: str,
+def _edge_series(e: tuple[str, bool, list[int], list[list[float]], list[list[float]]], frame: str,
                  name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    st = np.array(e[2], float)
+    """(stamps (n,) int64 ns, xyz (n, 3), quat_xyzw (n, 4)) of one TF edge, sorted, repeats dropped."""
+    st = np.array(e[2], np.int64)
     xyz = np.array(e[3], float)
     q = np.array(e[4], float)
     order = np.argsort(st, kind="stable")  # several publishers interleave on /tf: sort, then dedupe
@@ -269,19 +311,23 @@ def _edge_series(e: tuple[str, bool, list[float], list[list[float]], list[list[f
     return st[keep], xyz[keep], np.where(np.abs(n - 1) > 1e-12, q / n, q)
 
 
-def _edge_at(s: tuple[np.ndarray, np.ndarray, np.ndarray], static: bool, stamps: np.ndarray) -> np.ndarray:
-    st, xyz, q = s
-    T = np.tile(np.eye(4), (len(stamps), 1, 1))
-    if static or len(st) == 1:
+def _edge_at(s: tuple[np.ndarray, np.ndarray, np.ndarray], static: bool, stamps_ns: np.ndarray) -> np.ndarray:
+    """(n, 4, 4) the edge at ``stamps_ns`` (int64): its message at an equal stamp, else interpolated."""
+    st_ns, xyz, q = s
+    T = np.tile(np.eye(4), (len(stamps_ns), 1, 1))
+    if static or len(st_ns) == 1:
         T[:, :3, :3] = Rotation.from_quat(q[-1]).as_matrix()
         T[:, :3, 3] = xyz[-1]
         return T
-    exact = np.searchsorted(st, stamps)
-    hit = (exact < len(st)) & (st[np.minimum(exact, len(st) - 1)] == stamps)
-    rot = Slerp(st, Rotation.from_quat(q))(np.clip(stamps, st[0], st[-1])).as_matrix()
-    pos = np.column_stack([np.interp(stamps, st, xyz[:, k]) for k in range(3)])
+    exact = np.searchsorted(st_ns, stamps_ns)
+    hit = (exact < len(st_ns)) & (st_ns[np.minimum(exact, len(st_ns) - 1)] == stamps_ns)
+    # seconds from the first message: float64 keeps nanoseconds over a few months
+    st = (st_ns - st_ns[0]).astype(float) * 1e-9
+    t = (stamps_ns - st_ns[0]).astype(float) * 1e-9
+    rot = Slerp(st, Rotation.from_quat(q))(np.clip(t, st[0], st[-1])).as_matrix()
+    pos = np.column_stack([np.interp(t, st, xyz[:, k]) for k in range(3)])
     # at a message's own stamp use it as published (slerp would round it by 1e-16)
-    idx = np.minimum(exact, len(st) - 1)[hit]
+    idx = np.minimum(exact, len(st_ns) - 1)[hit]
     rot[hit] = Rotation.from_quat(q[idx]).as_matrix()
     pos[hit] = xyz[idx]
     T[:, :3, :3] = rot
@@ -303,14 +349,15 @@ def write_bag_trajectory(track: PoseTrack, path: str | os.PathLike[str], ros_ver
     with BagWriter(path, ros_version, storage, force) as w:
         T = w.ts.types
         poses = []
+        stamps_ns = track.integer_stamps_ns()
         for i in range(len(track)):
-            t = float(track.stamps_s[i])
-            h = header(w.ts, ros_version, t, frame, seq=i)
+            t = int(stamps_ns[i])
+            h = header_ns(w.ts, ros_version, t, frame, seq=i)
             x, y, z = (float(v) for v in track.xyz[i])
             qx, qy, qz, qw = (float(v) for v in track.quat_xyzw[i])
             pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=y, z=z),
                                                orientation=T["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw))
-            w.write(topic, t, T["geometry_msgs/msg/PoseWithCovarianceStamped"](
+            w.write_ns(topic, t, T["geometry_msgs/msg/PoseWithCovarianceStamped"](
                 header=h, pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=C[i].copy())))
             if path_topic:
                 poses.append(T["geometry_msgs/msg/PoseStamped"](header=h, pose=pose))
@@ -318,10 +365,10 @@ def write_bag_trajectory(track: PoseTrack, path: str | os.PathLike[str], ros_ver
                 tr = T["geometry_msgs/msg/Transform"](
                     translation=T["geometry_msgs/msg/Vector3"](x=x, y=y, z=z),
                     rotation=T["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw))
-                w.write(tf_topic, t, T["tf2_msgs/msg/TFMessage"](transforms=[
+                w.write_ns(tf_topic, t, T["tf2_msgs/msg/TFMessage"](transforms=[
                     T["geometry_msgs/msg/TransformStamped"](header=h, child_frame_id=child, transform=tr)]))
         if path_topic and len(track):
-            t_last = float(track.stamps_s[-1])
-            w.write(path_topic, t_last, T["nav_msgs/msg/Path"](
-                header=header(w.ts, ros_version, t_last, frame), poses=poses))
+            t_last = int(stamps_ns[-1])
+            w.write_ns(path_topic, t_last, T["nav_msgs/msg/Path"](
+                header=header_ns(w.ts, ros_version, t_last, frame), poses=poses))
     return [Path(path)]
