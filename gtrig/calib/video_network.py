@@ -31,6 +31,8 @@ from itertools import combinations
 
 import cv2
 import numpy as np
+from scipy.sparse import csr_matrix, diags
+from scipy.sparse.linalg import spsolve
 from scipy.spatial.transform import Rotation
 
 from gtrig import geometry as geo
@@ -185,8 +187,20 @@ def project(X_cam: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
     return np.column_stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]])
 
 
+def _exp_so3(w: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula: a rotation vector (3,), rad, to a rotation matrix (3, 3)."""
+    th = float(np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]))
+    W = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    if th < 1e-12:
+        return np.eye(3) + W
+    return np.eye(3) + (np.sin(th) / th) * W + ((1.0 - np.cos(th)) / th**2) * (W @ W)
+
+
 def _perturb(T0: np.ndarray, p: np.ndarray) -> np.ndarray:
-    return geo.make_T(Rotation.from_rotvec(p[:3]).as_matrix() @ T0[:3, :3], T0[:3, 3] + p[3:])
+    T = np.eye(4)
+    T[:3, :3] = _exp_so3(p[:3]) @ T0[:3, :3]
+    T[:3, 3] = T0[:3, 3] + p[3:]
+    return T
 
 
 @dataclass(frozen=True)
@@ -273,7 +287,7 @@ def _huber_weights(r: np.ndarray, huber_px: float) -> np.ndarray:
 
 
 def _solve(prob: _Problem, cams: Mapping[str, CameraIntrinsics], P: np.ndarray, huber_px: float,
-           max_iter: int = 50) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+           max_iter: int = 30) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Levenberg-Marquardt on iteratively reweighted normal equations; returns x, r, J, weights."""
     n = 6 * len(prob.order) + 6 * len(prob.instants)
     x = np.zeros(n)
@@ -281,24 +295,25 @@ def _solve(prob: _Problem, cams: Mapping[str, CameraIntrinsics], P: np.ndarray, 
     r = _residuals(x, prob, cams, P)
     for _ in range(max_iter):
         w = _huber_weights(r, huber_px)
-        J = _jacobian(x, prob, cams, P)
-        H = J.T @ (J * w[:, None])
+        J = csr_matrix(_jacobian(x, prob, cams, P))
+        H = (J.T @ J.multiply(w[:, None])).tocsc()
         g = J.T @ (w * r)
         cost = float(np.sum(w * r * r))
+        d = H.diagonal() + 1e-12
         while True:
-            try:
-                dx = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), g)
-            except np.linalg.LinAlgError:
-                raise ConvergenceError("camera network adjustment: singular normal equations") from None
+            dx = -spsolve(H + diags(lam * d), g)
+            if not np.all(np.isfinite(dx)):
+                raise ConvergenceError("camera network adjustment: singular normal equations")
             r_new = _residuals(x + dx, prob, cams, P)
             if float(np.sum(w * r_new * r_new)) < cost or lam > 1e8:
                 break
             lam *= 10.0
         if lam > 1e8:
             break
+        new_cost = float(np.sum(w * r_new * r_new))
         x, r = x + dx, r_new
         lam = max(lam / 10.0, 1e-9)
-        if float(np.max(np.abs(dx))) < 1e-9:
+        if cost - new_cost < 1e-6 * cost or float(np.max(np.abs(dx))) < 1e-8:
             break
     w = _huber_weights(r, huber_px)
     return x, r, _jacobian(x, prob, cams, P), w
