@@ -93,7 +93,8 @@ class CharucoBoard:
             )
         names = aruco_dictionaries()
         if self.dictionary not in names:
-            raise InputError(f"ChArUco dictionary {self.dictionary!r}: not one of OpenCV's ({', '.join(sorted(names)[:6])}, ...)")
+            known = ", ".join(sorted(names)[:6])
+            raise InputError(f"ChArUco dictionary {self.dictionary!r}: not one of OpenCV's ({known}, ...)")
         n_markers = (self.squares_x * self.squares_y) // 2
         size = cv2.aruco.getPredefinedDictionary(names[self.dictionary]).bytesList.shape[0]
         if n_markers > size:
@@ -185,7 +186,8 @@ def _board_from_caliscope(d: dict[str, Any], where: str) -> CharucoBoard:
                 raise FormatError(f"{where}: units {d.get('units')!r}: expected inch or cm")
             square = min(float(d["board_width"]) / cols, float(d["board_height"]) / rows) * unit
         scale = float(d.get("aruco_scale", 0.75))
-        return CharucoBoard(cols, rows, square, square * scale, str(d["dictionary"]),
+        square = round(square, 9)  # to the nanometre: 5.4 cm is 0.054 m, not 0.054000000000000006
+        return CharucoBoard(cols, rows, square, round(square * scale, 9), str(d["dictionary"]),
                             bool(d.get("inverted", False)), bool(d.get("legacy_pattern", False)))
     except KeyError as e:
         raise FormatError(f"{where}: {e.args[0]}: missing field (caliscope's charuco.toml)") from None

@@ -318,7 +318,8 @@ def calibrate_point_sets(
         if e[worst] <= thr or len(keep) <= MIN_VIEWS:
             break
         rejected[names[keep[worst]]] = f"outlier: {e[worst]:.3f} px RMS (median {med:.3f} px)"
-        log.warning("rejected %s: reprojection RMS %.3f px, %.1f x the median", names[keep[worst]], e[worst], e[worst] / med)
+        log.warning("rejected %s: reprojection RMS %.3f px, %.1f x the median", names[keep[worst]], e[worst],
+                    e[worst] / med)
         del keep[worst]
     Ts = np.array([geo.make_T(cv2.Rodrigues(r)[0], t.ravel()) for r, t in zip(rvecs, tvecs, strict=True)])
     std = {n: float(s) for n, s in zip(STD_NAMES, np.asarray(std_int, dtype=float).ravel(), strict=False)}

@@ -44,7 +44,9 @@ def _camera(name: str, d: dict[str, Any], where: str) -> CaliscopeCamera:
     except KeyError as e:
         raise FormatError(f"{where}: {name}: {e.args[0]}: missing field") from None
     except (TypeError, ValueError):
-        raise FormatError(f"{where}: {name}: matrix, distortions, size, rotation, translation must be numbers") from None
+        raise FormatError(
+            f"{where}: {name}: matrix, distortions, size, rotation, translation must be numbers"
+        ) from None
     return CaliscopeCamera(name, CameraIntrinsics((w, h), K, dist, err, {}), err, T)
 
 
