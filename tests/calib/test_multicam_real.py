@@ -161,3 +161,27 @@ def test_relative_poses_near_caliscopes(root: Path, board, detections, intrinsic
     d_base, d_rot = _pose_differences(res, peer)
     assert d_base.max() < 0.020  # measured at most 14.9 mm
     assert d_rot.max() < 4.5  # measured at most 3.7 deg: lenses from 13-23 views of a 12-corner board
+
+
+def test_cli_calib_video_writes_lenses_and_network(root: Path, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from gtrig.cli.main import app
+
+    s = root / "post_optimization"
+    out = tmp_path / "out"
+    args = ["calib", "video", "--board", str(s / "charuco.toml"), "--videos", str(s / "calibration/extrinsic"),
+            "--out", str(out), "--step", "3", "--lenses", str(s / "camera_array.toml")]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    import yaml
+
+    doc = yaml.safe_load((out / "network.yaml").read_text())
+    assert doc["reference"] == "cam_0" and len(doc["pairs"]) == 6
+    base = {tuple(p["cameras"]): p["baseline_mm"] for p in doc["pairs"]}
+    assert abs(base[("cam_0", "cam_1")] - 1148.9) < 20  # caliscope's 1148.9 mm
+    assert sorted(p.name for p in out.iterdir()) == ["cam_0.yaml", "cam_1.yaml", "cam_2.yaml", "cam_3.yaml",
+                                                     "network.yaml"]
+    bad = CliRunner().invoke(app, [*args[:2], "--board", str(tmp_path / "none.toml"), *args[4:6], "--out",
+                                   str(tmp_path / "bad")])
+    assert bad.exit_code == 2 and "no such board file" in bad.output and not (tmp_path / "bad").exists()
