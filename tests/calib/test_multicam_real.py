@@ -23,7 +23,7 @@ from gtrig.io.caliscope import read_caliscope_cameras
 from gtrig.io.video import frame_timing, read_camera_video
 
 STEP = 2
-SESSIONS = ("charuco_calibration", "post_optimization")
+RECORDINGS = ("charuco_calibration", "post_optimization")
 CAMS = ("cam_0", "cam_1", "cam_2", "cam_3")
 
 
@@ -39,7 +39,7 @@ def board(root: Path) -> CharucoBoard:
 
 @pytest.fixture(scope="module")
 def detections(root: Path, board: CharucoBoard) -> dict[str, dict[str, VideoDetections]]:
-    return {s: detect_videos(find_videos(root / s / "calibration" / "extrinsic"), board, STEP) for s in SESSIONS}
+    return {s: detect_videos(find_videos(root / s / "calibration" / "extrinsic"), board, STEP) for s in RECORDINGS}
 
 
 def _fit(det: VideoDetections, board: CharucoBoard) -> PointSetFit:
@@ -97,7 +97,7 @@ def test_corners_agree_with_caliscope(root: Path, detections) -> None:
 
 
 def test_intrinsics_rms_at_most_caliscopes_error(root: Path, intrinsics) -> None:
-    for s in SESSIONS:
+    for s in RECORDINGS:
         peer = read_caliscope_cameras(root / s / "camera_array.toml")
         for c in CAMS:
             assert intrinsics[s][c].camera.rms_px <= peer[c].error_px, (s, c)  # measured 0.13-0.24 vs 0.33-0.54
@@ -117,17 +117,17 @@ def _rms_with_lens(det: VideoDetections, board: CharucoBoard, K: np.ndarray, dis
     return float(np.sqrt(np.mean(np.concatenate(e))))
 
 
-def test_two_sessions_intrinsics_consistent(root: Path, board, detections, intrinsics) -> None:
-    """The two sessions' lenses of each camera: where both sessions give 13 or more views, each lens explains
-    the other session's views (poses refitted) within caliscope's stated error (measured 0.15-0.21 px against
+def test_two_recordings_lenses_consistent(root: Path, board, detections, intrinsics) -> None:
+    """The two recordings' lenses of each camera: where both recordings give 13 or more views, each lens explains
+    the other recording's views (poses refitted) within caliscope's stated error (measured 0.15-0.21 px against
     0.37-0.54 px); fx, fy, cx, cy differ by less than 5 combined stated sigmas (measured at most 4.6, cam_0's
     fx: OpenCV's sigmas treat the corners as independent, and are optimistic for a 12-corner board)."""
-    peer = read_caliscope_cameras(root / SESSIONS[0] / "camera_array.toml")
+    peer = read_caliscope_cameras(root / RECORDINGS[0] / "camera_array.toml")
     for c in CAMS:
-        fa, fb = (intrinsics[s][c] for s in SESSIONS)
+        fa, fb = (intrinsics[s][c] for s in RECORDINGS)
         a, b = fa.camera, fb.camera
         if min(len(fa.names), len(fb.names)) >= 13:
-            for lens, other in ((a, SESSIONS[1]), (b, SESSIONS[0])):
+            for lens, other in ((a, RECORDINGS[1]), (b, RECORDINGS[0])):
                 rms = _rms_with_lens(detections[other][c], board, lens.camera_matrix, lens.dist_coeffs)
                 assert rms <= peer[c].error_px, (c, other, rms)
         for k, (i, j) in (("fx", (0, 0)), ("fy", (1, 1)), ("cx", (0, 2)), ("cy", (1, 2))):
@@ -150,7 +150,7 @@ def _pose_differences(res, peer) -> tuple[np.ndarray, np.ndarray]:
 def test_relative_poses_near_caliscopes(root: Path, board, detections, intrinsics) -> None:
     """The six pairs' baselines and relative rotations against caliscope's, with caliscope's lenses (from its
     dedicated intrinsic videos) and with gtrig's lenses from the same extrinsic video."""
-    s = SESSIONS[0]
+    s = RECORDINGS[0]
     peer = read_caliscope_cameras(root / s / "camera_array.toml")
     res = calibrate_video_network(detections[s], {c: peer[c].intrinsics for c in CAMS}, board)
     assert res.n_instants >= 15
