@@ -147,9 +147,13 @@ class CharucoCornerDetector:
         params.detectInvertedMarker = board.inverted
         self._detector = cv2.aruco.CharucoDetector(board.opencv_board(), cv2.aruco.CharucoParameters(), params)
 
-    def detect(self, grey: np.ndarray, min_corners: int = MIN_CORNERS) -> CharucoView | None:
-        """The board's corners in an 8-bit grey image, or None with fewer than ``min_corners``."""
-        corners, ids, _mc, _mi = self._detector.detectBoard(grey)
+    def detect(self, grey: np.ndarray, min_corners: int = MIN_CORNERS, *, mirrored: bool = False) -> CharucoView | None:
+        """The board's corners in an 8-bit grey image, or None with fewer than ``min_corners``.
+
+        ``mirrored``: the image is a left-right mirror of what the lens saw (a webcam's mirror mode); it is
+        flipped back before detection, and the corners are in the unmirrored image.
+        """
+        corners, ids, _mc, _mi = self._detector.detectBoard(cv2.flip(grey, 1) if mirrored else grey)
         if ids is None or len(ids) < min_corners:
             return None
         ids_ = np.asarray(ids, dtype=np.int64).ravel()

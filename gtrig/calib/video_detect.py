@@ -43,8 +43,9 @@ class VideoDetections:
     views: tuple[CharucoView, ...]
 
 
-def detect_video(video: CameraVideo, board: CharucoBoard, step: int = 1) -> VideoDetections:
-    """Detect ``board`` in every ``step``-th frame of ``video`` (frames decoded one at a time)."""
+def detect_video(video: CameraVideo, board: CharucoBoard, step: int = 1, *, mirrored: bool = False) -> VideoDetections:
+    """Detect ``board`` in every ``step``-th frame of ``video`` (frames decoded one at a time); ``mirrored``:
+    the video is left-right mirrored (:meth:`CharucoCornerDetector.detect`)."""
     detector = CharucoCornerDetector(board)
     ks: list[int] = []
     views: list[CharucoView] = []
@@ -53,7 +54,7 @@ def detect_video(video: CameraVideo, board: CharucoBoard, step: int = 1) -> Vide
     for k, grey in video.iter_frames(step):
         size = (int(grey.shape[1]), int(grey.shape[0]))
         n += 1
-        v = detector.detect(grey)
+        v = detector.detect(grey, mirrored=mirrored)
         if v is not None:
             ks.append(k)
             views.append(v)
