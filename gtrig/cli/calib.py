@@ -302,6 +302,8 @@ def video(
     from gtrig.cli import checks
 
     checks.input_folder("--videos", videos)
+    checks.output_folder("--out", out)
+    checks.not_inside("--out", out, videos, "the videos' folder")
     checks.count("--step", step, lo=1, hi=1000)
     b = read_board_file(board)
     given = _given_lenses(lenses)

@@ -185,3 +185,6 @@ def test_cli_calib_video_writes_lenses_and_network(root: Path, tmp_path: Path) -
     bad = CliRunner().invoke(app, [*args[:2], "--board", str(tmp_path / "none.toml"), *args[4:6], "--out",
                                    str(tmp_path / "bad")])
     assert bad.exit_code == 2 and "no such board file" in bad.output and not (tmp_path / "bad").exists()
+    for extra, words in ((["--step", "0"], "--step"), (["--out", str(s / "charuco.toml")], "is a file")):
+        bad = CliRunner().invoke(app, [*args[:8], *extra] if extra[0] == "--step" else [*args[:6], *extra])
+        assert bad.exit_code == 2 and words in bad.output, bad.output
