@@ -93,7 +93,7 @@ def test_corners_agree_with_caliscope(root: Path, detections) -> None:
                     d.append(np.linalg.norm(xy - ref[(int(inst), cid, int(i))]))
     d_ = np.array(d)
     assert d_.size > 500
-    assert np.median(d_) < 0.5  # measured 0.2 px: the same corners, refined differently
+    assert np.median(d_) < 0.5  # measured median 0.29 px, 95th percentile 1.2 px over 955 corners
 
 
 def test_intrinsics_rms_at_most_caliscopes_error(root: Path, intrinsics) -> None:
