@@ -188,3 +188,16 @@ def test_cli_calib_video_writes_lenses_and_network(root: Path, tmp_path: Path) -
     for extra, words in ((["--step", "0"], "--step"), (["--out", str(s / "charuco.toml")], "is a file")):
         bad = CliRunner().invoke(app, [*args[:8], *extra] if extra[0] == "--step" else [*args[:6], *extra])
         assert bad.exit_code == 2 and words in bad.output, bad.output
+
+
+def test_plain_frame_times_and_frames_on_demand(root: Path, tmp_path: Path) -> None:
+    """gtrig's plain ``<cam>.timestamps.csv`` beside a video; every 10th frame decoded, a gap reported."""
+    src = root / "post_optimization/calibration/extrinsic/cam_1.mp4"
+    (tmp_path / "left.mp4").symlink_to(src.resolve())
+    stamps = np.r_[np.arange(20), np.arange(23, 60)] / 6.0  # 57 frames, three missing after the 20th
+    (tmp_path / "left.timestamps.csv").write_text(
+        "frame,stamp_s\n" + "".join(f"{i},{t:.6f}\n" for i, t in enumerate(stamps)))
+    (v,) = find_videos(tmp_path)
+    assert v.camera == "left" and (v.timing.n_dropped, list(v.timing.dropped_after)) == (3, [19])
+    got = [(k, img.shape) for k, img in v.iter_frames(step=10)]
+    assert [k for k, _ in got] == [0, 10, 20, 30, 40, 50] and all(s == (720, 1280) for _, s in got)
