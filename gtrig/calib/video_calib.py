@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -72,6 +72,7 @@ def calibrate_from_videos(
     lenses: Mapping[str, CameraIntrinsics] | None = None,
     reference: str | None = None,
     estimate_k3: bool = False,
+    mirrored: Sequence[str] = (),
 ) -> VideoCalibration:
     """Calibrate the cameras whose videos are in ``videos_dir`` (module docstring).
 
@@ -82,9 +83,10 @@ def calibrate_from_videos(
     step : read every ``step``-th frame.
     lenses : intrinsics to hold instead of calibrating them, by camera name (all or some).
     reference : the camera whose frame is the world (default: the first by name).
+    mirrored : cameras whose videos are left-right mirrored (a webcam's mirror mode).
     """
     vids = {v.camera: v for v in find_videos(videos_dir)}
-    dets = detect_videos(list(vids.values()), board, step)
+    dets = detect_videos(list(vids.values()), board, step, mirrored)
     given = dict(lenses or {})
     fits = {c: fit_lens(d, board, estimate_k3=estimate_k3) for c, d in dets.items() if c not in given}
     cams = {c: given[c] if c in given else fits[c].camera for c in dets}

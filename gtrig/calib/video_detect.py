@@ -85,6 +85,10 @@ def find_videos(folder: str | os.PathLike[str]) -> list[CameraVideo]:
     return out
 
 
-def detect_videos(videos: Sequence[CameraVideo], board: CharucoBoard, step: int = 1) -> dict[str, VideoDetections]:
-    """:func:`detect_video` for each camera, by camera name."""
-    return {v.camera: detect_video(v, board, step) for v in videos}
+def detect_videos(videos: Sequence[CameraVideo], board: CharucoBoard, step: int = 1,
+                  mirrored: Sequence[str] = ()) -> dict[str, VideoDetections]:
+    """:func:`detect_video` for each camera, by camera name; the cameras named in ``mirrored`` are flipped."""
+    unknown = set(mirrored) - {v.camera for v in videos}
+    if unknown:
+        raise InputError(f"mirrored camera(s) {', '.join(sorted(unknown))}: no such video")
+    return {v.camera: detect_video(v, board, step, mirrored=v.camera in mirrored) for v in videos}

@@ -295,6 +295,9 @@ def video(
     ),
     reference: str = typer.Option(None, "--reference", help="The camera whose frame is the world."),
     k3: bool = typer.Option(False, "--k3", help="Also estimate the 6th-order radial term k3."),
+    mirrored: list[str] = typer.Option(
+        [], "--mirrored", help="A camera whose video is left-right mirrored (repeat for several)."
+    ),
 ) -> None:
     """Calibrate fixed cameras from videos of a hand-held ChArUco board: lenses, then relative poses."""
     from gtrig.calib.charuco import read_board_file
@@ -307,7 +310,8 @@ def video(
     checks.count("--step", step, lo=1, hi=1000)
     b = read_board_file(board)
     given = _given_lenses(lenses)
-    cal = calibrate_from_videos(videos, b, step=step, lenses=given, reference=reference, estimate_k3=k3)
+    cal = calibrate_from_videos(videos, b, step=step, lenses=given, reference=reference, estimate_k3=k3,
+                                mirrored=mirrored)
     write_video_calibration(out, cal)
     console.print(styled(out, "bold"), f": {b.spec()}; reference {cal.network.reference}", sep="")
     for c, lens in cal.lenses.items():
