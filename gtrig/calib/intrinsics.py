@@ -256,3 +256,86 @@ def calibrate_intrinsics(
             (msg, *res.warnings),
         )
     return res
+
+
+@dataclass(frozen=True)
+class PointSetFit:
+    """The outcome of :func:`calibrate_point_sets`.
+
+    Attributes
+    ----------
+    camera : the calibration; ``extra`` holds ``std`` (each parameter's standard deviation, pixels for
+        fx fy cx cy), ``per_view_rms_px``, ``rejected`` and ``views_used``.
+    names : (V,) the names of the views used.
+    T_cam_board : (V, 4, 4) the board's pose in each used view (metres).
+    per_view_rms_px : (V,) reprojection RMS of each used view, pixels.
+    rejected : {name: reason} of the outlier views.
+    """
+
+    camera: CameraIntrinsics
+    names: tuple[str, ...]
+    T_cam_board: np.ndarray
+    per_view_rms_px: np.ndarray
+    rejected: dict[str, str]
+
+    @property
+    def std(self) -> dict[str, float]:
+        return dict(self.camera.extra.get("std", {}))
+
+
+def calibrate_point_sets(
+    object_points: Sequence[np.ndarray],
+    image_points: Sequence[np.ndarray],
+    names: Sequence[str],
+    image_size: tuple[int, int],
+    *,
+    estimate_k3: bool = False,
+    min_reject_px: float = 0.15,
+) -> PointSetFit:
+    """Calibrate one camera from views of any planar target with partial corner sets (a ChArUco board).
+
+    Zhang's method with the outlier rule of :func:`calibrate_views` (module docstring).
+
+    Parameters
+    ----------
+    object_points : (V,) arrays (N_i, 3), the corners seen in view i in the board frame, metres (z = 0).
+    image_points : (V,) arrays (N_i, 2), their pixels.
+    names : (V,) a name per view, for the messages.
+    image_size : (w, h) pixels.
+
+    Raises
+    ------
+    InputError
+        Fewer than 3 views. ConvergenceError: OpenCV's calibration fails.
+    """
+    obj = [np.asarray(p, dtype=np.float32).reshape(-1, 3) for p in object_points]
+    img = [np.asarray(p, dtype=np.float32).reshape(-1, 1, 2) for p in image_points]
+    keep = list(range(len(obj)))
+    if len(keep) < MIN_VIEWS:
+        raise InputError(f"too few views: {len(keep)} with the board, need at least {MIN_VIEWS}")
+    flags = 0 if estimate_k3 else cv2.CALIB_FIX_K3
+    rejected: dict[str, str] = {}
+    while True:
+        rms, K, dist, rvecs, tvecs, std_int, _std_ext, per_view = _run(
+            [obj[i] for i in keep], [img[i] for i in keep], image_size, flags, None
+        )
+        e = np.asarray(per_view, dtype=float).ravel()
+        med = float(np.median(e))
+        thr = max(3.0 * med, med + 5.0 * 1.4826 * float(np.median(np.abs(e - med))), min_reject_px)
+        worst = int(np.argmax(e))
+        if e[worst] <= thr or len(keep) <= MIN_VIEWS:
+            break
+        rejected[names[keep[worst]]] = f"outlier: {e[worst]:.3f} px RMS (median {med:.3f} px)"
+        log.warning("rejected %s: reprojection RMS %.3f px, %.1f x the median", names[keep[worst]], e[worst],
+                    e[worst] / med)
+        del keep[worst]
+    Ts = np.array([geo.make_T(cv2.Rodrigues(r)[0], t.ravel()) for r, t in zip(rvecs, tvecs, strict=True)])
+    std = {n: float(s) for n, s in zip(STD_NAMES, np.asarray(std_int, dtype=float).ravel(), strict=False)}
+    if not estimate_k3:
+        std["k3"] = 0.0
+    used = tuple(names[i] for i in keep)
+    extra = {"std": std, "per_view_rms_px": dict(zip(used, e.tolist(), strict=True)), "rejected": rejected,
+             "views_used": len(keep)}
+    cam = CameraIntrinsics(image_size, np.asarray(K, dtype=float), np.asarray(dist, dtype=float).ravel()[:5],
+                           float(rms), extra)
+    return PointSetFit(cam, used, Ts, e, rejected)

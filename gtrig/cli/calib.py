@@ -1,4 +1,4 @@
-"""``gtrig calib intrinsics | network | recording | check | steady``: camera calibration."""
+"""``gtrig calib intrinsics | network | recording | check | steady | video``: camera calibration."""
 
 from __future__ import annotations
 
@@ -274,3 +274,65 @@ def steady(
     console.print(f"moved: {', '.join(moved)}" if moved else "all cameras steady")
     if moved:
         raise typer.Exit(1)
+
+
+def _given_lenses(path: Path | None) -> dict:
+    """Lenses to hold: a caliscope config.toml / camera_array.toml, or a folder of <cam>.yaml."""
+    if path is None:
+        return {}
+    from gtrig.errors import InputError
+    from gtrig.io.caliscope import read_caliscope_cameras
+    from gtrig.io.camfile import read_cam_yaml
+
+    if path.is_dir():
+        return {p.stem: read_cam_yaml(p) for p in sorted(path.glob("*.yaml")) if p.stem != "network"}
+    if path.suffix.lower() == ".toml":
+        return {n: c.intrinsics for n, c in read_caliscope_cameras(path).items()}
+    raise InputError(f"--lenses {path}: expected a folder of <cam>.yaml or a caliscope .toml")
+
+
+@app.command("video")
+@handle_errors
+def video(
+    board: Path = typer.Option(
+        ..., "--board", help="ChArUco board file: gtrig's (YAML/TOML) or caliscope's charuco.toml."
+    ),
+    videos: Path = typer.Option(
+        ..., "--videos", help="Folder of <cam>.mp4 with <cam>.timestamps.csv, or caliscope's timestamps.csv."
+    ),
+    out: Path = typer.Option(..., "--out", help="Folder to write <cam>.yaml and network.yaml into."),
+    step: int = typer.Option(1, "--step", help="Read every n-th frame."),
+    lenses: Path = typer.Option(
+        None, "--lenses", help="Hold these lenses: a folder of <cam>.yaml or caliscope's camera_array.toml."
+    ),
+    reference: str = typer.Option(None, "--reference", help="The camera whose frame is the world."),
+    k3: bool = typer.Option(False, "--k3", help="Also estimate the 6th-order radial term k3."),
+    mirrored: list[str] = typer.Option(
+        [], "--mirrored", help="A camera whose video is left-right mirrored (repeat for several)."
+    ),
+) -> None:
+    """Calibrate fixed cameras from videos of a hand-held ChArUco board: lenses, then relative poses."""
+    from gtrig.calib.charuco import read_board_file
+    from gtrig.calib.video_calib import calibrate_from_videos, write_video_calibration
+    from gtrig.cli import checks
+
+    checks.input_folder("--videos", videos)
+    checks.output_folder("--out", out)
+    checks.not_inside("--out", out, videos, "the videos' folder")
+    checks.count("--step", step, lo=1, hi=1000)
+    b = read_board_file(board)
+    given = _given_lenses(lenses)
+    cal = calibrate_from_videos(videos, b, step=step, lenses=given, reference=reference, estimate_k3=k3,
+                                mirrored=mirrored)
+    write_video_calibration(out, cal)
+    console.print(styled(out, "bold"), f": {b.spec()}; reference {cal.network.reference}", sep="")
+    for c, lens in cal.lenses.items():
+        v, det = cal.videos[c], cal.detections[c]
+        src = f"lens RMS {lens.rms_px:.3f} px from {len(cal.fits[c].names)} views" if c in cal.fits else "lens held"
+        console.print(f"  {c}: {v.timing.summary()}; board in {len(det.views)} of {det.n_frames_read} frames "
+                      f"read; {src}; network RMS {cal.network.rms_px.get(c, float('nan')):.3f} px")
+    console.print(f"  network: {cal.network.n_instants} instants, {cal.network.n_corners} corners, "
+                  f"RMS {cal.network.rms_px_all:.3f} px")
+    for p in cal.pairs:
+        console.print(f"  {p.cam_a}-{p.cam_b}: baseline {1000 * p.baseline_m:.1f} ± "
+                      f"{1000 * p.sigma_baseline_m:.1f} mm, angle {p.angle_deg:.2f} ± {p.sigma_angle_deg:.2f} deg")
