@@ -50,6 +50,30 @@ class _ArucoCorner:
     corner_cov: np.ndarray | None = None
 
 
+def aruco_for_rig(rig: Rig, subpix: bool = True) -> cv2.aruco.ArucoDetector:
+    """OpenCV's ArUco detector for the rig's markers (one family, a dictionary of the rig's IDs in sorted
+    order; the family's border width), with its default parameters and, with ``subpix``,
+    ``CORNER_REFINE_SUBPIX``."""
+    from gtrig.markers.families import family_spec, marker_cells
+
+    fams = {m.family for m in rig.robot.markers}
+    if len(fams) != 1:
+        raise InputError("the ArUco fallback handles one marker family per rig")
+    fam = fams.pop()
+    spec = family_spec(fam)
+    b = spec.border_cells
+    bits = [marker_cells(fam, i)[b:-b, b:-b].astype(np.uint8) for i in sorted(m.id for m in rig.robot.markers)]
+    dictionary = cv2.aruco.Dictionary(np.zeros((0, 1, 4), np.uint8), spec.data_cells, 0)
+    dictionary.bytesList = np.concatenate([cv2.aruco.Dictionary.getByteListFromBits(x) for x in bits], axis=0)
+    dictionary.maxCorrectionBits = 1 if fam in (MarkerFamily.ARTOOLKITPLUS_SIMPLE,
+                                                MarkerFamily.ARTOOLKITPLUS_SIMPLE_THIN) else 0
+    params = cv2.aruco.DetectorParameters()
+    params.markerBorderBits = b
+    if subpix:
+        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    return cv2.aruco.ArucoDetector(dictionary, params)
+
+
 class ArucoDetector:
     """OpenCV's ArUco detector with ``CORNER_REFINE_SUBPIX`` for the rig's markers (one family).
 
@@ -63,26 +87,8 @@ class ArucoDetector:
     version = cv2.__version__
 
     def __init__(self, rig: Rig, sigma_px: float = ARUCO_SIGMA_PX) -> None:
-        from gtrig.markers.families import family_spec, marker_cells
-
-        fams = {m.family for m in rig.robot.markers}
-        if len(fams) != 1:
-            raise InputError("the ArUco fallback handles one marker family per rig")
-        fam = fams.pop()
-        spec = family_spec(fam)
         self.ids = sorted(m.id for m in rig.robot.markers)
-        b = spec.border_cells
-        bits = [marker_cells(fam, i)[b:-b, b:-b].astype(np.uint8) for i in self.ids]
-        d = spec.data_cells
-        dictionary = cv2.aruco.Dictionary(np.zeros((0, 1, 4), np.uint8), d, 0)
-        rows = [cv2.aruco.Dictionary.getByteListFromBits(x) for x in bits]
-        dictionary.bytesList = np.concatenate(rows, axis=0)
-        dictionary.maxCorrectionBits = 1 if fam in (MarkerFamily.ARTOOLKITPLUS_SIMPLE,
-                                                    MarkerFamily.ARTOOLKITPLUS_SIMPLE_THIN) else 0
-        params = cv2.aruco.DetectorParameters()
-        params.markerBorderBits = b
-        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-        self._detector = cv2.aruco.ArucoDetector(dictionary, params)
+        self._detector = aruco_for_rig(rig, subpix=True)
         self.sigma_px = float(sigma_px)
 
     def __call__(self, image: np.ndarray, camera: CameraGeometry, file_tone: Tone = "linear",
