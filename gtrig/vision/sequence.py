@@ -596,8 +596,8 @@ def _scan_checkpoint(path: Path, key: str,
             log.warning("%s: not a GTvision checkpoint (corrupt header); starting afresh", path)
             return 0
         if head["key"] != key:
-            raise InputError(f"{path}: checkpoint of another run (other images, detector, lenses or markers); "
-                             "delete it or choose another output")
+            raise InputError(f"{path}: checkpoint of another run (other images, detector, tracking, lenses or "
+                             "markers); delete it or choose another output")
         good = f.tell()
         for line in f:
             try:
