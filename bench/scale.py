@@ -175,8 +175,10 @@ def seed_checkpoint(long_rec: Path, rig_path: Path, cycle_ck: Path, out_ck: Path
         _key,
         camera_indices,
         detection_chunks,
+        detector_label,
         make_instants,
     )
+    from gtrig.vision.track import TrackOptions
 
     rig = load_rig(rig_path)
     first: dict[tuple[str, str], object] = {}
@@ -189,7 +191,7 @@ def seed_checkpoint(long_rec: Path, rig_path: Path, cycle_ck: Path, out_ck: Path
     indices = camera_indices(long_rec, "run", rig)
     det = make_detector(rig, "auto")
     paths = {name: [ix.source(i) for i in range(len(ix))] for name, ix in indices.items()}
-    key = _key(rig, "run", f"{det.name}/{det.version}", paths, long_rec)
+    key = _key(rig, "run", detector_label(det.name, det.version, TrackOptions(), chunk_size), paths, long_rec)
     instants = make_instants(indices, "run")
     n_lines = 0
     with open(out_ck, "w", encoding="utf-8") as f:

@@ -548,6 +548,13 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
 
 
 # ----------------------------------------------------------------------------------------- the runner
+def detector_label(name: str, version: str, track: TrackOptions, chunk_size: int) -> str:
+    """What makes the detections besides the images and the rig, as the checkpoint's key holds it: the
+    detector's name and version, and when tracking, its settings and the chunk size (each chunk starts
+    with a whole-image pass); untracked, the label of before tracking existed."""
+    return f"{name}/{version}" + ("" if not track.enabled else f"/{track.key()}/chunk {chunk_size}")
+
+
 def _key(rig: Rig, sequence: str, detector: str, paths: Mapping[str, Iterable[str]], rec: Path | None = None) -> str:
     """What the checkpointed detections depend on: the images, the detector, the lenses and the markers'
     families and sizes; not the poses, the estimator's options nor how images group into instants, so a
@@ -948,9 +955,7 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     # the workers read their chunk's images by path; the client keeps no list of them
     paths = {name: map(ix.source, range(len(ix))) for name, ix in indices.items()}
     track = TrackOptions() if track is None else track
-    # tracked detections depend on the chunks (each starts with a whole-image pass)
-    how = "" if not track.enabled else f"/{track.key()}/chunk {chunk_size}"
-    key = _key(rig, sequence, f"{det.name}/{det.version}{how}", paths, rec)
+    key = _key(rig, sequence, detector_label(det.name, det.version, track, chunk_size), paths, rec)
     ctx = WorkerContext.of(rig, detector, track)
     _seed(ctx, model, det)
     dets = _open_checkpoint(None if checkpoint is None else Path(checkpoint), key, stale_checkpoint, indices)
