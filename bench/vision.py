@@ -16,7 +16,8 @@ Levels
     estimation included). This is the acceptance measurement of issue 6.
 ``tracking``: one sequence of a full simulated recording (``--sequence``, default run) with the markers
     tracked from image to image (:mod:`gtrig.vision.track`) and with every image searched whole, in the same
-    run: the whole GTvision stage's images per second (reading, detection, noise calibration, estimation),
+    run: the whole GTvision stage's images per second (reading, detection, noise calibration, estimation;
+    wall, and CPU per image, this process's and its workers', a figure a loaded machine disturbs less),
     the localized share and the accuracy against the truth of both, beside OpenCV's bare whole-image
     detection of the same images (``cv2.aruco.ArucoDetector`` with its default parameters and threads, a
     dictionary of the rig's markers; reading not counted).
@@ -266,6 +267,14 @@ def bench_recording(rec: Path, rig_path: Path, workers: int) -> None:
     print("\n".join(lines))
 
 
+def _cpu_s() -> float:
+    """CPU seconds of this process and of its finished children (the workers of a run, once it returns)."""
+    import resource
+
+    a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
+
+
 def bench_tracking(rec: Path, rig_path: Path, workers: int, sequence: str) -> None:
     from gtrig.io.frames import read_image
     from gtrig.rig import load_rig
@@ -278,7 +287,9 @@ def bench_tracking(rec: Path, rig_path: Path, workers: int, sequence: str) -> No
     print(f"\n### Tracking, {rec} {sequence} (rig {rig_path}), {workers or 'all'} worker(s)\n")
     rows = []
     for label, track in (("whole images", TrackOptions(enabled=False)), ("tracked", TrackOptions())):
+        cpu0 = _cpu_s()
         res = run_recording(rec, rig, sequence, planar=True, workers=workers, track=track)
+        cpu = _cpu_s() - cpu0
         acc = accuracy_on_recording(res, rec)
         n_img = sum(res.images_per_camera.values())
         sec = res.seconds
@@ -287,7 +298,8 @@ def bench_tracking(rec: Path, rig_path: Path, workers: int, sequence: str) -> No
         rows.append(f"| {label:<12} | {n_img / sec['total']:7.1f} | {n_img / sec['parallel']:7.1f} | "
                     f"{sec['total']:6.1f} | {acc.localized:4d}/{acc.instants:<4d} | {share:>18} | "
                     f"{100 * acc.pos_err_mean_m:.3f} / {100 * acc.pos_err_max_m:.2f} | "
-                    f"{math.degrees(acc.yaw_err_mean_rad):.4f} | {acc.nees_mean / acc.nees_dof:.2f} |")
+                    f"{math.degrees(acc.yaw_err_mean_rad):.4f} | {acc.nees_mean / acc.nees_dof:.2f} | "
+                    f"{1e3 * cpu / n_img:.1f} |")
     cv = aruco_for_rig(rig, subpix=False)
     t_read = t_cv = 0.0
     n_cv = found = 0
@@ -302,8 +314,9 @@ def bench_tracking(rec: Path, rig_path: Path, workers: int, sequence: str) -> No
             n_cv += 1
             found += 0 if ids is None else len(ids)
     print("| search       | images/s (stage) | images/s (detection pass) | stage s | localized | "
-          "visible-marker images localized | mean / max position cm | mean abs yaw deg | NEES/dof |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "visible-marker images localized | mean / max position cm | mean abs yaw deg | NEES/dof | "
+          "CPU ms per image |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     print("\n".join(rows))
     print(f"\nOpenCV ArucoDetector (defaults, its own threads), the same {n_cv} images: {n_cv / t_cv:.1f} images/s "
           f"of detection ({1e3 * t_cv / n_cv:.2f} ms per image, {found} markers; reading the images, not counted: "
