@@ -112,7 +112,7 @@ def _warm(ctx: object, camera: str, path: str) -> None:
     the per-image CPU figures."""
     from gtrig.vision.sequence import _process_chunk
 
-    _process_chunk(ctx, camera, [0], [path])  # type: ignore[arg-type]
+    _process_chunk(ctx, camera, [0], [path], [0.0])  # type: ignore[arg-type]
 
 
 def child_vision(rec: Path, rig_path: Path, mode: str, checkpoint: Path | None) -> dict[str, object]:
@@ -137,9 +137,10 @@ def child_vision(rec: Path, rig_path: Path, mode: str, checkpoint: Path | None) 
             spec = stack.enter_context(dask_cluster(rec.parent / f"{rec.name}_cluster", int(n)))
         ex = stack.enter_context(open_executor(spec))
         from gtrig.vision.sequence import WorkerContext, camera_indices
+        from gtrig.vision.track import TrackOptions
 
         ix = next(iter(camera_indices(rec, "run", rig).values()))
-        warm = (WorkerContext.of(rig, "auto"), ix.camera, ix.source(0))
+        warm = (WorkerContext.of(rig, "auto", TrackOptions()), ix.camera, ix.source(0))  # run_recording's
         if ex is not None:
             ex.run(_warm, *warm)  # type: ignore[attr-defined]
         _warm(*warm)  # the client (forked into the local pool's workers)
