@@ -112,7 +112,7 @@ def _warm(ctx: object, camera: str, path: str) -> None:
     the per-image CPU figures."""
     from gtrig.vision.sequence import _process_chunk
 
-    _process_chunk(ctx, camera, [0], [path])  # type: ignore[arg-type]
+    _process_chunk(ctx, camera, [0], [path], [0.0])  # type: ignore[arg-type]
 
 
 def child_vision(rec: Path, rig_path: Path, mode: str, checkpoint: Path | None) -> dict[str, object]:
@@ -137,9 +137,10 @@ def child_vision(rec: Path, rig_path: Path, mode: str, checkpoint: Path | None) 
             spec = stack.enter_context(dask_cluster(rec.parent / f"{rec.name}_cluster", int(n)))
         ex = stack.enter_context(open_executor(spec))
         from gtrig.vision.sequence import WorkerContext, camera_indices
+        from gtrig.vision.track import TrackOptions
 
         ix = next(iter(camera_indices(rec, "run", rig).values()))
-        warm = (WorkerContext.of(rig, "auto"), ix.camera, ix.source(0))
+        warm = (WorkerContext.of(rig, "auto", TrackOptions()), ix.camera, ix.source(0))  # run_recording's
         if ex is not None:
             ex.run(_warm, *warm)  # type: ignore[attr-defined]
         _warm(*warm)  # the client (forked into the local pool's workers)
@@ -175,8 +176,10 @@ def seed_checkpoint(long_rec: Path, rig_path: Path, cycle_ck: Path, out_ck: Path
         _key,
         camera_indices,
         detection_chunks,
+        detector_label,
         make_instants,
     )
+    from gtrig.vision.track import TrackOptions
 
     rig = load_rig(rig_path)
     first: dict[tuple[str, str], object] = {}
@@ -189,7 +192,7 @@ def seed_checkpoint(long_rec: Path, rig_path: Path, cycle_ck: Path, out_ck: Path
     indices = camera_indices(long_rec, "run", rig)
     det = make_detector(rig, "auto")
     paths = {name: [ix.source(i) for i in range(len(ix))] for name, ix in indices.items()}
-    key = _key(rig, "run", f"{det.name}/{det.version}", paths, long_rec)
+    key = _key(rig, "run", detector_label(det.name, det.version, TrackOptions(), chunk_size), paths, long_rec)
     instants = make_instants(indices, "run")
     n_lines = 0
     with open(out_ck, "w", encoding="utf-8") as f:

@@ -14,9 +14,17 @@ Levels
     OpenCV's ArUco subpixel corners (as the seeds ran it), and
     the throughput (images of 1024 x 768 per second, reading, detection, noise calibration and
     estimation included). This is the acceptance measurement of issue 6.
+``tracking``: one sequence of a full simulated recording (``--sequence``, default run) with the markers
+    tracked from image to image (:mod:`gtrig.vision.track`) and with every image searched whole, in the same
+    run: the whole GTvision stage's images per second (reading, detection, noise calibration, estimation;
+    wall, and CPU per image, this process's and its workers', a figure a loaded machine disturbs less),
+    the localized share and the accuracy against the truth of both, beside OpenCV's bare whole-image
+    detection of the same images (``cv2.aruco.ArucoDetector`` with its default parameters and threads, a
+    dictionary of the rig's markers; reading not counted).
 
 Usage: ``python bench/vision.py [--seeds 0 1 2] [--level corners images] [--workers 2]``;
-``python bench/vision.py --level recording --recording REC --rig REC_OUT/rig.calibrated.yaml --workers 2``
+``python bench/vision.py --level recording --recording REC --rig REC_OUT/rig.calibrated.yaml --workers 2``;
+``python bench/vision.py --level tracking --recording REC --rig RIG --workers 2 [--sequence run]``
 """
 
 from __future__ import annotations
@@ -259,16 +267,73 @@ def bench_recording(rec: Path, rig_path: Path, workers: int) -> None:
     print("\n".join(lines))
 
 
+def _cpu_s() -> float:
+    """CPU seconds of this process and of its finished children (the workers of a run, once it returns)."""
+    import resource
+
+    a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
+
+
+def bench_tracking(rec: Path, rig_path: Path, workers: int, sequence: str) -> None:
+    from gtrig.io.frames import read_image
+    from gtrig.rig import load_rig
+    from gtrig.vision.detect import aruco_for_rig
+    from gtrig.vision.report import accuracy_on_recording
+    from gtrig.vision.sequence import camera_indices, run_recording
+    from gtrig.vision.track import TrackOptions
+
+    rig = load_rig(rig_path)
+    print(f"\n### Tracking, {rec} {sequence} (rig {rig_path}), {workers or 'all'} worker(s)\n")
+    rows = []
+    for label, track in (("whole images", TrackOptions(enabled=False)), ("tracked", TrackOptions())):
+        cpu0 = _cpu_s()
+        res = run_recording(rec, rig, sequence, planar=True, workers=workers, track=track)
+        cpu = _cpu_s() - cpu0
+        acc = accuracy_on_recording(res, rec)
+        n_img = sum(res.images_per_camera.values())
+        sec = res.seconds
+        share = (f"{acc.frames_visible_localized}/{acc.frames_visible} "
+                 f"({100 * acc.visible_localized_fraction:.2f} %)" if sequence == "run" else "")
+        rows.append(f"| {label:<12} | {n_img / sec['total']:7.1f} | {n_img / sec['parallel']:7.1f} | "
+                    f"{sec['total']:6.1f} | {acc.localized:4d}/{acc.instants:<4d} | {share:>18} | "
+                    f"{100 * acc.pos_err_mean_m:.3f} / {100 * acc.pos_err_max_m:.2f} | "
+                    f"{math.degrees(acc.yaw_err_mean_rad):.4f} | {acc.nees_mean / acc.nees_dof:.2f} | "
+                    f"{1e3 * cpu / n_img:.1f} |")
+    cv = aruco_for_rig(rig, subpix=False)
+    t_read = t_cv = 0.0
+    n_cv = found = 0
+    for ix in camera_indices(rec, sequence, rig).values():
+        for i in range(len(ix)):
+            t0 = time.perf_counter()
+            img = read_image(ix.source(i))
+            t1 = time.perf_counter()
+            _, ids, _ = cv.detectMarkers(img)
+            t_cv += time.perf_counter() - t1
+            t_read += t1 - t0
+            n_cv += 1
+            found += 0 if ids is None else len(ids)
+    print("| search       | images/s (stage) | images/s (detection pass) | stage s | localized | "
+          "visible-marker images localized | mean / max position cm | mean abs yaw deg | NEES/dof | "
+          "CPU ms per image |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("\n".join(rows))
+    print(f"\nOpenCV ArucoDetector (defaults, its own threads), the same {n_cv} images: {n_cv / t_cv:.1f} images/s "
+          f"of detection ({1e3 * t_cv / n_cv:.2f} ms per image, {found} markers; reading the images, not counted: "
+          f"{1e3 * t_read / n_cv:.2f} ms per image)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--level", nargs="+", default=["corners", "images"],
-                    choices=["corners", "images", "recording"])
+                    choices=["corners", "images", "recording", "tracking"])
     ap.add_argument("--recording", type=Path, help="a simulated recording (level recording)")
     ap.add_argument("--rig", type=Path, help="its calibrated rig (level recording)")
     ap.add_argument("--noise-px", type=float, default=0.08)
     ap.add_argument("--workers", type=int, default=0)
     ap.add_argument("--frames", type=int, default=3)
+    ap.add_argument("--sequence", default="run", choices=["run", "validation"], help="level tracking")
     a = ap.parse_args()
     if "corners" in a.level:
         bench_corners(a.seeds, a.noise_px)
@@ -278,6 +343,10 @@ def main() -> None:
         if a.recording is None or a.rig is None:
             ap.error("--level recording needs --recording and --rig")
         bench_recording(a.recording, a.rig, a.workers)
+    if "tracking" in a.level:
+        if a.recording is None or a.rig is None:
+            ap.error("--level tracking needs --recording and --rig")
+        bench_tracking(a.recording, a.rig, a.workers, a.sequence)
 
 
 if __name__ == "__main__":

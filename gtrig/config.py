@@ -29,6 +29,7 @@ from gtrig.laser.track import TrackSettings
 from gtrig.markers.robotcal.bundle import BundleOptions
 from gtrig.markers.robotcal.calibrate import RobotCalOptions
 from gtrig.vision.estimate import VisionOptions
+from gtrig.vision.track import TrackOptions
 
 _SCALARS = (bool, int, float, str)
 
@@ -152,6 +153,28 @@ class MarkersConfig(Section):
     options: RobotCalSection = Field(default_factory=RobotCalSection)  # type: ignore[valid-type]
 
 
+_TRACK = TrackOptions()
+
+
+class VisionTrackConfig(Section):
+    """How GTvision tracks markers from image to image (:class:`gtrig.vision.track.TrackOptions`)."""
+
+    enabled: bool = Field(default=_TRACK.enabled, description="search each image where its markers are "
+                          "expected and where it changed; false: every image whole")
+    full_every_s: float = Field(default=_TRACK.full_every_s, gt=0, description="a whole-image pass at least "
+                                "this often per camera (s)")
+    margin_px: float = Field(default=_TRACK.margin_px, ge=0)
+    motion_margin: float = Field(default=_TRACK.motion_margin, ge=0)
+    size_margin: float = Field(default=_TRACK.size_margin, ge=0)
+    cell_px: int = Field(default=_TRACK.cell_px, ge=2)
+    change_level: float = Field(default=_TRACK.change_level, gt=0)
+    change_margin_px: float = Field(default=_TRACK.change_margin_px, ge=0)
+    window_px: int = Field(default=_TRACK.window_px, ge=64)
+
+    def options(self) -> TrackOptions:
+        return TrackOptions(**self.model_dump())
+
+
 class VisionConfig(Section):
     """GTvision (:func:`gtrig.vision.sequence.run_recording`)."""
 
@@ -161,6 +184,7 @@ class VisionConfig(Section):
     chunk_size: int = Field(default=16, ge=1)
     estimate_noise: bool = True
     options: VisionEstimateSection = Field(default_factory=VisionEstimateSection)  # type: ignore[valid-type]
+    track: VisionTrackConfig = Field(default_factory=VisionTrackConfig)
 
 
 class LaserConfig(Section):

@@ -23,6 +23,11 @@ def command(
     workers: int = typer.Option(0, "--workers", help="Processes (0: one per core)."),
     dask: str = dask_option(),
     detector: str = typer.Option("auto", "--detector", help="auto, gtrig or aruco."),
+    track: bool = typer.Option(True, "--track/--no-track", help="Search each image where its markers are "
+                               "expected and where it changed (whole-image passes on loss, at each chunk's "
+                               "start and every --full-every-s); --no-track: every image whole."),
+    full_every_s: float = typer.Option(1.0, "--full-every-s", help="A whole-image pass at least this often per "
+                                       "camera when tracking, seconds."),
     floor_sigma_mm: float = typer.Option(3.0, "--floor-sigma-mm", help="Floor height deviation (planar)."),
     floor_tilt_deg: float = typer.Option(0.3, "--floor-tilt-deg", help="Floor tilt deviation (planar)."),
     camera_sigma_mm: float = typer.Option(3.0, "--camera-sigma-mm",
@@ -48,6 +53,7 @@ def command(
     from gtrig.vision.refine import PlanarPrior
     from gtrig.vision.report import summarize
     from gtrig.vision.sequence import run_recording, write_pose_track_files
+    from gtrig.vision.track import TrackOptions
 
     checks.choice("--sequence", sequence, ("run", "validation"))
     checks.choice("--detector", detector, ("auto", "gtrig", "aruco"))
@@ -57,7 +63,8 @@ def command(
                              ("--camera-sigma-mm", camera_sigma_mm, 500.0, "mm"),
                              ("--camera-sigma-deg", camera_sigma_deg, 45.0, "deg"),
                              ("--marker-sigma-mm", marker_sigma_mm, 500.0, "mm"),
-                             ("--marker-sigma-deg", marker_sigma_deg, 45.0, "deg")):
+                             ("--marker-sigma-deg", marker_sigma_deg, 45.0, "deg"),
+                             ("--full-every-s", full_every_s, 3600.0, "s")):
         checks.number(opt, v, lo=0.0, lo_open=True, hi=hi, unit=unit)
     checks.input_folder("--recording", recording)
     checks.outputs([rig], [out, covariance])
@@ -89,7 +96,8 @@ def command(
     checkpoint = out.with_name(out.name + ".checkpoint.jsonl")
     with executor(dask) as ex, chunk_bar("GTvision") as bar:
         result = run_recording(recording, r, sequence, planar, workers, options=opts, detector=detector,
-                               checkpoint=checkpoint, progress=bar.progress, executor=ex)
+                               checkpoint=checkpoint, progress=bar.progress, executor=ex,
+                               track=TrackOptions(enabled=track, full_every_s=full_every_s))
     write_pose_track_files(result, out, covariance)
     checkpoint.unlink(missing_ok=True)
     rep = summarize(result)

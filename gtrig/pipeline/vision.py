@@ -35,7 +35,8 @@ def run_vision(inp: StageInput, rig: Rig, sequence: str) -> VisionResult:
     return run_recording(inp.rec, rig, sequence=sequence, planar=cfg.planar, workers=inp.workers, options=opts,
                          detector=cfg.detector, checkpoint=inp.out / f"gt_vision_{sequence}.checkpoint",
                          chunk_size=cfg.chunk_size, sync_tol_s=cfg.sync_tol_s, estimate_noise=cfg.estimate_noise,
-                         stale_checkpoint="restart", executor=inp.executor, progress=inp.progress)
+                         stale_checkpoint="restart", executor=inp.executor, progress=inp.progress,
+                         track=cfg.track.options())
 
 
 def _against_survey(inp: StageInput, res: VisionResult) -> list[AccuracyRow]:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import importlib
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -28,12 +28,50 @@ ARUCO_SIGMA_PX = 0.5
 
 DetectFn = Callable[[np.ndarray, CameraGeometry, Tone], list[MarkerView]]
 
+#: A box of an image in pixels ``(x0, y0, x1, y1)``: columns ``x0 <= x < x1``, rows ``y0 <= y < y1``.
+Box = tuple[int, int, int, int]
+
+#: Detectors kept per GTvision process for image regions (each holds its region's undistortion maps).
+_MAX_DETECTORS = 48
+
+
+def _shifted(views: list[MarkerView], box: Box | None) -> list[MarkerView]:
+    """Views found in the crop ``box`` of an image, their corners moved to the image's pixels."""
+    if box is None or (box[0] == 0 and box[1] == 0):
+        return views
+    d = np.array([box[0], box[1]], float)
+    return [replace(v, corners_px=v.corners_px + d) for v in views]
+
 
 @dataclass(frozen=True)
 class _ArucoCorner:
     id: int
     corners_px: np.ndarray
     corner_cov: np.ndarray | None = None
+
+
+def aruco_for_rig(rig: Rig, subpix: bool = True) -> cv2.aruco.ArucoDetector:
+    """OpenCV's ArUco detector for the rig's markers (one family, a dictionary of the rig's IDs in sorted
+    order; the family's border width), with its default parameters and, with ``subpix``,
+    ``CORNER_REFINE_SUBPIX``."""
+    from gtrig.markers.families import family_spec, marker_cells
+
+    fams = {m.family for m in rig.robot.markers}
+    if len(fams) != 1:
+        raise InputError("the ArUco fallback handles one marker family per rig")
+    fam = fams.pop()
+    spec = family_spec(fam)
+    b = spec.border_cells
+    bits = [marker_cells(fam, i)[b:-b, b:-b].astype(np.uint8) for i in sorted(m.id for m in rig.robot.markers)]
+    dictionary = cv2.aruco.Dictionary(np.zeros((0, 1, 4), np.uint8), spec.data_cells, 0)
+    dictionary.bytesList = np.concatenate([cv2.aruco.Dictionary.getByteListFromBits(x) for x in bits], axis=0)
+    dictionary.maxCorrectionBits = 1 if fam in (MarkerFamily.ARTOOLKITPLUS_SIMPLE,
+                                                MarkerFamily.ARTOOLKITPLUS_SIMPLE_THIN) else 0
+    params = cv2.aruco.DetectorParameters()
+    params.markerBorderBits = b
+    if subpix:
+        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    return cv2.aruco.ArucoDetector(dictionary, params)
 
 
 class ArucoDetector:
@@ -49,36 +87,21 @@ class ArucoDetector:
     version = cv2.__version__
 
     def __init__(self, rig: Rig, sigma_px: float = ARUCO_SIGMA_PX) -> None:
-        from gtrig.markers.families import family_spec, marker_cells
-
-        fams = {m.family for m in rig.robot.markers}
-        if len(fams) != 1:
-            raise InputError("the ArUco fallback handles one marker family per rig")
-        fam = fams.pop()
-        spec = family_spec(fam)
         self.ids = sorted(m.id for m in rig.robot.markers)
-        b = spec.border_cells
-        bits = [marker_cells(fam, i)[b:-b, b:-b].astype(np.uint8) for i in self.ids]
-        d = spec.data_cells
-        dictionary = cv2.aruco.Dictionary(np.zeros((0, 1, 4), np.uint8), d, 0)
-        rows = [cv2.aruco.Dictionary.getByteListFromBits(x) for x in bits]
-        dictionary.bytesList = np.concatenate(rows, axis=0)
-        dictionary.maxCorrectionBits = 1 if fam in (MarkerFamily.ARTOOLKITPLUS_SIMPLE,
-                                                    MarkerFamily.ARTOOLKITPLUS_SIMPLE_THIN) else 0
-        params = cv2.aruco.DetectorParameters()
-        params.markerBorderBits = b
-        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-        self._detector = cv2.aruco.ArucoDetector(dictionary, params)
+        self._detector = aruco_for_rig(rig, subpix=True)
         self.sigma_px = float(sigma_px)
 
-    def __call__(self, image: np.ndarray, camera: CameraGeometry, file_tone: Tone = "linear") -> list[MarkerView]:
-        corners, ids, _ = self._detector.detectMarkers(image)  # gradient-based corners: no tone needed
+    def __call__(self, image: np.ndarray, camera: CameraGeometry, file_tone: Tone = "linear",
+                 box: Box | None = None) -> list[MarkerView]:
+        """The markers of ``image`` (inside ``box`` only, if given; corners in ``image``'s pixels)."""
+        crop = image if box is None else np.ascontiguousarray(image[box[1]:box[3], box[0]:box[2]])
+        corners, ids, _ = self._detector.detectMarkers(crop)  # gradient-based corners: no tone needed
         if ids is None:
             return []
         cov = np.tile(np.eye(2) * self.sigma_px**2, (4, 1, 1))
         dets = [_ArucoCorner(self.ids[int(i)], np.asarray(c, float).reshape(4, 2), cov)
                 for c, i in zip(corners, ids.ravel(), strict=True)]
-        return views_from_detections(camera.name, dets, set(self.ids))
+        return _shifted(views_from_detections(camera.name, dets, set(self.ids)), box)
 
 
 class GtrigDetector:
@@ -97,19 +120,36 @@ class GtrigDetector:
         self._cls = detector_class
         self._tone = {c.name: c.tone for c in rig.cameras}
         # one detector per camera and tone (its undistortion set up once)
-        self._per_camera: dict[tuple[str, str], object] = {}
+        self._per_camera: dict[tuple[str, str, Box | None], object] = {}
         self._params = getattr(importlib.import_module(detector_class.__module__), "DetectorParams", None)
 
-    def __call__(self, image: np.ndarray, camera: CameraGeometry, file_tone: Tone = "linear") -> list[MarkerView]:
+    def __call__(self, image: np.ndarray, camera: CameraGeometry, file_tone: Tone = "linear",
+                 box: Box | None = None) -> list[MarkerView]:
         """The markers of ``image``, a frame of ``camera``; ``file_tone`` is how its file declares its
-        samples (:func:`gtrig.io.imagetone.declared_tone`), used where the rig's camera says ``tone: auto``."""
+        samples (:func:`gtrig.io.imagetone.declared_tone`), used where the rig's camera says ``tone: auto``.
+        With ``box`` only that part of the image is searched, by a detector whose camera matrix is shifted
+        by the box's corner (``cx - x0``, ``cy - y0``; the distortion is unchanged, which is exact), and
+        the corners are returned in ``image``'s pixels."""
         tone = self._tone.get(camera.name, "auto")
         tone = file_tone if tone == "auto" else tone
-        det = self._per_camera.get((camera.name, tone))
+        key = (camera.name, tone, box)
+        det = self._per_camera.get(key)
         if det is None:
+            K = np.array(camera.K, float)
+            if box is not None:
+                K[0, 2] -= box[0]
+                K[1, 2] -= box[1]
             args = () if self._params is None else (self._params(tone=tone),)
-            det = self._per_camera[(camera.name, tone)] = self._cls(self.family, camera.K, camera.dist, *args)
-        return views_from_detections(camera.name, det.detect(image), self.ids)  # type: ignore[attr-defined]
+            det = self._per_camera[key] = self._cls(self.family, K, camera.dist, *args)
+            if box is not None and len(self._per_camera) > _MAX_DETECTORS:
+                # the oldest region's detector goes (a whole image's never: it is made once per camera)
+                old = next(k for k in self._per_camera if k[2] is not None)
+                del self._per_camera[old]
+        elif box is not None:
+            self._per_camera[key] = self._per_camera.pop(key)  # most recently used last
+        crop = image if box is None else np.ascontiguousarray(image[box[1]:box[3], box[0]:box[2]])
+        views = views_from_detections(camera.name, det.detect(crop), self.ids)  # type: ignore[attr-defined]
+        return _shifted(views, box)
 
 
 def make_detector(rig: Rig, which: str = "auto") -> ArucoDetector | GtrigDetector:

@@ -63,6 +63,7 @@ from gtrig.vision.estimate import FrameEstimate, Status, VisionOptions, estimate
 from gtrig.vision.init import PreviousPose
 from gtrig.vision.instants import Instant, Instants, make_instants  # re-exported for their callers
 from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel
+from gtrig.vision.track import TrackOptions
 
 log = logging.getLogger(__name__)
 
@@ -395,12 +396,15 @@ class WorkerContext:
     token: str
     rig_doc: dict[str, Any] = field(repr=False)
     detector: str
+    track: TrackOptions = TrackOptions(enabled=False)
 
     @staticmethod
-    def of(rig: Rig, detector: str) -> WorkerContext:
+    def of(rig: Rig, detector: str, track: TrackOptions | None = None) -> WorkerContext:
         doc = rig_to_dict(rig)
-        token = hashlib.sha256(json.dumps([doc, detector], sort_keys=True, default=str).encode()).hexdigest()[:16]
-        return WorkerContext(token, doc, detector)
+        track = track or TrackOptions(enabled=False)
+        token = hashlib.sha256(json.dumps([doc, detector, track.key()], sort_keys=True,
+                                          default=str).encode()).hexdigest()[:16]
+        return WorkerContext(token, doc, detector, track)
 
 
 _W: dict[str, Any] = {}
@@ -437,18 +441,28 @@ def _views_from_json(camera: str, row: int, d: list[list[Any]]) -> tuple[MarkerV
     return tuple(MarkerView(camera, int(m), np.array(uv), np.array(cov), row) for m, uv, cov in d)
 
 
-def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: Sequence[str]
-                   ) -> list[list[Any]]:
-    """Markers detected in one camera's images ``rows`` (read here, on the worker, from ``paths``):
+def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: Sequence[str],
+                   stamps_s: Sequence[float] | None = None) -> list[list[Any]]:
+    """Markers detected in one camera's images ``rows`` (read here, on the worker, from ``paths``;
+    stamped ``stamps_s``, needed when tracking), in order, markers tracked from image to image when
+    ``ctx.track`` says so (:class:`gtrig.vision.track.CameraTracker`, started afresh in every chunk):
     ``[[row, [[marker_id, corners, cov], ...]], ...]``, the checkpoint's JSON form."""
+    from gtrig.vision.track import CameraTracker
+
     st = _state(ctx)
     cam = st["model"].cameras[camera]
     out = []
     # one camera's files share a format: the first one says how they store light (gtrig.io.imagetone)
     tone = declared_tone(paths[0]) if paths else "linear"
-    for i, path in zip(rows, paths, strict=True):
+    detect = st["detect"]
+    tracker = CameraTracker(lambda img, box: detect(img, cam, tone, box), cam.size, ctx.track)
+    if ctx.track.enabled and (stamps_s is None or len(stamps_s) != len(rows)):
+        raise ValueError("tracking needs the images' time stamps")
+    for k, (i, path) in enumerate(zip(rows, paths, strict=True)):
         img = read_image(path)  # an image file or a video's frame
-        out.append([int(i), _views_to_json(st["detect"](img, cam, tone))])
+        views = tracker.step(img, float(stamps_s[k]) if stamps_s is not None else 0.0)
+        out.append([int(i), _views_to_json(views)])
+    log.debug("camera %s, %d images: %s", camera, len(rows), tracker.stats)
     return out
 
 
@@ -550,6 +564,13 @@ def calibrate_noise(obs: Sequence[FrameObservations], options: VisionOptions, ca
 
 
 # ----------------------------------------------------------------------------------------- the runner
+def detector_label(name: str, version: str, track: TrackOptions, chunk_size: int) -> str:
+    """What makes the detections besides the images and the rig, as the checkpoint's key holds it: the
+    detector's name and version, and when tracking, its settings and the chunk size (each chunk starts
+    with a whole-image pass); untracked, the label of before tracking existed."""
+    return f"{name}/{version}" + ("" if not track.enabled else f"/{track.key()}/chunk {chunk_size}")
+
+
 def _key(rig: Rig, sequence: str, detector: str, paths: Mapping[str, Iterable[str]], rec: Path | None = None) -> str:
     """What the checkpointed detections depend on: the images, the detector, the lenses and the markers'
     families and sizes; not the poses, the estimator's options nor how images group into instants, so a
@@ -598,8 +619,8 @@ def _scan_checkpoint(path: Path, key: str,
             log.warning("%s: not a GTvision checkpoint (corrupt header); starting afresh", path)
             return 0
         if head["key"] != key:
-            raise InputError(f"{path}: checkpoint of another run (other images, detector, lenses or markers); "
-                             "delete it or choose another output")
+            raise InputError(f"{path}: checkpoint of another run (other images, detector, tracking, lenses or "
+                             "markers); delete it or choose another output")
         good = f.tell()
         for line in f:
             try:
@@ -679,7 +700,7 @@ def _detect_all(ctx: WorkerContext, chunks: list[tuple[str, list[int]]], indices
         cam, rows = chunks[k]
         ix = indices[cam]
         label = f"camera {cam}, {ix.stamps_s[rows[0]]:.3f}-{ix.stamps_s[rows[-1]]:.3f} s"
-        return Chunk((ctx, cam, rows, [ix.source(i) for i in rows]), label)
+        return Chunk((ctx, cam, rows, [ix.source(i) for i in rows], [float(ix.stamps_s[i]) for i in rows]), label)
 
     jobs = _Lazy(len(chunks), job)
     todo = [k for k, (cam, rows) in enumerate(chunks) if not all(dets.has(cam, i) for i in rows)]
@@ -892,7 +913,8 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
                   checkpoint: str | os.PathLike[str] | None = None,
                   progress: Callable[[int, int], None] | None = None, chunk_size: int | None = None,
                   sync_tol_s: float = 0.005, estimate_noise: bool = True,
-                  stale_checkpoint: str = "refuse", executor: Any = None) -> VisionResult:
+                  stale_checkpoint: str = "refuse", executor: Any = None,
+                  track: TrackOptions | None = None) -> VisionResult:
     """GTvision over one sequence of a recording.
 
     Parameters
@@ -911,6 +933,10 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
         file is not overwritten by guess) or started afresh ("restart": a folder the caller owns).
     progress : called as ``progress(done_chunks, total_chunks)`` over the detection chunks (each: one
         camera's ``chunk_size`` images in a time window).
+    track : how markers are tracked from image to image in each camera (default
+        :class:`~gtrig.vision.track.TrackOptions`: tracked, a whole-image pass at least once a second and at
+        every chunk's start, so the detections depend on ``chunk_size`` but never on the workers);
+        ``TrackOptions(enabled=False)``: every image searched whole.
     estimate_noise : estimate the corner covariances' variance factor per camera from this sequence's
         residuals and estimate every instant again with it (:func:`calibrate_noise`); ignored when
         ``options.corner_scale`` is given (those factors are used as they are).
@@ -945,8 +971,9 @@ def run_recording(rec_dir: str | os.PathLike[str], rig: Rig, sequence: str = "va
     # a new version of the detector's code makes other detections: not the checkpoint's
     # the workers read their chunk's images by path; the client keeps no list of them
     paths = {name: map(ix.source, range(len(ix))) for name, ix in indices.items()}
-    key = _key(rig, sequence, f"{det.name}/{det.version}", paths, rec)
-    ctx = WorkerContext.of(rig, detector)
+    track = TrackOptions() if track is None else track
+    key = _key(rig, sequence, detector_label(det.name, det.version, track, chunk_size), paths, rec)
+    ctx = WorkerContext.of(rig, detector, track)
     _seed(ctx, model, det)
     dets = _open_checkpoint(None if checkpoint is None else Path(checkpoint), key, stale_checkpoint, indices)
     t_par = time.perf_counter()

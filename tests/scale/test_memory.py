@@ -30,10 +30,12 @@ from gtrig.vision.sequence import (
     _views_to_json,
     camera_indices,
     detection_chunks,
+    detector_label,
     make_instants,
     run_recording,
 )
 from gtrig.vision.synthetic import CornerNoise, synthetic_observations, visible_views
+from gtrig.vision.track import TrackOptions
 
 CYCLE = 24  # distinct instants: the robot creeping past validation pose 4, then out of sight (as a run)
 SEEN = 2  # instants of the cycle with markers, seen by two cameras (a run's 30 %: 1/12 keeps the test fast)
@@ -62,7 +64,7 @@ def make_recording(out: Path, instants: int, seed: int = 1) -> tuple[Path, objec
     dump_rig(rig, out / "rig.yaml")
     indices = camera_indices(out, "run", rig)
     det = make_detector(rig, "auto")
-    key = _key(rig, "run", f"{det.name}/{det.version}",
+    key = _key(rig, "run", detector_label(det.name, det.version, TrackOptions(), CHUNK),
                {n: [ix.source(i) for i in range(len(ix))] for n, ix in indices.items()}, out)
     with open(out / "ck.jsonl", "w", encoding="utf-8") as f:
         f.write(json.dumps({"key": key, "version": CHECKPOINT_VERSION}) + "\n")

@@ -1,0 +1,307 @@
+"""Markers tracked through one camera's consecutive images, so that most images are searched in a small
+region instead of whole.
+
+Each image of a camera is searched where its markers are expected and where it changed:
+
+* **Tracked markers**: every marker seen in the camera's previous image is predicted by its corners'
+  motion over the two previous images (constant velocity in the image; one image: where it was), and
+  searched in the predicted square grown by a margin (a fixed part, the predicted displacement and a
+  share of the marker's side). A marker predicted inside the image but missing from its region makes the
+  image searched whole again.
+* **Change**: the image is reduced to the mean grey level of cells of ``cell_px`` pixels; a cell whose
+  mean moved by more than ``change_level`` from the last time that place was searched (a marker coming
+  into view, the robot moving or turning) is searched, with a margin of ``change_margin_px``. A fixed
+  camera's unchanged background is not searched again until the next whole-image pass.
+* **Whole-image pass**: at the first image of a chunk (chunks never depend on each other, so the
+  detections do not depend on how the work is split), at least every ``full_every_s`` seconds, when a
+  tracked marker is lost, and when the region to search fits in no window.
+
+The region searched in one image is one window holding the union of the above: a square of
+``window_px / 2``, ``3 window_px / 4`` or ``window_px`` pixels (the smallest that holds it) at a fixed place,
+on a grid of a quarter of its side. The detector of a window (its camera matrix shifted by the window's
+corner; the distortion coefficients are unchanged, which is exact) is made once per process and camera:
+its undistortion maps cost as much as five detections in it, so windows that followed the robot pixel by
+pixel would cost more than they save. Deterministic: the same images in the same order give the same
+detections.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from gtrig.errors import InputError
+from gtrig.vision.detect import Box
+from gtrig.vision.observations import MarkerView
+
+log = logging.getLogger(__name__)
+
+#: ``detect(image, box)``: the markers of ``image`` inside ``box`` (None: the whole image), their corners in
+#: the whole image's pixel frame.
+RegionDetectFn = Callable[[np.ndarray, Box | None], list[MarkerView]]
+
+
+@dataclass(frozen=True)
+class TrackOptions:
+    """How markers are tracked through a camera's images (:class:`CameraTracker`).
+
+    Attributes
+    ----------
+    enabled : bool
+        Track; False: every image is searched whole.
+    full_every_s : float
+        A whole-image pass at least this often per camera, seconds.
+    margin_px : float
+        Fixed part of a tracked marker's search margin, pixels.
+    motion_margin : float
+        A tracked marker's margin grows by this times its predicted corner displacement since the
+        previous image (the prediction's uncertainty: a constant-velocity guess errs by about the
+        velocity's change).
+    size_margin : float
+        ... and by this times the marker's side in the previous image (its pose may change its outline).
+    cell_px : int
+        Side of the cells whose mean grey level is compared, pixels.
+    change_level : float
+        A cell whose mean grey level moved by more than this (0-255 scale) from when its place was last
+        searched has changed (sensor noise of sigma 2 gives cell means of sigma 0.13 at 16 px).
+    change_margin_px : float
+        A changed area is searched this far around it (a marker only partly inside it).
+    window_px : int
+        Side of the largest window, pixels (module docstring); a region that fits in none is searched
+        whole.
+    """
+
+    enabled: bool = True
+    full_every_s: float = 1.0
+    margin_px: float = 12.0
+    motion_margin: float = 1.0
+    size_margin: float = 0.5
+    cell_px: int = 16
+    change_level: float = 4.0
+    change_margin_px: float = 64.0
+    window_px: int = 512
+
+    def __post_init__(self) -> None:
+        positive = {"full_every_s": self.full_every_s, "cell_px": self.cell_px, "change_level": self.change_level,
+                    "window_px": self.window_px // 8}
+        for name, v in positive.items():
+            if not v > 0:
+                raise InputError(f"tracking: {name} must be > 0 (got {v})")
+        for name, v in {"margin_px": self.margin_px, "motion_margin": self.motion_margin,
+                        "size_margin": self.size_margin, "change_margin_px": self.change_margin_px}.items():
+            if not v >= 0:
+                raise InputError(f"tracking: {name} must be >= 0 (got {v})")
+
+    def key(self) -> str:
+        """What the detections depend on (a checkpoint's key): "whole" when not tracking."""
+        if not self.enabled:
+            return "whole"
+        return (f"track/{self.full_every_s!r}/{self.margin_px!r}/{self.motion_margin!r}/{self.size_margin!r}/"
+                f"{self.cell_px}/{self.change_level!r}/{self.change_margin_px!r}/{self.window_px}")
+
+    @property
+    def windows_px(self) -> tuple[int, int, int]:
+        """The windows' sides, pixels, smallest first."""
+        return self.window_px // 2, 3 * self.window_px // 4, self.window_px
+
+
+@dataclass
+class TrackStats:
+    """How the images of a camera were searched: ``whole``, in a ``region``, or ``skipped`` (nothing
+    expected, nothing changed); ``lost``: whole-image passes made because a tracked marker was missing."""
+
+    whole: int = 0
+    region: int = 0
+    skipped: int = 0
+    lost: int = 0
+    region_area_px: int = 0
+
+    def add(self, other: TrackStats) -> None:
+        self.whole += other.whole
+        self.region += other.region
+        self.skipped += other.skipped
+        self.lost += other.lost
+        self.region_area_px += other.region_area_px
+
+
+@dataclass(frozen=True)
+class _Expected:
+    """A tracked marker's predicted corners (4, 2) and its search box (float, unclipped)."""
+
+    marker_id: int
+    corners_px: np.ndarray
+    box: tuple[float, float, float, float]
+
+
+def cell_means(image: np.ndarray, cell_px: int) -> np.ndarray:
+    """The mean grey level (float32, (H // cell, W // cell)) of ``image``'s cells (a colour image: its
+    channels' mean)."""
+    g = image if image.ndim == 2 else image.mean(axis=2)
+    h, w = g.shape[:2]
+    size = (max(1, w // cell_px), max(1, h // cell_px))
+    return cv2.resize(np.asarray(g, np.float32), size, interpolation=cv2.INTER_AREA)
+
+
+def predict_marker(prev: tuple[float, np.ndarray], before: tuple[float, np.ndarray] | None, stamp_s: float,
+                   opts: TrackOptions) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """A marker's corners (4, 2) at ``stamp_s`` from ``(stamp_s, corners)`` in the previous image and the
+    one before (None: unknown, the marker is searched where it was), and its search box
+    ``(x0, y0, x1, y1)``: the predicted square grown by the margin of :class:`TrackOptions`."""
+    t1, c1 = prev
+    side = float(np.max(np.linalg.norm(c1 - np.roll(c1, 1, axis=0), axis=1)))
+    if before is None or before[0] >= t1:
+        c, disp = c1, 0.5 * side  # no velocity: its motion is unknown, half a side of it allowed
+    else:
+        t2, c2 = before
+        c = c1 + (c1 - c2) * ((stamp_s - t1) / (t1 - t2))
+        disp = float(np.max(np.linalg.norm(c - c1, axis=1)))
+    m = opts.margin_px + opts.motion_margin * disp + opts.size_margin * side
+    lo, hi = np.minimum(c.min(axis=0), c1.min(axis=0)) - m, np.maximum(c.max(axis=0), c1.max(axis=0)) + m
+    return c, (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
+
+def window_for(region: tuple[float, float, float, float], size: tuple[int, int], sides_px: Sequence[int]
+               ) -> Box | None | tuple[()]:
+    """The smallest window (module docstring) of an image of ``size`` (w, h) that holds ``region``
+    (clipped to the image): a square of one of ``sides_px`` (ascending) at a multiple of a quarter of its
+    side (or against the image's far edge), clipped to the image. None: the region is outside the image;
+    ``()``: it fits in no window."""
+    w, h = size
+    a = (max(0.0, region[0]), max(0.0, region[1]), min(float(w), region[2]), min(float(h), region[3]))
+    if a[2] <= a[0] or a[3] <= a[1]:
+        return None
+    for side in sides_px:
+        x0, y0 = _origin(a[0], a[2], side, w), _origin(a[1], a[3], side, h)
+        if x0 is not None and y0 is not None:
+            return x0, y0, min(w, x0 + side), min(h, y0 + side)
+    return ()
+
+
+def _origin(lo: float, hi: float, side: int, n: int) -> int | None:
+    """The start of a window of ``side`` on an axis of ``n`` pixels holding ``[lo, hi]``, or None."""
+    if side >= n:
+        return 0
+    step = max(1, side // 4)
+    o = min(int(lo // step) * step, n - side)
+    return o if o + side >= hi else None
+
+
+def _union(boxes: Sequence[tuple[float, float, float, float]]) -> tuple[float, float, float, float] | None:
+    if not boxes:
+        return None
+    b = np.array(boxes)
+    return float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 2].max()), float(b[:, 3].max())
+
+
+def _inside(corners: np.ndarray, size: tuple[int, int], border: float = 2.0) -> bool:
+    w, h = size
+    return bool(np.all(corners >= border) and np.all(corners[:, 0] <= w - 1 - border)
+                and np.all(corners[:, 1] <= h - 1 - border))
+
+
+@dataclass
+class CameraTracker:
+    """Tracks one camera's markers through its consecutive images of one chunk (module docstring).
+
+    Parameters
+    ----------
+    detect : ``detect(image, box)`` the markers inside ``box`` (None: the whole image), corners in the
+        whole image's pixels.
+    size : (w, h) of the camera's images, pixels.
+    options : TrackOptions
+    """
+
+    detect: RegionDetectFn
+    size: tuple[int, int]
+    options: TrackOptions = TrackOptions()
+    stats: TrackStats = field(default_factory=TrackStats)
+    _last_whole_s: float | None = None
+    _prev: dict[int, tuple[float, np.ndarray]] = field(default_factory=dict)
+    _before: dict[int, tuple[float, np.ndarray]] = field(default_factory=dict)
+    _searched: np.ndarray | None = None  # cell means of each cell's content when it was last searched
+
+    def step(self, image: np.ndarray, stamp_s: float) -> list[MarkerView]:
+        """The markers of the next image (stamped ``stamp_s``, after the previous one)."""
+        o = self.options
+        h, w = image.shape[:2]
+        if (w, h) != self.size:
+            self.size = (w, h)
+            self._last_whole_s = None  # another image size: start afresh
+        cells = cell_means(image, o.cell_px) if o.enabled else None
+        whole = (not o.enabled or self._last_whole_s is None or self._searched is None
+                 or self._searched.shape != cells.shape  # type: ignore[union-attr]
+                 or stamp_s - self._last_whole_s >= o.full_every_s - 1e-9)
+        views: list[MarkerView] = []
+        if not whole:
+            assert cells is not None
+            views, whole = self._search_region(image, stamp_s, cells)
+        if whole:
+            views = self.detect(image, None)
+            self.stats.whole += 1
+            self._last_whole_s = stamp_s
+            self._searched = cells
+        self._before = self._prev
+        self._prev = {v.marker_id: (stamp_s, v.corners_px) for v in views}
+        return views
+
+    def _search_region(self, image: np.ndarray, stamp_s: float, cells: np.ndarray
+                       ) -> tuple[list[MarkerView], bool]:
+        """The markers found in the region of tracked and changed places, and whether the image must be
+        searched whole instead (a tracked marker missing, or a region too large)."""
+        o = self.options
+        expected = []
+        for mid, prev in self._prev.items():
+            c, around = predict_marker(prev, self._before.get(mid), stamp_s, o)
+            expected.append(_Expected(mid, c, around))
+        changed = self._changed_box(cells)
+        region = _union([e.box for e in expected] + ([changed] if changed is not None else []))
+        box = None if region is None else window_for(region, self.size, o.windows_px)
+        if box is None:
+            self.stats.skipped += 1
+            return [], False
+        if box == ():
+            return [], True
+        assert len(box) == 4
+        area = (box[2] - box[0]) * (box[3] - box[1])
+        views = self.detect(image, box)
+        found = {v.marker_id for v in views}
+        if any(e.marker_id not in found and _inside(e.corners_px, self.size) for e in expected):
+            self.stats.lost += 1
+            return [], True
+        self.stats.region += 1
+        self.stats.region_area_px += area
+        self._mark_searched(cells, box)
+        return views, False
+
+    def _changed_box(self, cells: np.ndarray) -> tuple[float, float, float, float] | None:
+        """The pixels box around the cells that changed since their place was last searched (grown by
+        ``change_margin_px``), or None."""
+        assert self._searched is not None
+        diff = np.abs(cells - self._searched) > self.options.change_level
+        if not diff.any():
+            return None
+        rows, cols = np.nonzero(diff)
+        sx, sy = self.size[0] / cells.shape[1], self.size[1] / cells.shape[0]
+        m = self.options.change_margin_px
+        return (cols.min() * sx - m, rows.min() * sy - m, (cols.max() + 1) * sx + m, (rows.max() + 1) * sy + m)
+
+    def _mark_searched(self, cells: np.ndarray, box: Box) -> None:
+        """The cells searched in ``box`` hold the current content: all of them at least
+        ``change_margin_px`` inside it (a marker across the box's edge was not readable there), or at the
+        image's edge."""
+        assert self._searched is not None
+        m = self.options.change_margin_px
+        w, h = self.size
+        x0 = box[0] + (m if box[0] > 0 else 0)
+        y0 = box[1] + (m if box[1] > 0 else 0)
+        x1 = box[2] - (m if box[2] < w else 0)
+        y1 = box[3] - (m if box[3] < h else 0)
+        sx, sy = w / cells.shape[1], h / cells.shape[0]
+        c0, r0 = int(np.ceil(x0 / sx)), int(np.ceil(y0 / sy))
+        c1, r1 = int(np.floor(x1 / sx)), int(np.floor(y1 / sy))
+        if c1 > c0 and r1 > r0:
+            self._searched[r0:r1, c0:c1] = cells[r0:r1, c0:c1]

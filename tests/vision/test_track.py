@@ -1,0 +1,172 @@
+"""Markers tracked from image to image (gtrig.vision.track): where each image is searched, and GTvision with
+tracking on against every image searched whole on a short rendered run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from gtrig import geometry as geo
+from gtrig.errors import InputError
+from gtrig.io.frames import write_frame_index
+from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
+from gtrig.vision.observations import MarkerView
+from gtrig.vision.sequence import run_recording
+from gtrig.vision.track import CameraTracker, TrackOptions, predict_marker, window_for
+
+FRAMES = 8
+RATE_HZ = 10.0
+
+
+def _square(cx: float, cy: float, side: float) -> np.ndarray:
+    h = side / 2
+    return np.array([[cx - h, cy - h], [cx + h, cy - h], [cx + h, cy + h], [cx - h, cy + h]])
+
+
+def test_prediction_moves_a_marker_on_at_its_velocity() -> None:
+    c2, c1 = _square(100, 200, 40), _square(110, 205, 40)
+    c, box = predict_marker((0.1, c1), (0.0, c2), 0.2, TrackOptions(margin_px=5, motion_margin=1, size_margin=0.5))
+    np.testing.assert_allclose(c, _square(120, 210, 40))
+    # grown by 5 + |(10, 5)| + 20 around both the last and the predicted square
+    m = 5 + np.hypot(10, 5) + 20
+    np.testing.assert_allclose(box, (90 - m, 185 - m, 140 + m, 230 + m))
+
+
+def test_windows_hold_the_region_at_fixed_places() -> None:
+    size = (1024, 768)
+    w = window_for((300.0, 200.0, 400.0, 290.0), size, (256, 384, 512))
+    assert w == (256, 192, 512, 448)  # the smallest side, at a multiple of a quarter of it
+    w = window_for((900.0, 700.0, 1100.0, 800.0), size, (256, 384, 512))
+    assert w == (768, 512, 1024, 768)  # against the image's far edges
+    assert window_for((-50.0, -50.0, -1.0, 10.0), size, (256,)) is None  # outside the image
+    assert window_for((0.0, 0.0, 600.0, 100.0), size, (256, 384, 512)) == ()  # fits in none
+
+
+class _Scripted:
+    """A detector that returns given markers (id: corners) per image, those inside the box it is given, and
+    records ``(image, box)`` of every call."""
+
+    def __init__(self, per_image: list[dict[int, np.ndarray]]) -> None:
+        self.per_image, self.k = per_image, -1
+        self.calls: list[tuple[int, tuple[int, int, int, int] | None]] = []
+
+    def __call__(self, image: np.ndarray, box: tuple[int, int, int, int] | None) -> list[MarkerView]:
+        self.calls.append((self.k, box))
+        out = []
+        for mid, c in self.per_image[self.k].items():
+            inside = box is None or (c[:, 0].min() >= box[0] and c[:, 1].min() >= box[1]
+                                     and c[:, 0].max() < box[2] and c[:, 1].max() < box[3])
+            if inside:
+                out.append(MarkerView("cam", mid, c, np.tile(np.eye(2) * 0.01, (4, 1, 1))))
+        return out
+
+    def whole(self) -> list[int]:
+        return sorted({k for k, b in self.calls if b is None})
+
+
+def _run(tracker: CameraTracker, det: _Scripted, images: list[np.ndarray], stamps: list[float]
+         ) -> list[list[MarkerView]]:
+    out = []
+    for img, t in zip(images, stamps, strict=True):
+        det.k += 1
+        out.append(tracker.step(img, t))
+    return out
+
+
+def test_tracker_searches_whole_at_start_on_loss_and_once_a_second() -> None:
+    rng = np.random.default_rng(0)
+    n = 20
+    background = rng.normal(90, 2, (768, 1024)).clip(0, 255).astype(np.uint8)
+    images, per_image = [], []
+    for k in range(n):
+        img = background.copy()
+        img[280:321, 280 + 4 * k:321 + 4 * k] = 20  # the marker's dark square moves with it
+        images.append(img)
+        # the marker vanishes from the detector's sight at image 6 (an occlusion)
+        per_image.append({} if k == 6 else {7: _square(300 + 4 * k, 300, 40)})
+    stamps = [0.1 * k for k in range(n)]
+    det = _Scripted(per_image)
+    got = _run(CameraTracker(det, (1024, 768), TrackOptions()), det, images, stamps)
+    assert [len(v) for v in got] == [0 if k == 6 else 1 for k in range(n)]
+    # whole: the start, image 6 (the tracked marker missing from its window), and a second after it; image 7
+    # (nothing tracked) is searched where the image changed, and finds the marker again
+    assert det.whole() == [0, 6, 16]
+    assert [b is None for k, b in det.calls if k == 6] == [False, True]
+    windows = [b for _, b in det.calls if b is not None]
+    assert len(windows) == n - 2 and all(b[2] - b[0] <= 256 and b[3] - b[1] <= 256 for b in windows)
+    # a static scene without markers: searched whole once a second, never in between
+    det = _Scripted([{}] * n)
+    tk = CameraTracker(det, (1024, 768), TrackOptions())
+    _run(tk, det, [background] * n, stamps)
+    assert det.whole() == [0, 10] and len(det.calls) == 2 and tk.stats.skipped == n - 2
+    # tracking off: every image whole
+    det = _Scripted(per_image)
+    _run(CameraTracker(det, (1024, 768), TrackOptions(enabled=False)), det, images, stamps)
+    assert det.calls == [(k, None) for k in range(n)]
+
+
+def test_options_refuse_nonsense() -> None:
+    with pytest.raises(InputError, match="full_every_s"):
+        TrackOptions(full_every_s=0.0)
+    with pytest.raises(InputError, match="margin_px"):
+        TrackOptions(margin_px=-1.0)
+
+
+@pytest.fixture(scope="module")
+def run_rec(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
+    """A short run, rendered: the robot driving and turning past validation pose 4 at 0.3 m/s."""
+    from gtrig.vision.synthetic import render_markers, visible_views
+
+    scene = make_scene(0)
+    rig = scene.rig_true
+    out = tmp_path_factory.mktemp("rec")
+    rng = np.random.default_rng(3)
+    x, y, th = VALIDATION_POSES[3]
+    Ts = []
+    for k in range(FRAMES):
+        a = th + 0.04 * k
+        Ts.append(scene.T_world_robot(x + 0.03 * k * np.cos(a), y + 0.03 * k * np.sin(a), a))
+    for c, cam in enumerate(rig.cameras):
+        seen = [any(n == cam.name for n, _, _ in visible_views(rig, T)) for T in Ts]
+        if not any(seen):
+            continue
+        folder = out / "run" / "cameras" / cam.name
+        folder.mkdir(parents=True)
+        blank = np.full((cam.resolution[1], cam.resolution[0]), 90, np.uint8)
+        for k, T in enumerate(Ts):
+            cv2.imwrite(str(folder / f"{k:06d}.png"), render_markers(rig, cam.name, T, rng) if seen[k] else blank)
+        write_frame_index(folder, np.arange(FRAMES) / RATE_HZ + 0.001 * c, [f"{k:06d}.png" for k in range(FRAMES)])
+    return out, rig
+
+
+def test_tracking_localizes_the_same_instants_at_the_same_poses(run_rec, monkeypatch: pytest.MonkeyPatch) -> None:
+    from gtrig.vision.detect import GtrigDetector
+
+    path, rig = run_rec
+    kw = {"workers": 1, "detector": "gtrig", "chunk_size": FRAMES}
+    whole = run_recording(path, rig, "run", True, track=TrackOptions(enabled=False), **kw)
+    boxes = []
+    call = GtrigDetector.__call__
+
+    def recorded(self, image, camera, tone="linear", box=None):  # type: ignore[no-untyped-def]
+        boxes.append(box)
+        return call(self, image, camera, tone, box)
+
+    monkeypatch.setattr(GtrigDetector, "__call__", recorded)
+    tracked = run_recording(path, rig, "run", True, **kw)  # tracking is the default
+    n_images = sum(tracked.images_per_camera.values())
+    # most images searched in a window or not at all: whole once per camera, at the chunk's start
+    assert boxes.count(None) == len(tracked.images_per_camera) and 0 < len(boxes) <= n_images
+    ok_whole = [e.stamp_s for e in whole.estimates if e.ok]
+    assert len(ok_whole) >= FRAMES - 1, [e.reason for e in whole.estimates]
+    assert [e.stamp_s for e in tracked.estimates if e.ok] == ok_whole
+    views = lambda r: [sorted((v.camera, v.marker_id) for v in o.views) for o in r.observations]  # noqa: E731
+    assert views(tracked) == views(whole)
+    for a, b in zip(whole.localized(), tracked.localized(), strict=True):
+        d = geo.inv_T(a.T_world_robot) @ b.T_world_robot
+        # the same markers, read from a crop: corners within a tenth of a pixel, poses within a millimetre
+        assert np.linalg.norm(d[:3, 3]) < 1e-3
+        assert np.degrees(np.arccos(np.clip((np.trace(d[:3, :3]) - 1) / 2, -1, 1))) < 0.05
