@@ -28,10 +28,13 @@ from gtrig.fusion.init import odom_in_world
 from gtrig.fusion.measurements import Fixes, FixModel, fixes_from_track
 from gtrig.fusion.process import (
     ConstantVelocityNoise,
+    OdometryJumps,
     OdometryNoise,
     constant_velocity_cov,
+    cut_at_jumps,
     interpolate_odometry,
     odometry_increments,
+    odometry_jumps,
     whitening,
 )
 from gtrig.io.odometry import OdometryLog
@@ -83,6 +86,9 @@ class FusionOptions:
         parameters stay a whole-run estimate: a first pass gives each window's information on them,
         the second smooths each window with the others' as its prior (:func:`_smooth_windows`). None:
         one batch per segment, whatever its length.
+    jumps : what odometry increment is a jump (a reset, a restart, a joined recording: faster than the
+        robot moves, :class:`~gtrig.fusion.process.OdometryJumps`); a jump starts a new odometry segment:
+        its increment ties nothing, the poses either side are held by the fixes.
     """
 
     estimator: Literal["batch", "ekf"] = "batch"
@@ -102,6 +108,7 @@ class FusionOptions:
     bias_cov: Mapping[str, np.ndarray] = field(default_factory=dict)
     window_s: float | None = 600.0
     window_overlap_s: float = 30.0
+    jumps: OdometryJumps = OdometryJumps()
 
 
 @dataclass(frozen=True)
@@ -137,6 +144,8 @@ class FusionReport:
     segments: tuple[Segment, ...]
     outliers: tuple[Outlier, ...]
     seconds: float
+    #: stamps (s, reference clock) of the odometry's jumps, each the start of a new odometry segment
+    odometry_jumps_s: tuple[float, ...] = ()
 
     def to_dict(self) -> dict[str, object]:
         return asdict(self)
@@ -309,6 +318,7 @@ def _chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: OdometryLog 
     if odometry is not None:
         odo = interpolate_odometry(odometry, stamps)
         u, qcov = odometry_increments(odo, stamps, opts.odometry)
+        u, qcov = cut_at_jumps(u, qcov, odometry_jumps(u, np.diff(stamps), opts.jumps))
         proc, d = PROCESS_ODOMETRY, 3
         k0, Pk = opts.odometry.prior() if k_prior is None else k_prior
         proc_W = whitening(qcov)
@@ -591,6 +601,17 @@ def _smooth_windows(parts: _Parts, between: Callable[[float, float], dict[str, n
         del sm, sw
 
 
+def _jump_stamps(odometry: OdometryLog | None, jumps: OdometryJumps) -> tuple[float, ...]:
+    """Stamps (s) of the records where the odometry jumps (each the first record of its new segment)."""
+    if odometry is None or len(odometry) < 2:
+        return ()
+    xyt = odometry.xytheta.copy()
+    xyt[:, 2] = np.unwrap(xyt[:, 2])
+    u, _ = odometry_increments(xyt, odometry.stamps_s, OdometryNoise())
+    hit = odometry_jumps(u, np.diff(odometry.stamps_s), jumps)
+    return tuple(float(t) for t in odometry.stamps_s[1:][hit])
+
+
 def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: FusionOptions | None = None,
          ) -> tuple[PoseTrack, FusionReport]:
     """Smooth absolute fixes with odometry (or constant velocity) into one trajectory.
@@ -683,7 +704,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
     track = parts.track()
     report = FusionReport(opts.estimator, "odometry" if odometry is not None else "constant velocity", per_source,
                           tuple(parts.segments), tuple(sorted(parts.outliers, key=lambda o: o.stamp_s)),
-                          time.perf_counter() - t_start)
+                          time.perf_counter() - t_start, _jump_stamps(odometry, opts.jumps))
     return track, report
 
 
