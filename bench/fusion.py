@@ -2,6 +2,7 @@
 covariances, and GTSAM (Levenberg-Marquardt, Marginals) on the same factors side by side.
 
     python bench/fusion.py [--hours 1] [--no-gtsam] [--seeds-root /work/recs]
+    python bench/fusion.py --consistency [--seeds 0 1 2] [--minutes 3] [--laps 3]
 
 Part 1 (speed): gtrig.fusion.fuse on the full hour (fixes at their own stamps: EKF + RTS, then the batch MAP
 with marginal covariances), wall time and peak memory. Part 2 (peer): the same hour with each fix snapped to
@@ -13,7 +14,10 @@ factors (``gtsam.CustomFactor`` calling gtrig's compiled residuals), like for li
 (with --seeds-root): the acceptance rows on simulated recordings (the pipeline's GTvision and GTlaser); with
 --sync also every clock offset against the simulator's truth (sources to odometry, injected odometry
 offsets, each camera and scanner to GTvision's clock). ``--sync-mc N``: the offset to odometry on N
-synthetic runs of the simulator's path and odometry model (bias, scatter, coverage).
+synthetic runs of the simulator's path and odometry model (bias, scatter, coverage). ``--consistency``: only
+NEES/dof with 95 % batch-means intervals per seed and scenario on the synthetic run: fused, the bridged poses
+of 3 s gaps, and the run made of laps whose odometry jumps back at every seam (the jumps cut as fusion does,
+and fitted through as before).
 """
 
 from __future__ import annotations
@@ -584,6 +588,103 @@ def part_sync_mc(runs: int, duration_s: float = 75.0) -> None:
           f"{np.mean(half):.2f} ms, covering {100 * np.mean(cover):.0f} %")
 
 
+def lapped(t: np.ndarray, truth: np.ndarray, odo: OdometryLog, tracks: list[PoseTrack], laps: int,
+           ) -> tuple[np.ndarray, np.ndarray, OdometryLog, list[PoseTrack]]:
+    """The run repeated ``laps`` times, each lap's stamps moved on by the run's length: at every seam the
+    robot (truth, fixes) and its odometry jump back to the lap's start, as a recording made of laps does
+    (bench/scale.py) and as an odometry reset or a relocalised robot does."""
+    period = float(t[-1] - t[0]) + float(t[1] - t[0])
+
+    def rep(a: np.ndarray) -> np.ndarray:
+        return np.concatenate([a] * laps)
+
+    st = np.concatenate([t + k * period for k in range(laps)])
+    odo2 = OdometryLog(st, rep(odo.xytheta), rep(odo.v_mps), rep(odo.omega_radps))
+    trs = [PoseTrack.from_xytheta(np.concatenate([tr.stamps_s + k * period for k in range(laps)]),
+                                  rep(tr.xytheta()), cov=rep(tr.cov), source=tr.source) for tr in tracks]
+    return st, rep(truth), odo2, trs
+
+
+def slipped(odo: OdometryLog, starts_s: np.ndarray, duration_s: float, factor: float) -> OdometryLog:
+    """The odometry with its travel over ``duration_s`` from each of ``starts_s`` multiplied by ``factor``
+    (the wheels spinning), dead-reckoned on from there."""
+    xyt = odo.xytheta
+    d = np.diff(xyt, axis=0)
+    c, s = np.cos(xyt[:-1, 2]), np.sin(xyt[:-1, 2])
+    u = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
+    st = odo.stamps_s[1:]
+    for t0 in np.atleast_1d(starts_s):
+        u[(st >= t0) & (st < t0 + duration_s), :2] *= factor
+    out = np.zeros_like(xyt)
+    out[0] = xyt[0]
+    for i in range(len(u)):  # dead reckoning; sequential by nature
+        ci, si = np.cos(out[i, 2]), np.sin(out[i, 2])
+        out[i + 1] = out[i] + [ci * u[i, 0] - si * u[i, 1], si * u[i, 0] + ci * u[i, 1], u[i, 2]]
+    return OdometryLog(odo.stamps_s, out, odo.v_mps, odo.omega_radps)
+
+
+def _nees_dof(track: PoseTrack, t: np.ndarray, truth: np.ndarray, mask: np.ndarray | None = None):  # noqa: ANN202
+    """NEES/dof of ``track`` against the truth (piecewise: a lap's seam is not interpolated across) and
+    its 95 % batch-means interval (gtrig.evaluate.gt_aware.batch_interval)."""
+    from gtrig.evaluate.gt_aware import batch_interval
+
+    k = np.clip(np.searchsorted(t, track.stamps_s), 1, len(t) - 1)
+    a = (track.stamps_s - t[k - 1]) / (t[k] - t[k - 1])
+    g = truth[k - 1] + a[:, None] * (truth[k] - truth[k - 1])
+    e = track.xytheta() - g
+    e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    q = np.einsum("ni,nij,nj->n", e, np.linalg.inv(track.cov), e) / 3
+    m = np.ones(len(q), bool) if mask is None else mask
+    return batch_interval(q[m]), float(np.hypot(e[m, 0], e[m, 1]).max())
+
+
+def part_consistency(seeds: list[int], minutes: float, laps: int) -> None:
+    """NEES/dof with its 95 % interval per seed and scenario on the synthetic run: the plain run, the
+    bridged poses of 3 s gaps cut every 20 s from both sources, and the run made of ``laps`` laps (the
+    odometry jumping back at each seam) with and without the jumps cut (FusionOptions.jumps), and the run
+    whose wheels slip (30 % too much travel for 0.5 s) once a minute, with and without the slips widened
+    (FusionOptions.slip_ratio)."""
+    from dataclasses import replace as _replace
+
+    from gtrig.fusion.process import OdometryJumps
+
+    opts = FusionOptions(correlation_s=0.0)  # the synthetic fixes' errors are independent
+    never = _replace(opts, jumps=OdometryJumps(max_speed_mps=1e9, max_yaw_rate_radps=1e9))
+
+    def fmt(iv) -> str:  # noqa: ANN001
+        return f"{iv.value:.2f} [{iv.low:.2f}, {iv.high:.2f}]"
+
+    print(f"## consistency: synthetic run of {minutes:g} min (odometry 50 Hz, vision 40 Hz, laser 75 Hz)")
+    print("| seed | scenario | poses | NEES/dof [95 %] | max pos error (mm) |")
+    print("|---|---|---|---|---|")
+    for seed in seeds:
+        t, truth, odo, tracks = synthetic_hour(minutes / 60.0, seed)
+        fx = [fixes_from_track(tr) for tr in tracks]
+        fused, _ = fuse(fx, odo, opts)
+        iv, mx = _nees_dof(fused, t, truth)
+        print(f"| {seed} | fused | {len(fused)} | {fmt(iv)} | {1e3 * mx:.2f} |", flush=True)
+        t0 = float(t[0])
+        cut = [tr.select(((tr.stamps_s - t0) % 20.0 < 10.0) | ((tr.stamps_s - t0) % 20.0 > 13.0)) for tr in tracks]
+        gap, _ = fuse([fixes_from_track(tr) for tr in cut], odo, opts)
+        b = gap.status == 2
+        iv, mx = _nees_dof(gap, t, truth, b)
+        print(f"| {seed} | bridged poses, 3 s gaps every 20 s | {int(b.sum())} | {fmt(iv)} | {1e3 * mx:.2f} |",
+              flush=True)
+        lt, ltruth, lodo, ltracks = lapped(t, truth, odo, tracks, laps)
+        lfx = [fixes_from_track(tr) for tr in ltracks]
+        for name, o in (("jumps cut", opts), ("jumps fitted through", never)):
+            lf, rep = fuse(lfx, lodo, o)
+            iv, mx = _nees_dof(lf, lt, ltruth)
+            print(f"| {seed} | {laps} laps, {name} ({len(rep.odometry_jumps_s)} jumps found) "
+                  f"| {len(lf)} | {fmt(iv)} | {1e3 * mx:.2f} |", flush=True)
+        sodo = slipped(odo, t0 + 30.0 + 60.0 * np.arange(int(minutes)), 0.5, 1.3)
+        for name, o in (("slips widened", opts), ("slips fitted through", _replace(opts, slip_ratio=0.0))):
+            sf, _ = fuse(fx, sodo, o)
+            iv, mx = _nees_dof(sf, t, truth)
+            print(f"| {seed} | 30 % slip for 0.5 s every minute, {name} | {len(sf)} | {fmt(iv)} | {1e3 * mx:.2f} |",
+                  flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=1.0)
@@ -595,7 +696,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds-root", type=Path, default=None)
     ap.add_argument("--sync", action="store_true", help="with --seeds-root: the clock offsets against the truth")
     ap.add_argument("--sync-mc", type=int, default=0, help="offsets to odometry on this many synthetic runs")
+    ap.add_argument("--consistency", action="store_true",
+                    help="only the NEES/dof with 95 % intervals per seed and scenario (plain, bridged, lapped)")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--minutes", type=float, default=3.0, help="--consistency: the synthetic run's length")
+    ap.add_argument("--laps", type=int, default=3, help="--consistency: laps of the lapped run")
     a = ap.parse_args(argv)
+    if a.consistency:
+        part_consistency(a.seeds, a.minutes, a.laps)
+        return 0
     if a.seeds_root is not None:
         part_seeds(a.seeds_root)
         if a.sync:

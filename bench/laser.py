@@ -10,6 +10,9 @@ the sweep; ``agile-two-fabrics``: a hull with dark and light sides; ``agile-2mps
 noise and nothing else; ``agile-ideal``: exact scans (the yaw budget); ``agile-synced``,
 ``agile-blocked-synced``: each scanner's offset measured by the sync stage's fit against a stand-in for
 GTvision and removed before tracking, as the pipeline's laser-clock stage does (gtrig.laser.clock);
+``agile-middle-stamps``: stamped at the middle; ``agile-simultaneous``: every beam of a scan fired at
+once, the rig saying so; ``agile-simultaneous-told-sweep``, ``agile-sweep-told-simultaneous``: the rig
+declaring the other timing (the beam timing check of gtrig.laser.beam_timing should name every scanner);
 ``agile-glossy-fabrics``: dark and light sides 3 cm apart in range bias; ``like-issue-19``: those fabrics,
 1 % dropouts, up to 0.9 m/s). The scanners are calibrated from the background sequence (nominal poses
 3 cm / 2 deg off), then the run is tracked with the calibrated poses and with the true ones. The peer is Open3D's
@@ -28,9 +31,11 @@ import time
 
 import numpy as np
 
+from gtrig.evaluate.gt_aware import batch_interval
 from gtrig.geometry import wrap_angle
 from gtrig.io.scans import ScanLog
 from gtrig.laser.background import build_background
+from gtrig.laser.beam_timing import check_beam_timing, timing_check
 from gtrig.laser.calibrate import calibrate_scanners
 from gtrig.laser.clock import ScannerClock, scanners_on_clock
 from gtrig.laser.foreground import foreground_mask, foreground_threshold
@@ -241,6 +246,7 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
              calibrate: bool = True, validate: bool = True, peer: bool = True) -> dict:
     laser = dict(laser or {})
     ideal = bool(laser.pop("ideal", False))  # exact geometry: no noise, bias, mixed pixels, clock offsets
+    declared = laser.pop("declared", None)  # the rig's beam timing when it differs from the scanners'
     clocks = laser.pop("clocks", None)  # "common": the offsets' mean only; "differences": mean removed;
     # "synced": each scanner's offset measured by the sync stage's fit against a GTvision stand-in and removed
     cfg = SimConfig(seed=seed, laser=LaserSimConfig(**laser), motion=MotionSimConfig(**(motion or {})))
@@ -290,6 +296,8 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
         out["true_offsets_ms"] = {k: 1000 * v for k, v in info.clock_offsets_s.items()}
         vision_ref = vision_stand_in(mot, ts[-1], cfg.camera.stamp_jitter_s, seed * 10 + 4)
     for label, scs in (("calibrated", cal), ("true", sc.rig_true.laser_scanners)):
+        if declared:
+            scs = tuple(s.model_copy(update=declared) for s in scs)
         t0 = time.perf_counter()
         bgm = [build_background(bgs[s.name].ranges_m, s) for s in scs]
         masks = [
@@ -335,6 +343,8 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
             "raw_pos_mm": 1000 * er.mean(),
             "raw_yaw_deg": np.degrees(eyr.mean()),
             "nees": nees.mean(),
+            "nees_dof": batch_interval(nees / 3),
+            "timing": timing_check(check_beam_timing(fp, res.xytheta, ok, res.track_id, scs, model)),
             "nees_xy": float(np.mean(np.einsum(
                 "ni,nij,nj->n", z[:, :2], np.linalg.inv(res.cov_xytheta[ok][:, :2, :2]), z[:, :2]))),
             "nees_th": float(np.mean(z[:, 2] ** 2 / res.cov_xytheta[ok][:, 2, 2])),
@@ -374,6 +384,13 @@ SCENARIOS = {
     "agile": ({}, {"profile": "agile", "speed_mps": 1.5}),
     "agile-blocked": ({"blocked_scanner": 0, "blocked_fraction": 0.5}, {"profile": "agile", "speed_mps": 1.5}),
     "agile-end-stamps": ({"stamp_at": "end"}, {"profile": "agile", "speed_mps": 1.5}),
+    "agile-middle-stamps": ({"stamp_at": "middle"}, {"profile": "agile", "speed_mps": 1.5}),
+    # beams fired all at once (a flash device, another simulator), the rig saying so, or the default sweep
+    "agile-simultaneous": ({"beam_timing": "simultaneous"}, {"profile": "agile", "speed_mps": 1.5}),
+    "agile-simultaneous-told-sweep": ({"beam_timing": "simultaneous", "declared": {"beam_timing": "sweep"}},
+                                      {"profile": "agile", "speed_mps": 1.5}),
+    "agile-sweep-told-simultaneous": ({"declared": {"beam_timing": "simultaneous"}},
+                                      {"profile": "agile", "speed_mps": 1.5}),
     "agile-two-fabrics": ({"gown_reflectivity": (0.15, 0.9, 0.15, 0.9)}, {"profile": "agile", "speed_mps": 1.5}),
     "agile-2mps": ({}, {"profile": "agile", "speed_mps": 2.0, "accel_mps2": 1.5}),
     # the yaw budget: the scanners on one clock (no offsets; the same noise otherwise)
@@ -396,6 +413,10 @@ SCENARIOS = {
 }
 
 
+def _nees(iv) -> str:  # noqa: ANN001
+    return f"{iv.value:.2f} [{iv.low:.2f}, {iv.high:.2f}]"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
@@ -414,8 +435,9 @@ def main() -> None:
     print()
     print("| scenario | seed | max speed (m/s) | frames | localized, >=2 sides | pos mean / max OK (mm) "
           "| yaw mean (deg) "
-          "| NEES/dof calibrated (true) | OK > 5 cm | peer pos (mm) | peer yaw mod 180 (deg) | peer share < 5 cm |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| NEES/dof calibrated [95 %] (true [95 %]) | OK > 5 cm | peer pos (mm) | peer yaw mod 180 (deg) "
+          "| peer share < 5 cm | beam timing check (calibrated) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     rates = []
     for name in a.scenarios:
         laser, motion = SCENARIOS[name]
@@ -431,7 +453,8 @@ def main() -> None:
             print(
                 f"| {name} | {seed} | {c['speed_max']:.2f} | {c['frames']} | {100 * c['loc_2sides']:.2f} % | "
                 f"{c['pos_mm']:.2f} / {c['ok_max_mm']:.1f} | {c['yaw_deg']:.3f} | "
-                f"{c['nees'] / 3:.2f} ({t['nees'] / 3:.2f}) | {c['ok_wrong_5cm']} | {peer} |",
+                f"{_nees(c['nees_dof'])} ({_nees(t['nees_dof'])}) | {c['ok_wrong_5cm']} | {peer} | "
+                f"{c['timing'][0]} (max {c['timing'][1]:.1f} sd) |",
                 flush=True,
             )
             rates.append((name, seed, r))

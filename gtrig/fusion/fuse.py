@@ -28,10 +28,13 @@ from gtrig.fusion.init import odom_in_world
 from gtrig.fusion.measurements import Fixes, FixModel, fixes_from_track
 from gtrig.fusion.process import (
     ConstantVelocityNoise,
+    OdometryJumps,
     OdometryNoise,
     constant_velocity_cov,
+    cut_at_jumps,
     interpolate_odometry,
     odometry_increments,
+    odometry_jumps,
     whitening,
 )
 from gtrig.io.odometry import OdometryLog
@@ -83,6 +86,17 @@ class FusionOptions:
         parameters stay a whole-run estimate: a first pass gives each window's information on them,
         the second smooths each window with the others' as its prior (:func:`_smooth_windows`). None:
         one batch per segment, whatever its length.
+    jumps : what odometry increment is a jump (a reset, a restart, a joined recording: faster than the
+        robot moves, :class:`~gtrig.fusion.process.OdometryJumps`); a jump starts a new odometry segment:
+        its increment ties nothing, the poses either side are held by the fixes.
+    slip_ratio, slip_window_s : a wheel slip (the odometry wrong by more than its noise model over a short
+        stretch) shows as odometry residuals far above the segment's typical ones: where the mean
+        whitened odometry residual over ``slip_window_s`` exceeds ``slip_ratio`` times the segment's
+        median of that mean, the increments' covariance there is multiplied by that excess and the
+        segment smoothed again (:func:`_slip_factors`), so the fixes, not the slipping odometry, set the
+        poses there; a slip large enough for the gate to refuse every source's fixes after it (they agree
+        with each other, not with the odometry) widens the increments within ``slip_window_s`` before
+        that stretch by :data:`SLIP_WIDEN` (:func:`_gated_stretches`). 0: off.
     """
 
     estimator: Literal["batch", "ekf"] = "batch"
@@ -102,6 +116,9 @@ class FusionOptions:
     bias_cov: Mapping[str, np.ndarray] = field(default_factory=dict)
     window_s: float | None = 600.0
     window_overlap_s: float = 30.0
+    jumps: OdometryJumps = OdometryJumps()
+    slip_ratio: float = 20.0
+    slip_window_s: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -137,6 +154,8 @@ class FusionReport:
     segments: tuple[Segment, ...]
     outliers: tuple[Outlier, ...]
     seconds: float
+    #: stamps (s, reference clock) of the odometry's jumps, each the start of a new odometry segment
+    odometry_jumps_s: tuple[float, ...] = ()
 
     def to_dict(self) -> dict[str, object]:
         return asdict(self)
@@ -297,18 +316,30 @@ def _node_stamps(t0: float, t1: float, odometry: OdometryLog | None, rate_hz: fl
     return t0 + np.arange(n) * step
 
 
+def _odometry_between(stamps: np.ndarray, odometry: OdometryLog, opts: FusionOptions,
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The odometry at the nodes (N, 3), its increments (N-1, 3) and their covariances (N-1, 3, 3), the
+    jumps cut (:func:`~gtrig.fusion.process.cut_at_jumps`)."""
+    odo = interpolate_odometry(odometry, stamps)
+    u, qcov = odometry_increments(odo, stamps, opts.odometry)
+    u, qcov = cut_at_jumps(u, qcov, odometry_jumps(u, np.diff(stamps), opts.jumps))
+    return odo, u, qcov
+
+
 def _chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: OdometryLog | None, opts: FusionOptions,
            sources: tuple[str, ...], k_prior: tuple[np.ndarray, np.ndarray] | None = None,
-           ) -> tuple[FactorChain, np.ndarray, np.ndarray, np.ndarray]:
+           slip: np.ndarray | None = None) -> tuple[FactorChain, np.ndarray, np.ndarray, np.ndarray]:
     """The factor chain, the start (N, d), the parameters' start and the start's covariance (d, d).
-    ``k_prior``: the odometry parameters' prior (mean (3,), covariance (3, 3)); default the options'."""
+    ``k_prior``: the odometry parameters' prior (mean (3,), covariance (3, 3)); default the options'.
+    ``slip``: (N-1,) factors on the odometry increments' covariances (wheel slips, :func:`_slip_factors`)."""
     N = stamps.size
     node = np.clip(np.searchsorted(stamps, fx["stamps"], "right") - 1, 0, N - 2)
     alpha = np.clip((fx["stamps"] - stamps[node]) / (stamps[node + 1] - stamps[node]), 0.0, 1.0)
     W = _fix_whitening(fx["cov"], fx["kind"])
     if odometry is not None:
-        odo = interpolate_odometry(odometry, stamps)
-        u, qcov = odometry_increments(odo, stamps, opts.odometry)
+        odo, u, qcov = _odometry_between(stamps, odometry, opts)
+        if slip is not None:
+            qcov = qcov * slip[:, None, None]
         proc, d = PROCESS_ODOMETRY, 3
         k0, Pk = opts.odometry.prior() if k_prior is None else k_prior
         proc_W = whitening(qcov)
@@ -424,13 +455,106 @@ class _Smoothed:
     iterations: int
 
 
+def _slip_factors(stamps: np.ndarray, u: np.ndarray, proc_W: np.ndarray, X: np.ndarray, K: np.ndarray,
+                  ratio: float, window_s: float) -> np.ndarray | None:
+    """Per odometry increment (N-1,), the factor its covariance needs where the wheels slipped: the mean
+    squared whitened residual of the increments within ``window_s`` over the chain's median of that
+    mean, where it exceeds ``ratio`` (1 elsewhere); None when nowhere. The median, not the expected
+    value 3, is the reference: with fixes denser than the odometry's noise the residuals of a right
+    odometry sit well below their dof, and a slip stands out against the chain's own typical level."""
+    if len(u) < 10:
+        return None
+    xa, xb = X[:-1], X[1:]
+    c, s = np.cos(xa[:, 2]), np.sin(xa[:, 2])
+    dx, dy = xb[:, 0] - xa[:, 0], xb[:, 1] - xa[:, 1]
+    r = np.column_stack([c * dx + s * dy - K[0] * u[:, 0], -s * dx + c * dy - K[0] * u[:, 1],
+                         (xb[:, 2] - xa[:, 2]) - K[1] * u[:, 2] - K[2] * u[:, 0]])
+    q = np.einsum("nij,nj->ni", proc_W, r)
+    q2 = np.sum(q**2, axis=1)
+    t = stamps[:-1]
+    cs = np.r_[0.0, np.cumsum(q2)]
+    lo = np.searchsorted(t, t - window_s / 2, "left")
+    hi = np.searchsorted(t, t + window_s / 2, "right")
+    mean = (cs[hi] - cs[lo]) / np.maximum(hi - lo, 1)
+    base = float(np.median(mean))
+    if not base > 0:
+        return None
+    excess = mean / base
+    if not np.any(excess > ratio):
+        return None
+    return np.where(excess > ratio, excess, 1.0)
+
+
+#: an odometry increment judged a slip has its covariance multiplied by this: it then ties the poses
+#: about as loosely as 100 times its noise, so the fixes set them
+SLIP_WIDEN = 1.0e4
+#: smoothing passes at most while slips are still found
+SLIP_PASSES = 4
+
+
+def _gated_stretches(seg: dict[str, np.ndarray], use: np.ndarray, window_s: float = 0.3,
+                     share: float = 0.8) -> np.ndarray:
+    """Stamps (s) where a stretch begins in which every source's fixes are refused by the gate (each
+    source with two fixes or more within ``window_s`` has at least ``share`` of them refused, three
+    fixes at least in all): the fixes agree with each other and not with the odometry's prediction, so
+    the odometry slipped just before."""
+    t = seg["stamps"]
+    if t.size < 3:
+        return np.zeros(0)
+    lo = np.searchsorted(t, t - window_s / 2, "left")
+    hi = np.searchsorted(t, t + window_s / 2, "right")
+    flag = (hi - lo) >= 3
+    for k in np.unique(seg["source"]):
+        mine = (seg["source"] == k).astype(float)
+        bad = mine * ~use
+        cm, cb = np.r_[0.0, np.cumsum(mine)], np.r_[0.0, np.cumsum(bad)]
+        n, nb = cm[hi] - cm[lo], cb[hi] - cb[lo]
+        flag &= (n < 2) | (nb >= share * n)
+    flag &= ~use
+    start = flag & ~np.r_[False, flag[:-1]]
+    return t[start]
+
+
+def _slip_widening(stamps: np.ndarray, starts_s: np.ndarray, before_s: float) -> np.ndarray | None:
+    """(N-1,) factors: :data:`SLIP_WIDEN` on the increments within ``before_s`` before each of
+    ``starts_s`` (where the gate began refusing every source), 1 elsewhere; None when there is none."""
+    if starts_s.size == 0:
+        return None
+    t0, t1 = stamps[:-1], stamps[1:]
+    hit = np.zeros(t0.size, bool)
+    for ts in starts_s:
+        hit |= (t1 >= ts - before_s) & (t0 <= ts)
+    return np.where(hit, SLIP_WIDEN, 1.0) if hit.any() else None
+
+
 def _smooth(stamps: np.ndarray, seg: dict[str, np.ndarray], odometry: OdometryLog | None, opts: FusionOptions,
             sources: tuple[str, ...], bias: list[np.ndarray | None], sigma_t: float,
-            k_prior: tuple[np.ndarray, np.ndarray] | None = None) -> _Smoothed:
+            k_prior: tuple[np.ndarray, np.ndarray] | None = None, slip: np.ndarray | None = None) -> _Smoothed:
     """The gated EKF + RTS, then (``opts.estimator == "batch"``) the robust batch solve, of the fixes ``seg``
     on the nodes ``stamps``; ``k_prior`` the odometry parameters' prior (default the options'). The
-    fixes' covariances are dropped from ``seg`` once the batch solve no longer needs them."""
-    chain, _, _, P0 = _chain(stamps, seg, odometry, opts, sources, k_prior)
+    fixes' covariances are dropped from ``seg`` once the batch solve no longer needs them. Where the
+    odometry slipped (:func:`_slip_factors`), the segment is smoothed once more with its increments'
+    covariances widened there (``slip``)."""
+    if odometry is not None and slip is None and opts.slip_ratio > 0:
+        keep: dict[str, np.ndarray] = {k: seg[k] for k in ("cov", "gate_cov") if k in seg}
+        _, u, qcov = _odometry_between(stamps, odometry, opts)
+        W = whitening(qcov)
+        f = np.ones(stamps.size - 1)
+        for _ in range(SLIP_PASSES):
+            sm = _smooth(stamps, seg, odometry, opts, sources, bias, sigma_t, k_prior, f)
+            seg.update(keep)
+            more = _slip_factors(stamps, u, W / np.sqrt(f)[:, None, None], sm.X, sm.K, opts.slip_ratio,
+                                 opts.slip_window_s)
+            g = _slip_widening(stamps, _gated_stretches(seg, sm.use), opts.slip_window_s)
+            if g is not None:
+                more = g if more is None else np.maximum(more, g)
+            if more is None:
+                break
+            f = np.minimum(f * more, SLIP_WIDEN)
+        for k in keep:  # dropped as the batch solve drops them
+            seg.pop(k, None)
+        return sm
+    chain, _, _, P0 = _chain(stamps, seg, odometry, opts, sources, k_prior, slip)
     Pk = np.zeros((0, 0)) if odometry is None else (opts.odometry.prior() if k_prior is None else k_prior)[1]
     ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob, gate_cov=seg["gate_cov"],
                      covariances=opts.estimator != "batch")
@@ -591,6 +715,17 @@ def _smooth_windows(parts: _Parts, between: Callable[[float, float], dict[str, n
         del sm, sw
 
 
+def _jump_stamps(odometry: OdometryLog | None, jumps: OdometryJumps) -> tuple[float, ...]:
+    """Stamps (s) of the records where the odometry jumps (each the first record of its new segment)."""
+    if odometry is None or len(odometry) < 2:
+        return ()
+    xyt = odometry.xytheta.copy()
+    xyt[:, 2] = np.unwrap(xyt[:, 2])
+    u, _ = odometry_increments(xyt, odometry.stamps_s, OdometryNoise())
+    hit = odometry_jumps(u, np.diff(odometry.stamps_s), jumps)
+    return tuple(float(t) for t in odometry.stamps_s[1:][hit])
+
+
 def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: FusionOptions | None = None,
          ) -> tuple[PoseTrack, FusionReport]:
     """Smooth absolute fixes with odometry (or constant velocity) into one trajectory.
@@ -683,7 +818,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
     track = parts.track()
     report = FusionReport(opts.estimator, "odometry" if odometry is not None else "constant velocity", per_source,
                           tuple(parts.segments), tuple(sorted(parts.outliers, key=lambda o: o.stamp_s)),
-                          time.perf_counter() - t_start)
+                          time.perf_counter() - t_start, _jump_stamps(odometry, opts.jumps))
     return track, report
 
 

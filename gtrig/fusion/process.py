@@ -97,6 +97,48 @@ def odometry_increments(xytheta: np.ndarray, stamps_s: np.ndarray, noise: Odomet
     return u, cov
 
 
+@dataclass(frozen=True)
+class OdometryJumps:
+    """What odometry increment is no motion but a jump: an odometry reset (back to zero), a relocalised
+    or restarted driver, a recording cut and joined (laps), a gross slip. An increment is a jump when
+    its length exceeds ``max_speed_mps * dt + tol_m`` or its turn ``max_yaw_rate_radps * dt + tol_rad``:
+    faster than the robot can move.
+
+    Attributes
+    ----------
+    max_speed_mps, max_yaw_rate_radps : the fastest the robot moves and turns (m/s, rad/s).
+    tol_m, tol_rad : what one increment may add to that (stamp jitter, quantisation).
+    """
+
+    max_speed_mps: float = 3.0
+    max_yaw_rate_radps: float = 6.0
+    tol_m: float = 0.02
+    tol_rad: float = 0.05
+
+
+def odometry_jumps(u: np.ndarray, dt_s: np.ndarray, jumps: OdometryJumps) -> np.ndarray:
+    """(N-1,) which increments ``u`` (N-1, 3) (robot frame, m, m, rad) over ``dt_s`` (N-1,) are jumps."""
+    dist = np.hypot(u[:, 0], u[:, 1])
+    turn = np.abs(u[:, 2])
+    return (dist > jumps.max_speed_mps * dt_s + jumps.tol_m) | (turn > jumps.max_yaw_rate_radps * dt_s + jumps.tol_rad)
+
+
+#: an increment across a jump: no motion, with this standard deviation (m, rad): it ties nothing
+JUMP_SIGMA = (1.0e3, 1.0e3, 1.0e2)
+
+
+def cut_at_jumps(u: np.ndarray, cov: np.ndarray, jump: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Increments (N-1, 3) and covariances (N-1, 3, 3) with each jump's made a new odometry segment's
+    start: zero motion, uninformative (:data:`JUMP_SIGMA`), so the poses on either side are tied by the
+    fixes alone, not pulled towards the jump."""
+    if not jump.any():
+        return u, cov
+    u, cov = u.copy(), cov.copy()
+    u[jump] = 0.0
+    cov[jump] = np.diag(np.square(JUMP_SIGMA))
+    return u, cov
+
+
 def constant_velocity_cov(dts: np.ndarray, noise: ConstantVelocityNoise) -> np.ndarray:
     """(N-1, 6, 6) covariance of the constant-velocity residual over steps ``dts`` (white-noise
     acceleration, Bar-Shalom's discretisation)."""

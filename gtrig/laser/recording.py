@@ -25,6 +25,7 @@ from gtrig.io.scans import ScanLog, ScanRows, index_scans, read_scans
 from gtrig.io.text import read_text
 from gtrig.io.yamlfile import safe_load
 from gtrig.laser.background import BackgroundModel, build_background
+from gtrig.laser.beam_timing import TimingFit, check_beam_timing
 from gtrig.laser.calibrate import CalibrationReport, calibrate_scanners, calibrated_rig, object_outlines
 from gtrig.laser.clock import ScannerClock, on_clock
 from gtrig.laser.foreground import foreground_mask, foreground_threshold
@@ -397,3 +398,23 @@ __all__ = [
     "track_sequence",
     "write_track",
 ]
+
+
+def check_recording_timing(
+    rec_dir: str | os.PathLike[str],
+    result: TrackResult,
+    rig: Rig,
+    sequence: str = "run",
+    scan_cache: str | os.PathLike[str] | Literal[False] | None = None,
+) -> tuple[TimingFit, ...]:
+    """Each fixed scanner's declared beam timing checked against the residuals of the track ``result``
+    made by :func:`track_recording` on ``sequence`` with ``rig`` (:mod:`gtrig.laser.beam_timing`);
+    ``scan_cache``: as :func:`track_recording`'s (the logs are read again from it)."""
+    rec = Path(rec_dir)
+    if rig.robot.hull is None:
+        raise ConfigError("rig: robot.hull: missing field: GTlaser tracks the robot's hull")
+    bgs = load_backgrounds(rec / "background", rig)
+    with scan_cache_folder(scan_cache) as cache:
+        rig_c, frames = logged_frames(rig, rec / sequence, bgs, None, cache)
+        return check_beam_timing(frames, result.xytheta, result.ok, result.track_id, rig_c.laser_scanners,
+                                 HullModel.from_hull(rig.robot.hull))

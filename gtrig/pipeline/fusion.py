@@ -161,6 +161,7 @@ def fusion(inp: StageInput) -> StageOutput:
         AccuracyRow("fusion", "poses", len(fused), ""),
         AccuracyRow("fusion", "poses bridged by odometry", 100 * counts["bridged"] / max(len(fused), 1), "%"),
         AccuracyRow("fusion", "fixes rejected or down-weighted", n_out, ""),
+        AccuracyRow("fusion", "odometry jumps (each a new odometry segment)", len(report.odometry_jumps_s), ""),
     )
     prod = {"tracks/fusion/run": fused}
     if not inp.has_truth:

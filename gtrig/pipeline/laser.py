@@ -21,7 +21,8 @@ def gtlaser(inp: StageInput) -> StageOutput:
     from gtrig.evaluate.truth import score_on_recording
     from gtrig.fusion.bias import mean_covariance
     from gtrig.io.biascov import write_bias_cov
-    from gtrig.laser.recording import calibrate_recording, track_recording
+    from gtrig.laser.beam_timing import timing_check
+    from gtrig.laser.recording import calibrate_recording, check_recording_timing, track_recording
     from gtrig.laser.track import TrackSettings, to_pose_track
 
     assert inp.products.rig is not None
@@ -33,6 +34,9 @@ def gtlaser(inp: StageInput) -> StageOutput:
                           scan_cache=inp.out / SCAN_CACHE, executor=inp.executor, workers=inp.workers,
                           progress=inp.progress)
     track = to_pose_track(res)
+    # the beam timing the residuals fit, against the rig's (a wrong one leaves a covariance too confident)
+    timing_text, timing_z, timing_ok = timing_check(check_recording_timing(
+        inp.rec, res, rig, "run", scan_cache=inp.out / SCAN_CACHE))
     # the scanners' registration error is one draw for the whole run: every pose shares it, so fusion
     # considers it as a bias rather than averaging it away (its share of a typical pose's covariance)
     write_bias_cov(inp.out / "gt_laser_bias.yaml", "GTlaser",
@@ -48,6 +52,7 @@ def gtlaser(inp: StageInput) -> StageOutput:
         AccuracyRow("GTlaser", "run, frames degenerate", counts["degenerate"], f"of {len(res)}"),
         AccuracyRow("GTlaser", "run, frames ambiguous", counts["ambiguous"], f"of {len(res)}", "0",
                     counts["ambiguous"] == 0),
+        AccuracyRow("GTlaser", timing_text, timing_z, "sd off the rig's sweep slope", "< 3", timing_ok),
     )
     # the per-frame result (diagnostics, raw fits) stays here: no later stage reads it, and on an hour's
     # recording (~80 MB) it would stand under the scoring's peak and under every later stage's

@@ -12,8 +12,11 @@ every one of these holds:
 3. ``s_ratio``: the measured residual deviation over the expected one (both scans' range noise) is at
    most ``max_s_ratio`` (a residual-distribution test: a match off by a fraction of the noise widens
    the inliers' residuals);
-4. ``sd``: the match is determinate: the covariance's largest position deviation (its major axis) is
-   under ``max_sd_m`` and the heading's under ``max_sd_rad`` (a corridor is degenerate along its axis);
+4. ``sd``: the match is determinate: the covariance's smallest position deviation (its minor axis) is
+   under ``max_sd_m`` and the heading's under ``max_sd_rad``. A match whose major axis is wider (a
+   corridor is degenerate along its axis) is accepted as *degenerate* with that covariance, large along
+   the axis, when ``degenerate == "report"`` (the default), refused when ``"refuse"``: what it says
+   across the axis is as good as any match's, and its covariance says what it does not know;
 5. ``guess``: the match agrees with the guess within their joint uncertainty: the squared Mahalanobis
    distance is under the chi-square(3) quantile ``guess_quantile``.
 
@@ -21,6 +24,8 @@ every one of these holds:
    restarted ``probe_m`` either side along the match's least determined direction finds no other pose
    explaining as many points (within ``probe_margin``). A corridor with a few doors fits well at
    several places along its axis, each with a small covariance; real scans showed it (CARMEN logs).
+   With ``degenerate == "report"`` such a match is kept with its covariance widened to span the other
+   solution (``cov + d d^T``, ``d`` the difference between the two), never with its own small one.
 
 Every threshold is physical (noise multiples, the accuracy a GT relation must have); the verdicts are
 measured against truth in docs/scanmatch.md, not assumed.
@@ -29,6 +34,7 @@ measured against truth in docs/scanmatch.md, not assumed.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy.stats import chi2
@@ -49,6 +55,7 @@ class AcceptParams:
     guess_quantile: float = 0.9999
     probe_m: float = 0.3
     probe_margin: float = 0.05
+    degenerate: Literal["report", "refuse"] = "report"
 
 
 DEFAULT_ACCEPT = AcceptParams()
@@ -66,6 +73,8 @@ class Verdict:
     sd_max_m: float
     sd_theta_rad: float
     mahalanobis2: float
+    #: accepted though wide along one direction (its covariance says how wide): a corridor's axis
+    degenerate: bool = False
 
     @property
     def score(self) -> float:
@@ -86,10 +95,11 @@ def judge(res: IcpResult, cov: np.ndarray, guess: np.ndarray, guess_cov: np.ndar
     exp_sig = float(np.sqrt(np.nanmean(res.expected_sigma_m[res.inlier] ** 2))) if res.n_inliers else np.inf
     s_ratio = float(res.s_m / exp_sig) if res.n_inliers > 3 else np.inf
     if np.all(np.isfinite(cov)):
-        sd_max = float(np.sqrt(max(0.0, np.linalg.eigvalsh(cov[:2, :2])[-1])))
+        ev = np.linalg.eigvalsh(cov[:2, :2])
+        sd_min, sd_max = (float(np.sqrt(max(0.0, e))) for e in ev)
         sd_th = float(np.sqrt(max(0.0, cov[2, 2])))
     else:
-        sd_max = sd_th = np.inf
+        sd_min = sd_max = sd_th = np.inf
     d = se2.relative(guess, res.pose)
     S = np.asarray(guess_cov, dtype=float) + (cov if np.all(np.isfinite(cov)) else 0.0)
     try:
@@ -105,10 +115,16 @@ def judge(res: IcpResult, cov: np.ndarray, guess: np.ndarray, guess_cov: np.ndar
         fails.append(f"inlier share {share:.2f} < {p.min_inlier_share:g}")
     if not s_ratio <= p.max_s_ratio:
         fails.append(f"residual spread {s_ratio:.2f} x expected > {p.max_s_ratio:g}")
-    if not sd_max <= p.max_sd_m:
-        fails.append(f"position sd {sd_max * 1000:.1f} mm > {p.max_sd_m * 1000:g} mm (degenerate)")
+    degenerate = bool(np.isfinite(sd_max) and sd_max > p.max_sd_m)
+    if not sd_min <= p.max_sd_m or (degenerate and p.degenerate == "refuse"):
+        worst = sd_max if p.degenerate == "refuse" else sd_min
+        fails.append(f"position sd {worst * 1000:.1f} mm > {p.max_sd_m * 1000:g} mm (degenerate)")
     if not sd_th <= p.max_sd_rad:
         fails.append(f"heading sd {np.degrees(sd_th):.3f} deg > {np.degrees(p.max_sd_rad):.3f} deg")
     if not m2 <= chi2.ppf(p.guess_quantile, 3):
         fails.append(f"disagrees with the guess (Mahalanobis^2 {m2:.1f})")
-    return Verdict(not fails, "; ".join(fails), float(explained), float(share), s_ratio, sd_max, sd_th, m2)
+    reason = "; ".join(fails)
+    if not fails and degenerate:
+        reason = f"degenerate: position sd {sd_max * 1000:.1f} mm along its major axis (reported, not refused)"
+    return Verdict(not fails, reason, float(explained), float(share), s_ratio, sd_max, sd_th, m2,
+                   degenerate=degenerate and not fails)

@@ -57,6 +57,15 @@ class GeneticResult:
     history: np.ndarray
 
 
+def pair_seed(base: int, stamp_a_s: float, stamp_b_s: float) -> int:
+    """The genetic matcher's seed for the pair of scans stamped ``stamp_a_s`` and ``stamp_b_s``: derived
+    from the pair itself (its stamps to the microsecond) and ``base``, so a pair's match does not depend
+    on where it stands in a list, how the list is cut into chunks or which other pairs are matched."""
+    us = [int(round(float(t) * 1e6)) for t in (stamp_a_s, stamp_b_s)]
+    words = [int(base) & 0xFFFFFFFF] + [w for u in us for w in ((u >> 32) & 0xFFFFFFFF, u & 0xFFFFFFFF)]
+    return int(np.random.SeedSequence(words).generate_state(1, np.uint64)[0] >> 1)
+
+
 def _fitness(tree: cKDTree, pts: np.ndarray, poses: np.ndarray, trim: float, clip: float) -> np.ndarray:
     P = poses.shape[0]
     moved = se2.apply(poses, np.broadcast_to(pts, (P, *pts.shape)))  # (P, N, 2)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -28,7 +28,7 @@ from gtrig.io.scans import ScanLog
 from gtrig.rig.models import OnboardScanner
 from gtrig.scanmatch import se2
 from gtrig.scanmatch.accept import DEFAULT_ACCEPT, AcceptParams, Verdict
-from gtrig.scanmatch.genetic import DEFAULT_GENETIC, GeneticParams
+from gtrig.scanmatch.genetic import DEFAULT_GENETIC, GeneticParams, pair_seed
 from gtrig.scanmatch.icp import DEFAULT_ICP, IcpParams
 from gtrig.scanmatch.scan import PlanarScan, merge, ranges_to_scan
 
@@ -155,9 +155,10 @@ def _match_chunk(first: int, items: list[tuple[PlanarScan, PlanarScan, np.ndarra
 
     model = ErrorModel(surface_bias_sigma_m=surface_bias_m)
     out = []
-    for n, (a, b, g, gc) in enumerate(items, first):
-        # each pair's own seed: the result does not depend on how pairs are cut into chunks
-        gp = None if genetic is None else GeneticParams(**{**genetic.__dict__, "seed": genetic.seed + n})
+    for a, b, g, gc in items:
+        # each pair's own seed, from its scans' stamps: the result depends neither on the pair's place in
+        # the list nor on how the pairs are cut into chunks
+        gp = None if genetic is None else replace(genetic, seed=pair_seed(genetic.seed, a.stamp_s, b.stamp_s))
         pose, cov, _res, v, name = match_pair(a, b, g, gc, model, tilt_shift_m, icp, accept, gp)
         out.append(Relation(a.stamp_s, b.stamp_s, pose, cov, g, name, v))
     return out

@@ -53,6 +53,17 @@ def test_pairs_from_raw_odometry(name, rows):
     # every accepted match is the scans' own alignment (2 cm, 0.5 deg), and near the logs' poses at 5 cm
     assert _within(own, ours, 0.02, 0.5)[acc].mean() >= 0.95
     assert _within(log_rel, ours, 0.05, 1.0)[acc].mean() >= 0.65
+    # of the pairs whose odometry guess is within 0.3 m and 10 deg of the logs' relative pose, most accepted
+    near = _within(log_rel, np.array([r.guess for r in rels]), 0.3, 10.0)
+    assert acc[near].mean() >= 0.5, acc[near].mean()
+    # the accepted covariances are honest against the logs once the logs' own noise is counted: 2 cm per
+    # axis, and in heading what the accepted pairs' heading differences show (ours are ~0.05 deg)
+    cov = np.array([r.cov for r in rels])[acc]
+    e = np.array([se2.compose(o, se2.inverse(g)) for o, g in zip(ours[acc], log_rel[acc], strict=True)])
+    sd_th = 1.4826 * np.median(np.abs(e[:, 2] - np.median(e[:, 2])))
+    ref = np.diag([0.02**2, 0.02**2, sd_th**2])
+    nees_dof = float(np.mean(np.einsum("ni,nij,nj->n", e, np.linalg.inv(cov + ref), e))) / 3
+    assert 0.5 <= nees_dof <= 2.0, nees_dof
     # the scans fit better at our relative poses than at the logs'
     better = [evaluate(scans[a], scans[b], ours[k]).s_m < evaluate(scans[a], scans[b], log_rel[k]).s_m
               for k, (a, b) in enumerate(pairs) if acc[k]]
@@ -63,5 +74,7 @@ def test_pairs_from_raw_odometry(name, rows):
     e = se2.relative(log_rel[acc], ours[acc])
     if len(cl) >= 5:
         assert np.median(np.hypot(cl[:, 0], cl[:, 1])) < 0.5 * np.median(np.hypot(e[:, 0], e[:, 1]))
-    print(f"{name}: accepted {acc.mean():.2f} ({acc[reach].mean():.2f} within reach), within 2 cm and 1 deg "
-          f"of the logs' {_within(log_rel, ours, 0.02, 1.0)[acc].mean():.2f}, {len(cl)} triplets")
+    print(f"{name}: accepted {acc.mean():.2f} ({acc[reach].mean():.2f} within reach, {acc[near].mean():.2f} of the "
+          f"odometry within 0.3 m, 10 deg), within 2 cm and 1 deg of the logs' "
+          f"{_within(log_rel, ours, 0.02, 1.0)[acc].mean():.2f}, {len(cl)} triplets, NEES/dof {nees_dof:.2f} "
+          f"(logs' heading sd {np.degrees(sd_th):.2f} deg)")
