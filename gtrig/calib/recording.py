@@ -156,7 +156,7 @@ def load_intrinsics(
     return out
 
 
-def _cam(x: CameraIntrinsics | IntrinsicsResult) -> CameraIntrinsics:
+def as_intrinsics(x: CameraIntrinsics | IntrinsicsResult) -> CameraIntrinsics:
     return x.camera if isinstance(x, IntrinsicsResult) else x
 
 
@@ -181,7 +181,7 @@ def calibrated_rig(
         upd: dict[str, Any] = {}
         refined = network.joint[c.name].intrinsics if network is not None and c.name in network.joint else None
         if refined is not None or c.name in intrinsics:
-            ci = refined if refined is not None else _cam(intrinsics[c.name])
+            ci = refined if refined is not None else as_intrinsics(intrinsics[c.name])
             if tuple(ci.image_size) != tuple(c.resolution):
                 raise InputError(
                     f"camera {c.name}: its intrinsics (from its calibration images) are for {ci.image_size[0]} x "
@@ -221,7 +221,7 @@ class CalibrationReport:
     def to_dict(self) -> dict[str, Any]:
         intr = {}
         for n, x in self.intrinsics.items():
-            c = _cam(x)
+            c = as_intrinsics(x)
             std = c.extra.get("std", {})
             intr[n] = {
                 "fx": float(c.camera_matrix[0, 0]),
@@ -246,7 +246,7 @@ class CalibrationReport:
             "|---" * 10 + "|",
         ]
         for n, x in sorted(self.intrinsics.items()):
-            c = _cam(x)
+            c = as_intrinsics(x)
             K, d = c.camera_matrix, c.dist_coeffs
             L.append(
                 f"| {n} | {K[0, 0]:.2f} | {K[1, 1]:.2f} | {K[0, 2]:.2f} | {K[1, 2]:.2f} | {d[0]:.4f} | "
@@ -326,7 +326,7 @@ class CalibrationReport:
                     f"{t.get('dcx_px', np.nan):.2f}, {t.get('dcy_px', np.nan):.2f} |"
                 )
         warns = list(net.warnings) + [
-            w for x in self.intrinsics.values() for w in _cam(x).extra.get("warnings", [])
+            w for x in self.intrinsics.values() for w in as_intrinsics(x).extra.get("warnings", [])
         ]
         if warns:
             L += ["", "## Warnings", ""] + [f"- {w}" for w in warns]
@@ -386,7 +386,7 @@ def compare_with_truth(
             "dcy_px": float(dK[1, 2]),
         }
         if intrinsics is not None and c.name in intrinsics:
-            dK0 = _cam(intrinsics[c.name]).camera_matrix - t.K
+            dK0 = as_intrinsics(intrinsics[c.name]).camera_matrix - t.K
             row |= {
                 "sweep_dfx_px": float(dK0[0, 0]),
                 "sweep_dfy_px": float(dK0[1, 1]),
@@ -424,7 +424,7 @@ def calibrate_recording(
         if c.name not in intr:
             log.warning("camera %s: no intrinsic sweep, keeping the rig's intrinsics", c.name)
             intr[c.name] = CameraIntrinsics(c.resolution, c.K, c.dist)
-    sizes = {n: _cam(x).image_size for n, x in intr.items()}
+    sizes = {n: as_intrinsics(x).image_size for n, x in intr.items()}
     pairs = load_pair_views(rec / "calib" / "pairs", spec.board, names, sizes)
     if spec.T_world_board is None:
         raise InputError(f"{spec.source}: T_world_board: missing field (the world board's pose)")
@@ -432,7 +432,7 @@ def calibrate_recording(
     prob = NetworkProblem(
         spec.board,
         spec.T_board1_board2,
-        {n: _cam(x) for n, x in intr.items()},
+        {n: as_intrinsics(x) for n, x in intr.items()},
         {c.name: c.T_world_cam.matrix() for c in rig.cameras},
         pairs,
         world,

@@ -101,7 +101,7 @@ def network(
     from gtrig.calib.network import NetworkProblem, calibrate_network
     from gtrig.calib.recording import (
         CalibrationReport,
-        _cam,
+        as_intrinsics,
         calibrated_rig,
         load_intrinsics,
         load_pair_views,
@@ -124,7 +124,7 @@ def network(
     intr = load_intrinsics(intrinsics_dir, names, spec.board) if intrinsics_dir else {}
     for c in r.cameras:
         intr.setdefault(c.name, CameraIntrinsics(c.resolution, c.K, c.dist))
-    cams = {n: _cam(x) for n, x in intr.items()}
+    cams = {n: as_intrinsics(x) for n, x in intr.items()}
     pv = load_pair_views(pairs, spec.board, names, {n: c.image_size for n, c in cams.items()})
     wv = load_world_views(world_board, spec.board, names, spec.T_world_board)
     prob = NetworkProblem(

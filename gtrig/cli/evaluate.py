@@ -30,10 +30,10 @@ def _pair_tum_by_stamp(reference: Path, estimate: Path, ref_t: PoseTable, est_t:
     in one pair at most), and both tables renamed by the reference's stamp."""
     from gtrig.errors import InputError
     from gtrig.evaluate.associate import mutual_nearest_indices
-    from gtrig.io.survey_csv import _looks_like_tum
+    from gtrig.io.survey_csv import looks_like_tum
     from gtrig.io.tum import read_tum
 
-    tums = [_looks_like_tum(p) for p in (reference, estimate)]
+    tums = [looks_like_tum(p) for p in (reference, estimate)]
     stamps = [read_tum(p).stamps_s if t else None for p, t in zip((reference, estimate), tums, strict=True)]
     integral = [s is not None and bool(np.all(np.abs(s - np.round(s)) < 1e-9)) for s in stamps]
     if not any(tums) or all(t == i for t, i in zip(tums, integral, strict=True)):

@@ -177,7 +177,7 @@ def _decorrelation_counts(f: Fixes, window_s: float) -> np.ndarray | None:
     return np.maximum(hi - lo, 1).astype(float)
 
 
-def _decorrelated(f: Fixes, window_s: float) -> Fixes:
+def decorrelated(f: Fixes, window_s: float) -> Fixes:
     """``f`` with each covariance multiplied by the count of its source's fixes within ``window_s``."""
     n = _decorrelation_counts(f, window_s)
     if n is None:
@@ -238,7 +238,7 @@ def _merge_order(fixes: Sequence[Fixes]) -> np.ndarray:
     return np.argsort(np.concatenate([f.stamps_s for f in fixes]), kind="stable")
 
 
-def _merge(fixes: Sequence[Fixes], order: np.ndarray | None = None) -> dict[str, np.ndarray]:
+def merge_fixes(fixes: Sequence[Fixes], order: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """The sources' fixes as one set of arrays in ``order`` (:func:`_merge_order`, by default): stamps (M,),
     z (M, 3), cov (M, 3, 3), kind (M,), lever (M, 2), source (M,) (index into ``fixes``)."""
     if order is None:
@@ -257,7 +257,7 @@ def _merge(fixes: Sequence[Fixes], order: np.ndarray | None = None) -> dict[str,
 
 def _decorrelated_cov(fixes: Sequence[Fixes], counts: Sequence[np.ndarray | None], cov: np.ndarray,
                       order: np.ndarray) -> np.ndarray:
-    """:func:`_decorrelated`'s covariances of the merged fixes, from their own merged ``cov`` (M, 3, 3) in
+    """:func:`decorrelated`'s covariances of the merged fixes, from their own merged ``cov`` (M, 3, 3) in
     ``order`` and each source's :func:`_decorrelation_counts` (``counts``): the same products, without a
     decorrelated copy of every source before the merge."""
     if all(c is None for c in counts):
@@ -266,13 +266,13 @@ def _decorrelated_cov(fixes: Sequence[Fixes], counts: Sequence[np.ndarray | None
     unused = np.concatenate([np.full(len(f), c is not None and f.model is FixModel.POSITION)
                              for f, c in zip(fixes, counts, strict=True)])[order]
     out = cov * n[:, None, None]
-    out[unused, 2, 2] = 1.0  # a position fix's third axis stays 1, as _decorrelated leaves it
+    out[unused, 2, 2] = 1.0  # a position fix's third axis stays 1, as decorrelated leaves it
     return out
 
 
 def _merge_span(fixes: Sequence[Fixes], counts: Sequence[np.ndarray | None], t0: float, t1: float,
                 gate_own_cov: bool = True) -> dict[str, np.ndarray]:
-    """Every source's fixes stamped in ``[t0, t1]`` (s), merged (:func:`_merge`; ``source`` indexes
+    """Every source's fixes stamped in ``[t0, t1]`` (s), merged (:func:`merge_fixes`; ``source`` indexes
     ``fixes``), with ``cov`` decorrelated by each source's whole-run ``counts`` and ``gate_cov`` the gate's
     (the fixes' own covariances, or ``cov`` when not ``gate_own_cov``)."""
     part, cnt = [], []
@@ -281,7 +281,7 @@ def _merge_span(fixes: Sequence[Fixes], counts: Sequence[np.ndarray | None], t0:
         part.append(Fixes(f.source, f.stamps_s[i0:i1], f.model, f.value[i0:i1], f.cov[i0:i1], f.lever_xy))
         cnt.append(None if c is None else c[i0:i1])
     order = _merge_order(part)
-    fx = _merge(part, order)
+    fx = merge_fixes(part, order)
     # the gate tests each fix against its own covariance: the decorrelation's inflation is for weighing a
     # second of correlated fixes, not for deciding whether one fix is an outlier
     fx["gate_cov"] = fx["cov"]
@@ -326,7 +326,7 @@ def _odometry_between(stamps: np.ndarray, odometry: OdometryLog, opts: FusionOpt
     return odo, u, qcov
 
 
-def _chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: OdometryLog | None, opts: FusionOptions,
+def build_chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: OdometryLog | None, opts: FusionOptions,
            sources: tuple[str, ...], k_prior: tuple[np.ndarray, np.ndarray] | None = None,
            slip: np.ndarray | None = None) -> tuple[FactorChain, np.ndarray, np.ndarray, np.ndarray]:
     """The factor chain, the start (N, d), the parameters' start and the start's covariance (d, d).
@@ -554,7 +554,7 @@ def _smooth(stamps: np.ndarray, seg: dict[str, np.ndarray], odometry: OdometryLo
         for k in keep:  # dropped as the batch solve drops them
             seg.pop(k, None)
         return sm
-    chain, _, _, P0 = _chain(stamps, seg, odometry, opts, sources, k_prior, slip)
+    chain, _, _, P0 = build_chain(stamps, seg, odometry, opts, sources, k_prior, slip)
     Pk = np.zeros((0, 0)) if odometry is None else (opts.odometry.prior() if k_prior is None else k_prior)[1]
     ekf = smooth_ekf(chain, P0, Pk, gate_prob=opts.gate_prob, gate_cov=seg["gate_cov"],
                      covariances=opts.estimator != "batch")

@@ -398,7 +398,7 @@ class PoseTable:
 _COLUMN_SETS = (("x", "y", "theta"), ("x", "y", "th"), ("val_x", "val_y", "val_th"), ("x", "y", "yaw"))
 
 
-def _looks_like_tum(p: Path) -> bool:
+def looks_like_tum(p: Path) -> bool:
     if p.suffix.lower() in (".tum",):
         return True
     if p.suffix.lower() == ".csv":
@@ -441,7 +441,7 @@ def read_pose_table(
     of the body x axis.
     """
     p = Path(path)
-    if _looks_like_tum(p):
+    if looks_like_tum(p):
         from gtrig.io.tum import read_tum
 
         tr = read_tum(p)

@@ -241,7 +241,7 @@ def estimate_offset(ref_stamps_s: np.ndarray, ref_yaw: np.ndarray, src_stamps_s:
 @dataclass(frozen=True)
 class _RefineWindow:
     """One window of :func:`refine_by_fusion`: its fixes merged with the anchors' over the same span
-    (``base``, :func:`gtrig.fusion.fuse._merge`), the odometry's node stamps (N,) covering them, the gate's
+    (``base``, :func:`gtrig.fusion.fuse.merge_fixes`), the odometry's node stamps (N,) covering them, the gate's
     verdict per fix (from the smoothing at the start offset) and the last solve's state (``warm``: X, K),
     which starts the next cost's solve."""
 
@@ -258,19 +258,19 @@ class _RefineWindow:
         anchors within ``margin`` (s) of its span (decorrelated there), smoothed at the start offset ``c``
         (s)."""
         from gtrig.fusion.ekf import smooth_ekf
-        from gtrig.fusion.fuse import _chain, _decorrelated, _merge
+        from gtrig.fusion.fuse import build_chain, decorrelated, merge_fixes
 
         if len(f) < 10:
             return None
-        anc = [_decorrelated(a.between(f.stamps_s[0] - c - margin, f.stamps_s[-1] - c + margin), opts.correlation_s)
+        anc = [decorrelated(a.between(f.stamps_s[0] - c - margin, f.stamps_s[-1] - c + margin), opts.correlation_s)
                for a in anchors]
-        base = _merge([f, *anc])
+        base = merge_fixes([f, *anc])
         names = (f.source, *(a.source for a in anc))
         i0 = max(int(np.searchsorted(odometry.stamps_s, base["stamps"][0] - c - margin)) - 1, 0)
         i1 = min(int(np.searchsorted(odometry.stamps_s, base["stamps"][-1] - c + margin)), len(odometry) - 1)
         stamps = odometry.stamps_s[i0:i1 + 1]
         fx0, order0 = _shifted(base, c)
-        chain0, _, _, P0 = _chain(stamps, fx0, odometry, opts, names)
+        chain0, _, _, P0 = build_chain(stamps, fx0, odometry, opts, names)
         ekf = smooth_ekf(chain0, P0, opts.odometry.prior()[1], gate_prob=opts.gate_prob)
         use = np.zeros(order0.size, bool)
         use[order0] = ekf.accept  # the gate's verdict per fix, in the unshifted order
@@ -279,10 +279,10 @@ class _RefineWindow:
     def cost(self, offset: float, odometry: OdometryLog, opts: FusionOptions) -> float:
         """The window's batch cost (-2 log-likelihood) with the source's fixes moved by ``offset`` (s)."""
         from gtrig.fusion.batch import smooth_batch
-        from gtrig.fusion.fuse import _chain
+        from gtrig.fusion.fuse import build_chain
 
         fx, order = _shifted(self.base, offset)
-        ch, _, _, _ = _chain(self.stamps, fx, odometry, opts, self.names)
+        ch, _, _, _ = build_chain(self.stamps, fx, odometry, opts, self.names)
         res = smooth_batch(ch, self.warm["X"], self.warm["K"], fix_use=self.use[order], huber_k=opts.huber_k,
                            max_iter=8)
         self.warm["X"], self.warm["K"] = res.X, res.K
@@ -315,7 +315,7 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
     ``window_s``: a source spanning more than this is smoothed a window of ``window_s`` of its fixes at
     a time (:class:`_RefineWindow`), the cost being the sum of the windows'; a shorter one is one batch.
     """
-    from gtrig.fusion.fuse import FusionOptions, _decorrelated
+    from gtrig.fusion.fuse import FusionOptions, decorrelated
 
     if estimate.verdict == "unobservable" or not np.isfinite(estimate.coarse_s):
         return estimate
@@ -330,7 +330,7 @@ def refine_by_fusion(estimate: OffsetEstimate, fixes: Fixes, odometry: OdometryL
     if keep.sum() < 10:
         return estimate
     f = Fixes(fixes.source, fixes.stamps_s[keep], fixes.model, fixes.value[keep], fixes.cov[keep], fixes.lever_xy)
-    f = _decorrelated(f, opts.correlation_s)
+    f = decorrelated(f, opts.correlation_s)
     # a long run is smoothed a window at a time and the windows' costs summed (the cost is a sum over
     # the fixes; what a window's cut loses is one process factor): memory a window's, not the run's
     # (an hour of GTlaser's 75 Hz fixes took the client's peak up by 320 MB); one window up to window_s

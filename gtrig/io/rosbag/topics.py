@@ -33,6 +33,10 @@ from gtrig.io.yamlfile import safe_load
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
 ODOM_TYPE = "nav_msgs/msg/Odometry"
+#: the messages a trajectory is read from
+POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PointStamped",
+              "geometry_msgs/msg/PoseWithCovarianceStamped", "geometry_msgs/msg/TransformStamped",
+              "nav_msgs/msg/Odometry", "nav_msgs/msg/Path")
 
 
 class TopicsConfig(BaseModel):
@@ -120,8 +124,6 @@ def topics_template(summaries: Sequence[TopicSummary], rig: Any = None, tf_traje
     onb = [s.name for s in rig.robot.onboard_scanners] if rig is not None else []
     doc: dict[str, Any] = {"sequence": "run", "stamp": "header", "cameras": {}, "lasers": {}, "onboard": {},
                            "odometry": None, "trajectories": {}}
-    from gtrig.io.rosbag.trajectory import POSE_TYPES
-
     for s in summaries:
         if s.msgtype in IMAGE_TYPES:
             doc["cameras"][name_for(s.topic, cams, "cam", len(doc["cameras"]))] = s.topic

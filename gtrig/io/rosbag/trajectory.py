@@ -41,6 +41,7 @@ from gtrig.io.rosbag._bag import (
     open_bag,
     time_to_ns,
 )
+from gtrig.io.rosbag.topics import POSE_TYPES, list_topics
 from gtrig.stamps import seconds_from_ns
 from gtrig.trajectory import PoseTrack
 
@@ -48,9 +49,6 @@ log = logging.getLogger(__name__)
 
 StampSource = Literal["header", "receive"]
 
-POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PointStamped",
-              "geometry_msgs/msg/PoseWithCovarianceStamped", "geometry_msgs/msg/TransformStamped",
-              "nav_msgs/msg/Odometry", "nav_msgs/msg/Path")
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 
 
@@ -190,7 +188,6 @@ def trajectory_choices(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[
     """``(topic, what)`` for every trajectory ``bag`` offers: its pose topics (type, message count) and the TF
     chains gtrig.io.rosbag.tf_tree proposes."""
     from gtrig.io.rosbag.tf_tree import propose_tf_trajectories, tf_edges
-    from gtrig.io.rosbag.topics import list_topics
 
     out = [(s.topic, f"{s.msgtype.replace('/msg/', '/')}, {s.count}") for s in list_topics(bag)
            if s.msgtype in POSE_TYPES]
