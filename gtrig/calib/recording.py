@@ -157,6 +157,7 @@ def load_intrinsics(
 
 
 def as_intrinsics(x: CameraIntrinsics | IntrinsicsResult) -> CameraIntrinsics:
+    """The lens of a calibration's result, or the lens itself."""
     return x.camera if isinstance(x, IntrinsicsResult) else x
 
 

@@ -399,6 +399,7 @@ _COLUMN_SETS = (("x", "y", "theta"), ("x", "y", "th"), ("val_x", "val_y", "val_t
 
 
 def looks_like_tum(p: Path) -> bool:
+    """Whether ``p`` is a TUM trajectory (by its suffix, else by its first data line) rather than a survey CSV."""
     if p.suffix.lower() in (".tum",):
         return True
     if p.suffix.lower() == ".csv":
