@@ -5,6 +5,10 @@ One detector per family and decimation is made once per process and never destro
 now and then crashes the process (a double free in ``Detector.__del__``, pupil-labs/apriltags issues
 46 and 52), so at exit each is disarmed (its pointer dropped) and the operating system frees it.
 
+The newer families' detectors correct one bit (:data:`NEWER_FAMILY_BITS`) instead of the binding's fixed
+two: AprilTag 3 tabulates every code within the corrected bits, and at two bits the tables of
+``tagCircle49h12``, ``tagStandard52h13`` and ``tagCustom48h12`` take gigabytes and half a minute to build.
+
 The code tables of the families that OpenCV does not carry (``tagStandard41h12``, ``tagStandard52h13``,
 ``tagCircle21h7``, ``tagCircle49h12``, ``tagCustom48h12``) are read from the library's family structs:
 the printed pattern of each code is laid out from the family's bit positions (:func:`tag_cells`).
@@ -26,6 +30,12 @@ __all__ = ["At3Family", "at3_detect", "at3_family", "tag_cells"]
 
 _LOCK = threading.Lock()
 _DETECTORS: dict[tuple[str, float], Any] = {}
+_FAMILIES: dict[str, Any] = {}
+
+#: the families whose detector corrects the binding's two bits (AprilTag 3's defaults)
+CLASSIC = ("tag16h5", "tag25h9", "tag36h11")
+#: bits the newer families' detectors correct
+NEWER_FAMILY_BITS = 1
 
 
 @dataclass(frozen=True)
@@ -79,9 +89,30 @@ def detector(name: str, quad_decimate: float = 2.0) -> Any:
         if det is None:
             from pupil_apriltags import Detector
 
-            det = _DETECTORS[key] = Detector(families=name, nthreads=1, quad_decimate=float(quad_decimate),
-                                             refine_edges=0)
+            if name in CLASSIC:
+                det = Detector(families=name, nthreads=1, quad_decimate=float(quad_decimate), refine_edges=0)
+            else:
+                # made for a small family, then given the newer family at fewer corrected bits
+                det = Detector(families="tag16h5", nthreads=1, quad_decimate=float(quad_decimate), refine_edges=0)
+                det.libc.apriltag_detector_clear_families.restype = None
+                det.libc.apriltag_detector_clear_families(det.tag_detector_ptr)
+                det.libc.apriltag_detector_add_family_bits.restype = None
+                det.libc.apriltag_detector_add_family_bits(det.tag_detector_ptr, _family_ptr(det.libc, name),
+                                                           NEWER_FAMILY_BITS)
+            _DETECTORS[key] = det
         return det
+
+
+def _family_ptr(libc: Any, name: str) -> Any:
+    """The library's family struct ``name`` (made once, never destroyed)."""
+    fam = _FAMILIES.get(name)
+    if fam is None:
+        from pupil_apriltags.bindings import _ApriltagFamily
+
+        create = getattr(libc, f"{name}_create")
+        create.restype = ctypes.POINTER(_ApriltagFamily)
+        fam = _FAMILIES[name] = create()
+    return fam
 
 
 def at3_detect(gray: NDArray[np.uint8], name: str, quad_decimate: float = 2.0
@@ -105,7 +136,9 @@ def at3_detect(gray: NDArray[np.uint8], name: str, quad_decimate: float = 2.0
 @functools.cache
 def at3_family(name: str) -> At3Family:
     """The layout and code table of the AprilTag 3 family ``name`` read from the library."""
-    fam = detector(name).tag_families[name].contents
+    libc = detector("tag16h5").libc
+    with _LOCK:
+        fam = _family_ptr(libc, name).contents
     n = int(fam.nbits)
     return At3Family(
         name=name,

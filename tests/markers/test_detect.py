@@ -171,18 +171,6 @@ def test_printed_marker_seen_in_perspective(family: MarkerFamily) -> None:
     assert np.abs(dets[0].corners_px - out).max() < 0.15
 
 
-def test_dark_mask_equals_thresholded_ratio() -> None:
-    """The 8-bit dark mask of the candidate stage is exactly ``closure_normalised < threshold``."""
-    from gtrig.markers.detect.candidates import closure_normalised, dark_mask
-
-    rng = np.random.default_rng(4)
-    img, _ = render(SHAPE, [], background=clutter_background(SHAPE, rng, n_shapes=40), gain=90.0, gradient=0.6,
-                    noise=3.0, rng=rng, ss=2)
-    for thr in (0.45, 0.6, 0.8):
-        ref = closure_normalised(img, 300.0, 4) < thr
-        assert np.array_equal(dark_mask(img, 300.0, 4, thr) > 0, ref)
-
-
 def test_band_pixels_match_a_brute_force_selection() -> None:
     """The scan-line band of :func:`gather_band` holds exactly the pixels of the image whose (s, d)
     lie in the band, for edges in every direction, partly outside the image and on pixel centres."""

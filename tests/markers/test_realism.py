@@ -60,7 +60,7 @@ def test_trace_names_the_stage() -> None:
     assert [d.id for d in dets] == [21]
     near = [r for r in trace if np.linalg.norm(r.quad_px.mean(axis=0) - t.corners_px.mean(axis=0)) < 20]
     assert near and all(r.reason for r in near)
-    assert {r.stage for r in near} <= {"candidate", "predecode", "fit", "decode", "blurred"}
+    assert {r.stage for r in near} <= {"fit", "decode", "duplicate"}
 
 
 def test_glare_on_the_border_is_not_a_white_cell() -> None:

@@ -40,28 +40,6 @@ def test_ordered_map_raises_where_the_result_is_taken() -> None:
     assert got == [0, 1, 2, 3, 4]
 
 
-def test_claims_run_each_task_once() -> None:
-    """The helper runs tasks ahead; the caller takes some, skips the rest; a skipped task that is
-    asked for anyway is run; no task runs twice."""
-    runs: list[int] = []
-    lock = threading.Lock()
-
-    def f(k: int) -> int:
-        with lock:
-            runs.append(k)
-        time.sleep(0.001)
-        return -k
-
-    claims = _threads.Claims(f, [(k,) for k in range(30)])
-    job = _threads.helper_pool().submit(claims.work)
-    claims.skip(range(10, 30, 2))
-    assert [claims.get(k) for k in range(0, 30, 3)] == [-k for k in range(0, 30, 3)]
-    claims.skip(range(30))
-    job.result(timeout=60)
-    assert len(runs) == len(set(runs))
-    assert set(range(0, 30, 3)) <= set(runs)  # 12, 18 and 24 among them: skipped, then asked for
-
-
 def test_fill_boxes_is_cv2_rectangle() -> None:
     rng = np.random.default_rng(4)
     a = np.zeros((60, 80), np.uint8)

@@ -269,7 +269,7 @@ class MarkerDetector:
         bad = np.flatnonzero(~r.ok)
         if trace is not None and not p.keep_unrefined:
             for q in bad:
-                trace.append(Rejection(Q0[q].copy(), "fit", f"{_who(cands[q])}: {fit_reason(r, q, s)}"))
+                trace.append(Rejection(Q0[q].copy(), "fit", f"{_who(cands[q])}: {fit_reason(r, int(q), s)}"))
         if len(bad) and p.keep_unrefined:
             # the peer's corners, gtrig's cells read through them
             w = read_whiteness_plain(gray, Q[bad], spec, und)
@@ -319,7 +319,7 @@ def _dedupe(dets: list[Detection], trace: list[Rejection] | None = None) -> list
     x, y = q[..., 0], q[..., 1]
     area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1))
     unrefined = np.array([not np.isfinite(d.blur_px) for d in dets])
-    order = np.lexsort((-area, [d.hamming for d in dets], unrefined))
+    order = np.lexsort((-area, np.array([d.hamming for d in dets]), unrefined))
     centre = q.mean(axis=1)
     keep: list[int] = []
     for i in order:
