@@ -82,7 +82,8 @@ atexit.register(_disarm)
 
 def detector(name: str, quad_decimate: float = 2.0) -> Any:
     """The process's AprilTag 3 detector for the family ``name`` (e.g. ``tag36h11``) at ``quad_decimate``,
-    without its own edge refinement (gtrig refines the corners) and with one thread."""
+    with one thread; without its own edge refinement for the classic families (gtrig refines their
+    corners), with it for the newer ones (their corners are AprilTag 3's)."""
     key = (name, float(quad_decimate))
     with _LOCK:
         det = _DETECTORS.get(key)
@@ -93,7 +94,7 @@ def detector(name: str, quad_decimate: float = 2.0) -> Any:
                 det = Detector(families=name, nthreads=1, quad_decimate=float(quad_decimate), refine_edges=0)
             else:
                 # made for a small family, then given the newer family at fewer corrected bits
-                det = Detector(families="tag16h5", nthreads=1, quad_decimate=float(quad_decimate), refine_edges=0)
+                det = Detector(families="tag16h5", nthreads=1, quad_decimate=float(quad_decimate), refine_edges=1)
                 det.libc.apriltag_detector_clear_families.restype = None
                 det.libc.apriltag_detector_clear_families(det.tag_detector_ptr)
                 det.libc.apriltag_detector_add_family_bits.restype = None
