@@ -76,8 +76,8 @@ def test_quad_from_lines_is_cramers_rule() -> None:
 
 
 def test_two_threads_give_the_same_detections_on_clutter() -> None:
-    """Large, small and blurred markers on clutter, in dim light (many seeds for the further
-    thresholds, candidates for both paths): one thread and two give the same detections, bit for bit."""
+    """Large, small and blurred markers on clutter, in dim light: one thread and two give the same
+    detections, bit for bit (the edge fits split between the threads)."""
     rng = np.random.default_rng(8)
     fam = MarkerFamily.APRILTAG_36H11
     shape = (480, 640)
@@ -91,7 +91,7 @@ def test_two_threads_give_the_same_detections_on_clutter() -> None:
         for threads in (1, 2):
             det = MarkerDetector(fam, params=DetectorParams(threads=threads))
             got[blur, threads] = det.detect(img)
-        assert len(got[blur, 1]) >= 3
+        assert len(got[blur, 1]) >= 2 and {d.id for d in got[blur, 1]} <= {t.marker_id for t in truths}
         a, b = got[blur, 1], got[blur, 2]
         assert [d.id for d in a] == [d.id for d in b]
         for x, y in zip(a, b, strict=True):

@@ -143,7 +143,8 @@ class DetectorParams:
         fit: the larger of this many pixels and this share of the marker's side (AprilTag 3's corners at
         its default decimation can be a few pixels off on large tags).
     keep_unrefined : a peer's marker whose edges the model cannot fit (a display's moire, an edge fused
-        with a dark neighbour, a highlight's ramp) is kept with the peer's corners and a covariance of
+        with a dark neighbour, a highlight's ramp) is kept with the peer's corners moved by OpenCV's
+        ``cornerSubPix`` and a covariance of
         :data:`UNREFINED_SIGMA_PX` when gtrig's cells read through those corners do not contradict its
         ID; ``False`` drops it.
     passes : edge-fit passes; the first fits plain steps, the next ones hold the modelled light of the
@@ -271,11 +272,14 @@ class MarkerDetector:
             for q in bad:
                 trace.append(Rejection(Q0[q].copy(), "fit", f"{_who(cands[q])}: {fit_reason(r, int(q), s)}"))
         if len(bad) and p.keep_unrefined:
-            # the peer's corners, gtrig's cells read through them
-            w = read_whiteness_plain(gray, Q[bad], spec, und)
+            # the peer's corners moved to the nearest grey-level corner (OpenCV's cornerSubPix), gtrig's
+            # cells read through them
+            Qb = _corner_subpix(gray, Q0[bad])
+            Qb = Qb if und is None else und.to_undistorted(Qb.reshape(-1, 2)).reshape(-1, 4, 2)
+            w = read_whiteness_plain(gray, Qb, spec, und)
             v = verify_ids(w, peer_ids[bad], spec, codes, p.min_soft_margin)
             cov = np.tile(np.eye(2) * UNREFINED_SIGMA_PX**2, (len(bad), 4, 1, 1))
-            out += self._accepted(cands, bad, v, Q[bad], cov, np.full(len(bad), np.nan), und, trace)
+            out += self._accepted(cands, bad, v, Qb, cov, np.full(len(bad), np.nan), und, trace)
         return out
 
     def _accepted(self, cands: list[PeerCandidate], idx: NDArray[np.int64], v: Verdict, corners: NDArray[np.float64],
@@ -297,6 +301,21 @@ class MarkerDetector:
             out.append(Detection(cands[q].id, corners[k][order].copy(), cov[k][order].copy(), int(v.hamming[k]),
                                  float(blur[k])))
         return out
+
+
+def _corner_subpix(gray: NDArray[np.uint8], quads: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Quads (K, 4, 2) raw px moved by ``cv2.cornerSubPix`` with a window of an eighth of each side (2-5 px)."""
+    out = np.array(quads, np.float64)
+    crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
+    for k, q in enumerate(out):
+        side = float(np.linalg.norm(q - np.roll(q, -1, axis=0), axis=1).min())
+        win = int(np.clip(side / 8.0, 2, 5))
+        pts = np.ascontiguousarray(q.reshape(-1, 1, 2), np.float32)
+        moved = cv2.cornerSubPix(gray, pts, (win, win), (-1, -1), crit).reshape(4, 2)
+        # a corner that ran away (to another corner of the scene) keeps the peer's place
+        far = np.linalg.norm(moved - q, axis=1) > 0.25 * side
+        out[k] = np.where(far[:, None], q, moved)
+    return out
 
 
 def _who(c: PeerCandidate) -> str:
