@@ -4,8 +4,9 @@ photo, gtrig finds at least the markers each peer finds, computed here on the sa
 ``quad_decimate=1``), and never reports a wrong ID: one that is not printed in the photo's set and that no
 peer reports at that place. The IDs printed are known for the boards and fields (FRC 2024: 36h11 IDs 1-16,
 FRC 2023: 16h5 IDs 1-8, the ChArUco boards' markers); elsewhere the peers' IDs stand for them. A peer's
-ID outside the printed set is a peer's false reading (AprilTag 3 reaches some 16h5 IDs by correcting two
-bits) and is not asked of gtrig."""
+ID outside the printed set is a peer's false reading and is not asked of gtrig; so is an AprilTag 3 reading
+with two corrected bits that no other peer confirms (on the FRC field's 16h5 photos it reads many IDs off
+the field so, and with ``quad_decimate=1`` one on it, 3, where neither OpenCV nor its default finds a tag)."""
 
 from __future__ import annotations
 
@@ -84,8 +85,11 @@ def see(path: Path, dictionary: str, detectors: dict[tuple[str, str], MarkerDete
     assert len({d.id for d in dets}) == len(dets), f"{path.name}: an ID detected twice"
     peers = {"OpenCV": _opencv(gray, dictionary)}
     if dictionary in AT3:
-        for label, qd in (("AprilTag 3", 2.0), ("AprilTag 3 qd=1", 1.0)):
-            peers[label] = {i: c.mean(axis=0) for i, _, c in at3_detect(gray, AT3[dictionary], qd)}
+        at3 = {label: at3_detect(gray, AT3[dictionary], qd) for label, qd in (("AprilTag 3", 2.0),
+                                                                             ("AprilTag 3 qd=1", 1.0))}
+        sure = set(peers["OpenCV"]) | {i for res in at3.values() for i, h, _ in res if h <= 1}
+        for label, res in at3.items():
+            peers[label] = {i: c.mean(axis=0) for i, h, c in res if h <= 1 or i in sure}
     return Seen({d.id: d.corners_px.mean(axis=0) for d in dets}, peers)
 
 
