@@ -102,6 +102,11 @@ def _opencv_detector(family: MarkerFamily) -> Any:
     params = cv2.aruco.DetectorParameters()
     params.markerBorderBits = family_spec(family).border_cells
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
+    if opencv_dictionary_name(family) is None:
+        # ARToolKitPlus' codes: OpenCV reads each cell from its middle 0.74 by default; a blur of 2 px on a
+        # 150 px marker's 12.5 px cells, stored through sRGB, then flips isolated cells and the marker is
+        # lost. Their cells are large (6 x 6 data, 3-cell border): the middle 0.4 reads them
+        params.perspectiveRemoveIgnoredMarginPerCell = 0.3
     return cv2.aruco.ArucoDetector(_opencv_dictionary(family), params)
 
 
