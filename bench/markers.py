@@ -100,7 +100,8 @@ def _run(name: str, det: Any, img: np.ndarray) -> tuple[list[tuple[int, np.ndarr
     if name.startswith("gtrig"):
         out = [(d.id, d.corners_px) for d in det.detect(img)]
     elif name == "apriltag3":
-        out = [(int(r.tag_id), np.asarray(r.corners, float)[[3, 2, 1, 0]]) for r in det.detect(img)]
+        # the library lists a classic family's corners from the printed top-right, counter-clockwise on the page
+        out = [(int(r.tag_id), np.asarray(r.corners, float)[[1, 0, 3, 2]]) for r in det.detect(img)]
     else:
         corners, ids, _ = det.detectMarkers(img)
         out = [] if ids is None else [(int(i), c.reshape(4, 2).astype(float))

@@ -124,13 +124,15 @@ def at3_detect(gray: NDArray[np.uint8], name: str, quad_decimate: float = 2.0
     -------
     list of (id, hamming, corners (4, 2)): corners in OpenCV's pixel convention (pixel centres at integer
     coordinates, as the library's), top-left, top-right, bottom-right, bottom-left as printed (the library
-    lists them from the bottom-left, counter-clockwise on the page).
+    lists them counter-clockwise on the page, from the printed top-right for the classic families and from
+    the bottom-left for the newer ones, whose patterns :func:`tag_cells` lays out; measured on rendered tags).
     """
     det = detector(name, quad_decimate)
+    order = [1, 0, 3, 2] if name in CLASSIC else [3, 2, 1, 0]
     out = []
     for d in det.detect(np.ascontiguousarray(gray, np.uint8)):
         c = np.asarray(d.corners, np.float64)
-        out.append((int(d.tag_id), int(d.hamming), c[[3, 2, 1, 0]].copy()))
+        out.append((int(d.tag_id), int(d.hamming), c[order].copy()))
     return out
 
 
