@@ -101,11 +101,10 @@ def _image_files(inputs: list[Path]) -> list[Path]:
 @handle_errors
 def detect(
     inputs: Annotated[list[Path], typer.Argument(help="Images or folders of images.")],
-    family: Annotated[MarkerFamily, typer.Option("--family", help="Marker family.")],
+    family: Annotated[MarkerFamily, typer.Option("--family", help="Marker family: ArUco, AprilTag or "
+                                                 "ARToolKitPlus (docs/markers.md lists them).")],
     out: Annotated[Path, typer.Option("--out", help="Output JSON (det.json).")],
     camera: Annotated[Path | None, typer.Option("--camera", help="cam.yaml: fit edges undistorted.")] = None,
-    blurred: Annotated[bool, typer.Option("--blurred/--no-blurred", help="The second path for small, blurred "
-                                          "markers (on by default; off: faster, and those are missed).")] = True,
     debug: Annotated[Path | None, typer.Option(
         "--debug", help="Folder for one PNG per image: the detections and every rejected candidate with the "
         "stage and reason it was dropped.")] = None,
@@ -127,7 +126,6 @@ def detect(
     from gtrig.io.frames import check_image_size
     from gtrig.io.imagetone import DeclaredTone, declared_tone
     from gtrig.markers.detect import DetectorParams, MarkerDetector
-    from gtrig.markers.detect.blurred import BlurredParams
 
     if tone not in ("auto", "linear", "srgb"):
         raise InputError(f"--tone {tone!r}: choose auto, linear or srgb")
@@ -143,7 +141,7 @@ def detect(
 
         cam = read_cam_yaml(camera)
         K, dist, size = cam.camera_matrix, cam.dist_coeffs, cam.image_size
-    base = DetectorParams() if blurred else DetectorParams(blurred=BlurredParams(enabled=False))
+    base = DetectorParams()
     detectors: dict[DeclaredTone, MarkerDetector] = {}  # one per tone: the undistortion maps are set up once
     images = []
     debug_files: list[tuple[Path, bytes]] = []

@@ -70,6 +70,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -108,11 +109,40 @@ _BCH_MASK = np.array(
 BCH_GENERATOR = 0x1DB2777
 
 _OPENCV_DICTS: dict[str, str] = {
+    "apriltag_16h5": "DICT_APRILTAG_16h5",
+    "apriltag_25h9": "DICT_APRILTAG_25h9",
+    "apriltag_36h10": "DICT_APRILTAG_36h10",
     "apriltag_36h11": "DICT_APRILTAG_36h11",
     "aruco_4x4_50": "DICT_4X4_50",
+    "aruco_4x4_100": "DICT_4X4_100",
+    "aruco_4x4_250": "DICT_4X4_250",
+    "aruco_4x4_1000": "DICT_4X4_1000",
+    "aruco_5x5_50": "DICT_5X5_50",
     "aruco_5x5_100": "DICT_5X5_100",
+    "aruco_5x5_250": "DICT_5X5_250",
+    "aruco_5x5_1000": "DICT_5X5_1000",
+    "aruco_6x6_50": "DICT_6X6_50",
+    "aruco_6x6_100": "DICT_6X6_100",
     "aruco_6x6_250": "DICT_6X6_250",
+    "aruco_6x6_1000": "DICT_6X6_1000",
+    "aruco_7x7_50": "DICT_7X7_50",
+    "aruco_7x7_100": "DICT_7X7_100",
+    "aruco_7x7_250": "DICT_7X7_250",
+    "aruco_7x7_1000": "DICT_7X7_1000",
     "aruco_original": "DICT_ARUCO_ORIGINAL",
+    "aruco_mip_36h12": "DICT_ARUCO_MIP_36h12",
+}
+
+#: the AprilTag families that AprilTag 3 reads, by its names (16h5, 25h9 and 36h11 OpenCV reads too)
+AT3_NAMES: dict[str, str] = {
+    "apriltag_16h5": "tag16h5",
+    "apriltag_25h9": "tag25h9",
+    "apriltag_36h11": "tag36h11",
+    "apriltag_standard41h12": "tagStandard41h12",
+    "apriltag_standard52h13": "tagStandard52h13",
+    "apriltag_circle21h7": "tagCircle21h7",
+    "apriltag_circle49h12": "tagCircle49h12",
+    "apriltag_custom48h12": "tagCustom48h12",
 }
 
 
@@ -131,6 +161,11 @@ class FamilySpec:
         Number of valid IDs, ``0 .. n_ids - 1``.
     max_correction : int
         Largest number of wrong data cells the decoder corrects.
+    edge_model : bool
+        The marker is a black square on white paper holding its data cells (every family but AprilTag 3's
+        newer ones, whose square is ringed by data cells): gtrig's edge model refines its corners and gtrig
+        reads its cells. For the others ``data_cells`` is the whole printed pattern's side, ``border_cells``
+        0, and the detector reports AprilTag 3's own corners and ID.
     """
 
     family: MarkerFamily
@@ -138,6 +173,7 @@ class FamilySpec:
     border_cells: int
     n_ids: int
     max_correction: int
+    edge_model: bool = True
 
     @property
     def cells(self) -> int:
@@ -166,8 +202,19 @@ def _is_bch(family: MarkerFamily) -> bool:
     return family.value.startswith("artoolkitplus_bch")
 
 
+def is_at3_only(family: MarkerFamily | str) -> bool:
+    """The family is one of AprilTag 3's newer ones, which OpenCV does not carry and gtrig's edge model
+    does not fit (:attr:`FamilySpec.edge_model`)."""
+    return _family(family).value in AT3_NAMES and _family(family).value not in _OPENCV_DICTS
+
+
+def opencv_dictionary_name(family: MarkerFamily | str) -> str | None:
+    """OpenCV's predefined dictionary of ``family`` (e.g. ``DICT_4X4_50``), None for the others."""
+    return _OPENCV_DICTS.get(_family(family).value)
+
+
 @functools.cache
-def _opencv_dict(family: MarkerFamily):
+def _opencv_dict(family: MarkerFamily) -> Any:
     import cv2
 
     return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, _OPENCV_DICTS[family.value]))
@@ -184,6 +231,11 @@ def family_spec(family: MarkerFamily | str) -> FamilySpec:
         # per-ID tolerances (id_correction) are at most 3 cells; see the module docstring
         border = 1 if fam.value.endswith("_thin") else 3
         return FamilySpec(fam, 6, border, 4096, 3)
+    if is_at3_only(fam):
+        from gtrig.markers.apriltag3 import at3_family
+
+        t = at3_family(AT3_NAMES[fam.value])
+        return FamilySpec(fam, t.total_width, 0, len(t.codes), 2, edge_model=False)
     d = _opencv_dict(fam)
     # ARUCO_ORIGINAL has codes 1 cell apart (in some rotation): correcting would mis-identify.
     corr = 0 if fam is MarkerFamily.ARUCO_ORIGINAL else int(d.maxCorrectionBits)
@@ -228,8 +280,11 @@ def id_correction(family: MarkerFamily | str) -> NDArray[np.int64]:
 
 @functools.cache
 def _codebook(family: MarkerFamily) -> NDArray[np.uint8]:
-    """All data grids of a family, (n_ids, d, d) uint8, white = 1, as printed."""
+    """All data grids of a family, (n_ids, d, d) uint8, white = 1, as printed (families with
+    :attr:`FamilySpec.edge_model`; the others are AprilTag 3's to decode)."""
     spec = family_spec(family)
+    if not spec.edge_model:
+        raise InputError(f"{family.value}: gtrig does not decode this family's cells (AprilTag 3 does)")
     if _is_artk(family):
         return _artk_data(np.arange(512))
     if _is_bch(family):
@@ -295,6 +350,10 @@ def marker_cells(family: MarkerFamily | str, marker_id: int) -> NDArray[np.uint8
     spec = family_spec(fam)
     if not (0 <= int(marker_id) < spec.n_ids):
         raise InputError(f"marker id {marker_id} out of range for {fam.value} (0..{spec.n_ids - 1})")
+    if not spec.edge_model:
+        from gtrig.markers.apriltag3 import tag_cells
+
+        return tag_cells(AT3_NAMES[fam.value], int(marker_id))
     out = np.zeros((spec.cells, spec.cells), np.uint8)
     b = spec.border_cells
     out[b:-b, b:-b] = _codebook(fam)[int(marker_id)]
@@ -381,3 +440,11 @@ def decode_cells(
     if ids[0] < 0:
         return None
     return int(ids[0]), int(rot[0]), int(ham[0])
+
+
+@functools.cache
+def all_codes(family: MarkerFamily | str) -> NDArray[np.uint8]:
+    """Every code of ``family`` in its four rotations as read in a quad's orientation, (4 n_ids, d, d):
+    index ``r n_ids + id`` holds ``np.rot90(printed data, -r)``."""
+    book = _codebook(_family(family))
+    return np.ascontiguousarray(np.concatenate([np.rot90(book, -r, axes=(1, 2)) for r in range(4)]))

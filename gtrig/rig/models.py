@@ -251,17 +251,39 @@ class LaserScanner(_Strict):
 
 
 class MarkerFamily(StrEnum):
-    """Square ID marker families."""
+    """Square ID marker families (:mod:`gtrig.markers.families` describes each)."""
 
     ARTOOLKITPLUS_SIMPLE = "artoolkitplus_simple"
     ARTOOLKITPLUS_SIMPLE_THIN = "artoolkitplus_simple_thin"
     ARTOOLKITPLUS_BCH = "artoolkitplus_bch"
     ARTOOLKITPLUS_BCH_THIN = "artoolkitplus_bch_thin"
+    APRILTAG_16H5 = "apriltag_16h5"
+    APRILTAG_25H9 = "apriltag_25h9"
+    APRILTAG_36H10 = "apriltag_36h10"
     APRILTAG_36H11 = "apriltag_36h11"
+    APRILTAG_STANDARD41H12 = "apriltag_standard41h12"
+    APRILTAG_STANDARD52H13 = "apriltag_standard52h13"
+    APRILTAG_CIRCLE21H7 = "apriltag_circle21h7"
+    APRILTAG_CIRCLE49H12 = "apriltag_circle49h12"
+    APRILTAG_CUSTOM48H12 = "apriltag_custom48h12"
     ARUCO_4X4_50 = "aruco_4x4_50"
+    ARUCO_4X4_100 = "aruco_4x4_100"
+    ARUCO_4X4_250 = "aruco_4x4_250"
+    ARUCO_4X4_1000 = "aruco_4x4_1000"
+    ARUCO_5X5_50 = "aruco_5x5_50"
     ARUCO_5X5_100 = "aruco_5x5_100"
+    ARUCO_5X5_250 = "aruco_5x5_250"
+    ARUCO_5X5_1000 = "aruco_5x5_1000"
+    ARUCO_6X6_50 = "aruco_6x6_50"
+    ARUCO_6X6_100 = "aruco_6x6_100"
     ARUCO_6X6_250 = "aruco_6x6_250"
+    ARUCO_6X6_1000 = "aruco_6x6_1000"
+    ARUCO_7X7_50 = "aruco_7x7_50"
+    ARUCO_7X7_100 = "aruco_7x7_100"
+    ARUCO_7X7_250 = "aruco_7x7_250"
+    ARUCO_7X7_1000 = "aruco_7x7_1000"
     ARUCO_ORIGINAL = "aruco_original"
+    ARUCO_MIP_36H12 = "aruco_mip_36h12"
 
 
 class Marker(_Strict):

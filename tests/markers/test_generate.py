@@ -13,7 +13,9 @@ import pytest
 from typer.testing import CliRunner
 
 from gtrig.cli.main import app
+from gtrig.markers.apriltag3 import at3_family
 from gtrig.markers.detect import MarkerDetector
+from gtrig.markers.families import AT3_NAMES, family_spec
 from gtrig.markers.generate import layout, png_resolution, to_png_image
 from gtrig.markers.sheetfiles import to_pdf as sheet_pdf
 from gtrig.markers.sheets import lay_out, marker_tile, parse_paper
@@ -41,13 +43,23 @@ def test_png_round_trip_every_family(family: MarkerFamily) -> None:
     small = np.clip(small + np.random.default_rng(0).normal(0, 3, small.shape), 0, 255).astype(np.uint8)
     dets = MarkerDetector(family).detect(small)
     assert [d.id for d in dets] == [3]
-    # corners: the black square starts at the marker's pixel offset (pixel edges at -0.5)
+    # corners: the black square starts at the marker's pixel offset (pixel edges at -0.5); AprilTag 3's
+    # newer families' corners span their border square, AprilTag 3's own corners
+    spec = family_spec(family)
+    a, b, tol = (0, n, 0.1) if spec.edge_model else (*_border_square(family), 0.5)
     x0 = round(lay.marker_xy_mm[0] * ppm / 1000)
     y0 = round(lay.marker_xy_mm[1] * ppm / 1000)
-    tl = (np.array([x0, y0]) - 0.5) * 0.5 - 0.25  # half-size image: u' = (u + 0.5) / 2 - 0.5
-    br = (np.array([x0, y0]) + n * k - 0.5) * 0.5 - 0.25
-    np.testing.assert_allclose(dets[0].corners_px[0], tl, atol=0.1)
-    np.testing.assert_allclose(dets[0].corners_px[2], br, atol=0.1)
+    tl = (np.array([x0, y0]) + a * k - 0.5) * 0.5 - 0.25  # half-size image: u' = (u + 0.5) / 2 - 0.5
+    br = (np.array([x0, y0]) + b * k - 0.5) * 0.5 - 0.25
+    np.testing.assert_allclose(dets[0].corners_px[0], tl, atol=tol)
+    np.testing.assert_allclose(dets[0].corners_px[2], br, atol=tol)
+
+
+def _border_square(family: MarkerFamily) -> tuple[int, int]:
+    """First and past-the-last cell of an AprilTag 3 newer family's border square in its printed pattern."""
+    fam = at3_family(AT3_NAMES[family.value])
+    start = (fam.total_width - fam.width_at_border) // 2
+    return start, start + fam.width_at_border
 
 
 def test_cli_make_formats(tmp_path: Path) -> None:

@@ -7,11 +7,8 @@ import numpy as np
 import pytest
 from scipy.special import ndtr
 
-from gtrig.markers.detect import DetectorParams, MarkerDetector, _kernels
-from gtrig.markers.detect.blurred import BlurredParams
+from gtrig.markers.detect import _kernels
 from gtrig.markers.detect.edges import CLIP_HIGH, CLIP_LOW, pixel_step
-from gtrig.markers.synth import clutter_background, homography_from_pose, render
-from gtrig.rig.models import MarkerFamily
 
 
 def test_normal_cdf_within_its_bound() -> None:
@@ -160,27 +157,6 @@ def test_cell_jacobian_matches_finite_differences_of_the_profiles() -> None:
         np.testing.assert_allclose(got[j], fd, atol=1e-3 * np.abs(fd).max() + 1e-6)
 
 
-def test_helper_thread_gives_the_same_detections() -> None:
-    """The second path's candidate stage and its early reads (the candidates no first-path candidate
-    covers) in a helper thread (``threads=2``) change nothing in the output (``threads=1`` runs both
-    paths in turn)."""
-    rng = np.random.default_rng(2)
-    fam = MarkerFamily.APRILTAG_36H11
-    shape = (300, 400)
-    markers = [(fam, 17 + 101 * i, homography_from_pose(s, c, 20, 50 * i, 33 * i))
-               for i, (s, c) in enumerate([(20, (80, 80)), (40, (220, 150)), (22, (320, 230))])]
-    img, _ = render(shape, markers, blur_px=1.8, noise=3.0, gain=200.0, gradient=0.3,
-                    background=clutter_background(shape, rng, n_shapes=15), rng=rng)
-    out = {}
-    for threads in (1, 2):
-        det = MarkerDetector(fam, params=DetectorParams(blurred=BlurredParams(enabled=True), threads=threads))
-        out[threads] = det.detect(img)
-    assert len(out[1]) >= 2
-    assert [d.id for d in out[1]] == [d.id for d in out[2]]
-    for a, b in zip(out[1], out[2], strict=True):
-        np.testing.assert_array_equal(a.corners_px, b.corners_px)
-
-
 def test_cell_design_is_the_profiles() -> None:
     """The fits' design is ``[1, 1 - S, F]`` with the cells free and ``[1, 1 - S + F code]`` for a code,
     with the profiles of :func:`_kernels.cell_profiles`."""
@@ -208,18 +184,3 @@ def test_helper_pool_works_in_a_forked_child() -> None:
     ctx = mp.get_context("fork")
     with ctx.Pool(1) as pool:
         assert pool.apply_async(_threads.run_split, (abs, [(-3,), (-4,)])).get(timeout=60) == [3, 4]
-
-
-def test_sides_traced_counts_the_traced_bins() -> None:
-    # a 40 px square's outline traced whole passes; with a gap over half of one side's middle it fails
-    from gtrig.markers.detect.candidates import BROKEN_BORDER_TRACED
-
-    a = np.array([[0.0, 0.0], [40.0, 0.0], [40.0, 40.0], [0.0, 40.0]])
-    sides = np.hypot(*(np.roll(a, -1, axis=0) - a).T)
-    t = np.arange(0, 40)
-    whole = np.concatenate([np.column_stack([t, 0 * t]), np.column_stack([0 * t + 40, t]),
-                            np.column_stack([40 - t, 0 * t + 40]), np.column_stack([0 * t, 40 - t])]).astype(float)
-    sel = _kernels.side_points(whole, a)
-    assert _kernels.sides_traced(whole, sel, a, sides, BROKEN_BORDER_TRACED)
-    gap = whole[~((whole[:, 1] == 0) & (whole[:, 0] > 8) & (whole[:, 0] < 24))]
-    assert not _kernels.sides_traced(gap, _kernels.side_points(gap, a), a, sides, BROKEN_BORDER_TRACED)

@@ -8,7 +8,6 @@ import pytest
 from scipy.special import ndtr
 
 from gtrig.markers.detect import _kernels
-from gtrig.markers.detect.candidates import _seed_regions
 from gtrig.markers.detect.decode import unblur_cells
 from gtrig.markers.detect.edges import EdgeSamples, _starts, quad_homographies, trim_outer
 from gtrig.markers.detect.sampling import bilinear
@@ -113,26 +112,6 @@ def test_trim_outer_keeps_the_pixels_inside() -> None:
     np.testing.assert_array_equal(got.starts, _starts(edge[keep], E))
 
 
-@pytest.mark.parametrize("shape", [(768, 1024), (200, 328), (756, 1008)])
-def test_seed_regions_coarse_grid_is_the_area_resize(shape: tuple[int, int]) -> None:
-    # the boxes come out as with the full-size mask resized by INTER_AREA (the form before session 37)
-    rng = np.random.default_rng(5)
-    h, w = shape
-    for _ in range(20):
-        seeds = [(int(rng.integers(0, w - 40)), int(rng.integers(0, h - 40)), int(rng.integers(3, 40)),
-                  int(rng.integers(3, 40))) for _ in range(int(rng.integers(1, 25)))]
-        for looser in (False, True):
-            region, boxes = _seed_regions(shape, seeds, looser)
-            coarse = cv2.dilate(cv2.resize(region, ((w + 7) // 8, (h + 7) // 8), interpolation=cv2.INTER_AREA),
-                                np.ones((3, 3), np.uint8))
-            parts, _ = cv2.findContours(coarse, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-            ref = []
-            for c in parts:
-                x, y, bw, bh = cv2.boundingRect(c)
-                ref.append((max(8 * x - 4, 0), max(8 * y - 4, 0), min(8 * (x + bw) + 4, w), min(8 * (y + bh) + 4, h)))
-            assert boxes == ref
-
-
 def _square_pixels_numpy(gray: np.ndarray, quad: np.ndarray, n: int, reach: float) -> tuple[np.ndarray, np.ndarray]:
     """blurred._pixels before session 38: the box's grid, its marker coordinates and the mask in NumPy."""
     h, w = gray.shape
@@ -150,26 +129,3 @@ def _square_pixels_numpy(gray: np.ndarray, quad: np.ndarray, n: int, reach: floa
     lim = reach / n
     keep = (mx > -lim) & (mx < 1 + lim) & (my > -lim) & (my < 1 + lim)
     return px[keep], gray[yy.ravel()[keep], xx.ravel()[keep]].astype(np.float64)
-
-
-def test_square_pixels_match_the_numpy_form() -> None:
-    # the second path's pixels of a candidate, bit for bit: random quads (tilted, perspective, some
-    # degenerate so that the horizon crosses the box) at the image's sides and inside
-    from gtrig.markers.detect.blurred import _pixels
-
-    rng = np.random.default_rng(3)
-    gray = rng.integers(0, 256, (120, 160), dtype=np.uint8)
-    for k in range(300):
-        ctr = rng.uniform([-5, -5], [165, 125])
-        side = rng.uniform(8, 45)
-        ang = rng.uniform(0, np.pi / 2)
-        sq = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], float) * side / 2
-        rot = np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
-        quad = ctr + sq @ rot.T + rng.normal(0, 0.15 * side if k % 10 else side, (4, 2))
-        want = _square_pixels_numpy(gray, quad, 8, 0.5)
-        got = _pixels(gray, quad, 8, 0.5)
-        if len(want[0]) == 0:
-            assert len(got[0]) == 0
-            continue
-        np.testing.assert_array_equal(got[0], want[0])
-        np.testing.assert_array_equal(got[1], want[1])

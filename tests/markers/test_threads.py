@@ -40,28 +40,6 @@ def test_ordered_map_raises_where_the_result_is_taken() -> None:
     assert got == [0, 1, 2, 3, 4]
 
 
-def test_claims_run_each_task_once() -> None:
-    """The helper runs tasks ahead; the caller takes some, skips the rest; a skipped task that is
-    asked for anyway is run; no task runs twice."""
-    runs: list[int] = []
-    lock = threading.Lock()
-
-    def f(k: int) -> int:
-        with lock:
-            runs.append(k)
-        time.sleep(0.001)
-        return -k
-
-    claims = _threads.Claims(f, [(k,) for k in range(30)])
-    job = _threads.helper_pool().submit(claims.work)
-    claims.skip(range(10, 30, 2))
-    assert [claims.get(k) for k in range(0, 30, 3)] == [-k for k in range(0, 30, 3)]
-    claims.skip(range(30))
-    job.result(timeout=60)
-    assert len(runs) == len(set(runs))
-    assert set(range(0, 30, 3)) <= set(runs)  # 12, 18 and 24 among them: skipped, then asked for
-
-
 def test_fill_boxes_is_cv2_rectangle() -> None:
     rng = np.random.default_rng(4)
     a = np.zeros((60, 80), np.uint8)
@@ -98,8 +76,8 @@ def test_quad_from_lines_is_cramers_rule() -> None:
 
 
 def test_two_threads_give_the_same_detections_on_clutter() -> None:
-    """Large, small and blurred markers on clutter, in dim light (many seeds for the further
-    thresholds, candidates for both paths): one thread and two give the same detections, bit for bit."""
+    """Large, small and blurred markers on clutter, in dim light: one thread and two give the same
+    detections, bit for bit (the edge fits split between the threads)."""
     rng = np.random.default_rng(8)
     fam = MarkerFamily.APRILTAG_36H11
     shape = (480, 640)
@@ -113,7 +91,7 @@ def test_two_threads_give_the_same_detections_on_clutter() -> None:
         for threads in (1, 2):
             det = MarkerDetector(fam, params=DetectorParams(threads=threads))
             got[blur, threads] = det.detect(img)
-        assert len(got[blur, 1]) >= 3
+        assert len(got[blur, 1]) >= 2 and {d.id for d in got[blur, 1]} <= {t.marker_id for t in truths}
         a, b = got[blur, 1], got[blur, 2]
         assert [d.id for d in a] == [d.id for d in b]
         for x, y in zip(a, b, strict=True):

@@ -40,7 +40,7 @@ def charuco_marker_corners(squares_xy: tuple[int, int], square_m: float, marker_
     d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
     board = cv2.aruco.CharucoBoard(squares_xy, square_m, marker_m, d)
     return {int(i): np.asarray(p, np.float64).reshape(4, 3)
-            for i, p in zip(board.getIds().ravel(), board.getObjPoints(), strict=True)}
+            for i, p in zip(np.asarray(board.getIds()).ravel(), board.getObjPoints(), strict=True)}
 
 
 def pose_fit_rms(corners_px: dict[int, NDArray[np.float64]], board_m: dict[int, NDArray[np.float64]],
@@ -127,8 +127,9 @@ def grid_local_rms(corners_px: dict[int, NDArray[np.float64]], grid_rc: dict[int
     blocks = []
     for c0 in range(cols - block + 1):
         for r0 in range(rows - block + 1):
-            ids = [at.get((c, r)) for c in range(c0, c0 + block) for r in range(r0, r0 + block)]
-            if all(i is not None for i in ids):
+            found = [at.get((c, r)) for c in range(c0, c0 + block) for r in range(r0, r0 + block)]
+            ids = [i for i in found if i is not None]
+            if len(ids) == len(found):
                 cr = np.array([grid_rc[i] for i in ids], np.float64)
                 img = np.concatenate([np.asarray(corners_px[i], np.float64).reshape(4, 2) for i in ids])
                 blocks.append((cr, img))

@@ -39,7 +39,7 @@ class Undistorter:
         """Raw pixels (N, 2) -> undistorted pixels (N, 2)."""
         pts = np.asarray(uv, dtype=np.float64).reshape(-1, 1, 2)
         out = _undistort(pts, self.K, self.dist, 1e-10)
-        return out.reshape(-1, 2)
+        return np.asarray(out, np.float64).reshape(-1, 2)
 
     def jacobian_to_raw(self, uv: NDArray[np.float64], h: float = 1e-3) -> NDArray[np.float64]:
         """d raw / d undistorted at points (N, 2): (N, 2, 2), by central differences."""
@@ -53,7 +53,8 @@ class Undistorter:
 
 
 def _undistort(pts: NDArray[np.floating], K: NDArray[np.float64], dist: NDArray[np.float64], eps: float
-               ) -> NDArray[np.float64]:
-    """``cv2.undistortPoints`` to undistorted pixels, iterated to ``eps`` (normalised units)."""
+               ) -> NDArray[np.floating]:
+    """``cv2.undistortPoints`` to undistorted pixels, iterated to ``eps`` (normalised units), in the
+    points' own precision (float32 for the maps, which ``cv2.remap`` takes)."""
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, eps)
-    return cv2.undistortPoints(pts, K, dist, None, None, K, crit)
+    return np.asarray(cv2.undistortPoints(pts, K, dist, None, None, K, crit), pts.dtype)

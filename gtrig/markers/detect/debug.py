@@ -2,9 +2,8 @@
 
 Drawn with OpenCV on the image (no plotting library): detections in green with their ID, and every
 rejected candidate in a colour per stage with its reason, so a user whose photo fails can see
-whether the marker never became a candidate (it is not outlined: the dark blob merged with its
-surroundings or broke), failed as a quadrilateral, could not be decoded, or was refused by the edge
-fits. The legend lists the reasons with numbers drawn beside the outlines.
+whether no peer found the marker (it is not outlined), the edge model could not fit its edges, or
+gtrig's cells contradicted the peer's ID. The legend lists the reasons with numbers drawn beside the outlines.
 """
 
 from __future__ import annotations
@@ -19,12 +18,9 @@ __all__ = ["STAGE_COLOURS", "debug_image"]
 
 #: BGR colour of each stage's outlines
 STAGE_COLOURS: dict[str, tuple[int, int, int]] = {
-    "candidate": (160, 160, 160),  # grey: the blob failed the shape tests
-    "predecode": (0, 165, 255),  # orange: its cells are far from every code
     "fit": (0, 0, 255),  # red: the edge fits were refused
-    "decode": (255, 0, 255),  # magenta: the refined cells do not decode
-    "blurred": (255, 128, 0),  # blue: the second path found no code
-    "duplicate": (128, 128, 0),
+    "decode": (255, 0, 255),  # magenta: gtrig's cells contradict the peer's ID
+    "duplicate": (128, 128, 0),  # teal: another detection holds the place
 }
 
 
@@ -54,8 +50,7 @@ def debug_image(gray: NDArray[np.uint8], detections: list[Detection], rejections
                     cv2.LINE_AA)
     head = f"{len(detections)} detection(s) (green, dot at the printed top-left), {len(rejections)} rejected"
     lines.insert(0, (head, (255, 255, 255)))
-    lines.insert(1, ("  " + ", ".join(f"{s}" for s in STAGE_COLOURS if s != "duplicate")
-                     + ": grey, orange, red, magenta, blue", (255, 255, 255)))
+    lines.insert(1, ("  " + ", ".join(STAGE_COLOURS) + ": red, magenta, teal", (255, 255, 255)))
     # legend in columns below the picture
     row_h, col_w = 14, 480
     per_col = 60

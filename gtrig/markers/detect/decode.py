@@ -5,7 +5,6 @@ from __future__ import annotations
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import ndtr
 
 from gtrig.markers.detect import _kernels
 from gtrig.markers.detect._blas import gram, matmul
@@ -19,10 +18,6 @@ SPARSE_SHARE = 0.15
 
 # sub-samples per cell, as offsets from its centre in cell units (the middle half of the cell)
 _OFFS = np.array([-0.25, 0.0, 0.25])
-
-#: largest share of the contrast the blur may carry into a sample from neighbours of the other colour for
-#: the sample to count in the uniformity test (:func:`flat_samples`): a tenth, against the half that flips it
-FLAT_LEAK = 0.1
 
 
 def sample_cells(
@@ -59,48 +54,6 @@ def sample_cells(
     if return_samples:
         return vals.mean(axis=3), vals
     return vals.mean(axis=3)
-
-
-def flat_samples(white: NDArray[np.floating], quads: NDArray[np.float64], sigma: NDArray[np.float64],
-                 leak: float = FLAT_LEAK) -> NDArray[np.bool_]:
-    """Which of the 9 samples of every cell (:func:`sample_cells`) the blur leaves at the cell's own level.
-
-    A sample 0.25 cell from the centre lies 0.25 cell from the nearest edge: at a blur of 1.35 px and
-    cells of 5.6 px that is one sigma, and a neighbour of the other colour lends it 15 % of the contrast
-    (two such neighbours, 30 %). Such a sample says nothing about whether the cell is uniform.
-
-    Parameters
-    ----------
-    white : (K, n, n) the cells, 1 = white (border included); the paper outside is taken as white.
-    quads : (K, 4, 2) corners (px), clockwise, corner 0 at cell (0, 0), corner 1 at cell (0, n - 1).
-    sigma : (K,) blur, px (Gaussian sigma).
-    leak : largest share of the contrast the neighbours of the other colour may lend a flat sample.
-
-    Returns
-    -------
-    (K, n, n, 9) bool, samples in :func:`sample_cells`' order (row of the sample, then column).
-    """
-    K, n = white.shape[0], white.shape[1]
-    side = np.linalg.norm(quads - np.roll(quads, -1, axis=1), axis=2)  # (K, 4)
-    # cell size along the rows (x, sides 0 and 2) and the columns (y, sides 1 and 3), px: on a tilted
-    # marker the two differ by up to 2x
-    cpx = np.stack([0.5 * (side[:, 0] + side[:, 2]), 0.5 * (side[:, 1] + side[:, 3])], axis=1) / n  # (K, 2)
-    s = np.maximum(sigma, 1e-3)[:, None, None, None]
-    # share of a sample's blur kernel over the previous (-1), its own (0) and the next (+1) cell along
-    # one axis, (K, 2 axes, 3 samples, 3 cells)
-    lo = (-0.5 - _OFFS)[None, None, :] * cpx[:, :, None]
-    hi = (0.5 - _OFFS)[None, None, :] * cpx[:, :, None]
-    a, b = ndtr(lo[..., None] / s), ndtr(hi[..., None] / s)
-    w = np.concatenate([a, b - a, 1.0 - b], axis=-1)  # (K, 2, 3, 3)
-    pad = np.pad(np.asarray(white, np.float64), ((0, 0), (1, 1), (1, 1)), constant_values=1.0)
-    out = np.empty((K, n, n, 9), bool)
-    for i in range(n):
-        for j in range(n):
-            other = np.abs(pad[:, i:i + 3, j:j + 3] - pad[:, i + 1, j + 1][:, None, None])  # (K, 3 rows, 3 cols)
-            # lent share at sample (r, c): sum over neighbours (u, v) of wy[r, u] wx[c, v] other[u, v]
-            lent = np.einsum("kru,kcv,kuv->krc", w[:, 1], w[:, 0], other)
-            out[:, i, j] = (lent <= leak).reshape(K, 9)
-    return out
 
 
 def unblur_cells(

@@ -47,12 +47,12 @@ def bilinear(gray: NDArray[np.uint8], x: NDArray[np.floating], y: NDArray[np.flo
     if pad:
         mx = np.concatenate([mx, np.zeros(pad, np.float32)])
         my = np.concatenate([my, np.zeros(pad, np.float32)])
-    mx = mx.reshape(rows, cols)
-    my = my.reshape(rows, cols)
+    mx2 = mx.reshape(rows, cols)
+    my2 = my.reshape(rows, cols)
     out = np.empty((rows, cols), np.uint8 if gray.dtype == np.uint8 else np.float32)
     for r0 in range(0, rows, CHUNK):
         r1 = min(rows, r0 + CHUNK)
-        out[r0:r1] = cv2.remap(gray, mx[r0:r1], my[r0:r1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        out[r0:r1] = cv2.remap(gray, mx2[r0:r1], my2[r0:r1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return out.ravel()[:n].astype(np.float64)
 
 
