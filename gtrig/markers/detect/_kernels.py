@@ -170,13 +170,60 @@ def _solve(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def lm_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.float64],
+            extra: NDArray[np.float64], lo: int, hi: int, P: NDArray[np.float64], clipped: NDArray[np.bool_],
+            slow: bool, iterations: int, tol: float, wt: float, ls_lo: float, ls_hi: float,
+            max_white: float, clip_low: float, clip_high: float, JTJ: NDArray[np.float64],
+            G: NDArray[np.float64]) -> float:
+    """Levenberg-Marquardt of one edge (pixels ``lo:hi``) of :func:`edge_lm`, from and into ``P`` (7,).
+
+    ``iterations`` is the edge's own limit (a clipped edge's already multiplied); ``JTJ`` (7, 7)
+    receives ``J^T J`` at the estimate and ``G`` (8, 8) is scratch. Returns the residual sum of squares.
+    """
+    A = np.empty((7, 7))
+    Pn = np.empty(7)
+    JTr = np.empty(7)
+    edge_normal_eq(X0, X1, val, extra, lo, hi, P, clipped, slow, clip_low, clip_high, G)
+    JTJ[:, :] = G[:7, :7]
+    JTr[:] = G[:7, 7]
+    cur = G[7, 7]
+    lam = 1e-3
+    for _it in range(iterations):
+        A[:] = JTJ
+        for p in range(7):
+            A[p, p] += lam * (JTJ[p, p] + 1e-9)
+        delta = _solve(A, JTr)
+        for p in range(7):
+            Pn[p] = P[p] + delta[p]
+        Pn[4] = min(max(Pn[4], ls_lo), ls_hi)
+        if slow:
+            Pn[3] = min(Pn[3], max_white * (clip_high - Pn[2]))
+        edge_normal_eq(X0, X1, val, extra, lo, hi, Pn, clipped, slow, clip_low, clip_high, G)
+        if G[7, 7] <= cur:
+            P[:] = Pn
+            cur = G[7, 7]
+            JTJ[:, :] = G[:7, :7]
+            JTr[:] = G[:7, 7]
+            lam *= 0.3
+        else:
+            lam *= 10.0
+        done = abs(delta[1]) + abs(delta[0]) * wt < tol
+        if slow:
+            done = done and abs(delta[3]) < 1e-3 * abs(P[3])
+        if done:
+            break
+    return cur
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def edge_lm(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.float64],
             extra: NDArray[np.float64], bounds: NDArray[np.int64], P: NDArray[np.float64],
             has: NDArray[np.bool_], clipped: NDArray[np.bool_], slow: NDArray[np.bool_], iterations: int,
             slow_factor: int, tol: float, wt: NDArray[np.float64], ls_lo: float, ls_hi: float,
             max_white: float, clip_low: float, clip_high: float
             ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Levenberg-Marquardt of every edge of :func:`.edges.fit_edges` (its docstring), each on its own.
+    """Levenberg-Marquardt of every edge of :func:`.edges.fit_edges` (its docstring), each on its own
+    (:func:`lm_edge`).
 
     Parameters
     ----------
@@ -199,44 +246,14 @@ def edge_lm(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
     JTJ = np.zeros((E, 7, 7))
     cur = np.zeros(E)
     G = np.empty((8, 8))
-    A = np.empty((7, 7))
-    Pn = np.empty(7)
-    JTr = np.empty(7)
     for k in range(E):
         if not has[k]:
             for p in range(7):
                 JTJ[k, p, p] = 1.0
             continue
-        lo, hi = bounds[k], bounds[k + 1]
-        edge_normal_eq(X0, X1, val, extra, lo, hi, P[k], clipped, slow[k], clip_low, clip_high, G)
-        JTJ[k] = G[:7, :7]
-        JTr[:] = G[:7, 7]
-        cur[k] = G[7, 7]
-        lam = 1e-3
-        for _it in range(iterations * slow_factor if slow[k] else iterations):
-            A[:] = JTJ[k]
-            for p in range(7):
-                A[p, p] += lam * (JTJ[k, p, p] + 1e-9)
-            delta = _solve(A, JTr)
-            for p in range(7):
-                Pn[p] = P[k, p] + delta[p]
-            Pn[4] = min(max(Pn[4], ls_lo), ls_hi)
-            if slow[k]:
-                Pn[3] = min(Pn[3], max_white * (clip_high - Pn[2]))
-            edge_normal_eq(X0, X1, val, extra, lo, hi, Pn, clipped, slow[k], clip_low, clip_high, G)
-            if G[7, 7] <= cur[k]:
-                P[k] = Pn
-                cur[k] = G[7, 7]
-                JTJ[k] = G[:7, :7]
-                JTr[:] = G[:7, 7]
-                lam *= 0.3
-            else:
-                lam *= 10.0
-            done = abs(delta[1]) + abs(delta[0]) * wt[k] < tol
-            if slow[k]:
-                done = done and abs(delta[3]) < 1e-3 * abs(P[k, 3])
-            if done:
-                break
+        cur[k] = lm_edge(X0, X1, val, extra, bounds[k], bounds[k + 1], P[k], clipped, slow[k],
+                         iterations * slow_factor if slow[k] else iterations, tol, wt[k], ls_lo, ls_hi,
+                         max_white, clip_low, clip_high, JTJ[k], G)
     return P, cur, JTJ
 
 
@@ -449,7 +466,7 @@ def cell_jacobian(x: NDArray[np.float64], y: NDArray[np.float64], H0: NDArray[np
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.float64], nrm: NDArray[np.float64],
+def band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.float64], nrm: NDArray[np.float64],
                L: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64],
                excl: NDArray[np.float64], out_x: NDArray[np.int64], out_y: NDArray[np.int64],
                out_e: NDArray[np.int64], fill: bool) -> int:
@@ -510,11 +527,11 @@ def band_pixels(gray: NDArray[np.uint8], p0: NDArray[np.float64], t: NDArray[np.
     """
     shape_hw = (gray.shape[0], gray.shape[1])
     z = np.empty(0, np.int64)
-    M = _band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, z, z, z, False)
+    M = band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, z, z, z, False)
     xs = np.empty(M, np.int64)
     ys = np.empty(M, np.int64)
     es = np.empty(M, np.int64)
-    _band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, xs, ys, es, True)
+    band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, xs, ys, es, True)
     xy = np.empty((M, 2))
     val = np.empty(M)
     for i in range(M):
