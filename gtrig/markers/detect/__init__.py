@@ -44,16 +44,7 @@ from gtrig.markers.detect.blurred import BlurredParams, find_blurred_candidates,
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.candidates import CandidateParams, find_candidates
 from gtrig.markers.detect.decode import flat_samples, sample_cells, soft_code_margin, unblur_cells
-from gtrig.markers.detect.edges import (
-    CLIP_HIGH,
-    across_edge,
-    fit_edges,
-    gather_band,
-    intersect_corners,
-    marker_context,
-    trim_outer,
-    white_extent,
-)
+from gtrig.markers.detect.edges import CLIP_HIGH, RefineParams, refine_quads
 from gtrig.markers.detect.shading import read_shaded
 from gtrig.markers.detect.tone import Tone, to_levels, to_light
 from gtrig.markers.families import FamilySpec, _codebook, decode_batch, family_spec, marker_cells
@@ -586,60 +577,12 @@ class MarkerDetector:
         retried = self._retried
         if not len(Q):
             return []
-        side = np.linalg.norm(Q - np.roll(Q, -1, axis=1), axis=2)  # (Q, 4)
-        cell = np.repeat(side.mean(axis=1) / n, 4)
-        border = cell * self.spec.border_cells
         white = self._white_cells(pre_id, pre_bits)
-        p0 = Q.reshape(-1, 2)
-        p1 = np.roll(Q, -1, axis=1).reshape(-1, 2)
-        L = side.ravel()
-        sigma = np.full(len(p0), 1.0)
-        fit = None
-        for _pass in range(p.passes):
-            w = 3.0 * sigma + p.band_px
-            if fit is None:
-                # plain step model: keep the band inside the black border and away from the ends
-                w_in = np.maximum(1.0, np.minimum(w, border - 1.5 * sigma))
-                w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
-                excl = np.minimum(np.maximum(3.0 * sigma + 1.0, 0.08 * L), 0.3 * L)
-            else:
-                # the corners and the data cells are modelled: the band may reach into them
-                w_in = np.maximum(1.0, np.minimum(w, border + 0.5 * cell))
-                w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
-                excl = np.minimum(sigma, 0.3 * L)
-            if p.margin_cells is not None:
-                w_out = np.maximum(1.0, np.minimum(w_out, p.margin_cells * cell - 2.0 * sigma))
-            if p.white_end:
-                # the band's white half must not reach past the paper into the surround: the profile is
-                # read WHITE_LOOK_SIGMAS further out, so that a paper's end just beyond the band is seen
-                # (its blurred foot inside the band moves the line too)
-                w_look = w_out + WHITE_LOOK_SIGMAS * sigma
-                samples = gather_band(gray, p0, p1, w_in, w_look, excl, und)
-                d = across_edge(samples, p0, p1)  # (both steps need it)
-                w_out = np.minimum(w_out, white_extent(samples, p0, p1, sigma, w_in, w_look, d))
-                samples = trim_outer(samples, p0, p1, w_out, d)
-            else:
-                samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
-            if p.tone != "linear":
-                samples = dataclasses.replace(samples, val=to_light(samples.val, p.tone))
-            if fit is None:
-                fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, tol=p.tol, threads=nt)
-            else:
-                corners, _ = intersect_corners(fit, len(Q))
-                extra = marker_context(samples, fit, corners, white, nt)
-                fit = fit_edges(samples, p0, p1, sigma, iterations=p.iterations, extra=extra, init=fit,
-                                tol=p.tol, threads=nt)
-            # the blur is about the same on the four edges of a marker: the next pass starts from
-            # their median, which recovers an edge whose plain-step fit collapsed to a sharp step
-            # (white cells one border-width inside pull sigma to 0 on small markers)
-            sigma = np.repeat(np.median(np.clip(fit.sigma, 0.3, p.max_blur_px).reshape(-1, 4), axis=1), 4)
-            lines = fit.lines()
-            # next pass: end points = the fitted line's points nearest to the previous ends
-            nvec = lines[:, :2]
-            p0 = p0 - (np.einsum("ij,ij->i", nvec, p0) - lines[:, 2])[:, None] * nvec
-            p1 = p1 - (np.einsum("ij,ij->i", nvec, p1) - lines[:, 2])[:, None] * nvec
-        assert fit is not None
-        corners, cov = intersect_corners(fit, len(Q))
+        # the edge fits' passes, bands and corners in compiled code (edges.refine_quads)
+        refine = RefineParams(p.passes, p.iterations, p.tol, p.band_px, p.white_end, WHITE_LOOK_SIGMAS, p.margin_cells,
+                              p.max_blur_px)
+        light = None if p.tone == "linear" else to_light(np.arange(256, dtype=np.float64), p.tone)
+        fit, corners, cov = refine_quads(gray, Q, white, self.spec.border_cells, refine, und, light, nt)
         # late rejection
         ok_e = (fit.ok & (fit.b >= p.min_contrast) & (fit.rms <= p.max_rel_rms * np.abs(fit.b))
                 & (fit.sigma <= p.max_blur_px) & (fit.sigma >= 0.06))
