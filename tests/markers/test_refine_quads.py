@@ -1,69 +1,20 @@
 """The compiled edge refinement (:func:`gtrig.markers.detect.edges.refine_quads`) against the same chain of
-the public step functions called in turn (band, white end, trim, context, fits, corners), on renders."""
+the public step functions called in turn (band, white end, trim, context, fits, corners:
+:func:`~gtrig.markers.detect.edges.refine_quads_stepwise`), on renders."""
 
 from __future__ import annotations
-
-import dataclasses
 
 import numpy as np
 import pytest
 
 from gtrig.markers.detect.camera import Undistorter
-from gtrig.markers.detect.edges import (
-    EdgeFit,
-    RefineParams,
-    across_edge,
-    band_limits,
-    fit_edges,
-    gather_band,
-    intersect_corners,
-    marker_context,
-    refine_quads,
-    trim_outer,
-    white_extent,
-)
+from gtrig.markers.detect.edges import RefineParams, refine_quads, refine_quads_stepwise
 from gtrig.markers.detect.tone import to_light
 from gtrig.markers.families import family_spec, marker_cells
 from gtrig.markers.synth import clutter_background, homography_from_pose, render
 from gtrig.rig.models import MarkerFamily
 
 FAMILY = MarkerFamily.APRILTAG_36H11
-
-
-def reference_chain(gray: np.ndarray, quads: np.ndarray, white: np.ndarray, border_cells: int, prm: RefineParams,
-                    undist: Undistorter | None = None, tone: str = "linear"
-                    ) -> tuple[EdgeFit, np.ndarray, np.ndarray]:
-    """The refinement as the step functions of ``edges`` make it, one call per step and pass."""
-    n = white.shape[1]
-    side = np.linalg.norm(quads - np.roll(quads, -1, axis=1), axis=2)
-    cell = np.repeat(side.mean(axis=1) / n, 4)
-    border = cell * border_cells
-    p0 = quads.reshape(-1, 2)
-    p1 = np.roll(quads, -1, axis=1).reshape(-1, 2)
-    sigma = np.full(len(p0), 1.0)
-    fit = None
-    for k in range(prm.passes):
-        w_in, w_out, w_look, excl = band_limits(sigma, side.ravel(), cell, border, k == 0, prm)
-        samples = gather_band(gray, p0, p1, w_in, w_look, excl, undist)
-        if prm.white_end:
-            d = across_edge(samples, p0, p1)
-            w_out = np.minimum(w_out, white_extent(samples, p0, p1, sigma, w_in, w_look, d))
-            samples = trim_outer(samples, p0, p1, w_out, d)
-        samples = dataclasses.replace(samples, val=to_light(samples.val, tone))  # type: ignore[arg-type]
-        if fit is None:
-            fit = fit_edges(samples, p0, p1, sigma, iterations=prm.iterations, tol=prm.tol)
-        else:
-            corners, _ = intersect_corners(fit, len(quads))
-            extra = marker_context(samples, fit, corners, white)
-            fit = fit_edges(samples, p0, p1, sigma, iterations=prm.iterations, extra=extra, init=fit, tol=prm.tol)
-        sigma = np.repeat(np.median(np.clip(fit.sigma, 0.3, prm.max_blur_px).reshape(-1, 4), axis=1), 4)
-        lines = fit.lines()
-        nvec = lines[:, :2]
-        p0 = p0 - (np.einsum("ij,ij->i", nvec, p0) - lines[:, 2])[:, None] * nvec
-        p1 = p1 - (np.einsum("ij,ij->i", nvec, p1) - lines[:, 2])[:, None] * nvec
-    assert fit is not None
-    corners, cov = intersect_corners(fit, len(quads))
-    return fit, corners, cov
 
 
 def _scene(seed: int, side: float, blur: float, gain: float = 230.0, undist: Undistorter | None = None
@@ -95,14 +46,14 @@ def test_compiled_refinement_is_the_step_functions_chain(seed: int, side: float,
     img, quads, white, true = _scene(seed, side, blur, gain)
     bc = family_spec(FAMILY).border_cells
     prm = RefineParams()
-    ref, c_ref, cov_ref = reference_chain(img, quads, white, bc, prm)
+    ref, c_ref, cov_ref = refine_quads_stepwise(img, quads, white, bc, prm)
     fit, corners, cov = refine_quads(img, quads, white, bc, prm)
     assert np.abs(corners - c_ref).max() < 1e-6
     assert np.allclose(cov, cov_ref, rtol=1e-6, atol=1e-12)
     for name in ("sigma", "a", "b", "rms"):
         assert np.allclose(getattr(fit, name), getattr(ref, name), rtol=1e-6, atol=1e-6), name
     assert np.array_equal(fit.ok, ref.ok) and np.array_equal(fit.n_px, ref.n_px)
-    if gain < 255:  # (the over-exposed render's accuracy is the subject of test_blurred's clipped cases)
+    if gain < 255:  # (clipped renders: the agreement only)
         assert np.sqrt(np.mean(np.sum((corners - true) ** 2, axis=2))) < (0.15 if blur <= 1.0 else 0.3)
 
 
@@ -114,7 +65,7 @@ def test_compiled_refinement_with_a_lens_model_tone_and_two_threads() -> None:
     img, quads, white, _true = _scene(5, 50.0, 0.7, undist=und)
     bc = family_spec(FAMILY).border_cells
     for prm, tone in ((RefineParams(), "srgb"), (RefineParams(white_end=False, margin_cells=1.0), "linear")):
-        ref, c_ref, _ = reference_chain(img, quads, white, bc, prm, und, tone)
         light = to_light(np.arange(256, dtype=np.float64), tone)  # type: ignore[arg-type]
+        _ref, c_ref, _ = refine_quads_stepwise(img, quads, white, bc, prm, und, light if tone != "linear" else None)
         _fit, corners, _ = refine_quads(img, quads, white, bc, prm, und, light, threads=2)
         assert np.abs(corners - c_ref).max() < 1e-6

@@ -741,6 +741,54 @@ def refine_quads(
     return fit, corners, cov
 
 
+def refine_quads_stepwise(
+    gray: NDArray[np.uint8],
+    quads: NDArray[np.float64],
+    white: NDArray[np.float64],
+    border_cells: int,
+    params: RefineParams | None = None,
+    undist: Undistorter | None = None,
+    light: NDArray[np.float64] | None = None,
+) -> tuple[EdgeFit, NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`refine_quads` through the step functions, one array call per step and pass: the reference
+    the compiled passes are held to (its tests, ``bench/markers.py --refine-only``). Same arguments and
+    results."""
+    prm = params or RefineParams()
+    quads = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    n = white.shape[1]
+    side = np.linalg.norm(quads - np.roll(quads, -1, axis=1), axis=2)
+    cell = np.repeat(side.mean(axis=1) / n, 4)
+    border = cell * border_cells
+    p0 = quads.reshape(-1, 2)
+    p1 = np.roll(quads, -1, axis=1).reshape(-1, 2)
+    sigma = np.full(len(p0), 1.0)
+    fit = None
+    for k in range(prm.passes):
+        w_in, w_out, w_look, excl = band_limits(sigma, side.ravel(), cell, border, k == 0, prm)
+        samples = gather_band(gray, p0, p1, w_in, w_look, excl, undist)
+        if prm.white_end:
+            d = across_edge(samples, p0, p1)
+            w_out = np.minimum(w_out, white_extent(samples, p0, p1, sigma, w_in, w_look, d))
+            samples = trim_outer(samples, p0, p1, w_out, d)
+        if light is not None:
+            samples = dataclasses.replace(samples, val=np.asarray(light, np.float64)[samples.val.astype(np.intp)])
+        if fit is None:
+            fit = fit_edges(samples, p0, p1, sigma, iterations=prm.iterations, tol=prm.tol)
+        else:
+            corners, _ = intersect_corners(fit, len(quads))
+            extra = marker_context(samples, fit, corners, white)
+            fit = fit_edges(samples, p0, p1, sigma, iterations=prm.iterations, extra=extra, init=fit, tol=prm.tol)
+        sigma = np.repeat(np.median(np.clip(fit.sigma, 0.3, prm.max_blur_px).reshape(-1, 4), axis=1), 4)
+        lines = fit.lines()
+        nvec = lines[:, :2]
+        p0 = p0 - (np.einsum("ij,ij->i", nvec, p0) - lines[:, 2])[:, None] * nvec
+        p1 = p1 - (np.einsum("ij,ij->i", nvec, p1) - lines[:, 2])[:, None] * nvec
+    if fit is None:
+        raise ValueError("refine_quads_stepwise: params.passes must be at least 1")
+    corners, cov = intersect_corners(fit, len(quads))
+    return fit, corners, cov
+
+
 def _raw_boxes(shape: tuple[int, ...], p0: NDArray[np.float64], p1: NDArray[np.float64], w_in: NDArray[np.float64],
                w_out: NDArray[np.float64], undist: Undistorter) -> NDArray[np.int64]:
     """Each band's bounding box in the raw image (E, 4) as ``(x0, y0, x1, y1)``, end exclusive
