@@ -405,7 +405,7 @@ def _bench_floor(images: list[NDArray[np.uint8]]) -> None:
     det = MarkerDetector(FAMILY, params=DetectorParams(threads=1))
     cvd = _detectors(["cv2 NONE"])["cv2 NONE"]
     fits: list[float] = []
-    plain = gd.fit_edges
+    plain = gd.refine_quads
 
     def timed(*args: Any, **kw: Any) -> Any:
         t0 = time.perf_counter()
@@ -415,7 +415,7 @@ def _bench_floor(images: list[NDArray[np.uint8]]) -> None:
             fits.append(time.perf_counter() - t0)
     default = cv2.getNumThreads()
     cv2.setNumThreads(1)
-    gd.fit_edges = timed
+    gd.refine_quads = timed
     try:
         passes: list[float] = []
         cv: list[float] = []
@@ -436,7 +436,7 @@ def _bench_floor(images: list[NDArray[np.uint8]]) -> None:
             total.append(time.perf_counter() - t0)
         fit_ms = 1000.0 * sum(fits) / max(found, 1)
     finally:
-        gd.fit_edges = plain
+        gd.refine_quads = plain
         cv2.setNumThreads(default)
     p, c, g = 1000.0 * float(np.median(passes)), float(np.median(cv)), 1000.0 * float(np.median(total))
     per_img = fit_ms * found / len(images)

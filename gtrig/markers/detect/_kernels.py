@@ -289,6 +289,25 @@ def _ndtr_sat(z: float) -> float:
     return _ndtr(z)
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _saturated_grid(t: float, s: float, n: int, F: NDArray[np.float64]) -> tuple[int, int]:
+    """``F[k] = Phi((t - k) / s)`` for the grid lines ``k = 0..n``, 1 or 0 (to 1e-19) beyond 9 SDs and
+    set without evaluating there (:func:`_ndtr_sat`), and the range ``[k0, k1)`` of the cells ``k``
+    whose ``F[k] - F[k + 1]`` may differ from 0."""
+    lo = max(0, int(math.ceil(t - 9.0 * s)))
+    hi = min(n, int(math.floor(t + 9.0 * s)))
+    for k in range(0, min(lo, n + 1)):
+        F[k] = 1.0
+    for k in range(lo, hi + 1):
+        F[k] = _ndtr_sat((t - k) / s)
+    for k in range(max(hi + 1, lo), n + 1):
+        F[k] = 0.0
+    if hi < lo:
+        # no line within 9 SDs: the one cell where F steps from 1 to 0, if any
+        return (lo - 1, lo) if 0 < lo <= n else (0, 0)
+    return max(lo - 1, 0), min(hi + 1, n)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray[np.int64],
                    H: NDArray[np.float64], sigma: NDArray[np.float64], white: NDArray[np.float64],
@@ -309,27 +328,29 @@ def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray
     Fx = np.empty(n + 1)
     Fy = np.empty(n + 1)
     for i in range(N):
-        h = H[quad[i]]
+        g = quad[i]  # (elements indexed in place: a view per pixel costs more than the pixel's sums)
         xi, yi = x[i], y[i]
-        w3 = h[6] * xi + h[7] * yi + h[8]
-        mx = (h[0] * xi + h[1] * yi + h[2]) / w3
-        my = (h[3] * xi + h[4] * yi + h[5]) / w3
+        w3 = H[g, 6] * xi + H[g, 7] * yi + H[g, 8]
+        mx = (H[g, 0] * xi + H[g, 1] * yi + H[g, 2]) / w3
+        my = (H[g, 3] * xi + H[g, 4] * yi + H[g, 5]) / w3
         scale = sigma[i] / abs(w3) * n
-        sx = scale * math.hypot(h[0] - mx * h[6], h[1] - mx * h[7])
-        sy = scale * math.hypot(h[3] - my * h[6], h[4] - my * h[7])
-        for k in range(n + 1):
-            Fx[k] = _ndtr_sat((mx * n - k) / sx)
-            Fy[k] = _ndtr_sat((my * n - k) / sy)
-        W = white[quad[i]]
+        ax, bx = H[g, 0] - mx * H[g, 6], H[g, 1] - mx * H[g, 7]
+        ay, by = H[g, 3] - my * H[g, 6], H[g, 4] - my * H[g, 7]
+        sx = scale * math.sqrt(ax * ax + bx * bx)  # (libm's hypot guards against overflow at 4x the cost)
+        sy = scale * math.sqrt(ay * ay + by * by)
+        # only the grid lines within 9 SDs have a CDF other than 0 or 1: the cells' sum runs over the
+        # rows and columns between them (the other products are 0)
+        c0, c1 = _saturated_grid(mx * n, sx, n, Fx)
+        r0, r1 = _saturated_grid(my * n, sy, n, Fy)
         R = 0.0
-        for r in range(n):
+        for r in range(r0, r1):
             Yr = Fy[r] - Fy[r + 1]
             if Yr == 0.0:
                 continue
             acc = 0.0
-            for c in range(n):
-                if W[r, c] != 0.0:
-                    acc += W[r, c] * (Fx[c] - Fx[c + 1])
+            for c in range(c0, c1):
+                if white[g, r, c] != 0.0:
+                    acc += white[g, r, c] * (Fx[c] - Fx[c + 1])
             R += Yr * acc
         S = (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
         out[i] = 1.0 - S + R - _ndtr(dist[i] / sigma[i])
