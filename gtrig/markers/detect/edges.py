@@ -619,10 +619,16 @@ class RefineParams:
         marker's corners and cells fixed (:func:`marker_context`).
     iterations, tol : :func:`fit_edges`' iteration limit and line-step tolerance (pixels).
     band_px : half-width of the band beyond ``3 sigma`` (pixels).
-    white_end : end each edge's outer band where its white quiet zone ends (:func:`white_extent`),
-        read ``look_sigmas`` blur sigmas beyond the band.
+    white_end : end each edge's outer band where its white quiet zone ends (:func:`white_extent`): the
+        band's white half must not reach past the paper into the surround. The profile is read
+        ``look_sigmas`` blur sigmas beyond the band, so that a paper's end just beyond it is seen (its
+        blurred foot inside the band moves the line too).
     margin_cells : the printed white margin around the black square, in cells, if known.
-    max_blur_px : upper clip of the blur a pass hands to the next (the lower is 0.3 px).
+    max_blur_px : upper clip of the blur a pass hands to the next (the lower is 0.3 px). The blur is
+        about the same on the four edges of a marker: the next pass starts from their median, which
+        recovers an edge whose plain-step fit collapsed to a sharp step (white cells one border-width
+        inside pull sigma to 0 on small markers); its end points are the fitted lines' points nearest
+        to the previous ones.
     """
 
     passes: int = 3
