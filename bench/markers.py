@@ -40,8 +40,14 @@ figure: the wall-clock ratio with OpenCV's default threads, both detectors on th
 ``--floor`` times, on the main table's images (``--quick``: its smaller grid) with one thread, what no
 trimming of gtrig's code removes: the OpenCV calls it makes on the whole image whatever the image holds
 (the first path's closing, ratio mask and contours; the second path's smoothing, dark mask, quiet-zone
-masks and contours) and its edge fits per detected marker, against OpenCV's whole detection on the same
-images.
+masks and contours) and its edge refinement per detected marker (``edges.refine_quads``: bands, fits,
+corners), against OpenCV's whole detection on the same images.
+
+``--refine-only`` times the edge refinement alone, one thread, in CPU time of the calling thread (steady
+on a loaded machine), on the quads OpenCV finds in the main table's images (their corners turned to the
+true order, the true code's cells): the compiled refinement, the same through the step functions (its
+reference, the detector's path before it was compiled) and OpenCV's cornerSubPix on the same quads, with
+each one's corner RMS against the truth.
 
 "gtrig" is the default detector (both paths), "gtrig first path" the same without the second path for
 small blurred markers (``DetectorParams(blurred=BlurredParams(enabled=False))``).
@@ -443,9 +449,9 @@ def _bench_floor(images: list[NDArray[np.uint8]]) -> None:
     print(f"{len(images)} images {images[0].shape[1]} x {images[0].shape[0]}, one thread, medians:")
     print(f"  OpenCV ArucoDetector, whole detection  {c:6.2f} ms (the 1.5x target: {1.5 * c:.2f} ms for gtrig)")
     print(f"  gtrig's whole-image passes             {p:6.2f} ms = {p / c:.2f}x OpenCV's detection")
-    print(f"  gtrig's edge fits                      {fit_ms:6.2f} ms per detected marker "
+    print(f"  gtrig's edge refinement                {fit_ms:6.2f} ms per detected marker "
           f"({found / len(images):.2f} per image: {per_img:.2f} ms)")
-    print(f"  floor (passes + edge fits)             {p + per_img:6.2f} ms = {(p + per_img) / c:.2f}x; "
+    print(f"  floor (passes + edge refinement)       {p + per_img:6.2f} ms = {(p + per_img) / c:.2f}x; "
           f"gtrig's whole detection {g:.2f} ms = {g / c:.2f}x")
 
 
