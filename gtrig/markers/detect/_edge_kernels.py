@@ -369,12 +369,15 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
             starts[k + 1] += starts[k]
         if look:
             # the paper's end: the band's pixels beyond it are left out (edges stay sorted)
+            unit = np.empty((4, 2))
+            for k in range(4):
+                tx, ty = p1[e0 + k, 0] - p0[e0 + k, 0], p1[e0 + k, 1] - p0[e0 + k, 1]
+                L = math.hypot(tx, ty)
+                unit[k, 0], unit[k, 1] = tx / L, ty / L
             d = np.empty(N)
             for i in range(N):
-                e = e0 + es[i]
-                tx, ty = p1[e, 0] - p0[e, 0], p1[e, 1] - p0[e, 1]
-                L = math.hypot(tx, ty)
-                d[i] = (x[i] - p0[e, 0]) * (ty / L) - (y[i] - p0[e, 1]) * (tx / L)
+                k = es[i]
+                d[i] = (x[i] - p0[e0 + k, 0]) * unit[k, 1] - (y[i] - p0[e0 + k, 1]) * unit[k, 0]
             lim = np.empty(4)
             for k in range(4):
                 e = e0 + k
@@ -402,6 +405,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
         for k in range(4):
             init[k] = P[e0 + k]
             init_mid[k] = mid[e0 + k]
+        X0 = np.empty(N)
+        X1 = np.empty(N)
         for k in range(4):
             e = e0 + k
             tx, ty = p1[e, 0] - p0[e, 0], p1[e, 1] - p0[e, 1]
@@ -409,8 +414,6 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
             tx, ty = tx / nl, ty / nl
             new_mid[0], new_mid[1] = 0.5 * (p0[e, 0] + p1[e, 0]), 0.5 * (p0[e, 1] + p1[e, 1])
             lo, hi = starts[k], starts[k + 1]
-            X0 = np.empty(N)
-            X1 = np.empty(N)
             for i in range(lo, hi):
                 X0[i] = x[i] - new_mid[0]
                 X1[i] = y[i] - new_mid[1]
