@@ -319,6 +319,50 @@ def _context(x: NDArray[np.float64], y: NDArray[np.float64], es: NDArray[np.int6
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _edge_starts(es: NDArray[np.int64]) -> NDArray[np.int64]:
+    """First index (5,) of each of a quad's four edges in its pixels' sorted edge indices ``es`` (0..3),
+    and their number last."""
+    starts = np.zeros(5, np.int64)
+    for i in range(es.shape[0]):
+        starts[es[i] + 1] += 1
+    for k in range(4):
+        starts[k + 1] += starts[k]
+    return starts
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _trim_to_paper(x: NDArray[np.float64], y: NDArray[np.float64], raw: NDArray[np.float64], es: NDArray[np.int64],
+                   starts: NDArray[np.int64], p0: NDArray[np.float64], p1: NDArray[np.float64],
+                   w_in: NDArray[np.float64], w_out: NDArray[np.float64], w_look: NDArray[np.float64],
+                   sigma: NDArray[np.float64], lo: float, step: float, drop: float, end_sigmas: float
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """A quad's band pixels (x, y, values, edge 0..3; ``starts`` of :func:`_edge_starts`) without those
+    beyond the paper's end (:func:`_white_limit`, at most ``w_out``) or beyond ``w_out`` itself
+    (:func:`.edges.white_extent`, :func:`.edges.trim_outer`); the edges stay sorted. ``p0``, ``p1``
+    (4, 2) and the limits (4,) are the quad's."""
+    unit = np.empty((4, 2))
+    for k in range(4):
+        tx, ty = p1[k, 0] - p0[k, 0], p1[k, 1] - p0[k, 1]
+        L = math.hypot(tx, ty)
+        unit[k, 0], unit[k, 1] = tx / L, ty / L
+    N = x.shape[0]
+    d = np.empty(N)
+    for i in range(N):
+        k = es[i]
+        d[i] = (x[i] - p0[k, 0]) * unit[k, 1] - (y[i] - p0[k, 1]) * unit[k, 0]
+    lim = np.empty(4)
+    for k in range(4):
+        lim[k] = min(w_out[k], _white_limit(d, raw, starts[k], starts[k + 1], lo, step, sigma[k], w_in[k],
+                                            w_look[k], drop, end_sigmas))
+    m = 0
+    for i in range(N):
+        if d[i] <= lim[es[i]]:
+            x[m], y[m], raw[m], es[m] = x[i], y[i], raw[i], es[i]
+            m += 1
+    return x[:m], y[:m], raw[:m], es[:m]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray[np.float32],
                 map_y: NDArray[np.float32], boxes: NDArray[np.int64], p0: NDArray[np.float64],
                 p1: NDArray[np.float64], sigma0: NDArray[np.float64], w_in: NDArray[np.float64],
@@ -361,40 +405,12 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
                                                 excl[sl])
         else:
             x, y, raw, es = _gather_raw(gray, p0[sl], p1[sl], w_in[sl], w_band, excl[sl])
-        N = x.shape[0]
-        starts = np.zeros(5, np.int64)
-        for i in range(N):
-            starts[es[i] + 1] += 1
-        for k in range(4):
-            starts[k + 1] += starts[k]
+        starts = _edge_starts(es)
         if look:
-            # the paper's end: the band's pixels beyond it are left out (edges stay sorted)
-            unit = np.empty((4, 2))
-            for k in range(4):
-                tx, ty = p1[e0 + k, 0] - p0[e0 + k, 0], p1[e0 + k, 1] - p0[e0 + k, 1]
-                L = math.hypot(tx, ty)
-                unit[k, 0], unit[k, 1] = tx / L, ty / L
-            d = np.empty(N)
-            for i in range(N):
-                k = es[i]
-                d[i] = (x[i] - p0[e0 + k, 0]) * unit[k, 1] - (y[i] - p0[e0 + k, 1]) * unit[k, 0]
-            lim = np.empty(4)
-            for k in range(4):
-                e = e0 + k
-                lim[k] = min(w_out[e], _white_limit(d, raw, starts[k], starts[k + 1], lo_bins, step, sigma0[e],
-                                                    w_in[e], w_look[e], drop, end_sigmas))
-            m = 0
-            for i in range(N):
-                if d[i] <= lim[es[i]]:
-                    x[m], y[m], raw[m], es[m] = x[i], y[i], raw[i], es[i]
-                    m += 1
-            N = m
-            x, y, raw, es = x[:N], y[:N], raw[:N], es[:N]
-            starts[:] = 0
-            for i in range(N):
-                starts[es[i] + 1] += 1
-            for k in range(4):
-                starts[k + 1] += starts[k]
+            x, y, raw, es = _trim_to_paper(x, y, raw, es, starts, p0[sl], p1[sl], w_in[sl], w_out[sl], w_look[sl],
+                                           sigma0[sl], lo_bins, step, drop, end_sigmas)
+            starts = _edge_starts(es)
+        N = x.shape[0]
         v = np.empty(N)
         for i in range(N):
             v[i] = lut[int(raw[i])]
