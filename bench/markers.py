@@ -28,6 +28,7 @@ Usage::
     python bench/markers.py                 # the renders: accuracy and speed
     python bench/markers.py --quick         # a smaller grid of renders
     python bench/markers.py --hard          # the harder simulated set
+    python bench/markers.py --refine-only   # the edge refinement alone, against cornerSubPix
 """
 
 from __future__ import annotations
@@ -44,8 +45,10 @@ from typing import Any
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 
 from gtrig.markers.detect import DetectorParams, MarkerDetector
+from gtrig.markers.families import marker_cells
 from gtrig.markers.synth import clutter_background, homography_from_pose, render, textured_background
 from gtrig.rig.models import MarkerFamily
 
@@ -236,6 +239,91 @@ def _photo(path: Path, dictionary: str, set_name: str, row: _Row, dets: dict[tup
                      and not any(i in p and np.linalg.norm(p[i] - c) < 10 for p in peers))
 
 
+def _refine_inputs(img: NDArray[np.uint8], truths: list, cvd: Any
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``--refine-only``'s quads: OpenCV's (no refinement) markers of ``img`` that match a true marker,
+    their corners turned to the true corners' order, the true code's white cells and the true corners."""
+    corners, ids, _ = cvd.detectMarkers(img)
+    quads, white, true = [], [], []
+    for c, i in zip(corners, [] if ids is None else ids.ravel(), strict=True):
+        for t in truths:
+            if t.marker_id != int(i):
+                continue
+            q = np.asarray(c, np.float64).reshape(4, 2)
+            q = min((np.roll(q, -s, axis=0) for s in range(4)), key=lambda r: float(np.abs(r - t.corners_px).sum()))
+            if np.abs(q - t.corners_px).max() < 5:
+                quads.append(q)
+                white.append(marker_cells(FAMILY, t.marker_id).astype(np.float64))
+                true.append(t.corners_px)
+    return np.array(quads).reshape(-1, 4, 2), np.array(white), np.array(true).reshape(-1, 4, 2)
+
+
+def _bench_refine(scenes: list[tuple[NDArray[np.uint8], list, float]]) -> None:
+    """``--refine-only``: the edge refinement alone on OpenCV's quads of the renders, one thread, CPU time
+    per marker (this thread's) and corner RMS against the truth: gtrig's compiled refinement, the same
+    through the step functions (its reference), and OpenCV's cornerSubPix on the same quads."""
+    from gtrig.markers.detect.edges import RefineParams, refine_quads, refine_quads_stepwise
+    from gtrig.markers.families import family_spec
+
+    cvd = _opencv("DICT_APRILTAG_36h11")
+    bc = family_spec(FAMILY).border_cells
+    prm = RefineParams()
+    crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
+    default = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    names = ["start (OpenCV NONE)", "cornerSubPix 5x5", "gtrig stepwise", "gtrig compiled"]
+    cpu = {k: 0.0 for k in names}
+    err: dict[tuple[str, bool], list[float]] = {(k, lo): [] for k in names for lo in (True, False)}
+    n_markers = 0
+    worst = 0.0
+    try:
+        for img, truths, _blur in scenes[:2]:  # compiled kernels warm
+            Q, W, _T = _refine_inputs(img, truths, cvd)
+            if len(Q):
+                refine_quads(img, Q, W, bc, prm)
+        for img, truths, blur in scenes:
+            Q, W, T = _refine_inputs(img, truths, cvd)
+            if not len(Q):
+                continue
+            n_markers += len(Q)
+            out = {names[0]: Q}
+            t0 = time.thread_time()
+            sp = cv2.cornerSubPix(img, Q.reshape(-1, 1, 2).astype(np.float32), (5, 5), (-1, -1), crit)
+            cpu[names[1]] += time.thread_time() - t0
+            out[names[1]] = sp.reshape(-1, 4, 2).astype(np.float64)
+            t0 = time.thread_time()
+            out[names[2]] = refine_quads_stepwise(img, Q, W, bc, prm)[1]
+            cpu[names[2]] += time.thread_time() - t0
+            t0 = time.thread_time()
+            out[names[3]] = refine_quads(img, Q, W, bc, prm)[1]
+            cpu[names[3]] += time.thread_time() - t0
+            worst = max(worst, float(np.nanmax(np.abs(out[names[3]] - out[names[2]]))))
+            for k, c in out.items():
+                e2 = np.sum((c - T) ** 2, axis=2).ravel().tolist()
+                err[(k, blur <= 1.0)].extend(e2)
+    finally:
+        cv2.setNumThreads(default)
+    print(f"{len(scenes)} images 1024 x 768, {n_markers} markers found by OpenCV (its quads, the true code's cells),"
+          " one thread, CPU time of this thread")
+    print(f"{'refinement':24s} {'ms/marker':>9s} {'x subpix':>8s} {'RMS blur<=1':>11s} {'RMS blur 2':>10s}")
+    for k in names:
+        ms = 1000.0 * cpu[k] / max(n_markers, 1)
+        ratio = cpu[k] / cpu[names[1]] if cpu[names[1]] > 0 else float("nan")
+        lo, hi = (float(np.sqrt(np.mean(err[(k, b)]))) if err[(k, b)] else float("nan") for b in (True, False))
+        print(f"{k:24s} {ms:9.3f} {ratio:8.1f} {lo:11.4f} {hi:10.4f}")
+    print(f"compiled against stepwise: largest corner difference {worst:.2e} px")
+
+
+def _bench_refine_only(rng: np.random.Generator) -> None:
+    """``--refine-only`` on the quick grid of renders."""
+    scenes = []
+    for side, tilt, blur, light in itertools.product([20, 35, 60, 120], [0, 45], [0.0, 0.5, 1.0, 2.0],
+                                                     ["uniform", "dim"]):
+        img, truths = _scene(rng, side, tilt, blur, light)
+        scenes.append((img, truths, blur))
+    _bench_refine(scenes)
+
+
 def _bench_photos() -> None:
     if not REAL.is_dir():
         print(f"{REAL}: not found, real photos left out")
@@ -355,12 +443,16 @@ def main() -> None:
     ap.add_argument("--photos", action="store_true", help="the real photos of ../shared/data/markers_real")
     ap.add_argument("--hard", action="store_true", help="the harder simulated set (JPEG, Bayer, glare, ...)")
     ap.add_argument("--per-side", type=int, default=50, help="--hard: images per marker side")
+    ap.add_argument("--refine-only", action="store_true",
+                    help="the edge refinement alone on OpenCV's quads of the renders, against cornerSubPix")
     a = ap.parse_args()
     rng = np.random.default_rng(a.seed)
     if a.photos:
         _bench_photos()
     elif a.hard:
         _bench_hard(rng, a.per_side)
+    elif a.refine_only:
+        _bench_refine_only(rng)
     else:
         _bench_renders(rng, a.quick)
 

@@ -71,6 +71,23 @@ def _pixel_step(d: float, s: float, cos_t: float, sin_t: float) -> tuple[float, 
     return prof * iw, slope * iw, dls * iw * s2
 
 
+#: pixels whose Jacobian rows :func:`edge_normal_eq` holds at once: the products of their columns are then
+#: summed in vector registers (:func:`_gram_add`), four to eight pixels per instruction
+_CHUNK = 64
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "contract"})
+def _gram_add(J: NDArray[np.float64], m: int, out: NDArray[np.float64]) -> None:
+    """``out[p, q] += sum_i J[p, i] J[q, i]`` over the first ``m`` columns of ``J`` (8, C), ``q >= p``
+    (the sums reassociated: the order of the additions is the vector unit's, not the pixels')."""
+    for p in range(8):
+        for q in range(p, 8):
+            acc = 0.0
+            for i in range(m):
+                acc += J[p, i] * J[q, i]
+            out[p, q] += acc
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def edge_normal_eq(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.float64],
                    extra: NDArray[np.float64], lo: int, hi: int, P: NDArray[np.float64],
@@ -89,50 +106,55 @@ def edge_normal_eq(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArra
     exact : the edge is modelled by the pixel-integrated step.
     out : (8, 8): ``J^T J`` in ``[:7, :7]``, ``J^T r`` in ``[:7, 7]`` and ``r^T r`` in ``[7, 7]``,
         ``J`` the derivative of the prediction (so ``J^T r`` is minus half the gradient of ``r^T r``).
+
+    The rows ``[J r]`` of :data:`_CHUNK` pixels are formed one pixel at a time, then their products
+    summed by :func:`_gram_add`; a censored pixel's row is zero.
     """
     th, rho, a, b, ls, ca, cu = P[0], P[1], P[2], P[3], P[4], P[5], P[6]
     c, s = math.cos(th), math.sin(th)
     isg = math.exp(-ls)
     gk = b * isg * _INV_SQRT_2PI
     has_clip = clipped.shape[0] > 0
-    J = np.empty(8)
+    J = np.empty((8, _CHUNK))
     out[:] = 0.0
-    for i in range(lo, hi):
-        x0, x1 = X0[i], X1[i]
-        dm = x0 * c + x1 * s  # distance from the reference point across the edge
-        d = dm - rho
-        u = x1 * c - x0 * s  # along the edge
-        if exact:
-            Phi, dP, sP = _pixel_step(d, 1.0 / isg, c, s)
-            g = b * dP  # d pred / d d at unit shading
-            q4 = -b * sP  # minus d pred / d log sigma at unit shading
-        else:
-            z = d * isg
-            e = math.exp(-0.5 * z * z)
-            Phi = _ndtr_from_pdf(z, _INV_SQRT_2PI * e)
-            g = gk * e
-            q4 = g * d
-        Phi += extra[i]
-        base = a + b * Phi
-        f = 1.0 + ca * d + cu * u
-        dd = g * f + base * ca
-        r = val[i] - base * f
-        if has_clip and clipped[i]:
-            # censored: a clipped pixel the model puts beyond the clip level agrees
-            if (val[i] >= clip_high and r <= 0.0) or (val[i] <= clip_low and r >= 0.0):
-                continue
-        J[0] = dd * u - dm * cu * base  # theta
-        J[1] = -dd  # rho
-        J[2] = f  # a
-        J[3] = Phi * f  # b
-        J[4] = -q4 * f  # log sigma
-        J[5] = base * d  # c
-        J[6] = base * u  # c_u
-        J[7] = r
-        for p in range(8):
-            Jp = J[p]
-            for q in range(p, 8):
-                out[p, q] += Jp * J[q]
+    for start in range(lo, hi, _CHUNK):
+        m = min(_CHUNK, hi - start)
+        for j in range(m):
+            i = start + j
+            x0, x1 = X0[i], X1[i]
+            dm = x0 * c + x1 * s  # distance from the reference point across the edge
+            d = dm - rho
+            u = x1 * c - x0 * s  # along the edge
+            if exact:
+                Phi, dP, sP = _pixel_step(d, 1.0 / isg, c, s)
+                g = b * dP  # d pred / d d at unit shading
+                q4 = -b * sP  # minus d pred / d log sigma at unit shading
+            else:
+                z = d * isg
+                e = math.exp(-0.5 * z * z)
+                Phi = _ndtr_from_pdf(z, _INV_SQRT_2PI * e)
+                g = gk * e
+                q4 = g * d
+            Phi += extra[i]
+            base = a + b * Phi
+            f = 1.0 + ca * d + cu * u
+            dd = g * f + base * ca
+            r = val[i] - base * f
+            if has_clip and clipped[i]:
+                # censored: a clipped pixel the model puts beyond the clip level agrees
+                if (val[i] >= clip_high and r <= 0.0) or (val[i] <= clip_low and r >= 0.0):
+                    for p in range(8):
+                        J[p, j] = 0.0
+                    continue
+            J[0, j] = dd * u - dm * cu * base  # theta
+            J[1, j] = -dd  # rho
+            J[2, j] = f  # a
+            J[3, j] = Phi * f  # b
+            J[4, j] = -q4 * f  # log sigma
+            J[5, j] = base * d  # c
+            J[6, j] = base * u  # c_u
+            J[7, j] = r
+        _gram_add(J, m, out)
     for p in range(8):
         for q in range(p + 1, 8):
             out[q, p] = out[p, q]
@@ -170,13 +192,60 @@ def _solve(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def lm_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.float64],
+            extra: NDArray[np.float64], lo: int, hi: int, P: NDArray[np.float64], clipped: NDArray[np.bool_],
+            slow: bool, iterations: int, tol: float, wt: float, ls_lo: float, ls_hi: float,
+            max_white: float, clip_low: float, clip_high: float, JTJ: NDArray[np.float64],
+            G: NDArray[np.float64]) -> float:
+    """Levenberg-Marquardt of one edge (pixels ``lo:hi``) of :func:`edge_lm`, from and into ``P`` (7,).
+
+    ``iterations`` is the edge's own limit (a clipped edge's already multiplied); ``JTJ`` (7, 7)
+    receives ``J^T J`` at the estimate and ``G`` (8, 8) is scratch. Returns the residual sum of squares.
+    """
+    A = np.empty((7, 7))
+    Pn = np.empty(7)
+    JTr = np.empty(7)
+    edge_normal_eq(X0, X1, val, extra, lo, hi, P, clipped, slow, clip_low, clip_high, G)
+    JTJ[:, :] = G[:7, :7]
+    JTr[:] = G[:7, 7]
+    cur = G[7, 7]
+    lam = 1e-3
+    for _it in range(iterations):
+        A[:] = JTJ
+        for p in range(7):
+            A[p, p] += lam * (JTJ[p, p] + 1e-9)
+        delta = _solve(A, JTr)
+        for p in range(7):
+            Pn[p] = P[p] + delta[p]
+        Pn[4] = min(max(Pn[4], ls_lo), ls_hi)
+        if slow:
+            Pn[3] = min(Pn[3], max_white * (clip_high - Pn[2]))
+        edge_normal_eq(X0, X1, val, extra, lo, hi, Pn, clipped, slow, clip_low, clip_high, G)
+        if G[7, 7] <= cur:
+            P[:] = Pn
+            cur = G[7, 7]
+            JTJ[:, :] = G[:7, :7]
+            JTr[:] = G[:7, 7]
+            lam *= 0.3
+        else:
+            lam *= 10.0
+        done = abs(delta[1]) + abs(delta[0]) * wt < tol
+        if slow:
+            done = done and abs(delta[3]) < 1e-3 * abs(P[3])
+        if done:
+            break
+    return cur
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def edge_lm(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.float64],
             extra: NDArray[np.float64], bounds: NDArray[np.int64], P: NDArray[np.float64],
             has: NDArray[np.bool_], clipped: NDArray[np.bool_], slow: NDArray[np.bool_], iterations: int,
             slow_factor: int, tol: float, wt: NDArray[np.float64], ls_lo: float, ls_hi: float,
             max_white: float, clip_low: float, clip_high: float
             ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Levenberg-Marquardt of every edge of :func:`.edges.fit_edges` (its docstring), each on its own.
+    """Levenberg-Marquardt of every edge of :func:`.edges.fit_edges` (its docstring), each on its own
+    (:func:`lm_edge`).
 
     Parameters
     ----------
@@ -199,44 +268,14 @@ def edge_lm(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
     JTJ = np.zeros((E, 7, 7))
     cur = np.zeros(E)
     G = np.empty((8, 8))
-    A = np.empty((7, 7))
-    Pn = np.empty(7)
-    JTr = np.empty(7)
     for k in range(E):
         if not has[k]:
             for p in range(7):
                 JTJ[k, p, p] = 1.0
             continue
-        lo, hi = bounds[k], bounds[k + 1]
-        edge_normal_eq(X0, X1, val, extra, lo, hi, P[k], clipped, slow[k], clip_low, clip_high, G)
-        JTJ[k] = G[:7, :7]
-        JTr[:] = G[:7, 7]
-        cur[k] = G[7, 7]
-        lam = 1e-3
-        for _it in range(iterations * slow_factor if slow[k] else iterations):
-            A[:] = JTJ[k]
-            for p in range(7):
-                A[p, p] += lam * (JTJ[k, p, p] + 1e-9)
-            delta = _solve(A, JTr)
-            for p in range(7):
-                Pn[p] = P[k, p] + delta[p]
-            Pn[4] = min(max(Pn[4], ls_lo), ls_hi)
-            if slow[k]:
-                Pn[3] = min(Pn[3], max_white * (clip_high - Pn[2]))
-            edge_normal_eq(X0, X1, val, extra, lo, hi, Pn, clipped, slow[k], clip_low, clip_high, G)
-            if G[7, 7] <= cur[k]:
-                P[k] = Pn
-                cur[k] = G[7, 7]
-                JTJ[k] = G[:7, :7]
-                JTr[:] = G[:7, 7]
-                lam *= 0.3
-            else:
-                lam *= 10.0
-            done = abs(delta[1]) + abs(delta[0]) * wt[k] < tol
-            if slow[k]:
-                done = done and abs(delta[3]) < 1e-3 * abs(P[k, 3])
-            if done:
-                break
+        cur[k] = lm_edge(X0, X1, val, extra, bounds[k], bounds[k + 1], P[k], clipped, slow[k],
+                         iterations * slow_factor if slow[k] else iterations, tol, wt[k], ls_lo, ls_hi,
+                         max_white, clip_low, clip_high, JTJ[k], G)
     return P, cur, JTJ
 
 
@@ -248,6 +287,25 @@ def _ndtr_sat(z: float) -> float:
     if z <= -9.0:
         return 0.0
     return _ndtr(z)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _saturated_grid(t: float, s: float, n: int, F: NDArray[np.float64]) -> tuple[int, int]:
+    """``F[k] = Phi((t - k) / s)`` for the grid lines ``k = 0..n``, 1 or 0 (to 1e-19) beyond 9 SDs and
+    set without evaluating there (:func:`_ndtr_sat`), and the range ``[k0, k1)`` of the cells ``k``
+    whose ``F[k] - F[k + 1]`` may differ from 0."""
+    lo = max(0, int(math.ceil(t - 9.0 * s)))
+    hi = min(n, int(math.floor(t + 9.0 * s)))
+    for k in range(0, min(lo, n + 1)):
+        F[k] = 1.0
+    for k in range(lo, hi + 1):
+        F[k] = _ndtr_sat((t - k) / s)
+    for k in range(max(hi + 1, lo), n + 1):
+        F[k] = 0.0
+    if hi < lo:
+        # no line within 9 SDs: the one cell where F steps from 1 to 0, if any
+        return (lo - 1, lo) if 0 < lo <= n else (0, 0)
+    return max(lo - 1, 0), min(hi + 1, n)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -270,27 +328,29 @@ def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray
     Fx = np.empty(n + 1)
     Fy = np.empty(n + 1)
     for i in range(N):
-        h = H[quad[i]]
+        g = quad[i]  # (elements indexed in place: a view per pixel costs more than the pixel's sums)
         xi, yi = x[i], y[i]
-        w3 = h[6] * xi + h[7] * yi + h[8]
-        mx = (h[0] * xi + h[1] * yi + h[2]) / w3
-        my = (h[3] * xi + h[4] * yi + h[5]) / w3
+        w3 = H[g, 6] * xi + H[g, 7] * yi + H[g, 8]
+        mx = (H[g, 0] * xi + H[g, 1] * yi + H[g, 2]) / w3
+        my = (H[g, 3] * xi + H[g, 4] * yi + H[g, 5]) / w3
         scale = sigma[i] / abs(w3) * n
-        sx = scale * math.hypot(h[0] - mx * h[6], h[1] - mx * h[7])
-        sy = scale * math.hypot(h[3] - my * h[6], h[4] - my * h[7])
-        for k in range(n + 1):
-            Fx[k] = _ndtr_sat((mx * n - k) / sx)
-            Fy[k] = _ndtr_sat((my * n - k) / sy)
-        W = white[quad[i]]
+        ax, bx = H[g, 0] - mx * H[g, 6], H[g, 1] - mx * H[g, 7]
+        ay, by = H[g, 3] - my * H[g, 6], H[g, 4] - my * H[g, 7]
+        sx = scale * math.sqrt(ax * ax + bx * bx)  # (libm's hypot guards against overflow at 4x the cost)
+        sy = scale * math.sqrt(ay * ay + by * by)
+        # only the grid lines within 9 SDs have a CDF other than 0 or 1: the cells' sum runs over the
+        # rows and columns between them (the other products are 0)
+        c0, c1 = _saturated_grid(mx * n, sx, n, Fx)
+        r0, r1 = _saturated_grid(my * n, sy, n, Fy)
         R = 0.0
-        for r in range(n):
+        for r in range(r0, r1):
             Yr = Fy[r] - Fy[r + 1]
             if Yr == 0.0:
                 continue
             acc = 0.0
-            for c in range(n):
-                if W[r, c] != 0.0:
-                    acc += W[r, c] * (Fx[c] - Fx[c + 1])
+            for c in range(c0, c1):
+                if white[g, r, c] != 0.0:
+                    acc += white[g, r, c] * (Fx[c] - Fx[c + 1])
             R += Yr * acc
         S = (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
         out[i] = 1.0 - S + R - _ndtr(dist[i] / sigma[i])
@@ -449,7 +509,7 @@ def cell_jacobian(x: NDArray[np.float64], y: NDArray[np.float64], H0: NDArray[np
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.float64], nrm: NDArray[np.float64],
+def band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.float64], nrm: NDArray[np.float64],
                L: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64],
                excl: NDArray[np.float64], out_x: NDArray[np.int64], out_y: NDArray[np.int64],
                out_e: NDArray[np.int64], fill: bool) -> int:
@@ -510,11 +570,11 @@ def band_pixels(gray: NDArray[np.uint8], p0: NDArray[np.float64], t: NDArray[np.
     """
     shape_hw = (gray.shape[0], gray.shape[1])
     z = np.empty(0, np.int64)
-    M = _band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, z, z, z, False)
+    M = band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, z, z, z, False)
     xs = np.empty(M, np.int64)
     ys = np.empty(M, np.int64)
     es = np.empty(M, np.int64)
-    _band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, xs, ys, es, True)
+    band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, xs, ys, es, True)
     xy = np.empty((M, 2))
     val = np.empty(M)
     for i in range(M):

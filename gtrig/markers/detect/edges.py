@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import ndtr
 
-from gtrig.markers.detect import _kernels, _threads
+from gtrig.markers.detect import _edge_kernels, _kernels, _threads
 from gtrig.markers.detect.camera import Undistorter
 
 _INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
@@ -609,3 +609,206 @@ def marker_context(
             else [0, N])
     parts = [(xs[a:b], ys[a:b], quad[a:b], H, sg[a:b], W, d[a:b]) for a, b in itertools.pairwise(cuts)]
     return np.concatenate(_threads.run_split(_kernels.marker_context, parts))
+
+
+@dataclass(frozen=True)
+class RefineParams:
+    """The edge refinement's settings (:func:`refine_quads`; the detector's ``DetectorParams`` names).
+
+    passes : fits per edge; the first fits plain steps, the next ones hold the modelled light of the
+        marker's corners and cells fixed (:func:`marker_context`).
+    iterations, tol : :func:`fit_edges`' iteration limit and line-step tolerance (pixels).
+    band_px : half-width of the band beyond ``3 sigma`` (pixels).
+    white_end : end each edge's outer band where its white quiet zone ends (:func:`white_extent`): the
+        band's white half must not reach past the paper into the surround. The profile is read
+        ``look_sigmas`` blur sigmas beyond the band, so that a paper's end just beyond it is seen (its
+        blurred foot inside the band moves the line too).
+    margin_cells : the printed white margin around the black square, in cells, if known.
+    max_blur_px : upper clip of the blur a pass hands to the next (the lower is 0.3 px). The blur is
+        about the same on the four edges of a marker: the next pass starts from their median, which
+        recovers an edge whose plain-step fit collapsed to a sharp step (white cells one border-width
+        inside pull sigma to 0 on small markers); its end points are the fitted lines' points nearest
+        to the previous ones.
+    """
+
+    passes: int = 3
+    iterations: int = 10
+    tol: float = 1e-3
+    band_px: float = 5.0
+    white_end: bool = True
+    look_sigmas: float = 3.0
+    margin_cells: float | None = None
+    max_blur_px: float = 5.0
+
+
+def band_limits(sigma: NDArray[np.float64], side: NDArray[np.float64], cell: NDArray[np.float64],
+                border: NDArray[np.float64], first: bool, params: RefineParams
+                ) -> tuple[NDArray[np.float64], ...]:
+    """A pass's band around each edge (all (E,), pixels): ``w_in``, ``w_out``, the outer limit read for the
+    paper's end ``w_look`` (``w_out`` without :attr:`RefineParams.white_end`) and the ends left out.
+
+    sigma : current blur; side : the edge's length in the candidate; cell, border : the marker's cell and
+    border widths. The first pass (plain steps) keeps the band inside the black border and away from the
+    ends; the next ones model the corners and the data cells, so the band may reach into them.
+    """
+    w = 3.0 * sigma + params.band_px
+    w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
+    if first:
+        w_in = np.maximum(1.0, np.minimum(w, border - 1.5 * sigma))
+        excl = np.minimum(np.maximum(3.0 * sigma + 1.0, 0.08 * side), 0.3 * side)
+    else:
+        w_in = np.maximum(1.0, np.minimum(w, border + 0.5 * cell))
+        excl = np.minimum(sigma, 0.3 * side)
+    if params.margin_cells is not None:
+        w_out = np.maximum(1.0, np.minimum(w_out, params.margin_cells * cell - 2.0 * sigma))
+    w_look = w_out + params.look_sigmas * sigma if params.white_end else w_out
+    return w_in, w_out, w_look, excl
+
+
+def refine_quads(
+    gray: NDArray[np.uint8],
+    quads: NDArray[np.float64],
+    white: NDArray[np.float64],
+    border_cells: int,
+    params: RefineParams | None = None,
+    undist: Undistorter | None = None,
+    light: NDArray[np.float64] | None = None,
+    threads: int = 1,
+) -> tuple[EdgeFit, NDArray[np.float64], NDArray[np.float64]]:
+    """Sub-pixel corners of ``Q`` candidate quads: every pass of the edge fits in compiled code.
+
+    Each pass gathers each edge's band (:func:`band_limits`, :func:`gather_band`), ends it where the
+    white paper does (:func:`white_extent`, :func:`trim_outer`), fits the blurred step
+    (:func:`fit_edges`; from the second pass on with :func:`marker_context` held fixed), and starts the
+    next from the median blur of the quad's edges and the fitted lines; the corners are the lines'
+    intersections (:func:`intersect_corners`). The results are those of these functions called in
+    turn (to rounding: ``tests/markers/test_refine_quads.py``), at a fraction of the time.
+
+    Parameters
+    ----------
+    gray : (H, W) uint8 image.
+    quads : (Q, 4, 2) candidate corners, clockwise on screen, fit coordinates.
+    white : (Q, n, n) 1 for white cells, in the quads' orientation (:func:`marker_context`).
+    border_cells : black border width, cells.
+    undist : lens model; ``quads`` are then undistorted pixels.
+    light : (256,) light of each grey level (:func:`.tone.to_light`); None for linear levels.
+    threads : with 2 the quads are shared with a helper thread.
+
+    Returns
+    -------
+    fit : the last pass's :class:`EdgeFit` (edges ``4q .. 4q+3``); corners : (Q, 4, 2); cov : (Q, 4, 2, 2).
+    """
+    prm = params or RefineParams()
+    Q0 = np.ascontiguousarray(quads, np.float64).reshape(-1, 4, 2)
+    n_q = len(Q0)
+    n = white.shape[1]
+    E = 4 * n_q
+    side = np.linalg.norm(Q0 - np.roll(Q0, -1, axis=1), axis=2)  # (Q, 4)
+    cell = np.repeat(side.mean(axis=1) / n, 4)
+    border = cell * border_cells
+    L = side.ravel()
+    p0 = Q0.reshape(-1, 2).copy()
+    p1 = np.roll(Q0, -1, axis=1).reshape(-1, 2).copy()
+    sigma0 = np.full(E, 1.0)
+    P = np.zeros((E, 7))
+    mid = np.zeros((E, 2))
+    sigma, rms = np.zeros(E), np.zeros(E)
+    cov_line = np.zeros((E, 2, 2))
+    n_px = np.zeros(E, np.int64)
+    ok = np.zeros(E, bool)
+    lut = np.arange(256, dtype=np.float64) if light is None else np.ascontiguousarray(light, np.float64)
+    W = np.ascontiguousarray(white, np.float64)
+    gray = np.ascontiguousarray(gray)
+    no_map = np.zeros((0, 0), np.float32)
+    fit_cfg = np.array([prm.iterations, prm.tol, CLIPPED_ITER_FACTOR, CLIP_LOW, CLIP_HIGH, CLIPPED_EDGE_SHARE,
+                        PIXEL_VAR, SHARP_SIGMA_PX, MAX_CLIPPED_WHITE])
+    cut = [0, n_q]
+    if threads > 1 and n_q > 1:
+        cut = [0, *sorted({round(k * n_q / SPLIT_PARTS) for k in range(1, SPLIT_PARTS)} - {0, n_q}), n_q]
+    for k in range(prm.passes):
+        w_in, w_out, w_look, excl = band_limits(sigma0, L, cell, border, k == 0, prm)
+        band_cfg = np.array([float(prm.white_end), float(np.max(w_in)) if E else 0.0, PROFILE_STEP_PX,
+                             WHITE_END_DROP, WHITE_END_SIGMAS, 0.3, prm.max_blur_px])
+        boxes = np.zeros((0, 4), np.int64) if undist is None else _raw_boxes(gray.shape, p0, p1, w_in, w_look, undist)
+        maps = (no_map, no_map) if undist is None else (undist.map_x, undist.map_y)
+        arrays = (p0, p1, sigma0, w_in, w_out, w_look, excl)
+        parts = [(gray, lut, *maps, boxes[4 * a:4 * b] if undist is not None else boxes,
+                  *(x[4 * a:4 * b] for x in arrays), W[a:b], band_cfg, fit_cfg, k == 0, k == prm.passes - 1,
+                  *(x[4 * a:4 * b] for x in (P, mid, sigma, cov_line, rms, n_px, ok)))
+                 for a, b in itertools.pairwise(cut)]
+        _threads.run_split(_edge_kernels.refine_pass, parts)
+    fit = EdgeFit(P[:, 0].copy(), P[:, 1].copy(), mid, P[:, 2].copy(), P[:, 3].copy(), sigma, P[:, 5:7].copy(),
+                  cov_line, rms, n_px, ok)
+    corners = np.empty((n_q, 4, 2))
+    cov = np.empty((n_q, 4, 2, 2))
+    for q in range(n_q):
+        _edge_kernels.quad_corners(fit.theta[4 * q:4 * q + 4], fit.rho[4 * q:4 * q + 4], mid[4 * q:4 * q + 4],
+                                   cov_line[4 * q:4 * q + 4], corners[q], cov[q])
+    return fit, corners, cov
+
+
+def refine_quads_stepwise(
+    gray: NDArray[np.uint8],
+    quads: NDArray[np.float64],
+    white: NDArray[np.float64],
+    border_cells: int,
+    params: RefineParams | None = None,
+    undist: Undistorter | None = None,
+    light: NDArray[np.float64] | None = None,
+) -> tuple[EdgeFit, NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`refine_quads` through the step functions, one array call per step and pass: the reference
+    the compiled passes are held to (its tests, ``bench/markers.py --refine-only``). Same arguments and
+    results."""
+    prm = params or RefineParams()
+    quads = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    n = white.shape[1]
+    side = np.linalg.norm(quads - np.roll(quads, -1, axis=1), axis=2)
+    cell = np.repeat(side.mean(axis=1) / n, 4)
+    border = cell * border_cells
+    p0 = quads.reshape(-1, 2)
+    p1 = np.roll(quads, -1, axis=1).reshape(-1, 2)
+    sigma = np.full(len(p0), 1.0)
+    fit = None
+    for k in range(prm.passes):
+        w_in, w_out, w_look, excl = band_limits(sigma, side.ravel(), cell, border, k == 0, prm)
+        samples = gather_band(gray, p0, p1, w_in, w_look, excl, undist)
+        if prm.white_end:
+            d = across_edge(samples, p0, p1)
+            w_out = np.minimum(w_out, white_extent(samples, p0, p1, sigma, w_in, w_look, d))
+            samples = trim_outer(samples, p0, p1, w_out, d)
+        if light is not None:
+            samples = dataclasses.replace(samples, val=np.asarray(light, np.float64)[samples.val.astype(np.intp)])
+        if fit is None:
+            fit = fit_edges(samples, p0, p1, sigma, iterations=prm.iterations, tol=prm.tol)
+        else:
+            corners, _ = intersect_corners(fit, len(quads))
+            extra = marker_context(samples, fit, corners, white)
+            fit = fit_edges(samples, p0, p1, sigma, iterations=prm.iterations, extra=extra, init=fit, tol=prm.tol)
+        sigma = np.repeat(np.median(np.clip(fit.sigma, 0.3, prm.max_blur_px).reshape(-1, 4), axis=1), 4)
+        lines = fit.lines()
+        nvec = lines[:, :2]
+        p0 = p0 - (np.einsum("ij,ij->i", nvec, p0) - lines[:, 2])[:, None] * nvec
+        p1 = p1 - (np.einsum("ij,ij->i", nvec, p1) - lines[:, 2])[:, None] * nvec
+    if fit is None:
+        raise ValueError("refine_quads_stepwise: params.passes must be at least 1")
+    corners, cov = intersect_corners(fit, len(quads))
+    return fit, corners, cov
+
+
+def _raw_boxes(shape: tuple[int, ...], p0: NDArray[np.float64], p1: NDArray[np.float64], w_in: NDArray[np.float64],
+               w_out: NDArray[np.float64], undist: Undistorter) -> NDArray[np.int64]:
+    """Each band's bounding box in the raw image (E, 4) as ``(x0, y0, x1, y1)``, end exclusive
+    (:func:`_band_boxes_undistorted`'s boxes, the corners of all edges mapped in one call)."""
+    h, w = shape[:2]
+    t = p1 - p0
+    L = np.hypot(t[:, 0], t[:, 1])
+    t = t / L[:, None]
+    n = np.column_stack([t[:, 1], -t[:, 0]])
+    ext = np.maximum(w_in, w_out)[:, None]
+    pts = np.stack([p0 - ext * (n + t), p0 + ext * (n - t), p1 - ext * (n - t), p1 + ext * (n + t)], axis=1)
+    box = undist.to_raw(pts.reshape(-1, 2)).reshape(-1, 4, 2)
+    x0 = np.maximum(np.floor(box[:, :, 0].min(axis=1)).astype(np.int64) - 1, 0)
+    x1 = np.minimum(np.ceil(box[:, :, 0].max(axis=1)).astype(np.int64) + 2, w)
+    y0 = np.maximum(np.floor(box[:, :, 1].min(axis=1)).astype(np.int64) - 1, 0)
+    y1 = np.minimum(np.ceil(box[:, :, 1].max(axis=1)).astype(np.int64) + 2, h)
+    return np.ascontiguousarray(np.column_stack([x0, y0, x1, y1]), np.int64)

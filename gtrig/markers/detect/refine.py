@@ -11,23 +11,14 @@ residual, is blurrier than allowed, or moves a corner too far from the peer's.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from gtrig.markers.detect.camera import Undistorter
-from gtrig.markers.detect.edges import (
-    EdgeFit,
-    across_edge,
-    fit_edges,
-    gather_band,
-    intersect_corners,
-    marker_context,
-    trim_outer,
-    white_extent,
-)
+from gtrig.markers.detect.edges import EdgeFit, RefineParams
+from gtrig.markers.detect.edges import refine_quads as edge_refine
 from gtrig.markers.detect.tone import Tone, to_light
 
 __all__ = ["RefineSettings", "Refined", "refine_quads", "fit_reason"]
@@ -84,78 +75,17 @@ class Refined:
         return self.fit.a.reshape(-1, 4).mean(axis=1), self.fit.b.reshape(-1, 4).mean(axis=1)
 
 
-def _band_widths(sigma: NDArray[np.float64], cell: NDArray[np.float64], border: NDArray[np.float64],
-                 L: NDArray[np.float64], first: bool, s: RefineSettings
-                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Inner and outer half-widths of each edge's band and the length excluded at each end, px (E,)."""
-    w = 3.0 * sigma + s.band_px
-    if first:
-        # plain step model: keep the band inside the black border and away from the ends
-        w_in = np.maximum(1.0, np.minimum(w, border - 1.5 * sigma))
-        excl = np.minimum(np.maximum(3.0 * sigma + 1.0, 0.08 * L), 0.3 * L)
-    else:
-        # the corners and the data cells are modelled: the band may reach into them
-        w_in = np.maximum(1.0, np.minimum(w, border + 0.5 * cell))
-        excl = np.minimum(sigma, 0.3 * L)
-    w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
-    if s.margin_cells is not None:
-        w_out = np.maximum(1.0, np.minimum(w_out, s.margin_cells * cell - 2.0 * sigma))
-    return w_in, w_out, excl
-
-
-def _one_pass(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np.float64], sigma: NDArray[np.float64],
-              widths: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
-              fit: EdgeFit | None, white: NDArray[np.float64], und: Undistorter | None, s: RefineSettings,
-              threads: int) -> EdgeFit:
-    """One pass of the edge fits from the end points ``p0``, ``p1`` (E, 2) (the previous pass ``fit``)."""
-    w_in, w_out, excl = widths
-    if s.white_end:
-        # the band's white half must not reach past the paper into the surround: the profile is read
-        # WHITE_LOOK_SIGMAS further out, so that a paper's end just beyond the band is seen
-        w_look = w_out + WHITE_LOOK_SIGMAS * sigma
-        samples = gather_band(gray, p0, p1, w_in, w_look, excl, und)
-        d = across_edge(samples, p0, p1)
-        w_out = np.minimum(w_out, white_extent(samples, p0, p1, sigma, w_in, w_look, d))
-        samples = trim_outer(samples, p0, p1, w_out, d)
-    else:
-        samples = gather_band(gray, p0, p1, w_in, w_out, excl, und)
-    if s.tone != "linear":
-        samples = dataclasses.replace(samples, val=to_light(samples.val, s.tone))
-    if fit is None:
-        return fit_edges(samples, p0, p1, sigma, iterations=s.iterations, tol=s.tol, threads=threads)
-    corners, _ = intersect_corners(fit, len(p0) // 4)
-    extra = marker_context(samples, fit, corners, white, threads)
-    return fit_edges(samples, p0, p1, sigma, iterations=s.iterations, extra=extra, init=fit, tol=s.tol,
-                     threads=threads)
-
-
 def refine_quads(gray: NDArray[np.uint8], quads: NDArray[np.float64], white: NDArray[np.float64],
                  border_cells: int, und: Undistorter | None, s: RefineSettings, threads: int = 1) -> Refined:
     """Refine quads (Q, 4, 2) (fit coordinates, clockwise on screen) of markers whose cells ``white``
-    (Q, n, n; 1 = white, cell (0, 0) at corner 0) are known, with ``border_cells`` of black border."""
+    (Q, n, n; 1 = white, cell (0, 0) at corner 0) are known, with ``border_cells`` of black border: the
+    passes of :func:`.edges.refine_quads` (compiled), then the fit's tests."""
     Q = np.asarray(quads, np.float64)
-    n = white.shape[1]
     side = np.linalg.norm(Q - np.roll(Q, -1, axis=1), axis=2)  # (Q, 4)
-    cell = np.repeat(side.mean(axis=1) / n, 4)
-    border = cell * border_cells
-    p0 = Q.reshape(-1, 2)
-    p1 = np.roll(Q, -1, axis=1).reshape(-1, 2)
-    L = side.ravel()
-    sigma = np.full(len(p0), 1.0)
-    fit: EdgeFit | None = None
-    for k in range(s.passes):
-        fit = _one_pass(gray, p0, p1, sigma, _band_widths(sigma, cell, border, L, k == 0, s), fit, white, und, s,
-                        threads)
-        # the blur is about the same on the four edges of a marker: the next pass starts from their median,
-        # which recovers an edge whose plain-step fit collapsed to a sharp step
-        sigma = np.repeat(np.median(np.clip(fit.sigma, 0.3, s.max_blur_px).reshape(-1, 4), axis=1), 4)
-        lines = fit.lines()
-        # next pass: end points = the fitted line's points nearest to the previous ends
-        nvec = lines[:, :2]
-        p0 = p0 - (np.einsum("ij,ij->i", nvec, p0) - lines[:, 2])[:, None] * nvec
-        p1 = p1 - (np.einsum("ij,ij->i", nvec, p1) - lines[:, 2])[:, None] * nvec
-    assert fit is not None
-    corners, cov = intersect_corners(fit, len(Q))
+    params = RefineParams(s.passes, s.iterations, s.tol, s.band_px, s.white_end, WHITE_LOOK_SIGMAS, s.margin_cells,
+                          s.max_blur_px)
+    light = None if s.tone == "linear" else to_light(np.arange(256, dtype=np.float64), s.tone)
+    fit, corners, cov = edge_refine(gray, Q, white, border_cells, params, und, light, threads)
     ok_e = (fit.ok & (fit.b >= s.min_contrast) & (fit.rms <= s.max_rel_rms * np.abs(fit.b))
             & (fit.sigma <= s.max_blur_px) & (fit.sigma >= 0.06))
     ok = ok_e.reshape(-1, 4).all(axis=1)

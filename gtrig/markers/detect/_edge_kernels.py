@@ -1,0 +1,462 @@
+"""Compiled edge refinement of whole quadrilaterals: one pass of :func:`.edges.refine_quads` (numba).
+
+A pass takes every quad through the steps the public functions of :mod:`.edges` make one call each:
+the band around each edge (:func:`.edges.gather_band`), the paper's end beyond it
+(:func:`.edges.white_extent`, :func:`.edges.trim_outer`), the modelled light of the marker's corners
+and cells (:func:`.edges.marker_context`, from the previous pass's lines), the blurred-step fits
+(:func:`.edges.fit_edges`, with its refit of edges sharper than a pixel) and the next pass's blur
+and end points; the last pass adds the lines' covariances and the corners
+(:func:`.edges.intersect_corners`). The arithmetic is the same as theirs, step for step, so the
+results agree with them to rounding; what goes is the interpreter's work per step and per edge, and
+the temporaries of the array forms (most of the time on a marker of a few hundred band pixels per
+edge). The quads are independent within a pass: the caller may split them between threads. The one
+value shared by all quads of a pass (the origin of :func:`.edges.white_extent`'s bins, the widest
+inner band) is given by the caller.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from gtrig.markers.detect._kernels import band_scan, lm_edge, marker_context, quad_homographies
+
+#: column of the parameters ``(theta, rho, a, b, log sigma, c, c_u)`` (:func:`.edges.fit_edges`)
+_NP = 7
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np.float64],
+                w_in: NDArray[np.float64], w_out: NDArray[np.float64], excl: NDArray[np.float64]
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """Band pixels of the edges ``p0 -> p1`` (E, 2) without a lens model: x, y, value, edge (each (M,),
+    sorted by edge; :func:`.edges.gather_band`)."""
+    E = p0.shape[0]
+    t = np.empty((E, 2))
+    nrm = np.empty((E, 2))
+    L = np.empty(E)
+    for e in range(E):
+        tx, ty = p1[e, 0] - p0[e, 0], p1[e, 1] - p0[e, 1]
+        L[e] = math.hypot(tx, ty)
+        t[e, 0], t[e, 1] = tx / L[e], ty / L[e]
+        nrm[e, 0], nrm[e, 1] = t[e, 1], -t[e, 0]
+    shape_hw = (gray.shape[0], gray.shape[1])
+    z = np.empty(0, np.int64)
+    M = band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, z, z, z, False)
+    xs = np.empty(M, np.int64)
+    ys = np.empty(M, np.int64)
+    es = np.empty(M, np.int64)
+    band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, xs, ys, es, True)
+    x = np.empty(M)
+    y = np.empty(M)
+    v = np.empty(M)
+    for i in range(M):
+        x[i], y[i] = xs[i], ys[i]
+        v[i] = gray[ys[i], xs[i]]
+    return x, y, v, es
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _gather_undistorted(gray: NDArray[np.uint8], map_x: NDArray[np.float32], map_y: NDArray[np.float32],
+                        boxes: NDArray[np.int64], p0: NDArray[np.float64], p1: NDArray[np.float64],
+                        w_in: NDArray[np.float64], w_out: NDArray[np.float64], excl: NDArray[np.float64]
+                        ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """Band pixels in undistorted coordinates: the raw pixels of each edge's box ``(x0, y0, x1, y1)``
+    (E, 4; end exclusive, empty when ``x1 <= x0``) in row-major order whose undistorted position
+    (``map_x``, ``map_y``) lies in the band (:func:`.edges.gather_band` with a lens model)."""
+    E = p0.shape[0]
+    M = 0
+    for e in range(E):
+        if boxes[e, 2] > boxes[e, 0] and boxes[e, 3] > boxes[e, 1]:
+            M += (boxes[e, 2] - boxes[e, 0]) * (boxes[e, 3] - boxes[e, 1])
+    x = np.empty(M)
+    y = np.empty(M)
+    v = np.empty(M)
+    es = np.empty(M, np.int64)
+    m = 0
+    for e in range(E):
+        x0, y0, x1, y1 = boxes[e, 0], boxes[e, 1], boxes[e, 2], boxes[e, 3]
+        if x1 <= x0 or y1 <= y0:
+            continue
+        tx, ty = p1[e, 0] - p0[e, 0], p1[e, 1] - p0[e, 1]
+        L = math.hypot(tx, ty)
+        tx, ty = tx / L, ty / L
+        nx, ny = ty, -tx
+        for iy in range(y0, y1):
+            for ix in range(x0, x1):
+                px = float(map_x[iy, ix])
+                py = float(map_y[iy, ix])
+                rx, ry = px - p0[e, 0], py - p0[e, 1]
+                s = rx * tx + ry * ty
+                d = rx * nx + ry * ny
+                if d >= -w_in[e] and d <= w_out[e] and s >= excl[e] and s <= L - excl[e]:
+                    x[m], y[m], v[m], es[m] = px, py, gray[iy, ix], e
+                    m += 1
+    return x[:m], y[:m], v[:m], es[:m]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _white_limit(d: NDArray[np.float64], v: NDArray[np.float64], lo_i: int, hi_i: int, lo: float, step: float,
+                 sigma: float, w_in: float, w_look: float, drop: float, end_sigmas: float) -> float:
+    """:func:`.edges.white_extent` of one edge: its pixels ``lo_i:hi_i`` at distances ``d`` across it,
+    values ``v``; bins of ``step`` from ``-lo``. Returns the outer limit (at most ``w_look``)."""
+    nb = int(math.floor((lo + w_look) / step)) + 2
+    cnt = np.zeros(nb, np.int64)
+    tot = np.zeros(nb)
+    for i in range(lo_i, hi_i):
+        f = math.floor((d[i] + lo) / step)
+        k = 0 if not (f > 0.0) else (nb - 1 if f > nb - 1 else int(f))
+        cnt[k] += 1
+        tot[k] += v[i]
+    prof = np.empty(nb)
+    centre = np.empty(nb)
+    for k in range(nb):
+        prof[k] = tot[k] / cnt[k] if cnt[k] >= 3 else np.nan
+        centre[k] = (k + 0.5) * step - lo
+    black = np.inf
+    n_black = 0
+    white_sum = 0.0
+    n_white = 0
+    for k in range(nb):
+        c = centre[k]
+        if math.isnan(prof[k]):
+            continue
+        if c >= -w_in and c <= -sigma:
+            black = min(black, prof[k])
+            n_black += 1
+        if c >= 2.0 * sigma and c <= 2.0 * sigma + 1.0:
+            white_sum += prof[k]
+            n_white += 1
+    if n_black == 0 or n_white == 0:
+        return w_look
+    white = white_sum / n_white
+    contrast = white - black
+    if not (math.isfinite(contrast) and contrast > 0):
+        return w_look
+    thr = white - drop * contrast
+    first = -1
+    for k in range(nb):
+        if centre[k] >= 2.0 * sigma and centre[k] <= w_look and prof[k] < thr:
+            first = k
+            break
+    if first < 0:
+        return w_look
+    low = np.inf
+    for k in range(first, nb):
+        if centre[k] <= w_look and not math.isnan(prof[k]):
+            low = min(low, prof[k])
+    half = min(0.5 * (white + low), thr)
+    kk = first
+    level = thr
+    for k in range(nb):
+        if centre[k] >= 2.0 * sigma and centre[k] <= w_look and prof[k] < half:
+            kk = k
+            level = half
+            break
+    d_end = centre[kk]
+    if kk > 0:
+        prev, cur = prof[kk - 1], prof[kk]
+        if math.isfinite(prev) and prev > cur:
+            frac = min(max((prev - level) / (prev - cur), 0.0), 1.0)
+            d_end = centre[kk - 1] + frac * step
+    lim = d_end - end_sigmas * sigma
+    floor = min(w_look, max(1.5, sigma))
+    return min(max(lim, floor), w_look)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _start_params(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[np.float64], lo: int, hi: int,
+                  nx: float, ny: float, mid: NDArray[np.float64], ls: float, init: NDArray[np.float64],
+                  init_mid: NDArray[np.float64], has_init: bool, P: NDArray[np.float64]) -> None:
+    """The start of one edge's fit into ``P`` (7,) (:func:`.edges.fit_edges`): the previous fit's
+    levels, shading and line moved to the new reference point ``mid`` with ``has_init``, else the
+    means of the band's inner and outer halves; the blur from ``ls`` (log sigma)."""
+    if has_init:
+        c, s = math.cos(init[0]), math.sin(init[0])
+        P[0] = init[0]
+        P[1] = init[1] + (c * (init_mid[0] - mid[0]) + s * (init_mid[1] - mid[1]))
+        P[2], P[3] = init[2], init[3]
+        P[5], P[6] = init[5], init[6]
+    else:
+        sum_in = 0.0
+        n_in = 0.0
+        sum_out = 0.0
+        for i in range(lo, hi):
+            if X0[i] * nx + X1[i] * ny < 0:
+                sum_in += v[i]
+                n_in += 1.0
+            else:
+                sum_out += v[i]
+        a = sum_in / max(n_in, 1.0)
+        P[0] = math.atan2(ny, nx)
+        P[1] = 0.0
+        P[2] = a
+        P[3] = sum_out / max((hi - lo) - n_in, 1.0) - a
+        P[5], P[6] = 0.0, 0.0
+    P[4] = ls
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _fit_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[np.float64], extra: NDArray[np.float64],
+              lo: int, hi: int, nx: float, ny: float, mid: NDArray[np.float64], sigma0: float,
+              init: NDArray[np.float64], init_mid: NDArray[np.float64], has_init: bool, want_cov: bool,
+              cfg: NDArray[np.float64], P: NDArray[np.float64], cov: NDArray[np.float64]) -> tuple[float, float, bool]:
+    """:func:`.edges.fit_edges` of one edge (pixels ``lo:hi`` relative to ``mid``, normal ``(nx, ny)``),
+    its refit with the pixel-integrated step when the Gaussian one is sharper than a pixel included.
+
+    ``cfg`` holds (iterations, tol, clipped iteration factor, clip low, clip high, clipped share, pixel
+    variance, sharp sigma, max clipped white). Writes the parameters into ``P`` (7,) and, with
+    ``want_cov``, the (theta, rho) covariance into ``cov`` (2, 2). Returns the effective blur, the
+    residual RMS and whether the fit is usable.
+    """
+    iterations, tol, factor = int(cfg[0]), cfg[1], int(cfg[2])
+    clip_low, clip_high, share, pix_var, sharp_sigma, max_white = cfg[3], cfg[4], cfg[5], cfg[6], cfg[7], cfg[8]
+    cnt = hi - lo
+    n_clip = 0
+    for i in range(lo, hi):
+        if v[i] >= clip_high or v[i] <= clip_low:
+            n_clip += 1
+    clipped = np.empty(0, np.bool_)
+    if n_clip > 0:
+        clipped = np.zeros(v.shape[0], np.bool_)
+        for i in range(lo, hi):
+            clipped[i] = v[i] >= clip_high or v[i] <= clip_low
+    saturated = n_clip > share * cnt
+    has = cnt > 8
+    JTJ = np.empty((_NP, _NP))
+    G = np.empty((8, 8))
+    ls0 = math.log(max(sigma0, 0.3))
+    sigma = 0.0
+    cur = 0.0
+    slow = saturated
+    for model in range(2):
+        # model 1: every edge on the pixel-integrated step (fit_edges' pixel_model refit)
+        slow = saturated or model == 1
+        _start_params(X0, X1, v, lo, hi, nx, ny, mid, ls0, init, init_mid, has_init, P)
+        if slow:
+            P[4] = math.log(math.sqrt(max(math.exp(2 * P[4]) - pix_var, 0.05**2)))
+            if saturated:
+                P[3] = max(P[3], 2.0 * (clip_high - P[2]))
+        if has:
+            cur = lm_edge(X0, X1, v, extra, lo, hi, P, clipped, slow, iterations * factor if slow else iterations,
+                          tol, math.sqrt(cnt), math.log(0.05), math.log(20.0), max_white, clip_low, clip_high,
+                          JTJ, G)
+        else:
+            cur = 0.0
+            JTJ[:] = 0.0
+            for p in range(_NP):
+                JTJ[p, p] = 1.0
+        sigma = math.sqrt(math.exp(2 * P[4]) + pix_var) if slow else math.exp(P[4])
+        if slow or not (has and sigma < sharp_sigma):
+            break
+    s2 = cur / max(cnt - _NP, 1)
+    ok = has
+    for p in range(_NP):
+        ok = ok and math.isfinite(P[p])
+    if want_cov:
+        Ci = np.linalg.pinv(JTJ)
+        for p in range(2):
+            for q in range(2):
+                cov[p, q] = Ci[p, q] * s2
+                ok = ok and math.isfinite(cov[p, q])
+    return sigma, math.sqrt(s2), ok
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def quad_corners(theta: NDArray[np.float64], rho: NDArray[np.float64], mid: NDArray[np.float64],
+                 cov_line: NDArray[np.float64], corners: NDArray[np.float64], cov: NDArray[np.float64]) -> None:
+    """Corners (4, 2) and their covariances (4, 2, 2) of one quad from its four lines (theta, rho (4,),
+    mid (4, 2), cov_line (4, 2, 2)), written into ``corners`` and ``cov`` (:func:`.edges.intersect_corners`)."""
+    for i in range(4):
+        h = (i + 3) % 4
+        c1, s1, c2, s2 = math.cos(theta[h]), math.sin(theta[h]), math.cos(theta[i]), math.sin(theta[i])
+        r1 = rho[h] + (c1 * mid[h, 0] + s1 * mid[h, 1])
+        r2 = rho[i] + (c2 * mid[i, 0] + s2 * mid[i, 1])
+        det = c1 * s2 - s1 * c2
+        # A = [[c1, s1], [c2, s2]]; its inverse's columns
+        a00, a01, a10, a11 = s2 / det, -s1 / det, -c2 / det, c1 / det
+        x = a00 * r1 + a01 * r2
+        y = a10 * r1 + a11 * r2
+        corners[i, 0], corners[i, 1] = x, y
+        k1 = -s1 * (mid[h, 0] - x) + c1 * (mid[h, 1] - y)
+        k2 = -s2 * (mid[i, 0] - x) + c2 * (mid[i, 1] - y)
+        for r in range(2):
+            for c in range(2):
+                cov[i, r, c] = 0.0
+        for (col0, col1, kk, C) in ((a00, a10, k1, cov_line[h]), (a01, a11, k2, cov_line[i])):
+            # J = [col * kk, col] (2 x 2), J C J^T
+            j00, j01, j10, j11 = col0 * kk, col0, col1 * kk, col1
+            m00 = j00 * C[0, 0] + j01 * C[1, 0]
+            m01 = j00 * C[0, 1] + j01 * C[1, 1]
+            m10 = j10 * C[0, 0] + j11 * C[1, 0]
+            m11 = j10 * C[0, 1] + j11 * C[1, 1]
+            cov[i, 0, 0] += m00 * j00 + m01 * j01
+            cov[i, 0, 1] += m00 * j10 + m01 * j11
+            cov[i, 1, 0] += m10 * j00 + m11 * j01
+            cov[i, 1, 1] += m10 * j10 + m11 * j11
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _context(x: NDArray[np.float64], y: NDArray[np.float64], es: NDArray[np.int64], P: NDArray[np.float64],
+             mid: NDArray[np.float64], sigma: NDArray[np.float64], white: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`.edges.marker_context` of one quad's band pixels (edges ``es`` in 0..3) at its previous fits
+    ``P`` (4, 7), ``mid`` (4, 2) and effective blurs ``sigma`` (4,); ``white`` (1, n, n)."""
+    corners = np.empty((1, 4, 2))
+    cov = np.empty((4, 2, 2))
+    quad_corners(P[:, 0].copy(), P[:, 1].copy(), mid, np.zeros((4, 2, 2)), corners[0], cov)
+    H = quad_homographies(corners).reshape(1, 9)
+    N = x.shape[0]
+    d = np.empty(N)
+    sg = np.empty(N)
+    for i in range(N):
+        e = es[i]
+        d[i] = math.cos(P[e, 0]) * (x[i] - mid[e, 0]) + math.sin(P[e, 0]) * (y[i] - mid[e, 1]) - P[e, 1]
+        sg[i] = sigma[e]
+    return marker_context(x, y, np.zeros(N, np.int64), H, sg, white, d)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _edge_starts(es: NDArray[np.int64]) -> NDArray[np.int64]:
+    """First index (5,) of each of a quad's four edges in its pixels' sorted edge indices ``es`` (0..3),
+    and their number last."""
+    starts = np.zeros(5, np.int64)
+    for i in range(es.shape[0]):
+        starts[es[i] + 1] += 1
+    for k in range(4):
+        starts[k + 1] += starts[k]
+    return starts
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _trim_to_paper(x: NDArray[np.float64], y: NDArray[np.float64], raw: NDArray[np.float64], es: NDArray[np.int64],
+                   starts: NDArray[np.int64], p0: NDArray[np.float64], p1: NDArray[np.float64],
+                   w_in: NDArray[np.float64], w_out: NDArray[np.float64], w_look: NDArray[np.float64],
+                   sigma: NDArray[np.float64], lo: float, step: float, drop: float, end_sigmas: float
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """A quad's band pixels (x, y, values, edge 0..3; ``starts`` of :func:`_edge_starts`) without those
+    beyond the paper's end (:func:`_white_limit`, at most ``w_out``) or beyond ``w_out`` itself
+    (:func:`.edges.white_extent`, :func:`.edges.trim_outer`); the edges stay sorted. ``p0``, ``p1``
+    (4, 2) and the limits (4,) are the quad's."""
+    unit = np.empty((4, 2))
+    for k in range(4):
+        tx, ty = p1[k, 0] - p0[k, 0], p1[k, 1] - p0[k, 1]
+        L = math.hypot(tx, ty)
+        unit[k, 0], unit[k, 1] = tx / L, ty / L
+    N = x.shape[0]
+    d = np.empty(N)
+    for i in range(N):
+        k = es[i]
+        d[i] = (x[i] - p0[k, 0]) * unit[k, 1] - (y[i] - p0[k, 1]) * unit[k, 0]
+    lim = np.empty(4)
+    for k in range(4):
+        lim[k] = min(w_out[k], _white_limit(d, raw, starts[k], starts[k + 1], lo, step, sigma[k], w_in[k],
+                                            w_look[k], drop, end_sigmas))
+    m = 0
+    for i in range(N):
+        if d[i] <= lim[es[i]]:
+            x[m], y[m], raw[m], es[m] = x[i], y[i], raw[i], es[i]
+            m += 1
+    return x[:m], y[:m], raw[:m], es[:m]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray[np.float32],
+                map_y: NDArray[np.float32], boxes: NDArray[np.int64], p0: NDArray[np.float64],
+                p1: NDArray[np.float64], sigma0: NDArray[np.float64], w_in: NDArray[np.float64],
+                w_out: NDArray[np.float64], w_look: NDArray[np.float64], excl: NDArray[np.float64],
+                white: NDArray[np.float64], band_cfg: NDArray[np.float64], fit_cfg: NDArray[np.float64],
+                first: bool, last: bool, P: NDArray[np.float64], mid: NDArray[np.float64],
+                sigma: NDArray[np.float64], cov: NDArray[np.float64], rms: NDArray[np.float64],
+                n_px: NDArray[np.int64], ok: NDArray[np.bool_]) -> None:
+    """One pass of :func:`.edges.refine_quads` over ``Q`` quads (edges ``4q .. 4q + 3``), in place.
+
+    Parameters
+    ----------
+    gray : (H, W) image. lut : (256,) light of each level (:func:`.tone.to_light`).
+    map_x, map_y, boxes : with a lens model, the undistorted position of every raw pixel (H, W) and each
+        edge's raw box (4Q, 4) (:func:`_gather_undistorted`); else ``boxes`` is empty.
+    p0, p1 : (4Q, 2) the edges' end points; replaced by the fitted lines' points nearest to them.
+    sigma0 : (4Q,) the blur the pass starts from; replaced by the median per quad of the fitted blurs.
+    w_in, w_out, w_look, excl : (4Q,) the band's limits (:func:`.edges.gather_band`); ``w_look`` the
+        outer limit read for the paper's end (``w_out`` itself when that is not looked for).
+    white : (Q, n, n) white cells. band_cfg : (white end looked for (0/1), bins' origin, bin width,
+        white-end drop, white-end sigmas, blur lower clip, blur upper clip).
+    fit_cfg : :func:`_fit_edge`'s ``cfg``. first, last : the first (plain steps) and last (covariances)
+        passes.
+    P, mid, sigma, cov, rms, n_px, ok : (4Q, 7), (4Q, 2), (4Q,), (4Q, 2, 2), (4Q,) x 3: the fits of
+        :class:`.edges.EdgeFit` (``P`` its parameters), read as the previous pass's and replaced.
+    """
+    Q = white.shape[0]
+    undistorted = boxes.shape[0] > 0
+    look, lo_bins, step, drop, end_sigmas, s_lo, s_hi = (band_cfg[0] > 0.5, band_cfg[1], band_cfg[2], band_cfg[3],
+                                                         band_cfg[4], band_cfg[5], band_cfg[6])
+    init = np.empty((4, _NP))
+    init_mid = np.empty((4, 2))
+    new_mid = np.empty(2)
+    for q in range(Q):
+        e0 = 4 * q
+        sl = slice(e0, e0 + 4)
+        w_band = w_look[sl] if look else w_out[sl]
+        if undistorted:
+            x, y, raw, es = _gather_undistorted(gray, map_x, map_y, boxes[sl], p0[sl], p1[sl], w_in[sl], w_band,
+                                                excl[sl])
+        else:
+            x, y, raw, es = _gather_raw(gray, p0[sl], p1[sl], w_in[sl], w_band, excl[sl])
+        starts = _edge_starts(es)
+        if look:
+            x, y, raw, es = _trim_to_paper(x, y, raw, es, starts, p0[sl], p1[sl], w_in[sl], w_out[sl], w_look[sl],
+                                           sigma0[sl], lo_bins, step, drop, end_sigmas)
+            starts = _edge_starts(es)
+        N = x.shape[0]
+        v = np.empty(N)
+        for i in range(N):
+            v[i] = lut[int(raw[i])]
+        if first:
+            extra = np.zeros(N)
+        else:
+            extra = _context(x, y, es, P[sl], mid[sl], sigma[sl], white[q:q + 1])
+        for k in range(4):
+            init[k] = P[e0 + k]
+            init_mid[k] = mid[e0 + k]
+        X0 = np.empty(N)
+        X1 = np.empty(N)
+        for k in range(4):
+            e = e0 + k
+            tx, ty = p1[e, 0] - p0[e, 0], p1[e, 1] - p0[e, 1]
+            nl = math.sqrt(tx * tx + ty * ty)
+            tx, ty = tx / nl, ty / nl
+            new_mid[0], new_mid[1] = 0.5 * (p0[e, 0] + p1[e, 0]), 0.5 * (p0[e, 1] + p1[e, 1])
+            lo, hi = starts[k], starts[k + 1]
+            for i in range(lo, hi):
+                X0[i] = x[i] - new_mid[0]
+                X1[i] = y[i] - new_mid[1]
+            sg, r, good = _fit_edge(X0, X1, v, extra, lo, hi, ty, -tx, new_mid, sigma0[e], init[k], init_mid[k],
+                                    not first, last, fit_cfg, P[e], cov[e])
+            mid[e, 0], mid[e, 1] = new_mid[0], new_mid[1]
+            sigma[e], rms[e], n_px[e], ok[e] = sg, r, hi - lo, good
+        _next_pass(P[sl], mid[sl], sigma[sl], s_lo, s_hi, p0[sl], p1[sl], sigma0[sl])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _next_pass(P: NDArray[np.float64], mid: NDArray[np.float64], sigma: NDArray[np.float64], s_lo: float,
+               s_hi: float, p0: NDArray[np.float64], p1: NDArray[np.float64], sigma0: NDArray[np.float64]) -> None:
+    """A quad's next start: the median of its four blurs clipped to ``[s_lo, s_hi]`` into ``sigma0``
+    (4,), and the end points ``p0``, ``p1`` (4, 2) moved onto the fitted lines."""
+    s = np.empty(4)
+    nan = False
+    for k in range(4):
+        s[k] = min(max(sigma[k], s_lo), s_hi)
+        nan = nan or math.isnan(sigma[k])
+    s.sort()
+    med = np.nan if nan else 0.5 * (s[1] + s[2])
+    for k in range(4):
+        sigma0[k] = med
+        c, sn = math.cos(P[k, 0]), math.sin(P[k, 0])
+        off = P[k, 1] + (c * mid[k, 0] + sn * mid[k, 1])
+        for pt in (p0, p1):
+            dist = (c * pt[k, 0] + sn * pt[k, 1]) - off
+            pt[k, 0] -= dist * c
+            pt[k, 1] -= dist * sn

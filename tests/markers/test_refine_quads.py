@@ -1,0 +1,71 @@
+"""The compiled edge refinement (:func:`gtrig.markers.detect.edges.refine_quads`) against the same chain of
+the public step functions called in turn (band, white end, trim, context, fits, corners:
+:func:`~gtrig.markers.detect.edges.refine_quads_stepwise`), on renders."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gtrig.markers.detect.camera import Undistorter
+from gtrig.markers.detect.edges import RefineParams, refine_quads, refine_quads_stepwise
+from gtrig.markers.detect.tone import to_light
+from gtrig.markers.families import family_spec, marker_cells
+from gtrig.markers.synth import clutter_background, homography_from_pose, render
+from gtrig.rig.models import MarkerFamily
+
+FAMILY = MarkerFamily.APRILTAG_36H11
+
+
+def _scene(seed: int, side: float, blur: float, gain: float = 230.0, undist: Undistorter | None = None
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A render of three markers: image, start quads (true corners moved by up to 1 px, fit
+    coordinates), white cells (Q, n, n) and the true corners (Q, 4, 2, fit coordinates)."""
+    rng = np.random.default_rng(seed)
+    markers = []
+    for k, c in enumerate([(220, 250), (520, 480), (800, 260)]):
+        H = homography_from_pose(side, c, 30.0 * k, rng.uniform(0, 360), rng.uniform(0, 360))
+        markers.append((FAMILY, int(rng.integers(0, 587)), H))
+    bg = clutter_background((768, 1024), rng, n_shapes=30)
+    img, truths = render((768, 1024), markers, blur_px=blur, noise=3.0, gain=gain, background=bg, rng=rng)
+    true = np.array([t.corners_px for t in truths], np.float64)
+    if undist is not None:
+        true = undist.to_undistorted(true.reshape(-1, 2)).reshape(-1, 4, 2)
+    quads = true + rng.uniform(-1.0, 1.0, true.shape)
+    white = np.array([marker_cells(FAMILY, t.marker_id) for t in truths], np.float64)
+    return img, quads, white, true
+
+
+@pytest.mark.parametrize(("seed", "side", "blur", "gain"), [(0, 24.0, 0.5, 230.0), (1, 60.0, 1.0, 230.0),
+                                                            (2, 110.0, 0.0, 230.0), (3, 45.0, 2.0, 70.0),
+                                                            (4, 40.0, 0.8, 400.0)])
+def test_compiled_refinement_is_the_step_functions_chain(seed: int, side: float, blur: float, gain: float) -> None:
+    """Corners within 1e-6 px and the fits' blur, levels, covariances and flags those of the step
+    functions called in turn, sharp, blurred, dim and over-exposed (clipped) markers alike; and the
+    corners near the truth where the render is not clipped."""
+    img, quads, white, true = _scene(seed, side, blur, gain)
+    bc = family_spec(FAMILY).border_cells
+    prm = RefineParams()
+    ref, c_ref, cov_ref = refine_quads_stepwise(img, quads, white, bc, prm)
+    fit, corners, cov = refine_quads(img, quads, white, bc, prm)
+    assert np.abs(corners - c_ref).max() < 1e-6
+    assert np.allclose(cov, cov_ref, rtol=1e-6, atol=1e-12)
+    for name in ("sigma", "a", "b", "rms"):
+        assert np.allclose(getattr(fit, name), getattr(ref, name), rtol=1e-6, atol=1e-6), name
+    assert np.array_equal(fit.ok, ref.ok) and np.array_equal(fit.n_px, ref.n_px)
+    if gain < 255:  # (clipped renders: the agreement only)
+        assert np.sqrt(np.mean(np.sum((corners - true) ** 2, axis=2))) < (0.15 if blur <= 1.0 else 0.3)
+
+
+def test_compiled_refinement_with_a_lens_model_tone_and_two_threads() -> None:
+    """The same with undistorted coordinates (a lens of the simulated room's strength), sRGB-stored
+    levels, no white-end search and two threads."""
+    K = np.array([[700.0, 0, 511.5], [0, 700.0, 383.5], [0, 0, 1]])
+    und = Undistorter(K, np.array([-0.12, 0.1, 1e-4, -1e-4, 0.0]), (768, 1024))
+    img, quads, white, _true = _scene(5, 50.0, 0.7, undist=und)
+    bc = family_spec(FAMILY).border_cells
+    for prm, tone in ((RefineParams(), "srgb"), (RefineParams(white_end=False, margin_cells=1.0), "linear")):
+        light = to_light(np.arange(256, dtype=np.float64), tone)  # type: ignore[arg-type]
+        _ref, c_ref, _ = refine_quads_stepwise(img, quads, white, bc, prm, und, light if tone != "linear" else None)
+        _fit, corners, _ = refine_quads(img, quads, white, bc, prm, und, light, threads=2)
+        assert np.abs(corners - c_ref).max() < 1e-6
