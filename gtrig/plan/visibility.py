@@ -109,3 +109,44 @@ def marker_sight(cam: CameraGeometry, corners_robot: np.ndarray, poses_xytheta: 
         blocked = hull_blocks(poses_xytheta[idx], pw[idx], cam.T_world_cam[:3, 3], hull)
         vis[idx[np.any(blocked, axis=1)]] = False
     return MarkerSight(vis, uv, np.where(vis, side, 0.0))
+
+
+@dataclass(frozen=True)
+class CameraSight:
+    """All markers in one camera over K poses: ``visible`` (K, M) bool, ``uv`` (K, M, 4, 2) pixels (nan
+    where not computed), ``side_px`` (K, M) (0 where not seen)."""
+
+    visible: np.ndarray
+    uv: np.ndarray
+    side_px: np.ndarray
+
+
+def camera_sight(cam: CameraGeometry, corners_robot: np.ndarray, poses_xytheta: np.ndarray, hull: Hull | None,
+                 margin_px: float = MARGIN_PX, min_side_px: float = MIN_SIDE_PX) -> CameraSight:
+    """:func:`marker_sight` for M markers at once (``corners_robot`` (M, 4, 3)), with a first cut on the
+    markers' bounding sphere so that poses where the camera cannot see any of them cost little."""
+    K, M = poses_xytheta.shape[0], corners_robot.shape[0]
+    vis = np.zeros((K, M), dtype=bool)
+    uv = np.full((K, M, 4, 2), np.nan)
+    side = np.zeros((K, M))
+    flat = corners_robot.reshape(-1, 3)
+    centre = flat.mean(axis=0)
+    radius = float(np.max(np.linalg.norm(flat - centre, axis=1)))
+    cw = robot_to_world(poses_xytheta, centre[None])[:, 0]
+    cc = cw @ cam.T_cam_world[:3, :3].T + cam.T_cam_world[:3, 3]
+    # the sphere must reach in front of the camera and, when well in front, near the image
+    near = cc[:, 2] > MIN_DEPTH_M - radius
+    far = cc[:, 2] > 2 * radius
+    if far.any():
+        uvc = _project(cam, cc[far])
+        r_px = 2.0 * max(cam.K[0, 0], cam.K[1, 1]) * radius / cc[far, 2] + margin_px
+        w, h = cam.size
+        ok = (uvc[:, 0] > -r_px) & (uvc[:, 1] > -r_px) & (uvc[:, 0] < w + r_px) & (uvc[:, 1] < h + r_px)
+        near[np.flatnonzero(far)[~ok]] = False
+    cand = np.flatnonzero(near)
+    if cand.size == 0:
+        return CameraSight(vis, uv, side)
+    for m in range(M):
+        ms = marker_sight(cam, corners_robot[m], poses_xytheta[cand], hull, margin_px, min_side_px)
+        vis[cand, m], uv[cand, m], side[cand, m] = ms.visible, ms.uv, ms.side_px
+    return CameraSight(vis, uv, side)

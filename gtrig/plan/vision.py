@@ -40,7 +40,7 @@ from gtrig.vision.projection import camera_pose_jacobian, lens_jacobian, project
 from gtrig.vision.refine import PlanarPrior, prior_residuals
 from gtrig.vision.synthetic import CornerNoise
 
-from gtrig.plan.visibility import MARGIN_PX, MIN_SIDE_PX, marker_sight
+from gtrig.plan.visibility import MARGIN_PX, MIN_SIDE_PX, camera_sight
 
 
 @dataclass(frozen=True)
@@ -137,21 +137,23 @@ def marker_jacobian(J_pose: np.ndarray, R_world_robot: np.ndarray, p_robot: np.n
     return np.concatenate([d, -d @ skew(p_robot - centre_robot)], axis=2)
 
 
-def _add_blocks(H: np.ndarray, rows: np.ndarray, r0: np.ndarray, c0: np.ndarray, B: np.ndarray) -> None:
-    """``H[rows[v], r0[v]:r0[v]+b, c0[v]:c0[v]+b'] += B[v]`` for every v (repeated rows add up)."""
-    V, br, bc = B.shape
-    K, D, _ = H.shape
+def _block_entries(rows: np.ndarray, r0: np.ndarray, c0: np.ndarray, B: np.ndarray, D: int
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Flat indices into (K, D, D) and values for ``H[rows[v], r0[v]:r0[v]+b, c0[v]:c0[v]+b'] += B[v]``."""
+    _, br, bc = B.shape
     ri = r0[:, None, None] + np.arange(br)[None, :, None]
     ci = c0[:, None, None] + np.arange(bc)[None, None, :]
-    flat = (rows[:, None, None] * D + ri) * D + ci
-    H += np.bincount(flat.ravel(), B.ravel(), minlength=K * D * D).reshape(K, D, D)
+    return ((rows[:, None, None] * D + ri) * D + ci).ravel(), B.ravel()
 
 
-def _camera_normal_equations(H: np.ndarray, cam: CameraGeometry, model: VisionModel, cv: _CameraViews,
-                             poses: np.ndarray, settings: VisionPlanSettings, rig_u: RigUncertainty) -> None:
-    """Add one camera's corners to the normal matrices ``H`` (K, D, D) over (pose, marker corrections),
-    its own correction eliminated."""
+def _camera_normal_equations(H: np.ndarray, entries: list[tuple[np.ndarray, np.ndarray]], cam: CameraGeometry,
+                             model: VisionModel, cv: _CameraViews, poses: np.ndarray, settings: VisionPlanSettings,
+                             rig_u: RigUncertainty) -> None:
+    """One camera's corners in the normal matrices ``H`` (K, D, D) over (pose, marker corrections), its
+    own correction eliminated: the elimination is subtracted from ``H`` at once, the corners' own blocks
+    are appended to ``entries`` (added by the caller in one pass). ``cv.pose`` indexes ``H``'s rows."""
     V = cv.pose.shape[0]
+    D = H.shape[1]
     info = np.repeat(corner_information(cv.side_px, settings.corner_noise, settings.corner_floor_px), 4)
     sc, Rk = _stack(cam, model, cv, poses, info)
     eye = np.eye(4)
@@ -176,19 +178,19 @@ def _camera_normal_equations(H: np.ndarray, cam: CameraGeometry, model: VisionMo
     has = cv.slot >= 0
     m0 = 6 + 6 * cv.slot
     zero = np.zeros(V, dtype=int)
-    _add_blocks(H, cv.pose, zero, zero, view_sum(Jp, Jp))
+    entries.append(_block_entries(cv.pose, zero, zero, view_sum(Jp, Jp), D))
     if has.any():
         Jm_v, Jp_v = Jm.reshape(V, 8, 6)[has], Jp.reshape(V, 8, 6)[has]
         pm = np.einsum("vra,vrb->vab", Jp_v, Jm_v)
-        _add_blocks(H, cv.pose[has], zero[has], m0[has], pm)
-        _add_blocks(H, cv.pose[has], m0[has], zero[has], np.swapaxes(pm, 1, 2))
-        _add_blocks(H, cv.pose[has], m0[has], m0[has], np.einsum("vra,vrb->vab", Jm_v, Jm_v))
+        entries.append(_block_entries(cv.pose[has], zero[has], m0[has], pm, D))
+        entries.append(_block_entries(cv.pose[has], m0[has], zero[has], np.swapaxes(pm, 1, 2), D))
+        entries.append(_block_entries(cv.pose[has], m0[has], m0[has], np.einsum("vra,vrb->vab", Jm_v, Jm_v), D))
     if Jc is None or S_c is None:
         return
     # eliminate the camera's correction: H_xx -= H_xc H_cc^-1 H_cx, per pose seen by this camera
     kc = S_c.shape[0]
     g_pose, g = np.unique(cv.pose, return_inverse=True)
-    G, D = g_pose.shape[0], H.shape[1]
+    G = g_pose.shape[0]
     Hcc = np.broadcast_to(S_c.T @ S_c, (G, kc, kc)).copy()
     np.add.at(Hcc, g, view_sum(Jc, Jc))
     Hxc = np.zeros((G, D, kc))
@@ -199,14 +201,47 @@ def _camera_normal_equations(H: np.ndarray, cam: CameraGeometry, model: VisionMo
     H[g_pose] -= Hxc @ np.linalg.solve(Hcc, np.swapaxes(Hxc, 1, 2))
 
 
+def _pose_covariance(H: np.ndarray) -> np.ndarray:
+    """The pose block (K, 6, 6) of ``inv(H)`` for normal matrices (K, D, D) over (pose, nuisances), by
+    eliminating the nuisances (Schur complement)."""
+    H = 0.5 * (H + np.swapaxes(H, 1, 2))
+    if H.shape[1] == 6:
+        return np.linalg.inv(H)
+    Hpp, Hpn, Hnn = H[:, :6, :6], H[:, :6, 6:], H[:, 6:, 6:]
+    return np.linalg.inv(Hpp - Hpn @ np.linalg.solve(Hnn, np.swapaxes(Hpn, 1, 2)))
+
+
 def predict_vision(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSettings = VisionPlanSettings(),
                    model: VisionModel | None = None) -> VisionPrediction:
     """GTvision's predicted covariance at planar poses (K, 3) on a flat floor (module docstring)."""
     poses = np.asarray(poses_xytheta, dtype=float).reshape(-1, 3)
     model = VisionModel.from_rig(rig) if model is None else model
     rig_u = settings.rig_uncertainty.with_rig(rig)
-    hull = rig.robot.hull
     mids = [m.id for m in rig.robot.markers]
+    corners = np.stack([model.corners_robot[m] for m in mids])
+    names = [c.name for c in rig.cameras]
+    K = poses.shape[0]
+    sights = [camera_sight(model.cameras[n], corners, poses, rig.robot.hull, settings.margin_px, settings.min_side_px)
+              for n in names]
+    views = np.stack([s.visible.sum(axis=1) for s in sights], axis=1) if names else np.zeros((K, 0), int)
+    side_min = np.stack([np.where(s.visible, s.side_px, np.inf).min(axis=1) for s in sights], axis=1) \
+        if names else np.zeros((K, 0))
+    side_min[~np.isfinite(side_min)] = 0.0
+    seen = views.sum(axis=1) > 0
+    cov6 = np.full((K, 6, 6), np.nan)
+    if seen.any():
+        cov6[seen] = _seen_covariance(rig, model, poses[seen], [(n, s.visible[seen], s.uv[seen], s.side_px[seen])
+                                                               for n, s in zip(names, sights, strict=True)],
+                                      mids, settings, rig_u)
+    i = np.array(PLANAR_INDEX)
+    return VisionPrediction(cov6[:, i[:, None], i[None, :]], cov6, views, side_min)
+
+
+def _seen_covariance(rig: Rig, model: VisionModel, poses: np.ndarray,
+                     sights: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], mids: list[int],
+                     settings: VisionPlanSettings, rig_u: RigUncertainty) -> np.ndarray:
+    """Pose covariances (K, 6, 6) at poses (K, 3) where at least one marker is seen; ``sights`` per camera:
+    name, visible (K, M), corners (K, M, 4, 2), sides (K, M)."""
     S_m = {mid: rig_u.sqrt_information("marker", mid) for mid in mids}
     slots = {mid: i for i, mid in enumerate(m for m in mids if S_m[m] is not None)}
     K, D = poses.shape[0], 6 + 6 * len(slots)
@@ -217,31 +252,14 @@ def predict_vision(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSett
         S = S_m[mid]
         assert S is not None
         H[:, 6 + 6 * i:12 + 6 * i, 6 + 6 * i:12 + 6 * i] += S.T @ S
-    names = [c.name for c in rig.cameras]
-    views = np.zeros((K, len(names)), dtype=int)
-    side_min = np.zeros((K, len(names)))
-    for ci, name in enumerate(names):
-        cam = model.cameras[name]
-        parts = []
-        for mid in mids:
-            ms = marker_sight(cam, model.corners_robot[mid], poses, hull, settings.margin_px, settings.min_side_px)
-            k = np.flatnonzero(ms.visible)
-            parts.append((k, mid, ms.uv[k], ms.side_px[k]))
-            views[k, ci] += 1
-            sm = side_min[k, ci]
-            side_min[k, ci] = np.where(sm > 0, np.minimum(sm, ms.side_px[k]), ms.side_px[k])
-        pose_idx = np.concatenate([p[0] for p in parts])
-        if pose_idx.size == 0:
+    entries: list[tuple[np.ndarray, np.ndarray]] = []
+    slot_of = np.array([slots.get(m, -1) for m in mids])
+    for name, vis, uv, side in sights:
+        k, m = np.nonzero(vis)
+        if k.size == 0:
             continue
-        cv = _CameraViews(pose_idx, np.concatenate([np.full(p[0].size, slots.get(p[1], -1)) for p in parts]),
-                          np.concatenate([np.full(p[0].size, p[1]) for p in parts]),
-                          np.concatenate([p[2] for p in parts]), np.concatenate([p[3] for p in parts]))
-        _camera_normal_equations(H, cam, model, cv, poses, settings, rig_u)
-    seen = views.sum(axis=1) > 0
-    cov6 = np.full((K, 6, 6), np.nan)
-    if seen.any():
-        Hs = 0.5 * (H[seen] + np.swapaxes(H[seen], 1, 2))
-        cov6[seen] = np.linalg.inv(Hs)[:, :6, :6]
-    i = np.array(PLANAR_INDEX)
-    cov3 = cov6[:, i[:, None], i[None, :]]
-    return VisionPrediction(cov3, cov6, views, side_min)
+        cv = _CameraViews(k, slot_of[m], np.asarray(mids)[m], uv[k, m], side[k, m])
+        _camera_normal_equations(H, entries, model.cameras[name], model, cv, poses, settings, rig_u)
+    idx = np.concatenate([e[0] for e in entries])
+    H += np.bincount(idx, np.concatenate([e[1] for e in entries]), minlength=H.size).reshape(H.shape)
+    return _pose_covariance(H)
