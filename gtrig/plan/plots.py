@@ -40,9 +40,8 @@ def _panel(ax: Any, plan: PlanResult, values: np.ndarray, title: str, label: str
            cmap: str = "viridis") -> None:
     import matplotlib as mpl
 
-    cm = mpl.colormaps[cmap].copy()
-    cm.set_over("0.35")  # uncovered (infinite) and beyond the scale: dark grey
-    cm.set_bad("white")
+    # uncovered (infinite) and beyond the scale: dark grey; outside the area: white
+    cm = mpl.colormaps[cmap].with_extremes(over="0.35", bad="white")
     v = np.where(np.isinf(values), vmax * 10, values)
     if plan.grid.kind == "area":
         img, ext = _image(plan, v)
