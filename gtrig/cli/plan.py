@@ -56,6 +56,7 @@ def command(
     marker_sigma_mm: float = typer.Option(0.3, "--marker-sigma-mm", help="Marker position sigma on the robot after "
                                           "calibration (markers without pose_cov)."),
     marker_sigma_deg: float = typer.Option(0.05, "--marker-sigma-deg", help="Marker orientation sigma."),
+    workers: int = typer.Option(2, "--workers", help="Processes."),
 ) -> None:
     """Predict GTvision's, GTlaser's and the fused pose accuracy over the floor for a planned rig."""
     import math
@@ -73,6 +74,7 @@ def command(
 
     checks.number("--grid-m", grid_m, lo=0.0, lo_open=True, hi=5.0, unit="m")
     checks.count("--headings", headings, 1, 360)
+    checks.workers(workers)
     checks.number("--target-mm", target_mm, lo=0.0, lo_open=True, hi=1000.0, unit="mm")
     checks.number("--target-deg", target_deg, lo=0.0, lo_open=True, hi=180.0, unit="deg")
     for name, v in (("--camera-sigma-mm", camera_sigma_mm), ("--marker-sigma-mm", marker_sigma_mm)):
@@ -96,11 +98,15 @@ def command(
     ru = RigUncertainty(camera_sigma_mm / 1000, math.radians(camera_sigma_deg), marker_sigma_mm / 1000,
                         math.radians(marker_sigma_deg))
     settings = PlanSettings(vision=VisionPlanSettings(rig_uncertainty=ru))
-    _run(r, grid, settings, out, target_mm / 1000, math.radians(target_deg), rig.stem)
+    if workers == 0:
+        import os
+
+        workers = os.cpu_count() or 1
+    _run(r, grid, settings, out, target_mm / 1000, math.radians(target_deg), rig.stem, workers)
 
 
 def _run(rig: Rig, grid: PlanGrid, settings: PlanSettings, out: Path, target_m: float, target_rad: float,
-         name: str) -> None:
+         name: str, workers: int) -> None:
     """Predict, then write every output (nothing is written when the prediction fails)."""
     import time
 
@@ -111,7 +117,7 @@ def _run(rig: Rig, grid: PlanGrid, settings: PlanSettings, out: Path, target_m: 
     from gtrig.plan.report import plan_table, summary_lines
 
     t0 = time.perf_counter()
-    plan = predict_plan(rig, grid, settings)
+    plan = predict_plan(rig, grid, settings, workers)
     elapsed = time.perf_counter() - t0
     maps = cell_maps(plan)
     summary = summarize_target(plan, target_m, target_rad)

@@ -8,7 +8,6 @@ is that source's. Poses are processed in chunks so that memory stays bounded.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -94,15 +93,10 @@ def fuse_information(covs: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def predict_plan(rig: Rig, grid: PlanGrid, settings: PlanSettings = PlanSettings(),
-                 progress: Callable[[int, int], None] | None = None) -> PlanResult:
-    """GTvision, GTlaser and fusion at every pose of ``grid`` for the planned ``rig`` (module docstring).
-
-    ``progress(done, total)`` is called after each chunk of poses.
-    """
-    if not rig.cameras and not rig.laser_scanners:
-        raise InputError("the rig has neither cameras nor fixed laser scanners: nothing to plan")
-    poses = grid.poses_xytheta()
+def _predict_block(rig: Rig, poses: np.ndarray, settings: PlanSettings
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Both sources at poses (K, 3), chunk by chunk: vision and laser covariances (K, 3, 3), views,
+    smallest sides, beams and sides per sensor."""
     K = poses.shape[0]
     n_c, n_s = len(rig.cameras), len(rig.laser_scanners)
     cov_v, cov_l = np.full((K, 3, 3), np.nan), np.full((K, 3, 3), np.nan)
@@ -118,8 +112,27 @@ def predict_plan(rig: Rig, grid: PlanGrid, settings: PlanSettings = PlanSettings
         if n_s:
             pl = predict_laser(rig, poses[a:b], settings.laser)
             cov_l[a:b], beams[a:b], sides[a:b] = pl.cov_xytheta, pl.beams, pl.sides
-        if progress is not None:
-            progress(b, K)
+    return cov_v, cov_l, views, side_px, beams, sides
+
+
+def predict_plan(rig: Rig, grid: PlanGrid, settings: PlanSettings = PlanSettings(), workers: int = 1) -> PlanResult:
+    """GTvision, GTlaser and fusion at every pose of ``grid`` for the planned ``rig`` (module docstring),
+    in ``workers`` processes."""
+    if not rig.cameras and not rig.laser_scanners:
+        raise InputError("the rig has neither cameras nor fixed laser scanners: nothing to plan")
+    poses = grid.poses_xytheta()
+    K = poses.shape[0]
+    if workers <= 1 or K < 4 * settings.chunk_poses:
+        parts = [_predict_block(rig, poses, settings)]
+    else:
+        from gtrig.parallel import process_pool
+
+        edges = np.linspace(0, K, 4 * workers + 1).astype(int)
+        with process_pool(workers) as ex:
+            futures = [ex.submit(_predict_block, rig, poses[a:b], settings)
+                       for a, b in zip(edges[:-1], edges[1:], strict=True)]
+            parts = [f.result() for f in futures]
+    cov_v, cov_l, views, side_px, beams, sides = (np.concatenate(x) for x in zip(*parts, strict=True))
     fused = fuse_information([cov_v, cov_l])
     log.info("plan: %d poses (%d cells x %d headings)", K, grid.n_cells, grid.n_headings)
     return PlanResult(grid, tuple(c.name for c in rig.cameras), tuple(s.name for s in rig.laser_scanners),
