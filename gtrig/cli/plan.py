@@ -39,6 +39,19 @@ def parse_polygon(text: str) -> list[tuple[float, float]]:
     return out
 
 
+def parse_suggest(text: str | None) -> int:
+    """``--suggest cameras:N``: the number of cameras to add (0 without the option)."""
+    from gtrig.errors import InputError
+
+    if text is None:
+        return 0
+    kind, _, n = text.partition(":")
+    if kind != "cameras" or not n.isdigit() or not 1 <= int(n) <= 10:
+        raise InputError(f"--suggest: expected cameras:N with N from 1 to 10, got {text!r} (scanners are not "
+                         "suggested yet)")
+    return int(n)
+
+
 @handle_errors
 def command(
     rig: Path = typer.Argument(..., help="The planned rig.yaml (nominal poses and intrinsics)."),
@@ -57,6 +70,11 @@ def command(
                                           "calibration (markers without pose_cov)."),
     marker_sigma_deg: float = typer.Option(0.05, "--marker-sigma-deg", help="Marker orientation sigma."),
     workers: int = typer.Option(2, "--workers", help="Processes."),
+    suggest: str | None = typer.Option(None, "--suggest", help="cameras:N: add N cameras, each where it most "
+                                       "increases the share meeting the target (greedy over candidate poses)."),
+    suggest_height: float = typer.Option(2.8, "--suggest-height", help="Height of the suggested cameras (m)."),
+    suggest_positions: int = typer.Option(24, "--suggest-positions", help="Candidate positions along the outline "
+                                          "(each aimed at the area's centre and at the failing cells' centre)."),
 ) -> None:
     """Predict GTvision's, GTlaser's and the fused pose accuracy over the floor for a planned rig."""
     import math
@@ -81,6 +99,9 @@ def command(
         checks.number(name, v, lo=0.0, hi=100.0, unit="mm")
     for name, v in (("--camera-sigma-deg", camera_sigma_deg), ("--marker-sigma-deg", marker_sigma_deg)):
         checks.number(name, v, lo=0.0, hi=10.0, unit="deg")
+    n_suggest = parse_suggest(suggest)
+    checks.number("--suggest-height", suggest_height, lo=0.1, hi=20.0, unit="m")
+    checks.count("--suggest-positions", suggest_positions, 1, 1000)
     if area is not None and path is not None:
         raise InputError("--area and --path exclude each other: give one")
     checks.output_folder("--out", out)
@@ -102,11 +123,12 @@ def command(
         import os
 
         workers = os.cpu_count() or 1
-    _run(r, grid, settings, out, target_mm / 1000, math.radians(target_deg), rig.stem, workers)
+    _run(r, grid, settings, out, target_mm / 1000, math.radians(target_deg), rig.stem, workers,
+         (n_suggest, suggest_height, suggest_positions))
 
 
 def _run(rig: Rig, grid: PlanGrid, settings: PlanSettings, out: Path, target_m: float, target_rad: float,
-         name: str, workers: int) -> None:
+         name: str, workers: int, suggest: tuple[int, float, int] = (0, 2.8, 24)) -> None:
     """Predict, then write every output (nothing is written when the prediction fails)."""
     import time
 
@@ -123,7 +145,29 @@ def _run(rig: Rig, grid: PlanGrid, settings: PlanSettings, out: Path, target_m: 
     summary = summarize_target(plan, target_m, target_rad)
     lines = summary_lines(plan, maps, summary, elapsed)
     figs = _figures(plan, maps, summary, target_m, target_rad)
+    suggested = None
+    if suggest[0]:
+        from gtrig.plan import plots
+        from gtrig.plan.suggest import suggest_cameras
+
+        found = suggest_cameras(rig, plan, suggest[0], target_m, target_rad, settings, suggest[1], suggest[2])
+        for sg in found:
+            x, y, z = sg.camera.T_world_cam.xyz
+            lines.append(f"suggested camera {sg.camera.name} at x {x:.2f}, y {y:.2f}, z {z:.2f} m "
+                         f"({sg.n_candidates} candidates): target met on {100 * sg.share_before:.1f} % -> "
+                         f"{100 * sg.share_after:.1f} % of the {'area' if grid.kind == 'area' else 'path'}")
+        suggested = found[-1]
+        maps2 = cell_maps(suggested.plan)
+        summary2 = summarize_target(suggested.plan, target_m, target_rad)
+        figs += [("target_suggested.png", "With the suggested camera(s): where the target is met",
+                  plots.target_map(suggested.plan, summary2)),
+                 ("sigma_fused_suggested.png", "With the suggested camera(s): fused sigma",
+                  plots.sigma_maps(suggested.plan, maps2, "fused", target_m, target_rad))]
     out.mkdir(parents=True, exist_ok=True)
+    if suggested is not None:
+        from gtrig.rig.load import dump_rig
+
+        dump_rig(suggested.rig, out / "rig_suggested.yaml")
     write_plan_csv(out / "plan_grid.csv", plan_table(plan))
     for fname, _, png in figs:
         atomic_write_bytes(out / fname, png)

@@ -36,6 +36,19 @@ def test_plan_writes_its_files(rig_file, tmp_path):
     assert "data:image/png;base64," in (out / "plan.html").read_text()
 
 
+def test_plan_suggests_a_camera(rig_file, tmp_path):
+    out = tmp_path / "s"
+    r = runner.invoke(app, ["plan", str(rig_file), "--out", str(out), "--area", AREA, "--grid-m", "0.5",
+                            "--headings", "2", "--suggest", "cameras:1", "--suggest-positions", "4",
+                            "--target-mm", "3", "--target-deg", "0.1"])
+    assert r.exit_code == 0, r.output
+    assert "suggested camera suggested1" in r.output
+    from gtrig.rig.load import load_rig
+
+    assert [c.name for c in load_rig(out / "rig_suggested.yaml").cameras][-1] == "suggested1"
+    assert (out / "target_suggested.png").stat().st_size > 0
+
+
 def test_plan_on_a_path(rig_file, tmp_path):
     tum = tmp_path / "p.tum"
     tum.write_text("".join(f"{i:.1f} {0.1 * i:.3f} 2.0 0 0 0 0 1\n" for i in range(10)))
@@ -52,6 +65,7 @@ def test_plan_on_a_path(rig_file, tmp_path):
     (["--target-mm", "-1"], "--target-mm"),
     (["--path", "nothere.tum"], "nothere.tum"),
     (["--area", AREA, "--path", "x.tum"], "exclude each other"),
+    (["--suggest", "scanners:1"], "--suggest"),
 ])
 def test_plan_refuses_bad_input_in_one_line(rig_file, tmp_path, args, expect):
     out = tmp_path / "o"
