@@ -67,7 +67,8 @@ def speed(grid_m: float, headings: int, workers: int) -> None:
     wall, cpu = time.perf_counter() - t, time.process_time() - c
     n = grid.n_cells * grid.n_headings
     print(f"10 m x 10 m, {grid_m:g} m grid, {headings} headings: {n} poses, 8 cameras, 4 scanners")
-    print(f"plan ({workers} worker(s)): wall {wall:.1f} s, CPU of this process {cpu:.1f} s ({1e6 * cpu / n:.1f} us CPU per pose); vision covers "
+    print(f"plan ({workers} worker(s)): wall {wall:.1f} s, CPU of this process {cpu:.1f} s "
+          f"({1e6 * cpu / n:.1f} us CPU per pose); vision covers "
           f"{100 * np.isfinite(plan.sigma_xy_m('vision')).mean():.1f} %, laser "
           f"{100 * np.isfinite(plan.sigma_xy_m('laser')).mean():.1f} %")
     print(f"peer: GTvision's fit of one pose {1e3 * peer:.2f} ms CPU; plan per pose / fit per pose = "
@@ -75,13 +76,13 @@ def speed(grid_m: float, headings: int, workers: int) -> None:
 
 
 def figures(folder: Path) -> None:
+    from gtrig.io.atomic import atomic_write_bytes
     from gtrig.plan import plots
     from gtrig.plan.grid import area_grid
     from gtrig.plan.maps import cell_maps, summarize_target
     from gtrig.plan.predict import PlanSettings, predict_plan
     from gtrig.plan.report import summary_lines
     from gtrig.plan.vision import VisionPlanSettings
-    from gtrig.io.atomic import atomic_write_bytes
     from gtrig.vision.covariance import RigUncertainty
 
     rig = make_scene(0).rig_nominal
@@ -96,7 +97,8 @@ def figures(folder: Path) -> None:
         print(line)
     folder.mkdir(parents=True, exist_ok=True)
     for src in ("fused", "vision", "laser"):
-        atomic_write_bytes(folder / f"plan_gtroom_{src}.png", plots.sigma_maps(plan, maps, src, 0.001, np.radians(0.05)))
+        png = plots.sigma_maps(plan, maps, src, 0.001, np.radians(0.05))
+        atomic_write_bytes(folder / f"plan_gtroom_{src}.png", png)
     atomic_write_bytes(folder / "plan_gtroom_coverage.png", plots.coverage_maps(plan, maps))
     atomic_write_bytes(folder / "plan_gtroom_target.png", plots.target_map(plan, s))
 

@@ -146,10 +146,12 @@ def predict_laser(rig: Rig, poses_xytheta: np.ndarray, settings: LaserPlanSettin
     cov_scan = np.linalg.inv(H)
     A = np.linalg.solve(H, H_pb)
     bias = st.surface_bias_std_m**2 * np.ones((4, 4)) + st.side_bias_std_m**2 * np.eye(4)
-    cov = cov_scan + A @ bias @ np.swapaxes(A, 1, 2) + np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2])
+    floor = np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2])
+    cov = cov_scan + A @ bias @ np.swapaxes(A, 1, 2) + floor
     n_pts = beams.sum(axis=1)
     n_sides = np.sum(per_side.sum(axis=1) >= icp.min_side_points, axis=1)
     std_xy = np.sqrt(np.linalg.eigvalsh(cov[:, :2, :2])[:, -1])
     covered = (n_pts >= icp.min_points) & (n_sides >= 2) & (std_xy <= icp.max_std_m) & (
         np.sqrt(cov[:, 2, 2]) <= icp.max_std_rad)
-    return LaserPrediction(np.where(covered[:, None, None], cov, np.nan), np.where(n_pts[:, None, None] > 0, cov_scan, np.nan), beams, sides, covered)
+    return LaserPrediction(np.where(covered[:, None, None], cov, np.nan),
+                           np.where(n_pts[:, None, None] > 0, cov_scan, np.nan), beams, sides, covered)

@@ -33,7 +33,9 @@ def _image(plan: PlanResult, values: np.ndarray) -> tuple[np.ndarray, tuple[floa
     img = np.full(ij.max(axis=0)[::-1] + 1, np.nan)
     img[ij[:, 1], ij[:, 0]] = values
     h = g.step_m / 2
-    return img, (lo[0] - h, lo[0] + (img.shape[1] - 1) * g.step_m + h, lo[1] - h, lo[1] + (img.shape[0] - 1) * g.step_m + h)
+    x1 = lo[0] + (img.shape[1] - 1) * g.step_m + h
+    y1 = lo[1] + (img.shape[0] - 1) * g.step_m + h
+    return img, (lo[0] - h, x1, lo[1] - h, y1)
 
 
 def _panel(ax: Any, plan: PlanResult, values: np.ndarray, title: str, label: str, vmax: float,
@@ -63,7 +65,8 @@ def sigma_maps(plan: PlanResult, maps: CellMaps, source: str, target_xy_m: float
     fig, axes = figure(nrows=2, ncols=2, figsize=(11, 9))
     for row, (what, vals, scale, unit, tgt) in enumerate((
             ("position sigma", maps.sigma_xy_m[source], 1000.0, "mm", target_xy_m * 1000),
-            ("yaw sigma", maps.sigma_yaw_rad[source], float(np.degrees(1.0)), "deg", float(np.degrees(target_yaw_rad))))):
+            ("yaw sigma", maps.sigma_yaw_rad[source], float(np.degrees(1.0)), "deg",
+             float(np.degrees(target_yaw_rad))))):
         for col, (agg, v) in enumerate(zip(("worst", "median"), vals, strict=True)):
             _panel(axes[row, col], plan, v * scale, f"{source}: {what}, {agg} heading", f"{what} ({unit})",
                    4 * tgt, "viridis")

@@ -89,9 +89,10 @@ def _score(plan: PlanResult, target_xy_m: float, target_yaw_rad: float) -> tuple
 
 
 def suggest_cameras(rig: Rig, plan: PlanResult, n_add: int, target_xy_m: float, target_yaw_rad: float,
-                    settings: PlanSettings = PlanSettings(), height_m: float = 2.8, n_positions: int = 24
+                    settings: PlanSettings | None = None, height_m: float = 2.8, n_positions: int = 24
                     ) -> list[Suggestion]:
     """Add ``n_add`` cameras one at a time, each the best of the candidates (module docstring)."""
+    settings = PlanSettings() if settings is None else settings
     if not rig.cameras:
         raise InputError("--suggest cameras: the rig has no camera whose lens a suggested one could copy")
     if not rig.robot.markers:

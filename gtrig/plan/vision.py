@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gtrig.plan.visibility import MARGIN_PX, MIN_SIDE_PX, camera_sight
 from gtrig.rig.models import Rig
 from gtrig.vision.covariance import PLANAR_INDEX, UNCALIBRATED_MARKERS, RigUncertainty
 from gtrig.vision.estimate import VisionOptions
@@ -39,8 +40,6 @@ from gtrig.vision.observations import CameraGeometry, StackedCorners, VisionMode
 from gtrig.vision.projection import camera_pose_jacobian, lens_jacobian, project_pose, skew
 from gtrig.vision.refine import PlanarPrior, prior_residuals
 from gtrig.vision.synthetic import CornerNoise
-
-from gtrig.plan.visibility import MARGIN_PX, MIN_SIDE_PX, camera_sight
 
 
 @dataclass(frozen=True)

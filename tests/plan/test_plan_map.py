@@ -31,7 +31,8 @@ def test_camera_turned_away_leaves_its_hole(room):
     cam = int(np.argmax([o.sum() for o in only]))
     assert only[cam].sum() >= 10  # the test needs a region that camera alone sees
     c = rig.cameras[cam]
-    turned = c.model_copy(update={"T_world_cam": Pose(xyz=c.T_world_cam.xyz, rpy_deg=(0.0, 0.0, 0.0))})  # at the ceiling
+    up = Pose(xyz=c.T_world_cam.xyz, rpy_deg=(0.0, 0.0, 0.0))  # looking at the ceiling
+    turned = c.model_copy(update={"T_world_cam": up})
     rig2 = rig.model_copy(update={"cameras": tuple(turned if x.name == c.name else x for x in rig.cameras)})
     after = predict_plan(rig2, grid)
     v_before = cell_maps(before).sigma_xy_m["vision"][0]

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from gtrig import geometry as geo
-from gtrig.plan.vision import VisionPlanSettings, marker_jacobian, predict_vision
 from gtrig.plan.visibility import camera_sight
+from gtrig.plan.vision import VisionPlanSettings, marker_jacobian, predict_vision
 from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
 from gtrig.vision.covariance import UNCALIBRATED_MARKERS, RigUncertainty
 from gtrig.vision.estimate import VisionOptions, estimate_frame
