@@ -5,7 +5,8 @@ GT room's maps for docs/plan.md.
 The speed is wall-clock and CPU time of :func:`gtrig.plan.predict.predict_plan` alone; the peer ratio is
 the plan's CPU time per pose over the estimator's (``estimate_frame``) per pose, measured in the same run.
 
-    python bench/plan.py [--grid-m 0.05] [--headings 16] [--figures docs/figures]
+    python bench/plan.py [--grid-m 0.05] [--headings 16] [--workers 1] [--figures docs/figures]
+    python bench/plan.py --suggest 25 --grid-m 0.1 --headings 16
 """
 
 from __future__ import annotations
@@ -75,6 +76,29 @@ def speed(grid_m: float, headings: int, workers: int) -> None:
           f"{cpu / n / peer:.4f}")
 
 
+def suggestion(grid_m: float, headings: int, positions: int) -> None:
+    """Time of ``--suggest cameras:1`` on the GT room with one camera removed (2 aims per position)."""
+    from gtrig.plan.grid import area_grid
+    from gtrig.plan.predict import PlanSettings, predict_plan
+    from gtrig.plan.suggest import suggest_cameras
+    from gtrig.plan.vision import VisionPlanSettings
+    from gtrig.vision.covariance import RigUncertainty
+
+    full = make_scene(0).rig_nominal
+    rig = full.model_copy(update={"cameras": tuple(c for i, c in enumerate(full.cameras) if i != 1)})
+    grid = area_grid(room_walls()[:, 0], grid_m, headings)
+    st = PlanSettings(vision=VisionPlanSettings(
+        rig_uncertainty=RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))))
+    plan = predict_plan(rig, grid, st)
+    t, c = time.perf_counter(), time.process_time()
+    [s] = suggest_cameras(rig, plan, 1, 0.003, np.radians(0.1), st, n_positions=positions)
+    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    x, y, z = s.camera.T_world_cam.xyz
+    print(f"suggest cameras:1 on the GT room without cam1, {grid.n_cells * grid.n_headings} poses, "
+          f"{s.n_candidates} candidates: wall {wall:.1f} s, CPU {cpu:.1f} s; camera at ({x:.2f}, {y:.2f}, {z:.2f}) m, "
+          f"share meeting 3 mm / 0.1 deg {100 * s.share_before:.1f} % -> {100 * s.share_after:.1f} %")
+
+
 def figures(folder: Path) -> None:
     from gtrig.io.atomic import atomic_write_bytes
     from gtrig.plan import plots
@@ -108,9 +132,13 @@ def main() -> None:
     ap.add_argument("--grid-m", type=float, default=0.05)
     ap.add_argument("--headings", type=int, default=16)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--suggest", type=int, default=0, help="time a camera suggestion over this many positions "
+                    "along the GT room's outline (2 candidates each) instead")
     ap.add_argument("--figures", type=Path, default=None, help="write the GT room's maps here (and skip the speed)")
     a = ap.parse_args()
-    if a.figures is not None:
+    if a.suggest:
+        suggestion(a.grid_m, a.headings, a.suggest)
+    elif a.figures is not None:
         figures(a.figures)
     else:
         speed(a.grid_m, a.headings, a.workers)
