@@ -38,6 +38,7 @@ _SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("sync", "sync", "command"),
     ("gps", "gps", "command"),
     ("scanmatch", "scanmatch", "group"),
+    ("plan", "plan", "command"),
 )
 
 

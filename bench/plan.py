@@ -1,0 +1,148 @@
+"""Planning benchmark: the speed of ``gtrig plan`` on a 10 m x 10 m room with 8 cameras and 4 scanners
+(5 cm grid, 16 headings), beside its peer, GTvision's own fit of one pose on synthetic corners; and the
+GT room's maps for docs/plan.md.
+
+The speed is wall-clock and CPU time of :func:`gtrig.plan.predict.predict_plan` alone; the peer ratio is
+the plan's CPU time per pose over the estimator's (``estimate_frame``) per pose, measured in the same run.
+
+    python bench/plan.py [--grid-m 0.05] [--headings 16] [--workers 1] [--figures docs/figures]
+    python bench/plan.py --suggest 25 --grid-m 0.1 --headings 16
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gtrig import geometry as geo
+from gtrig.rig.models import Pose, Rig
+from gtrig.sim.gtroom import VALIDATION_POSES, make_scene, room_walls
+
+
+def ten_metre_room() -> Rig:
+    """The GT room's rig with 8 cameras on a ring 4.5 m out from the centre of a 10 m square, 3 m high,
+    each aimed 2 m past the centre's near side, and its 4 scanners moved to the square's corners."""
+    rig = make_scene(0).rig_nominal
+    cams = []
+    for i in range(8):
+        a = 2 * np.pi * i / 8
+        eye = np.array([5 + 4.5 * np.cos(a), 5 + 4.5 * np.sin(a), 3.0])
+        T = geo.look_at(eye, np.array([5 + 1.0 * np.cos(a), 5 + 1.0 * np.sin(a), 0.0]))
+        cams.append(rig.cameras[0].model_copy(update={"name": f"cam{i}", "T_world_cam": Pose.from_matrix(T)}))
+    scans = []
+    for i, (x, y) in enumerate(((0.2, 0.2), (9.8, 0.2), (9.8, 9.8), (0.2, 9.8))):
+        yaw = np.degrees(np.arctan2(5 - y, 5 - x))
+        scans.append(rig.laser_scanners[i].model_copy(update={
+            "T_world_scanner": Pose(xyz=(x, y, 0.25), rpy_deg=(0.0, 0.0, float(yaw)))}))
+    return rig.model_copy(update={"cameras": tuple(cams), "laser_scanners": tuple(scans)})
+
+
+def peer_seconds_per_pose(n: int = 26) -> float:
+    """CPU seconds of GTvision's fit of one pose (synthetic corners of the GT room's validation poses)."""
+    from gtrig.vision.estimate import estimate_frame
+    from gtrig.vision.observations import VisionModel
+    from gtrig.vision.synthetic import synthetic_observations
+
+    rig = make_scene(0).rig_true
+    model = VisionModel.from_rig(rig)
+    rng = np.random.default_rng(0)
+    obs = [synthetic_observations(rig, geo.se2_to_T(*p), 0.0, rng) for p in VALIDATION_POSES[:n]]
+    c = time.process_time()
+    for o in obs:
+        estimate_frame(model, o)
+    return (time.process_time() - c) / len(obs)
+
+
+def speed(grid_m: float, headings: int, workers: int) -> None:
+    from gtrig.plan.grid import area_grid
+    from gtrig.plan.predict import predict_plan
+
+    rig = ten_metre_room()
+    grid = area_grid(np.array([[0, 0], [10, 0], [10, 10], [0, 10.0]]), grid_m, headings)
+    peer = peer_seconds_per_pose()
+    t, c = time.perf_counter(), time.process_time()
+    plan = predict_plan(rig, grid, workers=workers)
+    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    n = grid.n_cells * grid.n_headings
+    print(f"10 m x 10 m, {grid_m:g} m grid, {headings} headings: {n} poses, 8 cameras, 4 scanners")
+    print(f"plan ({workers} worker(s)): wall {wall:.1f} s, CPU of this process {cpu:.1f} s "
+          f"({1e6 * cpu / n:.1f} us CPU per pose); vision covers "
+          f"{100 * np.isfinite(plan.sigma_xy_m('vision')).mean():.1f} %, laser "
+          f"{100 * np.isfinite(plan.sigma_xy_m('laser')).mean():.1f} %")
+    print(f"peer: GTvision's fit of one pose {1e3 * peer:.2f} ms CPU; plan per pose / fit per pose = "
+          f"{cpu / n / peer:.4f}")
+
+
+def suggestion(grid_m: float, headings: int, positions: int) -> None:
+    """Time of ``--suggest cameras:1`` on the GT room with one camera removed (2 aims per position)."""
+    from gtrig.plan.grid import area_grid
+    from gtrig.plan.predict import PlanSettings, predict_plan
+    from gtrig.plan.suggest import suggest_cameras
+    from gtrig.plan.vision import VisionPlanSettings
+    from gtrig.vision.covariance import RigUncertainty
+
+    full = make_scene(0).rig_nominal
+    rig = full.model_copy(update={"cameras": tuple(c for i, c in enumerate(full.cameras) if i != 1)})
+    grid = area_grid(room_walls()[:, 0], grid_m, headings)
+    st = PlanSettings(vision=VisionPlanSettings(
+        rig_uncertainty=RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))))
+    plan = predict_plan(rig, grid, st)
+    t, c = time.perf_counter(), time.process_time()
+    [s] = suggest_cameras(rig, plan, 1, 0.003, np.radians(0.1), st, n_positions=positions)
+    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    x, y, z = s.camera.T_world_cam.xyz
+    print(f"suggest cameras:1 on the GT room without cam1, {grid.n_cells * grid.n_headings} poses, "
+          f"{s.n_candidates} candidates: wall {wall:.1f} s, CPU {cpu:.1f} s; camera at ({x:.2f}, {y:.2f}, {z:.2f}) m, "
+          f"share meeting 3 mm / 0.1 deg {100 * s.share_before:.1f} % -> {100 * s.share_after:.1f} %")
+
+
+def figures(folder: Path) -> None:
+    from gtrig.io.atomic import atomic_write_bytes
+    from gtrig.plan import plots
+    from gtrig.plan.grid import area_grid
+    from gtrig.plan.maps import cell_maps, summarize_target
+    from gtrig.plan.predict import PlanSettings, predict_plan
+    from gtrig.plan.report import summary_lines
+    from gtrig.plan.vision import VisionPlanSettings
+    from gtrig.vision.covariance import RigUncertainty
+
+    rig = make_scene(0).rig_nominal
+    grid = area_grid(room_walls()[:, 0], 0.1, 16)
+    ru = RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))  # gtrig plan's defaults
+    t = time.perf_counter()
+    plan = predict_plan(rig, grid, PlanSettings(vision=VisionPlanSettings(rig_uncertainty=ru)))
+    el = time.perf_counter() - t
+    maps = cell_maps(plan)
+    s = summarize_target(plan, 0.001, np.radians(0.05))
+    for line in summary_lines(plan, maps, s, el):
+        print(line)
+    folder.mkdir(parents=True, exist_ok=True)
+    for src in ("fused", "vision", "laser"):
+        png = plots.sigma_maps(plan, maps, src, 0.001, np.radians(0.05))
+        atomic_write_bytes(folder / f"plan_gtroom_{src}.png", png)
+    atomic_write_bytes(folder / "plan_gtroom_coverage.png", plots.coverage_maps(plan, maps))
+    atomic_write_bytes(folder / "plan_gtroom_target.png", plots.target_map(plan, s))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--grid-m", type=float, default=0.05)
+    ap.add_argument("--headings", type=int, default=16)
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--suggest", type=int, default=0, help="time a camera suggestion over this many positions "
+                    "along the GT room's outline (2 candidates each) instead")
+    ap.add_argument("--figures", type=Path, default=None, help="write the GT room's maps here (and skip the speed)")
+    a = ap.parse_args()
+    if a.suggest:
+        suggestion(a.grid_m, a.headings, a.suggest)
+    elif a.figures is not None:
+        figures(a.figures)
+    else:
+        speed(a.grid_m, a.headings, a.workers)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,139 @@
+"""The plan: GTvision's, GTlaser's and the fused pose covariance at every pose of a grid or path.
+
+The fused covariance is the inverse of the sum of the two sources' planar informations (x, y, yaw),
+as fusion combines independent measurements of one instant; where only one source covers a pose it
+is that source's. Poses are processed in chunks so that memory stays bounded.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gtrig.errors import InputError
+from gtrig.plan.grid import PlanGrid
+from gtrig.plan.laser import LaserPlanSettings, predict_laser
+from gtrig.plan.vision import VisionPlanSettings, predict_vision
+from gtrig.rig.models import Rig
+from gtrig.vision.observations import VisionModel
+
+log = logging.getLogger(__name__)
+
+SOURCES = ("vision", "laser", "fused")
+
+
+@dataclass(frozen=True)
+class PlanSettings:
+    """Noise models of both sources and the chunk size (poses per chunk)."""
+
+    vision: VisionPlanSettings = field(default_factory=VisionPlanSettings)
+    laser: LaserPlanSettings = field(default_factory=LaserPlanSettings)
+    chunk_poses: int = 2048
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """The prediction at K poses (``grid.poses_xytheta()``, cell-major).
+
+    Attributes
+    ----------
+    grid : where the poses are.
+    camera_names, scanner_names : the rig's, in its order.
+    cov : {"vision" | "laser" | "fused": (K, 3, 3)} covariance of x, y (m) and yaw (rad), world frame;
+        nan where the source does not cover the pose.
+    views : (K, n_cameras) markers each camera sees whole.
+    side_px : (K, n_cameras) smallest marker side each camera sees, pixels (0: none).
+    beams : (K, n_scanners) beams each scanner puts on the hull.
+    sides : (K, n_scanners) hull sides each scanner sees with enough beams for the ICP.
+    """
+
+    grid: PlanGrid
+    camera_names: tuple[str, ...]
+    scanner_names: tuple[str, ...]
+    cov: dict[str, np.ndarray]
+    views: np.ndarray
+    side_px: np.ndarray
+    beams: np.ndarray
+    sides: np.ndarray
+
+    @property
+    def poses_xytheta(self) -> np.ndarray:
+        return self.grid.poses_xytheta()
+
+    def sigma_xy_m(self, source: str) -> np.ndarray:
+        """(K,) the position's largest standard deviation (sqrt of the largest eigenvalue), m; nan: uncovered."""
+        C = self.cov[source][:, :2, :2]
+        ok = np.all(np.isfinite(C), axis=(1, 2))
+        out = np.full(C.shape[0], np.nan)
+        if ok.any():
+            out[ok] = np.sqrt(np.maximum(np.linalg.eigvalsh(C[ok])[:, -1], 0.0))
+        return out
+
+    def sigma_yaw_rad(self, source: str) -> np.ndarray:
+        """(K,) the yaw's standard deviation, rad; nan: uncovered."""
+        return np.sqrt(self.cov[source][:, 2, 2])
+
+
+def fuse_information(covs: list[np.ndarray]) -> np.ndarray:
+    """Covariance (K, 3, 3) of independent estimates (each (K, 3, 3), nan where absent): the inverse of
+    the sum of their informations; nan where none is present."""
+    K = covs[0].shape[0]
+    info = np.zeros((K, 3, 3))
+    have = np.zeros(K, dtype=bool)
+    for C in covs:
+        ok = np.all(np.isfinite(C), axis=(1, 2))
+        if ok.any():
+            info[ok] += np.linalg.inv(C[ok])
+        have |= ok
+    out = np.full((K, 3, 3), np.nan)
+    if have.any():
+        out[have] = np.linalg.inv(info[have])
+    return out
+
+
+def _predict_block(rig: Rig, poses: np.ndarray, settings: PlanSettings
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Both sources at poses (K, 3), chunk by chunk: vision and laser covariances (K, 3, 3), views,
+    smallest sides, beams and sides per sensor."""
+    K = poses.shape[0]
+    n_c, n_s = len(rig.cameras), len(rig.laser_scanners)
+    cov_v, cov_l = np.full((K, 3, 3), np.nan), np.full((K, 3, 3), np.nan)
+    views, side_px = np.zeros((K, n_c), dtype=np.int16), np.zeros((K, n_c), dtype=np.float32)
+    beams, sides = np.zeros((K, n_s), dtype=np.int32), np.zeros((K, n_s), dtype=np.int8)
+    model = VisionModel.from_rig(rig) if rig.cameras and rig.robot.markers else None
+    step = max(1, int(settings.chunk_poses))
+    for a in range(0, K, step):
+        b = min(K, a + step)
+        if model is not None:
+            pv = predict_vision(rig, poses[a:b], settings.vision, model)
+            cov_v[a:b], views[a:b], side_px[a:b] = pv.cov_xytheta, pv.views, pv.side_px
+        if n_s:
+            pl = predict_laser(rig, poses[a:b], settings.laser)
+            cov_l[a:b], beams[a:b], sides[a:b] = pl.cov_xytheta, pl.beams, pl.sides
+    return cov_v, cov_l, views, side_px, beams, sides
+
+
+def predict_plan(rig: Rig, grid: PlanGrid, settings: PlanSettings = PlanSettings(), workers: int = 1) -> PlanResult:
+    """GTvision, GTlaser and fusion at every pose of ``grid`` for the planned ``rig`` (module docstring),
+    in ``workers`` processes."""
+    if not rig.cameras and not rig.laser_scanners:
+        raise InputError("the rig has neither cameras nor fixed laser scanners: nothing to plan")
+    poses = grid.poses_xytheta()
+    K = poses.shape[0]
+    if workers <= 1 or K < 4 * settings.chunk_poses:
+        parts = [_predict_block(rig, poses, settings)]
+    else:
+        from gtrig.parallel import process_pool
+
+        edges = np.linspace(0, K, 4 * workers + 1).astype(int)
+        with process_pool(workers) as ex:
+            futures = [ex.submit(_predict_block, rig, poses[a:b], settings)
+                       for a, b in zip(edges[:-1], edges[1:], strict=True)]
+            parts = [f.result() for f in futures]
+    cov_v, cov_l, views, side_px, beams, sides = (np.concatenate(x) for x in zip(*parts, strict=True))
+    fused = fuse_information([cov_v, cov_l])
+    log.info("plan: %d poses (%d cells x %d headings)", K, grid.n_cells, grid.n_headings)
+    return PlanResult(grid, tuple(c.name for c in rig.cameras), tuple(s.name for s in rig.laser_scanners),
+                      {"vision": cov_v, "laser": cov_l, "fused": fused}, views, side_px, beams, sides)

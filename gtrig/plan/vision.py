@@ -1,0 +1,264 @@
+"""GTvision's predicted pose covariance at many poses: the estimator's information, without images.
+
+At a pose, GTvision's fit (:func:`gtrig.vision.refine.refine_pose`) minimises the whitened corner
+residuals over the robot pose ``xi = (dt, dphi)`` together with a correction of every camera and marker
+in view (the rig's uncertainty, Gaussian priors of :class:`gtrig.vision.covariance.RigUncertainty`),
+plus the floor prior in planar mode; its covariance is the pose block of the inverse normal matrix.
+Here the same normal matrix is built from the noise-free corners of the markers seen whole
+(:mod:`gtrig.plan.visibility`), with the estimator's own Jacobians
+(:func:`gtrig.vision.projection.project_pose`, :func:`~gtrig.vision.projection.camera_pose_jacobian`,
+:func:`~gtrig.vision.projection.lens_jacobian`) and priors
+(:meth:`~gtrig.vision.covariance.RigUncertainty.sqrt_information`,
+:func:`gtrig.vision.refine.prior_residuals`).
+
+To do so for every pose at once, each corner is projected with its robot pose moved into its camera:
+the robot at ``(R, t)`` seen by a camera ``T_cam_world`` is the robot at ``(I, 0)`` with the corner at
+``R p`` seen by the camera ``T_cam_world`` translated by ``t``, which the projection functions accept
+corner by corner. The camera nuisances are eliminated camera by camera (Schur complement: each
+camera's correction touches only its own corners), leaving the pose and the markers' corrections,
+whose normal matrix is inverted per pose.
+
+Corner noise. The detector's corner covariance is not known before there are images; the model is
+the one GTvision's synthetic corners are drawn with (:class:`gtrig.vision.synthetic.CornerNoise`:
+``sigma_px`` at ``ref_side_px``, growing as the square root of ``ref_side_px / side``, anisotropic by
+``anisotropy`` at a random angle), plus the estimator's floor (``VisionOptions.corner_floor_px``).
+A random orientation of the anisotropy is averaged over in the information: each axis gets the mean
+of the two principal informations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gtrig.plan.visibility import MARGIN_PX, MIN_SIDE_PX, camera_sight
+from gtrig.rig.models import Rig
+from gtrig.vision.covariance import PLANAR_INDEX, UNCALIBRATED_MARKERS, RigUncertainty
+from gtrig.vision.estimate import VisionOptions
+from gtrig.vision.observations import CameraGeometry, StackedCorners, VisionModel
+from gtrig.vision.projection import camera_pose_jacobian, lens_jacobian, project_pose, skew
+from gtrig.vision.refine import PlanarPrior, prior_residuals
+from gtrig.vision.synthetic import CornerNoise
+
+
+@dataclass(frozen=True)
+class VisionPlanSettings:
+    """The noise models of the prediction.
+
+    Attributes
+    ----------
+    corner_noise : the detector's corner noise as a function of the marker's size in the image.
+    corner_floor_px : isotropic sigma added to it (GTvision's default floor).
+    rig_uncertainty : the cameras' and markers' pose sigmas (GTvision's default: calibrated cameras,
+        hand-measured markers); the rig's own ``pose_cov`` entries override them.
+    prior : the floor prior (GTvision's planar mode).
+    margin_px, min_side_px : a marker closer to the image border or smaller is not seen.
+    """
+
+    corner_noise: CornerNoise = field(default_factory=CornerNoise)
+    corner_floor_px: float = VisionOptions().corner_floor_px
+    rig_uncertainty: RigUncertainty = UNCALIBRATED_MARKERS
+    prior: PlanarPrior = field(default_factory=PlanarPrior)
+    margin_px: float = MARGIN_PX
+    min_side_px: float = MIN_SIDE_PX
+
+
+@dataclass(frozen=True)
+class VisionPrediction:
+    """GTvision at K poses.
+
+    Attributes
+    ----------
+    cov_xytheta : (K, 3, 3) predicted covariance of x, y (m) and yaw (rad); nan where no marker is seen.
+    cov_6x6 : (K, 6, 6) the full one over (dt, dphi), world axes (GTvision's ``cov_6x6``).
+    views : (K, n_cameras) markers each camera sees whole.
+    side_px : (K, n_cameras) smallest marker side each camera sees, pixels (0: none).
+    """
+
+    cov_xytheta: np.ndarray
+    cov_6x6: np.ndarray
+    views: np.ndarray
+    side_px: np.ndarray
+
+
+def corner_information(side_px: np.ndarray, noise: CornerNoise, floor_px: float) -> np.ndarray:
+    """Information (1/px^2) of one corner coordinate of a marker whose side is ``side_px`` in the image."""
+    s2 = noise.sigma_px**2 * np.maximum(1.0, noise.ref_side_px / np.maximum(side_px, 1e-6))
+    a = noise.anisotropy
+    f2 = floor_px**2
+    return 0.5 * (1.0 / (s2 * a + f2) + 1.0 / (s2 / a + f2))
+
+
+@dataclass(frozen=True)
+class _CameraViews:
+    """The views of one camera over a chunk of poses: pose index (V,), marker slot (V,) (-1: no nuisance),
+    marker ID (V,), corners (V, 4, 2) px, side (V,) px."""
+
+    pose: np.ndarray
+    slot: np.ndarray
+    marker: np.ndarray
+    uv: np.ndarray
+    side_px: np.ndarray
+
+
+def _stack(cam: CameraGeometry, model: VisionModel, cv: _CameraViews, poses: np.ndarray,
+           info: np.ndarray) -> tuple[StackedCorners, np.ndarray]:
+    """The views' corners as :class:`StackedCorners` with each robot pose moved into its camera (module
+    docstring), and the rotations (N, 3, 3) of the robot poses, corner by corner."""
+    n = 4 * cv.pose.shape[0]
+    k = np.repeat(cv.pose, 4)
+    th = poses[k, 2]
+    c, s = np.cos(th), np.sin(th)
+    Rk = np.zeros((n, 3, 3))
+    Rk[:, 0, 0], Rk[:, 0, 1], Rk[:, 1, 0], Rk[:, 1, 1], Rk[:, 2, 2] = c, -s, s, c, 1.0
+    t = np.column_stack([poses[k, :2], np.zeros(n)])
+    p_robot = np.concatenate([model.corners_robot[int(m)] for m in cv.marker]) if n else np.zeros((0, 3))
+    R_cw, t_cw = cam.T_cam_world[:3, :3], cam.T_cam_world[:3, 3]
+    L = np.sqrt(info)[:, None, None] * np.eye(2)
+    K = cam.K
+    sc = StackedCorners(
+        p_robot=np.einsum("nij,nj->ni", Rk, p_robot), uv=cv.uv.reshape(-1, 2), cov=np.linalg.inv(L @ L),
+        sqrt_info=L, R_cw=np.broadcast_to(R_cw, (n, 3, 3)), t_cw=t_cw + t @ R_cw.T,
+        cam_centre_w=cam.T_world_cam[:3, 3] - t, fx=np.full(n, K[0, 0]), fy=np.full(n, K[1, 1]),
+        skew=np.full(n, K[0, 1]), cx=np.full(n, K[0, 2]), cy=np.full(n, K[1, 2]),
+        dist=np.broadcast_to(cam.dist, (n, 8)), view=np.repeat(np.arange(cv.pose.shape[0]), 4),
+        cam=np.zeros(n, dtype=int), marker=np.repeat(cv.marker, 4), camera_names=(cam.name,))
+    return sc, Rk
+
+
+def marker_jacobian(J_pose: np.ndarray, R_world_robot: np.ndarray, p_robot: np.ndarray,
+                    centre_robot: np.ndarray) -> np.ndarray:
+    """d uv / d (marker perturbation) (N, 2, 6) as :func:`gtrig.vision.projection.marker_pose_jacobian`
+    (the marker moved rigidly about its centre, robot axes), from the pose Jacobian ``J_pose`` (N, 2, 6),
+    each corner's robot rotation (N, 3, 3), its robot-frame point (N, 3) and its marker's centre (N, 3)."""
+    d = J_pose[:, :, :3] @ R_world_robot
+    return np.concatenate([d, -d @ skew(p_robot - centre_robot)], axis=2)
+
+
+def _block_entries(rows: np.ndarray, r0: np.ndarray, c0: np.ndarray, B: np.ndarray, D: int
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Flat indices into (K, D, D) and values for ``H[rows[v], r0[v]:r0[v]+b, c0[v]:c0[v]+b'] += B[v]``."""
+    _, br, bc = B.shape
+    ri = r0[:, None, None] + np.arange(br)[None, :, None]
+    ci = c0[:, None, None] + np.arange(bc)[None, None, :]
+    return ((rows[:, None, None] * D + ri) * D + ci).ravel(), B.ravel()
+
+
+def _camera_normal_equations(H: np.ndarray, entries: list[tuple[np.ndarray, np.ndarray]], cam: CameraGeometry,
+                             model: VisionModel, cv: _CameraViews, poses: np.ndarray, settings: VisionPlanSettings,
+                             rig_u: RigUncertainty) -> None:
+    """One camera's corners in the normal matrices ``H`` (K, D, D) over (pose, marker corrections), its
+    own correction eliminated: the elimination is subtracted from ``H`` at once, the corners' own blocks
+    are appended to ``entries`` (added by the caller in one pass). ``cv.pose`` indexes ``H``'s rows."""
+    V = cv.pose.shape[0]
+    D = H.shape[1]
+    info = np.repeat(corner_information(cv.side_px, settings.corner_noise, settings.corner_floor_px), 4)
+    sc, Rk = _stack(cam, model, cv, poses, info)
+    eye = np.eye(4)
+    _, _, Jp = project_pose(sc, eye, True)
+    assert Jp is not None
+    w = np.sqrt(info)[:, None, None]
+    p_r = np.concatenate([model.corners_robot[int(m)] for m in cv.marker])
+    ctr = np.repeat(p_r.reshape(V, 4, 3).mean(axis=1), 4, axis=0)
+    Jm = w * marker_jacobian(Jp, Rk, p_r, ctr)
+    Jp = w * Jp
+    S_c = rig_u.sqrt_information("camera", cam.name)
+    Jc = None
+    if S_c is not None:
+        Jc = camera_pose_jacobian(sc, eye)
+        if S_c.shape[0] > 6:
+            Jc = np.concatenate([Jc, lens_jacobian(sc, eye, S_c.shape[0] - 6)], axis=2)
+        Jc = w * Jc
+
+    def view_sum(A: np.ndarray, B: np.ndarray) -> np.ndarray:  # (V, a, b): sum over a view's 8 rows
+        return np.einsum("vra,vrb->vab", A.reshape(V, 8, -1), B.reshape(V, 8, -1))
+
+    has = cv.slot >= 0
+    m0 = 6 + 6 * cv.slot
+    zero = np.zeros(V, dtype=int)
+    entries.append(_block_entries(cv.pose, zero, zero, view_sum(Jp, Jp), D))
+    if has.any():
+        Jm_v, Jp_v = Jm.reshape(V, 8, 6)[has], Jp.reshape(V, 8, 6)[has]
+        pm = np.einsum("vra,vrb->vab", Jp_v, Jm_v)
+        entries.append(_block_entries(cv.pose[has], zero[has], m0[has], pm, D))
+        entries.append(_block_entries(cv.pose[has], m0[has], zero[has], np.swapaxes(pm, 1, 2), D))
+        entries.append(_block_entries(cv.pose[has], m0[has], m0[has], np.einsum("vra,vrb->vab", Jm_v, Jm_v), D))
+    if Jc is None or S_c is None:
+        return
+    # eliminate the camera's correction: H_xx -= H_xc H_cc^-1 H_cx, per pose seen by this camera
+    kc = S_c.shape[0]
+    g_pose, g = np.unique(cv.pose, return_inverse=True)
+    G = g_pose.shape[0]
+    Hcc = np.broadcast_to(S_c.T @ S_c, (G, kc, kc)).copy()
+    np.add.at(Hcc, g, view_sum(Jc, Jc))
+    Hxc = np.zeros((G, D, kc))
+    np.add.at(Hxc[:, :6, :], g, view_sum(Jp, Jc))
+    if has.any():
+        mc = np.einsum("vra,vrb->vab", Jm.reshape(V, 8, 6)[has], Jc.reshape(V, 8, kc)[has])
+        Hxc[g[has][:, None], m0[has][:, None] + np.arange(6)[None, :], :] = mc
+    H[g_pose] -= Hxc @ np.linalg.solve(Hcc, np.swapaxes(Hxc, 1, 2))
+
+
+def _pose_covariance(H: np.ndarray) -> np.ndarray:
+    """The pose block (K, 6, 6) of ``inv(H)`` for normal matrices (K, D, D) over (pose, nuisances), by
+    eliminating the nuisances (Schur complement)."""
+    H = 0.5 * (H + np.swapaxes(H, 1, 2))
+    if H.shape[1] == 6:
+        return np.linalg.inv(H)
+    Hpp, Hpn, Hnn = H[:, :6, :6], H[:, :6, 6:], H[:, 6:, 6:]
+    return np.linalg.inv(Hpp - Hpn @ np.linalg.solve(Hnn, np.swapaxes(Hpn, 1, 2)))
+
+
+def predict_vision(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSettings = VisionPlanSettings(),
+                   model: VisionModel | None = None) -> VisionPrediction:
+    """GTvision's predicted covariance at planar poses (K, 3) on a flat floor (module docstring)."""
+    poses = np.asarray(poses_xytheta, dtype=float).reshape(-1, 3)
+    model = VisionModel.from_rig(rig) if model is None else model
+    rig_u = settings.rig_uncertainty.with_rig(rig)
+    mids = [m.id for m in rig.robot.markers]
+    corners = np.stack([model.corners_robot[m] for m in mids])
+    names = [c.name for c in rig.cameras]
+    K = poses.shape[0]
+    sights = [camera_sight(model.cameras[n], corners, poses, rig.robot.hull, settings.margin_px, settings.min_side_px)
+              for n in names]
+    views = np.stack([s.visible.sum(axis=1) for s in sights], axis=1) if names else np.zeros((K, 0), int)
+    side_min = np.stack([np.where(s.visible, s.side_px, np.inf).min(axis=1) for s in sights], axis=1) \
+        if names else np.zeros((K, 0))
+    side_min[~np.isfinite(side_min)] = 0.0
+    seen = views.sum(axis=1) > 0
+    cov6 = np.full((K, 6, 6), np.nan)
+    if seen.any():
+        cov6[seen] = _seen_covariance(rig, model, poses[seen], [(n, s.visible[seen], s.uv[seen], s.side_px[seen])
+                                                               for n, s in zip(names, sights, strict=True)],
+                                      mids, settings, rig_u)
+    i = np.array(PLANAR_INDEX)
+    return VisionPrediction(cov6[:, i[:, None], i[None, :]], cov6, views, side_min)
+
+
+def _seen_covariance(rig: Rig, model: VisionModel, poses: np.ndarray,
+                     sights: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], mids: list[int],
+                     settings: VisionPlanSettings, rig_u: RigUncertainty) -> np.ndarray:
+    """Pose covariances (K, 6, 6) at poses (K, 3) where at least one marker is seen; ``sights`` per camera:
+    name, visible (K, M), corners (K, M, 4, 2), sides (K, M)."""
+    S_m = {mid: rig_u.sqrt_information("marker", mid) for mid in mids}
+    slots = {mid: i for i, mid in enumerate(m for m in mids if S_m[m] is not None)}
+    K, D = poses.shape[0], 6 + 6 * len(slots)
+    H = np.zeros((K, D, D))
+    _, Jprior = prior_residuals(np.eye(4), settings.prior)
+    H[:, :6, :6] += Jprior.T @ Jprior
+    for mid, i in slots.items():
+        S = S_m[mid]
+        assert S is not None
+        H[:, 6 + 6 * i:12 + 6 * i, 6 + 6 * i:12 + 6 * i] += S.T @ S
+    entries: list[tuple[np.ndarray, np.ndarray]] = []
+    slot_of = np.array([slots.get(m, -1) for m in mids])
+    for name, vis, uv, side in sights:
+        k, m = np.nonzero(vis)
+        if k.size == 0:
+            continue
+        cv = _CameraViews(k, slot_of[m], np.asarray(mids)[m], uv[k, m], side[k, m])
+        _camera_normal_equations(H, entries, model.cameras[name], model, cv, poses, settings, rig_u)
+    idx = np.concatenate([e[0] for e in entries])
+    H += np.bincount(idx, np.concatenate([e[1] for e in entries]), minlength=H.size).reshape(H.shape)
+    return _pose_covariance(H)

@@ -1,0 +1,74 @@
+"""GTvision's predicted covariance against the estimator's on synthetic corners, and its pieces."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gtrig import geometry as geo
+from gtrig.plan.visibility import camera_sight
+from gtrig.plan.vision import VisionPlanSettings, marker_jacobian, predict_vision
+from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
+from gtrig.vision.covariance import UNCALIBRATED_MARKERS, RigUncertainty
+from gtrig.vision.estimate import VisionOptions, estimate_frame
+from gtrig.vision.observations import MarkerView, VisionModel, stack_corners
+from gtrig.vision.projection import marker_pose_jacobian, project_pose
+from gtrig.vision.synthetic import synthetic_observations, visible_views
+
+CALIBRATED = RigUncertainty(0.0005, math.radians(0.01), 0.0003, math.radians(0.05))
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return make_scene(0).rig_true
+
+
+@pytest.mark.parametrize("rig_u", [UNCALIBRATED_MARKERS, CALIBRATED], ids=["hand-measured", "calibrated"])
+def test_predicted_sigma_agrees_with_the_estimator(rig, rig_u):
+    poses = VALIDATION_POSES[::4]
+    pred = predict_vision(rig, poses, VisionPlanSettings(rig_uncertainty=rig_u))
+    model = VisionModel.from_rig(rig)
+    rng = np.random.default_rng(3)
+    ratios = []
+    for k, (x, y, th) in enumerate(poses):
+        obs = synthetic_observations(rig, geo.se2_to_T(x, y, th), 0.0, rng)
+        est = estimate_frame(model, obs, VisionOptions(rig_uncertainty=rig_u))
+        assert est.ok and est.cov_6x6 is not None
+        i = [0, 1, 5]
+        s_est = np.sqrt(np.diag(est.cov_6x6[np.ix_(i, i)]))
+        s_pred = np.sqrt(np.diag(pred.cov_xytheta[k]))
+        ratios.append(s_pred / s_est)
+    r = np.array(ratios)
+    assert np.all(np.abs(r - 1) < 0.2), r
+
+
+def test_visibility_matches_the_synthetic_views(rig):
+    rng = np.random.default_rng(0)
+    poses = np.column_stack([rng.uniform(-3, 3, 60), rng.uniform(-2, 6, 60), rng.uniform(-np.pi, np.pi, 60)])
+    poses = np.vstack([poses, VALIDATION_POSES])
+    model = VisionModel.from_rig(rig)
+    mids = [m.id for m in rig.robot.markers]
+    corners = np.stack([model.corners_robot[m] for m in mids])
+    sights = {c.name: camera_sight(model.cameras[c.name], corners, poses, rig.robot.hull) for c in rig.cameras}
+    n_seen = 0
+    for k, (x, y, th) in enumerate(poses):
+        ref = {(c, m) for c, m, _ in visible_views(rig, geo.se2_to_T(x, y, th))}
+        got = {(c, mids[j]) for c, s in sights.items() for j in np.flatnonzero(s.visible[k])}
+        assert got == ref
+        n_seen += len(ref)
+    assert n_seen > 50
+
+
+def test_marker_jacobian_is_the_estimators(rig):
+    model = VisionModel.from_rig(rig)
+    T = geo.se2_to_T(0.5, 2.0, 0.7)
+    views = [MarkerView(c, m, uv, np.tile(np.eye(2) * 0.01, (4, 1, 1))) for c, m, uv in visible_views(rig, T)]
+    sc = stack_corners(model, views)
+    ref = marker_pose_jacobian(sc, T)
+    _, _, J = project_pose(sc, T)
+    ctr = np.concatenate([np.repeat(sc.p_robot[sc.view == v].mean(axis=0)[None], 4, axis=0)
+                          for v in range(len(views))])
+    got = marker_jacobian(J, np.broadcast_to(T[:3, :3], (sc.p_robot.shape[0], 3, 3)), sc.p_robot, ctr)
+    assert np.allclose(got, ref, rtol=1e-9, atol=1e-6)
