@@ -147,7 +147,7 @@ def detect(
     debug_files: list[tuple[Path, bytes]] = []
     n_det = 0
     for f in track(files, "detecting", total=len(files)):
-        img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH)  # 16-bit kept: _to_gray scales it
+        img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH)  # 16-bit kept: to_gray scales it
         if img is None:
             raise FormatError(f"{f}: not a readable image")
         check_image_size(img, f)
@@ -160,10 +160,10 @@ def detect(
             detectors[t] = MarkerDetector(family, K, dist, dataclasses.replace(base, tone=t))
         dets = detectors[t].detect(img, trace)
         if debug is not None:
-            from gtrig.markers.detect import _to_gray
+            from gtrig.markers.detect import to_gray
             from gtrig.markers.detect.debug import debug_image
 
-            ok, buf = cv2.imencode(".png", debug_image(_to_gray(img), dets, trace or []))
+            ok, buf = cv2.imencode(".png", debug_image(to_gray(img), dets, trace or []))
             if ok:
                 debug_files.append((debug / f"{f.stem}.debug.png", buf.tobytes()))
         n_det += len(dets)

@@ -232,12 +232,12 @@ class MarkerDetector:
 
     def detect(self, image: NDArray[np.generic], trace: list[Rejection] | None = None) -> list[Detection]:
         """Detect and decode markers in a grey (H, W) or colour (H, W, 3 | 4) image of any depth
-        (:func:`_to_gray`). Images too small to hold a marker give no detections.
+        (:func:`to_gray`). Images too small to hold a marker give no detections.
 
         ``trace``, a list, receives a :class:`Rejection` for every peer candidate dropped on the way (what
         ``gtrig markers detect --debug DIR`` draws).
         """
-        gray = _to_gray(image)
+        gray = to_gray(image)
         if min(gray.shape) < 8:
             return []
         cands = find_peer_candidates(gray, self.spec.family, self.params.peers)
@@ -351,7 +351,7 @@ def _dedupe(dets: list[Detection], trace: list[Rejection] | None = None) -> list
     return [dets[i] for i in sorted(keep)]
 
 
-def _to_gray(image: NDArray[np.generic]) -> NDArray[np.uint8]:
+def to_gray(image: NDArray[np.generic]) -> NDArray[np.uint8]:
     """Any image OpenCV reads as the detector's 8-bit grey (H, W).
 
     Accepts (H, W), (H, W, 1), (H, W, 2) (grey + alpha), (H, W, 3) (BGR) and (H, W, 4) (BGRA) arrays
