@@ -1,4 +1,4 @@
-"""Camera calibration benchmark (issue 4): every acceptance figure, per seed.
+"""Camera calibration benchmark: every acceptance figure, per seed.
 
 For each seed, only the calibration part of a recording is simulated (the rigs, ``calib/`` and
 ``truth/boards.yaml``, as ``gtrig sim`` writes them; ``--views`` sweep views per camera and ``--pairs``

@@ -365,7 +365,7 @@ def part_seeds(root: Path) -> None:
             q = np.einsum("ni,nij,nj->n", e, np.linalg.inv(c), e)
             print(f"| {rec.name} | {name} | {p.mean():.3f} | {np.percentile(p, 95):.3f} | {p.max():.3f} | "
                   f"{np.degrees(np.abs(e[:, 2])).mean():.4f} | {q.mean() / 3:.3f} | {100 * np.mean(q <= 7.815):.1f} |")
-            # a source's mean world-frame error is what no weighting can average out (session 30: GTvision's
+            # a source's mean world-frame error is what no weighting can average out (GTvision's
             # -1.4, -0.9 mm from the detector's edge band, where the mean pos column looked unchanged)
             print(f"|  | {name}: mean error world x {e[:, 0].mean() * 1e3:+.3f}, y {e[:, 1].mean() * 1e3:+.3f} mm | "
                   "| | | | | |")

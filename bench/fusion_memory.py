@@ -1,4 +1,4 @@
-"""Peak memory of the two smoothings with odometry against the recording's length (issue 24).
+"""Peak memory of the two smoothings with odometry against the recording's length.
 
 The sync stage's joint camera fit smooths GTvision and GTlaser with odometry
 (:func:`gtrig.sync.joint_cameras.joint_reference`, 1 + C + 3 times a run), and the fusion stage

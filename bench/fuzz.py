@@ -1,4 +1,4 @@
-"""Fuzz run of every reader (issue 17): any bytes give a result or a GtrigError, never another exception,
+"""Fuzz run of every reader: any bytes give a result or a GtrigError, never another exception,
 a hang or an exhausted memory.
 
 Each reader of ``tests/io/fuzz_cases.py`` gets ``--n`` inputs, in process (no Hypothesis): three in four

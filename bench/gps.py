@@ -1,4 +1,4 @@
-"""RTK-GPS reader benchmark (issue 23): gtrig's reader against pynmea2 + pyproj on the same log.
+"""RTK-GPS reader benchmark: gtrig's reader against pynmea2 + pyproj on the same log.
 
 The logs: the three shared RAWSEEDS Bovisa logs with their prefixes stripped and full two-digit
 checksums restored (so pynmea2 verifies every checksum, as gtrig does), and one simulated outdoor

@@ -1,4 +1,4 @@
-"""RTK-GPS ground truth, measured (issue 23): the shared Bovisa logs and simulated outdoor runs.
+"""RTK-GPS ground truth, measured: the shared Bovisa logs and simulated outdoor runs.
 
 Real logs (``../shared/data/rawseeds/Bovisa_2008-*``): fix-type shares over time, fixes kept by the
 default filter (RTK fixed, sigmas < 0.2 m) and by the RAWSEEDS-like one (any fix, sigmas < 0.2 m),

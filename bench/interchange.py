@@ -1,4 +1,4 @@
-"""Interchange benchmark (issue 22): bag import throughput, and the same GT from a bag-imported
+"""Interchange benchmark: bag import throughput, and the same GT from a bag-imported
 recording.
 
 1. Throughput. A bag of ``--images`` 1024 x 768 mono8 ``sensor_msgs/Image`` and one of ``--scans``

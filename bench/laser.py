@@ -1,4 +1,4 @@
-"""GTlaser benchmark (issues 7, 19): localized share, errors and NEES against speed, with Open3D's ICP.
+"""GTlaser benchmark: localized share, errors and NEES against speed, with Open3D's ICP.
 
 For each scenario and seed: the simulated GT room (people walking, uneven floor, mixed pixels,
 reflectivity bias, scanner clock offsets of 2 ms), a background sequence, and the continuous run,
@@ -407,7 +407,7 @@ SCENARIOS = {
     # glossy dark and light fabrics, 3 cm between black and white: the sides' range bias estimated
     "agile-glossy-fabrics": ({"gown_reflectivity": (0.1, 0.9, 0.1, 0.9), "reflectivity_bias_m": 0.03},
                              {"profile": "agile", "speed_mps": 1.5}),
-    # the other simulator of issue 19: up to 0.9 m/s, 1 % dropouts, fabrics of different bias
+    # the other simulator: up to 0.9 m/s, 1 % dropouts, fabrics of different bias
     "like-issue-19": ({"gown_reflectivity": (0.1, 0.9, 0.1, 0.9), "reflectivity_bias_m": 0.03, "dropout_prob": 0.01},
                       {"profile": "agile", "speed_mps": 0.9}),
 }

@@ -1,4 +1,4 @@
-"""The marker detector on renders made apart from gtrig (issue 16): ``tests/markers/independent_render``
+"""The marker detector on renders made apart from gtrig: ``tests/markers/independent_render``
 imports only NumPy and OpenCV, and draws OpenCV's own markers (ArUco 4x4_50, 5x5_100, 6x6_250, AprilTag
 36h11) the way a camera sees a print: 3D pose up to 60 deg, a bowed print, paper grain, glare, a
 Gaussian, defocus-disk or motion point-spread function applied at 6x the resolution, vignetting,

@@ -1,4 +1,4 @@
-"""Whether two `gtrig run` output folders hold the same results (issue 15: a refactor changes no number).
+"""Whether two `gtrig run` output folders hold the same results (a refactor changes no number).
 
 Compares, between a reference folder (e.g. the pipeline's outputs at a branch point) and a new one: the
 bytes of the pose tracks' TUM files, the calibrated rig, the markers file and the survey's tables; the

@@ -1,4 +1,4 @@
-"""Scale benchmark (issue 24): GTvision over a long recording on the local process pool and on Dask.
+"""Scale benchmark: GTvision over a long recording on the local process pool and on Dask.
 
 A long run is made cheaply from a short one: each camera's images of the short run's ``run/`` are
 linked once and repeated through a ``timestamps.csv`` that goes on for ``--minutes`` (stamps of the

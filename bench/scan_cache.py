@@ -1,4 +1,4 @@
-"""The scan cache (issue 24): what parsing a laser log costs against reading its parsed ranges back.
+"""The scan cache: what parsing a laser log costs against reading its parsed ranges back.
 
 For each ``REC/run/lasers/*.csv``, in this process, CPU seconds (``time.process_time``, so a loaded
 machine changes them less than wall time) of:

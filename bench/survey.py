@@ -1,4 +1,4 @@
-"""Survey benchmark (issue 3): world points from the seeds' readings, from a network and jointly with the
+"""Survey benchmark: world points from the seeds' readings, from a network and jointly with the
 validation poses, side by side.
 
 Monte-Carlo over simulated surveys of one GT-room scene with its 26 validation stops: every trial redraws

@@ -13,7 +13,7 @@ Levels
     with a fully visible marker that were localized, the seeds' method on the same detections and on
     OpenCV's ArUco subpixel corners (as the seeds ran it), and
     the throughput (images of 1024 x 768 per second, reading, detection, noise calibration and
-    estimation included). This is the acceptance measurement of issue 6.
+    estimation included). This is the acceptance measurement.
 ``tracking``: one sequence of a full simulated recording (``--sequence``, default run) with the markers
     tracked from image to image (:mod:`gtrig.vision.track`) and with every image searched whole, in the same
     run: the whole GTvision stage's images per second (reading, detection, noise calibration, estimation;

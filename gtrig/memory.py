@@ -4,8 +4,8 @@ A long run (an hour of recording, gtrig.pipeline) allocates and frees hundreds o
 per stage. glibc's allocator keeps much of what is freed: arrays under 32 MB are served from the heap
 once a larger mmapped block was freed (its mmap threshold rises to that block's size), and a heap's
 free pages below its top go back to the system only through ``malloc_trim``. The process would then
-hold each stage's high-water mark into the next stages, though the live data is far smaller (issue 24:
-the client kept ~690 MB after GTlaser on an hour of recording).
+hold each stage's high-water mark into the next stages, though the live data is far smaller (the
+client kept ~690 MB after GTlaser on an hour of recording).
 
 :func:`release_free_memory` is called by the pipeline after each stage; it is a garbage collection
 alone off glibc.

@@ -1,7 +1,7 @@
 """Smoothing of pose sequences: a Rauch-Tung-Striebel smoother with a constant-velocity model.
 
 Core (no stage imports it from another stage): GTlaser smooths each hull track with it (journal paper,
-section 6; issue 7), and fusion or any source that measures poses with a covariance may use it.
+section 6), and fusion or any source that measures poses with a covariance may use it.
 Vectorised where the recursion allows (the gains of the backward pass at once); about 10^5 poses/s.
 """
 
@@ -97,7 +97,7 @@ def rts_smooth_varying(
     The forward filter keeps its state only at the start of each block of :data:`SMOOTH_BLOCK_FRAMES`
     frames; the backward pass runs it again over each block, from the last, from that state (the
     same operations, so the same bits): an hour-long track holds a block's predicted and filtered
-    states, not ~4 kB per frame of them (issue 24), for a second forward pass.
+    states, not ~4 kB per frame of them, for a second forward pass.
     """
     n = len(stamps_s)
     m = 3 * order

@@ -69,7 +69,7 @@ def interrupt(p: subprocess.Popen[str], ready: Callable[[], bool], sig: int, tim
         out, _ = p.communicate(timeout=120)
     except subprocess.TimeoutExpired:
         p.kill()
-        raise AssertionError(f"still running 120 s after {signal.Signals(sig).name}: a hang (open, issue 17)") from None
+        raise AssertionError(f"still running 120 s after {signal.Signals(sig).name}: a hang (open)") from None
     assert p.returncode in ({signal.SIGINT: 130, signal.SIGTERM: 128 + signal.SIGTERM}.get(sig, -sig),
                             -sig), (p.returncode, out)
     assert "Traceback" not in out, out

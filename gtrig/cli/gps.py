@@ -1,4 +1,4 @@
-"""``gtrig gps``: RTK-GPS ground truth from an NMEA, RAWSEEDS or RTKLIB log (issue 23, docs/gps.md)."""
+"""``gtrig gps``: RTK-GPS ground truth from an NMEA, RAWSEEDS or RTKLIB log (docs/gps.md)."""
 
 from __future__ import annotations
 

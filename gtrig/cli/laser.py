@@ -1,4 +1,4 @@
-"""``gtrig laser calibrate`` and ``gtrig laser track``: GTlaser (issue 7, docs/laser.md)."""
+"""``gtrig laser calibrate`` and ``gtrig laser track``: GTlaser (docs/laser.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``gtrig scanmatch pairs / validate / map / mounting``: onboard scan matching (issue 21, docs/scanmatch.md)."""
+"""``gtrig scanmatch pairs / validate / map / mounting``: onboard scan matching (docs/scanmatch.md)."""
 
 from __future__ import annotations
 

@@ -61,7 +61,7 @@ class FusionOptions:
     bridge_after_s : poses inside a gap between accepted fixes longer than this are BRIDGED.
     gate_prob : chi-square gate of each fix's innovation (probability of keeping a good fix).
     gate_own_cov : the gate tests each fix's innovation against the fix's own covariance plus the
-        prediction's (True), or against the covariance inflated for correlation (False; before session 27).
+        prediction's (True), or against the covariance inflated for correlation (False).
     huber_k : Huber threshold (sigmas) of the batch solve.
     innovation_window_s : the batch solve weighs each fix with its covariance times the mean normalised
         innovation squared per dof of its source's fixes within this window (the gate's, at least 1):

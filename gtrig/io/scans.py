@@ -171,7 +171,7 @@ def read_scans(
 @dataclass(frozen=True)
 class ScanRows:
     """Where each scan of a scan CSV is, to read the scans a few at a time (:func:`index_scans`): a
-    recording's hours of scans are never in memory at once (issue 24; 20 bytes per scan).
+    recording's hours of scans are never in memory at once (20 bytes per scan).
 
     Attributes
     ----------

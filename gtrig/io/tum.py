@@ -156,7 +156,7 @@ def _trajectory(p: Path, a: np.ndarray, stamps_ns: np.ndarray | None = None,
 
 
 #: rows per piece of a text written piece by piece: an hour's track (~270,000 rows) as one string, its rows'
-#: strings and its encoded bytes held at once took ~130 MB of a client's peak (issue 24)
+#: strings and its encoded bytes held at once took ~130 MB of a client's peak
 ROWS_PER_PIECE = 8192
 
 

@@ -96,7 +96,7 @@ class FramedPoints:
 
 class FrameSource(Protocol):
     """The frames of a sequence, read a time window at a time: :class:`FramedPoints` (all in memory)
-    or :class:`gtrig.laser.recording.LoggedFrames` (from the scan logs on disk, issue 24)."""
+    or :class:`gtrig.laser.recording.LoggedFrames` (from the scan logs on disk)."""
 
     @property
     def frame_stamps_s(self) -> np.ndarray: ...  # (F,) seconds

@@ -190,7 +190,7 @@ def read_calibration_cov(path: str | os.PathLike[str], rig: Rig) -> np.ndarray:
 @dataclass(frozen=True)
 class LoggedFrames:
     """The frames of a sequence read from its scan logs on disk a time window at a time
-    (:class:`gtrig.laser.fuse.FrameSource`; issue 24): in memory only the scans' stamps and places
+    (:class:`gtrig.laser.fuse.FrameSource`): in memory only the scans' stamps and places
     (:class:`gtrig.io.scans.ScanRows`) and which frame each joins (:class:`gtrig.laser.fuse.FrameLayout`),
     about 40 bytes per scan; a window's ranges are read, masked and turned into world points when it
     is asked for, by the client or by the worker a part of it is sent to (the recording on a path both

@@ -1,6 +1,6 @@
 """GTlaser tracking: background subtraction, fusion, hull ICP, (re)acquisition, smoothing.
 
-The loop (journal paper, section 6, with the additions of issue 7):
+The loop (journal paper, section 6, with the additions):
 
 1. Foreground returns of every scan (:mod:`gtrig.laser.foreground`), all scanners fused into world
    points grouped by frame (:mod:`gtrig.laser.fuse`), in one vectorised pass.
@@ -9,7 +9,7 @@ The loop (journal paper, section 6, with the additions of issue 7):
    reach, points are compensated for the motion within the frame (the scanners are not synchronised,
    each beam has its firing time), gated near the predicted outline, and the hull is fitted by
    point-to-line ICP (:func:`gtrig.laser.hull_icp.fit_hull_batch`, all frames of a chunk at once). A
-   fit is accepted by its Mahalanobis distance from the prediction (issue 19: a fixed 6 cm gate and a
+   fit is accepted by its Mahalanobis distance from the prediction (a fixed 6 cm gate and a
    zero velocity after each acquisition lost robots faster than about 0.5 m/s).
 3. A frame whose fit is degenerate is flagged (``DEGENERATE``); after ``lost_after`` failing frames in a
    row, or a gap in time, the track is lost and the global search (:mod:`gtrig.laser.acquire`) runs on
@@ -401,7 +401,7 @@ def _refine_with_side_bias(
     symmetry) are left out.
 
     The points are made, corrected and fitted a time window of :data:`COVARIANCE_WINDOW_FRAMES` frames
-    at a time (issue 24: the whole run's at once peaked at ~35 kB per frame); between windows only
+    at a time (the whole run's at once peaked at ~35 kB per frame); between windows only
     per-frame arrays are kept (poses, covariances, each frame's reduced normal equations). Each pass's
     correction is made again from the poses and biases of the passes before it, and the windows' fits
     iterate as one fit of every frame would (:func:`_fit_windows`): the same bits as one pass over the
@@ -550,7 +550,7 @@ COVARIANCE_WINDOW_FRAMES = 256
 def _window_covariances(part: FrameSource, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
                         scanner_cov: np.ndarray | None, st: TrackSettings
                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
-    # (on a worker: a source read from the logs on disk makes its points here, issue 24)
+    # (on a worker: a source read from the logs on disk makes its points here)
     fp = part.window(0, part.n_frames, scans=False)
     bias = None if cov_bias is None else surface_bias_covariance(fp, model, raw, cov_bias, st.icp)
     cal = None if scanner_cov is None else calibration_covariance(fp, model, raw, scanner_cov, st.icp)
@@ -628,7 +628,7 @@ def track_frames(
         Foreground points of the sequence, in the world, by frame: all of them
         (:func:`gtrig.laser.fuse.frame_points`) or a source that reads them a time window of
         :data:`COVARIANCE_WINDOW_FRAMES` frames at a time (:class:`gtrig.laser.recording.LoggedFrames`:
-        then no pass holds more than a window's points, issue 24).
+        then no pass holds more than a window's points).
     model
         The hull outline (:meth:`HullModel.from_hull`).
     settings
@@ -841,7 +841,7 @@ def track_frames(
         # points corrected and de-skewed with the smoothed velocity, and smoothed again
         bias = _refine_with_side_bias(fp, model, st, stamps, xytheta, track_id, status, raw, raw_cov)
         # its windows' points and fits, freed, would otherwise stay in the heap under what the later
-        # passes allocate (an hour's log: ~200 MB more at the stage's peak, issue 24)
+        # passes allocate (an hour's log: ~200 MB more at the stage's peak)
         release_free_memory()
         xytheta, cov = _smooth_tracks(stamps, raw, raw_cov, status, track_id, len(tracks), st)
     cov_bias, cov_cal = frame_covariances(fp, model, raw, bias.cov if np.any(bias.cov != 0) else None, scanner_cov,

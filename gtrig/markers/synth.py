@@ -141,7 +141,7 @@ def render(
 ) -> tuple[NDArray[np.uint8], list[SynthMarker]]:
     """Render markers into an 8-bit grayscale image (or, with ``bayer``, a BGR image).
 
-    The keywords after ``ss`` add what real photos have and clean renders lack (issue 16); their
+    The keywords after ``ss`` add what real photos have and clean renders lack; their
     defaults leave the image exactly as without them.
 
     Parameters

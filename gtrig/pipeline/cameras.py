@@ -1,4 +1,4 @@
-"""Stage ``cameras``: intrinsics, then the joint network calibration anchored on the world board (issue 4)."""
+"""Stage ``cameras``: intrinsics, then the joint network calibration anchored on the world board."""
 
 from __future__ import annotations
 

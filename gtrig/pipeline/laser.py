@@ -1,5 +1,5 @@
-"""Stage ``laser``: GTlaser, the fixed scanners' calibration then hull tracking over the continuous run
-(issue 7), written as the pose track ``gt_laser.tum`` + ``gt_laser_cov.csv``, and the error its poses
+"""Stage ``laser``: GTlaser, the fixed scanners' calibration then hull tracking over the continuous run, written as
+the pose track ``gt_laser.tum`` + ``gt_laser_cov.csv``, and the error its poses
 share over the run (the scanners' calibration) as ``gt_laser_bias.yaml`` (gtrig.io.biascov)."""
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ def gtlaser_clock(inp: StageInput) -> StageOutput:
     as ``gt_laser_synced.tum`` + ``gt_laser_synced_cov.csv`` (the product ``tracks/GTlaser-synced/run``), with
     its offset to odometry measured on it (:func:`_offset_to_odometry`) as a check. Fusion keeps GTlaser's
     own track and the sync stage's offset for it: fed the synced track instead, the fused track moved by
-    -0.023, +0.014 and 0.000 mm on three recordings (BENCHMARKS.md, issue 19, session 27), a wash, because the
+    -0.023, +0.014 and 0.000 mm on three recordings, a wash, because the
     fused clock is set by the sources' offsets to odometry, which odometry's slip dominates."""
     from gtrig.config import apply_to_dataclass
     from gtrig.io.yamlfile import load_yaml

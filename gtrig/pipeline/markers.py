@@ -1,5 +1,5 @@
 """Stage ``markers``: the markers' poses on the robot from the hand-held images, anchored on the
-dima-marker (issue 5)."""
+dima-marker."""
 
 from __future__ import annotations
 

@@ -158,7 +158,7 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
             st.check_output(result)
             cache.save_record(out_p, st.name, key, result)
             # what the stage freed goes back to the system before the next one allocates its own: on an
-            # hour's recording the client otherwise held every stage's peak (gtrig.memory, issue 24)
+            # hour's recording the client otherwise held every stage's peak (gtrig.memory)
             release_free_memory()
         products = products.updated(result.products)
         for name in result.products:

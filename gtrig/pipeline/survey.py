@@ -1,4 +1,4 @@
-"""Stage ``survey``: world points and validation poses from the hand-laser distances (issue 3)."""
+"""Stage ``survey``: world points and validation poses from the hand-laser distances."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""Stage ``vision``: GTvision, robot poses from all markers in all cameras on the calibrated rig
-(issue 6), written as pose tracks ``gt_vision_<sequence>.tum`` + ``_cov.csv``."""
+"""Stage ``vision``: GTvision, robot poses from all markers in all cameras on the calibrated rig, written as pose
+tracks ``gt_vision_<sequence>.tum`` + ``_cov.csv``."""
 
 from __future__ import annotations
 

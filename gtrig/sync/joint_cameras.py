@@ -18,7 +18,7 @@ Interval: at the fixed point the estimate's error is the fit's error over ``1 - 
 jackknife interval is scaled by ``1 / (1 - w)``), since the smoothing follows the camera's own noise by
 the same share. Offsets are relative to GTvision's clock, as the pose fit's.
 
-Measured on the three simulated seeds (BENCHMARKS.md, issue 18, session 34): largest camera error 0.69 /
+Measured on the three simulated seeds: largest camera error 0.69 /
 0.80 / 1.18 ms against GTlaser, 0.36 / 0.97 / 0.93 ms jointly (the pipeline).
 """
 

@@ -39,7 +39,7 @@ class Reference:
 
 
 #: a reference longer than this is smoothed in windows of this length (seconds), each with
-#: :data:`REFERENCE_OVERLAP_S` more fixes on either side (issue 24: one batch over an hour held ~600 MB)
+#: :data:`REFERENCE_OVERLAP_S` more fixes on either side (one batch over an hour held ~600 MB)
 REFERENCE_WINDOW_S = 600.0
 #: the fixes beyond each window's ends that its smoothing sees: a fix's pull on the constant-velocity
 #: smoothing dies out within seconds, so with 30 s of them the kept part of a window is the whole batch's

@@ -2,13 +2,13 @@
 (:func:`gtrig.sync.sensors.scanner_offsets`), whole in memory or a window of frames at a time.
 
 An hour of logs holds about 20 million returns (about 80 a frame at the simulated rates): 1.1 GB as
-arrays, and the fit's (P, n) rows over all of them another 3 GB (issue 24). :func:`returns_of_recording`
+arrays, and the fit's (P, n) rows over all of them another 3 GB. :func:`returns_of_recording`
 reads the logs once, a window at a time, keeps per frame only its stamp and each scanner's count of
 returns (what :func:`~gtrig.sync.sensors.restamp_laser` and
 :func:`~gtrig.sync.sensors.laser_clock` need), and spools the returns to a temporary binary file
 (42 bytes a return) that the fit reads back a window at a time for each of its passes. Spooling is what
-the measurement chose over parsing the text logs again for every pass (BENCHMARKS.md, issue 24,
-session 35): the logs can also be re-read (``spool=False``), for a disk without room for the file.
+the measurement chose over parsing the text logs again for every pass (BENCHMARKS.md,
+Scale): the logs can also be re-read (``spool=False``), for a disk without room for the file.
 """
 
 from __future__ import annotations

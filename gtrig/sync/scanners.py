@@ -162,7 +162,7 @@ def scanner_offsets(ret: ScannerReturns | WindowedReturns, ref: Reference, corne
     The returns are read a window at a time (``ret.windows()``) for each of the fit's passes: one for the
     first stamp, four Gauss-Newton iterations and the cost curves; what is held across windows is per block
     of time (the normal equations, (B, n, n)) or per scanner, so the memory does not grow with the
-    recording's length when ``ret`` is a :class:`WindowedReturns` (issue 24).
+    recording's length when ``ret`` is a :class:`WindowedReturns`.
 
     Parameters
     ----------

@@ -2,7 +2,7 @@
 
 Both return :class:`~gtrig.vision.observations.MarkerView` lists for one image of one camera. The
 ArUco path is also the seeds'-method baseline's corner source ("corners from OpenCV's ArUco subpixel
-refinement", issue 6): ARToolKitPlus "simple ID" markers are read by ArUco through a custom dictionary
+refinement"): ARToolKitPlus "simple ID" markers are read by ArUco through a custom dictionary
 built from :func:`gtrig.markers.families.marker_cells` with ``markerBorderBits`` = the family's border.
 """
 
@@ -105,7 +105,7 @@ class ArucoDetector:
 
 
 class GtrigDetector:
-    """The markers package's detector (issue 5: ``gtrig.markers.detect.MarkerDetector(family, K, dist)``
+    """The markers package's detector (``gtrig.markers.detect.MarkerDetector(family, K, dist)``
     and its ``detect(image)``), adapted to :class:`MarkerView` lists."""
 
     name = "gtrig-markers"

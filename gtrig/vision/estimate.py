@@ -1,7 +1,7 @@
 """The robot pose of one instant from every marker in every camera: initialisation, robust refinement,
 outlier views, the consistency test and the covariance.
 
-Steps (issue 6):
+Steps:
 
 1. both IPPE solutions of every view, candidates refined on all corners, flip picked
    (:mod:`gtrig.vision.init`);
@@ -19,7 +19,7 @@ variance factor per camera (``VisionOptions.corner_scale``) that :mod:`gtrig.vis
 from the residuals of the whole recording. A detector's covariances are at best right in shape, rarely
 in scale, and a test against a wrong scale refuses good frames (scale too small) or lets bad ones
 through (too large). The floor keeps one over-confident corner from outweighing a whole camera: the
-detector of issue 5 reports a median corner sigma of 0.006 px on simulated images whose corners are
+detector reports a median corner sigma of 0.006 px on simulated images whose corners are
 off by about 0.2 px RMS, with a spread of 40 between corners that the residuals do not show.
 
 The per-camera factor is an average: close, motion-blurred or over-exposed markers have noisier
@@ -92,7 +92,7 @@ class VisionOptions:
         this level (chi-square test with the frame's redundancy): by chance a frame whose corners are
         exactly as noisy as its camera's model has a factor above 1 half of the time, and charging
         that to it made the covariances of homogeneous data cautious by 10-40 % (E max(1, F) at 2-10
-        dof); 0.5 charges every factor above 1 (the behaviour before issue 19).
+        dof); 0.5 charges every factor above 1 (the earlier behaviour, kept as an option).
     rig_variance_component : bool
         The recording's noise calibration splits its residuals between the corners and the rig's
         stated uncertainty (:func:`gtrig.vision.sequence.calibrate_noise` with ``rig_component``),

@@ -8,7 +8,7 @@
 
 A recording of hours has millions of images (8 cameras at 30 Hz for 3 hours: 2.6 million), so the
 instants are held as flat arrays (:class:`Instants`, about 30 bytes per instant and image instead of
-some 270 as one object per instant, issue 24) and grouped by array operations and one loop over plain
+some 270 as one object per instant) and grouped by array operations and one loop over plain
 integers, not over Python tuples of every image.
 """
 

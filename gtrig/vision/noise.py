@@ -85,7 +85,7 @@ def estimate_rig_scale(rig_noise: Iterable[tuple[float, float]], min_redundancy:
     ``cap`` times its redundancy; None when the corners checked less than ``min_redundancy`` of it.
 
     A rig calibrated better than it says (an exact calibration given with a hand-measured sigma, the
-    independent renderer of issue 19) leaves its nuisance corrections far inside their priors; its
+    independent renderer) leaves its nuisance corrections far inside their priors; its
     covariance then dominates every pose's, which comes out cautious by as much as the rig was
     understated. Estimated jointly with the corners' factors (:func:`gtrig.vision.sequence.calibrate_noise`)
     the two components settle at the split the residuals support (Foerstner 1979, variance components

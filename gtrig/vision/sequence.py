@@ -25,7 +25,7 @@ checkpoint of other images, another detector, other lenses or other markers is r
 before the camera or marker poses were calibrated again, or with other estimator settings, is reused
 (detection does not depend on them).
 
-Memory: the client's state does not grow with the recording (issue 24) beyond its index (frame
+Memory: the client's state does not grow with the recording beyond its index (frame
 indices, instants): detections are read back from the checkpoint (or a temporary file) a line at a time,
 each stage's estimates are written to a temporary file chunk by chunk and read back in time order.
 """
@@ -206,7 +206,7 @@ def _arr(a: np.ndarray | None) -> Any:
 
 # ------------------------------------------------------------------------------- streamed state
 # The client's state over a recording is kept on disk, not in memory, so that it does not grow with the
-# recording's length (issue 24): the detections in their checkpoint (one JSON line per chunk, read back
+# recording's length: the detections in their checkpoint (one JSON line per chunk, read back
 # a line at a time), the estimates in a temporary file of pickled blocks (one block per chunk of
 # instants). What stays in memory per instant is a few bytes (a line number, a flag, an offset).
 # what is read back is read in time order (a chunk of instants at a time, as its chunk is submitted):

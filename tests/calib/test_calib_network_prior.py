@@ -1,4 +1,4 @@
-"""The double board's prior weighs as stated next to the corners (issue 19, short calibrations).
+"""The double board's prior weighs as stated next to the corners (short calibrations).
 
 The corners' residuals are pixels, the prior's rows standard deviations: unscaled, with corners at 0.03 px,
 the 1 cm / 1 deg prior on ``T_board1_board2`` acted as one of 0.3 mm / 0.03 deg and held the double board near

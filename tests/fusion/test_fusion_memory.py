@@ -1,5 +1,5 @@
 """The smoothings with odometry hold few bytes per node: their traced peak grows with the run's length by
-less than the per-node budget (issue 24; bench/fusion_memory.py measures it at 5-60 minutes)."""
+less than the per-node budget (bench/fusion_memory.py measures it at 5-60 minutes)."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def _peak(call, minutes: float) -> tuple[int, float]:  # noqa: ANN001
 def test_smoothing_peak_per_node_within_budget(call, budget: float) -> None:  # noqa: ANN001
     """Between a 2- and a 6-minute run (50 Hz odometry nodes, 75 Hz GTlaser, 10 Hz GTvision fixes: 1.7 fixes
     a node) the traced peak grows by under ``budget`` bytes a node: the fusion stage's call with the
-    considered biases (1.2 kB measured; 2.7 kB before session 36: two normal-equations systems and the
+    considered biases (1.2 kB measured; 2.7 kB with two normal-equations systems and the
     filter's covariances held through the batch solve, the solve's right-hand sides copied twice), the
     joint camera fit's reference (1.2 kB; 2.0 kB before). The peak is now the filter's backward-pass
     store (gains, conditional covariances and means: 288 B a node) on top of the merged fixes."""

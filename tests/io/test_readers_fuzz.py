@@ -59,7 +59,7 @@ def test_mutated_valid_files(tmp_path_factory, name):
     run()
 
 
-# inputs on which a reader crashed in bench/fuzz.py runs (issue 17), each now a one-line refusal
+# inputs on which a reader crashed in bench/fuzz.py runs, each now a one-line refusal
 FOUND = [
     ("frame_index", b"frame,stamp_s,file\n99999999999999999999,0.0,0.png\n", "frame number"),
     ("rtklib_pos", b"%  GPST  latitude(deg) longitude(deg)\n99999999999999999999/10/04 13:55:52.000 45.5 9.1 186.5 1 9"

@@ -1,4 +1,4 @@
-"""The scanners' calibration covariance against truth on gtrig's simulator (issue 19).
+"""The scanners' calibration covariance against truth on gtrig's simulator.
 
 The background scans of the GT room as `gtrig sim --quick` makes them (per-surface reflectivity bias,
 mixed pixels, noise, dropouts): the formal covariance of the fit, which shrinks as 1 / points, is 5-7

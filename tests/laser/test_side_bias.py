@@ -1,4 +1,4 @@
-"""The hull sides' range bias (dark and light fabric) is estimated over the sequence (issue 19): the
+"""The hull sides' range bias (dark and light fabric) is estimated over the sequence: the
 estimate matches the simulator's bias, and the poses lose the error it caused."""
 
 from __future__ import annotations

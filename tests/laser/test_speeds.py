@@ -1,5 +1,5 @@
 """GTlaser at real robot speeds: the same path replayed at 0.3, 1.0 and 2.0 m/s, accelerating and
-braking, every beam cast at the instant the scanner's mirror fires it (issue 19)."""
+braking, every beam cast at the instant the scanner's mirror fires it."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Camera images of printed markers made apart from gtrig (issue 16): this module imports only NumPy
+"""Camera images of printed markers made apart from gtrig: this module imports only NumPy
 and OpenCV, never ``gtrig``, so the detector is not checked against the renderer it was tuned on.
 
 The markers are OpenCV's own (``cv2.aruco.generateImageMarker``: ArUco 4x4_50, 5x5_100, 6x6_250 and

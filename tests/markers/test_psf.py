@@ -1,9 +1,9 @@
 """Markers blurred by optics that are not Gaussian: a defocus disk and a linear motion blur over the
 whole scene (gtrig.markers.synth.disk_psf, motion_psf), on the bench's cluttered scenes. The detector's
 models assume a Gaussian blur; where a marker's cells are lost in such a blur it must read nothing,
-never another ID, and a clutter glyph must not read as a marker (session 39: 3 wrong IDs in 360 markers
+never another ID, and a clutter glyph must not read as a marker (3 wrong IDs in 360 markers
 before; the second path's read of a square whose blur exceeds a cell, and the pre-decoder's unconfirmed
-blur-model reads at the family's full correction; session 40: a 20 px tag smeared 6 px read as another
+blur-model reads at the family's full correction; a 20 px tag smeared 6 px read as another
 ID with 4 cells corrected, which the solved cells' soft margin refuses, DetectorParams.min_soft_margin)."""
 
 from __future__ import annotations

@@ -85,7 +85,7 @@ def test_sharpened_edges_keep_the_corners() -> None:
     """A phone's sharpening (unsharp mask, radius 1.5 px, amount 0.8) overshoots 2-4 px beyond a
     1 px blurred edge: the edge band must reach past the halo to the plateaus, or the fitted white
     level follows the overshoot and moves the line (corners 0.10-0.12 px off with the band 1.5 px
-    beyond 3 sigma, the default until session 28; 0.08-0.09 px with 5 px)."""
+    beyond 3 sigma, the earlier default; 0.08-0.09 px with 5 px)."""
     import cv2
 
     for k in range(3):

@@ -1,4 +1,4 @@
-"""Marker-to-robot calibration (issue 5): accuracy against simulated truth, outliers, bridges, CLI errors."""
+"""Marker-to-robot calibration: accuracy against simulated truth, outliers, bridges, CLI errors."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Session 37's compiled forms against the NumPy / OpenCV forms they replaced (the same values)."""
+"""The compiled forms against the NumPy / OpenCV forms they replaced (the same values)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ _OFFS = np.array([-0.25, 0.0, 0.25])
 
 def _unblur_numpy(gray: np.ndarray, quads: np.ndarray, n: int, border: int, sigma: np.ndarray,
                   black: np.ndarray, contrast: np.ndarray) -> np.ndarray:
-    """unblur_cells before session 37: the dense design from SciPy's ndtr and one solve."""
+    """unblur_cells in NumPy: the dense design from SciPy's ndtr and one solve."""
     d = n - 2 * border
     Q = len(quads)
     c = (np.arange(border, n - border)[:, None] + 0.5 + _OFFS[None, :]).ravel() / n
@@ -113,7 +113,7 @@ def test_trim_outer_keeps_the_pixels_inside() -> None:
 
 
 def _square_pixels_numpy(gray: np.ndarray, quad: np.ndarray, n: int, reach: float) -> tuple[np.ndarray, np.ndarray]:
-    """blurred._pixels before session 38: the box's grid, its marker coordinates and the mask in NumPy."""
+    """the pixels of a box in NumPy: the box's grid, its marker coordinates and the mask in NumPy."""
     h, w = gray.shape
     x0, y0 = np.maximum(np.floor(quad.min(axis=0) - 4), 0).astype(int)
     x1, y1 = np.minimum(np.ceil(quad.max(axis=0) + 4), [w - 1, h - 1]).astype(int)

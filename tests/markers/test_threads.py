@@ -1,4 +1,4 @@
-"""The detector's threading helpers (issue 16, speed): the results never depend on the threads."""
+"""The detector's threading helpers (speed): the results never depend on the threads."""
 
 from __future__ import annotations
 

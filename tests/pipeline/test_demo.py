@@ -143,8 +143,8 @@ def test_from_laser_reruns_laser_and_what_follows(demo: Path) -> None:
 
 
 def test_run_on_a_dask_cluster_writes_the_same_tracks(demo: Path, tmp_path: Path) -> None:
-    """``--dask`` on a cluster of separate ``dask scheduler`` / ``dask worker`` processes on 127.0.0.1
-    (issue 24): GTlaser, GTvision (the run's images detected again, on the workers) and fusion write the
+    """``--dask`` on a cluster of separate ``dask scheduler`` / ``dask worker`` processes on 127.0.0.1: GTlaser,
+    GTvision (the run's images detected again, on the workers) and fusion write the
     same bytes as the local process pool did."""
     pytest.importorskip("distributed")
     from tests.scale.cluster import dask_cluster

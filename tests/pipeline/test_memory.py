@@ -1,4 +1,4 @@
-"""The client's memory between stages (issue 24): a stage's record is pickled straight into its file, not
+"""The client's memory between stages: a stage's record is pickled straight into its file, not
 built in memory beside the products, and what a stage freed is handed back to the system before the next
 one runs (gtrig.memory)."""
 

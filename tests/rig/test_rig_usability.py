@@ -1,4 +1,4 @@
-"""Rig files as a new user writes them (issue 19): a vision-only rig needs no hull, stills need no
+"""Rig files as a new user writes them: a vision-only rig needs no hull, stills need no
 frame rate, ``gtrig rig check`` lists every problem of a file at once, and the beam timing of a
 scanner is the device's."""
 

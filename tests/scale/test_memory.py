@@ -1,4 +1,4 @@
-"""The client's memory does not grow with the recording's length (issue 24): GTvision's run over a
+"""The client's memory does not grow with the recording's length: GTvision's run over a
 recording three times longer peaks (tracemalloc, in this process) at about the same memory; so does
 GTlaser's, beyond its per-frame result (:func:`test_gtlaser_client_memory_is_flat_in_the_log_length`).
 
@@ -179,8 +179,8 @@ def laser_peak(seq: Path, rig: object, backgrounds: list) -> tuple[int, int, int
 
 def test_gtlaser_client_memory_is_flat_in_the_log_length(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """GTlaser's client over a log three times longer: its peak beyond the result grows by well under a kB
-    a frame (it held every scan, every point and the side-bias pass's arrays of them, ~52 kB a frame, in
-    session 33; now a window's, and per frame only the poses, covariances and stamps of the filters).
+    a frame (it held every scan, every point and the side-bias pass's arrays of them, ~52 kB a frame,
+    before; now a window's, and per frame only the poses, covariances and stamps of the filters).
     The logs are indexed in blocks of 200 lines: a block (2,048 lines, ~8 MB, by default) is bounded by
     construction, and one longer than the short log would be counted as growth."""
     import gtrig.io.scans as scans
@@ -221,8 +221,8 @@ def scanner_sync_peak(rec: Path, rig: object, laps: int) -> tuple[int, int]:
 
 def test_scanner_sync_client_memory_is_flat_in_the_log_length(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """The sync stage's per-scanner fit over a log three times longer: its peak grows by well under a kB a
-    frame (it held every foreground return and the fit's rows of them, (P, n), 21 kB a frame here, in
-    session 34; now a window's, and per frame only its stamp and each scanner's count of returns). The
+    frame (it held every foreground return and the fit's rows of them, (P, n), 21 kB a frame here,
+    before; now a window's, and per frame only its stamp and each scanner's count of returns). The
     fit's windows are made shorter than the short log, so that a window's memory is the same in both."""
     import gtrig.io.scans as scans
 
@@ -231,7 +231,7 @@ def test_scanner_sync_client_memory_is_flat_in_the_log_length(tmp_path: Path, mo
         import gtrig.sync.returns as returns
 
         monkeypatch.setattr(returns, "WINDOW_FRAMES", 150)
-    except ImportError:  # before session 35 (the test then measures the fit that held every return)
+    except ImportError:  # no windowed returns: the test measures the fit that holds every return
         pass
     runs = {}
     for name, laps in (("short", 1), ("long", 3)):

@@ -1,4 +1,4 @@
-"""Simulator options of issue 19: a fast robot accelerating and braking as real ones do, a scanner
+"""Simulator options: a fast robot accelerating and braking as real ones do, a scanner
 half blocked by clutter, scans stamped at the start, middle or end of the sweep (or all beams fired
 at once), and a hull of two fabrics. The default settings leave the scene as it was."""
 

@@ -309,7 +309,7 @@ def _drive(t: float) -> np.ndarray:
 
 def test_recording_returns_read_a_window_at_a_time_are_the_whole_logs_returns(tmp_path) -> None:  # noqa: ANN001
     """The scanners' returns for the per-scanner offsets, read from the logs a few frames at a time, are
-    the returns of the whole logs read at once, bit for bit (issue 24: only the returns stay in memory)."""
+    the returns of the whole logs read at once, bit for bit (only the returns stay in memory)."""
     rig, whole = _logged_recording(tmp_path)
     assert whole.stamps_s.size > 500
     for w in (7, 10**6):

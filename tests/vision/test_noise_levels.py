@@ -1,5 +1,5 @@
-"""GTvision's covariance stays honest at image noise levels its noise calibration was not tuned on
-(issue 19): the variance factors come from each data set's own residuals, in 6-DoF and planar mode."""
+"""GTvision's covariance stays honest at image noise levels its noise calibration was not tuned on: the variance
+factors come from each data set's own residuals, in 6-DoF and planar mode."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""The noise calibration splits the residuals between the corners and the rig's stated uncertainty
-(issue 19): a rig calibrated better or worse than it says still gets honest pose covariances."""
+"""The noise calibration splits the residuals between the corners and the rig's stated uncertainty: a rig
+calibrated better or worse than it says still gets honest pose covariances."""
 
 from __future__ import annotations
 

@@ -5,13 +5,13 @@ and a ``gemv`` whose ``m * n`` reaches ``2304 * 4`` (its ``GEMM_MULTITHREAD_THRE
 detector's products are a few hundred microseconds at most: handing them to OpenBLAS's threads costs
 more than it saves, and its threads spin after each call, taking the core the detector's own helper
 thread (:mod:`._threads`) would use. On a loaded 2-core machine one threaded ``36 x 512 x 36`` product
-took 0.24-6.5 ms of wall time against 0.03 ms in one thread (session 29, BENCHMARKS.md issue 16), and
+took 0.24-6.5 ms of wall time against 0.03 ms in one thread (BENCHMARKS.md), and
 the bench's images spent three times the detector's own CPU in OpenBLAS's threads.
 
 :func:`matmul` splits a product along the rows of its first operand (each row of the result is then
 computed by the same kernel over the same ``k``, as in one call) into calls below those thresholds, and
 :func:`gram` sums blocks of rows, unless BLAS is held to one thread (:func:`one_thread`, every detection),
-where one call does each (session 38: the blocks moved the last bits of the results, and cost 3-5 % of a
+where one call does each (the blocks moved the last bits of the results, and cost 3-5 % of a
 detection).
 
 LAPACK's solves are not split so: :func:`one_thread` keeps every BLAS call of a detection in its

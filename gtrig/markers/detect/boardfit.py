@@ -4,7 +4,7 @@ A printed board is flat and its marker corners are known in the board's plane; d
 that fit it to ``r`` px RMS (after a pose, or a homography plus a radial lens term for an uncalibrated
 camera, has been fitted) are wrong by at most about ``r`` px each, as long as the layout and the lens
 model are right (their errors add to the residual, they never hide a detector's error). The same fit
-on two detectors' corners of the same photo therefore ranks their accuracy on real images (issue 16).
+on two detectors' corners of the same photo therefore ranks their accuracy on real images.
 
 * :func:`pose_fit_rms`: a calibrated camera (OpenCV's model) and a known board in metres, one planar
   pose per image (IPPE, then Levenberg-Marquardt on the reprojection error);

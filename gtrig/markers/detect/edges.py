@@ -68,7 +68,7 @@ MAX_CLIPPED_WHITE = 4.0
 #: band pixels of one fit below which splitting it between threads costs more than it saves
 _SPLIT_MIN_PX = 2000
 #: parts a split fit is cut into (:func:`._threads.run_split`): with two, the calling thread waited for
-#: the helper's half in 15 % of its samples on a loaded machine (session 29); with four the wait is at
+#: the helper's half in 15 % of its samples on a loaded machine; with four the wait is at
 #: most the part the helper is finishing
 SPLIT_PARTS = 4
 #: share of an edge's band pixels clipped above which the edge is fitted as clipped
@@ -174,7 +174,7 @@ PROFILE_STEP_PX = 0.5
 #: fall below the white level, in units of the edge's contrast, that ends the white plateau: deeper
 #: than a phone's sharpening halo settles back from its overshoot (the grid photo's tenth percentile
 #: stays within 0.09 of its white level from 2 to 14 px beyond the edge), shallow enough to catch any
-#: surround that would move the line (session 33, BENCHMARKS.md issue 18)
+#: surround that would move the line (BENCHMARKS.md)
 WHITE_END_DROP = 0.25
 #: how far (in blur sigmas) the band stops short of the paper's end: the surround's blurred step is
 #: 0.6 % of its fall there (1.5 sigma, 7 %, left 0.02-0.04 px outward on a mid-grey surround)

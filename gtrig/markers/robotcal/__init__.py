@@ -1,4 +1,4 @@
-"""Marker-to-robot calibration from hand-held images (issue 5; docs/markers.md).
+"""Marker-to-robot calibration from hand-held images (docs/markers.md).
 
 The poses ``T_robot_marker`` of the markers on the robot, from images of the standing robot taken with
 a calibrated hand-held camera, anchored on one marker whose pose on the robot is measured (marker 14,
