@@ -158,8 +158,12 @@ def test_tracking_localizes_the_same_instants_at_the_same_poses(run_rec, monkeyp
     monkeypatch.setattr(GtrigDetector, "__call__", recorded)
     tracked = run_recording(path, rig, "run", True, **kw)  # tracking is the default
     n_images = sum(tracked.images_per_camera.values())
-    # most images searched in a window or not at all: whole once per camera, at the chunk's start
-    assert boxes.count(None) == len(tracked.images_per_camera) and 0 < len(boxes) <= n_images
+    # most images searched in a window or not at all: whole at the chunk's start, and again only where a
+    # tracked marker was not found in its window
+    n_cams = len(tracked.images_per_camera)
+    extra_whole = boxes.count(None) - n_cams  # a window that missed a tracked marker, then the whole image
+    assert 0 <= extra_whole <= 2 and 0 < len(boxes) <= n_images + extra_whole
+    assert len(boxes) - boxes.count(None) >= n_images // 2
     ok_whole = [e.stamp_s for e in whole.estimates if e.ok]
     assert len(ok_whole) >= FRAMES - 1, [e.reason for e in whole.estimates]
     assert [e.stamp_s for e in tracked.estimates if e.ok] == ok_whole
