@@ -76,7 +76,7 @@ def test_the_checks_catch_work_log_wording() -> None:
     """The patterns find what they are for, and leave ordinary words alone."""
     for heading in ("## Session 27 (h18)", "### Fixed in issue 19", "## Notes for the lead", "## h18f figures"):
         assert LOG_HEADING.search(heading), heading
-    for words in ("as measured in session 34", "", "last session's thresholds", "branch h18",
+    for words in ("as measured in session 34", "(issue 24)", "last session's thresholds", "branch h18",
                   "for the lead's rerun", "run on 2026-12-02"):
         assert LOG_WORDS.search(words) or DATE.search(words), words
     for fine in ("## Leading edge", "this leads to", "Bovisa_2008-09-01", "a misleading figure", "h = 0.35 m"):
