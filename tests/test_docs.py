@@ -11,8 +11,6 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 PAGES = sorted([REPO / "README.md", REPO / "BENCHMARKS.md", *(REPO / "docs").glob("*.md")])
 
-#: pages being rewritten elsewhere: checked as soon as their headings are clean, skipped until then
-PENDING = {"BENCHMARKS.md", "docs/markers.md", "docs/vision.md"}
 
 #: a heading (a line starting with '#') that names how the software was made rather than what it does
 LOG_HEADING = re.compile(r"\bsessions?\b|\bissue\s*#?\d+|\(h\d+[a-z]?\)|\bh\d{1,2}[a-z]?\b|\bhelpers?\b|\blead\b",
@@ -66,9 +64,6 @@ def _work_log(page: Path) -> list[str]:
 @pytest.mark.parametrize("page", PAGES, ids=_name)
 def test_no_work_log_headings_or_wording(page: Path) -> None:
     bad = _work_log(page)
-    if _name(page) in PENDING and bad:
-        pytest.skip(f"{_name(page)} is being rewritten; still {len(_log_headings(page))} work-log headings, "
-                    f"{len(bad)} findings in all")
     assert not bad, "work-log wording (the history is in git log):\n" + "\n".join(bad)
 
 
