@@ -126,37 +126,6 @@ def test_homographies_and_marker_context() -> None:
     np.testing.assert_allclose(got, _context_numpy(xy[:, 0], xy[:, 1], q, H9, sigma, white, dist), atol=2e-6)
 
 
-def test_cell_jacobian_matches_finite_differences_of_the_profiles() -> None:
-    """The derivative of ``a + b (1 - S) + F w`` with respect to the 8 corner coordinates and the blur
-    equals central differences of :func:`_kernels.cell_profiles` through the homographies."""
-    rng = np.random.default_rng(11)
-    quad = _quads(rng, 1)[0]
-    n, border, contrast, sig = 8, 1, 150.0, 1.3
-    d = n - 2 * border
-    cells = contrast * rng.integers(0, 2, (d, d)).astype(float)
-    xy = quad.mean(axis=0) + rng.uniform(-18, 18, (500, 2))
-    x, y = xy[:, 0].copy(), xy[:, 1].copy()
-
-    def model(qv: np.ndarray, s: float) -> np.ndarray:
-        base, F = _kernels.cell_profiles(x, y, _kernels.quad_homographies(qv.reshape(1, 4, 2)), np.array([s]), n,
-                                         border)
-        return contrast * base[0] + F[0] @ cells.ravel()
-
-    hq = 1e-4
-    Qp = np.repeat(quad.reshape(1, 8), 9, axis=0)
-    Qp[np.arange(1, 9), np.arange(8)] += hq
-    Hs = _kernels.quad_homographies(Qp.reshape(9, 4, 2))
-    got = _kernels.cell_jacobian(x, y, Hs[0], (Hs[1:] - Hs[0]) / hq, sig, n, border, cells, contrast)
-    for j in range(9):
-        dq, ds = np.zeros(8), 0.0
-        if j < 8:
-            dq[j] = 1e-5
-        else:
-            ds = 1e-6
-        fd = (model(quad.ravel() + dq, sig + ds) - model(quad.ravel() - dq, sig - ds)) / (2 * (dq.sum() + ds))
-        np.testing.assert_allclose(got[j], fd, atol=1e-3 * np.abs(fd).max() + 1e-6)
-
-
 def test_cell_design_is_the_profiles() -> None:
     """The fits' design is ``[1, 1 - S, F]`` with the cells free and ``[1, 1 - S + F code]`` for a code,
     with the profiles of :func:`_kernels.cell_profiles`."""

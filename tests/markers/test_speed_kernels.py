@@ -112,20 +112,3 @@ def test_trim_outer_keeps_the_pixels_inside() -> None:
     np.testing.assert_array_equal(got.starts, _starts(edge[keep], E))
 
 
-def _square_pixels_numpy(gray: np.ndarray, quad: np.ndarray, n: int, reach: float) -> tuple[np.ndarray, np.ndarray]:
-    """the pixels of a box in NumPy: the box's grid, its marker coordinates and the mask in NumPy."""
-    h, w = gray.shape
-    x0, y0 = np.maximum(np.floor(quad.min(axis=0) - 4), 0).astype(int)
-    x1, y1 = np.minimum(np.ceil(quad.max(axis=0) + 4), [w - 1, h - 1]).astype(int)
-    if x1 <= x0 or y1 <= y0:
-        return np.zeros((0, 2)), np.zeros(0)
-    yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
-    px = np.stack([xx.ravel(), yy.ravel()], -1).astype(np.float64)
-    H = quad_homographies(quad[None])[0]
-    w3 = H[2, 0] * px[:, 0] + H[2, 1] * px[:, 1] + H[2, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        mx = (H[0, 0] * px[:, 0] + H[0, 1] * px[:, 1] + H[0, 2]) / w3
-        my = (H[1, 0] * px[:, 0] + H[1, 1] * px[:, 1] + H[1, 2]) / w3
-    lim = reach / n
-    keep = (mx > -lim) & (mx < 1 + lim) & (my > -lim) & (my < 1 + lim)
-    return px[keep], gray[yy.ravel()[keep], xx.ravel()[keep]].astype(np.float64)

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from gtrig.markers.detect import DetectorParams, MarkerDetector, _kernels, _threads
+from gtrig.markers.detect import DetectorParams, MarkerDetector, _threads
 from gtrig.markers.synth import clutter_background, homography_from_pose, render
 from gtrig.rig.models import MarkerFamily
 
@@ -38,41 +38,6 @@ def test_ordered_map_raises_where_the_result_is_taken() -> None:
         for v in _threads.ordered_map(f, [(k,) for k in range(10)], 2):
             got.append(v)
     assert got == [0, 1, 2, 3, 4]
-
-
-def test_fill_boxes_is_cv2_rectangle() -> None:
-    rng = np.random.default_rng(4)
-    a = np.zeros((60, 80), np.uint8)
-    b = np.zeros_like(a)
-    boxes = []
-    for _ in range(40):
-        x0, y0 = rng.integers(0, 80), rng.integers(0, 60)
-        x1, y1 = rng.integers(x0, 80), rng.integers(y0, 60)
-        boxes.append((x0, y0, x1, y1))
-        cv2.rectangle(a, (int(x0), int(y0)), (int(x1), int(y1)), 255, -1)
-    _kernels.fill_boxes(b, np.array(boxes, np.int64))
-    np.testing.assert_array_equal(a, b)
-
-
-def test_quad_from_lines_is_cramers_rule() -> None:
-    """The compiled intersections equal NumPy's Cramer's rule bit for bit, and refuse parallel lines
-    and corners moved too far."""
-    rng = np.random.default_rng(5)
-    prev = np.array([3, 0, 1, 2])
-    for _ in range(200):
-        approx = np.array([[10, 10], [40, 11], [41, 39], [9, 40]], float) + rng.normal(0, 1, (4, 2))
-        th = np.arctan2(*(np.roll(approx, -1, axis=0) - approx).T[::-1]) + np.pi / 2 + rng.normal(0, 0.01, 4)
-        n = np.column_stack([np.cos(th), np.sin(th)])
-        lines = np.column_stack([n, np.einsum("ij,ij->i", n, approx + np.roll(approx, -1, axis=0)) / 2])
-        a1, b1, c1 = lines[prev].T
-        a2, b2, c2 = lines.T
-        inv = 1.0 / (a1 * b2 - a2 * b1)
-        ref = np.column_stack([(c1 * b2 - c2 * b1) * inv, (a1 * c2 - a2 * c1) * inv])
-        q, ok = _kernels.quad_from_lines(lines, approx)
-        np.testing.assert_array_equal(q, ref)
-        assert ok == (np.hypot(*(ref - approx).T).max() <= max(3.0, 0.1 * np.ptp(approx)))
-    lines[1] = lines[0]
-    assert not _kernels.quad_from_lines(lines, approx)[1]
 
 
 def test_two_threads_give_the_same_detections_on_clutter() -> None:

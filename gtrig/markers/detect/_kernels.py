@@ -425,90 +425,6 @@ def cell_profiles(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def cell_jacobian(x: NDArray[np.float64], y: NDArray[np.float64], H0: NDArray[np.float64],
-                  dH: NDArray[np.float64], sig: float, n: int, border: int, cells: NDArray[np.float64],
-                  contrast: float) -> NDArray[np.float64]:
-    """Derivative (9, N) of the model ``a + b (1 - S) + F w`` with respect to the 8 corner
-    coordinates (through the homography ``H0`` (3, 3) and its derivatives ``dH`` (8, 3, 3)) and the
-    blur, at fixed levels and cells (``contrast`` = b, ``cells`` = b w as a (d, d) array); the
-    formulas of :func:`.blurred._prediction_jacobian`."""
-    N = x.shape[0]
-    d = n - 2 * border
-    out = np.empty((9, N))
-    h = H0.ravel()
-    D = dH.reshape(8, 9)
-    dmx = np.empty(8)
-    dmy = np.empty(8)
-    ds = np.empty(8)
-    dsx = np.empty(8)
-    dsy = np.empty(8)
-    Fx = np.empty(n + 1)
-    Fy = np.empty(n + 1)
-    dFx = np.empty((9, n + 1))
-    dFy = np.empty((9, n + 1))
-    CX = np.empty(d)
-    YC = np.empty(d)
-    for i in range(N):
-        xi, yi = x[i], y[i]
-        w3 = h[6] * xi + h[7] * yi + h[8]
-        mx = (h[0] * xi + h[1] * yi + h[2]) / w3
-        my = (h[3] * xi + h[4] * yi + h[5]) / w3
-        s = sig / abs(w3) * n
-        ax, bx = h[0] - mx * h[6], h[1] - mx * h[7]
-        ay, by = h[3] - my * h[6], h[4] - my * h[7]
-        hx = max(math.hypot(ax, bx), 1e-12)
-        hy = max(math.hypot(ay, by), 1e-12)
-        sx = max(s * hx, 1e-3)
-        sy = max(s * hy, 1e-3)
-        for j in range(8):
-            dw = D[j, 6] * xi + D[j, 7] * yi + D[j, 8]
-            dmx[j] = (D[j, 0] * xi + D[j, 1] * yi + D[j, 2] - mx * dw) / w3
-            dmy[j] = (D[j, 3] * xi + D[j, 4] * yi + D[j, 5] - my * dw) / w3
-            ds[j] = -s * dw / w3
-            dax = D[j, 0] - dmx[j] * h[6] - mx * D[j, 6]
-            dbx = D[j, 1] - dmx[j] * h[7] - mx * D[j, 7]
-            day = D[j, 3] - dmy[j] * h[6] - my * D[j, 6]
-            dby = D[j, 4] - dmy[j] * h[7] - my * D[j, 7]
-            dsx[j] = ds[j] * hx + s * (ax * dax + bx * dbx) / hx
-            dsy[j] = ds[j] * hy + s * (ay * day + by * dby) / hy
-        for k in range(n + 1):
-            zx = (mx * n - k) / sx
-            zy = (my * n - k) / sy
-            phx = math.exp(-0.5 * zx * zx) * _INV_SQRT_2PI
-            phy = math.exp(-0.5 * zy * zy) * _INV_SQRT_2PI
-            Fx[k] = _ndtr_from_pdf(zx, phx)
-            Fy[k] = _ndtr_from_pdf(zy, phy)
-            for j in range(8):
-                dFx[j, k] = phx * (n * dmx[j] - zx * dsx[j]) / sx
-                dFy[j, k] = phy * (n * dmy[j] - zy * dsy[j]) / sy
-            dFx[8, k] = -phx * zx / sig
-            dFy[8, k] = -phy * zy / sig
-        Sx = Fx[0] - Fx[n]
-        Sy = Fy[0] - Fy[n]
-        # C X and Y^T C, so that both bilinear terms are dot products per parameter
-        for r in range(d):
-            acc = 0.0
-            for c in range(d):
-                acc += cells[r, c] * (Fx[border + c] - Fx[border + c + 1])
-            CX[r] = acc
-        for c in range(d):
-            acc = 0.0
-            for r in range(d):
-                acc += (Fy[border + r] - Fy[border + r + 1]) * cells[r, c]
-            YC[c] = acc
-        for j in range(9):
-            dSx = dFx[j, 0] - dFx[j, n]
-            dSy = dFy[j, 0] - dFy[j, n]
-            v = -contrast * (dSx * Sy + Sx * dSy)
-            for r in range(d):
-                v += (dFy[j, border + r] - dFy[j, border + r + 1]) * CX[r]
-            for c in range(d):
-                v += YC[c] * (dFx[j, border + c] - dFx[j, border + c + 1])
-            out[j, i] = v
-    return out
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
 def band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.float64], nrm: NDArray[np.float64],
                L: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64],
                excl: NDArray[np.float64], out_x: NDArray[np.int64], out_y: NDArray[np.int64],
@@ -617,73 +533,6 @@ def cell_design(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.fl
     return A
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def side_points(pts: NDArray[np.float64], approx: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """The contour points ``pts`` (P, 2) that belong to each side of ``approx`` (4, 2) (side ``i``
-    from corner ``i`` to ``i + 1``): within the side's middle 70 % and within ``max(2, 5 %)`` of its
-    length across it (:func:`.candidates.robust_quad`). Returns (4, P)."""
-    P = pts.shape[0]
-    sel = np.zeros((4, P), np.bool_)
-    for i in range(4):
-        j = (i + 1) % 4
-        tx, ty = approx[j, 0] - approx[i, 0], approx[j, 1] - approx[i, 1]
-        L = math.hypot(tx, ty)
-        tx, ty = tx / L, ty / L
-        near = max(2.0, 0.05 * L)
-        for k in range(P):
-            rx, ry = pts[k, 0] - approx[i, 0], pts[k, 1] - approx[i, 1]
-            s = rx * tx + ry * ty
-            d = rx * ty - ry * tx
-            sel[i, k] = s > 0.15 * L and s < 0.85 * L and abs(d) < near
-    return sel
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def side_select(pts: NDArray[np.float64], approx: NDArray[np.float64]) -> tuple[NDArray[np.bool_], bool]:
-    """:func:`side_points` of ``pts`` (P, 2) for the quad ``approx`` (4, 2), and whether the quad is
-    usable: every side at least 3 px long and holding at least 3 points (:func:`.candidates.robust_quad`)."""
-    for i in range(4):
-        j = (i + 1) % 4
-        if math.hypot(approx[j, 0] - approx[i, 0], approx[j, 1] - approx[i, 1]) < 3.0:
-            return np.zeros((4, 0), np.bool_), False
-    sel = side_points(pts, approx)
-    for i in range(4):
-        if sel[i].sum() < 3:
-            return sel, False
-    return sel, True
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def quad_from_lines(lines: NDArray[np.float64], approx: NDArray[np.float64]) -> tuple[NDArray[np.float64], bool]:
-    """Corner ``i`` = intersection of lines ``i - 1`` and ``i`` (``lines`` (4, 3) as (nx, ny, c) with
-    n.x = c, Cramer's rule), and whether the quad (4, 2) is accepted: finite, and no corner moved from
-    ``approx`` (4, 2) by more than ``max(3, 0.1 peak-to-peak of approx)`` (:func:`.candidates.robust_quad`)."""
-    q = np.empty((4, 2))
-    moved = 0.0
-    for i in range(4):
-        h = (i + 3) % 4
-        a1, b1, c1 = lines[h, 0], lines[h, 1], lines[h, 2]
-        a2, b2, c2 = lines[i, 0], lines[i, 1], lines[i, 2]
-        inv = 1.0 / (a1 * b2 - a2 * b1)
-        q[i, 0] = (c1 * b2 - c2 * b1) * inv
-        q[i, 1] = (a1 * c2 - a2 * c1) * inv
-        if not (math.isfinite(q[i, 0]) and math.isfinite(q[i, 1])):
-            return q, False
-        moved = max(moved, math.hypot(q[i, 0] - approx[i, 0], q[i, 1] - approx[i, 1]))
-    return q, moved <= max(3.0, 0.1 * (approx.max() - approx.min()))
-
-
-@njit(cache=True, nogil=True)
-def fill_boxes(region: NDArray[np.uint8], boxes: NDArray[np.int64]) -> None:
-    """Set to 255 the pixels of ``region`` (H, W) inside each box ``(x0, y0, x1, y1)`` of ``boxes``
-    (B, 4), both ends included (``cv2.rectangle`` filled, without a Python call per box)."""
-    for b in range(boxes.shape[0]):
-        x0, y0, x1, y1 = boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3]
-        for y in range(y0, y1 + 1):
-            for x in range(x0, x1 + 1):
-                region[y, x] = 255
-
-
 @njit(cache=True, inline="always")
 def _popcount64(x: np.uint64) -> int:
     """Set bits of a 64-bit word (SWAR: pairs, nibbles, bytes, then one multiply)."""
@@ -721,40 +570,6 @@ def nearest_codes(words: NDArray[np.uint64], table: NDArray[np.uint64]
                 d2 = di
         best[k], h1[k], h2[k] = b, d1, d2
     return best, h1, h2
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def sides_traced(pts: NDArray[np.float64], sel: NDArray[np.bool_], a: NDArray[np.float64],
-                 sides: NDArray[np.float64], share: float) -> bool:
-    """Whether the contour points ``pts`` (P, 2) trace each side of the quad ``a`` (4, 2) over at
-    least ``share`` of its middle 70 % (:func:`.candidates._broken_border_quad`): of the 2 px bins
-    along side ``i`` (length ``sides[i]``, px) from 15 % of it on, those holding one of its points
-    ``sel[i]`` (4, P) number at least ``share * ceil(0.35 sides[i])``; every side needs 3 points."""
-    P = pts.shape[0]
-    bin_of = np.empty(P, np.int64)  # the bins of side i's points, the first ``count`` entries
-    for i in range(4):
-        j = (i + 1) % 4
-        tx, ty = (a[j, 0] - a[i, 0]) / sides[i], (a[j, 1] - a[i, 1]) / sides[i]
-        off = 0.15 * sides[i]
-        count = 0
-        top = 0
-        for k in range(P):
-            if sel[i, k]:
-                b = int(max(math.floor(((pts[k, 0] - a[i, 0]) * tx + (pts[k, 1] - a[i, 1]) * ty - off) / 2.0), 0.0))
-                bin_of[count] = b
-                count += 1
-                top = max(top, b)
-        if count < 3:
-            return False
-        seen = np.zeros(top + 1, np.bool_)
-        bins = 0
-        for m in range(count):
-            if not seen[bin_of[m]]:
-                seen[bin_of[m]] = True
-                bins += 1
-        if bins < share * math.ceil(0.7 * sides[i] / 2.0):
-            return False
-    return True
 
 
 #: a blurred cell profile below this share of its peak (1) is left out of the cell reading's normal
@@ -920,29 +735,3 @@ def band_keep(xy: NDArray[np.float64], val: NDArray[np.float64], edge: NDArray[n
     return xy2, val2, edge2, starts
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def square_pixels(gray: NDArray[np.uint8], x0: int, y0: int, x1: int, y1: int, H: NDArray[np.float64], lim: float
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Pixel centres (K, 2) and values (K,) of the box ``x0..x1, y0..y1`` (both ends included) of ``gray``
-    (H, W) whose marker coordinates through ``H`` (3, 3) lie within ``lim`` (marker units) of the unit
-    square, in row-major order (the second path's pixels of a candidate, :func:`.blurred._pixels`: its
-    NumPy form built six arrays of the box to keep a few hundred pixels, a tenth of the reads' time).
-    A pixel on or beyond the homography's horizon (the division gives inf or NaN) is not kept."""
-    nx = x1 - x0 + 1
-    px = np.empty((nx * (y1 - y0 + 1), 2))
-    val = np.empty(nx * (y1 - y0 + 1))
-    k = 0
-    for yi in range(y0, y1 + 1):
-        y = float(yi)
-        for xi in range(x0, x1 + 1):
-            x = float(xi)
-            # the same operations in the same order as the NumPy form
-            w3 = H[2, 0] * x + H[2, 1] * y + H[2, 2]
-            mx = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w3
-            my = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w3
-            if mx > -lim and mx < 1.0 + lim and my > -lim and my < 1.0 + lim:
-                px[k, 0] = x
-                px[k, 1] = y
-                val[k] = float(gray[yi, xi])
-                k += 1
-    return px[:k].copy(), val[:k].copy()
