@@ -131,6 +131,22 @@ def test_run_without_truth_writes_the_same_tracks(demo: Path, tmp_path: Path) ->
     assert r2.exit_code == 0 and "reused (unchanged since their last run): survey, cameras, markers, " \
         "robot-frame, laser, vision" in r2.output, r2.output
 
+    # the README's "your own recording" path goes on: the rig checked, the report, every export, and GTvision
+    # scored against the fused track, each with no warning
+    runner = CliRunner()
+    (tmp_path / "export").mkdir()
+    steps = [["rig", "check", str(rec / "rig.yaml")], ["report", str(out), "--out", str(tmp_path / "report.html")]]
+    for fmt, name in (("tum", "e.tum"), ("gtrig", "g.tum"), ("kitti", "e.kitti"), ("euroc", "euroc"),
+                      ("rawseeds", "e_rs.csv"), ("csv", "e.csv"), ("rosbag1", "e.bag"), ("rosbag2", "e.mcap")):
+        steps.append(["export", str(out / "gt_fused.tum"), "--to", fmt, "--out", str(tmp_path / "export" / name)])
+    steps.append(["evaluate", "slam", "--gt", str(out / "gt_fused.tum"), "--estimate", str(out / "gt_vision_run.tum"),
+                  "--align", "none"])
+    for args in steps:
+        r = runner.invoke(app, args)
+        assert r.exit_code == 0 and "warning" not in r.output.lower(), (args, r.output)
+    assert "association interpolate-gt" in r.output  # a GT-grade reference: its poses interpolated, not nearest
+    assert (tmp_path / "report.html").stat().st_size > 100_000
+
 
 def test_from_laser_reruns_laser_and_what_follows(demo: Path) -> None:
     res = demo / "results"
