@@ -201,94 +201,15 @@ def calibrate_scanners(
     nominal = np.array([geo.T_to_se2(s.T_world_scanner.matrix()) for s in scanners])
     x = nominal.copy()
     prior = np.tile([1 / prior_std_m**2, 1 / prior_std_m**2, 1 / prior_std_rad**2], S)
-    H = np.diag(prior)
+    ne = _Normal(np.diag(prior), np.zeros(3 * S), np.zeros((3 * S, S + n_bias)))
     it = 0
     stats: dict[str, list[tuple[int, float]]] = {}
     for gate in gates_m:
         for _ in range(iterations_per_gate):
             it += 1
-            H = np.diag(prior)
-            g = prior * (x - nominal).ravel()
-            # d (weighted normal-equation right-hand side) / d (range biases): the biases' pull on x
-            G = np.zeros((3 * S, S + n_bias))
-            stats = {"overlap": [(0, 0.0)] * S, "object": [(0, 0.0)] * S}
-            pw = [_to_world(x[i], geoms[i][0]) for i in range(S)]
-            nw = [_rot_rows(geoms[i][1], x[i, 2]) for i in range(S)]
-            trees = [cKDTree(p) for p in pw]
-            ray = [_rot_rows(geoms[i][0] / np.linalg.norm(geoms[i][0], axis=1, keepdims=True), x[i, 2])
-                   for i in range(S)]  # (n, 2) unit beam directions in the world
-            for i in range(S):
-                pi_s = geoms[i][0]
-                dpi = (
-                    pi_s @ np.array([[np.cos(x[i, 2]), np.sin(x[i, 2])], [-np.sin(x[i, 2]), np.cos(x[i, 2])]])
-                ) @ _J90.T  # d p_w / d theta_i
-                ssq, cnt = 0.0, 0
-                for j in range(S):
-                    if j == i:
-                        continue
-                    d, idx = trees[j].query(pw[i], distance_upper_bound=gate + 0.15)
-                    m = np.isfinite(d)
-                    idx = idx[m]
-                    n = nw[j][idx]
-                    m2 = np.isfinite(n[:, 0])
-                    q = pw[j][idx[m2]]
-                    n = n[m2]
-                    sel = np.flatnonzero(m)[m2]
-                    # the surface must face scanner i as well as scanner j
-                    face = np.einsum("ij,ij->i", n, x[i, :2] - q) > 0
-                    sel, q, n = sel[face], q[face], n[face]
-                    r = np.einsum("ij,ij->i", n, pw[i][sel] - q)
-                    ok = np.abs(r) < gate
-                    sel, q, n, r = sel[ok], q[ok], n[ok], r[ok]
-                    if r.size == 0:
-                        continue
-                    dq = (q - x[j, :2]) @ _J90.T
-                    Ji = np.column_stack([n, np.einsum("ij,ij->i", n, dpi[sel])])
-                    Jj = -np.column_stack([n, np.einsum("ij,ij->i", n, dq)])
-                    wgt = 1.0 / (sigma_point_m**2 + (r / 3.0) ** 2 * (np.abs(r) > 3 * sigma_point_m))
-                    bi, bj = slice(3 * i, 3 * i + 3), slice(3 * j, 3 * j + 3)
-                    H[bi, bi] += (Ji * wgt[:, None]).T @ Ji
-                    H[bj, bj] += (Jj * wgt[:, None]).T @ Jj
-                    H[bi, bj] += (Ji * wgt[:, None]).T @ Jj
-                    H[bj, bi] += (Jj * wgt[:, None]).T @ Ji
-                    g[bi] += Ji.T @ (wgt * r)
-                    g[bj] += Jj.T @ (wgt * r)
-                    # a range bias moves point k along its beam: r changes by n . ray (i), -n . ray (j)
-                    di = np.einsum("ij,ij->i", n, ray[i][sel])
-                    dj = -np.einsum("ij,ij->i", n, ray[j][idx[m2][face][ok]])
-                    for own, cols, dr in ((i, bias_cols[i][sel], di), (j, bias_cols[j][idx[m2][face][ok]], dj)):
-                        for Jx, bx in ((Ji, bi), (Jj, bj)):
-                            _add_bias_pull(G, bx, Jx, wgt * dr, cols, own, S)
-                    ssq += float(r @ r)
-                    cnt += r.size
-                stats["overlap"][i] = (cnt, np.sqrt(ssq / cnt) if cnt else float("nan"))
-                # the world objects: point-to-line to their known sides, faces visible from scanner i
-                n_ob, ssq_ob = 0, 0.0
-                for o, obj in enumerate(objs):
-                    vis = (obj.normals @ x[i, :2] - obj.offsets) > 0
-                    sd = pw[i] @ obj.normals.T - obj.offsets
-                    a = pw[i] @ obj.tangents.T - np.einsum("ij,ij->i", obj.tangents, obj.corners_xy)
-                    over = np.maximum(0.0, np.maximum(-a, a - obj.lengths))
-                    d2 = np.where(vis, sd * sd + over * over, np.inf)
-                    k = np.argmin(d2, axis=1)
-                    rows = np.arange(len(k))
-                    m = (d2[rows, k] < gate * gate) & (over[rows, k] < 0.01)
-                    if not np.any(m):
-                        continue
-                    n = obj.normals[k[m]]
-                    r = sd[rows, k][m]
-                    Ji = np.column_stack([n, np.einsum("ij,ij->i", n, dpi[m])])
-                    wgt = 1.0 / sigma_point_m**2
-                    bi = slice(3 * i, 3 * i + 3)
-                    H[bi, bi] += wgt * Ji.T @ Ji
-                    g[bi] += wgt * Ji.T @ r
-                    dr = np.einsum("ij,ij->i", n, ray[i][m])
-                    _add_bias_pull(G, bi, Ji, wgt * dr, face_col[o] + k[m], i, S)
-                    n_ob += int(m.sum())
-                    ssq_ob += float(r @ r)
-                if n_ob:
-                    stats["object"][i] = (n_ob, float(np.sqrt(ssq_ob / n_ob)))
-            delta = -np.linalg.solve(H, g)
+            ne, stats = _normal_equations(x, nominal, prior, geoms, objs, bias_cols, face_col, n_bias, gate,
+                                          sigma_point_m)
+            delta = -np.linalg.solve(ne.H, ne.g)
             x = x + delta.reshape(S, 3)
     if not any(n for n, _ in stats["object"]):
         raise ConvergenceError(
@@ -301,10 +222,134 @@ def calibrate_scanners(
     all_o = [(n, r) for n, r in stats["object"] if n]
     rms_ob = float(np.sqrt(sum(n * r * r for n, r in all_o) / sum(n for n, _ in all_o)))
     scale = max(1.0, (rms_ov / sigma_point_m) ** 2) if np.isfinite(rms_ov) else 1.0
-    Hinv = np.linalg.inv(H)
-    cov = Hinv * scale + _bias_covariance(Hinv, G, S, range_bias_std_m, surface_bias_std_m)
+    Hinv = np.linalg.inv(ne.H)
+    cov = Hinv * scale + _bias_covariance(Hinv, ne.G, S, range_bias_std_m, surface_bias_std_m)
     cov = 0.5 * (cov + cov.T)
-    std = np.sqrt(np.diag(cov)).reshape(S, 3)
+    out_scanners, cal = _calibrated(scanners, x, nominal, cov, stats)
+    return out_scanners, CalibrationReport(cal, it, rms_ov, rms_ob, cov)
+
+
+@dataclass
+class _Normal:
+    """The Gauss-Newton normal equations ``H dx = -g`` over the S scanners' (x, y, theta), and ``G``, the
+    right-hand side's derivative by the range biases (their pull on the poses)."""
+
+    H: np.ndarray
+    g: np.ndarray
+    G: np.ndarray
+
+
+def _normal_equations(x: np.ndarray, nominal: np.ndarray, prior: np.ndarray, geoms: list, objs: list,
+                      bias_cols: list, face_col: np.ndarray, n_bias: int, gate: float, sigma_point_m: float
+                      ) -> tuple[_Normal, dict[str, list[tuple[int, float]]]]:
+    """One Gauss-Newton iteration's normal equations at the poses ``x`` (S, 3): the prior, every pair of
+    scanners' overlapping background points and every scanner's points on the world objects; with each
+    scanner's point count and RMS residual (``overlap``, ``object``)."""
+    S = len(x)
+    ne = _Normal(np.diag(prior), prior * (x - nominal).ravel(), np.zeros((3 * S, S + n_bias)))
+    stats: dict[str, list[tuple[int, float]]] = {"overlap": [(0, 0.0)] * S, "object": [(0, 0.0)] * S}
+    pw = [_to_world(x[i], geoms[i][0]) for i in range(S)]
+    nw = [_rot_rows(geoms[i][1], x[i, 2]) for i in range(S)]
+    trees = [cKDTree(p) for p in pw]
+    ray = [_rot_rows(geoms[i][0] / np.linalg.norm(geoms[i][0], axis=1, keepdims=True), x[i, 2])
+           for i in range(S)]  # (n, 2) unit beam directions in the world
+    for i in range(S):
+        pi_s = geoms[i][0]
+        dpi = (
+            pi_s @ np.array([[np.cos(x[i, 2]), np.sin(x[i, 2])], [-np.sin(x[i, 2]), np.cos(x[i, 2])]])
+        ) @ _J90.T  # d p_w / d theta_i
+        ssq, cnt = 0.0, 0
+        for j in range(S):
+            if j == i:
+                continue
+            s_ij, c_ij = _overlap_pair(ne, i, j, x, pw, nw, trees, ray, dpi, bias_cols, gate, sigma_point_m)
+            ssq += s_ij
+            cnt += c_ij
+        stats["overlap"][i] = (cnt, np.sqrt(ssq / cnt) if cnt else float("nan"))
+        n_ob, ssq_ob = _object_terms(ne, i, x, pw, dpi, ray, objs, face_col, gate, sigma_point_m)
+        if n_ob:
+            stats["object"][i] = (n_ob, float(np.sqrt(ssq_ob / n_ob)))
+    return ne, stats
+
+
+def _overlap_pair(ne: _Normal, i: int, j: int, x: np.ndarray, pw: list, nw: list, trees: list, ray: list,
+                  dpi: np.ndarray, bias_cols: list, gate: float, sigma_point_m: float) -> tuple[float, int]:
+    """Scanner ``i``'s background points on scanner ``j``'s background surfaces (facing both), point to
+    line, added to ``ne``; their sum of squares and count."""
+    S = len(x)
+    d, idx = trees[j].query(pw[i], distance_upper_bound=gate + 0.15)
+    m = np.isfinite(d)
+    idx = idx[m]
+    n = nw[j][idx]
+    m2 = np.isfinite(n[:, 0])
+    q = pw[j][idx[m2]]
+    n = n[m2]
+    sel = np.flatnonzero(m)[m2]
+    # the surface must face scanner i as well as scanner j
+    face = np.einsum("ij,ij->i", n, x[i, :2] - q) > 0
+    sel, q, n = sel[face], q[face], n[face]
+    r = np.einsum("ij,ij->i", n, pw[i][sel] - q)
+    ok = np.abs(r) < gate
+    sel, q, n, r = sel[ok], q[ok], n[ok], r[ok]
+    if r.size == 0:
+        return 0.0, 0
+    dq = (q - x[j, :2]) @ _J90.T
+    Ji = np.column_stack([n, np.einsum("ij,ij->i", n, dpi[sel])])
+    Jj = -np.column_stack([n, np.einsum("ij,ij->i", n, dq)])
+    wgt = 1.0 / (sigma_point_m**2 + (r / 3.0) ** 2 * (np.abs(r) > 3 * sigma_point_m))
+    bi, bj = slice(3 * i, 3 * i + 3), slice(3 * j, 3 * j + 3)
+    ne.H[bi, bi] += (Ji * wgt[:, None]).T @ Ji
+    ne.H[bj, bj] += (Jj * wgt[:, None]).T @ Jj
+    ne.H[bi, bj] += (Ji * wgt[:, None]).T @ Jj
+    ne.H[bj, bi] += (Jj * wgt[:, None]).T @ Ji
+    ne.g[bi] += Ji.T @ (wgt * r)
+    ne.g[bj] += Jj.T @ (wgt * r)
+    # a range bias moves point k along its beam: r changes by n . ray (i), -n . ray (j)
+    di = np.einsum("ij,ij->i", n, ray[i][sel])
+    dj = -np.einsum("ij,ij->i", n, ray[j][idx[m2][face][ok]])
+    for own, cols, dr in ((i, bias_cols[i][sel], di), (j, bias_cols[j][idx[m2][face][ok]], dj)):
+        for Jx, bx in ((Ji, bi), (Jj, bj)):
+            _add_bias_pull(ne.G, bx, Jx, wgt * dr, cols, own, S)
+    return float(r @ r), r.size
+
+
+def _object_terms(ne: _Normal, i: int, x: np.ndarray, pw: list, dpi: np.ndarray, ray: list, objs: list,
+                  face_col: np.ndarray, gate: float, sigma_point_m: float) -> tuple[int, float]:
+    """Scanner ``i``'s points on the world objects' known sides (faces visible from it), point to line,
+    added to ``ne``; their count and sum of squares."""
+    S = len(x)
+    n_ob, ssq_ob = 0, 0.0
+    for o, obj in enumerate(objs):
+        vis = (obj.normals @ x[i, :2] - obj.offsets) > 0
+        sd = pw[i] @ obj.normals.T - obj.offsets
+        a = pw[i] @ obj.tangents.T - np.einsum("ij,ij->i", obj.tangents, obj.corners_xy)
+        over = np.maximum(0.0, np.maximum(-a, a - obj.lengths))
+        d2 = np.where(vis, sd * sd + over * over, np.inf)
+        k = np.argmin(d2, axis=1)
+        rows = np.arange(len(k))
+        m = (d2[rows, k] < gate * gate) & (over[rows, k] < 0.01)
+        if not np.any(m):
+            continue
+        n = obj.normals[k[m]]
+        r = sd[rows, k][m]
+        Ji = np.column_stack([n, np.einsum("ij,ij->i", n, dpi[m])])
+        wgt = 1.0 / sigma_point_m**2
+        bi = slice(3 * i, 3 * i + 3)
+        ne.H[bi, bi] += wgt * Ji.T @ Ji
+        ne.g[bi] += wgt * Ji.T @ r
+        dr = np.einsum("ij,ij->i", n, ray[i][m])
+        _add_bias_pull(ne.G, bi, Ji, wgt * dr, face_col[o] + k[m], i, S)
+        n_ob += int(m.sum())
+        ssq_ob += float(r @ r)
+    return n_ob, ssq_ob
+
+
+def _calibrated(scanners: Sequence[LaserScanner], x: np.ndarray, nominal: np.ndarray, cov: np.ndarray,
+                stats: dict[str, list[tuple[int, float]]]
+                ) -> tuple[tuple[LaserScanner, ...], tuple[ScannerCalibration, ...]]:
+    """The scanners at their calibrated planar poses (nominal height, roll and pitch kept) and each one's
+    calibration record."""
+    std = np.sqrt(np.diag(cov)).reshape(len(scanners), 3)
     out_scanners = []
     cal = []
     for i, s in enumerate(scanners):
@@ -325,7 +370,7 @@ def calibrate_scanners(
                 stats["object"][i][1],
             )
         )
-    return tuple(out_scanners), CalibrationReport(tuple(cal), it, rms_ov, rms_ob, cov)
+    return tuple(out_scanners), tuple(cal)
 
 
 def _rot_rows(p: np.ndarray, theta: float) -> np.ndarray:
