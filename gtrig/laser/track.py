@@ -649,184 +649,12 @@ def track_frames(
     st = settings
     F = fp.n_frames
     stamps = fp.frame_stamps_s
-    raw = np.full((F, 3), np.nan)
-    raw_cov = np.full((F, 3, 3), np.nan)
-    status = np.full(F, LOST, dtype=np.int8)
-    n_points = np.zeros(F, dtype=int)
-    n_sides = np.zeros(F, dtype=int)
-    rms = np.full(F, np.nan)
-    track_id = np.full(F, -1, dtype=int)
-    reasons = [""] * F
-    centre_r = model.corners_xy.mean(axis=0)
-    tracks: list[list[int | bool]] = []  # [first frame, heading ambiguous]
-    qd = np.array([st.predict_accel_std_mps2**2] * 2 + [st.predict_ang_accel_std_radps2**2])
-    Pv_unknown = np.diag([st.max_speed_mps**2, st.max_speed_mps**2, st.max_turn_rate_radps**2])
-
-    # the frames are walked a window at a time (the filter's state between windows is its predictor);
-    # each frame's count of points per scanner is kept for the timing term
-    counts = np.zeros((F, len(fp.sigma_m)), dtype=np.int64)
-    win: FramedPoints | None = None
-    w0 = 0  # the window's first frame
-
-    def window_at(k: int) -> FramedPoints:
-        """The window holding frames ``[k, k + chunk_frames)`` (or up to the last); ``k`` never decreases."""
-        nonlocal win, w0
-        if win is None or (k + st.chunk_frames > w0 + win.n_frames and w0 + win.n_frames < F):
-            w0, win = k, fp.window(k, min(F, k + max(COVARIANCE_WINDOW_FRAMES, st.chunk_frames)))
-            counts[w0:w0 + win.n_frames] = points_per_scanner(win)
-        return win
-
-    pred_state: _Predictor | None = None  # the tracking filter of the current track
-    tracking = False
-    fails = 0
-    last_pose_frame = -1  # last OK frame of any track
+    tr = _FrameTracker(fp, model, st)
     k = 0
     while k < F:
-        wf = window_at(k)
-        if not tracking:
-            sl = wf.frame(k - w0)
-            prior, radius, inherited = None, None, False
-            gap = np.inf if last_pose_frame < 0 else stamps[k] - stamps[last_pose_frame]
-            if gap <= st.prior_max_gap_s:
-                prior = raw[last_pose_frame]
-                inherited = bool(tracks[track_id[last_pose_frame]][1])  # the prior's own heading unresolved
-                if gap <= st.reacquire_gap_s:
-                    radius = st.reacquire_radius_m
-            acq = None
-            if sl.stop - sl.start >= st.icp.min_points:
-                acq = acquire(
-                    model,
-                    wf.xy_world[sl],
-                    wf.scanner_index[sl],
-                    wf.scanner_xy_world,
-                    wf.dir_world[sl],
-                    wf.sigma_m,
-                    st.icp,
-                    prior_xytheta=prior,
-                    search_radius_m=radius,
-                    free_rays=wf.free_rays(k - w0),
-                )
-            if acq is None or acq.fit.rms_m > st.max_rms_m:
-                reasons[k] = "hull not found"
-                k += 1
-                continue
-            f = acq.fit
-            pose = f.xytheta.copy()
-            if prior is not None:
-                pose[2] = prior[2] + wrap_angle(pose[2] - prior[2])  # continuous heading
-            tracks.append([k, acq.ambiguous or inherited])
-            raw[k], raw_cov[k] = pose, f.cov_xytheta
-            status[k], n_points[k], n_sides[k], rms[k] = OK, f.n_points, f.n_sides, f.rms_m
-            track_id[k] = len(tracks) - 1
-            # the velocity of a new track: that of the track just lost, made uncertain by the robot's
-            # accelerations over the gap, else unknown up to the robot's top speed; its first frames
-            # are then fitted one at a time until the filter has measured it
-            if pred_state is not None and radius is not None and not acq.ambiguous:
-                v0 = pred_state.x[3:].copy()
-                Pv0 = pred_state.P[3:, 3:] + np.diag(qd) * gap + Pv_unknown * min(1.0, gap / st.reacquire_gap_s) ** 2
-            else:
-                v0, Pv0 = np.zeros(3), Pv_unknown
-            pred_state = _start_predictor(stamps[k], pose, f.cov_xytheta, v0, Pv0)
-            fails, tracking, last_pose_frame = 0, True, k
-            log.debug(
-                "hull acquired at frame %d (%.3f s)%s", k, stamps[k], " (heading ambiguous)" * acq.ambiguous
-            )
-            k += 1
-            continue
-
-        assert pred_state is not None
-        end = min(F, k + st.chunk_frames)
-        gaps = np.flatnonzero(np.diff(stamps[k - 1 : end]) > st.max_gap_s)
-        if gaps.size:
-            end = k + int(gaps[0])
-        if end <= k:
-            tracking = False
-            continue
-        pred, pred_cov = pred_state.predict(stamps[k:end], qd)
-        # fit together only the frames the prediction reaches: its standard deviation within a third
-        # of the ICP's capture (at least one frame)
-        sd_xy = np.sqrt(np.maximum(pred_cov[:, 0, 0], pred_cov[:, 1, 1]))
-        sd_th = np.sqrt(pred_cov[:, 2, 2])
-        reach = (3 * sd_xy <= st.capture_m) & (3 * sd_th <= st.capture_rad)
-        n_fit = max(1, int(np.argmin(reach)) if not reach.all() else len(reach))
-        end = k + n_fit
-        pred, pred_cov = pred[:n_fit], pred_cov[:n_fit]
-        vel = pred_state.x[3:]
-        sl = slice(int(wf.frame_start[k - w0]), int(wf.frame_start[end - w0]))
-        fid = np.repeat(np.arange(end - k), np.diff(wf.frame_start[k - w0 : end - w0 + 1]))
-        xy = wf.xy_world[sl]
-        dt = wf.dt_s[sl]
-        # motion within the frame: bring each point back to the frame time
-        pc = pred[fid]
-        xy = compensate_motion(xy, dt, vel, pc)
-        # gate: only points near the predicted outline
-        near = (
-            np.hypot(xy[:, 0] - pc[:, 0], xy[:, 1] - pc[:, 1])
-            < model.half_diagonal_m + np.hypot(*model.corners_xy.mean(axis=0)) + 2 * st.icp.gate_m
-        )
-        fits = fit_hull_batch(
-            model,
-            xy[near],
-            fid[near],
-            wf.scanner_index[sl][near],
-            wf.scanner_xy_world,
-            wf.dir_world[sl][near],
-            wf.sigma_m,
-            pred,
-            st.icp,
-        )
-        next_k = end
-        for i in range(end - k):
-            j = k + i
-            pose = fits.xytheta[i]
-            d = pose - pred[i]
-            jump = float(np.hypot(d[0], d[1]))
-            n_points[j], n_sides[j], rms[j] = fits.n_points[i], fits.n_sides[i], fits.rms_m[i]
-            bad = ""
-            if fits.n_points[i] < st.icp.min_points:
-                bad = f"few points ({fits.n_points[i]})"
-            elif not fits.rms_m[i] <= st.max_rms_m:
-                bad = f"residual {1000 * fits.rms_m[i]:.0f} mm"
-            elif not fits.degenerate[i]:
-                # the gate scales with what the prediction and the fit can each be off by
-                S = pred_cov[i] + fits.cov_xytheta[i]
-                m2 = float(d @ np.linalg.solve(S, d))
-                small = jump <= st.min_jump_m and abs(d[2]) <= st.min_jump_rad
-                if jump > st.max_jump_m or abs(d[2]) > st.max_jump_rad or (m2 > st.gate_chi2 and not small):
-                    bad = f"jump of {1000 * jump:.0f} mm, {np.degrees(d[2]):.1f} deg from the prediction"
-            if bad and i > 0:
-                # predicted from farther back than the frame before it: try again from a fresh prediction
-                next_k = j
-                break
-            if bad:
-                reasons[j] = bad
-                fails += 1
-            elif fits.degenerate[i]:
-                raw[j], raw_cov[j] = pose, fits.cov_xytheta[i]
-                status[j], reasons[j] = DEGENERATE, fits.reasons[i]
-                track_id[j] = len(tracks) - 1
-                fails += 1
-            else:
-                raw[j], raw_cov[j] = pose, fits.cov_xytheta[i]
-                status[j], reasons[j] = OK, ""
-                track_id[j] = len(tracks) - 1
-                pred_state = pred_state.update(stamps[j], pose, fits.cov_xytheta[i], qd)
-                last_pose_frame = j
-                fails = 0
-            if fails >= st.lost_after:
-                tracking = False
-                log.debug("track lost at frame %d (%.3f s): %s", j, stamps[j], reasons[j])
-                next_k = j + 1
-                break
-        end = next_k
-        # resolve the pi symmetry as soon as the robot has moved, before a later track inherits it
-        tid = len(tracks) - 1
-        if st.forward_motion and tracks[tid][1]:
-            if _resolve_heading(tid, track_id, status, raw, raw_cov, centre_r, st.min_motion_m):
-                tracks[tid][1] = False
-                pred_state = _refilter(tid, track_id, status, stamps, raw, raw_cov, qd, Pv_unknown)
-        k = end
-
+        k = tr.track_chunk(k) if tr.tracking else tr.acquire_at(k)
+    tracks, track_id, status, reasons = tr.tracks, tr.track_id, tr.status, tr.reasons
+    raw, raw_cov = tr.raw, tr.raw_cov
     for tid, (_first, ambiguous) in enumerate(tracks):
         idx = np.flatnonzero(track_id == tid)
         if ambiguous:
@@ -851,7 +679,7 @@ def track_frames(
         # frame: after smoothing
         cov = cov + np.nan_to_num(cov_bias)
     # the scanners' clocks: the motion a stamp offset hides (the rig's stamp_sigma_s)
-    cov = cov + timing_covariance(counts, fp.stamp_sigma_s, stamps, xytheta, track_id)
+    cov = cov + timing_covariance(tr.counts, fp.stamp_sigma_s, stamps, xytheta, track_id)
     if cov_cal is not None:
         cov = cov + cov_cal
     else:
@@ -860,9 +688,210 @@ def track_frames(
     raw_w = raw.copy()
     raw_w[:, 2] = wrap_angle(raw_w[:, 2])
     return TrackResult(
-        stamps.copy(), xytheta, cov, status, raw_w, raw_cov, n_points, n_sides, rms, track_id, tuple(reasons),
-        cov_cal, bias,
+        stamps.copy(), xytheta, cov, status, raw_w, raw_cov, tr.n_points, tr.n_sides, tr.rms, track_id,
+        tuple(reasons), cov_cal, bias,
     )
+
+
+class _FrameTracker:
+    """The tracking filter walking a sequence's frames in order: acquisition of the hull where no track
+    runs (:meth:`acquire_at`), then chunks of frames fitted together from the track's prediction
+    (:meth:`track_chunk`); the per-frame results in its arrays. The frames are read a window at a time
+    (the filter's state between windows is its predictor); each frame's count of points per scanner is
+    kept for the timing term."""
+
+    def __init__(self, fp: FrameSource, model: HullModel, st: TrackSettings) -> None:
+        F = fp.n_frames
+        self.fp, self.model, self.st, self.F = fp, model, st, F
+        self.stamps = fp.frame_stamps_s
+        self.raw = np.full((F, 3), np.nan)
+        self.raw_cov = np.full((F, 3, 3), np.nan)
+        self.status = np.full(F, LOST, dtype=np.int8)
+        self.n_points = np.zeros(F, dtype=int)
+        self.n_sides = np.zeros(F, dtype=int)
+        self.rms = np.full(F, np.nan)
+        self.track_id = np.full(F, -1, dtype=int)
+        self.reasons = [""] * F
+        self.centre_r = model.corners_xy.mean(axis=0)
+        self.tracks: list[list[int | bool]] = []  # [first frame, heading ambiguous]
+        self.qd = np.array([st.predict_accel_std_mps2**2] * 2 + [st.predict_ang_accel_std_radps2**2])
+        self.Pv_unknown = np.diag([st.max_speed_mps**2, st.max_speed_mps**2, st.max_turn_rate_radps**2])
+        self.counts = np.zeros((F, len(fp.sigma_m)), dtype=np.int64)
+        self.win: FramedPoints | None = None
+        self.w0 = 0  # the window's first frame
+        self.pred_state: _Predictor | None = None  # the tracking filter of the current track
+        self.tracking = False
+        self.fails = 0
+        self.last_pose_frame = -1  # last OK frame of any track
+
+    def window_at(self, k: int) -> FramedPoints:
+        """The window holding frames ``[k, k + chunk_frames)`` (or up to the last); ``k`` never decreases."""
+        st, F = self.st, self.F
+        if self.win is None or (k + st.chunk_frames > self.w0 + self.win.n_frames and self.w0 + self.win.n_frames < F):
+            self.w0, self.win = k, self.fp.window(k, min(F, k + max(COVARIANCE_WINDOW_FRAMES, st.chunk_frames)))
+            self.counts[self.w0:self.w0 + self.win.n_frames] = points_per_scanner(self.win)
+        return self.win
+
+    def acquire_at(self, k: int) -> int:
+        """Look for the hull in frame ``k`` with no track running (near the last pose when it is recent);
+        a hull found starts a track. Returns the next frame."""
+        st, stamps, model = self.st, self.stamps, self.model
+        wf = self.window_at(k)
+        w0 = self.w0
+        sl = wf.frame(k - w0)
+        prior, radius, inherited = None, None, False
+        gap = np.inf if self.last_pose_frame < 0 else stamps[k] - stamps[self.last_pose_frame]
+        if gap <= st.prior_max_gap_s:
+            prior = self.raw[self.last_pose_frame]
+            inherited = bool(self.tracks[self.track_id[self.last_pose_frame]][1])  # the prior's heading unresolved
+            if gap <= st.reacquire_gap_s:
+                radius = st.reacquire_radius_m
+        acq = None
+        if sl.stop - sl.start >= st.icp.min_points:
+            acq = acquire(
+                model,
+                wf.xy_world[sl],
+                wf.scanner_index[sl],
+                wf.scanner_xy_world,
+                wf.dir_world[sl],
+                wf.sigma_m,
+                st.icp,
+                prior_xytheta=prior,
+                search_radius_m=radius,
+                free_rays=wf.free_rays(k - w0),
+            )
+        if acq is None or acq.fit.rms_m > st.max_rms_m:
+            self.reasons[k] = "hull not found"
+            return k + 1
+        f = acq.fit
+        pose = f.xytheta.copy()
+        if prior is not None:
+            pose[2] = prior[2] + wrap_angle(pose[2] - prior[2])  # continuous heading
+        self.tracks.append([k, acq.ambiguous or inherited])
+        self.raw[k], self.raw_cov[k] = pose, f.cov_xytheta
+        self.status[k], self.n_points[k], self.n_sides[k], self.rms[k] = OK, f.n_points, f.n_sides, f.rms_m
+        self.track_id[k] = len(self.tracks) - 1
+        # the velocity of a new track: that of the track just lost, made uncertain by the robot's
+        # accelerations over the gap, else unknown up to the robot's top speed; its first frames
+        # are then fitted one at a time until the filter has measured it
+        if self.pred_state is not None and radius is not None and not acq.ambiguous:
+            v0 = self.pred_state.x[3:].copy()
+            Pv0 = (self.pred_state.P[3:, 3:] + np.diag(self.qd) * gap
+                   + self.Pv_unknown * min(1.0, gap / st.reacquire_gap_s) ** 2)
+        else:
+            v0, Pv0 = np.zeros(3), self.Pv_unknown
+        self.pred_state = _start_predictor(stamps[k], pose, f.cov_xytheta, v0, Pv0)
+        self.fails, self.tracking, self.last_pose_frame = 0, True, k
+        log.debug("hull acquired at frame %d (%.3f s)%s", k, stamps[k], " (heading ambiguous)" * acq.ambiguous)
+        return k + 1
+
+    def track_chunk(self, k: int) -> int:
+        """Fit the frames from ``k`` that the track's prediction reaches together, then judge each one
+        against the prediction (a frame refused after the first is fitted again from a fresh prediction);
+        the pi symmetry resolved as soon as the robot has moved. Returns the next frame."""
+        st, stamps, model, F = self.st, self.stamps, self.model, self.F
+        wf = self.window_at(k)
+        w0 = self.w0
+        assert self.pred_state is not None
+        end = min(F, k + st.chunk_frames)
+        gaps = np.flatnonzero(np.diff(stamps[k - 1 : end]) > st.max_gap_s)
+        if gaps.size:
+            end = k + int(gaps[0])
+        if end <= k:
+            self.tracking = False
+            return k
+        pred, pred_cov = self.pred_state.predict(stamps[k:end], self.qd)
+        # fit together only the frames the prediction reaches: its standard deviation within a third
+        # of the ICP's capture (at least one frame)
+        sd_xy = np.sqrt(np.maximum(pred_cov[:, 0, 0], pred_cov[:, 1, 1]))
+        sd_th = np.sqrt(pred_cov[:, 2, 2])
+        reach = (3 * sd_xy <= st.capture_m) & (3 * sd_th <= st.capture_rad)
+        n_fit = max(1, int(np.argmin(reach)) if not reach.all() else len(reach))
+        end = k + n_fit
+        pred, pred_cov = pred[:n_fit], pred_cov[:n_fit]
+        vel = self.pred_state.x[3:]
+        sl = slice(int(wf.frame_start[k - w0]), int(wf.frame_start[end - w0]))
+        fid = np.repeat(np.arange(end - k), np.diff(wf.frame_start[k - w0 : end - w0 + 1]))
+        xy = wf.xy_world[sl]
+        dt = wf.dt_s[sl]
+        # motion within the frame: bring each point back to the frame time
+        pc = pred[fid]
+        xy = compensate_motion(xy, dt, vel, pc)
+        # gate: only points near the predicted outline
+        near = (
+            np.hypot(xy[:, 0] - pc[:, 0], xy[:, 1] - pc[:, 1])
+            < model.half_diagonal_m + np.hypot(*model.corners_xy.mean(axis=0)) + 2 * st.icp.gate_m
+        )
+        fits = fit_hull_batch(
+            model,
+            xy[near],
+            fid[near],
+            wf.scanner_index[sl][near],
+            wf.scanner_xy_world,
+            wf.dir_world[sl][near],
+            wf.sigma_m,
+            pred,
+            st.icp,
+        )
+        end = self._judge(k, end, fits, pred, pred_cov)
+        # resolve the pi symmetry as soon as the robot has moved, before a later track inherits it
+        tid = len(self.tracks) - 1
+        if st.forward_motion and self.tracks[tid][1]:
+            if _resolve_heading(tid, self.track_id, self.status, self.raw, self.raw_cov, self.centre_r,
+                                st.min_motion_m):
+                self.tracks[tid][1] = False
+                self.pred_state = _refilter(tid, self.track_id, self.status, stamps, self.raw, self.raw_cov, self.qd,
+                                            self.Pv_unknown)
+        return end
+
+    def _judge(self, k: int, end: int, fits: Any, pred: np.ndarray, pred_cov: np.ndarray) -> int:
+        """Frames ``k .. end - 1``'s fits against the prediction: kept (OK, or DEGENERATE), refused (the
+        reason kept), or, after the first frame, fitted again from a fresh prediction; the track lost after
+        ``lost_after`` failures. Returns the next frame."""
+        st = self.st
+        assert self.pred_state is not None
+        next_k = end
+        for i in range(end - k):
+            j = k + i
+            pose = fits.xytheta[i]
+            d = pose - pred[i]
+            jump = float(np.hypot(d[0], d[1]))
+            self.n_points[j], self.n_sides[j], self.rms[j] = fits.n_points[i], fits.n_sides[i], fits.rms_m[i]
+            bad = ""
+            if fits.n_points[i] < st.icp.min_points:
+                bad = f"few points ({fits.n_points[i]})"
+            elif not fits.rms_m[i] <= st.max_rms_m:
+                bad = f"residual {1000 * fits.rms_m[i]:.0f} mm"
+            elif not fits.degenerate[i]:
+                # the gate scales with what the prediction and the fit can each be off by
+                S = pred_cov[i] + fits.cov_xytheta[i]
+                m2 = float(d @ np.linalg.solve(S, d))
+                small = jump <= st.min_jump_m and abs(d[2]) <= st.min_jump_rad
+                if jump > st.max_jump_m or abs(d[2]) > st.max_jump_rad or (m2 > st.gate_chi2 and not small):
+                    bad = f"jump of {1000 * jump:.0f} mm, {np.degrees(d[2]):.1f} deg from the prediction"
+            if bad and i > 0:
+                # predicted from farther back than the frame before it: try again from a fresh prediction
+                return j
+            if bad:
+                self.reasons[j] = bad
+                self.fails += 1
+            elif fits.degenerate[i]:
+                self.raw[j], self.raw_cov[j] = pose, fits.cov_xytheta[i]
+                self.status[j], self.reasons[j] = DEGENERATE, fits.reasons[i]
+                self.track_id[j] = len(self.tracks) - 1
+                self.fails += 1
+            else:
+                self.raw[j], self.raw_cov[j] = pose, fits.cov_xytheta[i]
+                self.status[j], self.reasons[j] = OK, ""
+                self.track_id[j] = len(self.tracks) - 1
+                self.pred_state = self.pred_state.update(self.stamps[j], pose, fits.cov_xytheta[i], self.qd)
+                self.last_pose_frame = j
+                self.fails = 0
+            if self.fails >= st.lost_after:
+                self.tracking = False
+                log.debug("track lost at frame %d (%.3f s): %s", j, self.stamps[j], self.reasons[j])
+                return j + 1
+        return next_k
 
 
 def _planar_transforms(xytheta: np.ndarray) -> np.ndarray:
