@@ -57,7 +57,155 @@ def _mm(A, B, out, transpose_b=False):  # noqa: ANN001, ANN202
 
 
 @nb.njit(cache=True, nogil=True)
-def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z, fix_cov, fix_gcov, fix_lever,  # noqa: ANN001, ANN201, PLR0913, C901
+def _predict_joint(process, proc_u_i, proc_Q_i, dt, m, P, zi, mu, Pj, f, F, Gm, F3, G3, FP, GQ, FPF):  # noqa: ANN001, ANN202, PLR0913
+    """The joint (x_i, x_{i+1}, K) of step i: the mean ``mu`` and covariance ``Pj`` from (x_i, K)'s ``m``,
+    ``P`` and the process model (odometry, or constant velocity over ``dt``)."""
+    d = f.shape[0]
+    n = m.shape[0]
+    if process == 0:
+        odo_predict(m[:3], m[3:6], proc_u_i, f, F3, G3)
+        F[:, :] = F3
+        Gm[:, :] = G3
+    else:
+        F[:, :] = 0.0
+        for a in range(6):
+            F[a, a] = 1.0
+        for a in range(3):
+            F[a, 3 + a] = dt
+        for a in range(d):
+            f[a] = 0.0
+            for b in range(d):
+                f[a] += F[a, b] * m[b]
+        Gm[:, :] = np.eye(d)
+    _mm(F, P, FP)
+    for a in range(n):
+        mu[zi[a]] = m[a]
+        for b in range(n):
+            Pj[zi[a], zi[b]] = P[a, b]
+    _mm(Gm, proc_Q_i, GQ)
+    _mm(GQ, Gm, FPF, True)
+    for a in range(d):
+        for b in range(d):
+            t = FPF[a, b]
+            for c in range(n):
+                t += FP[a, c] * F[b, c]
+            FPF[a, b] = t
+    for a in range(d):
+        mu[d + a] = f[a]
+        for b in range(n):
+            Pj[d + a, zi[b]] = FP[a, b]
+            Pj[zi[b], d + a] = FP[a, b]
+        for b in range(d):
+            Pj[d + a, d + b] = FPF[a, b]
+
+
+@nb.njit(cache=True, nogil=True)
+def _apply_fix(j, d, fix_alpha, fix_kind, fix_z, fix_cov, fix_gcov, fix_lever, gate, mu, Pj, r, Jq, qb, hb, PHt,  # noqa: ANN001, ANN202, PLR0913
+               Kg, S, nu, accept, nis):
+    """Fix ``j`` on the joint of its step: its innovation gated (the prediction's covariance plus the fix's
+    gate covariance), then applied to ``mu`` and ``Pj`` when accepted; ``accept[j]`` and ``nis[j]`` set."""
+    nj = mu.shape[0]
+    al = fix_alpha[j]
+    mdim = fix_residual(mu[:d], mu[d:2 * d], al, fix_kind[j], fix_z[j], fix_lever[j], r, Jq, qb, hb)
+    # P H^T with H = [(1 - al) Jq, al Jq, 0] on (x_i[:3], x_{i+1}[:3], K)
+    for a in range(nj):
+        for b in range(mdim):
+            t = 0.0
+            for c in range(3):
+                t += ((1.0 - al) * Pj[a, c] + al * Pj[a, d + c]) * Jq[b, c]
+            PHt[a, b] = t
+    for a in range(mdim):
+        for b in range(mdim):
+            t = fix_cov[j, a, b]
+            for c in range(3):
+                t += Jq[a, c] * ((1.0 - al) * PHt[c, b] + al * PHt[d + c, b])
+            S[a, b] = t
+    Sm = S[:mdim, :mdim].copy()
+    Si = np.empty((mdim, mdim))
+    # the gate's innovation covariance: the prediction's plus the fix's own (gate_cov)
+    Sg = Sm.copy()
+    for a in range(mdim):
+        for b in range(mdim):
+            Sg[a, b] += fix_gcov[j, a, b] - fix_cov[j, a, b]
+    Sgi = np.empty((mdim, mdim))
+    if not chol_inv(Sm, Si) or not chol_inv(Sg, Sgi):
+        accept[j] = False
+        nis[j] = np.nan
+        return
+    for a in range(mdim):
+        nu[a] = -r[a]
+    q = 0.0
+    for a in range(mdim):
+        for b in range(mdim):
+            q += nu[a] * Sgi[a, b] * nu[b]
+    nis[j] = q
+    if q > gate[mdim]:
+        accept[j] = False
+        return
+    accept[j] = True
+    # K = P H^T S^-1;  mean += K nu;  P -= K S K^T = PHt S^-1 PHt^T (symmetric update)
+    for a in range(nj):
+        t = 0.0
+        for b in range(mdim):
+            kab = 0.0
+            for c in range(mdim):
+                kab += PHt[a, c] * Si[c, b]
+            Kg[a, b] = kab
+            t += kab * nu[b]
+        mu[a] += t
+    for a in range(nj):
+        for b in range(a + 1):
+            t = 0.0
+            for c in range(mdim):
+                t += Kg[a, c] * PHt[b, c]
+            Pj[a, b] -= t
+            if b != a:
+                Pj[b, a] -= t
+
+
+@nb.njit(cache=True, nogil=True)
+def _rts_backward(m, P, mu_a, mu_b, Gs, Cs, Xs, Ps, Ks, Pks):  # noqa: ANN001, ANN202
+    """The Rauch-Tung-Striebel pass from the last step's (x_N, K) ``m``, ``P``: each x_i from the stored
+    conditionals ``x_i | (x_{i+1}, K)``; the smoothed states ``Xs``, covariances ``Ps`` (when kept) and K."""
+    N, d = Xs.shape
+    n = m.shape[0]
+    p = n - d
+    Xs[N - 1] = m[:d]
+    keep_cov = Ps.shape[0] == N  # an empty Ps: the smoothed covariances are not kept
+    if keep_cov:
+        Ps[N - 1] = P[:d, :d]
+    Pz = P.copy()
+    mz = m.copy()
+    GP = np.empty((d, n))
+    Pxi = np.empty((d, d))
+    for i in range(N - 2, -1, -1):
+        G = Gs[i]
+        # x_i = mu_a + G (z_{i+1} - mu_b);  P_i = C + G Pz G^T;  cross with K = G Pz[:, K]
+        for a in range(d):
+            t = mu_a[i, a]
+            for c in range(n):
+                t += G[a, c] * (mz[c] - mu_b[i, c])
+            Xs[i, a] = t
+        _mm(G, Pz, GP)
+        _mm(GP, G, Pxi, True)
+        for a in range(d):
+            for b in range(d):
+                Pxi[a, b] += Cs[i, a, b]
+        for a in range(d):
+            for b in range(p):
+                Pz[a, d + b] = GP[a, d + b]
+                Pz[d + b, a] = GP[a, d + b]
+            for b in range(d):
+                Pz[a, b] = Pxi[a, b]
+            mz[a] = Xs[i, a]
+        if keep_cov:
+            Ps[i] = Pxi
+    Ks[:] = mz[d:]
+    Pks[:, :] = Pz[d:, d:]
+
+
+@nb.njit(cache=True, nogil=True)
+def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z, fix_cov, fix_gcov, fix_lever,  # noqa: ANN001, ANN201, PLR0913
              fix_use, gate, x0, P0, k0, Pk, Xs, Xf, Ps, Ks, Pks, accept, nis):
     N, d = Xs.shape
     p = k0.shape[0]
@@ -107,107 +255,16 @@ def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z,
     M = fix_node.shape[0]
     for i in range(N - 1):
         # --- predict x_{i+1} from (x_i, K)
-        if process == 0:
-            odo_predict(m[:3], m[3:6], proc_u[i], f, F3, G3)
-            F[:, :] = F3
-            Gm[:, :] = G3
-        else:
-            dt = dts[i]
-            F[:, :] = 0.0
-            for a in range(6):
-                F[a, a] = 1.0
-            for a in range(3):
-                F[a, 3 + a] = dt
-            for a in range(d):
-                f[a] = 0.0
-                for b in range(d):
-                    f[a] += F[a, b] * m[b]
-            Gm[:, :] = np.eye(d)
-        _mm(F, P, FP)
-        for a in range(n):
-            mu[zi[a]] = m[a]
-            for b in range(n):
-                Pj[zi[a], zi[b]] = P[a, b]
-        _mm(Gm, proc_Q[i], GQ)
-        _mm(GQ, Gm, FPF, True)
-        for a in range(d):
-            for b in range(d):
-                t = FPF[a, b]
-                for c in range(n):
-                    t += FP[a, c] * F[b, c]
-                FPF[a, b] = t
-        for a in range(d):
-            mu[d + a] = f[a]
-            for b in range(n):
-                Pj[d + a, zi[b]] = FP[a, b]
-                Pj[zi[b], d + a] = FP[a, b]
-            for b in range(d):
-                Pj[d + a, d + b] = FPF[a, b]
+        _predict_joint(process, proc_u[i], proc_Q[i], dts[i] if process != 0 else 0.0, m, P, zi, mu, Pj, f, F, Gm,
+                       F3, G3, FP, GQ, FPF)
         # --- the fixes stamped in (t_i, t_{i+1}], each gated, then applied
         while j < M and fix_node[j] == i:
             if not fix_use[j]:
                 accept[j] = False
                 nis[j] = np.nan
-                j += 1
-                continue
-            al = fix_alpha[j]
-            mdim = fix_residual(mu[:d], mu[d:2 * d], al, fix_kind[j], fix_z[j], fix_lever[j], r, Jq, qb, hb)
-            # P H^T with H = [(1 - al) Jq, al Jq, 0] on (x_i[:3], x_{i+1}[:3], K)
-            for a in range(nj):
-                for b in range(mdim):
-                    t = 0.0
-                    for c in range(3):
-                        t += ((1.0 - al) * Pj[a, c] + al * Pj[a, d + c]) * Jq[b, c]
-                    PHt[a, b] = t
-            for a in range(mdim):
-                for b in range(mdim):
-                    t = fix_cov[j, a, b]
-                    for c in range(3):
-                        t += Jq[a, c] * ((1.0 - al) * PHt[c, b] + al * PHt[d + c, b])
-                    S[a, b] = t
-            Sm = S[:mdim, :mdim].copy()
-            Si = np.empty((mdim, mdim))
-            # the gate's innovation covariance: the prediction's plus the fix's own (gate_cov)
-            Sg = Sm.copy()
-            for a in range(mdim):
-                for b in range(mdim):
-                    Sg[a, b] += fix_gcov[j, a, b] - fix_cov[j, a, b]
-            Sgi = np.empty((mdim, mdim))
-            if not chol_inv(Sm, Si) or not chol_inv(Sg, Sgi):
-                accept[j] = False
-                nis[j] = np.nan
-                j += 1
-                continue
-            for a in range(mdim):
-                nu[a] = -r[a]
-            q = 0.0
-            for a in range(mdim):
-                for b in range(mdim):
-                    q += nu[a] * Sgi[a, b] * nu[b]
-            nis[j] = q
-            if q > gate[mdim]:
-                accept[j] = False
-                j += 1
-                continue
-            accept[j] = True
-            # K = P H^T S^-1;  mean += K nu;  P -= K S K^T = PHt S^-1 PHt^T (symmetric update)
-            for a in range(nj):
-                t = 0.0
-                for b in range(mdim):
-                    kab = 0.0
-                    for c in range(mdim):
-                        kab += PHt[a, c] * Si[c, b]
-                    Kg[a, b] = kab
-                    t += kab * nu[b]
-                mu[a] += t
-            for a in range(nj):
-                for b in range(a + 1):
-                    t = 0.0
-                    for c in range(mdim):
-                        t += Kg[a, c] * PHt[b, c]
-                    Pj[a, b] -= t
-                    if b != a:
-                        Pj[b, a] -= t
+            else:
+                _apply_fix(j, d, fix_alpha, fix_kind, fix_z, fix_cov, fix_gcov, fix_lever, gate, mu, Pj, r, Jq, qb,
+                           hb, PHt, Kg, S, nu, accept, nis)
             j += 1
         # --- condition x_i on (x_{i+1}, K) for the backward pass; keep (x_{i+1}, K)
         for a in range(n):
@@ -230,38 +287,7 @@ def _ekf_rts(process, proc_u, proc_Q, dts, fix_node, fix_alpha, fix_kind, fix_z,
         P[:, :] = Pbb
         Xf[i + 1] = m[:d]
     # --- backward (Rauch-Tung-Striebel)
-    Xs[N - 1] = m[:d]
-    keep_cov = Ps.shape[0] == N  # an empty Ps: the smoothed covariances are not kept
-    if keep_cov:
-        Ps[N - 1] = P[:d, :d]
-    Pz = P.copy()
-    mz = m.copy()
-    GP = np.empty((d, n))
-    Pxi = np.empty((d, d))
-    for i in range(N - 2, -1, -1):
-        G = Gs[i]
-        # x_i = mu_a + G (z_{i+1} - mu_b);  P_i = C + G Pz G^T;  cross with K = G Pz[:, K]
-        for a in range(d):
-            t = mu_a[i, a]
-            for c in range(n):
-                t += G[a, c] * (mz[c] - mu_b[i, c])
-            Xs[i, a] = t
-        _mm(G, Pz, GP)
-        _mm(GP, G, Pxi, True)
-        for a in range(d):
-            for b in range(d):
-                Pxi[a, b] += Cs[i, a, b]
-        for a in range(d):
-            for b in range(p):
-                Pz[a, d + b] = GP[a, d + b]
-                Pz[d + b, a] = GP[a, d + b]
-            for b in range(d):
-                Pz[a, b] = Pxi[a, b]
-            mz[a] = Xs[i, a]
-        if keep_cov:
-            Ps[i] = Pxi
-    Ks[:] = mz[d:]
-    Pks[:, :] = Pz[d:, d:]
+    _rts_backward(m, P, mu_a, mu_b, Gs, Cs, Xs, Ps, Ks, Pks)
     return -1
 
 
