@@ -43,7 +43,7 @@ CHUNK = 4  # instants per chunk: the short run already fills the client's bounde
 
 
 def make_recording(out: Path, instants: int, seed: int = 1) -> tuple[Path, object]:
-    """A run of ``instants`` instants at 10 Hz (every camera's images one blank file, stamps 1 ms apart
+    """A run of ``instants`` instants at 10 Hz (every camera's images one blank file of its size, stamps 1 ms apart
     so that each instant holds all cameras) and its seeded detection checkpoint ``out/ck.jsonl``."""
     scene = make_scene(0)
     rig = scene.rig_true
@@ -59,7 +59,7 @@ def make_recording(out: Path, instants: int, seed: int = 1) -> tuple[Path, objec
     for j, cam in enumerate(rig.cameras):
         folder = out / "run" / "cameras" / cam.name
         folder.mkdir(parents=True)
-        cv2.imwrite(str(folder / "blank.png"), np.zeros((2, 2), np.uint8))
+        cv2.imwrite(str(folder / "blank.png"), np.zeros((cam.resolution[1], cam.resolution[0]), np.uint8))
         write_frame_index(folder, 0.1 * np.arange(instants) + 0.001 * j, ["blank.png"] * instants)
     dump_rig(rig, out / "rig.yaml")
     indices = camera_indices(out, "run", rig)
