@@ -102,6 +102,10 @@ def _opencv_detector(family: MarkerFamily) -> Any:
     params = cv2.aruco.DetectorParameters()
     params.markerBorderBits = family_spec(family).border_cells
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
+    # a marker whose corner lies within OpenCV's default 3 px of the image's edge is whole and its edges
+    # fit (the bands stop at the image): on the simulated room's validation stops the default lost one
+    # marker in 33 (3 % of the views, with the stops' accuracy)
+    params.minDistanceToBorder = 1
     if opencv_dictionary_name(family) is None:
         # ARToolKitPlus' codes: OpenCV reads each cell from its middle 0.74 by default; a blur of 2 px on a
         # 150 px marker's 12.5 px cells, stored through sRGB, then flips isolated cells and the marker is
