@@ -10,13 +10,13 @@ windows each one gave the sync stage (``sync.yaml``), the only per-scanner recor
 from __future__ import annotations
 
 import html
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from gtrig.io.checkpoint import checkpoint_records
 from gtrig.report.section import Section
 
 #: the grid the image-coverage share is counted on (columns, rows)
@@ -60,26 +60,20 @@ def read_checkpoint(path: Path) -> tuple[dict[str, CameraCoverage], str]:
     """Per camera its coverage, and what the row axis is (``image`` rows or ``time`` stamps in s)."""
     per: dict[str, CameraCoverage] = {}
     axis = "image"
-    with open(path, encoding="utf-8") as f:
-        f.readline()  # the header: the detections' key
-        for line in f:
-            try:
-                d = json.loads(line)
-            except json.JSONDecodeError:
-                break  # a line cut by an interruption
-            if not isinstance(d, dict):
-                continue
-            if "camera" in d:
-                cov = per.setdefault(str(d["camera"]), CameraCoverage())
-                for row, dets in d.get("frames") or []:
-                    _add(cov, float(row), [m[1] for m in dets])
-                continue
-            axis = "time"
-            for item in d.get("items") or []:
-                obs = item.get("obs") if isinstance(item, dict) else None
-                if isinstance(obs, dict):
-                    for v in obs.get("views", []):
-                        _add(per.setdefault(str(v[0]), CameraCoverage()), float(obs.get("stamp_s", 0.0)), [v[2]])
+    for d in checkpoint_records(path):
+        if not isinstance(d, dict):
+            continue
+        if "camera" in d:
+            cov = per.setdefault(str(d["camera"]), CameraCoverage())
+            for row, dets in d.get("frames") or []:
+                _add(cov, float(row), [m[1] for m in dets])
+            continue
+        axis = "time"
+        for item in d.get("items") or []:
+            obs = item.get("obs") if isinstance(item, dict) else None
+            if isinstance(obs, dict):
+                for v in obs.get("views", []):
+                    _add(per.setdefault(str(v[0]), CameraCoverage()), float(obs.get("stamp_s", 0.0)), [v[2]])
     return per, axis
 
 

@@ -84,9 +84,9 @@ def _instants_with_views(checkpoint: str | os.PathLike[str], camera_stamps_s: Ma
     the cameras whose images show markers. Reads both checkpoint layouts: per camera and time window
     (``{"camera", "frames"}``, version 5), whose instants are rebuilt as GTvision makes them, and whole
     instants (``{"chunk", "items"}``, before)."""
-    import json
     from pathlib import Path
 
+    from gtrig.io.checkpoint import checkpoint_records
     from gtrig.io.frames import FrameIndex
     from gtrig.vision.sequence import make_instants
 
@@ -97,22 +97,19 @@ def _instants_with_views(checkpoint: str | os.PathLike[str], camera_stamps_s: Ma
 
     by_stamp: dict[float, tuple[float, list[str]]] = {}
     with_views: dict[str, set[int]] = {}
-    with open(checkpoint, encoding="utf-8") as f:
-        f.readline()  # the header: the detections' key
-        for line in f:
-            try:
-                d = json.loads(line)
-                if "camera" in d:
-                    with_views.setdefault(str(d["camera"]), set()).update(int(r) for r, v in d["frames"] if v)
-                    continue
-                items = d["items"]
-            except (json.JSONDecodeError, KeyError, TypeError, ValueError):
-                break  # a line cut by an interruption
-            for it in items:
-                o = it["obs"]
-                seen = sorted({v[0] for v in o["views"]})
-                t0 = float(o["stamp_s"])
-                by_stamp[round(t0, 6)] = (when(seen, {c: int(r) for c, r in o["frames"]}, t0), seen)
+    for d in checkpoint_records(checkpoint):
+        try:
+            if "camera" in d:
+                with_views.setdefault(str(d["camera"]), set()).update(int(r) for r, v in d["frames"] if v)
+                continue
+            items = d["items"]
+        except (KeyError, TypeError, ValueError):
+            break  # a line cut by an interruption
+        for it in items:
+            o = it["obs"]
+            seen = sorted({v[0] for v in o["views"]})
+            t0 = float(o["stamp_s"])
+            by_stamp[round(t0, 6)] = (when(seen, {c: int(r) for c, r in o["frames"]}, t0), seen)
     if with_views:
         indices = {c: FrameIndex(c, Path("."), np.arange(len(s)), np.asarray(s, float), ())
                    for c, s in camera_stamps_s.items()}

@@ -29,7 +29,6 @@ Verdicts and the cost curve as :func:`gtrig.sync.sensors.offset_verdict`.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 from collections.abc import Mapping
@@ -39,6 +38,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig.evaluate.associate import nearest_indices
+from gtrig.io.checkpoint import checkpoint_records
 from gtrig.sync.offset import OffsetEstimate
 from gtrig.sync.reference import Reference, cost_score, jackknife, near_reference, offset_verdict, ridge
 from gtrig.trajectory import PoseTrack
@@ -80,26 +80,19 @@ def read_camera_corners(checkpoint: str | os.PathLike[str], model: VisionModel,
     """
     views: dict[str, list[MarkerView]] = {}
     floor = floor_px**2 * np.eye(2)
-    with open(checkpoint, encoding="utf-8") as f:
-        f.readline()  # the header: the detections' key
-        for line in f:
-            try:
-                d = json.loads(line)
-            except json.JSONDecodeError:
-                break  # a line cut by an interruption
-            cam = d.get("camera")
-            if cam is None:
-                log.warning("%s: a checkpoint of whole instants (before version 5): no per-camera corners",
-                            checkpoint)
-                return {}
-            if cam not in model.cameras or cam not in camera_stamps_s:
-                continue
-            for row, dets in d["frames"]:
-                ids = [int(m) for m, _, _ in dets]
-                for m, uv, cov in dets:
-                    if int(m) in model.corners_robot and ids.count(int(m)) == 1:
-                        views.setdefault(cam, []).append(
-                            MarkerView(cam, int(m), np.asarray(uv, float), np.asarray(cov, float) + floor, int(row)))
+    for d in checkpoint_records(checkpoint):
+        cam = d.get("camera")
+        if cam is None:
+            log.warning("%s: a checkpoint of whole instants (before version 5): no per-camera corners", checkpoint)
+            return {}
+        if cam not in model.cameras or cam not in camera_stamps_s:
+            continue
+        for row, dets in d["frames"]:
+            ids = [int(m) for m, _, _ in dets]
+            for m, uv, cov in dets:
+                if int(m) in model.corners_robot and ids.count(int(m)) == 1:
+                    views.setdefault(cam, []).append(
+                        MarkerView(cam, int(m), np.asarray(uv, float), np.asarray(cov, float) + floor, int(row)))
     out = {}
     for cam, vs in views.items():
         rows = np.array([v.frame for v in vs])
