@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from gtrig.markers.detect._kernels import band_scan, lm_edge, marker_context, quad_homographies
+from gtrig.markers.detect._kernels import band_pixels, lm_edge, marker_context, quad_homographies
 
 #: column of the parameters ``(theta, rho, a, b, log sigma, c, c_u)`` (:func:`.edges.fit_edges`)
 _NP = 7
@@ -43,20 +43,8 @@ def _gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np
         L[e] = math.hypot(tx, ty)
         t[e, 0], t[e, 1] = tx / L[e], ty / L[e]
         nrm[e, 0], nrm[e, 1] = t[e, 1], -t[e, 0]
-    shape_hw = (gray.shape[0], gray.shape[1])
-    z = np.empty(0, np.int64)
-    M = band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, z, z, z, False)
-    xs = np.empty(M, np.int64)
-    ys = np.empty(M, np.int64)
-    es = np.empty(M, np.int64)
-    band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, xs, ys, es, True)
-    x = np.empty(M)
-    y = np.empty(M)
-    v = np.empty(M)
-    for i in range(M):
-        x[i], y[i] = xs[i], ys[i]
-        v[i] = gray[ys[i], xs[i]]
-    return x, y, v, es
+    xy, v, es = band_pixels(gray, p0, t, nrm, L, w_in, w_out, excl)
+    return xy[:, 0].copy(), xy[:, 1].copy(), v, es
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
