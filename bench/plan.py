@@ -177,7 +177,7 @@ def honesty(pairs: list[str], calibrated: bool, every: int = 3) -> None:
             true_xyt = _truth_xytheta(truth, t[keep])
             est_xyt = np.column_stack([est.xyz[keep, :2], geo.yaw_of_quats(est.quat_xyzw[keep])])
             err = pose_errors(est_xyt, true_xyt)
-            plan = predict_plan(rig, path_grid(true_xyt[:, :2], true_xyt[:, 2]), settings)
+            plan = predict_plan(rig, path_grid(true_xyt[:, :2], true_xyt[:, 2], t[keep]), settings)
             region = best_camera_region(plan.views)
             for r in region_ratios(err, plan.cov[src], region):
                 pooled.setdefault((src, r.region), []).append(
