@@ -124,10 +124,31 @@ def _check_robot(plan: Rig) -> None:
         raise InputError("robot.onboard_scanners: the simulator's onboard scanners scan a horizontal plane")
 
 
+def _check_world_board(plan: Rig) -> None:
+    """A planned camera must see the world board whole: the simulated calibration anchors the cameras to
+    the world with it."""
+    from gtrig.sim.cameras import board_fully_visible
+    from gtrig.sim.render import PinholeCamera
+
+    T_world_board = world_board_pose()
+    if not any(board_fully_visible(PinholeCamera.from_rig(c), c.T_world_cam.matrix(), T_world_board,
+                                   margin_px=5.0, max_angle_deg=80.0) for c in plan.cameras):
+        x, y = T_world_board[:2, 3]
+        raise InputError(f"cameras: none sees the simulated world board whole (on the floor at x {x:g}, y {y:g} m, "
+                         "x along world x); the simulated calibration anchors the cameras to it")
+
+
+def world_board_pose() -> np.ndarray:
+    """T_world_board (4, 4) of the GT room's world-anchoring chessboard: flat on the floor, printed side
+    down (the board's z into the floor), x along world x."""
+    return geo.T_from_xyz_rpy([1.1, 1.65, 0.0], [np.pi, 0, 0])
+
+
 def check_plan(plan: Rig) -> None:
     """Refuse, with one line naming the field, a planned rig the simulator cannot simulate."""
     room_xy = room_walls()[:, 0]
     _check_cameras(plan, room_xy)
+    _check_world_board(plan)
     _check_scanners(plan, room_xy)
     _check_robot(plan)
     names = [p.name for p in plan.survey.reference_points]
@@ -218,7 +239,7 @@ def install(plan: Rig, seed: int = 0, anchor_id: int = DIMA_MARKER_ID) -> Scene:
     rig_nominal = _nominal(rig_true, plan, rng)
     T12_nom = geo.make_T(np.eye(3), [CHESSBOARD_SQUARES[0] * CHESSBOARD_SQUARE_M + DOUBLE_BOARD_GAP_M, 0, 0])
     T12_true = T12_nom @ geo.T_from_xyz_rpy(rng.normal(0, 0.002, 3), np.radians(rng.normal(0, 0.2, 3)))
-    T_world_board = geo.T_from_xyz_rpy([1.1, 1.65, 0.0], [np.pi, 0, 0])
+    T_world_board = world_board_pose()
     return Scene(
         seed=seed, rig_true=rig_true, rig_nominal=rig_nominal, walls=room_walls(), boxes=clutter(),
         floor=Floor.random(rng), world_points_xy=WORLD_POINTS_XY.copy(), reference_true_xy=ref_true,

@@ -106,6 +106,8 @@ def _bad(field: str) -> Rig:
         s = d.laser_scanners[2]
         tilted = Pose(xyz=s.T_world_scanner.xyz, rpy_deg=(5.0, 0.0, 30.0))
         return d.model_copy(update={"laser_scanners": (s.model_copy(update={"T_world_scanner": tilted}),)})
+    if field == "board":  # cam1 alone sees the world board
+        return d.model_copy(update={"cameras": (d.cameras[0], d.cameras[2], d.cameras[3])})
     if field == "marker":
         m = d.robot.markers[1]
         high = Pose(xyz=(0.2, -0.14, 1.0), rpy_deg=(0.0, 0.0, 0.0))
@@ -117,6 +119,7 @@ def _bad(field: str) -> Rig:
 @pytest.mark.parametrize(("field", "named"), [
     ("camera", "cameras[1] (cam1).T_world_cam"), ("scanner", "laser_scanners[0] (laser2).T_world_scanner"),
     ("marker", "robot.markers[1] (id 6).T_robot_marker"), ("hull", "robot.hull"),
+    ("board", "cameras: none sees the simulated world board whole"),
 ])
 def test_what_cannot_be_simulated_is_refused_in_one_line(tmp_path: Path, field: str, named: str) -> None:
     dump_rig(_bad(field), tmp_path / "rig.yaml")
