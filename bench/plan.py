@@ -7,6 +7,14 @@ the plan's CPU time per pose over the estimator's (``estimate_frame``) per pose,
 
     python bench/plan.py [--grid-m 0.05] [--headings 16] [--workers 1] [--figures docs/figures]
     python bench/plan.py --suggest 25 --grid-m 0.1 --headings 16
+    python bench/plan.py --honesty RESULTS=RECORDING [RESULTS=RECORDING ...] [--calibrated]
+
+``--honesty``: the plan's predicted sigmas of GTlaser, fusion and GTvision at the true poses of simulated
+runs (``gtrig run`` results folders beside the recordings ``gtrig sim`` wrote, with their truth) against
+the runs' errors, per region of the floor (the camera that sees the robot best) and pooled over the runs;
+and each camera's predicted coverage against the share of its images in which the run found a marker.
+The plan is made from the recording's ``rig.yaml`` (the planned rig) with ``gtrig plan``'s default rig
+sigmas, or with ``--calibrated`` from the results' ``rig.calibrated.yaml`` (its calibrated covariances).
 """
 
 from __future__ import annotations
@@ -127,6 +135,76 @@ def figures(folder: Path) -> None:
     atomic_write_bytes(folder / "plan_gtroom_target.png", plots.target_map(plan, s))
 
 
+def _truth_xytheta(truth, stamps_s: np.ndarray) -> np.ndarray:  # noqa: ANN001
+    th = np.unwrap(geo.yaw_of_quats(truth.quat_xyzw))
+    return np.column_stack([np.interp(stamps_s, truth.stamps_s, truth.xyz[:, 0]),
+                            np.interp(stamps_s, truth.stamps_s, truth.xyz[:, 1]),
+                            np.interp(stamps_s, truth.stamps_s, th)])
+
+
+def _camera_stamps(recording: Path, camera: str) -> np.ndarray:
+    import csv
+
+    with open(recording / "run" / "cameras" / camera / "timestamps.csv", encoding="utf-8") as f:
+        return np.array([float(r["stamp_s"]) for r in csv.DictReader(f)])
+
+
+def honesty(pairs: list[str], calibrated: bool, every: int = 3) -> None:
+    """Predicted against measured, per region and source (module docstring)."""
+    from gtrig.io.tum import read_tum
+    from gtrig.plan.grid import path_grid
+    from gtrig.plan.honesty import best_camera_region, coverage_check, pose_errors, region_ratios
+    from gtrig.plan.predict import PlanSettings, predict_plan
+    from gtrig.plan.vision import VisionPlanSettings, predict_vision
+    from gtrig.report.coverage import read_checkpoint
+    from gtrig.rig.load import load_rig
+    from gtrig.vision.covariance import RigUncertainty
+
+    ru = RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))  # gtrig plan's defaults
+    settings = PlanSettings(vision=VisionPlanSettings(rig_uncertainty=ru))
+    sources = (("laser", "gt_laser.tum"), ("fused", "gt_fused.tum"), ("vision", "gt_vision_run.tum"))
+    pooled: dict[tuple[str, int], list[np.ndarray]] = {}
+    for pair in pairs:
+        res_s, _, rec_s = pair.partition("=")
+        res, rec = Path(res_s), Path(rec_s)
+        rig = load_rig(res / "rig.calibrated.yaml" if calibrated else rec / "rig.yaml")
+        truth = read_tum(rec / "truth" / "run.tum")
+        print(f"{res} against {rec / 'truth'} ({'calibrated rig' if calibrated else 'planned rig'}):")
+        for src, fname in sources:
+            est = read_tum(res / fname)
+            t = est.stamps_s
+            keep = np.flatnonzero((t >= truth.stamps_s[0]) & (t <= truth.stamps_s[-1]))[::every]
+            true_xyt = _truth_xytheta(truth, t[keep])
+            est_xyt = np.column_stack([est.xyz[keep, :2], geo.yaw_of_quats(est.quat_xyzw[keep])])
+            err = pose_errors(est_xyt, true_xyt)
+            plan = predict_plan(rig, path_grid(true_xyt[:, :2], true_xyt[:, 2], t[keep]), settings)
+            region = best_camera_region(plan.views)
+            for r in region_ratios(err, plan.cov[src], region):
+                pooled.setdefault((src, r.region), []).append(
+                    np.array([r.poses, r.rms_error_m**2, r.rms_sigma_m**2, r.rms_error_rad**2, r.rms_sigma_rad**2]))
+                print(f"  {src:<6} region cam{r.region}: {r.poses:4d} poses, RMS error / sigma: position "
+                      f"{r.position:.2f} ({1e3 * r.rms_error_m:.3f} / {1e3 * r.rms_sigma_m:.3f} mm), yaw {r.yaw:.2f} "
+                      f"({np.degrees(r.rms_error_rad):.4f} / {np.degrees(r.rms_sigma_rad):.4f} deg)")
+        per, _ = read_checkpoint(res / "gt_vision_run.checkpoint")
+        for cam in rig.cameras:
+            stamps = _camera_stamps(rec, cam.name)
+            seen = predict_vision(rig.model_copy(update={"cameras": (cam,)}), _truth_xytheta(truth, stamps),
+                                  settings.vision).views[:, 0] > 0
+            localized = np.zeros(stamps.size, dtype=bool)
+            c = per.get(cam.name)
+            if c is not None:
+                localized[np.asarray(c.rows, dtype=int)] = np.asarray(c.marked, dtype=bool)
+            cc = coverage_check(cam.name, seen, localized)
+            print(f"  coverage {cam.name}: {cc.images} images, predicted {cc.predicted_pct:.1f} %, marker found "
+                  f"{cc.localized_pct:.1f} %, difference {cc.difference_points:+.1f} points, agree on "
+                  f"{cc.agree_pct:.1f} % of the images")
+    print("pooled over the runs (RMS error / RMS sigma per region):")
+    for (src, reg), rows in sorted(pooled.items()):
+        # poses-weighted mean squares over the runs
+        e2, s2, y2, ys2 = np.sum([r[0] * r[1:] for r in rows], axis=0) / np.sum([r[0] for r in rows])
+        print(f"  {src:<6} region cam{reg}: position {np.sqrt(e2 / s2):.2f}, yaw {np.sqrt(y2 / ys2):.2f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--grid-m", type=float, default=0.05)
@@ -135,8 +213,13 @@ def main() -> None:
     ap.add_argument("--suggest", type=int, default=0, help="time a camera suggestion over this many positions "
                     "along the GT room's outline (2 candidates each) instead")
     ap.add_argument("--figures", type=Path, default=None, help="write the GT room's maps here (and skip the speed)")
+    ap.add_argument("--honesty", nargs="+", metavar="RESULTS=RECORDING", default=None,
+                    help="check the plan against these simulated runs instead (module docstring)")
+    ap.add_argument("--calibrated", action="store_true", help="with --honesty: plan with the calibrated rig")
     a = ap.parse_args()
-    if a.suggest:
+    if a.honesty:
+        honesty(a.honesty, a.calibrated)
+    elif a.suggest:
         suggestion(a.grid_m, a.headings, a.suggest)
     elif a.figures is not None:
         figures(a.figures)

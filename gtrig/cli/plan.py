@@ -112,7 +112,7 @@ def command(
         from gtrig.io.tum import read_tum
 
         traj = read_tum(path)
-        grid = path_grid(traj.xyz[:, :2], geo.yaw_of_quats(traj.quat_xyzw))
+        grid = path_grid(traj.xyz[:, :2], geo.yaw_of_quats(traj.quat_xyzw), traj.stamps_s)
     else:
         poly = np.asarray(parse_polygon(area), dtype=float) if area is not None else default_area(r)
         grid = area_grid(poly, grid_m, headings)

@@ -20,11 +20,16 @@ def command(
                                             help="The robot's clock (odometry, onboard scans) minus the GT clock."),
     config: Path | None = typer.Option(None, "--config", help="YAML of simulator settings over the defaults, "
                                        "e.g. 'motion: {profile: agile, speed_mps: 1.5}' (docs/simulator.md)."),
+    rig: Path | None = typer.Option(None, "--rig", help="A planned rig.yaml (as gtrig plan reads it) to install "
+                                    "in the GT room instead of its own (docs/simulator.md)."),
+    path: Path | None = typer.Option(None, "--path", help="A TUM trajectory for the continuous run instead of "
+                                     "the built-in path (world frame, inside the GT room)."),
 ) -> None:
     """Simulate a recording of the instrumented room, with its truth, in the real on-disk layout."""
     import time
 
     from gtrig.cli import checks
+    from gtrig.errors import InputError
     from gtrig.sim.config import SimConfig
     from gtrig.sim.recording import simulate
 
@@ -37,12 +42,51 @@ def command(
                                   "odometry_clock_offset_s": odometry_offset_s})
     if config is not None:
         cfg = _with_file(cfg, config)
+    plan = _planned_rig(rig) if rig is not None else None
+    planned_path = _planned_path(path) if path is not None else None
+    if (plan is not None or planned_path is not None) and cfg.scenario != "gtroom":
+        raise InputError("--rig and --path simulate the GT room: leave --scenario at gtroom")
     t0 = time.perf_counter()
     with console.status("simulating") as status:
-        timings = simulate(cfg, out, on_step=lambda name, i, n: status.update(f"[{i + 1}/{n}] {name}"))
+        timings = simulate(cfg, out, on_step=lambda name, i, n: status.update(f"[{i + 1}/{n}] {name}"),
+                           plan=plan, path=planned_path)
     for name, secs in timings.items():
         console.print(f"  {name:<20} {secs:6.1f} s")
     console.print(f"wrote {out} in {time.perf_counter() - t0:.1f} s")
+
+
+def _planned_rig(path: Path):  # noqa: ANN202
+    """The planned rig, loaded and checked for the simulator (one line naming the field otherwise)."""
+    from gtrig.errors import InputError
+    from gtrig.rig.load import load_rig
+    from gtrig.sim.install import check_plan
+
+    if not path.is_file():
+        raise InputError(f"{path}: no such rig file")
+    plan = load_rig(path)
+    try:
+        check_plan(plan)
+    except InputError as e:
+        raise InputError(f"{path}: {e}") from None
+    return plan
+
+
+def _planned_path(path: Path):  # noqa: ANN202
+    """The continuous run's path from a TUM file: stamps from its first pose, x, y and the heading."""
+    import numpy as np
+
+    from gtrig import geometry as geo
+    from gtrig.errors import InputError
+    from gtrig.io.tum import read_tum
+    from gtrig.sim.recording import PlannedPath
+
+    if not path.is_file():
+        raise InputError(f"{path}: no such trajectory file")
+    traj = read_tum(path)
+    if len(traj.stamps_s) < 2:
+        raise InputError(f"{path}: the path needs at least 2 poses")
+    xyth = np.column_stack([traj.xyz[:, :2], np.unwrap(geo.yaw_of_quats(traj.quat_xyzw))])
+    return PlannedPath(np.asarray(traj.stamps_s - traj.stamps_s[0], dtype=float), xyth)
 
 
 def _with_file(cfg, path: Path):  # noqa: ANN001, ANN202

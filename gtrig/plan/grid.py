@@ -27,6 +27,8 @@ class PlanGrid:
     step_m : cell size (area), metres; nan for a path.
     polygon_xy : (V, 2) the area's outline, world frame, metres (a path: its bounding box).
     path_theta_rad : (C,) heading of each path pose, or None for an area.
+    path_velocity : (C, 3) velocity of each path pose, x, y (m/s) and heading (rad/s), world frame, when
+        the path has time stamps; None otherwise (a standing robot).
     """
 
     kind: Literal["area", "path"]
@@ -35,6 +37,7 @@ class PlanGrid:
     step_m: float
     polygon_xy: np.ndarray
     path_theta_rad: np.ndarray | None = None
+    path_velocity: np.ndarray | None = None
 
     @property
     def n_cells(self) -> int:
@@ -107,15 +110,22 @@ def area_grid(polygon_xy: np.ndarray, step_m: float = 0.05, n_headings: int = 16
     return PlanGrid("area", cells, headings, float(step_m), P)
 
 
-def path_grid(xy: np.ndarray, theta_rad: np.ndarray) -> PlanGrid:
-    """The poses of a path: positions (N, 2) and headings (N,), world frame."""
+def path_grid(xy: np.ndarray, theta_rad: np.ndarray, stamps_s: np.ndarray | None = None) -> PlanGrid:
+    """The poses of a path: positions (N, 2) and headings (N,), world frame; with increasing time stamps
+    (N,) in seconds, also each pose's velocity (central differences over the unwrapped heading)."""
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     th = np.asarray(theta_rad, dtype=float).ravel()
     if xy.shape[0] == 0 or th.shape[0] != xy.shape[0]:
         raise InputError("--path: the path has no poses")
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     box = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
-    return PlanGrid("path", xy, np.zeros(1), float("nan"), box, th)
+    vel = None
+    if stamps_s is not None and xy.shape[0] >= 2:
+        t = np.asarray(stamps_s, dtype=float).ravel()
+        if t.shape[0] != xy.shape[0] or np.any(np.diff(t) <= 0):
+            raise InputError("--path: the stamps must increase")
+        vel = np.gradient(np.column_stack([xy, np.unwrap(th)]), t, axis=0)
+    return PlanGrid("path", xy, np.zeros(1), float("nan"), box, th, vel)
 
 
 def default_area(rig: Rig) -> np.ndarray:

@@ -9,9 +9,11 @@ top). The noise-free hits are handed to the hull ICP's own normal equations
 ``range_sigma_m`` along the beam, the model error, the weak prior), so the covariance is the one
 the ICP reports for one scan, plus what GTlaser adds after smoothing and cannot average out: the
 hull's surface bias (:func:`gtrig.laser.hull_icp.side_bias_sensitivity` with its prior) and the floor
-``floor_std_m``/``floor_std_rad``. Smoothing over a moving run shrinks the scan noise's part; a
-standing robot gets this one. A pose the ICP would call degenerate (too few points, fewer than two
-sides, too wide a covariance) is not covered.
+``floor_std_m``/``floor_std_rad``. GTlaser smooths each track over its frames, so the scan noise's part
+is the smoother's steady state (:mod:`gtrig.plan.smoothing`: frames at the scanners' rate, the smoother's
+order and the geometric middle of the process noises its adaptation searches, ``process_noise_factor``),
+not one scan's: one scan's covariance is kept beside it. A pose the ICP would call degenerate (too few
+points, fewer than two sides, too wide a covariance) is not covered, judged on one scan as the ICP does.
 """
 
 from __future__ import annotations
@@ -32,8 +34,9 @@ class LaserPrediction:
     Attributes
     ----------
     cov_xytheta : (K, 3, 3) predicted covariance of x, y (m) and yaw (rad); nan where not covered.
-    cov_scan_xytheta : (K, 3, 3) its part from one scan's range noise alone (what the ICP reports for a
-        scan that fits as its noise model says), for every pose with beams on the hull.
+    cov_scan_xytheta : (K, 3, 3) one scan's covariance from its range noise alone (what the ICP reports
+        for a scan that fits as its noise model says), for every pose with beams on the hull; its part in
+        ``cov_xytheta`` is what smoothing leaves of it.
     beams : (K, n_scanners) beams of each scanner on the hull.
     sides : (K, n_scanners) hull sides each scanner sees with at least ``min_side_points`` beams.
     covered : (K,) the ICP would trust the fit (not degenerate).
@@ -118,10 +121,31 @@ def cast_beams(rig: Rig, model: HullModel, poses_xytheta: np.ndarray) -> BeamHit
 
 @dataclass(frozen=True)
 class LaserPlanSettings:
-    """GTlaser's settings the prediction uses (its ICP's noise model and degeneracy thresholds, and the
-    terms added after smoothing)."""
+    """GTlaser's settings the prediction uses (its ICP's noise model and degeneracy thresholds, its
+    smoother, and the terms added after smoothing); ``smooth`` False predicts one scan's fit, as for a
+    single frame. ``process_noise_factor`` scales the smoother's base process noise (spectral density):
+    GTlaser adapts it per frame between 1 and 100 times the base (:mod:`gtrig.laser.process_noise`); 10,
+    the middle on a log scale, matches the GT room's simulated runs (docs/plan.md, honesty)."""
 
     track: TrackSettings = field(default_factory=TrackSettings)
+    smooth: bool = True
+    process_noise_factor: float = 10.0
+
+
+def _smoothed_scan_covariance(rig: Rig, cov_scan: np.ndarray, st: TrackSettings, factor: float) -> np.ndarray:
+    """What GTlaser's smoother leaves of one scan's covariance (K, 3, 3): frames at the scanners' median
+    rate, the smoother's process noise times ``factor`` (module docstring)."""
+    from gtrig.plan.smoothing import smoothed_covariance
+
+    rate_hz = float(np.median([s.rate_hz for s in rig.laser_scanners]))
+    if st.smoother_order == 3 and st.adapt_process_noise:
+        q_xy, q_yaw = st.jerk_std_mps3, st.ang_jerk_std_radps3
+        order = 3
+    else:  # a fixed white-acceleration model (rts_smooth)
+        q_xy, q_yaw, factor = st.accel_std_mps2, st.ang_accel_std_radps2, 1.0
+        order = 2
+    qd = factor * np.array([q_xy**2, q_xy**2, q_yaw**2])
+    return smoothed_covariance(cov_scan, qd, 1.0 / rate_hz, order)
 
 
 def predict_laser(rig: Rig, poses_xytheta: np.ndarray, settings: LaserPlanSettings = LaserPlanSettings()
@@ -147,11 +171,15 @@ def predict_laser(rig: Rig, poses_xytheta: np.ndarray, settings: LaserPlanSettin
     A = np.linalg.solve(H, H_pb)
     bias = st.surface_bias_std_m**2 * np.ones((4, 4)) + st.side_bias_std_m**2 * np.eye(4)
     floor = np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2])
-    cov = cov_scan + A @ bias @ np.swapaxes(A, 1, 2) + floor
+    persistent = A @ bias @ np.swapaxes(A, 1, 2) + floor  # what smoothing cannot average out
+    cov_one = cov_scan + persistent
     n_pts = beams.sum(axis=1)
     n_sides = np.sum(per_side.sum(axis=1) >= icp.min_side_points, axis=1)
-    std_xy = np.sqrt(np.linalg.eigvalsh(cov[:, :2, :2])[:, -1])
+    std_xy = np.sqrt(np.linalg.eigvalsh(cov_one[:, :2, :2])[:, -1])
     covered = (n_pts >= icp.min_points) & (n_sides >= 2) & (std_xy <= icp.max_std_m) & (
-        np.sqrt(cov[:, 2, 2]) <= icp.max_std_rad)
+        np.sqrt(cov_one[:, 2, 2]) <= icp.max_std_rad)
+    cov = cov_one
+    if settings.smooth and st.smooth:
+        cov = _smoothed_scan_covariance(rig, cov_scan, st, settings.process_noise_factor) + persistent
     return LaserPrediction(np.where(covered[:, None, None], cov, np.nan),
                            np.where(n_pts[:, None, None] > 0, cov_scan, np.nan), beams, sides, covered)

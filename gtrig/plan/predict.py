@@ -2,7 +2,10 @@
 
 The fused covariance is the inverse of the sum of the two sources' planar informations (x, y, yaw),
 as fusion combines independent measurements of one instant; where only one source covers a pose it
-is that source's. Poses are processed in chunks so that memory stays bounded.
+is that source's. On a path with time stamps, GTvision's covariance also holds the cameras' time-stamp
+jitter times the robot's velocity (:func:`gtrig.plan.motion.stamp_jitter_covariance`): an image stamped
+off by ``dt`` shows the robot where it was ``dt`` earlier or later. Poses are processed in chunks so that
+memory stays bounded.
 """
 
 from __future__ import annotations
@@ -133,6 +136,11 @@ def predict_plan(rig: Rig, grid: PlanGrid, settings: PlanSettings = PlanSettings
                        for a, b in zip(edges[:-1], edges[1:], strict=True)]
             parts = [f.result() for f in futures]
     cov_v, cov_l, views, side_px, beams, sides = (np.concatenate(x) for x in zip(*parts, strict=True))
+    if grid.path_velocity is not None and rig.cameras:
+        from gtrig.plan.motion import stamp_jitter_covariance
+
+        cov_v = cov_v + stamp_jitter_covariance(views, np.array([c.stamp_sigma_s for c in rig.cameras]),
+                                                grid.path_velocity)
     fused = fuse_information([cov_v, cov_l])
     log.info("plan: %d poses (%d cells x %d headings)", K, grid.n_cells, grid.n_headings)
     return PlanResult(grid, tuple(c.name for c in rig.cameras), tuple(s.name for s in rig.laser_scanners),

@@ -91,6 +91,7 @@ CAM_RES = (1024, 768)
 CAM_F = 1500.0
 CAM_RATE_HZ = 10.0
 
+SCANNER_UV = ((-3.7, 1.75), (-3.7, -1.75), (3.7, -1.75), (3.7, 1.75))  # the band's corners
 LASER_HEIGHT_M = 0.25
 LASER_RATE_HZ = 75.0
 LASER_BEAMS = 180
@@ -189,7 +190,7 @@ def _true_cameras(rng: np.random.Generator) -> tuple[Camera, ...]:
 def _scanners(rng: np.random.Generator) -> tuple[LaserScanner, ...]:
     """Four 180-degree scanners at the band's corners, looking inwards (seeds: SICK LMS, 180 beams)."""
     out = []
-    for i, (u, v) in enumerate(((-3.7, 1.75), (-3.7, -1.75), (3.7, -1.75), (3.7, 1.75))):
+    for i, (u, v) in enumerate(SCANNER_UV):
         p = _band_xy(u, v)
         to_centre = BAND_CENTRE - p
         yaw = float(np.arctan2(to_centre[1], to_centre[0]) + rng.normal(0, np.radians(1)))
@@ -318,6 +319,36 @@ def make_scene(seed: int = 0) -> Scene:
         floor=Floor.random(rng), world_points_xy=WORLD_POINTS_XY.copy(), reference_true_xy=ref_true,
         T_board1_board2_true=T12_true, T_board1_board2_nominal=T12_nom, T_world_board=T_world_board,
     )
+
+
+def design_rig() -> Rig:
+    """The GT room's rig as planned, before it is installed: cameras on their poles aimed at the band's
+    centre line with the nominal lens (no distortion), the scanners at the band's corners looking at its
+    centre, the markers where the layout puts them, the survey's reference points. ``gtrig sim --rig`` on
+    it (:func:`gtrig.sim.install.install`) draws the same installation as :func:`make_scene`."""
+    w, h = CAM_RES
+    K = ((CAM_F, 0.0, w / 2 - 0.5), (0.0, CAM_F, h / 2 - 0.5), (0.0, 0.0, 1.0))
+    cams = tuple(
+        Camera(name=f"cam{i}", resolution=CAM_RES, camera_matrix=K, dist_coeffs=(0.0, 0.0, 0.0, 0.0, 0.0),
+               T_world_cam=Pose.from_matrix(geo.look_at(np.r_[_band_xy(u, CAM_POLE_V), z],
+                                                        np.r_[_band_xy(u, CAM_TARGET_V), 0.0])),
+               rate_hz=CAM_RATE_HZ)
+        for i, (u, z) in enumerate(zip(CAM_U, CAM_HEIGHT, strict=True)))
+    scanners = []
+    for i, (u, v) in enumerate(SCANNER_UV):
+        p = _band_xy(u, v)
+        to_centre = BAND_CENTRE - p
+        T = geo.T_from_xyz_rpy([p[0], p[1], LASER_HEIGHT_M], [0, 0, float(np.arctan2(to_centre[1], to_centre[0]))])
+        inc = np.pi / LASER_BEAMS
+        scanners.append(LaserScanner(name=f"laser{i}", T_world_scanner=Pose.from_matrix(T),
+                                     angle_min_rad=-np.pi / 2 + inc / 2, angle_increment_rad=inc, beams=LASER_BEAMS,
+                                     range_max_m=30.0, rate_hz=LASER_RATE_HZ, range_sigma_m=0.01))
+    survey = Survey(reference_points=tuple(ReferencePoint(name=k, xy=v, sigma_m=REFERENCE_SIGMA_M)
+                                           for k, v in REFERENCE_POINTS_XY.items()),
+                    hand_laser_sigma_m=HAND_LASER_SIGMA_M)
+    world = World(name="gtroom", description="Simulated replica of the RAWSEEDS GT room (GTV frame)")
+    return Rig(world=world, cameras=cams, laser_scanners=tuple(scanners), robot=_robot(_markers(None)),
+               survey=survey)
 
 
 def continuous_path(

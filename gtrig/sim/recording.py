@@ -51,10 +51,25 @@ class Timeline:
     background_interval_s: np.ndarray  # (1, 2)
 
 
-def make_timeline(scene: Scene, cfg: SimConfig) -> Timeline:
+@dataclass(frozen=True)
+class PlannedPath:
+    """The continuous run's path given by the user instead of the built-in one: stamps (N,) seconds from
+    its start, increasing, and planar poses (N, 3) x, y (m), heading (rad, continuous), world frame."""
+
+    stamps_s: np.ndarray
+    xytheta: np.ndarray
+
+
+def make_timeline(scene: Scene, cfg: SimConfig, path: PlannedPath | None = None) -> Timeline:
+    """When each sequence happens: the background, the validation stops, the continuous run (along
+    ``path`` when given, else the built-in path through the validation positions, cut to
+    ``cfg.run_duration_s``)."""
     duration = cfg.run_duration_s
     m = cfg.motion
-    if m.profile == "agile":
+    if path is not None:
+        keep = path.stamps_s <= (duration if duration is not None else np.inf)
+        stamps, xyth = path.stamps_s[keep], path.xytheta[keep]
+    elif m.profile == "agile":
         stamps, xyth = agile_path(VALIDATION_POSES, m.speed_mps, m.accel_mps2, m.lat_accel_mps2,
                                   m.yaw_rate_max_radps, duration_s=duration)
     else:
@@ -210,6 +225,36 @@ def _step_map(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig) -> None:
     write_maps(scene, out)
 
 
+def _scene(cfg: SimConfig, plan: Rig | None) -> Scene:
+    """The GT room with its own rig, or with ``plan`` installed in it, as ``cfg.laser`` sets it up."""
+    if plan is None:
+        return configure_scene(make_scene(cfg.seed), cfg)
+    from gtrig.sim.install import install
+
+    return configure_scene(install(plan, cfg.seed), cfg)
+
+
+def check_path(path: PlannedPath) -> None:
+    """Refuse, with one line, a path the simulator cannot drive: fewer than 2 poses, stamps not
+    increasing, a pose outside the GT room's walls."""
+    from gtrig.sim.gtroom import room_walls
+    from gtrig.sim.install import inside_polygon
+
+    t, p = path.stamps_s, path.xytheta
+    if t.ndim != 1 or p.shape != (t.size, 3) or t.size < 2:
+        raise InputError("--path: the path needs at least 2 poses")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(p))):
+        raise InputError("--path: a stamp or pose is not a finite number")
+    if np.any(np.diff(t) <= 0):
+        i = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 2
+        raise InputError(f"--path: pose {i}: the stamps must increase")
+    walls = room_walls()[:, 0]
+    for i, xy in enumerate(p[:, :2]):
+        if not inside_polygon(xy, walls):
+            raise InputError(f"--path: pose {i + 1} at ({xy[0]:.2f}, {xy[1]:.2f}) m is outside the simulated "
+                             "GT room's walls")
+
+
 Step = Callable[[Scene, Timeline, Path, SimConfig], None]
 STEPS: tuple[tuple[str, Step], ...] = (
     ("rig and truth", _write_rigs_and_truth),
@@ -223,11 +268,17 @@ STEPS: tuple[tuple[str, Step], ...] = (
 )
 
 
-def _config_key(cfg: SimConfig) -> str:
+def _config_key(cfg: SimConfig, plan: Rig | None = None, path: PlannedPath | None = None) -> str:
     # workers change speed, never output
     # the robot clock's offset joined the settings later: at its default it leaves the key unchanged
     skip = {"workers"} | ({"odometry_clock_offset_s"} if cfg.odometry_clock_offset_s == 0 else set())
-    doc = cfg.model_dump(mode="json", exclude=skip)
+    doc: dict[str, Any] = cfg.model_dump(mode="json", exclude=skip)
+    # a planned rig and path are part of what is simulated (absent: the key is the built-in scene's)
+    if plan is not None:
+        doc["plan"] = plan.model_dump(mode="json")
+    if path is not None:
+        doc["path"] = hashlib.sha256(np.ascontiguousarray(np.column_stack([path.stamps_s, path.xytheta]))
+                                     .tobytes()).hexdigest()
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -246,7 +297,8 @@ def _read_state(path: Path) -> dict[str, Any]:
 
 
 def simulate(
-    cfg: SimConfig, out_dir: str | Path, on_step: Callable[[str, int, int], None] | None = None
+    cfg: SimConfig, out_dir: str | Path, on_step: Callable[[str, int, int], None] | None = None,
+    plan: Rig | None = None, path: PlannedPath | None = None,
 ) -> dict[str, float]:
     """Write a full recording of ``cfg.scenario`` into ``out_dir``; returns seconds per step.
 
@@ -256,6 +308,9 @@ def simulate(
     out_dir : the recording folder; created if needed. A folder holding a recording made with other
         settings is refused rather than mixed.
     on_step : called as ``on_step(name, index, count)`` before each step (progress display).
+    plan : a planned rig installed in the GT room instead of the GT room's own
+        (:func:`gtrig.sim.install.install`; refused with one line when the simulator cannot simulate it).
+    path : the continuous run's path instead of the built-in one (inside the GT room's walls).
     """
     if cfg.scenario == "outdoor":  # RTK-GPS and odometry on a campus (gtrig.sim.outdoor, docs/gps.md)
         from gtrig.sim.outdoor import simulate_outdoor
@@ -265,10 +320,13 @@ def simulate(
         return {"outdoor": time.perf_counter() - t}
     if cfg.scenario != "gtroom":
         raise InputError(f"unknown scenario {cfg.scenario!r}; available: gtroom, outdoor")
+    scene = _scene(cfg, plan)
+    if path is not None:
+        check_path(path)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     state_path = out / STATE_FILE
-    key = _config_key(cfg)
+    key = _config_key(cfg, plan, path)
     done: list[str] = []
     if state_path.exists():
         state = _read_state(state_path)
@@ -278,8 +336,7 @@ def simulate(
     elif any(out.iterdir()):
         raise InputError(f"{out}: folder is not empty and holds no simulated recording; choose another --out")
 
-    scene = configure_scene(make_scene(cfg.seed), cfg)
-    tl = make_timeline(scene, cfg)
+    tl = make_timeline(scene, cfg, path)
     timings: dict[str, float] = {}
     for i, (name, step) in enumerate(STEPS):
         if on_step:

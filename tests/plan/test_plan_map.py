@@ -46,11 +46,12 @@ def test_camera_turned_away_leaves_its_hole(room):
 
 def test_target_share_and_regions(room):
     _, grid, plan = room
-    s = summarize_target(plan, 0.003, np.radians(0.5))
     fused = cell_maps(plan).sigma_xy_m["fused"][0]
+    target = float(np.median(fused[np.isfinite(fused)]))  # met on about half of the covered cells
+    s = summarize_target(plan, target, np.radians(0.5))
     assert 0 < s.share_worst < 1
     assert s.share_worst == pytest.approx(np.mean(s.meets))
-    assert np.all(fused[s.meets] <= 0.003)
+    assert np.all(fused[s.meets] <= target)
     assert s.fails and all(r.size > 0 for r in s.fails)
     assert s.share_median >= s.share_worst
 
