@@ -455,7 +455,9 @@ def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: 
     # one camera's files share a format: the first one says how they store light (gtrig.io.imagetone)
     tone = declared_tone(paths[0]) if paths else "linear"
     detect = st["detect"]
-    tracker = CameraTracker(lambda img, box: detect(img, cam, tone, box), cam.size, ctx.track)
+    expect = getattr(detect, "expected", None)
+    tracker = CameraTracker(lambda img, box: detect(img, cam, tone, box), cam.size, ctx.track,
+                            None if expect is None else (lambda img, predicted: expect(img, cam, tone, predicted)))
     if ctx.track.enabled and (stamps_s is None or len(stamps_s) != len(rows)):
         raise ValueError("tracking needs the images' time stamps")
     for k, (i, path) in enumerate(zip(rows, paths, strict=True)):
