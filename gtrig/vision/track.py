@@ -119,7 +119,8 @@ class TrackOptions:
 class TrackStats:
     """How the images of a camera were searched: ``whole``, in a ``region``, or ``skipped`` (nothing
     expected, nothing changed); ``lost``: whole-image passes made because a tracked marker was missing;
-    ``confirmed``: tracked markers the peers missed, found at their predicted corners."""
+    ``confirmed``: tracked markers the peers missed, found at their predicted corners;
+    ``confirmed_back``: markers found in the images before they appeared (:mod:`gtrig.vision.backfill`)."""
 
     whole: int = 0
     region: int = 0
@@ -127,6 +128,7 @@ class TrackStats:
     lost: int = 0
     region_area_px: int = 0
     confirmed: int = 0
+    confirmed_back: int = 0
 
     def add(self, other: TrackStats) -> None:
         self.whole += other.whole
@@ -135,6 +137,7 @@ class TrackStats:
         self.lost += other.lost
         self.region_area_px += other.region_area_px
         self.confirmed += other.confirmed
+        self.confirmed_back += other.confirmed_back
 
 
 @dataclass(frozen=True)
@@ -206,7 +209,8 @@ def _union(boxes: Sequence[tuple[float, float, float, float]]) -> tuple[float, f
     return float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 2].max()), float(b[:, 3].max())
 
 
-def _inside(corners: np.ndarray, size: tuple[int, int], border: float = 2.0) -> bool:
+def inside_image(corners: np.ndarray, size: tuple[int, int], border: float = 2.0) -> bool:
+    """Every corner (4, 2) at least ``border`` pixels inside an image of ``size`` (w, h)."""
     w, h = size
     return bool(np.all(corners >= border) and np.all(corners[:, 0] <= w - 1 - border)
                 and np.all(corners[:, 1] <= h - 1 - border))
@@ -285,7 +289,7 @@ class CameraTracker:
         if self.expect is None:
             return []
         todo = [e for e in expected if e.marker_id not in found and e.marker_id not in tried
-                and _inside(e.corners_px, self.size)]
+                and inside_image(e.corners_px, self.size)]
         if todo:
             got = {v.marker_id: v for v in self.expect(image, [(e.marker_id, e.corners_px) for e in todo])}
             tried.update({e.marker_id: got.get(e.marker_id) for e in todo})
@@ -310,7 +314,7 @@ class CameraTracker:
         views = self.detect(image, box)
         views = views + self._confirm(image, expected, {v.marker_id for v in views}, tried)
         found = {v.marker_id for v in views}
-        if any(e.marker_id not in found and _inside(e.corners_px, self.size) for e in expected):
+        if any(e.marker_id not in found and inside_image(e.corners_px, self.size) for e in expected):
             self.stats.lost += 1
             return [], True
         self.stats.region += 1

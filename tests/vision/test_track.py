@@ -229,3 +229,51 @@ def test_tracking_localizes_the_same_instants_at_the_same_poses(run_rec, monkeyp
         # the same markers, read from a crop: corners within a tenth of a pixel, poses within a millimetre
         assert np.linalg.norm(d[:3, 3]) < 1e-3
         assert np.degrees(np.arccos(np.clip((np.trace(d[:3, :3]) - 1) / 2, -1, 1))) < 0.05
+
+
+def test_a_marker_that_appeared_is_found_back_in_the_images_before() -> None:
+    from gtrig.vision.backfill import track_with_backfill
+
+    rng = np.random.default_rng(2)
+    n = 10
+    background = rng.normal(90, 2, (768, 1024)).clip(0, 255).astype(np.uint8)
+    images, per_image, truth = [], [], []
+    for k in range(n):
+        img = background.copy()
+        x = 10 + 30 * k  # coming in from the left edge: fully inside from image 1 on
+        img[280:321, max(0, x - 20):x + 21] = 20
+        images.append(img)
+        truth.append(_square(x, 300, 40))
+        # the peers find it from image 4 on only
+        per_image.append({7: truth[k]} if k >= 4 else {})
+    asked: list[int] = []
+
+    def expect(image: np.ndarray, predicted: list[tuple[int, np.ndarray]]) -> list[MarkerView]:
+        k = next(i for i, im in enumerate(images) if im is image)
+        asked.append(k)
+        return [MarkerView("cam", m, truth[k], np.tile(np.eye(2) * 0.01, (4, 1, 1))) for m, c in predicted
+                if m == 7 and np.abs(c - truth[k]).max() < 3.0]
+
+    det = _Scripted(per_image)
+    tk = CameraTracker(det, (1024, 768), TrackOptions(), expect)
+    stamps = [0.1 * k for k in range(n)]
+
+    def frames():  # type: ignore[no-untyped-def]
+        for img, t in zip(images, stamps, strict=True):
+            det.k += 1
+            yield img, t
+
+    got = list(track_with_backfill(tk, frames(), lookback=2))
+    # found back in images 3 and 2 (two back from where it appeared), at its corners; never in images 0-1
+    assert [[v.marker_id for v in g] for g in got] == [[], [], [7], [7]] + [[7]] * (n - 4)
+    assert all(np.allclose(g[0].corners_px, truth[k]) for k, g in enumerate(got) if g)
+    assert tk.stats.confirmed_back == 2 and sorted(asked) == [2, 3]
+    # with enough look-back, back to the first image where it is inside the image by 2 px (image 1)
+    det = _Scripted(per_image)
+    tk = CameraTracker(det, (1024, 768), TrackOptions(), expect)
+    got = list(track_with_backfill(tk, frames(), lookback=5))
+    assert [len(g) for g in got] == [0] + [1] * (n - 1) and tk.stats.confirmed_back == 3
+    # without a confirmation, the tracker's own output, image by image
+    det = _Scripted(per_image)
+    tk = CameraTracker(det, (1024, 768), TrackOptions())
+    assert [len(g) for g in track_with_backfill(tk, frames())] == [0] * 4 + [1] * (n - 4)
