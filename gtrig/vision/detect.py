@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import importlib
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import cv2
 import numpy as np
@@ -123,13 +124,9 @@ class GtrigDetector:
         self._per_camera: dict[tuple[str, str, Box | None], object] = {}
         self._params = getattr(importlib.import_module(detector_class.__module__), "DetectorParams", None)
 
-    def __call__(self, image: np.ndarray, camera: CameraGeometry, file_tone: Tone = "linear",
-                 box: Box | None = None) -> list[MarkerView]:
-        """The markers of ``image``, a frame of ``camera``; ``file_tone`` is how its file declares its
-        samples (:func:`gtrig.io.imagetone.declared_tone`), used where the rig's camera says ``tone: auto``.
-        With ``box`` only that part of the image is searched, by a detector whose camera matrix is shifted
-        by the box's corner (``cx - x0``, ``cy - y0``; the distortion is unchanged, which is exact), and
-        the corners are returned in ``image``'s pixels."""
+    def _detector(self, camera: CameraGeometry, file_tone: Tone, box: Box | None) -> object:
+        """The markers package's detector of ``camera`` for the region ``box`` (None: the whole image), made
+        on first use (the most recently used regions' detectors are kept)."""
         tone = self._tone.get(camera.name, "auto")
         tone = file_tone if tone == "auto" else tone
         key = (camera.name, tone, box)
@@ -147,9 +144,53 @@ class GtrigDetector:
                 del self._per_camera[old]
         elif box is not None:
             self._per_camera[key] = self._per_camera.pop(key)  # most recently used last
+        return det
+
+    def __call__(self, image: np.ndarray, camera: CameraGeometry, file_tone: Tone = "linear",
+                 box: Box | None = None) -> list[MarkerView]:
+        """The markers of ``image``, a frame of ``camera``; ``file_tone`` is how its file declares its
+        samples (:func:`gtrig.io.imagetone.declared_tone`), used where the rig's camera says ``tone: auto``.
+        With ``box`` only that part of the image is searched, by a detector whose camera matrix is shifted
+        by the box's corner (``cx - x0``, ``cy - y0``; the distortion is unchanged, which is exact), and
+        the corners are returned in ``image``'s pixels."""
+        det = self._detector(camera, file_tone, box)
         crop = image if box is None else np.ascontiguousarray(image[box[1]:box[3], box[0]:box[2]])
-        views = views_from_detections(camera.name, det.detect(crop), self.ids)  # type: ignore[attr-defined]
-        return _shifted(views, box)
+        dets = _second_start(det, crop, det.detect(crop))  # type: ignore[attr-defined]
+        return _shifted(views_from_detections(camera.name, dets, self.ids), box)
+
+    def expected(self, image: np.ndarray, camera: CameraGeometry, file_tone: Tone,
+                 predicted: Sequence[tuple[int, np.ndarray]]) -> list[MarkerView]:
+        """Markers expected in ``image`` (a frame of ``camera``) where no peer found them: each
+        ``(marker_id, corners_px)`` (corners (4, 2) in the whole image's pixels, printed order, e.g. a
+        tracker's prediction) refined by the edge model from those corners and kept only when gtrig's cells
+        read through the refined corners give that ID (``MarkerDetector.detect_expected``); empty when the
+        markers package has no such entry point."""
+        det = self._detector(camera, file_tone, None)
+        confirm = getattr(det, "detect_expected", None)
+        if confirm is None or not predicted:
+            return []
+        quads = np.array([c for _, c in predicted], float).reshape(-1, 4, 2)
+        ids = np.array([m for m, _ in predicted], np.int64)
+        return views_from_detections(camera.name, confirm(image, quads, ids), self.ids)
+
+
+def _second_start(det: object, image: np.ndarray, dets: list[Any]) -> list[Any]:
+    """``dets`` (the markers package's detections in ``image``) where those whose edges did not fit from
+    the peer's corners (kept unrefined, ``blur_px`` NaN) are refined again from their unrefined corners:
+    the edge fit's start is then within a fraction of a pixel of the edges, where a peer's whole-pixel
+    corners can leave the first pass on a neighbouring edge in a noisy image. A marker whose second fit
+    passes and whose cells read as its ID takes the refined corners; the others stay as they were."""
+    confirm = getattr(det, "detect_expected", None)
+    redo = [k for k, d in enumerate(dets) if not np.isfinite(getattr(d, "blur_px", 0.0))]
+    if confirm is None or not redo:
+        return dets
+    quads = np.array([dets[k].corners_px for k in redo], float)
+    again = {d.id: d for d in confirm(image, quads, np.array([dets[k].id for k in redo], np.int64))}
+    out = list(dets)
+    for k in redo:
+        if dets[k].id in again:
+            out[k] = again.pop(dets[k].id)
+    return out
 
 
 def make_detector(rig: Rig, which: str = "auto") -> ArucoDetector | GtrigDetector:

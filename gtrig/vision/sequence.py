@@ -445,8 +445,10 @@ def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: 
                    stamps_s: Sequence[float] | None = None) -> list[list[Any]]:
     """Markers detected in one camera's images ``rows`` (read here, on the worker, from ``paths``;
     stamped ``stamps_s``, needed when tracking), in order, markers tracked from image to image when
-    ``ctx.track`` says so (:class:`gtrig.vision.track.CameraTracker`, started afresh in every chunk):
+    ``ctx.track`` says so (:class:`gtrig.vision.track.CameraTracker`, started afresh in every chunk; markers
+    that appear looked for back in the chunk's images before, :mod:`gtrig.vision.backfill`):
     ``[[row, [[marker_id, corners, cov], ...]], ...]``, the checkpoint's JSON form."""
+    from gtrig.vision.backfill import track_with_backfill
     from gtrig.vision.track import CameraTracker
 
     st = _state(ctx)
@@ -455,12 +457,15 @@ def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: 
     # one camera's files share a format: the first one says how they store light (gtrig.io.imagetone)
     tone = declared_tone(paths[0]) if paths else "linear"
     detect = st["detect"]
-    tracker = CameraTracker(lambda img, box: detect(img, cam, tone, box), cam.size, ctx.track)
+    expect = getattr(detect, "expected", None)
+    tracker = CameraTracker(lambda img, box: detect(img, cam, tone, box), cam.size, ctx.track,
+                            None if expect is None else (lambda img, predicted: expect(img, cam, tone, predicted)))
     if ctx.track.enabled and (stamps_s is None or len(stamps_s) != len(rows)):
         raise ValueError("tracking needs the images' time stamps")
-    for k, (i, path) in enumerate(zip(rows, paths, strict=True)):
-        img = read_image(path)  # an image file or a video's frame
-        views = tracker.step(img, float(stamps_s[k]) if stamps_s is not None else 0.0)
+    # each image file or video frame read as the tracker asks for it
+    frames = ((read_image(path), float(stamps_s[k]) if stamps_s is not None else 0.0)
+              for k, path in enumerate(paths))
+    for i, views in zip(rows, track_with_backfill(tracker, frames), strict=True):
         out.append([int(i), _views_to_json(views)])
     log.debug("camera %s, %d images: %s", camera, len(rows), tracker.stats)
     return out

@@ -6,8 +6,10 @@ Each image of a camera is searched where its markers are expected and where it c
 * **Tracked markers**: every marker seen in the camera's previous image is predicted by its corners'
   motion over the two previous images (constant velocity in the image; one image: where it was), and
   searched in the predicted square grown by a margin (a fixed part, the predicted displacement and a
-  share of the marker's side). A marker predicted inside the image but missing from its region makes the
-  image searched whole again.
+  share of the marker's side). A marker predicted inside the image that the peers (OpenCV, AprilTag 3)
+  gave no candidate for, typically one smeared by motion, is looked for at its predicted corners: the edge
+  model is refined from them and the marker kept only when its cells, read through the refined corners,
+  give its ID (``MarkerDetector.detect_expected``). One still missing makes the image searched whole again.
 * **Change**: the image is reduced to the mean grey level of cells of ``cell_px`` pixels; a cell whose
   mean moved by more than ``change_level`` from the last time that place was searched (a marker coming
   into view, the robot moving or turning) is searched, with a margin of ``change_margin_px``. A fixed
@@ -43,6 +45,10 @@ log = logging.getLogger(__name__)
 #: ``detect(image, box)``: the markers of ``image`` inside ``box`` (None: the whole image), their corners in
 #: the whole image's pixel frame.
 RegionDetectFn = Callable[[np.ndarray, Box | None], list[MarkerView]]
+
+#: ``expect(image, [(marker_id, corners_px), ...])``: of markers predicted at corners (4, 2) (the whole
+#: image's pixels, printed order), those confirmed there (refined from the prediction, their ID read).
+ExpectFn = Callable[[np.ndarray, Sequence[tuple[int, np.ndarray]]], list[MarkerView]]
 
 
 @dataclass(frozen=True)
@@ -112,13 +118,17 @@ class TrackOptions:
 @dataclass
 class TrackStats:
     """How the images of a camera were searched: ``whole``, in a ``region``, or ``skipped`` (nothing
-    expected, nothing changed); ``lost``: whole-image passes made because a tracked marker was missing."""
+    expected, nothing changed); ``lost``: whole-image passes made because a tracked marker was missing;
+    ``confirmed``: tracked markers the peers missed, found at their predicted corners;
+    ``confirmed_back``: markers found in the images before they appeared (:mod:`gtrig.vision.backfill`)."""
 
     whole: int = 0
     region: int = 0
     skipped: int = 0
     lost: int = 0
     region_area_px: int = 0
+    confirmed: int = 0
+    confirmed_back: int = 0
 
     def add(self, other: TrackStats) -> None:
         self.whole += other.whole
@@ -126,6 +136,8 @@ class TrackStats:
         self.skipped += other.skipped
         self.lost += other.lost
         self.region_area_px += other.region_area_px
+        self.confirmed += other.confirmed
+        self.confirmed_back += other.confirmed_back
 
 
 @dataclass(frozen=True)
@@ -197,7 +209,8 @@ def _union(boxes: Sequence[tuple[float, float, float, float]]) -> tuple[float, f
     return float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 2].max()), float(b[:, 3].max())
 
 
-def _inside(corners: np.ndarray, size: tuple[int, int], border: float = 2.0) -> bool:
+def inside_image(corners: np.ndarray, size: tuple[int, int], border: float = 2.0) -> bool:
+    """Every corner (4, 2) at least ``border`` pixels inside an image of ``size`` (w, h)."""
     w, h = size
     return bool(np.all(corners >= border) and np.all(corners[:, 0] <= w - 1 - border)
                 and np.all(corners[:, 1] <= h - 1 - border))
@@ -213,11 +226,18 @@ class CameraTracker:
         whole image's pixels.
     size : (w, h) of the camera's images, pixels.
     options : TrackOptions
+    expect : ``expect(image, predicted)`` (:data:`ExpectFn`), or None. A tracked marker predicted inside
+        the image that the search (of a region or of the whole image) did not find is looked for at its
+        predicted corners with it: a motion blur can leave the peers without a candidate where the edge
+        model still fits the marker's edges and its cells still read as its ID. A marker predicted across
+        the image's edge is not (its corners outside the image would be extrapolated from short edges, with
+        errors of most of a pixel that their covariances do not show).
     """
 
     detect: RegionDetectFn
     size: tuple[int, int]
     options: TrackOptions = TrackOptions()
+    expect: ExpectFn | None = None
     stats: TrackStats = field(default_factory=TrackStats)
     _last_whole_s: float | None = None
     _prev: dict[int, tuple[float, np.ndarray]] = field(default_factory=dict)
@@ -231,32 +251,56 @@ class CameraTracker:
         if (w, h) != self.size:
             self.size = (w, h)
             self._last_whole_s = None  # another image size: start afresh
+            self._prev, self._before = {}, {}
         cells = cell_means(image, o.cell_px) if o.enabled else None
         whole = (not o.enabled or self._last_whole_s is None or self._searched is None
                  or self._searched.shape != cells.shape  # type: ignore[union-attr]
                  or stamp_s - self._last_whole_s >= o.full_every_s - 1e-9)
+        expected = self._expected(stamp_s) if o.enabled else []
+        tried: dict[int, MarkerView | None] = {}
         views: list[MarkerView] = []
         if not whole:
             assert cells is not None
-            views, whole = self._search_region(image, stamp_s, cells)
+            views, whole = self._search_region(image, expected, cells, tried)
         if whole:
             views = self.detect(image, None)
+            views = views + self._confirm(image, expected, {v.marker_id for v in views}, tried)
             self.stats.whole += 1
             self._last_whole_s = stamp_s
             self._searched = cells
+        kept = {id(v) for v in views}
+        self.stats.confirmed += sum(v is not None and id(v) in kept for v in tried.values())
         self._before = self._prev
         self._prev = {v.marker_id: (stamp_s, v.corners_px) for v in views}
         return views
 
-    def _search_region(self, image: np.ndarray, stamp_s: float, cells: np.ndarray
-                       ) -> tuple[list[MarkerView], bool]:
+    def _expected(self, stamp_s: float) -> list[_Expected]:
+        """The markers of the previous image, predicted at ``stamp_s`` (:func:`predict_marker`)."""
+        out = []
+        for mid, prev in self._prev.items():
+            c, around = predict_marker(prev, self._before.get(mid), stamp_s, self.options)
+            out.append(_Expected(mid, c, around))
+        return out
+
+    def _confirm(self, image: np.ndarray, expected: Sequence[_Expected], found: set[int],
+                 tried: dict[int, MarkerView | None]) -> list[MarkerView]:
+        """The expected markers predicted inside the image, not in ``found``, confirmed at their predicted
+        corners by ``expect`` (each tried once per image: ``tried`` holds the outcomes)."""
+        if self.expect is None:
+            return []
+        todo = [e for e in expected if e.marker_id not in found and e.marker_id not in tried
+                and inside_image(e.corners_px, self.size)]
+        if todo:
+            got = {v.marker_id: v for v in self.expect(image, [(e.marker_id, e.corners_px) for e in todo])}
+            tried.update({e.marker_id: got.get(e.marker_id) for e in todo})
+        return [v for e in expected if e.marker_id not in found
+                and (v := tried.get(e.marker_id)) is not None]
+
+    def _search_region(self, image: np.ndarray, expected: Sequence[_Expected], cells: np.ndarray,
+                       tried: dict[int, MarkerView | None]) -> tuple[list[MarkerView], bool]:
         """The markers found in the region of tracked and changed places, and whether the image must be
         searched whole instead (a tracked marker missing, or a region too large)."""
         o = self.options
-        expected = []
-        for mid, prev in self._prev.items():
-            c, around = predict_marker(prev, self._before.get(mid), stamp_s, o)
-            expected.append(_Expected(mid, c, around))
         changed = self._changed_box(cells)
         region = _union([e.box for e in expected] + ([changed] if changed is not None else []))
         box = None if region is None else window_for(region, self.size, o.windows_px)
@@ -268,8 +312,9 @@ class CameraTracker:
         assert len(box) == 4
         area = (box[2] - box[0]) * (box[3] - box[1])
         views = self.detect(image, box)
+        views = views + self._confirm(image, expected, {v.marker_id for v in views}, tried)
         found = {v.marker_id for v in views}
-        if any(e.marker_id not in found and _inside(e.corners_px, self.size) for e in expected):
+        if any(e.marker_id not in found and inside_image(e.corners_px, self.size) for e in expected):
             self.stats.lost += 1
             return [], True
         self.stats.region += 1

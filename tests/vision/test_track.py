@@ -12,6 +12,7 @@ import pytest
 from gtrig import geometry as geo
 from gtrig.errors import InputError
 from gtrig.io.frames import write_frame_index
+from gtrig.rig.models import Rig
 from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
 from gtrig.vision.observations import MarkerView
 from gtrig.vision.sequence import run_recording
@@ -108,6 +109,43 @@ def test_tracker_searches_whole_at_start_on_loss_and_once_a_second() -> None:
     assert det.calls == [(k, None) for k in range(n)]
 
 
+def test_a_tracked_marker_the_peers_miss_is_confirmed_at_its_prediction() -> None:
+    rng = np.random.default_rng(1)
+    n = 12
+    background = rng.normal(90, 2, (768, 1024)).clip(0, 255).astype(np.uint8)
+    images, per_image, truth = [], [], []
+    for k in range(n):
+        img = background.copy()
+        img[280:321, 280 + 4 * k:321 + 4 * k] = 20
+        images.append(img)
+        truth.append(_square(300 + 4 * k, 300, 40))
+        # the detector misses the marker in images 4-6 (a motion blur), and marker 9 never was there
+        per_image.append({} if 4 <= k <= 6 else {7: truth[k]})
+    asked: list[tuple[int, list[int]]] = []
+
+    def expect(image: np.ndarray, predicted: list[tuple[int, np.ndarray]]) -> list[MarkerView]:
+        k = next(i for i, im in enumerate(images) if im is image)
+        asked.append((k, [m for m, _ in predicted]))
+        # confirmed where the prediction is within 3 px of the marker (the edge fit's reach)
+        return [MarkerView("cam", m, truth[k], np.tile(np.eye(2) * 0.01, (4, 1, 1))) for m, c in predicted
+                if m == 7 and np.abs(c - truth[k]).max() < 3.0]
+
+    det = _Scripted(per_image)
+    tk = CameraTracker(det, (1024, 768), TrackOptions(), expect)
+    got = _run(tk, det, images, [0.1 * k for k in range(n)])
+    # every image has its marker, at its place; searched whole only at the start and a second later
+    assert [[v.marker_id for v in g] for g in got] == [[7]] * n
+    assert all(np.allclose(g[0].corners_px, truth[k]) for k, g in enumerate(got))
+    assert det.whole() == [0, 10] and tk.stats.lost == 0 and tk.stats.confirmed == 3
+    # asked once per image where the peers missed it, for the tracked marker only
+    assert asked == [(4, [7]), (5, [7]), (6, [7])]
+    # a confirmation that fails: the image is searched whole, as without one
+    det = _Scripted(per_image)
+    tk = CameraTracker(det, (1024, 768), TrackOptions(), lambda image, predicted: [])
+    got = _run(tk, det, images, [0.1 * k for k in range(n)])
+    assert [len(g) for g in got] == [0 if 4 <= k <= 6 else 1 for k in range(n)] and det.whole() == [0, 4]
+
+
 def test_options_refuse_nonsense() -> None:
     with pytest.raises(InputError, match="full_every_s"):
         TrackOptions(full_every_s=0.0)
@@ -115,20 +153,25 @@ def test_options_refuse_nonsense() -> None:
         TrackOptions(margin_px=-1.0)
 
 
-@pytest.fixture(scope="module")
-def run_rec(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
-    """A short run, rendered: the robot driving and turning past validation pose 4 at 0.3 m/s."""
-    from gtrig.vision.synthetic import render_markers, visible_views
-
+def _run_poses() -> tuple[Rig, list[np.ndarray]]:
+    """The simulated room's true rig and the short run's robot poses ``T_world_robot``, one per image."""
     scene = make_scene(0)
-    rig = scene.rig_true
-    out = tmp_path_factory.mktemp("rec")
-    rng = np.random.default_rng(3)
     x, y, th = VALIDATION_POSES[3]
     Ts = []
     for k in range(FRAMES):
         a = th + 0.04 * k
         Ts.append(scene.T_world_robot(x + 0.03 * k * np.cos(a), y + 0.03 * k * np.sin(a), a))
+    return scene.rig_true, Ts
+
+
+@pytest.fixture(scope="module")
+def run_rec(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
+    """A short run, rendered: the robot driving and turning past validation pose 4 at 0.3 m/s."""
+    from gtrig.vision.synthetic import render_markers, visible_views
+
+    rig, Ts = _run_poses()
+    out = tmp_path_factory.mktemp("rec")
+    rng = np.random.default_rng(3)
     for c, cam in enumerate(rig.cameras):
         seen = [any(n == cam.name for n, _, _ in visible_views(rig, T)) for T in Ts]
         if not any(seen):
@@ -144,6 +187,7 @@ def run_rec(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
 
 def test_tracking_localizes_the_same_instants_at_the_same_poses(run_rec, monkeypatch: pytest.MonkeyPatch) -> None:
     from gtrig.vision.detect import GtrigDetector
+    from gtrig.vision.synthetic import visible_views
 
     path, rig = run_rec
     kw = {"workers": 1, "detector": "gtrig", "chunk_size": FRAMES}
@@ -167,10 +211,69 @@ def test_tracking_localizes_the_same_instants_at_the_same_poses(run_rec, monkeyp
     ok_whole = [e.stamp_s for e in whole.estimates if e.ok]
     assert len(ok_whole) >= FRAMES - 1, [e.reason for e in whole.estimates]
     assert [e.stamp_s for e in tracked.estimates if e.ok] == ok_whole
-    views = lambda r: [sorted((v.camera, v.marker_id) for v in o.views) for o in r.observations]  # noqa: E731
-    assert views(tracked) == views(whole)
+    views = lambda r: [{(v.camera, v.marker_id): v for v in o.views} for o in r.observations]  # noqa: E731
+    # every marker of the whole images, and those the peers missed but the tracker confirmed at their
+    # predicted corners: there, at the markers' true corners
+    _, Ts = _run_poses()
+    assert len(tracked.observations) == len(Ts)
+    n_more = 0
+    for T, a, b in zip(Ts, views(whole), views(tracked), strict=True):
+        truth = {(c, m): uv for c, m, uv in visible_views(rig, T, margin_px=-100.0, min_side_px=0.0)}
+        assert set(a) <= set(b)
+        for k in set(b) - set(a):
+            n_more += 1
+            assert np.abs(b[k].corners_px - truth[k]).max() < 0.5
+    assert n_more <= 4
     for a, b in zip(whole.localized(), tracked.localized(), strict=True):
         d = geo.inv_T(a.T_world_robot) @ b.T_world_robot
         # the same markers, read from a crop: corners within a tenth of a pixel, poses within a millimetre
         assert np.linalg.norm(d[:3, 3]) < 1e-3
         assert np.degrees(np.arccos(np.clip((np.trace(d[:3, :3]) - 1) / 2, -1, 1))) < 0.05
+
+
+def test_a_marker_that_appeared_is_found_back_in_the_images_before() -> None:
+    from gtrig.vision.backfill import track_with_backfill
+
+    rng = np.random.default_rng(2)
+    n = 10
+    background = rng.normal(90, 2, (768, 1024)).clip(0, 255).astype(np.uint8)
+    images, per_image, truth = [], [], []
+    for k in range(n):
+        img = background.copy()
+        x = 10 + 30 * k  # coming in from the left edge: fully inside from image 1 on
+        img[280:321, max(0, x - 20):x + 21] = 20
+        images.append(img)
+        truth.append(_square(x, 300, 40))
+        # the peers find it from image 4 on only
+        per_image.append({7: truth[k]} if k >= 4 else {})
+    asked: list[int] = []
+
+    def expect(image: np.ndarray, predicted: list[tuple[int, np.ndarray]]) -> list[MarkerView]:
+        k = next(i for i, im in enumerate(images) if im is image)
+        asked.append(k)
+        return [MarkerView("cam", m, truth[k], np.tile(np.eye(2) * 0.01, (4, 1, 1))) for m, c in predicted
+                if m == 7 and np.abs(c - truth[k]).max() < 3.0]
+
+    det = _Scripted(per_image)
+    tk = CameraTracker(det, (1024, 768), TrackOptions(), expect)
+    stamps = [0.1 * k for k in range(n)]
+
+    def frames():  # type: ignore[no-untyped-def]
+        for img, t in zip(images, stamps, strict=True):
+            det.k += 1
+            yield img, t
+
+    got = list(track_with_backfill(tk, frames(), lookback=2))
+    # found back in images 3 and 2 (two back from where it appeared), at its corners; never in images 0-1
+    assert [[v.marker_id for v in g] for g in got] == [[], [], [7], [7]] + [[7]] * (n - 4)
+    assert all(np.allclose(g[0].corners_px, truth[k]) for k, g in enumerate(got) if g)
+    assert tk.stats.confirmed_back == 2 and sorted(asked) == [2, 3]
+    # with enough look-back, back to the first image where it is inside the image by 2 px (image 1)
+    det = _Scripted(per_image)
+    tk = CameraTracker(det, (1024, 768), TrackOptions(), expect)
+    got = list(track_with_backfill(tk, frames(), lookback=5))
+    assert [len(g) for g in got] == [0] + [1] * (n - 1) and tk.stats.confirmed_back == 3
+    # without a confirmation, the tracker's own output, image by image
+    det = _Scripted(per_image)
+    tk = CameraTracker(det, (1024, 768), TrackOptions())
+    assert [len(g) for g in track_with_backfill(tk, frames())] == [0] * 4 + [1] * (n - 4)

@@ -41,7 +41,7 @@ from gtrig.markers.detect.peers import PeerCandidate, PeerParams, find_peer_cand
 from gtrig.markers.detect.refine import RefineSettings, fit_reason, refine_quads
 from gtrig.markers.detect.tone import Tone
 from gtrig.markers.detect.verify import Verdict, read_whiteness, read_whiteness_plain, verify_ids
-from gtrig.markers.families import FamilySpec, all_codes, family_spec, marker_cells
+from gtrig.markers.families import FamilySpec, all_codes, decode_batch, family_spec, marker_cells
 from gtrig.rig.models import MarkerFamily
 
 __all__ = ["AT3_ONLY_SIGMA_PX", "DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", "PeerParams",
@@ -49,7 +49,7 @@ __all__ = ["AT3_ONLY_SIGMA_PX", "DETECTOR_VERSION", "Detection", "DetectorParams
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 19
+DETECTOR_VERSION = 20
 
 #: corner sigma written for AprilTag 3's newer families, whose corners gtrig does not refine, px
 AT3_ONLY_SIGMA_PX = 0.5
@@ -248,6 +248,68 @@ class MarkerDetector:
         nt = _threads.threads(self.params.threads)
         with _blas.one_thread(), _threads.opencv_one_thread():
             return _dedupe(self._refine_and_verify(gray, cands, trace, nt), trace)
+
+    def detect_expected(self, image: NDArray[np.generic], quads_px: NDArray[np.float64],
+                        ids: NDArray[np.int64]) -> list[Detection]:
+        """Markers expected at known places: each quad refined by the edge model from the given corners (no
+        peer involved) and kept only when gtrig's cells, read through the refined corners, read as its
+        expected ID.
+
+        For a tracker's prediction (a marker's corners expected from the previous images, where a motion blur
+        left the peers without a candidate) or a second start for a marker whose peer corners the edge fit
+        did not follow. The fit passes the same tests as a peer's candidate (contrast, residual, blur,
+        corner move from the start); the cells must then decode to the expected ID within the family's
+        correction at the expected orientation, unambiguously, and no other ID's code may lead by the soft
+        margin: a positive reading, stricter than a peer's ID, which only has to be left uncontradicted.
+
+        Parameters
+        ----------
+        image : (H, W) or (H, W, C) image, as :meth:`detect` takes.
+        quads_px : (K, 4, 2) float
+            Expected corners, raw-image pixels, in printed order (top-left, top-right, bottom-right,
+            bottom-left).
+        ids : (K,) int
+            The markers' expected IDs.
+
+        Returns
+        -------
+        list of Detection
+            The confirmed markers, corners ordered as printed (at most one per input quad, in input order).
+        """
+        Q0 = np.asarray(quads_px, np.float64).reshape(-1, 4, 2)
+        expected = np.asarray(ids, np.int64).reshape(-1)
+        if len(Q0) != len(expected):
+            raise InputError(f"detect_expected: {len(Q0)} quads but {len(expected)} IDs")
+        spec = self.spec
+        if not len(Q0) or not spec.edge_model or np.any((expected < 0) | (expected >= spec.n_ids)):
+            return []
+        gray = to_gray(image)
+        if min(gray.shape) < 8:
+            return []
+        nt = _threads.threads(self.params.threads)
+        with _blas.one_thread(), _threads.opencv_one_thread():
+            return self._confirm_expected(gray, Q0, expected, nt)
+
+    def _confirm_expected(self, gray: NDArray[np.uint8], Q0: NDArray[np.float64], expected: NDArray[np.int64],
+                          nt: int) -> list[Detection]:
+        """:meth:`detect_expected`'s fit and positive reading of quads ``Q0`` (K, 4, 2) raw px."""
+        p, spec = self.params, self.spec
+        und = self._undistorter(gray.shape)
+        Q = Q0 if und is None else und.to_undistorted(Q0.reshape(-1, 2)).reshape(-1, 4, 2)
+        white = np.array([marker_cells(spec.family, int(i)) for i in expected], np.float64)
+        r = refine_quads(gray, Q, white, spec.border_cells, und, p.refine_settings(), nt)
+        idx = np.flatnonzero(r.ok)
+        if not len(idx):
+            return []
+        w = read_whiteness(gray, r, idx, spec, p.tone, p.max_blur_px, und)
+        v = verify_ids(w, expected[idx], spec, all_codes(spec.family), p.min_soft_margin)
+        read, rot, _ = decode_batch(spec.family, (w > 0.5).astype(np.uint8), spec.max_correction)
+        ok = v.ok & (read == expected[idx]) & (rot == 0) & (v.rot == 0)
+        cands = [PeerCandidate(Q0[q], int(expected[q]), "opencv") for q in idx]
+        keep = np.flatnonzero(ok)
+        v_keep = Verdict(v.ok[keep], v.rot[keep], v.hamming[keep], [v.reason[k] for k in keep])
+        return self._accepted([cands[k] for k in keep], np.arange(len(keep)), v_keep, r.corners[idx[keep]],
+                              r.cov[idx[keep]], r.blur[idx[keep]], und, None)
 
     def _refine_and_verify(self, gray: NDArray[np.uint8], cands: list[PeerCandidate],
                            trace: list[Rejection] | None, nt: int) -> list[Detection]:
