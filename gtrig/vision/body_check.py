@@ -136,10 +136,11 @@ def rigidity_nees(tri: TriangulatedPoints, pose: BodyPose, body: PointBody) -> n
 
 
 def split_pose_nees(cameras: Mapping[str, CameraGeometry], body: PointBody, views: Sequence[BodyView],
-                    options: BodyOptions = BodyOptions()) -> list[float]:
+                    options: BodyOptions | None = None) -> list[float]:
     """For each camera with a view of ``options.min_points`` points: the NEES (6 dof) of the pose from that
     camera alone against the pose from the other cameras, with the sum of their covariances (independent
     pixels, so the sum is the difference's covariance when both are right)."""
+    options = options or BodyOptions()
     out = []
     for v in views:
         rest = [w for w in views if w.camera != v.camera]
