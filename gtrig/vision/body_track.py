@@ -52,12 +52,16 @@ class BodyTrack:
 
     def to_pose_track(self) -> PoseTrack:
         """The localized poses, ``T_world_body`` with their (6, 6) covariances (world-frame perturbation)."""
-        ok = [p for p in self.poses if p.ok and p.T_world_body is not None and p.cov_6x6 is not None]
-        if not ok:
+        stamps, T, cov = [], [], []
+        for p in self.poses:
+            if p.ok and p.T_world_body is not None and p.cov_6x6 is not None:
+                stamps.append(p.stamp_s)
+                T.append(p.T_world_body)
+                cov.append(p.cov_6x6)
+        if not stamps:
             return PoseTrack.empty("body", "se3")
-        return PoseTrack.from_matrices(np.array([p.stamp_s for p in ok]), np.stack([p.T_world_body for p in ok]),
-                                       cov=np.stack([p.cov_6x6 for p in ok]), cov_kind="se3", source="body",
-                                       child_frame_id=self.body.name)
+        return PoseTrack.from_matrices(np.array(stamps), np.stack(T), cov=np.stack(cov), cov_kind="se3",
+                                       source="body", child_frame_id=self.body.name)
 
 
 def group_instants(views: Sequence[tuple[int, BodyView]]) -> list[BodyInstant]:
