@@ -8,8 +8,9 @@ by one (ChArUco corners) instead of four per marker:
 1. every camera's view of the body gives up to two poses by PnP (IPPE for a planar body, SQPnP otherwise);
    each becomes a candidate ``T_world_body`` through the camera's pose; each candidate is refined on all
    points of all cameras and the cheapest kept;
-2. a camera whose view's chi-square is beyond ``BodyOptions.view_level`` (a wrong ID, a board seen at
-   another instant) is dropped and the fit repeated while more than one camera is left;
+2. while a camera's view has a chi-square beyond ``BodyOptions.view_level`` (a wrong ID, a board seen at
+   another instant), the view whose removal leaves the others the most consistent is dropped and the fit
+   repeated, while more than one camera is left;
 3. the points' chi-square over their redundancy is the instant's variance factor; where a chi-square test
    finds it significantly above 1 it scales the covariance (:func:`gtrig.vision.estimate.frame_scale`).
 
@@ -195,6 +196,23 @@ def _best_fit(cameras: Mapping[str, CameraGeometry], body: PointBody, views: lis
     return sc, best
 
 
+def _worst_view(cameras: Mapping[str, CameraGeometry], body: PointBody, views: list[BodyView], T0: np.ndarray,
+                options: BodyOptions) -> int | None:
+    """The view whose removal leaves the others the most consistent (the smallest chi-square per dof of a
+    fit from ``T0`` without it): an off view drags the robust fit, so that its own chi-square alone does
+    not always single it out. None when no removal leaves a view that can seed a pose."""
+    best, best_score = None, math.inf
+    for i in range(len(views)):
+        rest = views[:i] + views[i + 1:]
+        if not any(len(v.ids) >= options.min_points for v in rest):
+            continue
+        f = refine_pose(stack_body(cameras, body, rest, options.sigma_px), T0, None, options.refine, options.rig)
+        score = f.chi2 / max(f.dof, 1)
+        if score < best_score:
+            best, best_score = i, score
+    return best
+
+
 def estimate_body_pose(cameras: Mapping[str, CameraGeometry], body: PointBody, views: Sequence[BodyView],
                        stamp_s: float, options: BodyOptions = BodyOptions()) -> BodyPose:
     """The body's pose at one instant from every camera's view of it (see the module docstring)."""
@@ -209,9 +227,10 @@ def estimate_body_pose(cameras: Mapping[str, CameraGeometry], body: PointBody, v
     while len(kept) > 1:
         per_view = np.bincount(sc.view, weights=fit.whitened**2, minlength=len(kept))
         gate = np.array([chi2_dist.ppf(1 - options.view_level, 2 * len(v.ids)) for v in kept])
-        worst = int(np.argmax(per_view / gate))
-        if per_view[worst] <= gate[worst] or not any(
-                len(v.ids) >= options.min_points for i, v in enumerate(kept) if i != worst):
+        if np.all(per_view <= gate):
+            break
+        worst = _worst_view(cameras, body, kept, fit.T_world_robot, options)
+        if worst is None:
             break
         rejected.append(kept.pop(worst).camera)
         sc, fit = _best_fit(cameras, body, kept, options)
