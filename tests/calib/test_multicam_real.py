@@ -201,3 +201,66 @@ def test_plain_frame_times_and_frames_on_demand(root: Path, tmp_path: Path) -> N
     assert v.camera == "left" and (v.timing.n_dropped, list(v.timing.dropped_after)) == (3, [19])
     got = [(k, img.shape) for k, img in v.iter_frames(step=10)]
     assert [k for k, _ in got] == [0, 10, 20, 30, 40, 50] and all(s == (720, 1280) for _, s in got)
+
+
+@pytest.fixture(scope="module")
+def board_tracks(root: Path, board: CharucoBoard, detections) -> dict[str, tuple]:
+    """Per recording: the cameras (caliscope's lenses, gtrig's network from the same video), the board's
+    track (``gtrig vision --board``) and its shape check."""
+    from gtrig.vision.board_video import board_body, board_instants
+    from gtrig.vision.body import camera_geometry
+    from gtrig.vision.body_shape import check_shape
+    from gtrig.vision.body_track import track_body
+
+    out = {}
+    for s in RECORDINGS:
+        peer = read_caliscope_cameras(root / s / "camera_array.toml")
+        net = calibrate_video_network(detections[s], {c: peer[c].intrinsics for c in CAMS}, board)
+        cams = {c: camera_geometry(c, peer[c].intrinsics.camera_matrix, peer[c].intrinsics.dist_coeffs,
+                                   net.T_ref_cam[c], peer[c].intrinsics.image_size) for c in CAMS}
+        track = track_body(cams, board_body(board), board_instants(detections[s]))
+        out[s] = (cams, track, check_shape(cams, track, board.square_m, 0.3))
+    return out
+
+
+def test_board_tracked_square_size_and_flatness(board, board_tracks) -> None:
+    """The board tracked as a rigid body of its corners: its square size and flatness reconstructed from the
+    tracked poses and, independently of its shape, by triangulation. The cameras' scale comes from the same
+    board (the network's calibration), so the size checks the reconstruction's consistency over the
+    recording, not the print."""
+    a = board.square_m
+    for s in RECORDINGS:
+        _cams, track, sc = board_tracks[s]
+        assert len(track.poses) >= 20 and all(p.ok for p in track.poses), s
+        assert abs(sc.pose_edge_mean_m) < 0.005 * a, s  # measured -0.31 %, +0.03 %
+        assert sc.pose_edge_rms_m < 0.005 * a, s  # measured 0.237, 0.186 mm (0.44 %, 0.34 %) over 17 edges
+        assert sc.pose_plane_rms_m < 0.001, s  # measured 0.066, 0.065 mm
+        assert abs(sc.tri_edge_mean_m) < 0.006 * a, s  # measured -0.47 %, +0.11 % over 307, 397 edges
+        assert sc.tri_plane_rms_m < 0.001, s  # measured 0.35, 0.38 mm
+        # the triangulated corners' spread about the tracked rigid board agrees with 0.3 px corners
+        assert 0.4 < sc.rigidity_nees < 1.5, s  # measured 0.78, 0.64
+        # one camera's pose against the others': 5.7-6.7 times their stated covariance (unsynchronized
+        # exposures of a hand-moved board); the track's covariances carry that factor
+        assert 3.0 < sc.split_nees < 12.0 and track.variance_factor == pytest.approx(sc.split_nees), s
+
+
+def test_cli_vision_board_writes_poses_and_covariances(root: Path, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from gtrig.cli.main import app
+    from gtrig.io.posetrack import read_covariance_csv
+    from gtrig.io.tum import read_tum
+
+    s = root / "post_optimization"
+    out, cov = tmp_path / "board.tum", tmp_path / "board.cov.csv"
+    args = ["vision", "--board", str(s / "charuco.toml"), "--videos", str(s / "calibration/extrinsic"),
+            "--cameras", str(s / "camera_array.toml"), "--out", str(out), "--covariance", str(cov), "--step", "3"]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    assert "square" in r.output and "flatness" in r.output
+    traj = read_tum(out)
+    stamps, C, kind, *_ = read_covariance_csv(cov)
+    assert len(traj.stamps_s) == len(stamps) >= 15 and kind == "se3" and C is not None
+    assert np.all(np.linalg.eigvalsh(C) > 0)
+    bad = CliRunner().invoke(app, args[:5] + ["--out", str(tmp_path / "x.tum")])
+    assert bad.exit_code == 2 and "--cameras" in bad.output and not (tmp_path / "x.tum").exists()
