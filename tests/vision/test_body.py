@@ -108,3 +108,58 @@ def test_too_few_points_is_no_pose(n_points: int) -> None:
     v = BodyView("cam_0", np.arange(n_points), np.zeros((n_points, 2)) + 600)
     p = estimate_body_pose(CAMS, BOARD, [v], 1.5)
     assert not p.ok and p.T_world_body is None and p.stamp_s == 1.5
+
+
+# --- cameras' time offsets and line delays (gtrig.vision.body_timing) --------------------------------------
+
+OFFSET_S = {"cam_0": 0.0, "cam_1": 0.020, "cam_2": -0.012}
+
+
+def _T_moving(t: float) -> np.ndarray:
+    """A board swept through the cameras' shared view: up to about 0.25 m/s and 0.6 rad/s."""
+    R = Rotation.from_rotvec([0.4 * np.sin(1.3 * t), 0.3 * np.cos(0.9 * t), 0.5 * np.sin(0.7 * t)]).as_matrix()
+    c = np.array([0.12 * np.sin(1.5 * t), 0.1 * np.cos(1.1 * t), 0.05 * np.sin(0.8 * t)])
+    return geo.make_T(R, c - R @ np.array([2 * SQUARE, 2.5 * SQUARE, 0.0]))
+
+
+def _image(name: str, t_exposure: float, line_delay_s: float) -> np.ndarray:
+    """Pixels (12, 2) of the moving board in camera ``name``, each row exposed ``line_delay_s`` per row later."""
+    cam = CAMS[name]
+    t = np.full(len(BOARD.points_body), t_exposure)
+    for _ in range(3):  # each point's row depends on its time: a fixed point
+        uv = np.array([cv2.projectPoints(geo.transform_points(cam.T_cam_world @ _T_moving(tk), p[None]), np.zeros(3),
+                                         np.zeros(3), K, DIST)[0].reshape(2) for tk, p in zip(t, BOARD.points_body,
+                                                                                                strict=True)])
+        t = t_exposure + line_delay_s * (uv[:, 1] - 360.0)
+    return uv
+
+
+def _moving_instants(line_delay_s: float, rng: np.random.Generator, n: int = 36):
+    from gtrig.vision.body_track import group_instants
+
+    pairs = []
+    for i in range(n):
+        for name in CAMS:
+            t_img = i / 6.0 + rng.uniform(-0.005, 0.005)  # the stamps of one instant differ a little
+            uv = _image(name, t_img + OFFSET_S[name], line_delay_s) + rng.normal(0, 0.2, (12, 2))
+            pairs.append((i, BodyView(name, np.arange(12), uv, t_img)))
+    return group_instants(pairs)
+
+
+@pytest.mark.parametrize("line_delay_s", [0.0, 40e-6])  # 40 us per row: 720 rows read out in 29 ms
+def test_camera_offsets_and_line_delay_recovered(line_delay_s: float) -> None:
+    from gtrig.vision.body_timing import estimate_timing
+    from gtrig.vision.body_track import track_body
+
+    rng = np.random.default_rng(3)
+    opts = BodyOptions(sigma_px=0.2)
+    track = track_body(CAMS, BOARD, _moving_instants(line_delay_s, rng), opts)
+    tm = estimate_timing(CAMS, BOARD, track.instants, track.poses, "cam_0", line_delay=line_delay_s > 0,
+                         options=opts)
+    assert tm.instants >= 30 and tm.cameras == ("cam_0", "cam_1", "cam_2")
+    for c, d, s in zip(tm.cameras, tm.offset_s, tm.sigma_offset_s, strict=True):
+        # the velocities (central differences 1/3 s apart) err by a few percent: not in the interval
+        assert abs(d - OFFSET_S[c]) < 3 * s + 0.1 * abs(OFFSET_S[c]) + 1e-4, (c, d, s)
+    assert tm.rms_px["model"] < 0.7 * tm.rms_px["stamps"]
+    if line_delay_s:
+        assert np.all(np.abs(tm.line_delay_s - line_delay_s) < 3 * tm.sigma_line_delay_s + 6e-6), tm.line_delay_s
