@@ -48,6 +48,8 @@ def command(
                                         "folder or caliscope's camera_array.toml."),
     step: int = typer.Option(1, "--step", help="With --board: read every n-th frame."),
     sigma_px: float = typer.Option(0.3, "--sigma-px", help="With --board: a corner's pixel sigma."),
+    line_delay: bool = typer.Option(False, "--line-delay", help="With --board: also estimate each camera's "
+                                    "rolling-shutter line delay."),
 ) -> None:
     """Robot poses from the markers seen by all cameras at each instant, with covariances; with --board, a
     ChArUco board's poses from the cameras' videos."""
@@ -60,7 +62,7 @@ def command(
 
         if videos is None or cameras is None:
             raise InputError("--board needs --videos and --cameras")
-        run(board, videos, cameras, out, covariance, step, sigma_px)
+        run(board, videos, cameras, out, covariance, step, sigma_px, line_delay)
         return
     if rig is None or recording is None:
         raise InputError("--rig and --recording are required (or --board with --videos and --cameras)")

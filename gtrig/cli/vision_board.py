@@ -8,8 +8,9 @@ from gtrig.cli.common import console
 
 
 def run(board: Path, videos: Path, cameras: Path, out: Path, covariance: Path | None, step: int,
-        sigma_px: float) -> None:
-    """Track the board, write its poses (TUM, ``T_world_board``) and covariances, print the shape check."""
+        sigma_px: float, line_delay: bool = False) -> None:
+    """Track the board, write its poses (TUM, ``T_world_board``) and covariances, print the shape check and
+    the cameras' time offsets (and line delays) from the board's motion."""
     from gtrig.calib.charuco import read_board_file
     from gtrig.calib.video_detect import detect_videos, find_videos
     from gtrig.cli import checks
@@ -17,6 +18,7 @@ def run(board: Path, videos: Path, cameras: Path, out: Path, covariance: Path | 
     from gtrig.vision.board_video import board_body, board_instants, read_cameras
     from gtrig.vision.body import BodyOptions
     from gtrig.vision.body_shape import check_shape
+    from gtrig.vision.body_timing import estimate_timing
     from gtrig.vision.body_track import track_body
 
     checks.input_folder("--videos", videos)
@@ -46,3 +48,14 @@ def run(board: Path, videos: Path, cameras: Path, out: Path, covariance: Path | 
                   f"({pct * sc.tri_edge_mean_m:+.2f} %), edge RMS error {mm * sc.tri_edge_rms_m:.3f} mm over "
                   f"{sc.tri_edges} edges, flatness RMS {mm * sc.tri_plane_rms_m:.3f} mm over {sc.tri_instants} "
                   f"instants; rigidity NEES/dof {sc.rigidity_nees:.2f}", highlight=False)
+    tm = estimate_timing(cams, track.body, track.instants, track.poses, line_delay=line_delay,
+                         options=BodyOptions(sigma_px=sigma_px))
+    console.print(f"  time offsets from the board's motion ({tm.instants} instants, 95 % intervals; residual RMS "
+                  f"{tm.rms_px['stamps']:.3f} px with the frame times, {tm.rms_px['model']:.3f} px with the offsets"
+                  f"{' and line delays' if line_delay else ''}):", highlight=False)
+    for k, c in enumerate(tm.cameras):
+        text = ("reference" if c == tm.reference
+                else f"{1000 * tm.offset_s[k]:+.1f} ± {1960 * tm.sigma_offset_s[k]:.1f} ms")
+        if line_delay:
+            text += f", line delay {1e6 * tm.line_delay_s[k]:+.1f} ± {1.96e6 * tm.sigma_line_delay_s[k]:.1f} us/row"
+        console.print(f"    {c}: {text}", highlight=False)
