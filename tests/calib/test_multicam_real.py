@@ -292,3 +292,20 @@ def test_lens_sigmas_from_the_views_scatter(board, detections, intrinsics) -> No
             sa, sb = (honest[(s, c)][k] for s in RECORDINGS)
             z_max = max(z_max, abs(a[i, j] - b[i, j]) / np.hypot(sa, sb))
     assert z_max < 3.6  # measured 3.30 (cam_0's fx)
+
+
+def test_camera_time_offsets_from_the_boards_motion(board_tracks) -> None:
+    """Each camera's exposure offset from its frame times, from the board's motion: the offsets explain part
+    of the cameras' disagreement (residual RMS down by 5-28 %); the cameras were moved between the two
+    recordings, so their offsets are not compared across them."""
+    from gtrig.vision.body_timing import estimate_timing
+
+    for s in RECORDINGS:
+        cams, track, _sc = board_tracks[s]
+        tm = estimate_timing(cams, track.body, track.instants, track.poses, "cam_0", line_delay=False)
+        assert tm.instants >= 15 and tm.cameras == CAMS, s
+        assert tm.offset_s[0] == 0 and np.all(np.abs(tm.offset_s) < 0.05), (s, tm.offset_s)
+        assert np.all(np.isfinite(tm.sigma_offset_s)) and np.all(tm.sigma_offset_s[1:] < 0.01), s
+        # measured 1.39 -> 1.00 px and 1.44 -> 1.36 px; offsets cam_1 -24.4, -3.5 ms, cam_2 +29.1, +18.0 ms,
+        # cam_3 +19.9, +21.1 ms
+        assert tm.rms_px["model"] < 0.97 * tm.rms_px["stamps"], (s, tm.rms_px)
