@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from gtrig.calib.intrinsics import STD_NAMES
+from gtrig.errors import ConvergenceError
 from gtrig.io.camfile import CameraIntrinsics
 
 
@@ -44,13 +45,22 @@ def view_jackknife_std(object_points: Sequence[np.ndarray], image_points: Sequen
     flags = cv2.CALIB_USE_INTRINSIC_GUESS | (0 if estimate_k3 else cv2.CALIB_FIX_K3)
     d0 = np.zeros(5)
     d0[: min(5, lens.dist_coeffs.size)] = lens.dist_coeffs.ravel()[:5]
+    crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
     thetas = []
-    for i in range(n):
-        keep = [k for k in range(n) if k != i]
-        _rms, K, dist, _r, _t = cv2.calibrateCamera([obj[k] for k in keep], [img[k] for k in keep],
-                                                    lens.image_size, lens.camera_matrix.copy(), d0.copy(),
-                                                    flags=flags)
-        thetas.append(np.r_[K[0, 0], K[1, 1], K[0, 2], K[1, 2], np.ravel(dist)[:5]])
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)  # one summation order: the same digits on every run (as the lens's own fit)
+    try:
+        for i in range(n):
+            keep = [k for k in range(n) if k != i]
+            _rms, K, dist, _r, _t = cv2.calibrateCamera([obj[k] for k in keep], [img[k] for k in keep],
+                                                        lens.image_size, lens.camera_matrix.copy(), d0.copy(),
+                                                        flags=flags, criteria=crit)
+            thetas.append(np.r_[K[0, 0], K[1, 1], K[0, 2], K[1, 2], np.ravel(dist)[:5]])
+    except cv2.error as e:
+        raise ConvergenceError(f"OpenCV calibration without one view failed: {str(e).splitlines()[-1].strip()}"
+                               ) from None
+    finally:
+        cv2.setNumThreads(threads)
     th = np.array(thetas)
     var = (n - 1) / n * np.sum((th - th.mean(axis=0)) ** 2, axis=0)
     return {k: float(np.sqrt(v)) for k, v in zip(STD_NAMES, var, strict=True)}
