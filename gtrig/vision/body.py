@@ -156,7 +156,11 @@ def stack_body(cameras: Mapping[str, CameraGeometry], body: PointBody, views: Se
     n = int(sum(n_per))
     view = np.repeat(np.arange(len(views)), n_per)
     g = [cameras[v.camera] for v in views]
-    rep = lambda a: np.repeat(np.stack(a), n_per, axis=0)  # noqa: E731
+
+    def rep(per_view: list[np.ndarray]) -> np.ndarray:
+        """One row per point from one array per view."""
+        return np.repeat(np.stack(per_view), n_per, axis=0)
+
     K = rep([c.K for c in g])
     cov = np.tile(np.eye(2) * sigma_px**2, (n, 1, 1))
     L = np.tile(np.eye(2) / sigma_px, (n, 1, 1))
