@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,7 @@ from gtrig.calib.charuco import CharucoBoard
 from gtrig.calib.intrinsics import PointSetFit, calibrate_point_sets
 from gtrig.calib.video_detect import VideoDetections, detect_videos, find_videos
 from gtrig.calib.video_network import RelativePose, VideoNetworkResult, calibrate_video_network, relative_poses
+from gtrig.calib.view_jackknife import view_jackknife_std
 from gtrig.io.atomic import atomic_group, atomic_write_text
 from gtrig.io.camfile import CameraIntrinsics, write_cam_yaml
 from gtrig.io.video import CameraVideo
@@ -56,12 +57,23 @@ class VideoCalibration:
 
 
 def fit_lens(det: VideoDetections, board: CharucoBoard, *, estimate_k3: bool = False) -> PointSetFit:
-    """A camera's intrinsics from its views with at least :data:`MIN_LENS_CORNERS` corners."""
+    """A camera's intrinsics from its views with at least :data:`MIN_LENS_CORNERS` corners.
+
+    The lens's ``extra`` holds OpenCV's ``std`` and ``std_views``, the views' jackknife deviations
+    (:mod:`gtrig.calib.view_jackknife`); ``std_honest`` is the larger of the two per parameter.
+    """
     P = board.object_points()
     keep = [k for k, v in enumerate(det.views) if len(v.ids) >= MIN_LENS_CORNERS]
     names = [f"{det.camera}@{det.stamps_s[k]:.3f}s" for k in keep]
-    return calibrate_point_sets([P[det.views[k].ids] for k in keep], [det.views[k].corners_px for k in keep],
-                                names, det.image_size, estimate_k3=estimate_k3)
+    fit = calibrate_point_sets([P[det.views[k].ids] for k in keep], [det.views[k].corners_px for k in keep],
+                               names, det.image_size, estimate_k3=estimate_k3)
+    used = [det.views[keep[names.index(n)]] for n in fit.names]
+    jk = view_jackknife_std([P[v.ids] for v in used], [v.corners_px for v in used], fit.camera,
+                            estimate_k3=estimate_k3)
+    std = fit.camera.extra["std"]
+    honest = {k: max(float(std[k]), jk[k]) if np.isfinite(jk[k]) else float(std[k]) for k in std}
+    cam = replace(fit.camera, extra={**fit.camera.extra, "std_views": jk, "std_honest": honest})
+    return replace(fit, camera=cam)
 
 
 def calibrate_from_videos(

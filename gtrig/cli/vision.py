@@ -12,8 +12,8 @@ from gtrig.cli.scale import chunk_bar, dask_option, executor
 
 @handle_errors
 def command(
-    rig: Path = typer.Option(..., "--rig", help="The calibrated rig (rig.calibrated.yaml)."),
-    recording: Path = typer.Option(..., "--recording", help="The recording folder."),
+    rig: Path | None = typer.Option(None, "--rig", help="The calibrated rig (rig.calibrated.yaml)."),
+    recording: Path | None = typer.Option(None, "--recording", help="The recording folder."),
     out: Path = typer.Option(..., "--out", help="Output trajectory (TUM, T_world_robot)."),
     covariance: Path | None = typer.Option(None, "--covariance",
                                            help="Output CSV: one covariance per pose, row-major."),
@@ -40,9 +40,32 @@ def command(
     marker_sigma_deg: float = typer.Option(0.5, "--marker-sigma-deg",
                                            help="Marker orientation sigma, for markers without pose_cov "
                                            "(hand-measured: 0.5)."),
+    board: Path | None = typer.Option(None, "--board", help="Track this ChArUco board file instead of a robot: "
+                                      "with --videos and --cameras (docs/calibrate-from-video.md)."),
+    videos: Path | None = typer.Option(None, "--videos", help="With --board: folder of <cam>.mp4 and their "
+                                       "frame times."),
+    cameras: Path | None = typer.Option(None, "--cameras", help="With --board: gtrig calib video's output "
+                                        "folder or caliscope's camera_array.toml."),
+    step: int = typer.Option(1, "--step", help="With --board: read every n-th frame."),
+    sigma_px: float = typer.Option(0.3, "--sigma-px", help="With --board: a corner's pixel sigma."),
+    line_delay: bool = typer.Option(False, "--line-delay", help="With --board: also estimate each camera's "
+                                    "rolling-shutter line delay."),
 ) -> None:
-    """Robot poses from the markers seen by all cameras at each instant, with covariances."""
+    """Robot poses from the markers seen by all cameras at each instant, with covariances; with --board, a
+    ChArUco board's poses from the cameras' videos."""
     import math
+
+    from gtrig.errors import InputError
+
+    if board is not None:
+        from gtrig.cli.vision_board import run
+
+        if videos is None or cameras is None:
+            raise InputError("--board needs --videos and --cameras")
+        run(board, videos, cameras, out, covariance, step, sigma_px, line_delay)
+        return
+    if rig is None or recording is None:
+        raise InputError("--rig and --recording are required (or --board with --videos and --cameras)")
 
     from rich.table import Table
 

@@ -302,11 +302,11 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
         return FrameEstimate(obs.stamp_s, Status.INCONSISTENT,
                              f"variance factor {factor:.1f} > {options.max_variance_factor:g} "
                              f"(rms {rms:.2f} px)", variance_factor=factor, **common)
-    common["cov_6x6"] = fit.cov_6x6 * _frame_scale(factor, red_sum, options.frame_scale_level)
+    common["cov_6x6"] = fit.cov_6x6 * frame_scale(factor, red_sum, options.frame_scale_level)
     return FrameEstimate(obs.stamp_s, Status.OK, variance_factor=factor, **common)
 
 
-def _frame_scale(factor: float, redundancy: float, level: float) -> float:
+def frame_scale(factor: float, redundancy: float, level: float) -> float:
     """The factor that scales a frame's covariance: its own variance factor where the chi-square test
     (``redundancy`` dof) says its corners are noisier than the camera's model at ``level``, else 1."""
     from scipy.stats import chi2

@@ -1,0 +1,165 @@
+"""A rigid body of identified points tracked from fixed cameras (gtrig.vision.body): accuracy against simulated
+truth, the covariance's NEES, an outlier camera dropped, the shape checks on exact data."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from gtrig import geometry as geo
+from gtrig.vision.body import BodyOptions, BodyView, PointBody, camera_geometry, estimate_body_pose
+from gtrig.vision.body_check import edge_errors, plane_rms, shape_from_poses, split_pose_nees, triangulate_points
+from gtrig.vision.covariance import nees, pose_error_xi
+
+K = np.array([[900.0, 0, 640], [0, 900.0, 360], [0, 0, 1]])
+DIST = np.array([-0.1, 0.05, 0.0, 0.0, 0.0])
+SQUARE = 0.054
+BOARD = PointBody("board", np.array([[(c + 1) * SQUARE, (r + 1) * SQUARE, 0.0] for r in range(4) for c in range(3)]))
+
+
+def _look_at(centre: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """T_world_cam of a camera at ``centre`` looking at ``target`` (z forward, world z up in the image)."""
+    z = (target - centre) / np.linalg.norm(target - centre)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    return geo.make_T(np.column_stack([x, np.cross(z, x), z]), centre)
+
+
+CAMS = {f"cam_{i}": camera_geometry(f"cam_{i}", K, DIST, _look_at(c, np.zeros(3)), (1280, 720))
+        for i, c in enumerate(np.array([[1.2, 0.0, 0.4], [0.0, 1.1, 0.5], [-0.9, -0.8, 0.3]]))}
+
+
+def _pose(rng: np.random.Generator) -> np.ndarray:
+    R = Rotation.from_rotvec(rng.normal(0, 0.3, 3)).as_matrix()
+    # the board faces roughly upwards, its centre near the origin
+    return geo.make_T(R, rng.normal(0, 0.05, 3) - R @ np.array([2 * SQUARE, 2.5 * SQUARE, 0.0]))
+
+
+def _views(T_world_body: np.ndarray, rng: np.random.Generator, sigma_px: float) -> list[BodyView]:
+    out = []
+    for name, cam in CAMS.items():
+        p_cam = geo.transform_points(cam.T_cam_world @ T_world_body, BOARD.points_body)
+        if np.any(p_cam[:, 2] <= 0.1):
+            continue
+        uv = cv2.projectPoints(p_cam, np.zeros(3), np.zeros(3), K, DIST)[0].reshape(-1, 2)
+        out.append(BodyView(name, np.arange(len(uv)), uv + rng.normal(0, sigma_px, uv.shape)))
+    return out
+
+
+def test_pose_accurate_and_covariance_consistent() -> None:
+    rng = np.random.default_rng(5)
+    opts = BodyOptions(sigma_px=0.3)
+    n, err_mm = [], []
+    for _ in range(60):
+        T = _pose(rng)
+        p = estimate_body_pose(CAMS, BOARD, _views(T, rng, 0.3), 0.0, opts)
+        assert p.ok and p.T_world_body is not None and p.cov_6x6 is not None
+        e = pose_error_xi(p.T_world_body, T)
+        n.append(nees(e, p.cov_6x6))
+        err_mm.append(1000 * np.linalg.norm(e[:3]))
+    assert np.median(err_mm) < 1.0  # three cameras at about 1.2 m, 0.3 px corners
+    # NEES over 6 dof: mean 6 for a right covariance (60 draws: 5 % band about 4.9-7.2); frames whose factor
+    # is significantly above 1 are scaled up, so slightly below 6 is expected
+    assert 4.5 < np.mean(n) < 7.5
+
+
+def test_outlier_camera_dropped() -> None:
+    rng = np.random.default_rng(6)
+    T = _pose(rng)
+    views = _views(T, rng, 0.3)
+    bad = views[1]
+    views[1] = BodyView(bad.camera, bad.ids, bad.points_px + np.array([12.0, -8.0]))  # that camera's image is off
+    p = estimate_body_pose(CAMS, BOARD, views, 0.0, BodyOptions(sigma_px=0.3))
+    assert p.ok and p.rejected == (bad.camera,) and p.T_world_body is not None
+    assert 1000 * np.linalg.norm(p.T_world_body[:3, 3] - T[:3, 3]) < 3.0
+
+
+def test_shape_checks_recover_the_board() -> None:
+    """Triangulated and pose-based reconstructions of a noiseless board give its edges and flatness exactly;
+    with 0.3 px noise the triangulated corners' errors agree with their covariance (NEES near 3)."""
+    rng = np.random.default_rng(7)
+    poses, views = [], []
+    for _ in range(8):
+        T = _pose(rng)
+        vs = _views(T, rng, 0.0)
+        poses.append(estimate_body_pose(CAMS, BOARD, vs, 0.0, BodyOptions(sigma_px=0.3)))
+        views.append(vs)
+        tri = triangulate_points(CAMS, vs, 0.3)
+        assert len(tri.ids) == 12
+        np.testing.assert_allclose(tri.X_world, geo.transform_points(T, BOARD.points_body), atol=1e-6)
+    shape = shape_from_poses(CAMS, poses, views)
+    assert np.max(np.abs(edge_errors(shape, BOARD, SQUARE))) < 1e-6 and len(edge_errors(shape, BOARD, SQUARE)) == 17
+    assert plane_rms(np.array(list(shape.values()))) < 1e-6
+    d = []
+    for _ in range(40):
+        T = _pose(rng)
+        tri = triangulate_points(CAMS, _views(T, rng, 0.3), 0.3)
+        d += [nees(x - y, C) for x, y, C in zip(tri.X_world, geo.transform_points(T, BOARD.points_body[tri.ids]),
+                                                 tri.cov, strict=True)]
+    assert 2.6 < np.mean(d) < 3.4  # 480 points, 3 dof each
+    s = split_pose_nees(CAMS, BOARD, _views(_pose(rng), rng, 0.3), BodyOptions(sigma_px=0.3))
+    assert len(s) == 3 and all(np.isfinite(s))
+
+
+@pytest.mark.parametrize("n_points", [3])
+def test_too_few_points_is_no_pose(n_points: int) -> None:
+    v = BodyView("cam_0", np.arange(n_points), np.zeros((n_points, 2)) + 600)
+    p = estimate_body_pose(CAMS, BOARD, [v], 1.5)
+    assert not p.ok and p.T_world_body is None and p.stamp_s == 1.5
+
+
+# --- cameras' time offsets and line delays (gtrig.vision.body_timing) --------------------------------------
+
+OFFSET_S = {"cam_0": 0.0, "cam_1": 0.020, "cam_2": -0.012}
+
+
+def _T_moving(t: float) -> np.ndarray:
+    """A board swept through the cameras' shared view: up to about 0.25 m/s and 0.6 rad/s."""
+    R = Rotation.from_rotvec([0.4 * np.sin(1.3 * t), 0.3 * np.cos(0.9 * t), 0.5 * np.sin(0.7 * t)]).as_matrix()
+    c = np.array([0.12 * np.sin(1.5 * t), 0.1 * np.cos(1.1 * t), 0.05 * np.sin(0.8 * t)])
+    return geo.make_T(R, c - R @ np.array([2 * SQUARE, 2.5 * SQUARE, 0.0]))
+
+
+def _image(name: str, t_exposure: float, line_delay_s: float) -> np.ndarray:
+    """Pixels (12, 2) of the moving board in camera ``name``, each row exposed ``line_delay_s`` per row later."""
+    cam = CAMS[name]
+    t = np.full(len(BOARD.points_body), t_exposure)
+    for _ in range(3):  # each point's row depends on its time: a fixed point
+        uv = np.array([cv2.projectPoints(geo.transform_points(cam.T_cam_world @ _T_moving(tk), p[None]), np.zeros(3),
+                                         np.zeros(3), K, DIST)[0].reshape(2) for tk, p in zip(t, BOARD.points_body,
+                                                                                                strict=True)])
+        t = t_exposure + line_delay_s * (uv[:, 1] - 360.0)
+    return uv
+
+
+def _moving_instants(line_delay_s: float, rng: np.random.Generator, n: int = 36):
+    from gtrig.vision.body_track import group_instants
+
+    pairs = []
+    for i in range(n):
+        for name in CAMS:
+            t_img = i / 6.0 + rng.uniform(-0.005, 0.005)  # the stamps of one instant differ a little
+            uv = _image(name, t_img + OFFSET_S[name], line_delay_s) + rng.normal(0, 0.2, (12, 2))
+            pairs.append((i, BodyView(name, np.arange(12), uv, t_img)))
+    return group_instants(pairs)
+
+
+@pytest.mark.parametrize("line_delay_s", [0.0, 40e-6])  # 40 us per row: 720 rows read out in 29 ms
+def test_camera_offsets_and_line_delay_recovered(line_delay_s: float) -> None:
+    from gtrig.vision.body_timing import estimate_timing
+    from gtrig.vision.body_track import track_body
+
+    rng = np.random.default_rng(3)
+    opts = BodyOptions(sigma_px=0.2)
+    track = track_body(CAMS, BOARD, _moving_instants(line_delay_s, rng), opts)
+    tm = estimate_timing(CAMS, BOARD, track.instants, track.poses, "cam_0", line_delay=line_delay_s > 0,
+                         options=opts)
+    assert tm.instants >= 30 and tm.cameras == ("cam_0", "cam_1", "cam_2")
+    for c, d, s in zip(tm.cameras, tm.offset_s, tm.sigma_offset_s, strict=True):
+        # the velocities (central differences 1/3 s apart) err by a few percent: not in the interval
+        assert abs(d - OFFSET_S[c]) < 3 * s + 0.1 * abs(OFFSET_S[c]) + 1e-4, (c, d, s)
+    assert tm.rms_px["model"] < 0.7 * tm.rms_px["stamps"]
+    if line_delay_s:
+        assert np.all(np.abs(tm.line_delay_s - line_delay_s) < 3 * tm.sigma_line_delay_s + 6e-6), tm.line_delay_s
