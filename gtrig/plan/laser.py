@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gtrig.laser.hull_icp import HullModel, side_bias_normal_equations
+from gtrig.laser.hull_icp import HullModel
 from gtrig.laser.track import TrackSettings
 from gtrig.rig.models import Rig
 
@@ -124,34 +124,79 @@ class LaserPlanSettings:
     track: TrackSettings = field(default_factory=TrackSettings)
 
 
-def predict_laser(rig: Rig, poses_xytheta: np.ndarray, settings: LaserPlanSettings = LaserPlanSettings()
-                  ) -> LaserPrediction:
-    """GTlaser's predicted covariance at planar poses (K, 3) (module docstring)."""
+@dataclass(frozen=True)
+class LaserInformation:
+    """The additive part of GTlaser's prediction at K poses: sums over beams, so that the pieces of two
+    sets of scanners add up to those of their union.
+
+    Attributes
+    ----------
+    H_pp : (K, 3, 3) the ICP's ``sum w J^T J`` over x, y (m), yaw (rad), without its weak prior, 1/m^2.
+    H_pb : (K, 3, 4) ``sum w J c`` against each hull side's range bias.
+    beams : (K, n_scanners) beams of each scanner on the hull.
+    per_side : (K, n_scanners, 4) beams of each scanner on each hull side.
+    """
+
+    H_pp: np.ndarray
+    H_pb: np.ndarray
+    beams: np.ndarray
+    per_side: np.ndarray
+
+    def plus(self, other: LaserInformation) -> LaserInformation:
+        """Both sets of scanners at the same poses (``other``'s scanners after this one's)."""
+        return LaserInformation(self.H_pp + other.H_pp, self.H_pb + other.H_pb,
+                                np.concatenate([self.beams, other.beams], axis=1),
+                                np.concatenate([self.per_side, other.per_side], axis=1))
+
+
+def laser_information(rig: Rig, poses_xytheta: np.ndarray, settings: LaserPlanSettings = LaserPlanSettings()
+                      ) -> LaserInformation:
+    """The ICP's normal equations at planar poses (K, 3) from the beams of ``rig``'s scanners on the hull
+    (:func:`cast_beams`; blocks as :func:`gtrig.laser.hull_icp.side_bias_normal_equations`, compiled)."""
+    from gtrig.plan._laser_kernels import icp_blocks
+
     poses = np.asarray(poses_xytheta, dtype=float).reshape(-1, 3)
     K, n_s = poses.shape[0], len(rig.laser_scanners)
-    nan = np.full((K, 3, 3), np.nan)
     if rig.robot.hull is None or n_s == 0:
-        return LaserPrediction(nan, nan, np.zeros((K, n_s), int), np.zeros((K, n_s), int), np.zeros(K, bool))
+        return LaserInformation(np.zeros((K, 3, 3)), np.zeros((K, 3, 4)), np.zeros((K, n_s), int),
+                                np.zeros((K, n_s, 4), int))
     model = HullModel.from_hull(rig.robot.hull)
     hits = cast_beams(rig, model, poses)
     beams = np.bincount(hits.pose * n_s + hits.scanner, minlength=K * n_s).reshape(K, n_s)
     per_side = np.bincount((hits.pose * n_s + hits.scanner) * 4 + hits.side, minlength=K * n_s * 4).reshape(K, n_s, 4)
+    icp = settings.track.icp
+    S_xy = np.array([s.T_world_scanner.xyz[:2] for s in rig.laser_scanners], dtype=float)
+    var_r = np.array([s.range_sigma_m for s in rig.laser_scanners], dtype=float) ** 2
+    t0 = np.einsum("ij,ij->i", model.tangents, model.corners_xy)
+    H, H_pb, _ = icp_blocks(hits.pose.astype(np.int64), hits.scanner.astype(np.int64), hits.xy, hits.dir, poses,
+                            S_xy, var_r, model.normals, model.offsets, model.tangents, t0, model.lengths,
+                            float(icp.gate_m), float(icp.end_margin_m), float(icp.sigma_model_m), float(icp.huber_k))
+    return LaserInformation(H, H_pb, beams, per_side)
+
+
+def laser_covariance(info: LaserInformation, settings: LaserPlanSettings = LaserPlanSettings()) -> LaserPrediction:
+    """GTlaser's covariance from the ICP's normal equations (module docstring): the scan's, plus the
+    hull's surface bias and the floor; not covered where the ICP would call the fit degenerate."""
     st = settings.track
     icp = st.icp
-    sides = np.sum(per_side >= icp.min_side_points, axis=2)
-    S_xy = np.array([s.T_world_scanner.xyz[:2] for s in rig.laser_scanners], dtype=float)
-    sigma = np.array([s.range_sigma_m for s in rig.laser_scanners], dtype=float)
-    H, H_pb, _, _, _ = side_bias_normal_equations(model, hits.xy, hits.pose, hits.scanner, S_xy, hits.dir, sigma,
-                                                  poses, icp)
+    H = info.H_pp.copy()
+    H[:, [0, 1, 2], [0, 1, 2]] += [1 / icp.prior_std_m**2, 1 / icp.prior_std_m**2, 1 / icp.prior_std_rad**2]
     cov_scan = np.linalg.inv(H)
-    A = np.linalg.solve(H, H_pb)
+    A = cov_scan @ info.H_pb
     bias = st.surface_bias_std_m**2 * np.ones((4, 4)) + st.side_bias_std_m**2 * np.eye(4)
     floor = np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2])
     cov = cov_scan + A @ bias @ np.swapaxes(A, 1, 2) + floor
-    n_pts = beams.sum(axis=1)
-    n_sides = np.sum(per_side.sum(axis=1) >= icp.min_side_points, axis=1)
+    n_pts = info.beams.sum(axis=1)
+    sides = np.sum(info.per_side >= icp.min_side_points, axis=2)
+    n_sides = np.sum(info.per_side.sum(axis=1) >= icp.min_side_points, axis=1)
     std_xy = np.sqrt(np.linalg.eigvalsh(cov[:, :2, :2])[:, -1])
     covered = (n_pts >= icp.min_points) & (n_sides >= 2) & (std_xy <= icp.max_std_m) & (
         np.sqrt(cov[:, 2, 2]) <= icp.max_std_rad)
     return LaserPrediction(np.where(covered[:, None, None], cov, np.nan),
-                           np.where(n_pts[:, None, None] > 0, cov_scan, np.nan), beams, sides, covered)
+                           np.where(n_pts[:, None, None] > 0, cov_scan, np.nan), info.beams, sides, covered)
+
+
+def predict_laser(rig: Rig, poses_xytheta: np.ndarray, settings: LaserPlanSettings = LaserPlanSettings()
+                  ) -> LaserPrediction:
+    """GTlaser's predicted covariance at planar poses (K, 3) (module docstring)."""
+    return laser_covariance(laser_information(rig, poses_xytheta, settings), settings)
