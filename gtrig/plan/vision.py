@@ -136,23 +136,14 @@ def marker_jacobian(J_pose: np.ndarray, R_world_robot: np.ndarray, p_robot: np.n
     return np.concatenate([d, -d @ skew(p_robot - centre_robot)], axis=2)
 
 
-def _block_entries(rows: np.ndarray, r0: np.ndarray, c0: np.ndarray, B: np.ndarray, D: int
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Flat indices into (K, D, D) and values for ``H[rows[v], r0[v]:r0[v]+b, c0[v]:c0[v]+b'] += B[v]``."""
-    _, br, bc = B.shape
-    ri = r0[:, None, None] + np.arange(br)[None, :, None]
-    ci = c0[:, None, None] + np.arange(bc)[None, None, :]
-    return ((rows[:, None, None] * D + ri) * D + ci).ravel(), B.ravel()
+def _camera_normal_equations(H: np.ndarray, cam: CameraGeometry, model: VisionModel, cv: _CameraViews,
+                             poses: np.ndarray, settings: VisionPlanSettings, rig_u: RigUncertainty) -> None:
+    """Add one camera's corners to the normal matrices ``H`` (K, D, D) over (pose, marker corrections),
+    its own correction eliminated (:func:`gtrig.plan._vision_kernels.add_camera_views`). ``cv.pose``
+    indexes ``H``'s rows, in non-decreasing order."""
+    from gtrig.plan._vision_kernels import add_camera_views
 
-
-def _camera_normal_equations(H: np.ndarray, entries: list[tuple[np.ndarray, np.ndarray]], cam: CameraGeometry,
-                             model: VisionModel, cv: _CameraViews, poses: np.ndarray, settings: VisionPlanSettings,
-                             rig_u: RigUncertainty) -> None:
-    """One camera's corners in the normal matrices ``H`` (K, D, D) over (pose, marker corrections), its
-    own correction eliminated: the elimination is subtracted from ``H`` at once, the corners' own blocks
-    are appended to ``entries`` (added by the caller in one pass). ``cv.pose`` indexes ``H``'s rows."""
     V = cv.pose.shape[0]
-    D = H.shape[1]
     info = np.repeat(corner_information(cv.side_px, settings.corner_noise, settings.corner_floor_px), 4)
     sc, Rk = _stack(cam, model, cv, poses, info)
     eye = np.eye(4)
@@ -164,40 +155,16 @@ def _camera_normal_equations(H: np.ndarray, entries: list[tuple[np.ndarray, np.n
     Jm = w * marker_jacobian(Jp, Rk, p_r, ctr)
     Jp = w * Jp
     S_c = rig_u.sqrt_information("camera", cam.name)
-    Jc = None
-    if S_c is not None:
+    if S_c is None:
+        Jc, P_cam = np.zeros((V * 4, 2, 1)), np.zeros((1, 1))
+    else:
         Jc = camera_pose_jacobian(sc, eye)
         if S_c.shape[0] > 6:
             Jc = np.concatenate([Jc, lens_jacobian(sc, eye, S_c.shape[0] - 6)], axis=2)
-        Jc = w * Jc
-
-    def view_sum(A: np.ndarray, B: np.ndarray) -> np.ndarray:  # (V, a, b): sum over a view's 8 rows
-        return np.einsum("vra,vrb->vab", A.reshape(V, 8, -1), B.reshape(V, 8, -1))
-
-    has = cv.slot >= 0
-    m0 = 6 + 6 * cv.slot
-    zero = np.zeros(V, dtype=int)
-    entries.append(_block_entries(cv.pose, zero, zero, view_sum(Jp, Jp), D))
-    if has.any():
-        Jm_v, Jp_v = Jm.reshape(V, 8, 6)[has], Jp.reshape(V, 8, 6)[has]
-        pm = np.einsum("vra,vrb->vab", Jp_v, Jm_v)
-        entries.append(_block_entries(cv.pose[has], zero[has], m0[has], pm, D))
-        entries.append(_block_entries(cv.pose[has], m0[has], zero[has], np.swapaxes(pm, 1, 2), D))
-        entries.append(_block_entries(cv.pose[has], m0[has], m0[has], np.einsum("vra,vrb->vab", Jm_v, Jm_v), D))
-    if Jc is None or S_c is None:
-        return
-    # eliminate the camera's correction: H_xx -= H_xc H_cc^-1 H_cx, per pose seen by this camera
-    kc = S_c.shape[0]
-    g_pose, g = np.unique(cv.pose, return_inverse=True)
-    G = g_pose.shape[0]
-    Hcc = np.broadcast_to(S_c.T @ S_c, (G, kc, kc)).copy()
-    np.add.at(Hcc, g, view_sum(Jc, Jc))
-    Hxc = np.zeros((G, D, kc))
-    np.add.at(Hxc[:, :6, :], g, view_sum(Jp, Jc))
-    if has.any():
-        mc = np.einsum("vra,vrb->vab", Jm.reshape(V, 8, 6)[has], Jc.reshape(V, 8, kc)[has])
-        Hxc[g[has][:, None], m0[has][:, None] + np.arange(6)[None, :], :] = mc
-    H[g_pose] -= Hxc @ np.linalg.solve(Hcc, np.swapaxes(Hxc, 1, 2))
+        Jc, P_cam = w * Jc, S_c.T @ S_c
+    add_camera_views(H, cv.pose.astype(np.int64), cv.slot.astype(np.int64), np.ascontiguousarray(Jp.reshape(V, 8, 6)),
+                     np.ascontiguousarray(Jm.reshape(V, 8, 6)), np.ascontiguousarray(Jc.reshape(V, 8, -1)),
+                     np.ascontiguousarray(P_cam, dtype=float), S_c is not None)
 
 
 def _pose_covariance(H: np.ndarray) -> np.ndarray:
@@ -251,14 +218,11 @@ def _seen_covariance(rig: Rig, model: VisionModel, poses: np.ndarray,
         S = S_m[mid]
         assert S is not None
         H[:, 6 + 6 * i:12 + 6 * i, 6 + 6 * i:12 + 6 * i] += S.T @ S
-    entries: list[tuple[np.ndarray, np.ndarray]] = []
     slot_of = np.array([slots.get(m, -1) for m in mids])
     for name, vis, uv, side in sights:
         k, m = np.nonzero(vis)
         if k.size == 0:
             continue
         cv = _CameraViews(k, slot_of[m], np.asarray(mids)[m], uv[k, m], side[k, m])
-        _camera_normal_equations(H, entries, model.cameras[name], model, cv, poses, settings, rig_u)
-    idx = np.concatenate([e[0] for e in entries])
-    H += np.bincount(idx, np.concatenate([e[1] for e in entries]), minlength=H.size).reshape(H.shape)
+        _camera_normal_equations(H, model.cameras[name], model, cv, poses, settings, rig_u)
     return _pose_covariance(H)
