@@ -167,9 +167,9 @@ def _camera_normal_equations(H: np.ndarray, cam: CameraGeometry, model: VisionMo
                      np.ascontiguousarray(P_cam, dtype=float), S_c is not None)
 
 
-def _pose_covariance(H: np.ndarray) -> np.ndarray:
-    """The pose block (K, 6, 6) of ``inv(H)`` for normal matrices (K, D, D) over (pose, nuisances), by
-    eliminating the nuisances (Schur complement)."""
+def pose_covariance(H: np.ndarray) -> np.ndarray:
+    """The pose block (K, 6, 6) of ``inv(H)`` for normal matrices (K, D, D) over (pose, marker
+    corrections), by eliminating the corrections (Schur complement)."""
     H = 0.5 * (H + np.swapaxes(H, 1, 2))
     if H.shape[1] == 6:
         return np.linalg.inv(H)
@@ -177,15 +177,52 @@ def _pose_covariance(H: np.ndarray) -> np.ndarray:
     return np.linalg.inv(Hpp - Hpn @ np.linalg.solve(Hnn, np.swapaxes(Hpn, 1, 2)))
 
 
-def predict_vision(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSettings = VisionPlanSettings(),
-                   model: VisionModel | None = None) -> VisionPrediction:
-    """GTvision's predicted covariance at planar poses (K, 3) on a flat floor (module docstring)."""
+@dataclass(frozen=True)
+class VisionInformation:
+    """GTvision's normal matrices at K poses, the cameras' corrections eliminated: a sum over cameras, so
+    that a camera added to a rig adds its own matrices.
+
+    Attributes
+    ----------
+    seen : (K,) bool, some camera sees a marker whole.
+    H : (n_seen, D, D) normal matrices at the seen poses over the robot pose ``(dt, dphi)`` (world axes,
+        m and rad) and the corrections of the markers that have a prior (6 each, in the rig's order),
+        with or without the priors (:func:`prior_information`).
+    views : (K, n_cameras) markers each camera sees whole.
+    side_px : (K, n_cameras) smallest marker side each camera sees, pixels (0: none).
+    """
+
+    seen: np.ndarray
+    H: np.ndarray
+    views: np.ndarray
+    side_px: np.ndarray
+
+
+def prior_information(rig: Rig, settings: VisionPlanSettings = VisionPlanSettings()) -> np.ndarray:
+    """The priors' part (D, D) of every pose's normal matrix: GTvision's floor prior on the pose and
+    each marker's pose prior (the rig's uncertainty) on its correction."""
+    rig_u = settings.rig_uncertainty.with_rig(rig)
+    S_m = [S for S in (rig_u.sqrt_information("marker", m.id) for m in rig.robot.markers) if S is not None]
+    D = 6 + 6 * len(S_m)
+    P = np.zeros((D, D))
+    _, Jprior = prior_residuals(np.eye(4), settings.prior)
+    P[:6, :6] = Jprior.T @ Jprior
+    for i, S in enumerate(S_m):
+        P[6 + 6 * i:12 + 6 * i, 6 + 6 * i:12 + 6 * i] = S.T @ S
+    return P
+
+
+def vision_information(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSettings = VisionPlanSettings(),
+                       model: VisionModel | None = None, camera_names: tuple[str, ...] | None = None,
+                       priors: bool = True) -> VisionInformation:
+    """GTvision's normal matrices at planar poses (K, 3) on a flat floor from the cameras ``camera_names``
+    of ``rig`` (default: all), with the priors or without them (module docstring)."""
     poses = np.asarray(poses_xytheta, dtype=float).reshape(-1, 3)
     model = VisionModel.from_rig(rig) if model is None else model
     rig_u = settings.rig_uncertainty.with_rig(rig)
     mids = [m.id for m in rig.robot.markers]
     corners = np.stack([model.corners_robot[m] for m in mids])
-    names = [c.name for c in rig.cameras]
+    names = [c.name for c in rig.cameras] if camera_names is None else list(camera_names)
     K = poses.shape[0]
     sights = [camera_sight(model.cameras[n], corners, poses, rig.robot.hull, settings.margin_px, settings.min_side_px)
               for n in names]
@@ -194,35 +231,34 @@ def predict_vision(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSett
         if names else np.zeros((K, 0))
     side_min[~np.isfinite(side_min)] = 0.0
     seen = views.sum(axis=1) > 0
-    cov6 = np.full((K, 6, 6), np.nan)
-    if seen.any():
-        cov6[seen] = _seen_covariance(rig, model, poses[seen], [(n, s.visible[seen], s.uv[seen], s.side_px[seen])
-                                                               for n, s in zip(names, sights, strict=True)],
-                                      mids, settings, rig_u)
+    P = prior_information(rig, settings)
+    H = np.zeros((int(seen.sum()),) + P.shape)
+    if priors:
+        H += P
+    if H.shape[0]:
+        slot_of = np.full(len(mids), -1)
+        with_prior = [rig_u.sqrt_information("marker", m) is not None for m in mids]
+        slot_of[np.flatnonzero(with_prior)] = np.arange(sum(with_prior))
+        ps = poses[seen]
+        for name, sg in zip(names, sights, strict=True):
+            k, m = np.nonzero(sg.visible[seen])
+            if k.size:
+                cv = _CameraViews(k, slot_of[m], np.asarray(mids)[m], sg.uv[seen][k, m], sg.side_px[seen][k, m])
+                _camera_normal_equations(H, model.cameras[name], model, cv, ps, settings, rig_u)
+    return VisionInformation(seen, H, views, side_min)
+
+
+def planar_covariance(cov_6x6: np.ndarray) -> np.ndarray:
+    """The x, y, yaw block (K, 3, 3) of pose covariances (K, 6, 6) over (dt, dphi)."""
     i = np.array(PLANAR_INDEX)
-    return VisionPrediction(cov6[:, i[:, None], i[None, :]], cov6, views, side_min)
+    return cov_6x6[:, i[:, None], i[None, :]]
 
 
-def _seen_covariance(rig: Rig, model: VisionModel, poses: np.ndarray,
-                     sights: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], mids: list[int],
-                     settings: VisionPlanSettings, rig_u: RigUncertainty) -> np.ndarray:
-    """Pose covariances (K, 6, 6) at poses (K, 3) where at least one marker is seen; ``sights`` per camera:
-    name, visible (K, M), corners (K, M, 4, 2), sides (K, M)."""
-    S_m = {mid: rig_u.sqrt_information("marker", mid) for mid in mids}
-    slots = {mid: i for i, mid in enumerate(m for m in mids if S_m[m] is not None)}
-    K, D = poses.shape[0], 6 + 6 * len(slots)
-    H = np.zeros((K, D, D))
-    _, Jprior = prior_residuals(np.eye(4), settings.prior)
-    H[:, :6, :6] += Jprior.T @ Jprior
-    for mid, i in slots.items():
-        S = S_m[mid]
-        assert S is not None
-        H[:, 6 + 6 * i:12 + 6 * i, 6 + 6 * i:12 + 6 * i] += S.T @ S
-    slot_of = np.array([slots.get(m, -1) for m in mids])
-    for name, vis, uv, side in sights:
-        k, m = np.nonzero(vis)
-        if k.size == 0:
-            continue
-        cv = _CameraViews(k, slot_of[m], np.asarray(mids)[m], uv[k, m], side[k, m])
-        _camera_normal_equations(H, model.cameras[name], model, cv, poses, settings, rig_u)
-    return _pose_covariance(H)
+def predict_vision(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSettings = VisionPlanSettings(),
+                   model: VisionModel | None = None) -> VisionPrediction:
+    """GTvision's predicted covariance at planar poses (K, 3) on a flat floor (module docstring)."""
+    info = vision_information(rig, poses_xytheta, settings, model)
+    cov6 = np.full((info.seen.shape[0], 6, 6), np.nan)
+    if info.H.shape[0]:
+        cov6[info.seen] = pose_covariance(info.H)
+    return VisionPrediction(planar_covariance(cov6), cov6, info.views, info.side_px)
