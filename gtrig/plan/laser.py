@@ -142,6 +142,10 @@ class LaserInformation:
     beams: np.ndarray
     per_side: np.ndarray
 
+    def take(self, idx: np.ndarray) -> LaserInformation:
+        """The pieces at the poses ``idx`` (n,)."""
+        return LaserInformation(self.H_pp[idx], self.H_pb[idx], self.beams[idx], self.per_side[idx])
+
     def plus(self, other: LaserInformation) -> LaserInformation:
         """Both sets of scanners at the same poses (``other``'s scanners after this one's)."""
         return LaserInformation(self.H_pp + other.H_pp, self.H_pb + other.H_pb,
