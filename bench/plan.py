@@ -93,7 +93,7 @@ def suggestion(grid_m: float, headings: int, positions: int) -> None:
     t, c = time.perf_counter(), time.process_time()
     [s] = suggest_cameras(rig, plan, 1, 0.003, np.radians(0.1), st, n_positions=positions)
     wall, cpu = time.perf_counter() - t, time.process_time() - c
-    x, y, z = s.camera.T_world_cam.xyz
+    x, y, z = s.position_m
     print(f"suggest cameras:1 on the GT room without cam1, {grid.n_cells * grid.n_headings} poses, "
           f"{s.n_candidates} candidates: wall {wall:.1f} s, CPU {cpu:.1f} s; camera at ({x:.2f}, {y:.2f}, {z:.2f}) m, "
           f"share meeting 3 mm / 0.1 deg {100 * s.share_before:.1f} % -> {100 * s.share_after:.1f} %")
