@@ -237,8 +237,10 @@ def _candidates(rig: Rig, plan: PlanResult, kinds: list[SensorKind], aims: list[
     return out
 
 
-def _check(rig: Rig, n_cameras: int, n_scanners: int, scanner_height_m: float | None) -> float:
-    """Refuse a search the rig cannot support; the scanners' height."""
+def check_suggestion(rig: Rig, n_cameras: int, n_scanners: int, scanner_height_m: float | None = None) -> float:
+    """The suggested scanners' height (m; ``scanner_height_m`` or the rig's first scanner's), or a one-line
+    :class:`InputError` when the rig cannot support the search (no sensor to copy, no markers, no hull, a
+    scanning plane that misses the hull)."""
     if n_cameras and not rig.cameras:
         raise InputError("--suggest cameras: the rig has no camera whose lens a suggested one could copy")
     if n_cameras and not rig.robot.markers:
@@ -279,7 +281,7 @@ def suggest_sensors(rig: Rig, plan: PlanResult, n_cameras: int, n_scanners: int,
     One :class:`Suggestion` per sensor added, in the order they were chosen.
     """
     settings = PlanSettings() if settings is None else settings
-    z_scan = _check(rig, n_cameras, n_scanners, scanner_height_m)
+    z_scan = check_suggestion(rig, n_cameras, n_scanners, scanner_height_m)
     left: dict[SensorKind, int] = {"camera": n_cameras, "scanner": n_scanners}
     out: list[Suggestion] = []
     while left["camera"] + left["scanner"] > 0:
