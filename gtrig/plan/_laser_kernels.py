@@ -91,3 +91,42 @@ def icp_blocks(pose_idx: np.ndarray, scanner_idx: np.ndarray, xy_world: np.ndarr
         H[k, 2, 0] = H[k, 0, 2]
         H[k, 2, 1] = H[k, 1, 2]
     return H, Hpb, cnt
+
+
+@_jit
+def first_sides(pose_idx: np.ndarray, angle_rad: np.ndarray, corners_world: np.ndarray, origin_xy: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Where each beam first crosses its pose's hull outline.
+
+    Parameters
+    ----------
+    pose_idx : (M,) pose of each beam.
+    angle_rad : (M,) the beam's direction, world frame, rad.
+    corners_world : (K, 4, 2) the hull's corners at each pose, world frame, m (side j: corner j to j + 1).
+    origin_xy : (2,) the scanner's position, world frame, m.
+
+    Returns
+    -------
+    range_m : (M,) distance to the first side crossed (inf: none).
+    side : (M,) that side (0 when none).
+    """
+    M = pose_idx.shape[0]
+    rng = np.full(M, np.inf)
+    side = np.zeros(M, dtype=np.int64)
+    for i in range(M):
+        k = pose_idx[i]
+        ux, uy = math.cos(angle_rad[i]), math.sin(angle_rad[i])
+        for j in range(4):
+            j1 = (j + 1) % 4
+            cx, cy = corners_world[k, j, 0], corners_world[k, j, 1]
+            ex, ey = corners_world[k, j1, 0] - cx, corners_world[k, j1, 1] - cy
+            wx, wy = cx - origin_xy[0], cy - origin_xy[1]
+            den = ux * ey - uy * ex
+            if den == 0.0:
+                continue
+            r = (wx * ey - wy * ex) / den
+            sp = (wx * uy - wy * ux) / den
+            if r > 0.0 and sp >= 0.0 and sp <= 1.0 and r < rng[i]:
+                rng[i] = r
+                side[i] = j
+    return rng, side

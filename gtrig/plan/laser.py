@@ -22,6 +22,7 @@ import numpy as np
 
 from gtrig.laser.hull_icp import HullModel
 from gtrig.laser.track import TrackSettings
+from gtrig.plan._laser_kernels import first_sides, icp_blocks
 from gtrig.rig.models import Rig
 
 
@@ -96,18 +97,8 @@ def cast_beams(rig: Rig, model: HullModel, poses_xytheta: np.ndarray) -> BeamHit
         beam = start + np.arange(k.size)
         ang = yaw + a_lo + inc * beam
         u = np.column_stack([np.cos(ang), np.sin(ang)])
-        # first side crossed: ray o + r u against each side c_j + s e_j, s in [0, 1]
-        cj = corners[k]  # (M, 4, 2)
-        e = np.roll(cj, -1, axis=1) - cj
-        w = cj - o
-        den = u[:, None, 0] * e[..., 1] - u[:, None, 1] * e[..., 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            r = (w[..., 0] * e[..., 1] - w[..., 1] * e[..., 0]) / den
-            sp = (w[..., 0] * u[:, None, 1] - w[..., 1] * u[:, None, 0]) / den
-        valid = np.isfinite(r) & (r > 0) & (sp >= 0) & (sp <= 1)
-        r = np.where(valid, r, np.inf)
-        side = np.argmin(r, axis=1)
-        rng = r[np.arange(k.size), side]
+        # first side crossed: ray o + r u against each side c_j + s e_j, s in [0, 1] (compiled)
+        rng, side = first_sides(k.astype(np.int64), ang, corners, np.ascontiguousarray(o, dtype=float))
         hit = np.isfinite(rng) & (rng <= s.range_max_m)
         parts.append(BeamHits(k[hit], np.full(int(hit.sum()), si), o + rng[hit, None] * u[hit], u[hit], side[hit]))
     if not parts:
@@ -157,8 +148,6 @@ def laser_information(rig: Rig, poses_xytheta: np.ndarray, settings: LaserPlanSe
                       ) -> LaserInformation:
     """The ICP's normal equations at planar poses (K, 3) from the beams of ``rig``'s scanners on the hull
     (:func:`cast_beams`; blocks as :func:`gtrig.laser.hull_icp.side_bias_normal_equations`, compiled)."""
-    from gtrig.plan._laser_kernels import icp_blocks
-
     poses = np.asarray(poses_xytheta, dtype=float).reshape(-1, 3)
     K, n_s = poses.shape[0], len(rig.laser_scanners)
     if rig.robot.hull is None or n_s == 0:
