@@ -52,46 +52,61 @@ def add_camera_views(H: np.ndarray, pose: np.ndarray, slot: np.ndarray, Jp: np.n
     """
     V = pose.shape[0]
     kc = P_cam.shape[0]
+    n_max = 6 + 6 * V
+    Hcc = np.empty((kc, kc))
+    rows = np.empty(n_max, dtype=np.int64)
+    Hxc = np.empty((n_max, kc))
+    Y = np.empty((kc, n_max))
     a = 0
     while a < V:
         k = pose[a]
         b = a
         while b < V and pose[b] == k:
             b += 1
-        n = b - a
         # own blocks of the corners
         for v in range(a, b):
             m0 = 6 + 6 * slot[v]
             for i in range(6):
-                for j in range(6):
+                for j in range(i, 6):
                     s_pp = 0.0
-                    s_pm = 0.0
                     s_mm = 0.0
                     for r in range(8):
                         s_pp += Jp[v, r, i] * Jp[v, r, j]
-                        s_pm += Jp[v, r, i] * Jm[v, r, j]
                         s_mm += Jm[v, r, i] * Jm[v, r, j]
                     H[k, i, j] += s_pp
+                    if j != i:
+                        H[k, j, i] += s_pp
                     if slot[v] >= 0:
+                        H[k, m0 + i, m0 + j] += s_mm
+                        if j != i:
+                            H[k, m0 + j, m0 + i] += s_mm
+                if slot[v] >= 0:
+                    for j in range(6):
+                        s_pm = 0.0
+                        for r in range(8):
+                            s_pm += Jp[v, r, i] * Jm[v, r, j]
                         H[k, i, m0 + j] += s_pm
                         H[k, m0 + j, i] += s_pm
-                        H[k, m0 + i, m0 + j] += s_mm
         if not eliminate:
             a = b
             continue
         # the camera's correction: H_xx -= H_xc H_cc^-1 H_cx over the active rows (pose, markers in view)
-        Hcc = P_cam.copy()
+        for i in range(kc):
+            for j in range(kc):
+                Hcc[i, j] = P_cam[i, j]
         for v in range(a, b):
             for i in range(kc):
-                for j in range(kc):
+                for j in range(i, kc):
                     s = 0.0
                     for r in range(8):
                         s += Jc[v, r, i] * Jc[v, r, j]
                     Hcc[i, j] += s
-        rows = np.empty(6 + 6 * n, dtype=np.int64)
-        Hxc = np.zeros((6 + 6 * n, kc))
+                    if j != i:
+                        Hcc[j, i] += s
         for i in range(6):
             rows[i] = i
+            for j in range(kc):
+                Hxc[i, j] = 0.0
         na = 6
         for v in range(a, b):
             for i in range(6):
@@ -111,7 +126,6 @@ def add_camera_views(H: np.ndarray, pose: np.ndarray, slot: np.ndarray, Jp: np.n
                 na += 6
         L = _cholesky(Hcc)
         # Y = L^-1 H_cx (kc, na); the elimination is Y^T Y
-        Y = np.zeros((kc, na))
         for c in range(na):
             for i in range(kc):
                 t = Hxc[c, i]
@@ -119,9 +133,72 @@ def add_camera_views(H: np.ndarray, pose: np.ndarray, slot: np.ndarray, Jp: np.n
                     t -= L[i, q] * Y[q, c]
                 Y[i, c] = t / L[i, i]
         for i in range(na):
-            for j in range(na):
+            for j in range(i, na):
                 s = 0.0
                 for q in range(kc):
                     s += Y[q, i] * Y[q, j]
                 H[k, rows[i], rows[j]] -= s
+                if j != i:
+                    H[k, rows[j], rows[i]] -= s
         a = b
+
+
+@_jit
+def _spd_inverse(A: np.ndarray) -> np.ndarray:
+    """Inverse of a small symmetric positive-definite matrix through its Cholesky factor."""
+    n = A.shape[0]
+    L = _cholesky(A)
+    Li = np.zeros((n, n))
+    for j in range(n):
+        Li[j, j] = 1.0 / L[j, j]
+        for i in range(j + 1, n):
+            t = 0.0
+            for q in range(j, i):
+                t -= L[i, q] * Li[q, j]
+            Li[i, j] = t / L[i, i]
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            t = 0.0
+            for q in range(j, n):
+                t += Li[q, i] * Li[q, j]
+            out[i, j] = t
+            out[j, i] = t
+    return out
+
+
+@_jit
+def pose_block_of_inverse(H: np.ndarray, n_pose: int) -> np.ndarray:
+    """The leading ``n_pose`` block (K, n_pose, n_pose) of ``inv(H)`` for symmetric positive-definite
+    normal matrices (K, D, D) (each symmetrised first), by a Cholesky Schur complement of the rest."""
+    K, D = H.shape[0], H.shape[1]
+    p = n_pose
+    r = D - p
+    out = np.empty((K, p, p))
+    A = np.empty((r, r))
+    Y = np.empty((r, p))
+    S = np.empty((p, p))
+    for k in range(K):
+        for i in range(r):
+            for j in range(r):
+                A[i, j] = 0.5 * (H[k, p + i, p + j] + H[k, p + j, p + i])
+        for i in range(p):
+            for j in range(p):
+                S[i, j] = 0.5 * (H[k, i, j] + H[k, j, i])
+        if r > 0:
+            L = _cholesky(A)
+            # Y = L^-1 H_np, then S = H_pp - Y^T Y
+            for c in range(p):
+                for i in range(r):
+                    t = 0.5 * (H[k, p + i, c] + H[k, c, p + i])
+                    for q in range(i):
+                        t -= L[i, q] * Y[q, c]
+                    Y[i, c] = t / L[i, i]
+            for i in range(p):
+                for j in range(p):
+                    t = 0.0
+                    for q in range(r):
+                        t += Y[q, i] * Y[q, j]
+                    S[i, j] -= t
+        out[k] = _spd_inverse(S)
+    return out

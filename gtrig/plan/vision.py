@@ -102,6 +102,13 @@ class _CameraViews:
     side_px: np.ndarray
 
 
+def _corners_of(model: VisionModel, marker_ids: np.ndarray) -> np.ndarray:
+    """The robot-frame corners (4 V, 3) of the markers ``marker_ids`` (V,), four per marker."""
+    ids = np.array(sorted(model.corners_robot))
+    table = np.stack([model.corners_robot[int(i)] for i in ids])
+    return table[np.searchsorted(ids, marker_ids)].reshape(-1, 3)
+
+
 def _stack(cam: CameraGeometry, model: VisionModel, cv: _CameraViews, poses: np.ndarray,
            info: np.ndarray) -> tuple[StackedCorners, np.ndarray]:
     """The views' corners as :class:`StackedCorners` with each robot pose moved into its camera (module
@@ -113,12 +120,14 @@ def _stack(cam: CameraGeometry, model: VisionModel, cv: _CameraViews, poses: np.
     Rk = np.zeros((n, 3, 3))
     Rk[:, 0, 0], Rk[:, 0, 1], Rk[:, 1, 0], Rk[:, 1, 1], Rk[:, 2, 2] = c, -s, s, c, 1.0
     t = np.column_stack([poses[k, :2], np.zeros(n)])
-    p_robot = np.concatenate([model.corners_robot[int(m)] for m in cv.marker]) if n else np.zeros((0, 3))
+    p_robot = _corners_of(model, cv.marker)
     R_cw, t_cw = cam.T_cam_world[:3, :3], cam.T_cam_world[:3, 3]
     L = np.sqrt(info)[:, None, None] * np.eye(2)
     K = cam.K
+    p_rot = np.column_stack([c * p_robot[:, 0] - s * p_robot[:, 1], s * p_robot[:, 0] + c * p_robot[:, 1],
+                             p_robot[:, 2]])
     sc = StackedCorners(
-        p_robot=np.einsum("nij,nj->ni", Rk, p_robot), uv=cv.uv.reshape(-1, 2), cov=np.linalg.inv(L @ L),
+        p_robot=p_rot, uv=cv.uv.reshape(-1, 2), cov=(1.0 / info)[:, None, None] * np.eye(2),
         sqrt_info=L, R_cw=np.broadcast_to(R_cw, (n, 3, 3)), t_cw=t_cw + t @ R_cw.T,
         cam_centre_w=cam.T_world_cam[:3, 3] - t, fx=np.full(n, K[0, 0]), fy=np.full(n, K[1, 1]),
         skew=np.full(n, K[0, 1]), cx=np.full(n, K[0, 2]), cy=np.full(n, K[1, 2]),
@@ -150,7 +159,7 @@ def _camera_normal_equations(H: np.ndarray, cam: CameraGeometry, model: VisionMo
     _, _, Jp = project_pose(sc, eye, True)
     assert Jp is not None
     w = np.sqrt(info)[:, None, None]
-    p_r = np.concatenate([model.corners_robot[int(m)] for m in cv.marker])
+    p_r = _corners_of(model, cv.marker)
     ctr = np.repeat(p_r.reshape(V, 4, 3).mean(axis=1), 4, axis=0)
     Jm = w * marker_jacobian(Jp, Rk, p_r, ctr)
     Jp = w * Jp
@@ -169,12 +178,10 @@ def _camera_normal_equations(H: np.ndarray, cam: CameraGeometry, model: VisionMo
 
 def pose_covariance(H: np.ndarray) -> np.ndarray:
     """The pose block (K, 6, 6) of ``inv(H)`` for normal matrices (K, D, D) over (pose, marker
-    corrections), by eliminating the corrections (Schur complement)."""
-    H = 0.5 * (H + np.swapaxes(H, 1, 2))
-    if H.shape[1] == 6:
-        return np.linalg.inv(H)
-    Hpp, Hpn, Hnn = H[:, :6, :6], H[:, :6, 6:], H[:, 6:, 6:]
-    return np.linalg.inv(Hpp - Hpn @ np.linalg.solve(Hnn, np.swapaxes(Hpn, 1, 2)))
+    corrections), by eliminating the corrections (Schur complement, compiled)."""
+    from gtrig.plan._vision_kernels import pose_block_of_inverse
+
+    return pose_block_of_inverse(np.ascontiguousarray(H, dtype=float), 6)
 
 
 @dataclass(frozen=True)
