@@ -84,7 +84,7 @@ def speed(grid_m: float, headings: int, workers: int) -> None:
           f"{cpu / n / peer:.4f}")
 
 
-def suggestion(grid_m: float, headings: int, positions: int, kind: str) -> None:
+def suggestion(grid_m: float, headings: int, positions: int, kind: str, workers: int) -> None:
     """Time of ``--suggest cameras:1`` on the GT room with its second camera removed, or of
     ``--suggest scanners:1`` with its first scanner removed (2 aims per position)."""
     from gtrig.plan.grid import area_grid
@@ -105,12 +105,13 @@ def suggestion(grid_m: float, headings: int, positions: int, kind: str) -> None:
         rig_uncertainty=RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))))
     plan = predict_plan(rig, grid, st)
     t, c = time.perf_counter(), cpu_seconds()
-    [s] = suggest_sensors(rig, plan, n_cam, n_scan, 0.003, np.radians(0.1), st, n_positions=positions)
+    [s] = suggest_sensors(rig, plan, n_cam, n_scan, 0.003, np.radians(0.1), st, n_positions=positions, workers=workers)
     wall, cpu = time.perf_counter() - t, cpu_seconds() - c
     x, y, z = s.position_m
     print(f"suggest {what}, {grid.n_cells * grid.n_headings} poses, {s.n_candidates} candidates: wall {wall:.1f} s, "
-          f"CPU {cpu:.1f} s; {s.kind} at ({x:.2f}, {y:.2f}, {z:.2f}) m, share meeting 3 mm / 0.1 deg "
-          f"{100 * s.share_before:.1f} % -> {100 * s.share_after:.1f} % (load average {os.getloadavg()[0]:.1f})")
+          f"CPU {cpu:.1f} s ({workers} worker(s)); {s.kind} at ({x:.2f}, {y:.2f}, {z:.2f}) m, "
+          f"share meeting 3 mm / 0.1 deg {100 * s.share_before:.1f} % -> {100 * s.share_after:.1f} % "
+          f"(load average {os.getloadavg()[0]:.1f})")
 
 
 def figures(folder: Path) -> None:
@@ -153,7 +154,7 @@ def main() -> None:
     ap.add_argument("--figures", type=Path, default=None, help="write the GT room's maps here (and skip the speed)")
     a = ap.parse_args()
     if a.suggest:
-        suggestion(a.grid_m, a.headings, a.suggest, a.suggest_kind)
+        suggestion(a.grid_m, a.headings, a.suggest, a.suggest_kind, a.workers)
     elif a.figures is not None:
         figures(a.figures)
     else:

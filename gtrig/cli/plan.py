@@ -177,7 +177,7 @@ def _run(rig: Rig, grid: PlanGrid, settings: PlanSettings, out: Path, target_m: 
         from gtrig.plan.suggest import suggest_sensors
 
         found = suggest_sensors(rig, plan, suggest.cameras, suggest.scanners, target_m, target_rad, settings,
-                                suggest.height_m, suggest.positions, suggest.scanner_height_m)
+                                suggest.height_m, suggest.positions, suggest.scanner_height_m, workers)
         for sg in found:
             x, y, z = sg.position_m
             lines.append(f"suggested {sg.kind} {sg.sensor.name} at x {x:.2f}, y {y:.2f}, z {z:.2f} m "

@@ -173,7 +173,9 @@ def _candidate_fused(c: _Candidate, poses: np.ndarray, cov_v: np.ndarray, cov_l:
         hit = np.flatnonzero(own.seen)
         if hit.size == 0:
             return hit, np.zeros((0, 3, 3))
-        new_v = planar_covariance(pose_covariance(H_vision[hit] + own.H))
+        H = own.H
+        H += H_vision[hit]
+        new_v = planar_covariance(pose_covariance(H))
         return hit, fuse_information([new_v, cov_l[hit]])
     assert laser is not None
     own_l = laser_information(c.rig, poses, settings.laser)
@@ -184,38 +186,59 @@ def _candidate_fused(c: _Candidate, poses: np.ndarray, cov_v: np.ndarray, cov_l:
     return hit, fuse_information([cov_v[hit], new_l])
 
 
-def _score_candidates(rig: Rig, plan: PlanResult, cands: list[_Candidate], target_xy_m: float, target_yaw_rad: float,
-                      settings: PlanSettings) -> list[tuple[float, float]]:
-    """Each candidate's (share of cells meeting the target, minus the mean capped worst sigma over the
-    target), visiting the poses a few whole cells at a time (module docstring)."""
-    g = plan.grid
-    C, Hn = g.n_cells, g.n_headings
-    poses_all = plan.poses_xytheta
+def _cell_results(rig: Rig, cands: list[_Candidate], poses: np.ndarray, cov: dict[str, np.ndarray], n_headings: int,
+                  target_xy_m: float, target_yaw_rad: float, settings: PlanSettings) -> tuple[np.ndarray, np.ndarray]:
+    """For whole cells (their poses (C' H, 3), cell-major, and the plan's covariances there): whether each
+    candidate makes each cell meet the target at every heading, and the cell's worst fused position
+    sigma (m; inf: a heading uncovered), both (n_candidates, C'), a few cells at a time."""
+    Hn = n_headings
+    C = poses.shape[0] // Hn
     meets = np.zeros((len(cands), C), dtype=bool)
     worst = np.zeros((len(cands), C))
-    any_cam = any(c.kind == "camera" for c in cands) and bool(rig.robot.markers)
+    any_cam = any(c.kind == "camera" for c in cands)
     any_scan = any(c.kind == "scanner" for c in cands)
     P_vision = prior_information(rig, settings.vision) if any_cam else None
     cells_per_chunk = max(1, int(settings.chunk_poses) // Hn)
     for c0 in range(0, C, cells_per_chunk):
         c1 = min(C, c0 + cells_per_chunk)
         a, b = c0 * Hn, c1 * Hn
-        poses = poses_all[a:b]
-        cov_v, cov_l = plan.cov["vision"][a:b], plan.cov["laser"][a:b]
-        base_sxy, base_syaw = _sigmas(plan.cov["fused"][a:b])
+        cov_v, cov_l = cov["vision"][a:b], cov["laser"][a:b]
+        base_sxy, base_syaw = _sigmas(cov["fused"][a:b])
         H_vision = None
         if P_vision is not None:
-            vi = vision_information(rig, poses, settings.vision)
+            vi = vision_information(rig, poses[a:b], settings.vision)
             H_vision = np.broadcast_to(P_vision, (b - a,) + P_vision.shape).copy()
             H_vision[vi.seen] = vi.H
-        laser = laser_information(rig, poses, settings.laser) if any_scan else None
+        laser = laser_information(rig, poses[a:b], settings.laser) if any_scan else None
         for j, c in enumerate(cands):
             sxy, syaw = base_sxy.copy(), base_syaw.copy()
-            hit, fused = _candidate_fused(c, poses, cov_v, cov_l, H_vision, laser, settings)
+            hit, fused = _candidate_fused(c, poses[a:b], cov_v, cov_l, H_vision, laser, settings)
             sxy[hit], syaw[hit] = _sigmas(fused)
             ok = (sxy <= target_xy_m) & (syaw <= target_yaw_rad)
             meets[j, c0:c1] = ok.reshape(-1, Hn).all(axis=1)
             worst[j, c0:c1] = sxy.reshape(-1, Hn).max(axis=1)
+    return meets, worst
+
+
+def _score_candidates(rig: Rig, plan: PlanResult, cands: list[_Candidate], target_xy_m: float, target_yaw_rad: float,
+                      settings: PlanSettings, workers: int = 1) -> list[tuple[float, float]]:
+    """Each candidate's (share of cells meeting the target, minus the mean capped worst sigma over the
+    target) (module docstring), the cells split over ``workers`` processes."""
+    g = plan.grid
+    C, Hn = g.n_cells, g.n_headings
+    poses = plan.poses_xytheta
+    args = (Hn, target_xy_m, target_yaw_rad, settings)
+    if workers <= 1 or C * Hn < 4 * settings.chunk_poses:
+        meets, worst = _cell_results(rig, cands, poses, plan.cov, *args)
+    else:
+        from gtrig.parallel import process_pool
+
+        edges = np.linspace(0, C, 4 * workers + 1).astype(int) * Hn
+        with process_pool(workers) as ex:
+            futures = [ex.submit(_cell_results, rig, cands, poses[a:b], {k: v[a:b] for k, v in plan.cov.items()},
+                                 *args) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+            parts = [f.result() for f in futures]
+        meets, worst = (np.concatenate(x, axis=1) for x in zip(*parts, strict=True))
     return [(float(meets[j].mean()), -float(np.mean(np.minimum(worst[j] / target_xy_m, 10.0))))
             for j in range(len(cands))]
 
@@ -262,7 +285,8 @@ def check_suggestion(rig: Rig, n_cameras: int, n_scanners: int, scanner_height_m
 
 def suggest_sensors(rig: Rig, plan: PlanResult, n_cameras: int, n_scanners: int, target_xy_m: float,
                     target_yaw_rad: float, settings: PlanSettings | None = None, height_m: float = 2.8,
-                    n_positions: int = 24, scanner_height_m: float | None = None) -> list[Suggestion]:
+                    n_positions: int = 24, scanner_height_m: float | None = None, workers: int = 1
+                    ) -> list[Suggestion]:
     """Add ``n_cameras`` cameras and ``n_scanners`` fixed scanners one at a time, each round the best
     candidate of the kinds still to add (module docstring).
 
@@ -275,6 +299,7 @@ def suggest_sensors(rig: Rig, plan: PlanResult, n_cameras: int, n_scanners: int,
     height_m : the cameras' height, m.
     n_positions : candidate positions along the outline (each with 1 or 2 aims).
     scanner_height_m : the scanners' height, m (default: the rig's first scanner's).
+    workers : processes that score the candidates (each a share of the cells).
 
     Returns
     -------
@@ -294,7 +319,7 @@ def suggest_sensors(rig: Rig, plan: PlanResult, n_cameras: int, n_scanners: int,
         index: dict[SensorKind, int] = {"camera": n_cameras - left["camera"] + 1,
                                         "scanner": n_scanners - left["scanner"] + 1}
         cands = _candidates(rig, plan, kinds, aims, height_m, z_scan, n_positions, index)
-        scores = _score_candidates(rig, plan, cands, target_xy_m, target_yaw_rad, settings)
+        scores = _score_candidates(rig, plan, cands, target_xy_m, target_yaw_rad, settings, workers)
         best = max(range(len(cands)), key=lambda j: scores[j])
         c = cands[best]
         if c.kind == "camera":
@@ -309,7 +334,8 @@ def suggest_sensors(rig: Rig, plan: PlanResult, n_cameras: int, n_scanners: int,
 
 
 def suggest_cameras(rig: Rig, plan: PlanResult, n_add: int, target_xy_m: float, target_yaw_rad: float,
-                    settings: PlanSettings | None = None, height_m: float = 2.8, n_positions: int = 24
-                    ) -> list[Suggestion]:
+                    settings: PlanSettings | None = None, height_m: float = 2.8, n_positions: int = 24,
+                    workers: int = 1) -> list[Suggestion]:
     """Add ``n_add`` cameras one at a time, each the best of the candidates (:func:`suggest_sensors`)."""
-    return suggest_sensors(rig, plan, n_add, 0, target_xy_m, target_yaw_rad, settings, height_m, n_positions)
+    return suggest_sensors(rig, plan, n_add, 0, target_xy_m, target_yaw_rad, settings, height_m, n_positions,
+                           workers=workers)

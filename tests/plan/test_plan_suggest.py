@@ -65,3 +65,16 @@ def test_missing_scanner_is_suggested_where_the_hole_is():
     assert np.linalg.norm(np.array(s.position_m[:2]) - removed) < 1.5  # near the corner it was missing from
     assert s.plan.beams[:, -1].sum() > 0 and s.plan.scanner_names[-1] == s.sensor.name
     _assert_is_a_full_plan(s, grid, target)
+
+
+def test_workers_score_the_candidates_as_one_process():
+    full = make_scene(0).rig_nominal
+    rig = full.model_copy(update={"cameras": full.cameras[1:], "laser_scanners": full.laser_scanners[1:]})
+    settings = PlanSettings(vision=SETTINGS.vision, chunk_poses=16)  # small chunks: the cells go to the workers
+    grid = area_grid(room_walls()[:, 0], 0.5, 2)
+    plan = predict_plan(rig, grid, settings)
+    target = (0.004, np.radians(1.0))
+    one = suggest_sensors(rig, plan, 1, 1, *target, settings, n_positions=4)
+    two = suggest_sensors(rig, plan, 1, 1, *target, settings, n_positions=4, workers=2)
+    assert [(s.kind, s.position_m, s.share_after) for s in one] == [(s.kind, s.position_m, s.share_after) for s in two]
+    assert one[-1].share_after > one[0].share_before
