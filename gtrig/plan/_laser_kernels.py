@@ -94,39 +94,96 @@ def icp_blocks(pose_idx: np.ndarray, scanner_idx: np.ndarray, xy_world: np.ndarr
 
 
 @_jit
-def first_sides(pose_idx: np.ndarray, angle_rad: np.ndarray, corners_world: np.ndarray, origin_xy: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Where each beam first crosses its pose's hull outline.
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@_jit
+def _beam_span(X: float, Y: float, c: float, s: float, corners_xy: np.ndarray, ox: float, oy: float, yaw: float,
+               a_lo: float, inc: float, n_beams: int, cw: np.ndarray) -> tuple[int, int]:
+    """The hull's corners in the world ``cw`` (4, 2, filled) at pose (X, Y, cos, sin), and the first and
+    past-the-last beam (of the scanner at (ox, oy), heading ``yaw``, fan from ``a_lo`` by ``inc``) within
+    the angle they subtend."""
+    mx, my = 0.0, 0.0
+    for j in range(4):
+        cw[j, 0] = c * corners_xy[j, 0] - s * corners_xy[j, 1] + X
+        cw[j, 1] = s * corners_xy[j, 0] + c * corners_xy[j, 1] + Y
+        mx += 0.25 * cw[j, 0]
+        my += 0.25 * cw[j, 1]
+    ref = math.atan2(my - oy, mx - ox)
+    rmin, rmax = math.inf, -math.inf
+    for j in range(4):
+        rel = _wrap(math.atan2(cw[j, 1] - oy, cw[j, 0] - ox) - ref)
+        rmin, rmax = min(rmin, rel), max(rmax, rel)
+    # the hull's bearings (scanner frame), moved by whole turns next to the middle of the beams' fan
+    fan_mid = a_lo + 0.5 * inc * (n_beams - 1)
+    mid = ref - yaw
+    shift = fan_mid + _wrap(mid - fan_mid) - mid
+    f0 = math.ceil((ref + rmin - yaw + shift - a_lo) / inc)
+    f1 = math.floor((ref + rmax - yaw + shift - a_lo) / inc)
+    if f0 > n_beams - 1 or f1 < 0:
+        return 0, 0
+    i0, i1 = int(max(f0, 0.0)), int(min(f1, n_beams - 1.0))
+    return (i0, i1 + 1) if i1 >= i0 else (0, 0)
+
+
+@_jit
+def cast_scanner(poses_xytheta: np.ndarray, corners_xy: np.ndarray, origin_xy: np.ndarray, yaw: float, a_lo: float,
+                 inc: float, n_beams: int, range_max_m: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One scanner's beams that hit the hull at K poses.
 
     Parameters
     ----------
-    pose_idx : (M,) pose of each beam.
-    angle_rad : (M,) the beam's direction, world frame, rad.
-    corners_world : (K, 4, 2) the hull's corners at each pose, world frame, m (side j: corner j to j + 1).
-    origin_xy : (2,) the scanner's position, world frame, m.
+    poses_xytheta : (K, 3) robot poses (m, m, rad).
+    corners_xy : (4, 2) the hull's corners, robot frame, m (side j: corner j to j + 1).
+    origin_xy : (2,) the scanner's position, world frame, m; ``yaw`` its heading, rad.
+    a_lo, inc, n_beams : the fan's lowest beam angle (scanner frame, rad), its step (> 0) and beam count.
+    range_max_m : the scanner's range, m.
 
     Returns
     -------
-    range_m : (M,) distance to the first side crossed (inf: none).
-    side : (M,) that side (0 when none).
+    pose : (M,) pose of each hit; xy : (M, 2) hit point, world frame, m; dir : (M, 2) unit beam direction;
+    side : (M,) hull side hit (the first one the beam crosses).
     """
-    M = pose_idx.shape[0]
-    rng = np.full(M, np.inf)
-    side = np.zeros(M, dtype=np.int64)
-    for i in range(M):
-        k = pose_idx[i]
-        ux, uy = math.cos(angle_rad[i]), math.sin(angle_rad[i])
-        for j in range(4):
-            j1 = (j + 1) % 4
-            cx, cy = corners_world[k, j, 0], corners_world[k, j, 1]
-            ex, ey = corners_world[k, j1, 0] - cx, corners_world[k, j1, 1] - cy
-            wx, wy = cx - origin_xy[0], cy - origin_xy[1]
-            den = ux * ey - uy * ex
-            if den == 0.0:
-                continue
-            r = (wx * ey - wy * ex) / den
-            sp = (wx * uy - wy * ux) / den
-            if r > 0.0 and sp >= 0.0 and sp <= 1.0 and r < rng[i]:
-                rng[i] = r
-                side[i] = j
-    return rng, side
+    K = poses_xytheta.shape[0]
+    ox, oy = origin_xy[0], origin_xy[1]
+    cw = np.empty((4, 2))
+    n_max = 0
+    for k in range(K):
+        c, s = math.cos(poses_xytheta[k, 2]), math.sin(poses_xytheta[k, 2])
+        b0, b1 = _beam_span(poses_xytheta[k, 0], poses_xytheta[k, 1], c, s, corners_xy, ox, oy, yaw, a_lo, inc,
+                            n_beams, cw)
+        n_max += b1 - b0
+    pose = np.empty(n_max, dtype=np.int64)
+    xy = np.empty((n_max, 2))
+    dirs = np.empty((n_max, 2))
+    side = np.empty(n_max, dtype=np.int64)
+    m = 0
+    for k in range(K):
+        c, s = math.cos(poses_xytheta[k, 2]), math.sin(poses_xytheta[k, 2])
+        b0, b1 = _beam_span(poses_xytheta[k, 0], poses_xytheta[k, 1], c, s, corners_xy, ox, oy, yaw, a_lo, inc,
+                            n_beams, cw)
+        for beam in range(b0, b1):
+            ang = yaw + a_lo + inc * beam
+            ux, uy = math.cos(ang), math.sin(ang)
+            best, r_best = 0, math.inf
+            # first side crossed: ray o + r u against each side c_j + t e_j, t in [0, 1]
+            for j in range(4):
+                j1 = (j + 1) % 4
+                ex, ey = cw[j1, 0] - cw[j, 0], cw[j1, 1] - cw[j, 1]
+                wx, wy = cw[j, 0] - ox, cw[j, 1] - oy
+                den = ux * ey - uy * ex
+                if den == 0.0:
+                    continue
+                r = (wx * ey - wy * ex) / den
+                t = (wx * uy - wy * ux) / den
+                if r > 0.0 and t >= 0.0 and t <= 1.0 and r < r_best:
+                    best, r_best = j, r
+            if r_best <= range_max_m:
+                pose[m] = k
+                xy[m, 0], xy[m, 1] = ox + r_best * ux, oy + r_best * uy
+                dirs[m, 0], dirs[m, 1] = ux, uy
+                side[m] = best
+                m += 1
+    return pose[:m], xy[:m], dirs[:m], side[:m]

@@ -22,7 +22,7 @@ import numpy as np
 
 from gtrig.laser.hull_icp import HullModel
 from gtrig.laser.track import TrackSettings
-from gtrig.plan._laser_kernels import first_sides, icp_blocks
+from gtrig.plan._laser_kernels import cast_scanner, icp_blocks
 from gtrig.rig.models import Rig
 
 
@@ -67,40 +67,16 @@ def cast_beams(rig: Rig, model: HullModel, poses_xytheta: np.ndarray) -> BeamHit
     """Every fixed scanner's beams that hit the hull at planar poses (K, 3) (module docstring)."""
     hull = rig.robot.hull
     parts = []
+    poses = np.ascontiguousarray(poses_xytheta, dtype=float)
     for si, s in enumerate(rig.laser_scanners):
         T = s.T_world_scanner.matrix()
         if hull is None or not (hull.z_min_m < T[2, 3] < hull.z_max_m):
             continue
-        o, yaw = T[:2, 3], float(np.arctan2(T[1, 0], T[0, 0]))
-        c, sn = np.cos(poses_xytheta[:, 2]), np.sin(poses_xytheta[:, 2])
-        R = np.stack([np.stack([c, -sn], -1), np.stack([sn, c], -1)], -2)  # (K, 2, 2)
-        corners = np.einsum("kij,cj->kci", R, model.corners_xy) + poses_xytheta[:, None, :2]  # (K, 4, 2)
-        d = corners - o
-        centre = corners.mean(axis=1) - o
-        ref = np.arctan2(centre[:, 1], centre[:, 0])
-        rel = _wrap(np.arctan2(d[..., 1], d[..., 0]) - ref[:, None])
-        # the hull's bearings (scanner frame), moved by whole turns next to the middle of the beams' fan
-        inc = abs(s.angle_increment_rad)
         a_lo = min(s.angle_min_rad, s.angle_min_rad + s.angle_increment_rad * (s.beams - 1))
-        fan_mid = a_lo + 0.5 * inc * (s.beams - 1)
-        mid = ref - yaw
-        shift = fan_mid + _wrap(mid - fan_mid) - mid
-        lo, hi = ref + rel.min(axis=1) - yaw + shift, ref + rel.max(axis=1) - yaw + shift
-        i0 = np.clip(np.ceil((lo - a_lo) / inc).astype(int), 0, s.beams - 1)
-        i1 = np.clip(np.floor((hi - a_lo) / inc).astype(int), 0, s.beams - 1)
-        inside = (np.ceil((lo - a_lo) / inc) <= s.beams - 1) & (np.floor((hi - a_lo) / inc) >= 0)
-        n = np.where(inside & (i1 >= i0), i1 - i0 + 1, 0)
-        k = np.repeat(np.arange(poses_xytheta.shape[0]), n)
-        if k.size == 0:
-            continue
-        start = np.repeat(i0 - np.cumsum(n) + n, n)
-        beam = start + np.arange(k.size)
-        ang = yaw + a_lo + inc * beam
-        u = np.column_stack([np.cos(ang), np.sin(ang)])
-        # first side crossed: ray o + r u against each side c_j + s e_j, s in [0, 1] (compiled)
-        rng, side = first_sides(k.astype(np.int64), ang, corners, np.ascontiguousarray(o, dtype=float))
-        hit = np.isfinite(rng) & (rng <= s.range_max_m)
-        parts.append(BeamHits(k[hit], np.full(int(hit.sum()), si), o + rng[hit, None] * u[hit], u[hit], side[hit]))
+        k, xy, u, side = cast_scanner(poses, np.ascontiguousarray(model.corners_xy, dtype=float),
+                                      np.ascontiguousarray(T[:2, 3]), float(np.arctan2(T[1, 0], T[0, 0])), a_lo,
+                                      abs(s.angle_increment_rad), s.beams, s.range_max_m)
+        parts.append(BeamHits(k, np.full(k.size, si), xy, u, side))
     if not parts:
         z = np.zeros(0, dtype=int)
         return BeamHits(z, z, np.zeros((0, 2)), np.zeros((0, 2)), z)
