@@ -103,7 +103,9 @@ def suggestion(grid_m: float, headings: int, positions: int, kind: str, workers:
     grid = area_grid(room_walls()[:, 0], grid_m, headings)
     st = PlanSettings(vision=VisionPlanSettings(
         rig_uncertainty=RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))))
+    c = cpu_seconds()
     plan = predict_plan(rig, grid, st)
+    cpu_plan = cpu_seconds() - c
     t, c = time.perf_counter(), cpu_seconds()
     [s] = suggest_sensors(rig, plan, n_cam, n_scan, 0.003, np.radians(0.1), st, n_positions=positions, workers=workers)
     wall, cpu = time.perf_counter() - t, cpu_seconds() - c
@@ -112,6 +114,8 @@ def suggestion(grid_m: float, headings: int, positions: int, kind: str, workers:
           f"CPU {cpu:.1f} s ({workers} worker(s)); {s.kind} at ({x:.2f}, {y:.2f}, {z:.2f}) m, "
           f"share meeting 3 mm / 0.1 deg {100 * s.share_before:.1f} % -> {100 * s.share_after:.1f} % "
           f"(load average {os.getloadavg()[0]:.1f})")
+    print(f"peer: the plan of the same rig and grid, {cpu_plan:.1f} s CPU in one process; suggestion / plan = "
+          f"{cpu / cpu_plan:.2f}")
 
 
 def figures(folder: Path) -> None:
