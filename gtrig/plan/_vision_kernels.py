@@ -13,6 +13,8 @@ import math
 import numba as nb
 import numpy as np
 
+from gtrig.fusion.kernels import chol_inv
+
 _jit = nb.njit(cache=True, fastmath=False, nogil=True)
 
 
@@ -144,30 +146,6 @@ def add_camera_views(H: np.ndarray, pose: np.ndarray, slot: np.ndarray, Jp: np.n
 
 
 @_jit
-def _spd_inverse(A: np.ndarray) -> np.ndarray:
-    """Inverse of a small symmetric positive-definite matrix through its Cholesky factor."""
-    n = A.shape[0]
-    L = _cholesky(A)
-    Li = np.zeros((n, n))
-    for j in range(n):
-        Li[j, j] = 1.0 / L[j, j]
-        for i in range(j + 1, n):
-            t = 0.0
-            for q in range(j, i):
-                t -= L[i, q] * Li[q, j]
-            Li[i, j] = t / L[i, i]
-    out = np.empty((n, n))
-    for i in range(n):
-        for j in range(i, n):
-            t = 0.0
-            for q in range(j, n):
-                t += Li[q, i] * Li[q, j]
-            out[i, j] = t
-            out[j, i] = t
-    return out
-
-
-@_jit
 def pose_block_of_inverse(H: np.ndarray, n_pose: int) -> np.ndarray:
     """The leading ``n_pose`` block (K, n_pose, n_pose) of ``inv(H)`` for symmetric positive-definite
     normal matrices (K, D, D) (each symmetrised first), by a Cholesky Schur complement of the rest."""
@@ -178,6 +156,7 @@ def pose_block_of_inverse(H: np.ndarray, n_pose: int) -> np.ndarray:
     A = np.empty((r, r))
     Y = np.empty((r, p))
     S = np.empty((p, p))
+    Sinv = np.empty((p, p))
     for k in range(K):
         for i in range(r):
             for j in range(r):
@@ -200,5 +179,6 @@ def pose_block_of_inverse(H: np.ndarray, n_pose: int) -> np.ndarray:
                     for q in range(r):
                         t += Y[q, i] * Y[q, j]
                     S[i, j] -= t
-        out[k] = _spd_inverse(S)
+        chol_inv(S, Sinv)
+        out[k] = Sinv
     return out
