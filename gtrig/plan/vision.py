@@ -6,8 +6,10 @@ in view (the rig's uncertainty, Gaussian priors of :class:`gtrig.vision.covarian
 plus the floor prior in planar mode; its covariance is the pose block of the inverse normal matrix.
 Here the same normal matrix is built from the noise-free corners of the markers seen whole
 (:mod:`gtrig.plan.visibility`), with the estimator's own Jacobians
-(:func:`gtrig.vision.projection.project_pose`, :func:`~gtrig.vision.projection.camera_pose_jacobian`,
-:func:`~gtrig.vision.projection.lens_jacobian`) and priors
+(:func:`gtrig.vision.projection.project_pose`, :func:`~gtrig.vision.projection.lens_jacobian`; the
+camera's and the marker's are the formulas of :func:`~gtrig.vision.projection.camera_pose_jacobian` and
+:func:`~gtrig.vision.projection.marker_pose_jacobian` evaluated from the pose Jacobian, which the tests
+check equal those functions) and priors
 (:meth:`~gtrig.vision.covariance.RigUncertainty.sqrt_information`,
 :func:`gtrig.vision.refine.prior_residuals`).
 
@@ -37,7 +39,7 @@ from gtrig.rig.models import Rig
 from gtrig.vision.covariance import PLANAR_INDEX, UNCALIBRATED_MARKERS, RigUncertainty
 from gtrig.vision.estimate import VisionOptions
 from gtrig.vision.observations import CameraGeometry, StackedCorners, VisionModel
-from gtrig.vision.projection import camera_pose_jacobian, lens_jacobian, project_pose, skew
+from gtrig.vision.projection import lens_jacobian, project_pose, skew
 from gtrig.vision.refine import PlanarPrior, prior_residuals
 from gtrig.vision.synthetic import CornerNoise
 
@@ -145,6 +147,14 @@ def marker_jacobian(J_pose: np.ndarray, R_world_robot: np.ndarray, p_robot: np.n
     return np.concatenate([d, -d @ skew(p_robot - centre_robot)], axis=2)
 
 
+def camera_jacobian(J_pose: np.ndarray, p_world: np.ndarray, centre_world: np.ndarray) -> np.ndarray:
+    """d uv / d (camera perturbation) (N, 2, 6) as :func:`gtrig.vision.projection.camera_pose_jacobian`
+    (the camera's centre and rotation perturbed in the world frame), from the pose Jacobian ``J_pose``
+    (N, 2, 6), each corner's world point (N, 3) and its camera's centre (N, 3), metres."""
+    JR = J_pose[:, :, :3]  # d uv / d p_world
+    return np.concatenate([-JR, JR @ skew(p_world - centre_world)], axis=2)
+
+
 def _camera_normal_equations(H: np.ndarray, cam: CameraGeometry, model: VisionModel, cv: _CameraViews,
                              poses: np.ndarray, settings: VisionPlanSettings, rig_u: RigUncertainty) -> None:
     """Add one camera's corners to the normal matrices ``H`` (K, D, D) over (pose, marker corrections),
@@ -162,15 +172,15 @@ def _camera_normal_equations(H: np.ndarray, cam: CameraGeometry, model: VisionMo
     p_r = _corners_of(model, cv.marker)
     ctr = np.repeat(p_r.reshape(V, 4, 3).mean(axis=1), 4, axis=0)
     Jm = w * marker_jacobian(Jp, Rk, p_r, ctr)
-    Jp = w * Jp
     S_c = rig_u.sqrt_information("camera", cam.name)
     if S_c is None:
         Jc, P_cam = np.zeros((V * 4, 2, 1)), np.zeros((1, 1))
     else:
-        Jc = camera_pose_jacobian(sc, eye)
+        Jc = camera_jacobian(Jp, sc.p_robot, sc.cam_centre_w)  # the robot at the origin: p_world = p_robot
         if S_c.shape[0] > 6:
             Jc = np.concatenate([Jc, lens_jacobian(sc, eye, S_c.shape[0] - 6)], axis=2)
         Jc, P_cam = w * Jc, S_c.T @ S_c
+    Jp = w * Jp
     add_camera_views(H, cv.pose.astype(np.int64), cv.slot.astype(np.int64), np.ascontiguousarray(Jp.reshape(V, 8, 6)),
                      np.ascontiguousarray(Jm.reshape(V, 8, 6)), np.ascontiguousarray(Jc.reshape(V, 8, -1)),
                      np.ascontiguousarray(P_cam, dtype=float), S_c is not None)
