@@ -59,10 +59,6 @@ class BeamHits:
     side: np.ndarray
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 def cast_beams(rig: Rig, model: HullModel, poses_xytheta: np.ndarray) -> BeamHits:
     """Every fixed scanner's beams that hit the hull at planar poses (K, 3) (module docstring)."""
     hull = rig.robot.hull
