@@ -4,14 +4,18 @@ information from them.
 Each fixed scanner's beams are cast at the robot's hull (a convex box, ``rig.robot.hull``) at every
 pose: the beams within the angle the hull subtends, up to the scanner's range, hit the first side
 they meet, provided the scanning plane cuts the gown (the scanner's height between its bottom and
-top). The noise-free hits are handed to the hull ICP's own normal equations
-(:func:`gtrig.laser.hull_icp.side_bias_normal_equations`: point-to-line Jacobian, range noise
-``range_sigma_m`` along the beam, the model error, the weak prior), so the covariance is the one
+top). The noise-free hits enter the hull ICP's own normal equations (those of
+:func:`gtrig.laser.hull_icp.side_bias_normal_equations`: point-to-line Jacobian, range noise
+``range_sigma_m`` along the beam, the model error, the weak prior; both the cast and the sums are
+compiled passes, :mod:`gtrig.plan._laser_kernels`), so the covariance is the one
 the ICP reports for one scan, plus what GTlaser adds after smoothing and cannot average out: the
 hull's surface bias (:func:`gtrig.laser.hull_icp.side_bias_sensitivity` with its prior) and the floor
 ``floor_std_m``/``floor_std_rad``. Smoothing over a moving run shrinks the scan noise's part; a
 standing robot gets this one. A pose the ICP would call degenerate (too few points, fewer than two
 sides, too wide a covariance) is not covered.
+
+The sums over beams are kept apart (:class:`LaserInformation`) so that the pieces of added scanners
+add up: a suggested scanner's covariance is the rig's pieces plus its own.
 """
 
 from __future__ import annotations
