@@ -82,7 +82,8 @@ def command(
     suggest_positions: int = typer.Option(24, "--suggest-positions", help="Candidate positions along the outline "
                                           "(each aimed at the area's centre and at the failing cells' centre)."),
     suggest_scanner_height: float | None = typer.Option(None, "--suggest-scanner-height", help="Height of the "
-                                                        "suggested scanners (m) [default: the rig's first scanner's]."),
+                                                        "suggested scanners (m; by default the rig's first "
+                                                        "scanner's)."),
 ) -> None:
     """Predict GTvision's, GTlaser's and the fused pose accuracy over the floor for a planned rig."""
     import math
