@@ -6,7 +6,7 @@ The speed is wall-clock and CPU time of :func:`gtrig.plan.predict.predict_plan` 
 the plan's CPU time per pose over the estimator's (``estimate_frame``) per pose, measured in the same run.
 
     python bench/plan.py [--grid-m 0.05] [--headings 16] [--workers 1] [--figures docs/figures]
-    python bench/plan.py --suggest 25 --grid-m 0.1 --headings 16
+    python bench/plan.py --suggest 25 --grid-m 0.1 --headings 16 [--suggest-kind scanners]
     python bench/plan.py --honesty RESULTS=RECORDING [RESULTS=RECORDING ...] [--calibrated]
 
 ``--honesty``: the plan's predicted sigmas of GTlaser, fusion and GTvision at the true poses of simulated
@@ -20,6 +20,7 @@ sigmas, or with ``--calibrated`` from the results' ``rig.calibrated.yaml`` (its 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -48,6 +49,12 @@ def ten_metre_room() -> Rig:
     return rig.model_copy(update={"cameras": tuple(cams), "laser_scanners": tuple(scans)})
 
 
+def cpu_seconds() -> float:
+    """CPU time (user + system) of this process and of its finished worker processes, seconds."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
 def peer_seconds_per_pose(n: int = 26) -> float:
     """CPU seconds of GTvision's fit of one pose (synthetic corners of the GT room's validation poses)."""
     from gtrig.vision.estimate import estimate_frame
@@ -71,40 +78,52 @@ def speed(grid_m: float, headings: int, workers: int) -> None:
     rig = ten_metre_room()
     grid = area_grid(np.array([[0, 0], [10, 0], [10, 10], [0, 10.0]]), grid_m, headings)
     peer = peer_seconds_per_pose()
-    t, c = time.perf_counter(), time.process_time()
+    t, c = time.perf_counter(), cpu_seconds()
     plan = predict_plan(rig, grid, workers=workers)
-    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    wall, cpu = time.perf_counter() - t, cpu_seconds() - c
     n = grid.n_cells * grid.n_headings
     print(f"10 m x 10 m, {grid_m:g} m grid, {headings} headings: {n} poses, 8 cameras, 4 scanners")
-    print(f"plan ({workers} worker(s)): wall {wall:.1f} s, CPU of this process {cpu:.1f} s "
+    print(f"plan ({workers} worker(s)): wall {wall:.1f} s, CPU (all processes) {cpu:.1f} s "
           f"({1e6 * cpu / n:.1f} us CPU per pose); vision covers "
           f"{100 * np.isfinite(plan.sigma_xy_m('vision')).mean():.1f} %, laser "
           f"{100 * np.isfinite(plan.sigma_xy_m('laser')).mean():.1f} %")
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     print(f"peer: GTvision's fit of one pose {1e3 * peer:.2f} ms CPU; plan per pose / fit per pose = "
           f"{cpu / n / peer:.4f}")
 
 
-def suggestion(grid_m: float, headings: int, positions: int) -> None:
-    """Time of ``--suggest cameras:1`` on the GT room with one camera removed (2 aims per position)."""
+def suggestion(grid_m: float, headings: int, positions: int, kind: str, workers: int) -> None:
+    """Time of ``--suggest cameras:1`` on the GT room with its second camera removed, or of
+    ``--suggest scanners:1`` with its first scanner removed (2 aims per position)."""
     from gtrig.plan.grid import area_grid
     from gtrig.plan.predict import PlanSettings, predict_plan
-    from gtrig.plan.suggest import suggest_cameras
+    from gtrig.plan.suggest import suggest_sensors
     from gtrig.plan.vision import VisionPlanSettings
     from gtrig.vision.covariance import RigUncertainty
 
     full = make_scene(0).rig_nominal
-    rig = full.model_copy(update={"cameras": tuple(c for i, c in enumerate(full.cameras) if i != 1)})
+    if kind == "cameras":
+        rig = full.model_copy(update={"cameras": tuple(c for i, c in enumerate(full.cameras) if i != 1)})
+        n_cam, n_scan, what = 1, 0, "cameras:1 on the GT room without cam1"
+    else:
+        rig = full.model_copy(update={"laser_scanners": full.laser_scanners[1:]})
+        n_cam, n_scan, what = 0, 1, "scanners:1 on the GT room without laser0"
     grid = area_grid(room_walls()[:, 0], grid_m, headings)
     st = PlanSettings(vision=VisionPlanSettings(
         rig_uncertainty=RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))))
+    c = cpu_seconds()
     plan = predict_plan(rig, grid, st)
-    t, c = time.perf_counter(), time.process_time()
-    [s] = suggest_cameras(rig, plan, 1, 0.003, np.radians(0.1), st, n_positions=positions)
-    wall, cpu = time.perf_counter() - t, time.process_time() - c
-    x, y, z = s.camera.T_world_cam.xyz
-    print(f"suggest cameras:1 on the GT room without cam1, {grid.n_cells * grid.n_headings} poses, "
-          f"{s.n_candidates} candidates: wall {wall:.1f} s, CPU {cpu:.1f} s; camera at ({x:.2f}, {y:.2f}, {z:.2f}) m, "
-          f"share meeting 3 mm / 0.1 deg {100 * s.share_before:.1f} % -> {100 * s.share_after:.1f} %")
+    cpu_plan = cpu_seconds() - c
+    t, c = time.perf_counter(), cpu_seconds()
+    [s] = suggest_sensors(rig, plan, n_cam, n_scan, 0.003, np.radians(0.1), st, n_positions=positions, workers=workers)
+    wall, cpu = time.perf_counter() - t, cpu_seconds() - c
+    x, y, z = s.position_m
+    print(f"suggest {what}, {grid.n_cells * grid.n_headings} poses, {s.n_candidates} candidates: wall {wall:.1f} s, "
+          f"CPU {cpu:.1f} s ({workers} worker(s)); {s.kind} at ({x:.2f}, {y:.2f}, {z:.2f}) m, "
+          f"share meeting 3 mm / 0.1 deg {100 * s.share_before:.1f} % -> {100 * s.share_after:.1f} % "
+          f"(load average {os.getloadavg()[0]:.1f})")
+    print(f"peer: the plan of the same rig and grid, {cpu_plan:.1f} s CPU in one process; suggestion / plan = "
+          f"{cpu / cpu_plan:.2f}")
 
 
 def figures(folder: Path) -> None:
@@ -212,6 +231,8 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--suggest", type=int, default=0, help="time a camera suggestion over this many positions "
                     "along the GT room's outline (2 candidates each) instead")
+    ap.add_argument("--suggest-kind", choices=("cameras", "scanners"), default="cameras",
+                    help="what --suggest times: a camera (GT room without cam1) or a scanner (without laser0)")
     ap.add_argument("--figures", type=Path, default=None, help="write the GT room's maps here (and skip the speed)")
     ap.add_argument("--honesty", nargs="+", metavar="RESULTS=RECORDING", default=None,
                     help="check the plan against these simulated runs instead (module docstring)")
@@ -220,7 +241,7 @@ def main() -> None:
     if a.honesty:
         honesty(a.honesty, a.calibrated)
     elif a.suggest:
-        suggestion(a.grid_m, a.headings, a.suggest)
+        suggestion(a.grid_m, a.headings, a.suggest, a.suggest_kind, a.workers)
     elif a.figures is not None:
         figures(a.figures)
     else:

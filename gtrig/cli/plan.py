@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -39,17 +40,21 @@ def parse_polygon(text: str) -> list[tuple[float, float]]:
     return out
 
 
-def parse_suggest(text: str | None) -> int:
-    """``--suggest cameras:N``: the number of cameras to add (0 without the option)."""
+def parse_suggest(text: str | None) -> tuple[int, int]:
+    """``--suggest cameras:N,scanners:M`` (either or both): the cameras and fixed scanners to add (0, 0
+    without the option)."""
     from gtrig.errors import InputError
 
     if text is None:
-        return 0
-    kind, _, n = text.partition(":")
-    if kind != "cameras" or not n.isdigit() or not 1 <= int(n) <= 10:
-        raise InputError(f"--suggest: expected cameras:N with N from 1 to 10, got {text!r} (scanners are not "
-                         "suggested yet)")
-    return int(n)
+        return 0, 0
+    n = {"cameras": 0, "scanners": 0}
+    for part in text.split(","):
+        kind, _, count = part.strip().partition(":")
+        if kind not in n or n[kind] or not count.isdigit() or not 1 <= int(count) <= 10:
+            raise InputError(f"--suggest: expected cameras:N, scanners:M or cameras:N,scanners:M with N and M from "
+                             f"1 to 10, got {text!r}")
+        n[kind] = int(count)
+    return n["cameras"], n["scanners"]
 
 
 @handle_errors
@@ -70,11 +75,15 @@ def command(
                                           "calibration (markers without pose_cov)."),
     marker_sigma_deg: float = typer.Option(0.05, "--marker-sigma-deg", help="Marker orientation sigma."),
     workers: int = typer.Option(2, "--workers", help="Processes."),
-    suggest: str | None = typer.Option(None, "--suggest", help="cameras:N: add N cameras, each where it most "
-                                       "increases the share meeting the target (greedy over candidate poses)."),
+    suggest: str | None = typer.Option(None, "--suggest", help="cameras:N,scanners:M (either or both): add N cameras "
+                                       "and M fixed scanners, each where it most increases the share meeting the "
+                                       "target (greedy over candidate poses)."),
     suggest_height: float = typer.Option(2.8, "--suggest-height", help="Height of the suggested cameras (m)."),
     suggest_positions: int = typer.Option(24, "--suggest-positions", help="Candidate positions along the outline "
                                           "(each aimed at the area's centre and at the failing cells' centre)."),
+    suggest_scanner_height: float | None = typer.Option(None, "--suggest-scanner-height", help="Height of the "
+                                                        "suggested scanners (m; by default the rig's first "
+                                                        "scanner's)."),
 ) -> None:
     """Predict GTvision's, GTlaser's and the fused pose accuracy over the floor for a planned rig."""
     import math
@@ -102,12 +111,18 @@ def command(
     n_suggest = parse_suggest(suggest)
     checks.number("--suggest-height", suggest_height, lo=0.1, hi=20.0, unit="m")
     checks.count("--suggest-positions", suggest_positions, 1, 1000)
+    if suggest_scanner_height is not None:
+        checks.number("--suggest-scanner-height", suggest_scanner_height, lo=0.0, hi=20.0, unit="m")
     if area is not None and path is not None:
         raise InputError("--area and --path exclude each other: give one")
     checks.output_folder("--out", out)
     if not rig.is_file():
         raise InputError(f"{rig}: no such rig file")
     r = load_rig(rig)
+    if n_suggest != (0, 0):
+        from gtrig.plan.suggest import check_suggestion
+
+        check_suggestion(r, *n_suggest, suggest_scanner_height)
     if path is not None:
         from gtrig.io.tum import read_tum
 
@@ -124,11 +139,23 @@ def command(
 
         workers = os.cpu_count() or 1
     _run(r, grid, settings, out, target_mm / 1000, math.radians(target_deg), rig.stem, workers,
-         (n_suggest, suggest_height, suggest_positions))
+         Suggest(*n_suggest, suggest_height, suggest_positions, suggest_scanner_height))
+
+
+@dataclass(frozen=True)
+class Suggest:
+    """What ``--suggest`` asks for: cameras and scanners to add, the cameras' height (m), the candidate
+    positions along the outline, the scanners' height (m; None: the rig's first scanner's)."""
+
+    cameras: int = 0
+    scanners: int = 0
+    height_m: float = 2.8
+    positions: int = 24
+    scanner_height_m: float | None = None
 
 
 def _run(rig: Rig, grid: PlanGrid, settings: PlanSettings, out: Path, target_m: float, target_rad: float,
-         name: str, workers: int, suggest: tuple[int, float, int] = (0, 2.8, 24)) -> None:
+         name: str, workers: int, suggest: Suggest = Suggest()) -> None:
     """Predict, then write every output (nothing is written when the prediction fails)."""
     import time
 
@@ -146,22 +173,23 @@ def _run(rig: Rig, grid: PlanGrid, settings: PlanSettings, out: Path, target_m: 
     lines = summary_lines(plan, maps, summary, elapsed)
     figs = _figures(plan, maps, summary, target_m, target_rad)
     suggested = None
-    if suggest[0]:
+    if suggest.cameras or suggest.scanners:
         from gtrig.plan import plots
-        from gtrig.plan.suggest import suggest_cameras
+        from gtrig.plan.suggest import suggest_sensors
 
-        found = suggest_cameras(rig, plan, suggest[0], target_m, target_rad, settings, suggest[1], suggest[2])
+        found = suggest_sensors(rig, plan, suggest.cameras, suggest.scanners, target_m, target_rad, settings,
+                                suggest.height_m, suggest.positions, suggest.scanner_height_m, workers)
         for sg in found:
-            x, y, z = sg.camera.T_world_cam.xyz
-            lines.append(f"suggested camera {sg.camera.name} at x {x:.2f}, y {y:.2f}, z {z:.2f} m "
+            x, y, z = sg.position_m
+            lines.append(f"suggested {sg.kind} {sg.sensor.name} at x {x:.2f}, y {y:.2f}, z {z:.2f} m "
                          f"({sg.n_candidates} candidates): target met on {100 * sg.share_before:.1f} % -> "
                          f"{100 * sg.share_after:.1f} % of the {'area' if grid.kind == 'area' else 'path'}")
         suggested = found[-1]
         maps2 = cell_maps(suggested.plan)
         summary2 = summarize_target(suggested.plan, target_m, target_rad)
-        figs += [("target_suggested.png", "With the suggested camera(s): where the target is met",
+        figs += [("target_suggested.png", "With the suggested sensor(s): where the target is met",
                   plots.target_map(suggested.plan, summary2)),
-                 ("sigma_fused_suggested.png", "With the suggested camera(s): fused sigma",
+                 ("sigma_fused_suggested.png", "With the suggested sensor(s): fused sigma",
                   plots.sigma_maps(suggested.plan, maps2, "fused", target_m, target_rad))]
     out.mkdir(parents=True, exist_ok=True)
     if suggested is not None:

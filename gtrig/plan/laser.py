@@ -4,9 +4,10 @@ information from them.
 Each fixed scanner's beams are cast at the robot's hull (a convex box, ``rig.robot.hull``) at every
 pose: the beams within the angle the hull subtends, up to the scanner's range, hit the first side
 they meet, provided the scanning plane cuts the gown (the scanner's height between its bottom and
-top). The noise-free hits are handed to the hull ICP's own normal equations
-(:func:`gtrig.laser.hull_icp.side_bias_normal_equations`: point-to-line Jacobian, range noise
-``range_sigma_m`` along the beam, the model error, the weak prior), so the covariance is the one
+top). The noise-free hits enter the hull ICP's own normal equations (those of
+:func:`gtrig.laser.hull_icp.side_bias_normal_equations`: point-to-line Jacobian, range noise
+``range_sigma_m`` along the beam, the model error, the weak prior; both the cast and the sums are
+compiled passes, :mod:`gtrig.plan._laser_kernels`), so the covariance is the one
 the ICP reports for one scan, plus what GTlaser adds after smoothing and cannot average out: the
 hull's surface bias (:func:`gtrig.laser.hull_icp.side_bias_sensitivity` with its prior) and the floor
 ``floor_std_m``/``floor_std_rad``. GTlaser smooths each track over its frames, so the scan noise's part
@@ -14,6 +15,9 @@ is the smoother's steady state (:mod:`gtrig.plan.smoothing`: frames at the scann
 order and the geometric middle of the process noises its adaptation searches, ``process_noise_factor``),
 not one scan's: one scan's covariance is kept beside it. A pose the ICP would call degenerate (too few
 points, fewer than two sides, too wide a covariance) is not covered, judged on one scan as the ICP does.
+
+The sums over beams are kept apart (:class:`LaserInformation`) so that the pieces of added scanners
+add up: a suggested scanner's covariance is the rig's pieces plus its own.
 """
 
 from __future__ import annotations
@@ -22,8 +26,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gtrig.laser.hull_icp import HullModel, side_bias_normal_equations
+from gtrig.laser.hull_icp import HullModel
 from gtrig.laser.track import TrackSettings
+from gtrig.plan._laser_kernels import cast_scanner, icp_blocks
 from gtrig.rig.models import Rig
 
 
@@ -61,58 +66,20 @@ class BeamHits:
     side: np.ndarray
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 def cast_beams(rig: Rig, model: HullModel, poses_xytheta: np.ndarray) -> BeamHits:
     """Every fixed scanner's beams that hit the hull at planar poses (K, 3) (module docstring)."""
     hull = rig.robot.hull
     parts = []
+    poses = np.ascontiguousarray(poses_xytheta, dtype=float)
     for si, s in enumerate(rig.laser_scanners):
         T = s.T_world_scanner.matrix()
         if hull is None or not (hull.z_min_m < T[2, 3] < hull.z_max_m):
             continue
-        o, yaw = T[:2, 3], float(np.arctan2(T[1, 0], T[0, 0]))
-        c, sn = np.cos(poses_xytheta[:, 2]), np.sin(poses_xytheta[:, 2])
-        R = np.stack([np.stack([c, -sn], -1), np.stack([sn, c], -1)], -2)  # (K, 2, 2)
-        corners = np.einsum("kij,cj->kci", R, model.corners_xy) + poses_xytheta[:, None, :2]  # (K, 4, 2)
-        d = corners - o
-        centre = corners.mean(axis=1) - o
-        ref = np.arctan2(centre[:, 1], centre[:, 0])
-        rel = _wrap(np.arctan2(d[..., 1], d[..., 0]) - ref[:, None])
-        # the hull's bearings (scanner frame), moved by whole turns next to the middle of the beams' fan
-        inc = abs(s.angle_increment_rad)
         a_lo = min(s.angle_min_rad, s.angle_min_rad + s.angle_increment_rad * (s.beams - 1))
-        fan_mid = a_lo + 0.5 * inc * (s.beams - 1)
-        mid = ref - yaw
-        shift = fan_mid + _wrap(mid - fan_mid) - mid
-        lo, hi = ref + rel.min(axis=1) - yaw + shift, ref + rel.max(axis=1) - yaw + shift
-        i0 = np.clip(np.ceil((lo - a_lo) / inc).astype(int), 0, s.beams - 1)
-        i1 = np.clip(np.floor((hi - a_lo) / inc).astype(int), 0, s.beams - 1)
-        inside = (np.ceil((lo - a_lo) / inc) <= s.beams - 1) & (np.floor((hi - a_lo) / inc) >= 0)
-        n = np.where(inside & (i1 >= i0), i1 - i0 + 1, 0)
-        k = np.repeat(np.arange(poses_xytheta.shape[0]), n)
-        if k.size == 0:
-            continue
-        start = np.repeat(i0 - np.cumsum(n) + n, n)
-        beam = start + np.arange(k.size)
-        ang = yaw + a_lo + inc * beam
-        u = np.column_stack([np.cos(ang), np.sin(ang)])
-        # first side crossed: ray o + r u against each side c_j + s e_j, s in [0, 1]
-        cj = corners[k]  # (M, 4, 2)
-        e = np.roll(cj, -1, axis=1) - cj
-        w = cj - o
-        den = u[:, None, 0] * e[..., 1] - u[:, None, 1] * e[..., 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            r = (w[..., 0] * e[..., 1] - w[..., 1] * e[..., 0]) / den
-            sp = (w[..., 0] * u[:, None, 1] - w[..., 1] * u[:, None, 0]) / den
-        valid = np.isfinite(r) & (r > 0) & (sp >= 0) & (sp <= 1)
-        r = np.where(valid, r, np.inf)
-        side = np.argmin(r, axis=1)
-        rng = r[np.arange(k.size), side]
-        hit = np.isfinite(rng) & (rng <= s.range_max_m)
-        parts.append(BeamHits(k[hit], np.full(int(hit.sum()), si), o + rng[hit, None] * u[hit], u[hit], side[hit]))
+        k, xy, u, side = cast_scanner(poses, np.ascontiguousarray(model.corners_xy, dtype=float),
+                                      np.ascontiguousarray(T[:2, 3]), float(np.arctan2(T[1, 0], T[0, 0])), a_lo,
+                                      abs(s.angle_increment_rad), s.beams, s.range_max_m)
+        parts.append(BeamHits(k, np.full(k.size, si), xy, u, side))
     if not parts:
         z = np.zeros(0, dtype=int)
         return BeamHits(z, z, np.zeros((0, 2)), np.zeros((0, 2)), z)
@@ -132,12 +99,16 @@ class LaserPlanSettings:
     process_noise_factor: float = 10.0
 
 
-def _smoothed_scan_covariance(rig: Rig, cov_scan: np.ndarray, st: TrackSettings, factor: float) -> np.ndarray:
-    """What GTlaser's smoother leaves of one scan's covariance (K, 3, 3): frames at the scanners' median
-    rate, the smoother's process noise times ``factor`` (module docstring)."""
+def scanner_rate_hz(rig: Rig) -> float:
+    """The rate GTlaser's frames come at: the median of the fixed scanners' rates, Hz."""
+    return float(np.median([s.rate_hz for s in rig.laser_scanners]))
+
+
+def _smoothed_scan_covariance(rate_hz: float, cov_scan: np.ndarray, st: TrackSettings, factor: float) -> np.ndarray:
+    """What GTlaser's smoother leaves of one scan's covariance (K, 3, 3): frames at ``rate_hz``, the
+    smoother's process noise times ``factor`` (module docstring)."""
     from gtrig.plan.smoothing import smoothed_covariance
 
-    rate_hz = float(np.median([s.rate_hz for s in rig.laser_scanners]))
     if st.smoother_order == 3 and st.adapt_process_noise:
         q_xy, q_yaw = st.jerk_std_mps3, st.ang_jerk_std_radps3
         order = 3
@@ -148,38 +119,88 @@ def _smoothed_scan_covariance(rig: Rig, cov_scan: np.ndarray, st: TrackSettings,
     return smoothed_covariance(cov_scan, qd, 1.0 / rate_hz, order)
 
 
-def predict_laser(rig: Rig, poses_xytheta: np.ndarray, settings: LaserPlanSettings = LaserPlanSettings()
-                  ) -> LaserPrediction:
-    """GTlaser's predicted covariance at planar poses (K, 3) (module docstring)."""
+@dataclass(frozen=True)
+class LaserInformation:
+    """The additive part of GTlaser's prediction at K poses: sums over beams, so that the pieces of two
+    sets of scanners add up to those of their union.
+
+    Attributes
+    ----------
+    H_pp : (K, 3, 3) the ICP's ``sum w J^T J`` over x, y (m), yaw (rad), without its weak prior, 1/m^2.
+    H_pb : (K, 3, 4) ``sum w J c`` against each hull side's range bias.
+    beams : (K, n_scanners) beams of each scanner on the hull.
+    per_side : (K, n_scanners, 4) beams of each scanner on each hull side.
+    """
+
+    H_pp: np.ndarray
+    H_pb: np.ndarray
+    beams: np.ndarray
+    per_side: np.ndarray
+
+    def take(self, idx: np.ndarray) -> LaserInformation:
+        """The pieces at the poses ``idx`` (n,)."""
+        return LaserInformation(self.H_pp[idx], self.H_pb[idx], self.beams[idx], self.per_side[idx])
+
+    def plus(self, other: LaserInformation) -> LaserInformation:
+        """Both sets of scanners at the same poses (``other``'s scanners after this one's)."""
+        return LaserInformation(self.H_pp + other.H_pp, self.H_pb + other.H_pb,
+                                np.concatenate([self.beams, other.beams], axis=1),
+                                np.concatenate([self.per_side, other.per_side], axis=1))
+
+
+def laser_information(rig: Rig, poses_xytheta: np.ndarray, settings: LaserPlanSettings = LaserPlanSettings()
+                      ) -> LaserInformation:
+    """The ICP's normal equations at planar poses (K, 3) from the beams of ``rig``'s scanners on the hull
+    (:func:`cast_beams`; blocks as :func:`gtrig.laser.hull_icp.side_bias_normal_equations`, compiled)."""
     poses = np.asarray(poses_xytheta, dtype=float).reshape(-1, 3)
     K, n_s = poses.shape[0], len(rig.laser_scanners)
-    nan = np.full((K, 3, 3), np.nan)
     if rig.robot.hull is None or n_s == 0:
-        return LaserPrediction(nan, nan, np.zeros((K, n_s), int), np.zeros((K, n_s), int), np.zeros(K, bool))
+        return LaserInformation(np.zeros((K, 3, 3)), np.zeros((K, 3, 4)), np.zeros((K, n_s), int),
+                                np.zeros((K, n_s, 4), int))
     model = HullModel.from_hull(rig.robot.hull)
     hits = cast_beams(rig, model, poses)
     beams = np.bincount(hits.pose * n_s + hits.scanner, minlength=K * n_s).reshape(K, n_s)
     per_side = np.bincount((hits.pose * n_s + hits.scanner) * 4 + hits.side, minlength=K * n_s * 4).reshape(K, n_s, 4)
+    icp = settings.track.icp
+    S_xy = np.array([s.T_world_scanner.xyz[:2] for s in rig.laser_scanners], dtype=float)
+    var_r = np.array([s.range_sigma_m for s in rig.laser_scanners], dtype=float) ** 2
+    t0 = np.einsum("ij,ij->i", model.tangents, model.corners_xy)
+    H, H_pb, _ = icp_blocks(hits.pose.astype(np.int64), hits.scanner.astype(np.int64), hits.xy, hits.dir, poses,
+                            S_xy, var_r, model.normals, model.offsets, model.tangents, t0, model.lengths,
+                            float(icp.gate_m), float(icp.end_margin_m), float(icp.sigma_model_m), float(icp.huber_k))
+    return LaserInformation(H, H_pb, beams, per_side)
+
+
+def laser_covariance(info: LaserInformation, rate_hz: float, settings: LaserPlanSettings = LaserPlanSettings()
+                     ) -> LaserPrediction:
+    """GTlaser's covariance from the ICP's normal equations (module docstring): the scan's smoothed over
+    frames at ``rate_hz`` (:func:`scanner_rate_hz`), plus the hull's surface bias and the floor; not covered
+    where the ICP would call the fit degenerate."""
     st = settings.track
     icp = st.icp
-    sides = np.sum(per_side >= icp.min_side_points, axis=2)
-    S_xy = np.array([s.T_world_scanner.xyz[:2] for s in rig.laser_scanners], dtype=float)
-    sigma = np.array([s.range_sigma_m for s in rig.laser_scanners], dtype=float)
-    H, H_pb, _, _, _ = side_bias_normal_equations(model, hits.xy, hits.pose, hits.scanner, S_xy, hits.dir, sigma,
-                                                  poses, icp)
+    H = info.H_pp.copy()
+    H[:, [0, 1, 2], [0, 1, 2]] += [1 / icp.prior_std_m**2, 1 / icp.prior_std_m**2, 1 / icp.prior_std_rad**2]
     cov_scan = np.linalg.inv(H)
-    A = np.linalg.solve(H, H_pb)
+    A = cov_scan @ info.H_pb
     bias = st.surface_bias_std_m**2 * np.ones((4, 4)) + st.side_bias_std_m**2 * np.eye(4)
     floor = np.diag([st.floor_std_m**2, st.floor_std_m**2, st.floor_std_rad**2])
     persistent = A @ bias @ np.swapaxes(A, 1, 2) + floor  # what smoothing cannot average out
     cov_one = cov_scan + persistent
-    n_pts = beams.sum(axis=1)
-    n_sides = np.sum(per_side.sum(axis=1) >= icp.min_side_points, axis=1)
+    n_pts = info.beams.sum(axis=1)
+    sides = np.sum(info.per_side >= icp.min_side_points, axis=2)
+    n_sides = np.sum(info.per_side.sum(axis=1) >= icp.min_side_points, axis=1)
     std_xy = np.sqrt(np.linalg.eigvalsh(cov_one[:, :2, :2])[:, -1])
     covered = (n_pts >= icp.min_points) & (n_sides >= 2) & (std_xy <= icp.max_std_m) & (
         np.sqrt(cov_one[:, 2, 2]) <= icp.max_std_rad)
     cov = cov_one
     if settings.smooth and st.smooth:
-        cov = _smoothed_scan_covariance(rig, cov_scan, st, settings.process_noise_factor) + persistent
+        cov = _smoothed_scan_covariance(rate_hz, cov_scan, st, settings.process_noise_factor) + persistent
     return LaserPrediction(np.where(covered[:, None, None], cov, np.nan),
-                           np.where(n_pts[:, None, None] > 0, cov_scan, np.nan), beams, sides, covered)
+                           np.where(n_pts[:, None, None] > 0, cov_scan, np.nan), info.beams, sides, covered)
+
+
+def predict_laser(rig: Rig, poses_xytheta: np.ndarray, settings: LaserPlanSettings = LaserPlanSettings()
+                  ) -> LaserPrediction:
+    """GTlaser's predicted covariance at planar poses (K, 3) (module docstring)."""
+    rate_hz = scanner_rate_hz(rig) if rig.laser_scanners else 1.0  # no scanner: nothing is covered
+    return laser_covariance(laser_information(rig, poses_xytheta, settings), rate_hz, settings)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gtrig.plan._visibility_kernels import sight
 from gtrig.rig.models import Hull
 from gtrig.vision.observations import CameraGeometry
 
@@ -58,57 +59,12 @@ def _project(cam: CameraGeometry, p_cam: np.ndarray) -> np.ndarray:
     return np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=-1)
 
 
-def hull_blocks(poses_xytheta: np.ndarray, p_world: np.ndarray, eye_world: np.ndarray, hull: Hull) -> np.ndarray:
-    """(K, P) bool: the segment from each world point (K, P, 3) to the camera centre ``eye_world`` (3,)
-    crosses the hull's box (slab test in the robot frame; a point on the box's surface does not count)."""
-    c, s = np.cos(poses_xytheta[:, 2])[:, None], np.sin(poses_xytheta[:, 2])[:, None]
-
-    def to_robot(p: np.ndarray) -> np.ndarray:
-        dx, dy = p[..., 0] - poses_xytheta[:, 0:1], p[..., 1] - poses_xytheta[:, 1:2]
-        return np.stack([c * dx + s * dy, -s * dx + c * dy, p[..., 2]], axis=-1)
-
-    a = to_robot(p_world)
-    b = to_robot(np.broadcast_to(eye_world, p_world.shape))
-    ox, oy = hull.offset_xy_m
-    lo = np.array([ox - hull.length_m / 2, oy - hull.width_m / 2, hull.z_min_m]) + 1e-6
-    hi = np.array([ox + hull.length_m / 2, oy + hull.width_m / 2, hull.z_max_m]) - 1e-6
-    d = b - a
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t0, t1 = (lo - a) / d, (hi - a) / d
-    tmin = np.nanmax(np.where(np.isfinite(t0), np.minimum(t0, t1), -np.inf), axis=-1)
-    tmax = np.nanmin(np.where(np.isfinite(t0), np.maximum(t0, t1), np.inf), axis=-1)
-    # an axis the segment runs parallel to: inside that slab or never
-    par = ~np.isfinite(t0)
-    outside = par & ((a < lo) | (a > hi))
-    return (tmin <= tmax) & (tmax > 0) & (tmin < 1) & ~np.any(outside, axis=-1)
-
-
 def marker_sight(cam: CameraGeometry, corners_robot: np.ndarray, poses_xytheta: np.ndarray, hull: Hull | None,
                  margin_px: float = MARGIN_PX, min_side_px: float = MIN_SIDE_PX) -> MarkerSight:
     """Whether camera ``cam`` sees the marker of corners ``corners_robot`` (4, 3, robot frame, TL TR BR
     BL) whole at each planar pose (K, 3) on a flat floor, and where (see the module docstring)."""
-    pw = robot_to_world(poses_xytheta, corners_robot)  # (K, 4, 3)
-    R, t = cam.T_cam_world[:3, :3], cam.T_cam_world[:3, 3]
-    pc = pw @ R.T + t
-    # the face's normal (z of the marker) from its corners: (TR - TL) x (TL - BL) points out of the paper
-    n = np.cross(pc[:, 1] - pc[:, 0], pc[:, 0] - pc[:, 3])
-    centre = pc.mean(axis=1)
-    vis = np.all(pc[..., 2] > MIN_DEPTH_M, axis=1) & (np.einsum("ki,ki->k", n, centre) < 0)
-    uv = np.full(pc.shape[:2] + (2,), np.nan)
-    side = np.zeros(pc.shape[0])
-    if vis.any():
-        uv[vis] = _project(cam, pc[vis])
-        w, h = cam.size
-        u, v = uv[..., 0], uv[..., 1]
-        inside = np.all((u >= -0.5 + margin_px) & (v >= -0.5 + margin_px) & (u <= w - 0.5 - margin_px)
-                        & (v <= h - 0.5 - margin_px), axis=1)
-        side = np.mean(np.linalg.norm(uv - np.roll(uv, 1, axis=1), axis=2), axis=1)
-        vis &= inside & (np.nan_to_num(side) >= min_side_px)
-    if hull is not None and vis.any():
-        idx = np.flatnonzero(vis)
-        blocked = hull_blocks(poses_xytheta[idx], pw[idx], cam.T_world_cam[:3, 3], hull)
-        vis[idx[np.any(blocked, axis=1)]] = False
-    return MarkerSight(vis, uv, np.where(vis, side, 0.0))
+    cs = camera_sight(cam, np.asarray(corners_robot, dtype=float)[None], poses_xytheta, hull, margin_px, min_side_px)
+    return MarkerSight(cs.visible[:, 0], cs.uv[:, 0], cs.side_px[:, 0])
 
 
 @dataclass(frozen=True)
@@ -146,7 +102,17 @@ def camera_sight(cam: CameraGeometry, corners_robot: np.ndarray, poses_xytheta: 
     cand = np.flatnonzero(near)
     if cand.size == 0:
         return CameraSight(vis, uv, side)
-    for m in range(M):
-        ms = marker_sight(cam, corners_robot[m], poses_xytheta[cand], hull, margin_px, min_side_px)
-        vis[cand, m], uv[cand, m], side[cand, m] = ms.visible, ms.uv, ms.side_px
+    if hull is not None:
+        ox, oy = hull.offset_xy_m
+        lo = np.array([ox - hull.length_m / 2, oy - hull.width_m / 2, hull.z_min_m]) + 1e-6
+        hi = np.array([ox + hull.length_m / 2, oy + hull.width_m / 2, hull.z_max_m]) - 1e-6
+    else:
+        lo, hi = np.zeros(3), np.zeros(3)
+    w, h = cam.size
+    sight(np.ascontiguousarray(poses_xytheta, dtype=float), cand.astype(np.int64),
+          np.ascontiguousarray(corners_robot, dtype=float), np.ascontiguousarray(cam.T_cam_world[:3, :3]),
+          np.ascontiguousarray(cam.T_cam_world[:3, 3]), np.ascontiguousarray(cam.K, dtype=float),
+          np.ascontiguousarray(cam.dist, dtype=float), float(w), float(h),
+          np.ascontiguousarray(cam.T_world_cam[:3, 3]), lo, hi, hull is not None, float(margin_px), float(min_side_px),
+          MIN_DEPTH_M, vis, uv, side)
     return CameraSight(vis, uv, side)

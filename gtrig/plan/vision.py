@@ -6,8 +6,10 @@ in view (the rig's uncertainty, Gaussian priors of :class:`gtrig.vision.covarian
 plus the floor prior in planar mode; its covariance is the pose block of the inverse normal matrix.
 Here the same normal matrix is built from the noise-free corners of the markers seen whole
 (:mod:`gtrig.plan.visibility`), with the estimator's own Jacobians
-(:func:`gtrig.vision.projection.project_pose`, :func:`~gtrig.vision.projection.camera_pose_jacobian`,
-:func:`~gtrig.vision.projection.lens_jacobian`) and priors
+(:func:`gtrig.vision.projection.project_pose`, :func:`~gtrig.vision.projection.lens_jacobian`; the
+camera's and the marker's are the formulas of :func:`~gtrig.vision.projection.camera_pose_jacobian` and
+:func:`~gtrig.vision.projection.marker_pose_jacobian` evaluated from the pose Jacobian, which the tests
+check equal those functions) and priors
 (:meth:`~gtrig.vision.covariance.RigUncertainty.sqrt_information`,
 :func:`gtrig.vision.refine.prior_residuals`).
 
@@ -37,7 +39,7 @@ from gtrig.rig.models import Rig
 from gtrig.vision.covariance import PLANAR_INDEX, UNCALIBRATED_MARKERS, RigUncertainty
 from gtrig.vision.estimate import VisionOptions
 from gtrig.vision.observations import CameraGeometry, StackedCorners, VisionModel
-from gtrig.vision.projection import camera_pose_jacobian, lens_jacobian, project_pose, skew
+from gtrig.vision.projection import lens_jacobian, project_pose, skew
 from gtrig.vision.refine import PlanarPrior, prior_residuals
 from gtrig.vision.synthetic import CornerNoise
 
@@ -102,6 +104,13 @@ class _CameraViews:
     side_px: np.ndarray
 
 
+def _corners_of(model: VisionModel, marker_ids: np.ndarray) -> np.ndarray:
+    """The robot-frame corners (4 V, 3) of the markers ``marker_ids`` (V,), four per marker."""
+    ids = np.array(sorted(model.corners_robot))
+    table = np.stack([model.corners_robot[int(i)] for i in ids])
+    return table[np.searchsorted(ids, marker_ids)].reshape(-1, 3)
+
+
 def _stack(cam: CameraGeometry, model: VisionModel, cv: _CameraViews, poses: np.ndarray,
            info: np.ndarray) -> tuple[StackedCorners, np.ndarray]:
     """The views' corners as :class:`StackedCorners` with each robot pose moved into its camera (module
@@ -113,12 +122,14 @@ def _stack(cam: CameraGeometry, model: VisionModel, cv: _CameraViews, poses: np.
     Rk = np.zeros((n, 3, 3))
     Rk[:, 0, 0], Rk[:, 0, 1], Rk[:, 1, 0], Rk[:, 1, 1], Rk[:, 2, 2] = c, -s, s, c, 1.0
     t = np.column_stack([poses[k, :2], np.zeros(n)])
-    p_robot = np.concatenate([model.corners_robot[int(m)] for m in cv.marker]) if n else np.zeros((0, 3))
+    p_robot = _corners_of(model, cv.marker)
     R_cw, t_cw = cam.T_cam_world[:3, :3], cam.T_cam_world[:3, 3]
     L = np.sqrt(info)[:, None, None] * np.eye(2)
     K = cam.K
+    p_rot = np.column_stack([c * p_robot[:, 0] - s * p_robot[:, 1], s * p_robot[:, 0] + c * p_robot[:, 1],
+                             p_robot[:, 2]])
     sc = StackedCorners(
-        p_robot=np.einsum("nij,nj->ni", Rk, p_robot), uv=cv.uv.reshape(-1, 2), cov=np.linalg.inv(L @ L),
+        p_robot=p_rot, uv=cv.uv.reshape(-1, 2), cov=(1.0 / info)[:, None, None] * np.eye(2),
         sqrt_info=L, R_cw=np.broadcast_to(R_cw, (n, 3, 3)), t_cw=t_cw + t @ R_cw.T,
         cam_centre_w=cam.T_world_cam[:3, 3] - t, fx=np.full(n, K[0, 0]), fy=np.full(n, K[1, 1]),
         skew=np.full(n, K[0, 1]), cx=np.full(n, K[0, 2]), cy=np.full(n, K[1, 2]),
@@ -136,89 +147,99 @@ def marker_jacobian(J_pose: np.ndarray, R_world_robot: np.ndarray, p_robot: np.n
     return np.concatenate([d, -d @ skew(p_robot - centre_robot)], axis=2)
 
 
-def _block_entries(rows: np.ndarray, r0: np.ndarray, c0: np.ndarray, B: np.ndarray, D: int
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Flat indices into (K, D, D) and values for ``H[rows[v], r0[v]:r0[v]+b, c0[v]:c0[v]+b'] += B[v]``."""
-    _, br, bc = B.shape
-    ri = r0[:, None, None] + np.arange(br)[None, :, None]
-    ci = c0[:, None, None] + np.arange(bc)[None, None, :]
-    return ((rows[:, None, None] * D + ri) * D + ci).ravel(), B.ravel()
+def camera_jacobian(J_pose: np.ndarray, p_world: np.ndarray, centre_world: np.ndarray) -> np.ndarray:
+    """d uv / d (camera perturbation) (N, 2, 6) as :func:`gtrig.vision.projection.camera_pose_jacobian`
+    (the camera's centre and rotation perturbed in the world frame), from the pose Jacobian ``J_pose``
+    (N, 2, 6), each corner's world point (N, 3) and its camera's centre (N, 3), metres."""
+    JR = J_pose[:, :, :3]  # d uv / d p_world
+    return np.concatenate([-JR, JR @ skew(p_world - centre_world)], axis=2)
 
 
-def _camera_normal_equations(H: np.ndarray, entries: list[tuple[np.ndarray, np.ndarray]], cam: CameraGeometry,
-                             model: VisionModel, cv: _CameraViews, poses: np.ndarray, settings: VisionPlanSettings,
-                             rig_u: RigUncertainty) -> None:
-    """One camera's corners in the normal matrices ``H`` (K, D, D) over (pose, marker corrections), its
-    own correction eliminated: the elimination is subtracted from ``H`` at once, the corners' own blocks
-    are appended to ``entries`` (added by the caller in one pass). ``cv.pose`` indexes ``H``'s rows."""
+def _camera_normal_equations(H: np.ndarray, cam: CameraGeometry, model: VisionModel, cv: _CameraViews,
+                             poses: np.ndarray, settings: VisionPlanSettings, rig_u: RigUncertainty) -> None:
+    """Add one camera's corners to the normal matrices ``H`` (K, D, D) over (pose, marker corrections),
+    its own correction eliminated (:func:`gtrig.plan._vision_kernels.add_camera_views`). ``cv.pose``
+    indexes ``H``'s rows, in non-decreasing order."""
+    from gtrig.plan._vision_kernels import add_camera_views
+
     V = cv.pose.shape[0]
-    D = H.shape[1]
     info = np.repeat(corner_information(cv.side_px, settings.corner_noise, settings.corner_floor_px), 4)
     sc, Rk = _stack(cam, model, cv, poses, info)
     eye = np.eye(4)
     _, _, Jp = project_pose(sc, eye, True)
     assert Jp is not None
     w = np.sqrt(info)[:, None, None]
-    p_r = np.concatenate([model.corners_robot[int(m)] for m in cv.marker])
+    p_r = _corners_of(model, cv.marker)
     ctr = np.repeat(p_r.reshape(V, 4, 3).mean(axis=1), 4, axis=0)
     Jm = w * marker_jacobian(Jp, Rk, p_r, ctr)
-    Jp = w * Jp
     S_c = rig_u.sqrt_information("camera", cam.name)
-    Jc = None
-    if S_c is not None:
-        Jc = camera_pose_jacobian(sc, eye)
+    if S_c is None:
+        Jc, P_cam = np.zeros((V * 4, 2, 1)), np.zeros((1, 1))
+    else:
+        Jc = camera_jacobian(Jp, sc.p_robot, sc.cam_centre_w)  # the robot at the origin: p_world = p_robot
         if S_c.shape[0] > 6:
             Jc = np.concatenate([Jc, lens_jacobian(sc, eye, S_c.shape[0] - 6)], axis=2)
-        Jc = w * Jc
-
-    def view_sum(A: np.ndarray, B: np.ndarray) -> np.ndarray:  # (V, a, b): sum over a view's 8 rows
-        return np.einsum("vra,vrb->vab", A.reshape(V, 8, -1), B.reshape(V, 8, -1))
-
-    has = cv.slot >= 0
-    m0 = 6 + 6 * cv.slot
-    zero = np.zeros(V, dtype=int)
-    entries.append(_block_entries(cv.pose, zero, zero, view_sum(Jp, Jp), D))
-    if has.any():
-        Jm_v, Jp_v = Jm.reshape(V, 8, 6)[has], Jp.reshape(V, 8, 6)[has]
-        pm = np.einsum("vra,vrb->vab", Jp_v, Jm_v)
-        entries.append(_block_entries(cv.pose[has], zero[has], m0[has], pm, D))
-        entries.append(_block_entries(cv.pose[has], m0[has], zero[has], np.swapaxes(pm, 1, 2), D))
-        entries.append(_block_entries(cv.pose[has], m0[has], m0[has], np.einsum("vra,vrb->vab", Jm_v, Jm_v), D))
-    if Jc is None or S_c is None:
-        return
-    # eliminate the camera's correction: H_xx -= H_xc H_cc^-1 H_cx, per pose seen by this camera
-    kc = S_c.shape[0]
-    g_pose, g = np.unique(cv.pose, return_inverse=True)
-    G = g_pose.shape[0]
-    Hcc = np.broadcast_to(S_c.T @ S_c, (G, kc, kc)).copy()
-    np.add.at(Hcc, g, view_sum(Jc, Jc))
-    Hxc = np.zeros((G, D, kc))
-    np.add.at(Hxc[:, :6, :], g, view_sum(Jp, Jc))
-    if has.any():
-        mc = np.einsum("vra,vrb->vab", Jm.reshape(V, 8, 6)[has], Jc.reshape(V, 8, kc)[has])
-        Hxc[g[has][:, None], m0[has][:, None] + np.arange(6)[None, :], :] = mc
-    H[g_pose] -= Hxc @ np.linalg.solve(Hcc, np.swapaxes(Hxc, 1, 2))
+        Jc, P_cam = w * Jc, S_c.T @ S_c
+    Jp = w * Jp
+    add_camera_views(H, cv.pose.astype(np.int64), cv.slot.astype(np.int64), np.ascontiguousarray(Jp.reshape(V, 8, 6)),
+                     np.ascontiguousarray(Jm.reshape(V, 8, 6)), np.ascontiguousarray(Jc.reshape(V, 8, -1)),
+                     np.ascontiguousarray(P_cam, dtype=float), S_c is not None)
 
 
-def _pose_covariance(H: np.ndarray) -> np.ndarray:
-    """The pose block (K, 6, 6) of ``inv(H)`` for normal matrices (K, D, D) over (pose, nuisances), by
-    eliminating the nuisances (Schur complement)."""
-    H = 0.5 * (H + np.swapaxes(H, 1, 2))
-    if H.shape[1] == 6:
-        return np.linalg.inv(H)
-    Hpp, Hpn, Hnn = H[:, :6, :6], H[:, :6, 6:], H[:, 6:, 6:]
-    return np.linalg.inv(Hpp - Hpn @ np.linalg.solve(Hnn, np.swapaxes(Hpn, 1, 2)))
+def pose_covariance(H: np.ndarray) -> np.ndarray:
+    """The pose block (K, 6, 6) of ``inv(H)`` for normal matrices (K, D, D) over (pose, marker
+    corrections), by eliminating the corrections (Schur complement, compiled)."""
+    from gtrig.plan._vision_kernels import pose_block_of_inverse
+
+    return pose_block_of_inverse(np.ascontiguousarray(H, dtype=float), 6)
 
 
-def predict_vision(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSettings = VisionPlanSettings(),
-                   model: VisionModel | None = None) -> VisionPrediction:
-    """GTvision's predicted covariance at planar poses (K, 3) on a flat floor (module docstring)."""
+@dataclass(frozen=True)
+class VisionInformation:
+    """GTvision's normal matrices at K poses, the cameras' corrections eliminated: a sum over cameras, so
+    that a camera added to a rig adds its own matrices.
+
+    Attributes
+    ----------
+    seen : (K,) bool, some camera sees a marker whole.
+    H : (n_seen, D, D) normal matrices at the seen poses over the robot pose ``(dt, dphi)`` (world axes,
+        m and rad) and the corrections of the markers that have a prior (6 each, in the rig's order),
+        with or without the priors (:func:`prior_information`).
+    views : (K, n_cameras) markers each camera sees whole.
+    side_px : (K, n_cameras) smallest marker side each camera sees, pixels (0: none).
+    """
+
+    seen: np.ndarray
+    H: np.ndarray
+    views: np.ndarray
+    side_px: np.ndarray
+
+
+def prior_information(rig: Rig, settings: VisionPlanSettings = VisionPlanSettings()) -> np.ndarray:
+    """The priors' part (D, D) of every pose's normal matrix: GTvision's floor prior on the pose and
+    each marker's pose prior (the rig's uncertainty) on its correction."""
+    rig_u = settings.rig_uncertainty.with_rig(rig)
+    S_m = [S for S in (rig_u.sqrt_information("marker", m.id) for m in rig.robot.markers) if S is not None]
+    D = 6 + 6 * len(S_m)
+    P = np.zeros((D, D))
+    _, Jprior = prior_residuals(np.eye(4), settings.prior)
+    P[:6, :6] = Jprior.T @ Jprior
+    for i, S in enumerate(S_m):
+        P[6 + 6 * i:12 + 6 * i, 6 + 6 * i:12 + 6 * i] = S.T @ S
+    return P
+
+
+def vision_information(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSettings = VisionPlanSettings(),
+                       model: VisionModel | None = None, camera_names: tuple[str, ...] | None = None,
+                       priors: bool = True) -> VisionInformation:
+    """GTvision's normal matrices at planar poses (K, 3) on a flat floor from the cameras ``camera_names``
+    of ``rig`` (default: all), with the priors or without them (module docstring)."""
     poses = np.asarray(poses_xytheta, dtype=float).reshape(-1, 3)
     model = VisionModel.from_rig(rig) if model is None else model
     rig_u = settings.rig_uncertainty.with_rig(rig)
     mids = [m.id for m in rig.robot.markers]
     corners = np.stack([model.corners_robot[m] for m in mids])
-    names = [c.name for c in rig.cameras]
+    names = [c.name for c in rig.cameras] if camera_names is None else list(camera_names)
     K = poses.shape[0]
     sights = [camera_sight(model.cameras[n], corners, poses, rig.robot.hull, settings.margin_px, settings.min_side_px)
               for n in names]
@@ -227,38 +248,34 @@ def predict_vision(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSett
         if names else np.zeros((K, 0))
     side_min[~np.isfinite(side_min)] = 0.0
     seen = views.sum(axis=1) > 0
-    cov6 = np.full((K, 6, 6), np.nan)
-    if seen.any():
-        cov6[seen] = _seen_covariance(rig, model, poses[seen], [(n, s.visible[seen], s.uv[seen], s.side_px[seen])
-                                                               for n, s in zip(names, sights, strict=True)],
-                                      mids, settings, rig_u)
+    P = prior_information(rig, settings)
+    H = np.zeros((int(seen.sum()),) + P.shape)
+    if priors:
+        H += P
+    if H.shape[0]:
+        slot_of = np.full(len(mids), -1)
+        with_prior = [rig_u.sqrt_information("marker", m) is not None for m in mids]
+        slot_of[np.flatnonzero(with_prior)] = np.arange(sum(with_prior))
+        ps = poses[seen]
+        for name, sg in zip(names, sights, strict=True):
+            k, m = np.nonzero(sg.visible[seen])
+            if k.size:
+                cv = _CameraViews(k, slot_of[m], np.asarray(mids)[m], sg.uv[seen][k, m], sg.side_px[seen][k, m])
+                _camera_normal_equations(H, model.cameras[name], model, cv, ps, settings, rig_u)
+    return VisionInformation(seen, H, views, side_min)
+
+
+def planar_covariance(cov_6x6: np.ndarray) -> np.ndarray:
+    """The x, y, yaw block (K, 3, 3) of pose covariances (K, 6, 6) over (dt, dphi)."""
     i = np.array(PLANAR_INDEX)
-    return VisionPrediction(cov6[:, i[:, None], i[None, :]], cov6, views, side_min)
+    return cov_6x6[:, i[:, None], i[None, :]]
 
 
-def _seen_covariance(rig: Rig, model: VisionModel, poses: np.ndarray,
-                     sights: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], mids: list[int],
-                     settings: VisionPlanSettings, rig_u: RigUncertainty) -> np.ndarray:
-    """Pose covariances (K, 6, 6) at poses (K, 3) where at least one marker is seen; ``sights`` per camera:
-    name, visible (K, M), corners (K, M, 4, 2), sides (K, M)."""
-    S_m = {mid: rig_u.sqrt_information("marker", mid) for mid in mids}
-    slots = {mid: i for i, mid in enumerate(m for m in mids if S_m[m] is not None)}
-    K, D = poses.shape[0], 6 + 6 * len(slots)
-    H = np.zeros((K, D, D))
-    _, Jprior = prior_residuals(np.eye(4), settings.prior)
-    H[:, :6, :6] += Jprior.T @ Jprior
-    for mid, i in slots.items():
-        S = S_m[mid]
-        assert S is not None
-        H[:, 6 + 6 * i:12 + 6 * i, 6 + 6 * i:12 + 6 * i] += S.T @ S
-    entries: list[tuple[np.ndarray, np.ndarray]] = []
-    slot_of = np.array([slots.get(m, -1) for m in mids])
-    for name, vis, uv, side in sights:
-        k, m = np.nonzero(vis)
-        if k.size == 0:
-            continue
-        cv = _CameraViews(k, slot_of[m], np.asarray(mids)[m], uv[k, m], side[k, m])
-        _camera_normal_equations(H, entries, model.cameras[name], model, cv, poses, settings, rig_u)
-    idx = np.concatenate([e[0] for e in entries])
-    H += np.bincount(idx, np.concatenate([e[1] for e in entries]), minlength=H.size).reshape(H.shape)
-    return _pose_covariance(H)
+def predict_vision(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSettings = VisionPlanSettings(),
+                   model: VisionModel | None = None) -> VisionPrediction:
+    """GTvision's predicted covariance at planar poses (K, 3) on a flat floor (module docstring)."""
+    info = vision_information(rig, poses_xytheta, settings, model)
+    cov6 = np.full((info.seen.shape[0], 6, 6), np.nan)
+    if info.H.shape[0]:
+        cov6[info.seen] = pose_covariance(info.H)
+    return VisionPrediction(planar_covariance(cov6), cov6, info.views, info.side_px)

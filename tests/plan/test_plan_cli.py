@@ -49,6 +49,19 @@ def test_plan_suggests_a_camera(rig_file, tmp_path):
     assert (out / "target_suggested.png").stat().st_size > 0
 
 
+def test_plan_suggests_a_camera_and_a_scanner(rig_file, tmp_path):
+    out = tmp_path / "s2"
+    r = runner.invoke(app, ["plan", str(rig_file), "--out", str(out), "--area", AREA, "--grid-m", "0.5",
+                            "--headings", "2", "--suggest", "cameras:1,scanners:1", "--suggest-positions", "4",
+                            "--target-mm", "3", "--target-deg", "0.1"])
+    assert r.exit_code == 0, r.output
+    assert "suggested camera suggested1" in r.output and "suggested scanner suggested_laser1" in r.output
+    from gtrig.rig.load import load_rig
+
+    rig = load_rig(out / "rig_suggested.yaml")
+    assert rig.cameras[-1].name == "suggested1" and rig.laser_scanners[-1].name == "suggested_laser1"
+
+
 def test_plan_on_a_path(rig_file, tmp_path):
     tum = tmp_path / "p.tum"
     tum.write_text("".join(f"{i:.1f} {0.1 * i:.3f} 2.0 0 0 0 0 1\n" for i in range(10)))
@@ -65,7 +78,9 @@ def test_plan_on_a_path(rig_file, tmp_path):
     (["--target-mm", "-1"], "--target-mm"),
     (["--path", "nothere.tum"], "nothere.tum"),
     (["--area", AREA, "--path", "x.tum"], "exclude each other"),
-    (["--suggest", "scanners:1"], "--suggest"),
+    (["--suggest", "lidars:1"], "--suggest"),
+    (["--suggest", "cameras:1,cameras:2"], "--suggest"),
+    (["--suggest", "scanners:1", "--suggest-scanner-height", "2"], "does not cut the hull"),
 ])
 def test_plan_refuses_bad_input_in_one_line(rig_file, tmp_path, args, expect):
     out = tmp_path / "o"

@@ -39,3 +39,25 @@ def test_beams_and_scan_covariance_match_the_icp():
         assert np.allclose(pred.cov_scan_xytheta[k], fit.cov_xytheta, rtol=1e-4, atol=1e-14)
         assert pred.covered[k] == (not fit.degenerate)
     assert pred.covered.all()
+
+
+def test_compiled_blocks_equal_the_icps_normal_equations():
+    from gtrig.laser.hull_icp import side_bias_normal_equations
+    from gtrig.laser.track import TrackSettings
+    from gtrig.plan.laser import laser_information
+
+    rig = make_scene(0).rig_true
+    rng = np.random.default_rng(5)
+    poses = np.column_stack([rng.uniform(-3, 3, 300), rng.uniform(-2, 6, 300), rng.uniform(-np.pi, np.pi, 300)])
+    model = HullModel.from_hull(rig.robot.hull)
+    hits = cast_beams(rig, model, poses)
+    S_xy = np.array([s.T_world_scanner.xyz[:2] for s in rig.laser_scanners])
+    sigma = np.array([s.range_sigma_m for s in rig.laser_scanners])
+    icp = TrackSettings().icp
+    H, H_pb, *_ = side_bias_normal_equations(model, hits.xy, hits.pose, hits.scanner, S_xy, hits.dir, sigma, poses,
+                                             icp)
+    got = laser_information(rig, poses)
+    prior = np.diag([1 / icp.prior_std_m**2, 1 / icp.prior_std_m**2, 1 / icp.prior_std_rad**2])
+    assert hits.pose.size > 3000
+    assert np.allclose(got.H_pp + prior, H, rtol=1e-10, atol=1e-9)
+    assert np.allclose(got.H_pb, H_pb, rtol=1e-10, atol=1e-9)

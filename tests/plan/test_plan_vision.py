@@ -9,12 +9,12 @@ import pytest
 
 from gtrig import geometry as geo
 from gtrig.plan.visibility import camera_sight
-from gtrig.plan.vision import VisionPlanSettings, marker_jacobian, predict_vision
+from gtrig.plan.vision import VisionPlanSettings, camera_jacobian, marker_jacobian, predict_vision
 from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
 from gtrig.vision.covariance import UNCALIBRATED_MARKERS, RigUncertainty
 from gtrig.vision.estimate import VisionOptions, estimate_frame
 from gtrig.vision.observations import MarkerView, VisionModel, stack_corners
-from gtrig.vision.projection import marker_pose_jacobian, project_pose
+from gtrig.vision.projection import camera_pose_jacobian, marker_pose_jacobian, project_pose
 from gtrig.vision.synthetic import synthetic_observations, visible_views
 
 CALIBRATED = RigUncertainty(0.0005, math.radians(0.01), 0.0003, math.radians(0.05))
@@ -71,4 +71,17 @@ def test_marker_jacobian_is_the_estimators(rig):
     ctr = np.concatenate([np.repeat(sc.p_robot[sc.view == v].mean(axis=0)[None], 4, axis=0)
                           for v in range(len(views))])
     got = marker_jacobian(J, np.broadcast_to(T[:3, :3], (sc.p_robot.shape[0], 3, 3)), sc.p_robot, ctr)
+    assert np.allclose(got, ref, rtol=1e-9, atol=1e-6)
+
+
+def test_camera_jacobian_is_the_estimators(rig):
+    model = VisionModel.from_rig(rig)
+    T = geo.se2_to_T(0.5, 2.0, 0.7)
+    views = [MarkerView(c, m, uv, np.tile(np.eye(2) * 0.01, (4, 1, 1))) for c, m, uv in visible_views(rig, T)]
+    assert len({v.camera for v in views}) >= 2
+    sc = stack_corners(model, views)
+    ref = camera_pose_jacobian(sc, T)
+    _, _, J = project_pose(sc, T)
+    p_world = sc.p_robot @ T[:3, :3].T + T[:3, 3]
+    got = camera_jacobian(J, p_world, sc.cam_centre_w)
     assert np.allclose(got, ref, rtol=1e-9, atol=1e-6)
