@@ -243,7 +243,7 @@ def _followed_fit(model: VisionModel, views: list[MarkerView], options: VisionOp
     assert follow.T_world_robot is not None
     sc = stack_corners(model, views)
     fit = refine_pose(sc, follow.T_world_robot, options.planar_prior, options.refine, options.rig_uncertainty)
-    if not fit.converged or fit.min_depth_m <= 0 or PreviousPose(follow.T_world_robot).cost(fit.T_world_robot) > 1.0:
+    if not fit.converged or fit.min_depth_m <= 0 or _beyond(PreviousPose(follow.T_world_robot), fit.T_world_robot):
         return None
     red = float(np.sum(fit.redundancy))
     if not (np.isfinite(red) and red > 0.5 and float(np.sum(fit.whitened**2)) <= options.max_variance_factor * red):
@@ -251,6 +251,15 @@ def _followed_fit(model: VisionModel, views: list[MarkerView], options: VisionOp
     if not unbeaten_by_views(model, views, sc, fit, options.planar_prior, options.init):
         return None
     return sc, fit
+
+
+def _beyond(previous: PreviousPose, T: np.ndarray) -> bool:
+    """Whether the pose ``T`` (4, 4) lies outside the previous pose's tolerance (its sigmas as one
+    ellipse: ``previous.cost(T)`` above 1), without the rotation's logarithm."""
+    Tp = previous.T_world_robot
+    dt2 = float(np.sum((Tp[:3, 3] - T[:3, 3]) ** 2))
+    c = min(1.0, max(-1.0, (float(np.sum(Tp[:3, :3] * T[:3, :3])) - 1.0) / 2.0))  # cos of the relative angle
+    return dt2 / previous.sigma_m**2 + math.acos(c) ** 2 / previous.sigma_rad**2 > 1.0
 
 
 def estimate_consecutive(model: VisionModel, obs: Sequence[FrameObservations],
