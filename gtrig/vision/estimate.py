@@ -41,6 +41,7 @@ from enum import StrEnum
 from typing import Any
 
 import numpy as np
+from scipy.special import gammaincinv
 
 from gtrig.vision.covariance import UNCALIBRATED_MARKERS, RigUncertainty
 from gtrig.vision.init import InitOptions, PreviousPose, initial_pose, unbeaten_by_views
@@ -371,8 +372,7 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
 def _frame_scale(factor: float, redundancy: float, level: float) -> float:
     """The factor that scales a frame's covariance: its own variance factor where the chi-square test
     (``redundancy`` dof) says its corners are noisier than the camera's model at ``level``, else 1."""
-    from scipy.special import gammaincinv  # chi2.ppf(q, n) = 2 gammaincinv(n / 2, q); scipy.stats costs 1 s to import
-
     if factor <= 1.0:
         return 1.0
+    # chi2.ppf(q, n) is 2 gammaincinv(n / 2, q), bit for bit (scipy.stats takes a second to import)
     return factor if factor * redundancy > 2.0 * float(gammaincinv(redundancy / 2.0, 1.0 - level)) else 1.0

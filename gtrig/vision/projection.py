@@ -144,12 +144,12 @@ def camera_pose_jacobian(sc: StackedCorners, T_world_robot: np.ndarray) -> np.nd
     """
     R, t = T_world_robot[:3, :3], T_world_robot[:3, 3]
     p_w = sc.p_robot @ R.T + t
-    p_c = np.einsum("nij,nj->ni", sc.R_cw, p_w) + sc.t_cw
-    _, Jp = project_cam(sc, p_c, True)
-    assert Jp is not None
-    J = np.empty((p_w.shape[0], 2, 6))
-    J[:, :, :3] = -Jp @ sc.R_cw
-    J[:, :, 3:] = Jp @ sc.R_cw @ skew(p_w - sc.cam_centre_w)
+    _, _, J_robot = project_pose(sc, T_world_robot)
+    assert J_robot is not None
+    JR = J_robot[:, :, :3]  # d uv / d p_world
+    J = np.empty_like(J_robot)
+    J[:, :, :3] = -JR
+    J[:, :, 3:] = JR @ skew(p_w - sc.cam_centre_w)
     return J
 
 
