@@ -317,6 +317,7 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
         return sc, init.margin, tuple(c.fit.T_world_robot for c in init.candidates), fit
 
     followed = None if follow is None or start is not None else _followed_fit(model, views, options, follow)
+    alts: tuple[np.ndarray, ...]
     if followed is not None and follow is not None:
         sc, fit = followed
         margin, alts = follow.flip_margin, ()
