@@ -135,7 +135,9 @@ def prior_residuals(T: np.ndarray, prior: PlanarPrior) -> tuple[np.ndarray, np.n
     r = np.array([(T[2, 3] - prior.z_m) / prior.sigma_z_m, n[0] / st, n[1] / st])
     Jp = np.zeros((3, 6))
     Jp[0, 2] = 1.0 / prior.sigma_z_m
-    Jp[1:, 3:] = -skew(n)[:2] / st  # Exp(dphi) n = n - skew(n) dphi
+    # Exp(dphi) n = n - skew(n) dphi: the first two rows of -skew(n), written out
+    Jp[1, 3:] = (0.0, n[2] / st, -n[1] / st)
+    Jp[2, 3:] = (-n[2] / st, 0.0, n[0] / st)
     return r, Jp
 
 
