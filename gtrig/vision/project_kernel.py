@@ -12,10 +12,13 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-_jit = nb.njit(cache=True, fastmath=False, nogil=True)
+# one signature, compiled (or loaded from the cache) when the module is imported: any layout of the
+# arrays is taken, and the workers forked from a process that imported it never load it again
+_F1, _F2, _F3 = nb.float64[:], nb.float64[:, :], nb.float64[:, :, :]
+_SIGNATURE = nb.void(_F2, _F2, _F1, _F3, _F2, _F1, _F1, _F1, _F1, _F1, _F2, nb.boolean, _F2, _F1, _F3)
 
 
-@_jit
+@nb.njit(_SIGNATURE, cache=True, fastmath=False, nogil=True)
 def project_pose_into(p_robot: np.ndarray, R: np.ndarray, t: np.ndarray, R_cw: np.ndarray, t_cw: np.ndarray,
                       fx: np.ndarray, fy: np.ndarray, skew: np.ndarray, cx: np.ndarray, cy: np.ndarray,
                       dist: np.ndarray, jacobian: bool, uv: np.ndarray, z_cam: np.ndarray, J: np.ndarray) -> None:
