@@ -17,7 +17,10 @@ Levels
 ``tracking``: one sequence of a full simulated recording (``--sequence``, default run) with the markers
     tracked from image to image (:mod:`gtrig.vision.track`) and with every image searched whole, in the same
     run: the whole GTvision stage's images per second (reading, detection, noise calibration, estimation;
-    wall, and CPU per image, this process's and its workers', a figure a loaded machine disturbs less),
+    wall, and CPU per image, this process's and its workers', a figure a loaded machine disturbs less,
+    split into reading, detection and estimation, with the images per second that CPU allows on the
+    workers' cores with and without the reading: an 8-bit 1024 x 768 PNG costs about 6 ms to decode, of
+    which zlib's inflate alone is 4 ms, whatever OpenCV's read flags),
     the localized share and the accuracy against the truth of both, beside OpenCV's bare whole-image
     detection of the same images (``cv2.aruco.ArucoDetector`` with its default parameters and threads, a
     dictionary of the rig's markers; reading not counted).
@@ -37,6 +40,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
 import tempfile
 import time
 from dataclasses import replace
@@ -290,42 +294,59 @@ def bench_tracking(rec: Path, rig_path: Path, workers: int, sequence: str) -> No
 
     rig = load_rig(rig_path)
     print(f"\n### Tracking, {rec} {sequence} (rig {rig_path}), {workers or 'all'} worker(s)\n")
+    # OpenCV's bare detection first: it also brings the images into the page cache for both stage runs
+    cv = aruco_for_rig(rig, subpix=False)
+    cpu_read = t_read = t_cv = 0.0
+    n_cv = found = 0
+    for ix in camera_indices(rec, sequence, rig).values():
+        for i in range(len(ix)):
+            c0, t0 = time.process_time(), time.perf_counter()
+            img = read_image(ix.source(i))
+            c1, t1 = time.process_time(), time.perf_counter()
+            _, ids, _ = cv.detectMarkers(img)
+            t_cv += time.perf_counter() - t1
+            t_read += t1 - t0
+            cpu_read += c1 - c0
+            n_cv += 1
+            found += 0 if ids is None else len(ids)
+    read_ms = 1e3 * cpu_read / max(n_cv, 1)
+    cores = workers or (os.cpu_count() or 1)
     rows = []
     for label, track in (("whole images", TrackOptions(enabled=False)), ("tracked", TrackOptions())):
-        cpu0 = _cpu_s()
-        res = run_recording(rec, rig, sequence, planar=True, workers=workers, track=track)
-        cpu = _cpu_s() - cpu0
+        with tempfile.TemporaryDirectory() as d:
+            ck = Path(d) / "detections.checkpoint"
+            cpu0 = _cpu_s()
+            res = run_recording(rec, rig, sequence, planar=True, workers=workers, track=track, checkpoint=ck)
+            cpu = _cpu_s() - cpu0
+            # the same again from the detections just checkpointed: what the estimation side costs alone
+            cpu0 = _cpu_s()
+            run_recording(rec, rig, sequence, planar=True, workers=workers, track=track, checkpoint=ck)
+            cpu_est = _cpu_s() - cpu0
         acc = accuracy_on_recording(res, rec)
         n_img = sum(res.images_per_camera.values())
         sec = res.seconds
         share = (f"{acc.frames_visible_localized}/{acc.frames_visible} "
                  f"({100 * acc.visible_localized_fraction:.2f} %)" if sequence == "run" else "")
+        est_ms, all_ms = 1e3 * cpu_est / n_img, 1e3 * cpu / n_img
+        det_ms = all_ms - est_ms - read_ms
         rows.append(f"| {label:<12} | {n_img / sec['total']:7.1f} | {n_img / sec['parallel']:7.1f} | "
                     f"{sec['total']:6.1f} | {acc.localized:4d}/{acc.instants:<4d} | {share:>18} | "
                     f"{100 * acc.pos_err_mean_m:.3f} / {100 * acc.pos_err_max_m:.2f} | "
                     f"{math.degrees(acc.yaw_err_mean_rad):.4f} | {acc.nees_mean / acc.nees_dof:.2f} | "
-                    f"{1e3 * cpu / n_img:.1f} |")
-    cv = aruco_for_rig(rig, subpix=False)
-    t_read = t_cv = 0.0
-    n_cv = found = 0
-    for ix in camera_indices(rec, sequence, rig).values():
-        for i in range(len(ix)):
-            t0 = time.perf_counter()
-            img = read_image(ix.source(i))
-            t1 = time.perf_counter()
-            _, ids, _ = cv.detectMarkers(img)
-            t_cv += time.perf_counter() - t1
-            t_read += t1 - t0
-            n_cv += 1
-            found += 0 if ids is None else len(ids)
+                    f"{all_ms:.1f} | {read_ms:.1f} / {det_ms:.1f} / {est_ms:.1f} | "
+                    f"{1e3 * cores / all_ms:.0f} / {1e3 * cores / (all_ms - read_ms):.0f} |")
     print("| search       | images/s (stage) | images/s (detection pass) | stage s | localized | "
           "visible-marker images localized | mean / max position cm | mean abs yaw deg | NEES/dof | "
-          "CPU ms per image |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          f"CPU ms per image | of it read / detect / estimate | images/s on {cores} cores at that CPU: "
+          "with / without reading |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     print("\n".join(rows))
+    print("\n(images/s: wall, this machine as loaded; CPU per image: this process's and its workers'; read: "
+          "cv2.imread of each image in this process; estimate: the stage run again from its checkpointed "
+          "detections (noise calibration, estimation, flips, motion); detect: the rest)")
     print(f"\nOpenCV ArucoDetector (defaults, its own threads), the same {n_cv} images: {n_cv / t_cv:.1f} images/s "
           f"of detection ({1e3 * t_cv / n_cv:.2f} ms per image, {found} markers; reading the images, not counted: "
-          f"{1e3 * t_read / n_cv:.2f} ms per image)")
+          f"{1e3 * t_read / n_cv:.2f} ms per image, {read_ms:.2f} ms CPU)")
 
 
 def _render_validation(rec: Path, rig: Rig, Ts: list[np.ndarray], rng: np.random.Generator, frames: int,

@@ -35,14 +35,16 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import Any
 
 import numpy as np
+from scipy.special import gammaincinv
 
 from gtrig.vision.covariance import UNCALIBRATED_MARKERS, RigUncertainty
-from gtrig.vision.init import InitOptions, PreviousPose, initial_pose
+from gtrig.vision.init import InitOptions, PreviousPose, initial_pose, unbeaten_by_views
 from gtrig.vision.observations import FrameObservations, MarkerView, StackedCorners, VisionModel, stack_corners
 from gtrig.vision.refine import PlanarPrior, RefineOptions, RefineResult, refine_pose
 
@@ -93,6 +95,11 @@ class VisionOptions:
         exactly as noisy as its camera's model has a factor above 1 half of the time, and charging
         that to it made the covariances of homogeneous data cautious by 10-40 % (E max(1, F) at 2-10
         dof); 0.5 charges every factor above 1 (the earlier behaviour, kept as an option).
+    follow_max_gap_s : float
+        :func:`estimate_consecutive`: an instant at most this much later than the last localized one of
+        the same list starts its fit from that pose instead of ranking every view's IPPE solutions (the
+        search is run when the followed fit moved more than 0.2 m or 10 degrees, did not converge, left
+        an inconsistent frame, dropped a view, or when a view's own solution scores better); 0: never.
     rig_variance_component : bool
         The recording's noise calibration splits its residuals between the corners and the rig's
         stated uncertainty (:func:`gtrig.vision.sequence.calibrate_noise` with ``rig_component``),
@@ -114,6 +121,7 @@ class VisionOptions:
     max_variance_factor: float = 100.0
     previous_max_gap_s: float = 1.0
     frame_scale_level: float = 0.05
+    follow_max_gap_s: float = 0.3
     rig_variance_component: bool = False
 
     @property
@@ -229,8 +237,55 @@ def scale_views(views: tuple[MarkerView, ...] | list[MarkerView], scale: dict[st
     return [replace(v, corner_cov=(v.corner_cov + floor) * scale.get(v.camera, 1.0)) for v in views]
 
 
+def _followed_fit(model: VisionModel, views: list[MarkerView], options: VisionOptions, follow: FrameEstimate
+                  ) -> tuple[StackedCorners, RefineResult] | None:
+    """The fit of ``views`` started from the localized pose ``follow`` of an instant just before, or None
+    where it is not to be trusted without the full search (:attr:`VisionOptions.follow_max_gap_s`)."""
+    assert follow.T_world_robot is not None
+    sc = stack_corners(model, views)
+    fit = refine_pose(sc, follow.T_world_robot, options.planar_prior, options.refine, options.rig_uncertainty)
+    if not fit.converged or fit.min_depth_m <= 0 or _beyond(PreviousPose(follow.T_world_robot), fit.T_world_robot):
+        return None
+    red = float(np.sum(fit.redundancy))
+    if not (np.isfinite(red) and red > 0.5 and float(np.sum(fit.whitened**2)) <= options.max_variance_factor * red):
+        return None
+    if not unbeaten_by_views(model, views, sc, fit, options.planar_prior, options.init):
+        return None
+    return sc, fit
+
+
+def _beyond(previous: PreviousPose, T: np.ndarray) -> bool:
+    """Whether the pose ``T`` (4, 4) lies outside the previous pose's tolerance (its sigmas as one
+    ellipse: ``previous.cost(T)`` above 1), without the rotation's logarithm."""
+    Tp = previous.T_world_robot
+    dt2 = float(np.sum((Tp[:3, 3] - T[:3, 3]) ** 2))
+    c = min(1.0, max(-1.0, (float(np.sum(Tp[:3, :3] * T[:3, :3])) - 1.0) / 2.0))  # cos of the relative angle
+    return dt2 / previous.sigma_m**2 + math.acos(c) ** 2 / previous.sigma_rad**2 > 1.0
+
+
+def estimate_consecutive(model: VisionModel, obs: Sequence[FrameObservations],
+                         options: VisionOptions = VisionOptions()) -> list[FrameEstimate]:
+    """:func:`estimate_frame` of consecutive instants (time order), each that follows a localized one by at
+    most ``options.follow_max_gap_s`` started from its pose.
+
+    The first instant, and any after a gap or an instant that was not localized, gets the full search of
+    :mod:`gtrig.vision.init`: the estimates depend on the list given (a chunk of a recording's instants),
+    never on what was estimated before it.
+    """
+    out: list[FrameEstimate] = []
+    last: FrameEstimate | None = None
+    for o in obs:
+        near = last is not None and 0.0 <= o.stamp_s - last.stamp_s <= options.follow_max_gap_s
+        e = estimate_frame(model, o, options, follow=last if near else None)
+        out.append(e)
+        if e.ok:
+            last = e
+    return out
+
+
 def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOptions = VisionOptions(),
-                   previous: PreviousPose | None = None, start: FrameEstimate | None = None) -> FrameEstimate:
+                   previous: PreviousPose | None = None, start: FrameEstimate | None = None,
+                   follow: FrameEstimate | None = None) -> FrameEstimate:
     """The robot pose of one instant (see the module docstring).
 
     Parameters
@@ -242,6 +297,9 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
     start : an estimate of this instant whose flip is settled (a second pass with another model of
         the same instant, :func:`gtrig.vision.sequence.compensate_motion`): the fit starts from its pose
         and keeps its flip margin instead of ranking every view's solutions again.
+    follow : the localized estimate of an instant just before (:func:`estimate_consecutive`): the fit
+        starts from its pose and inherits its flip margin, unless that fit fails the checks of
+        :attr:`VisionOptions.follow_max_gap_s`; then, and after a dropped view, the full search runs.
     """
     model.check(obs)
     scale = dict(options.corner_scale)
@@ -258,7 +316,13 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
         sc, init, fit = _fit(model, views, options, previous)
         return sc, init.margin, tuple(c.fit.T_world_robot for c in init.candidates), fit
 
-    sc, margin, alts, fit = fit_views()
+    followed = None if follow is None or start is not None else _followed_fit(model, views, options, follow)
+    alts: tuple[np.ndarray, ...]
+    if followed is not None and follow is not None:
+        sc, fit = followed
+        margin, alts = follow.flip_margin, ()
+    else:
+        sc, margin, alts, fit = fit_views()
     while len(views) > 1:
         per_view = np.bincount(sc.view, weights=fit.whitened**2, minlength=len(views))
         worst = int(np.argmax(per_view))
@@ -309,8 +373,7 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
 def frame_scale(factor: float, redundancy: float, level: float) -> float:
     """The factor that scales a frame's covariance: its own variance factor where the chi-square test
     (``redundancy`` dof) says its corners are noisier than the camera's model at ``level``, else 1."""
-    from scipy.stats import chi2
-
     if factor <= 1.0:
         return 1.0
-    return factor if factor * redundancy > float(chi2.ppf(1.0 - level, redundancy)) else 1.0
+    # chi2.ppf(q, n) is 2 gammaincinv(n / 2, q), bit for bit (scipy.stats takes a second to import)
+    return factor if factor * redundancy > 2.0 * float(gammaincinv(redundancy / 2.0, 1.0 - level)) else 1.0

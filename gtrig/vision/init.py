@@ -199,3 +199,22 @@ def initial_pose(model: VisionModel, views: tuple[MarkerView, ...] | list[Marker
             distinct.append(c)
     margin = distinct[1].score - distinct[0].score if len(distinct) > 1 else math.inf
     return InitResult(distinct[0], float(margin), tuple(distinct), sols)
+
+
+def unbeaten_by_views(model: VisionModel, views: tuple[MarkerView, ...] | list[MarkerView], sc: StackedCorners,
+                      fit: RefineResult, prior: PlanarPrior | None = None,
+                      options: InitOptions = InitOptions()) -> bool:
+    """Whether a fit started elsewhere (the previous instant's pose) holds against the candidates
+    :func:`initial_pose` would rank: no IPPE solution of any view that is distinct from the fit's pose
+    scores, unrefined, below the fit's robust cost (refining a candidate only lowers its cost, so such a
+    candidate could win the search). A one-sided test: True does not prove the search would pick the
+    fit, only that no view's own solution says otherwise.
+    """
+    T_fit = fit.T_world_robot
+    for v in views:
+        for T in ippe_view(model, v).T_world_robot:
+            if _close(T, T_fit, options.merge_m, options.merge_rad):
+                continue
+            if _raw_score(sc, T, prior, options.screen_cap) < fit.robust_cost:
+                return False
+    return True

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from gtrig.vision.observations import StackedCorners
+from gtrig.vision.project_kernel import project_pose_into
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -108,6 +109,18 @@ def project_pose(sc: StackedCorners, T_world_robot: np.ndarray, jacobian: bool =
     z_cam : (N,) depth of each corner in its camera, metres (negative: behind the camera)
     J : (N, 2, 6) d uv / d xi, with ``xi = (dt, dphi)`` the world-frame perturbation (module docstring)
     """
+    n = sc.p_robot.shape[0]
+    uv, z = np.empty((n, 2)), np.empty(n)
+    J = np.empty((n if jacobian else 0, 2, 6))
+    T = np.asarray(T_world_robot, dtype=float)
+    project_pose_into(sc.p_robot, T[:3, :3], T[:3, 3], sc.R_cw, sc.t_cw, sc.fx, sc.fy, sc.skew, sc.cx, sc.cy,
+                      sc.dist, jacobian, uv, z, J)
+    return uv, z, J if jacobian else None
+
+
+def project_pose_numpy(sc: StackedCorners, T_world_robot: np.ndarray, jacobian: bool = True
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """:func:`project_pose` written with numpy arrays (the compiled kernel's reference)."""
     R, t = T_world_robot[:3, :3], T_world_robot[:3, 3]
     q = sc.p_robot @ R.T  # R p, robot point offsets in world axes
     p_w = q + t
@@ -131,12 +144,12 @@ def camera_pose_jacobian(sc: StackedCorners, T_world_robot: np.ndarray) -> np.nd
     """
     R, t = T_world_robot[:3, :3], T_world_robot[:3, 3]
     p_w = sc.p_robot @ R.T + t
-    p_c = np.einsum("nij,nj->ni", sc.R_cw, p_w) + sc.t_cw
-    _, Jp = project_cam(sc, p_c, True)
-    assert Jp is not None
-    J = np.empty((p_w.shape[0], 2, 6))
-    J[:, :, :3] = -Jp @ sc.R_cw
-    J[:, :, 3:] = Jp @ sc.R_cw @ skew(p_w - sc.cam_centre_w)
+    _, _, J_robot = project_pose(sc, T_world_robot)
+    assert J_robot is not None
+    JR = J_robot[:, :, :3]  # d uv / d p_world
+    J = np.empty_like(J_robot)
+    J[:, :, :3] = -JR
+    J[:, :, 3:] = JR @ skew(p_w - sc.cam_centre_w)
     return J
 
 

@@ -59,7 +59,7 @@ from gtrig.kinematics import pose_velocities  # moved to the core; re-exported f
 from gtrig.rig.load import rig_to_dict
 from gtrig.rig.models import Rig
 from gtrig.trajectory import PoseTrack
-from gtrig.vision.estimate import FrameEstimate, Status, VisionOptions, estimate_frame
+from gtrig.vision.estimate import FrameEstimate, Status, VisionOptions, estimate_consecutive, estimate_frame
 from gtrig.vision.init import PreviousPose
 from gtrig.vision.instants import Instant, Instants, make_instants  # re-exported for their callers
 from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel
@@ -474,7 +474,7 @@ def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: 
 def _estimate_chunk(ctx: WorkerContext, obs: Sequence[FrameObservations], options: VisionOptions
                     ) -> list[FrameEstimate]:
     model = _state(ctx)["model"]
-    return [estimate_frame(model, o, options) for o in obs]
+    return estimate_consecutive(model, obs, options)  # a chunk's instants follow each other
 
 
 def _instant_label(obs: Sequence[FrameObservations]) -> str:
