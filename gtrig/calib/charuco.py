@@ -213,6 +213,13 @@ def board_from_dict(data: Any, source: str = "<board>") -> CharucoBoard:
     return _board_from_gtrig(data, source)
 
 
+def charuco_board_document(board: CharucoBoard) -> dict[str, Any]:
+    """``board`` as gtrig's board document (module docstring); :func:`board_from_dict` reads it back."""
+    return {"type": "charuco", "squares": [board.squares_x, board.squares_y], "square_m": board.square_m,
+            "marker_m": board.marker_m, "dictionary": board.dictionary, "inverted": board.inverted,
+            "legacy_pattern": board.legacy_pattern}
+
+
 def read_board_file(path: str | os.PathLike[str]) -> CharucoBoard:
     """Read a ChArUco board file: ``.toml`` (caliscope's ``charuco.toml`` or gtrig's) or YAML."""
     p = Path(path)

@@ -226,7 +226,9 @@ STEPS: tuple[tuple[str, Step], ...] = (
 def _config_key(cfg: SimConfig) -> str:
     # workers change speed, never output
     # the robot clock's offset joined the settings later: at its default it leaves the key unchanged
-    skip = {"workers"} | ({"odometry_clock_offset_s"} if cfg.odometry_clock_offset_s == 0 else set())
+    # so did the sweeps' board (chessboard by default)
+    skip = ({"workers"} | ({"odometry_clock_offset_s"} if cfg.odometry_clock_offset_s == 0 else set())
+            | ({"calib_board"} if cfg.calib_board == "chessboard" else set()))
     doc = cfg.model_dump(mode="json", exclude=skip)
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
