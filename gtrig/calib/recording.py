@@ -18,8 +18,8 @@ import numpy as np
 import yaml
 
 from gtrig import geometry as geo
-from gtrig.calib.charuco_sweep import load_charuco_intrinsics
 from gtrig.calib.chessboard import Board, BoardsSpec, detect_corners, list_images, read_boards_yaml, read_grey
+from gtrig.calib.id_sweep import load_id_intrinsics
 from gtrig.calib.intrinsics import IntrinsicsResult, calibrate_intrinsics
 from gtrig.calib.network import (
     NetworkProblem,
@@ -425,9 +425,9 @@ def calibrate_recording(
     if spec.sweep_board is None:
         intr = load_intrinsics(rec / "calib" / "intrinsics", names, spec.board, estimate_k3=estimate_k3)
         sweeps = sweep_views(intr)
-    else:  # the sweeps show a ChArUco board
-        lenses, sweeps = load_charuco_intrinsics(rec / "calib" / "intrinsics", names, spec.sweep_board,
-                                                 estimate_k3=estimate_k3)
+    else:  # the sweeps show a board with corner IDs
+        lenses, sweeps = load_id_intrinsics(rec / "calib" / "intrinsics", names, spec.sweep_board,
+                                           estimate_k3=estimate_k3)
         intr = dict(lenses)
     for c in rig.cameras:
         if c.name not in intr:

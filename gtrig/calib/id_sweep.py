@@ -1,9 +1,9 @@
-"""A camera's intrinsics from a folder of ChArUco board images, with its views for the network's bundle
-adjustment.
+"""A camera's intrinsics from a folder of images of a board with corner IDs (a ChArUco board or an
+AprilGrid), with its views for the network's bundle adjustment.
 
-The intrinsic sweeps of a recording (``calib/intrinsics/<cam>/``) may show a ChArUco board instead of
-the chessboard (``sweep_board:`` in ``calib/boards.yaml``): every image's corners are found with
-:class:`gtrig.calib.charuco.CharucoCornerDetector`, views with at least :data:`MIN_SWEEP_CORNERS` corners
+The intrinsic sweeps of a recording (``calib/intrinsics/<cam>/``) may show such a board instead of the
+chessboard (``sweep_board:`` in ``calib/boards.yaml``): every image's corners are found with
+:func:`gtrig.calib.idboards.corner_detector`, views with at least :data:`MIN_SWEEP_CORNERS` corners
 calibrate the lens (:func:`gtrig.calib.intrinsics.calibrate_point_sets`, Zhang's method with its outlier
 rule), and each kept view becomes a :class:`gtrig.calib.network.SweepView` carrying its corners' board
 points, so that the network refines the lens from the sweep as it does from a chessboard's.
@@ -16,8 +16,9 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from gtrig.calib.charuco import CharucoBoard, CharucoCornerDetector, CharucoView
+from gtrig.calib.charuco import CharucoView
 from gtrig.calib.chessboard import list_images, read_grey
+from gtrig.calib.idboards import IdBoard, corner_detector
 from gtrig.calib.intrinsics import MIN_VIEWS, PointSetFit, calibrate_point_sets
 from gtrig.calib.network import SweepView
 from gtrig.errors import InputError
@@ -30,8 +31,8 @@ MIN_SWEEP_CORNERS = 6
 
 
 @dataclass(frozen=True)
-class CharucoSweep:
-    """One camera's ChArUco sweep, calibrated.
+class IdSweep:
+    """One camera's sweep of a board with corner IDs, calibrated.
 
     Attributes
     ----------
@@ -47,7 +48,7 @@ class CharucoSweep:
     missing: tuple[str, ...]
 
 
-def detect_charuco_folder(folder: str | os.PathLike[str], board: CharucoBoard
+def detect_id_folder(folder: str | os.PathLike[str], board: IdBoard
                           ) -> tuple[tuple[int, int], dict[str, CharucoView], list[str]]:
     """The board's corners in every image of ``folder``: the image size (w, h), the views with at least
     :data:`MIN_SWEEP_CORNERS` corners by file name, and the names of the others.
@@ -57,7 +58,7 @@ def detect_charuco_folder(folder: str | os.PathLike[str], board: CharucoBoard
     InputError
         Mixed resolutions.
     """
-    detector = CharucoCornerDetector(board)
+    detector = corner_detector(board)
     size: tuple[int, int] | None = None
     views: dict[str, CharucoView] = {}
     missing: list[str] = []
@@ -77,9 +78,9 @@ def detect_charuco_folder(folder: str | os.PathLike[str], board: CharucoBoard
     return size, views, missing
 
 
-def calibrate_charuco_folder(folder: str | os.PathLike[str], board: CharucoBoard, *, camera: str,
-                             estimate_k3: bool = False) -> CharucoSweep:
-    """Calibrate ``camera``'s lens from its ChArUco images in ``folder`` (module docstring).
+def calibrate_id_folder(folder: str | os.PathLike[str], board: IdBoard, *, camera: str,
+                             estimate_k3: bool = False) -> IdSweep:
+    """Calibrate ``camera``'s lens from its images of ``board`` in ``folder`` (module docstring).
 
     Raises
     ------
@@ -87,7 +88,7 @@ def calibrate_charuco_folder(folder: str | os.PathLike[str], board: CharucoBoard
         Fewer than :data:`gtrig.calib.intrinsics.MIN_VIEWS` images with the board.
     """
     d = Path(folder)
-    size, views, missing = detect_charuco_folder(d, board)
+    size, views, missing = detect_id_folder(d, board)
     if len(views) < MIN_VIEWS:
         raise InputError(f"{d}: too few views: the {board.spec()} was found in {len(views)} of "
                          f"{len(views) + len(missing)} image(s), need {MIN_VIEWS}")
@@ -101,17 +102,17 @@ def calibrate_charuco_folder(folder: str | os.PathLike[str], board: CharucoBoard
                         + (" ..." if len(missing) > 5 else ""))
         log.warning(warnings[-1])
     lens = fit.camera
-    extra = dict(lens.extra) | {"warnings": warnings, "board": {"charuco": board.spec()}}
+    extra = dict(lens.extra) | {"warnings": warnings, "board": board.spec()}
     cam = CameraIntrinsics(lens.image_size, lens.camera_matrix, lens.dist_coeffs, lens.rms_px, extra)
     sweep = tuple(SweepView(camera, n, views[n].corners_px, T, P[views[n].ids])
                   for n, T in zip(fit.names, fit.T_cam_board, strict=True))
-    log.info("camera %s: lens from %d ChArUco views, RMS %.3f px", camera, len(sweep), lens.rms_px)
-    return CharucoSweep(cam, sweep, fit, tuple(missing))
+    log.info("camera %s: lens from %d views of the %s, RMS %.3f px", camera, len(sweep), board.spec(), lens.rms_px)
+    return IdSweep(cam, sweep, fit, tuple(missing))
 
 
-def load_charuco_intrinsics(source: str | os.PathLike[str], cameras: list[str], board: CharucoBoard, *,
+def load_id_intrinsics(source: str | os.PathLike[str], cameras: list[str], board: IdBoard, *,
                             estimate_k3: bool = False) -> tuple[dict[str, CameraIntrinsics], list[SweepView]]:
-    """Intrinsics per camera from ``source``: ``<cam>.yaml`` files, or ``<cam>/`` folders of ChArUco images
+    """Intrinsics per camera from ``source``: ``<cam>.yaml`` files, or ``<cam>/`` folders of images of ``board``
     calibrated here; with the calibrated cameras' sweep views. Cameras with neither are left out.
 
     Raises
@@ -129,7 +130,7 @@ def load_charuco_intrinsics(source: str | os.PathLike[str], cameras: list[str], 
         if f.is_file():
             lenses[c] = read_cam_yaml(f)
         elif (root / c).is_dir():
-            sweep = calibrate_charuco_folder(root / c, board, camera=c, estimate_k3=estimate_k3)
+            sweep = calibrate_id_folder(root / c, board, camera=c, estimate_k3=estimate_k3)
             lenses[c] = sweep.camera
             views += sweep.views
     if not lenses:
