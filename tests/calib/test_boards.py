@@ -1,0 +1,142 @@
+"""Board files (Kalibr's targets, gtrig's AprilGrid) and AprilGrid detection on rendered images."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from gtrig import geometry as geo
+from gtrig.calib import synth
+from gtrig.calib.aprilgrid import AprilGrid, AprilGridDetector
+from gtrig.calib.charuco import CharucoBoard, charuco_board_document
+from gtrig.calib.chessboard import Board, boards_spec_from_dict
+from gtrig.calib.id_sweep import calibrate_id_folder
+from gtrig.calib.idboards import id_board_from_dict
+from gtrig.calib.targets import read_id_board_file, read_target_file
+from gtrig.errors import FormatError, InputError
+
+from .conftest import DIST, K, SIZE
+
+KALIBR_APRILGRID = """target_type: 'aprilgrid' #gridtype
+tagCols: 5               #number of apriltags
+tagRows: 4               #number of apriltags
+tagSize: 0.03            #size of apriltag, edge to edge [m]
+tagSpacing: 0.3          #ratio of space between tags to tagSize
+"""
+
+KALIBR_CHECKERBOARD = """target_type: 'checkerboard' #gridtype
+targetCols: 6               #number of internal chessboard corners
+targetRows: 7               #number of internal chessboard corners
+rowSpacingMeters: 0.06      #size of one chessboard square [m]
+colSpacingMeters: 0.06      #size of one chessboard square [m]
+"""
+
+
+def test_kalibr_targets_are_read_as_they_are(tmp_path: Path) -> None:
+    (tmp_path / "april.yaml").write_text(KALIBR_APRILGRID)
+    (tmp_path / "checker.yaml").write_text(KALIBR_CHECKERBOARD)
+    assert read_target_file(tmp_path / "april.yaml") == AprilGrid(5, 4, 0.03, 0.3)
+    assert read_target_file(tmp_path / "checker.yaml") == Board(6, 7, 0.06)
+    with pytest.raises(InputError, match="chessboard"):
+        read_id_board_file(tmp_path / "checker.yaml")
+    (tmp_path / "rect.yaml").write_text(KALIBR_CHECKERBOARD.replace("colSpacingMeters: 0.06", "colSpacingMeters: 0.05"))
+    with pytest.raises(FormatError, match="differ"):
+        read_target_file(tmp_path / "rect.yaml")
+    (tmp_path / "bad.yaml").write_text(KALIBR_APRILGRID.replace("tagCols: 5", "tagCols: five"))
+    with pytest.raises(FormatError, match="tagCols"):
+        read_target_file(tmp_path / "bad.yaml")
+
+
+def test_aprilgrid_points_are_kalibrs_turned_half_a_turn_about_x() -> None:
+    g = AprilGrid(5, 4, 0.03, 0.3)
+    P = g.object_points()
+    assert P.shape == (80, 3)
+    # Kalibr's point k: x from the column, y up from the row, of a 10 x 8 grid of tag corners
+    C, R = np.arange(80) % 10, np.arange(80) // 10
+    x = (C // 2) * 0.039 + (C % 2) * 0.03
+    y = (R // 2) * 0.039 + (R % 2) * 0.03
+    np.testing.assert_allclose(P, np.column_stack([x, -y, np.zeros(80)]), atol=1e-12)
+    # tag 6 (second row, second column): top-left, top-right, bottom-right, bottom-left as printed
+    ids = g.tag_corner_ids(6)
+    np.testing.assert_allclose(P[ids, :2], [[0.039, -0.069], [0.069, -0.069], [0.069, -0.039], [0.039, -0.039]],
+                               atol=1e-12)
+    assert id_board_from_dict({"type": "aprilgrid", "tags": [5, 4], "tag_m": 0.03, "spacing": 0.3}) == g
+
+
+def test_sweep_board_of_boards_yaml_round_trips() -> None:
+    b = CharucoBoard(10, 6, 0.1, 0.075, "DICT_4X4_50")
+    doc = {"inner_corners": [9, 5], "square_m": 0.1, "T_board1_board2": np.eye(4).tolist(),
+           "sweep_board": charuco_board_document(b)}
+    assert boards_spec_from_dict(doc).sweep_board == b
+    assert boards_spec_from_dict({**doc, "sweep_board": None}).sweep_board is None
+
+
+GRID = AprilGrid(5, 4, 0.03, 0.3)
+
+
+def _texture(g: AprilGrid) -> synth.Texture:
+    x0, y0, x1, y1 = g.extent_m()
+    margin = 0.6 * g.tag_m
+
+    def tex(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        v = np.where(g.black(x, y), 25.0, 225.0)
+        sheet = (x > x0 - margin) & (x < x1 + margin) & (y > y0 - margin) & (y < y1 + margin)
+        return np.where(sheet, v, np.nan)
+
+    return tex
+
+
+def _views(n: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """Poses ``T_cam_board`` with the whole grid in view, tilted up to 40 deg, turned any way."""
+    P = GRID.object_points()
+    out: list[np.ndarray] = []
+    while len(out) < n:
+        R = geo.T_from_xyz_rpy([0, 0, 0], np.radians([*rng.uniform(-40, 40, 2), rng.uniform(-180, 180)]))[:3, :3]
+        c = np.linalg.inv(K) @ [rng.uniform(0.3, 0.7) * SIZE[0], rng.uniform(0.3, 0.7) * SIZE[1], 1.0]
+        T = geo.make_T(R, c * rng.uniform(0.32, 0.45) - R @ P.mean(axis=0))
+        if synth.in_image(geo.project_points(geo.transform_points(T, P), K, DIST), SIZE, 25):
+            out.append(T)
+    return out
+
+
+@pytest.fixture(scope="module")
+def aprilgrid_sweep(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[np.ndarray]]:
+    """Eight rendered views of a 5 x 4 AprilGrid of 30 mm tags, with their true poses."""
+    d = tmp_path_factory.mktemp("aprilgrid")
+    rng = np.random.default_rng(3)
+    poses = _views(8, rng)
+    for i, T in enumerate(poses):
+        img = synth.render(K, DIST, SIZE, np.eye(4), [synth.Plane(T, _texture(GRID))], supersample=2, rng=rng)
+        cv2.imwrite(str(d / f"{i:03d}.png"), img)
+    return d, poses
+
+
+def test_aprilgrid_corners_are_found_where_the_renderer_put_them(aprilgrid_sweep) -> None:
+    d, poses = aprilgrid_sweep
+    det = AprilGridDetector(GRID)
+    P = GRID.object_points()
+    errs = []
+    for i, T in enumerate(poses):
+        v = det.detect(cv2.imread(str(d / f"{i:03d}.png"), cv2.IMREAD_GRAYSCALE))
+        assert v is not None and len(v.ids) >= 0.9 * GRID.n_corners
+        errs.append(np.linalg.norm(v.corners_px - geo.project_points(geo.transform_points(T, P[v.ids]), K, DIST),
+                                   axis=1))
+    e = np.concatenate(errs)
+    assert np.mean(e) < 0.1 and np.max(e) < 0.5, (np.mean(e), np.max(e))
+
+
+def test_aprilgrid_sweep_calibrates_the_lens(aprilgrid_sweep) -> None:
+    d, poses = aprilgrid_sweep
+    sweep = calibrate_id_folder(d, GRID, camera="cam0")
+    Kc = sweep.camera.camera_matrix
+    assert abs(Kc[0, 0] - K[0, 0]) < 2.0 and abs(Kc[1, 1] - K[1, 1]) < 2.0
+    assert abs(Kc[0, 2] - K[0, 2]) < 2.0 and abs(Kc[1, 2] - K[1, 2]) < 2.0
+    assert sweep.camera.rms_px < 0.15
+    assert len(sweep.views) == len(poses) and sweep.views[0].object_points is not None
+    # the views' poses are the rendered ones
+    dt = [np.linalg.norm(sv.T_cam_board[:3, 3] - T[:3, 3]) for sv, T in zip(sweep.views, poses, strict=True)
+          if sv.T_cam_board is not None]
+    assert max(dt) < 0.003
