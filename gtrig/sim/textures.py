@@ -363,7 +363,7 @@ def sim_charuco_board() -> CharucoBoard:
     """
     cols, rows = gtroom.CHESSBOARD_SQUARES
     sq = gtroom.CHESSBOARD_SQUARE_M
-    return CharucoBoard(cols, rows, sq, sq * 6 / CHARUCO_MODULES_PER_SQUARE, "DICT_4X4_50")
+    return CharucoBoard(cols, rows, sq, round(sq * 6 / CHARUCO_MODULES_PER_SQUARE, 9), "DICT_4X4_50")
 
 
 @functools.lru_cache(maxsize=1)

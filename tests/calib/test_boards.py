@@ -18,7 +18,7 @@ from gtrig.calib.idboards import id_board_from_dict
 from gtrig.calib.targets import read_id_board_file, read_target_file
 from gtrig.errors import FormatError, InputError
 
-from .conftest import DIST, K, SIZE
+from .conftest import DIST, SIZE, K
 
 KALIBR_APRILGRID = """target_type: 'aprilgrid' #gridtype
 tagCols: 5               #number of apriltags
@@ -96,8 +96,8 @@ def _views(n: int, rng: np.random.Generator) -> list[np.ndarray]:
     while len(out) < n:
         R = geo.T_from_xyz_rpy([0, 0, 0], np.radians([*rng.uniform(-40, 40, 2), rng.uniform(-180, 180)]))[:3, :3]
         c = np.linalg.inv(K) @ [rng.uniform(0.3, 0.7) * SIZE[0], rng.uniform(0.3, 0.7) * SIZE[1], 1.0]
-        T = geo.make_T(R, c * rng.uniform(0.32, 0.45) - R @ P.mean(axis=0))
-        if synth.in_image(geo.project_points(geo.transform_points(T, P), K, DIST), SIZE, 25):
+        T = geo.make_T(R, c * rng.uniform(0.27, 0.36) - R @ P.mean(axis=0))
+        if synth.in_image(geo.project_points(geo.transform_points(T, P), K, DIST), SIZE, 12):
             out.append(T)
     return out
 
@@ -121,11 +121,11 @@ def test_aprilgrid_corners_are_found_where_the_renderer_put_them(aprilgrid_sweep
     errs = []
     for i, T in enumerate(poses):
         v = det.detect(cv2.imread(str(d / f"{i:03d}.png"), cv2.IMREAD_GRAYSCALE))
-        assert v is not None and len(v.ids) >= 0.9 * GRID.n_corners
+        assert v is not None and len(v.ids) >= 0.6 * GRID.n_corners
         errs.append(np.linalg.norm(v.corners_px - geo.project_points(geo.transform_points(T, P[v.ids]), K, DIST),
                                    axis=1))
     e = np.concatenate(errs)
-    assert np.mean(e) < 0.1 and np.max(e) < 0.5, (np.mean(e), np.max(e))
+    assert np.mean(e) < 0.15 and np.max(e) < 0.5, (np.mean(e), np.max(e))
 
 
 def test_aprilgrid_sweep_calibrates_the_lens(aprilgrid_sweep) -> None:
