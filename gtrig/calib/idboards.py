@@ -25,6 +25,8 @@ from gtrig.calib.aprilgrid import AprilGrid, AprilGridDetector
 from gtrig.calib.charuco import CharucoBoard, CharucoCornerDetector, board_from_dict
 from gtrig.errors import FormatError
 
+__all__ = ["AprilGrid", "CharucoBoard", "IdBoard", "aprilgrid_from_kalibr", "corner_detector", "id_board_from_dict"]
+
 #: a board whose corners carry IDs
 IdBoard = CharucoBoard | AprilGrid
 

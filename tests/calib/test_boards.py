@@ -140,3 +140,23 @@ def test_aprilgrid_sweep_calibrates_the_lens(aprilgrid_sweep) -> None:
     dt = [np.linalg.norm(sv.T_cam_board[:3, 3] - T[:3, 3]) for sv, T in zip(sweep.views, poses, strict=True)
           if sv.T_cam_board is not None]
     assert max(dt) < 0.003
+
+
+def test_calib_intrinsics_reads_a_kalibr_aprilgrid_file(aprilgrid_sweep, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from gtrig.cli.main import app
+    from gtrig.io.camfile import read_cam_yaml
+
+    d, _poses = aprilgrid_sweep
+    (tmp_path / "april.yaml").write_text(KALIBR_APRILGRID)
+    r = CliRunner().invoke(app, ["calib", "intrinsics", "--images", str(d), "--board", str(tmp_path / "april.yaml"),
+                                 "--out", str(tmp_path / "cam.yaml")])
+    assert r.exit_code == 0, r.output
+    cam = read_cam_yaml(tmp_path / "cam.yaml")
+    assert abs(cam.camera_matrix[0, 0] - K[0, 0]) < 2.0 and (tmp_path / "cam_coverage.png").is_file()
+    (tmp_path / "circles.yaml").write_text("target_type: 'circlegrid'\ntargetCols: 6\n")
+    r = CliRunner().invoke(app, ["calib", "intrinsics", "--images", str(d), "--board", str(tmp_path / "circles.yaml"),
+                                 "--out", str(tmp_path / "cam2.yaml")])
+    assert r.exit_code != 0 and "circlegrid" in r.output and "Traceback" not in r.output
+    assert not (tmp_path / "cam2.yaml").exists()
