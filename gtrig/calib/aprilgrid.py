@@ -5,7 +5,7 @@ Layout
 ``tag_cols`` x ``tag_rows`` tag36h11 tags of side ``tag_m`` (the black square, edge to edge), ``spacing``
 x ``tag_m`` apart, tag IDs ``0 .. cols * rows - 1`` row by row from the bottom-left tag as printed. Each
 tag has a 2-module black border around its 6 x 6 data bits (10 modules across; the standard tag36h11 has
-one), and a black square of ``spacing * tag_m`` sits diagonally off each of its corners, so that every
+one), its code turned half a turn from the tag36h11 image (Kalibr's ``rotation=2``), and a black square of ``spacing * tag_m`` sits diagonally off each of its corners, so that every
 tag corner is also a chessboard-like saddle for sub-pixel refinement.
 
 Corner IDs and the board frame
@@ -98,11 +98,12 @@ class AprilGrid:
         return np.column_stack([x, -y_up, np.zeros(k.size)]).astype(np.float64)
 
     def tag_corner_ids(self, tag_id: int) -> np.ndarray:
-        """The corner IDs (4,) of a tag in OpenCV's marker order: top-left, top-right, bottom-right,
-        bottom-left as printed."""
+        """The corner IDs (4,) of a tag in OpenCV's marker order (its code image's top-left, top-right,
+        bottom-right, bottom-left): Kalibr prints the code turned half a turn, so these are the printed
+        tag's bottom-right, bottom-left, top-left and top-right corners."""
         w = 2 * self.tag_cols
         base = (tag_id // self.tag_cols) * 2 * w + (tag_id % self.tag_cols) * 2
-        return np.array([base + w, base + w + 1, base + 1, base])
+        return np.array([base + 1, base, base + w, base + w + 1])
 
     def extent_m(self) -> tuple[float, float, float, float]:
         """The printed pattern's bounds ``(x0, y0, x1, y1)`` in the board frame, corner squares included."""
@@ -125,8 +126,9 @@ class AprilGrid:
         gap_u, gap_v = u < 0, v < 0
         corner = (gap_u & gap_v) & (tc >= 0) & (tr >= 0) & (tc <= self.tag_cols) & (tr <= self.tag_rows)
         m = self.tag_m / TAG_MODULES
-        col = np.clip(np.floor(u / m), 0, TAG_MODULES - 1).astype(int)
-        row = np.clip(TAG_MODULES - 1 - np.floor(v / m), 0, TAG_MODULES - 1).astype(int)
+        # the code image turned half a turn: its row 0 at the tag's bottom, its column 0 at the tag's right
+        col = np.clip(TAG_MODULES - 1 - np.floor(u / m), 0, TAG_MODULES - 1).astype(int)
+        row = np.clip(np.floor(v / m), 0, TAG_MODULES - 1).astype(int)
         tag_id = np.clip(tr * self.tag_cols + tc, 0, self.n_tags - 1).astype(int)
         bits = tag_images(self.n_tags)[tag_id, row, col] == 0
         return (in_tag & bits) | corner

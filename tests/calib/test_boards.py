@@ -59,9 +59,10 @@ def test_aprilgrid_points_are_kalibrs_turned_half_a_turn_about_x() -> None:
     x = (C // 2) * 0.039 + (C % 2) * 0.03
     y = (R // 2) * 0.039 + (R % 2) * 0.03
     np.testing.assert_allclose(P, np.column_stack([x, -y, np.zeros(80)]), atol=1e-12)
-    # tag 6 (second row, second column): top-left, top-right, bottom-right, bottom-left as printed
+    # tag 6 (second row, second column), its code turned half a turn: bottom-right, bottom-left, top-left,
+    # top-right as printed (y up in Kalibr's frame, down in gtrig's)
     ids = g.tag_corner_ids(6)
-    np.testing.assert_allclose(P[ids, :2], [[0.039, -0.069], [0.069, -0.069], [0.069, -0.039], [0.039, -0.039]],
+    np.testing.assert_allclose(P[ids, :2], [[0.069, -0.039], [0.039, -0.039], [0.039, -0.069], [0.069, -0.069]],
                                atol=1e-12)
     assert id_board_from_dict({"type": "aprilgrid", "tags": [5, 4], "tag_m": 0.03, "spacing": 0.3}) == g
 
