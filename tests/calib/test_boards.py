@@ -161,3 +161,24 @@ def test_calib_intrinsics_reads_a_kalibr_aprilgrid_file(aprilgrid_sweep, tmp_pat
                                  "--out", str(tmp_path / "cam2.yaml")])
     assert r.exit_code != 0 and "circlegrid" in r.output and "Traceback" not in r.output
     assert not (tmp_path / "cam2.yaml").exists()
+
+
+def test_aprilgrid_of_a_real_kalibr_target_is_read_whole_and_in_order() -> None:
+    """A TUM VI calibration image (tests/data/aprilgrid/README.md): every tag corner found, and each 2 x 2
+    block of tags mapped by one homography to within the fisheye's bending (a corner assigned to the
+    wrong point of the grid is tens of pixels off)."""
+    img = cv2.imread(str(Path(__file__).parents[1] / "data" / "aprilgrid" / "tum_vi.png"), cv2.IMREAD_GRAYSCALE)
+    g = AprilGrid(6, 6, 0.088, 0.3)
+    v = AprilGridDetector(g).detect(img)
+    assert v is not None and len(v.ids) == g.n_corners
+    P = g.object_points()[:, :2]
+    rms = []
+    for tr in range(5):
+        for tc in range(5):
+            ids = np.concatenate([g.tag_corner_ids(t) for t in (6 * tr + tc, 6 * tr + tc + 1, 6 * tr + tc + 6,
+                                                                 6 * tr + tc + 7)])
+            m = np.isin(v.ids, ids)
+            H, _ = cv2.findHomography(P[v.ids[m]], v.corners_px[m], 0)
+            r = cv2.perspectiveTransform(P[v.ids[m]].reshape(-1, 1, 2), H).reshape(-1, 2) - v.corners_px[m]
+            rms.append(np.sqrt(np.mean(np.sum(r**2, axis=1))))
+    assert np.max(rms) < 1.0, np.max(rms)
