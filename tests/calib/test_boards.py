@@ -182,3 +182,20 @@ def test_aprilgrid_of_a_real_kalibr_target_is_read_whole_and_in_order() -> None:
             r = cv2.perspectiveTransform(P[v.ids[m]].reshape(-1, 1, 2), H).reshape(-1, 2) - v.corners_px[m]
             rms.append(np.sqrt(np.mean(np.sum(r**2, axis=1))))
     assert np.max(rms) < 1.0, np.max(rms)
+
+
+def test_calib_intrinsics_with_a_kalibr_checkerboard_file_matches_the_board_spec(sweep_dir, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from gtrig.cli.main import app
+
+    (tmp_path / "checker.yaml").write_text(KALIBR_CHECKERBOARD.replace("targetCols: 6", "targetCols: 9")
+                                           .replace("targetRows: 7", "targetRows: 5").replace("0.06", "0.03"))
+    outs = []
+    for k, board in enumerate((str(tmp_path / "checker.yaml"), "9x5x0.03")):
+        out = tmp_path / f"cam{k}.yaml"
+        r = CliRunner().invoke(app, ["calib", "intrinsics", "--images", str(sweep_dir), "--board", board,
+                                     "--out", str(out)])
+        assert r.exit_code == 0, r.output
+        outs.append(out.read_text())
+    assert outs[0] == outs[1]
