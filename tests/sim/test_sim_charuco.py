@@ -50,3 +50,11 @@ def test_sweep_charuco_corners_match_the_truth_as_closely_as_the_chessboards(tmp
     e = np.concatenate(err_charuco)
     assert e.mean() < 0.12 and e.max() < 0.4, (e.mean(), e.max())
     assert e.mean() < 3.0 * np.mean(err_chess)
+
+
+def test_the_sweeps_board_setting_keeps_chessboard_recordings_resumable() -> None:
+    from gtrig.sim.recording import _config_key
+
+    # the key of a recording simulated before the setting existed (seed 0, defaults)
+    assert _config_key(SimConfig(seed=0)) == "8daed225048552a4"
+    assert _config_key(SimConfig(seed=0, calib_board="charuco")) != "8daed225048552a4"
