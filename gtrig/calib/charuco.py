@@ -126,11 +126,11 @@ class CharucoBoard:
 
 @dataclass(frozen=True)
 class CharucoView:
-    """The corners of a ChArUco board seen in one image.
+    """The corners of a board with corner IDs (a ChArUco board, an AprilGrid) seen in one image.
 
     Attributes
     ----------
-    ids : (N,) corner IDs (indices into :meth:`CharucoBoard.object_points`), increasing.
+    ids : (N,) corner IDs (indices into the board's ``object_points()``), increasing.
     corners_px : (N, 2) subpixel corner positions, pixels (pixel centres at integers).
     """
 
