@@ -5,8 +5,9 @@ Layout
 ``tag_cols`` x ``tag_rows`` tag36h11 tags of side ``tag_m`` (the black square, edge to edge), ``spacing``
 x ``tag_m`` apart, tag IDs ``0 .. cols * rows - 1`` row by row from the bottom-left tag as printed. Each
 tag has a 2-module black border around its 6 x 6 data bits (10 modules across; the standard tag36h11 has
-one), its code turned half a turn from the tag36h11 image (Kalibr's ``rotation=2``), and a black square of ``spacing * tag_m`` sits diagonally off each of its corners, so that every
-tag corner is also a chessboard-like saddle for sub-pixel refinement.
+one), its code is turned half a turn from the tag36h11 image (Kalibr's ``rotation=2``), and a black
+square of ``spacing * tag_m`` sits diagonally off each of its corners, so that every tag corner is also a
+chessboard-like saddle for sub-pixel refinement.
 
 Corner IDs and the board frame
 ------------------------------
