@@ -220,18 +220,22 @@ def charuco_board_document(board: CharucoBoard) -> dict[str, Any]:
             "legacy_pattern": board.legacy_pattern}
 
 
-def read_board_file(path: str | os.PathLike[str]) -> CharucoBoard:
-    """Read a ChArUco board file: ``.toml`` (caliscope's ``charuco.toml`` or gtrig's) or YAML."""
+def load_board_document(path: str | os.PathLike[str]) -> Any:
+    """The parsed document of a board file: ``.toml`` as TOML, anything else as YAML; one-line errors."""
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{p}: no such board file")
     if p.suffix.lower() == ".toml":
         try:
-            data: Any = tomllib.loads(p.read_text(encoding="utf-8"))
+            return tomllib.loads(p.read_text(encoding="utf-8"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
             raise FormatError(f"{p}: not a TOML file ({e})") from None
-    else:
-        data = load_yaml(p)
-    board = board_from_dict(data, str(p))
+    return load_yaml(p)
+
+
+def read_board_file(path: str | os.PathLike[str]) -> CharucoBoard:
+    """Read a ChArUco board file: ``.toml`` (caliscope's ``charuco.toml`` or gtrig's) or YAML."""
+    p = Path(path)
+    board = board_from_dict(load_board_document(p), str(p))
     log.info("%s: %s", p, board.spec())
     return board

@@ -19,14 +19,13 @@ from __future__ import annotations
 
 import logging
 import os
-import tomllib
 from pathlib import Path
 from typing import Any
 
+from gtrig.calib.charuco import load_board_document
 from gtrig.calib.chessboard import Board
 from gtrig.calib.idboards import IdBoard, id_board_from_dict
 from gtrig.errors import FormatError, InputError
-from gtrig.io.yamlfile import load_yaml
 
 log = logging.getLogger(__name__)
 
@@ -75,16 +74,7 @@ def target_from_dict(data: Any, source: str = "<board>") -> Target:
 def read_target_file(path: str | os.PathLike[str]) -> Target:
     """Read a board file: ``.toml`` (caliscope's ``charuco.toml`` or gtrig's) or YAML (gtrig's, Kalibr's)."""
     p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{p}: no such board file")
-    if p.suffix.lower() == ".toml":
-        try:
-            data: Any = tomllib.loads(p.read_text(encoding="utf-8"))
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-            raise FormatError(f"{p}: not a TOML file ({e})") from None
-    else:
-        data = load_yaml(p)
-    board = target_from_dict(data, str(p))
+    board = target_from_dict(load_board_document(p), str(p))
     log.info("%s: %s", p, board.spec())
     return board
 
