@@ -345,15 +345,20 @@ def video(
     ),
 ) -> None:
     """Calibrate fixed cameras from videos of a hand-held ChArUco board: lenses, then relative poses."""
-    from gtrig.calib.charuco import read_board_file
+    from gtrig.calib.charuco import CharucoBoard
+    from gtrig.calib.targets import read_id_board_file
     from gtrig.calib.video_calib import calibrate_from_videos, write_video_calibration
     from gtrig.cli import checks
+    from gtrig.errors import InputError
 
     checks.input_folder("--videos", videos)
     checks.output_folder("--out", out)
     checks.not_inside("--out", out, videos, "the videos' folder")
     checks.count("--step", step, lo=1, hi=1000)
-    b = read_board_file(board)
+    b = read_id_board_file(board)
+    if not isinstance(b, CharucoBoard):
+        raise InputError(f"--board {board}: {b.spec()}: gtrig calib video takes ChArUco boards (an AprilGrid's "
+                         "lenses: gtrig calib intrinsics --board)")
     given = _given_lenses(lenses)
     cal = calibrate_from_videos(videos, b, step=step, lenses=given, reference=reference, estimate_k3=k3,
                                 mirrored=mirrored)
