@@ -126,11 +126,11 @@ class CharucoBoard:
 
 @dataclass(frozen=True)
 class CharucoView:
-    """The corners of a ChArUco board seen in one image.
+    """The corners of a board with corner IDs (a ChArUco board, an AprilGrid) seen in one image.
 
     Attributes
     ----------
-    ids : (N,) corner IDs (indices into :meth:`CharucoBoard.object_points`), increasing.
+    ids : (N,) corner IDs (indices into the board's ``object_points()``), increasing.
     corners_px : (N, 2) subpixel corner positions, pixels (pixel centres at integers).
     """
 
@@ -213,18 +213,29 @@ def board_from_dict(data: Any, source: str = "<board>") -> CharucoBoard:
     return _board_from_gtrig(data, source)
 
 
-def read_board_file(path: str | os.PathLike[str]) -> CharucoBoard:
-    """Read a ChArUco board file: ``.toml`` (caliscope's ``charuco.toml`` or gtrig's) or YAML."""
+def charuco_board_document(board: CharucoBoard) -> dict[str, Any]:
+    """``board`` as gtrig's board document (module docstring); :func:`board_from_dict` reads it back."""
+    return {"type": "charuco", "squares": [board.squares_x, board.squares_y], "square_m": board.square_m,
+            "marker_m": board.marker_m, "dictionary": board.dictionary, "inverted": board.inverted,
+            "legacy_pattern": board.legacy_pattern}
+
+
+def load_board_document(path: str | os.PathLike[str]) -> Any:
+    """The parsed document of a board file: ``.toml`` as TOML, anything else as YAML; one-line errors."""
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{p}: no such board file")
     if p.suffix.lower() == ".toml":
         try:
-            data: Any = tomllib.loads(p.read_text(encoding="utf-8"))
+            return tomllib.loads(p.read_text(encoding="utf-8"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
             raise FormatError(f"{p}: not a TOML file ({e})") from None
-    else:
-        data = load_yaml(p)
-    board = board_from_dict(data, str(p))
+    return load_yaml(p)
+
+
+def read_board_file(path: str | os.PathLike[str]) -> CharucoBoard:
+    """Read a ChArUco board file: ``.toml`` (caliscope's ``charuco.toml`` or gtrig's) or YAML."""
+    p = Path(path)
+    board = board_from_dict(load_board_document(p), str(p))
     log.info("%s: %s", p, board.spec())
     return board

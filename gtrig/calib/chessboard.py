@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 
 from gtrig import geometry as geo
+from gtrig.calib.idboards import IdBoard, id_board_from_dict
 from gtrig.errors import FormatError, InputError
 from gtrig.io.yamlfile import load_yaml
 
@@ -303,12 +304,16 @@ class BoardsSpec:
         Both boards of the double board and the world board share this geometry.
     T_board1_board2 : (4, 4) nominal pose of board 2 in board 1's frame (metres).
     T_world_board : (4, 4) pose of the world-anchoring board in the world, or None.
+    sweep_board : the board of the intrinsic sweeps when it is a ChArUco board or an AprilGrid
+        (``sweep_board:`` of the document, a board document of :mod:`gtrig.calib.idboards`); None: the
+        sweeps show ``board``.
     """
 
     board: Board
     T_board1_board2: np.ndarray
     T_world_board: np.ndarray | None
     source: str = "<boards>"
+    sweep_board: IdBoard | None = None
 
 
 def _pose_from_yaml(v: Any, where: str) -> np.ndarray:
@@ -353,8 +358,10 @@ def boards_spec_from_dict(data: Any, source: str = "<boards>") -> BoardsSpec:
         raise FormatError(f"{source}: T_board1_board2: missing field")
     T12 = _pose_from_yaml(data["T_board1_board2"], f"{source}: T_board1_board2")
     Twb = data.get("T_world_board")
+    sweep = data.get("sweep_board")
     return BoardsSpec(
-        board, T12, None if Twb is None else _pose_from_yaml(Twb, f"{source}: T_world_board"), source
+        board, T12, None if Twb is None else _pose_from_yaml(Twb, f"{source}: T_world_board"), source,
+        None if sweep is None else id_board_from_dict(sweep, f"{source}: sweep_board"),
     )
 
 
@@ -366,6 +373,7 @@ def read_boards_yaml(path: str | os.PathLike[str]) -> BoardsSpec:
     origin: corner               # optional: corner (first inner corner, default) or centre
     T_board1_board2: {xyz: [1.5, 0, 0], quat_xyzw: [0, 0, 0, 1]}
     T_world_board: {xyz: [...], rpy_deg: [180, 0, 0]}
+    sweep_board: {type: charuco, squares: [10, 6], ...}  # optional: the sweeps' ChArUco board or AprilGrid
     """
     p = Path(path)
     return boards_spec_from_dict(load_yaml(p), str(p))

@@ -92,12 +92,18 @@ class WorldView:
 @dataclass(frozen=True)
 class SweepView:
     """One view of a camera's intrinsic sweep: corners (N, 2) in pixels and, if known, the board's pose
-    ``T_cam_board`` (4, 4) from the single-camera calibration (initial value; PnP when None)."""
+    ``T_cam_board`` (4, 4) from the single-camera calibration (initial value; PnP when None).
+
+    ``object_points`` (N, 3): the corners in the sweep board's frame, metres, when the sweep shows
+    another board than the network's (a ChArUco board's partial corner sets; ``T_cam_board`` is then
+    required); None: the network's chessboard, all its corners in order.
+    """
 
     camera: str
     name: str
     corners: np.ndarray
     T_cam_board: np.ndarray | None = None
+    object_points: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -718,13 +724,18 @@ class _Bundle:
         cam_i, kind_i, brd_i, use12, uv = [], [], [], [], []
         self.obs_key: list[str] = []
 
-        def add(cam: str, kind: int, b: int, u12: bool, corners: np.ndarray, key: str) -> None:
-            cam_i.append(np.full(len(P), self.ci_of[cam]))
-            kind_i.append(np.full(len(P), kind))
-            brd_i.append(np.full(len(P), b))
-            use12.append(np.full(len(P), u12))
+        X: list[np.ndarray] = []
+
+        def add(cam: str, kind: int, b: int, u12: bool, corners: np.ndarray, key: str,
+                P_view: np.ndarray = P) -> None:
+            n = len(P_view)
+            cam_i.append(np.full(n, self.ci_of[cam]))
+            kind_i.append(np.full(n, kind))
+            brd_i.append(np.full(n, b))
+            use12.append(np.full(n, u12))
             uv.append(np.asarray(corners, dtype=float).reshape(-1, 2))
-            self.obs_key.extend([key] * len(P))
+            X.append(np.asarray(P_view, dtype=float).reshape(-1, 3))
+            self.obs_key.extend([key] * n)
 
         for k, wv in enumerate(world_views):
             add(wv.camera, 0, k, False, wv.corners, f"world:{wv.camera}")
@@ -732,13 +743,14 @@ class _Bundle:
             add(v.cam_a, 1, b, False, v.corners_a, f"pair:{v.pair}")
             add(v.cam_b, 1, b, True, v.corners_b, f"pair:{v.pair}")
         for s, sv in enumerate(self.sweeps):
-            add(sv.camera, 2, s, False, sv.corners, f"sweep:{sv.camera}")
+            add(sv.camera, 2, s, False, sv.corners, f"sweep:{sv.camera}",
+                P if sv.object_points is None else sv.object_points)
         self.cam_a = np.concatenate(cam_i)
         kind_a = np.concatenate(kind_i)
         self.brd_a = np.concatenate(brd_i)
         self.u12_a = np.concatenate(use12)
         self.uv_a = np.concatenate(uv)
-        self.X_a = np.tile(P, (len(cam_i), 1))
+        self.X_a = np.concatenate(X)
         self.m_world, self.m_pair, self.m_sw = kind_a == 0, kind_a == 1, kind_a == 2
         self.Rf = np.array([wv.T_world_board[:3, :3] for wv in world_views]).reshape(-1, 3, 3)
         self.tf = np.array([wv.T_world_board[:3, 3] for wv in world_views]).reshape(-1, 3)

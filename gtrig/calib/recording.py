@@ -19,6 +19,7 @@ import yaml
 
 from gtrig import geometry as geo
 from gtrig.calib.chessboard import Board, BoardsSpec, detect_corners, list_images, read_boards_yaml, read_grey
+from gtrig.calib.id_sweep import load_id_intrinsics
 from gtrig.calib.intrinsics import IntrinsicsResult, calibrate_intrinsics
 from gtrig.calib.network import (
     NetworkProblem,
@@ -420,7 +421,14 @@ def calibrate_recording(
     rig = load_rig(rec / "rig.yaml")
     spec: BoardsSpec = read_boards_yaml(rec / "calib" / "boards.yaml")
     names = [c.name for c in rig.cameras]
-    intr = load_intrinsics(rec / "calib" / "intrinsics", names, spec.board, estimate_k3=estimate_k3)
+    intr: dict[str, CameraIntrinsics | IntrinsicsResult]
+    if spec.sweep_board is None:
+        intr = load_intrinsics(rec / "calib" / "intrinsics", names, spec.board, estimate_k3=estimate_k3)
+        sweeps = sweep_views(intr)
+    else:  # the sweeps show a board with corner IDs
+        lenses, sweeps = load_id_intrinsics(rec / "calib" / "intrinsics", names, spec.sweep_board,
+                                           estimate_k3=estimate_k3)
+        intr = dict(lenses)
     for c in rig.cameras:
         if c.name not in intr:
             log.warning("camera %s: no intrinsic sweep, keeping the rig's intrinsics", c.name)
@@ -437,7 +445,7 @@ def calibrate_recording(
         {c.name: c.T_world_cam.matrix() for c in rig.cameras},
         pairs,
         world,
-        sweep_views(intr),
+        sweeps,
     )
     net = calibrate_network(prob, estimate_k3=estimate_k3)
     rig_cal = calibrated_rig(rig, intr, net)

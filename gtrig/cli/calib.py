@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from gtrig.cli.common import console, err_console, handle_errors, styled
 
+if TYPE_CHECKING:
+    from gtrig.calib.idboards import IdBoard
+
 app = typer.Typer(help="Camera calibration: intrinsics, the camera network, checks.", no_args_is_help=True)
 
-BOARD_HELP = "Chessboard as COLSxROWSxSQUARE: inner corners and square side in metres, e.g. 9x5x0.100."
+BOARD_HELP = ("Chessboard as COLSxROWSxSQUARE (inner corners, square side in metres, e.g. 9x5x0.100), or a board "
+              "file: Kalibr's checkerboard or aprilgrid target YAML, a ChArUco board (gtrig's or caliscope's).")
 
 
 @app.command("intrinsics")
@@ -24,16 +29,21 @@ def intrinsics(
     k3: bool = typer.Option(False, "--k3", help="Also estimate the 6th-order radial term k3."),
     figure: Path = typer.Option(None, "--figure", help="Coverage figure (PNG); default: next to --out."),
 ) -> None:
-    """Calibrate one camera from chessboard images; write cam.yaml and a coverage figure."""
-    from gtrig.calib.chessboard import parse_board
+    """Calibrate one camera from board images (chessboard, ChArUco, AprilGrid); write cam.yaml and a
+    coverage figure."""
+    from gtrig.calib.chessboard import Board, parse_board
     from gtrig.calib.intrinsics import calibrate_intrinsics
     from gtrig.calib.plots import plot_coverage
+    from gtrig.calib.targets import read_target_file
     from gtrig.cli import checks
     from gtrig.io.camfile import write_cam_yaml
 
-    b = parse_board(board)
+    b = read_target_file(board) if Path(board).suffix.lower() in (".yaml", ".yml", ".toml") else parse_board(board)
     checks.input_folder("--images", images)
     checks.outputs([], [out, figure])
+    if not isinstance(b, Board):
+        _id_board_intrinsics(images, b, out, figure, k3)
+        return
     res = calibrate_intrinsics(images, b, estimate_k3=k3)
     write_cam_yaml(out, res.camera)
     fig = figure or out.with_name(out.stem + "_coverage.png")
@@ -55,6 +65,29 @@ def intrinsics(
         f"  dist {', '.join(f'{v:.5f}' for v in d)}; coverage {100 * res.coverage:.0f} %; figure {fig}"
     )
     for w in res.warnings:
+        err_console.print(styled("warning:", "yellow"), w)
+
+
+def _id_board_intrinsics(images: Path, board: IdBoard, out: Path, figure: Path | None, k3: bool) -> None:
+    """``gtrig calib intrinsics`` with a ChArUco board or an AprilGrid: partial views, corners by ID."""
+    from gtrig.calib.id_sweep import calibrate_id_folder
+    from gtrig.calib.plots import plot_coverage
+    from gtrig.io.camfile import write_cam_yaml
+
+    res = calibrate_id_folder(images, board, camera=images.name, estimate_k3=k3)
+    write_cam_yaml(out, res.camera)
+    fig = figure or out.with_name(out.stem + "_coverage.png")
+    rms = dict(zip(res.fit.names, res.fit.per_view_rms_px.tolist(), strict=True))
+    plot_coverage([v.corners for v in res.views], res.camera.image_size, fig, rms, list(res.fit.names),
+                  title=f"{images.name}: {board.spec()}")
+    K, std = res.camera.camera_matrix, res.fit.std
+    console.print(styled(out, "bold"), f": {len(res.views)} views of the {board.spec()}, RMS "
+                  f"{res.camera.rms_px:.3f} px", sep="")
+    console.print(
+        f"  fx {K[0, 0]:.2f} ± {std.get('fx', 0):.2f}  fy {K[1, 1]:.2f} ± {std.get('fy', 0):.2f}  "
+        f"cx {K[0, 2]:.2f} ± {std.get('cx', 0):.2f}  cy {K[1, 2]:.2f} ± {std.get('cy', 0):.2f} px; figure {fig}"
+    )
+    for w in res.camera.extra.get("warnings", []):
         err_console.print(styled("warning:", "yellow"), w)
 
 
@@ -312,15 +345,20 @@ def video(
     ),
 ) -> None:
     """Calibrate fixed cameras from videos of a hand-held ChArUco board: lenses, then relative poses."""
-    from gtrig.calib.charuco import read_board_file
+    from gtrig.calib.charuco import CharucoBoard
+    from gtrig.calib.targets import read_id_board_file
     from gtrig.calib.video_calib import calibrate_from_videos, write_video_calibration
     from gtrig.cli import checks
+    from gtrig.errors import InputError
 
     checks.input_folder("--videos", videos)
     checks.output_folder("--out", out)
     checks.not_inside("--out", out, videos, "the videos' folder")
     checks.count("--step", step, lo=1, hi=1000)
-    b = read_board_file(board)
+    b = read_id_board_file(board)
+    if not isinstance(b, CharucoBoard):
+        raise InputError(f"--board {board}: {b.spec()}: gtrig calib video takes ChArUco boards (an AprilGrid's "
+                         "lenses: gtrig calib intrinsics --board)")
     given = _given_lenses(lenses)
     cal = calibrate_from_videos(videos, b, step=step, lenses=given, reference=reference, estimate_k3=k3,
                                 mirrored=mirrored)

@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 
 from gtrig import geometry as geo
+from gtrig.calib.charuco import charuco_board_document
 from gtrig.io.atomic import atomic_write_bytes, atomic_write_text
 from gtrig.io.frames import write_frame_index
 from gtrig.io.tum import Trajectory, write_tum
@@ -48,10 +49,12 @@ from gtrig.sim.textures import (
     board_face,
     board_object_points,
     board_outline_board,
+    charuco_face,
     floor_illumination,
     marker_corners_local,
     robot_faces,
     room_faces,
+    sim_charuco_board,
 )
 
 log = logging.getLogger(__name__)
@@ -497,10 +500,16 @@ class _StillShared:
     seed: int
 
 
-def _still_frame(sh: _StillShared, job: tuple[Camera, list[np.ndarray], str, int, int]) -> None:
-    cam_rig, boards, path, cam_index, k = job
+#: one still image: the camera, the boards' poses ``T_world_board``, the file, the camera's index, the
+#: image's serial number (its noise stream) and whether the boards are ChArUco boards (else chessboards)
+_StillJob = tuple[Camera, list[np.ndarray], str, int, int, bool]
+
+
+def _still_frame(sh: _StillShared, job: _StillJob) -> None:
+    cam_rig, boards, path, cam_index, k, charuco = job
     view = _cached_view(sh.scene, cam_rig, sh.ccfg)
-    faces = [board_face(T, view.cam, view.T_world_cam, sh.ccfg.supersample, f"board{i}")
+    make_face = charuco_face if charuco else board_face
+    faces = [make_face(T, view.cam, view.T_world_cam, sh.ccfg.supersample, f"board{i}")
              for i, T in enumerate(boards)]
     # painter's order: farther board first
     eye = view.T_world_cam[:3, 3]
@@ -520,7 +529,8 @@ def write_calibration_sets(scene: Scene, rec_dir: str | os.PathLike[str], cfg: S
     rec = Path(rec_dir)
     cams = scene.rig_true.cameras
     rng = np.random.default_rng([cfg.seed, 4242])
-    jobs: list[tuple[Camera, list[np.ndarray], str, int, int]] = []
+    jobs: list[_StillJob] = []
+    sweep_charuco = cfg.calib_board == "charuco"
     truth: dict[str, Any] = {
         "T_board1_board2": _pose_dict(scene.T_board1_board2_true),
         "T_world_board": _pose_dict(scene.T_world_board),
@@ -533,7 +543,7 @@ def write_calibration_sets(scene: Scene, rec_dir: str | os.PathLike[str], cfg: S
         entries = []
         for k, T in enumerate(poses):
             name = f"{k:06d}.png"
-            jobs.append((c, [T], str(rec / "calib" / "intrinsics" / c.name / name), ci, serial))
+            jobs.append((c, [T], str(rec / "calib" / "intrinsics" / c.name / name), ci, serial, sweep_charuco))
             serial += 1
             entries.append({"image": name, "T_cam_board": _pose_dict(geo.inv_T(Twc) @ T)})
         truth["intrinsics"][c.name] = entries
@@ -548,7 +558,7 @@ def write_calibration_sets(scene: Scene, rec_dir: str | os.PathLike[str], cfg: S
             T2 = T1 @ scene.T_board1_board2_true
             name = f"{k:06d}.png"
             for c, ci in ((ca, ia), (cb, ib)):
-                jobs.append((c, [T1, T2], str(rec / "calib" / "pairs" / pair / c.name / name), ci, serial))
+                jobs.append((c, [T1, T2], str(rec / "calib" / "pairs" / pair / c.name / name), ci, serial, False))
                 serial += 1
             entries.append({"image": name, "T_world_board1": _pose_dict(T1),
                             f"T_{ca.name}_board1": _pose_dict(geo.inv_T(Ta) @ T1),
@@ -562,7 +572,7 @@ def write_calibration_sets(scene: Scene, rec_dir: str | os.PathLike[str], cfg: S
         for k in range(cfg.n_world_board_views):
             name = f"{k:06d}.png"
             path = rec / "calib" / "world_board" / c.name / name
-            jobs.append((c, [scene.T_world_board], str(path), ci, serial))
+            jobs.append((c, [scene.T_world_board], str(path), ci, serial, False))
             serial += 1
             names.append(name)
         truth["world_board"][c.name] = {"images": names,
@@ -584,6 +594,9 @@ def write_calibration_sets(scene: Scene, rec_dir: str | os.PathLike[str], cfg: S
         "T_board1_board2": _pose_dict(scene.T_board1_board2_nominal),
         "T_world_board": _pose_dict(scene.T_world_board),
     }
+    if sweep_charuco:
+        # the intrinsic sweeps show a ChArUco board in its own frame (origin at the outer corner)
+        nominal["sweep_board"] = charuco_board_document(sim_charuco_board())
     atomic_write_text(rec / "calib" / "boards.yaml", yaml.safe_dump(nominal, sort_keys=False))
     atomic_write_text(rec / "truth" / "boards.yaml", yaml.safe_dump(truth, sort_keys=False))
     return truth

@@ -70,6 +70,9 @@ class SimConfig(_Cfg):
     n_pair_views: int = Field(default=24, ge=2)
     n_world_board_views: int = Field(default=3, ge=1)
     n_handheld_views: int = Field(default=30, ge=2)
+    calib_board: Literal["chessboard", "charuco"] = Field(
+        default="chessboard", description="the board the intrinsic sweeps show (the double board and the world "
+        "board stay chessboards); charuco: gtrig.sim.textures.sim_charuco_board, same size and poses")
     workers: int = Field(default=0, ge=0, description="processes; 0 = one per core")
     odometry_clock_offset_s: float = Field(
         default=0.0, ge=-60, le=60,

@@ -271,7 +271,9 @@ STEPS: tuple[tuple[str, Step], ...] = (
 def _config_key(cfg: SimConfig, plan: Rig | None = None, path: PlannedPath | None = None) -> str:
     # workers change speed, never output
     # the robot clock's offset joined the settings later: at its default it leaves the key unchanged
-    skip = {"workers"} | ({"odometry_clock_offset_s"} if cfg.odometry_clock_offset_s == 0 else set())
+    # so did the sweeps' board (chessboard by default)
+    skip = ({"workers"} | ({"odometry_clock_offset_s"} if cfg.odometry_clock_offset_s == 0 else set())
+            | ({"calib_board"} if cfg.calib_board == "chessboard" else set()))
     doc: dict[str, Any] = cfg.model_dump(mode="json", exclude=skip)
     # a planned rig and path are part of what is simulated (absent: the key is the built-in scene's)
     if plan is not None:

@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from gtrig import geometry as geo
+from gtrig.calib.charuco import CharucoBoard
 from gtrig.markers.families import marker_cells
 from gtrig.rig.models import Marker
 from gtrig.sim import gtroom
@@ -344,4 +345,45 @@ def board_face(T_world_board: np.ndarray, cam: PinholeCamera, T_world_cam: np.nd
                                         [(cols / 2 - 1) * sq, (rows / 2 - 1) * sq, 0.0])
     outline = geo.transform_points(T_world_board, board_outline_board())
     k = texels_for(cam, T_world_cam, outline, max(cols, rows) + 1, s)
+    return cells_face(T_face, cells, (cols * sq, rows * sq), BOARD_MARGIN_M, k, name)
+
+
+# ------------------------------------------------------------------------------------------ ChArUco
+#: modules (printed bits) per ChArUco square: a marker is 6 of them (4 x 4 bits and a black border)
+#: centred in a white square of 8, so every printed edge falls on the module grid
+CHARUCO_MODULES_PER_SQUARE = 8
+
+
+def sim_charuco_board() -> CharucoBoard:
+    """The simulator's ChArUco board: the chessboard's squares (``gtroom.CHESSBOARD_SQUARES`` of
+    ``gtroom.CHESSBOARD_SQUARE_M``) with ``DICT_4X4_50`` markers of 3/4 of a square, OpenCV's layout.
+
+    Its frame (:mod:`gtrig.calib.charuco`) has its origin at the board's outer corner: a point at
+    ``p`` in the chessboard frame of :func:`board_object_points` is at ``p + (sq, sq, 0)`` in it.
+    """
+    cols, rows = gtroom.CHESSBOARD_SQUARES
+    sq = gtroom.CHESSBOARD_SQUARE_M
+    return CharucoBoard(cols, rows, sq, round(sq * 6 / CHARUCO_MODULES_PER_SQUARE, 9), "DICT_4X4_50")
+
+
+@functools.lru_cache(maxsize=1)
+def charuco_cells() -> np.ndarray:
+    """The simulator's ChArUco board as printed modules (rows * 8, cols * 8), 1 = white, top row first."""
+    b = sim_charuco_board()
+    m = CHARUCO_MODULES_PER_SQUARE
+    img = b.opencv_board().generateImage((b.squares_x * m, b.squares_y * m), marginSize=0, borderBits=1)
+    return (np.asarray(img) > 127).astype(np.uint8)
+
+
+def charuco_face(T_world_board: np.ndarray, cam: PinholeCamera, T_world_cam: np.ndarray, s: int,
+                 name: str = "board") -> Face:
+    """The simulator's ChArUco board (:func:`sim_charuco_board`) where :func:`board_face` puts the
+    chessboard: same paper outline, same board frame (origin at the first inner corner)."""
+    cols, rows = gtroom.CHESSBOARD_SQUARES
+    sq = gtroom.CHESSBOARD_SQUARE_M
+    cells = charuco_cells()
+    T_face = T_world_board @ geo.make_T(np.diag([1.0, -1.0, -1.0]),
+                                        [(cols / 2 - 1) * sq, (rows / 2 - 1) * sq, 0.0])
+    outline = geo.transform_points(T_world_board, board_outline_board())
+    k = texels_for(cam, T_world_cam, outline, (max(cols, rows) + 1) * CHARUCO_MODULES_PER_SQUARE, s)
     return cells_face(T_face, cells, (cols * sq, rows * sq), BOARD_MARGIN_M, k, name)
