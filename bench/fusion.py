@@ -741,8 +741,11 @@ def part_recording(rec: Path, res: Path, gap_every_s: float = 20.0, gap_s: float
           f"{len(report.get('odometry_jumps_s', []))} odometry jumps found by fusion")
     print("| track | poses | NEES/dof [95 %] | max pos error (mm) |")
     print("|---|---|---|---|")
-    q, mx = _track_nees(fused, truth, fused.ok)
-    print(f"| fused (the pipeline's gt_fused) | {len(q)} | {fmt(q)} | {1e3 * mx:.2f} |", flush=True)
+    # every pose the track gives as ground truth: measured and bridged alike (a score of the OK poses
+    # alone would hide a stretch the fusion lost and bridged)
+    q, mx = _track_nees(fused, truth, fused.status != 3)
+    print(f"| fused (the pipeline's gt_fused), every pose | {len(q)} | {fmt(q)} | {1e3 * mx:.2f} |", flush=True)
+    print(f"| of which bridged (fusion's own gaps) | {int(np.sum(fused.status == 2))} | | |", flush=True)
     tracks = {"vision": read_pose_track(res / "gt_vision_run.tum", res / "gt_vision_run_cov.csv", "vision"),
               "laser": read_pose_track(res / "gt_laser.tum", res / "gt_laser_cov.csv", "laser")}
     sync = res / "sync.yaml"
