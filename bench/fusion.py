@@ -3,6 +3,7 @@ covariances, and GTSAM (Levenberg-Marquardt, Marginals) on the same factors side
 
     python bench/fusion.py [--hours 1] [--no-gtsam] [--seeds-root /work/recs]
     python bench/fusion.py --consistency [--seeds 0 1 2] [--minutes 3] [--laps 3]
+    python bench/fusion.py --recording REC --results OUT
 
 Part 1 (speed): gtrig.fusion.fuse on the full hour (fixes at their own stamps: EKF + RTS, then the batch MAP
 with marginal covariances), wall time and peak memory. Part 2 (peer): the same hour with each fix snapped to
@@ -17,12 +18,15 @@ offsets, each camera and scanner to GTvision's clock). ``--sync-mc N``: the offs
 synthetic runs of the simulator's path and odometry model (bias, scatter, coverage). ``--consistency``: only
 NEES/dof with 95 % batch-means intervals per seed and scenario on the synthetic run: fused, the bridged poses
 of 3 s gaps, and the run made of laps whose odometry jumps back at every seam (the jumps cut as fusion does,
-and fitted through as before).
+and fitted through as before). ``--recording REC --results OUT``: a pipeline run's fused track (a lapped
+recording's from bench/scale.py too) against the truth: NEES/dof with its 95 % interval, the bridged poses'
+over 3 s gaps cut every 20 s, and every camera's and scanner's clock offset against the simulated one.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import resource
 import sys
 import time
@@ -685,6 +689,97 @@ def part_consistency(seeds: list[int], minutes: float, laps: int) -> None:
                   flush=True)
 
 
+def _truth_at(truth, stamps_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001 (Trajectory)
+    """The true x, y, yaw (n, 3) at ``stamps_s`` and a mask (n,) of the stamps the truth brackets by two
+    consecutive samples at its own rate: a recording made of laps jumps back at each seam, where an
+    interpolation across the jump would be a pose the robot never had."""
+    T = truth.stamps_s
+    X = _true_xytheta(truth)
+    k = np.clip(np.searchsorted(T, stamps_s), 1, len(T) - 1)
+    step = float(np.median(np.diff(T)))
+    ok = (stamps_s >= T[0]) & (stamps_s <= T[-1]) & (T[k] - T[k - 1] <= 1.5 * step)
+    a = ((stamps_s - T[k - 1]) / (T[k] - T[k - 1]))[:, None]
+    return X[k - 1] + a * (X[k] - X[k - 1]), ok
+
+
+def _track_nees(track: PoseTrack, truth, mask: np.ndarray | None = None):  # noqa: ANN001, ANN202
+    """Per-pose NEES/dof (x, y, yaw) of ``track`` where the truth is defined (and ``mask``), and the
+    largest position error (m)."""
+    g, ok = _truth_at(truth, track.stamps_s)
+    ok &= np.ones(len(track), bool) if mask is None else mask
+    e = track.xytheta()[ok] - g[ok]
+    e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    q = np.einsum("ni,nij,nj->n", e, np.linalg.inv(track.cov_xytheta()[ok]), e) / 3
+    return q, float(np.hypot(e[:, 0], e[:, 1]).max()) if len(e) else float("nan")
+
+
+def part_recording(rec: Path, res: Path, gap_every_s: float = 20.0, gap_s: float = 3.0) -> None:
+    """A recording's pipeline results (``gtrig run``; a lapped one from bench/scale.py too) against its
+    truth: the fused track's NEES/dof with its 95 % batch-means interval, the bridged poses' over
+    ``gap_s`` gaps cut every ``gap_every_s`` from both sources (fused again as the pipeline fuses: sync's
+    offsets with their sigmas, each source's run-constant error), the odometry jumps fusion found, and
+    every camera's and scanner's clock offset to GTvision's (sync.yaml) against the simulated one."""
+    from gtrig.evaluate.gt_aware import batch_interval
+    from gtrig.fusion import fuse_tracks
+    from gtrig.io.biascov import read_bias_cov
+    from gtrig.io.odometry import read_odometry
+    from gtrig.io.offsets import read_offsets
+    from gtrig.io.posetrack import read_pose_track
+    from gtrig.io.tum import read_tum
+    from gtrig.io.yamlfile import load_yaml
+    from gtrig.pipeline.fusion import BIAS_FILES
+    from gtrig.sync.offset import offset_sigmas
+
+    def fmt(q: np.ndarray) -> str:
+        iv = batch_interval(q)
+        return f"{iv.value:.2f} [{iv.low:.2f}, {iv.high:.2f}]"
+
+    truth = read_tum(rec / "truth" / "run.tum")
+    fused = read_pose_track(res / "gt_fused.tum", res / "gt_fused_cov.csv", "fusion")
+    report = json.loads((res / "fusion_report.json").read_text(encoding="utf-8"))
+    print(f"## {rec} (results {res}): {truth.stamps_s[-1] - truth.stamps_s[0]:.0f} s, "
+          f"{len(report.get('odometry_jumps_s', []))} odometry jumps found by fusion")
+    print("| track | poses | NEES/dof [95 %] | max pos error (mm) |")
+    print("|---|---|---|---|")
+    # every pose the track gives as ground truth: measured and bridged alike (a score of the OK poses
+    # alone would hide a stretch the fusion lost and bridged)
+    q, mx = _track_nees(fused, truth, fused.status != 3)
+    print(f"| fused (the pipeline's gt_fused), every pose | {len(q)} | {fmt(q)} | {1e3 * mx:.2f} |", flush=True)
+    print(f"| of which bridged (fusion's own gaps) | {int(np.sum(fused.status == 2))} | | |", flush=True)
+    tracks = {"vision": read_pose_track(res / "gt_vision_run.tum", res / "gt_vision_run_cov.csv", "vision"),
+              "laser": read_pose_track(res / "gt_laser.tum", res / "gt_laser_cov.csv", "laser")}
+    sync = res / "sync.yaml"
+    offs = {k: v for k, v in read_offsets(sync).items() if k in tracks}
+    sig = {k: v for k, v in offset_sigmas(sync).items() if k in offs}
+    bias = {k: read_bias_cov(res / f) for k, f in BIAS_FILES.items() if (res / f).is_file()}
+    opts = FusionOptions(offsets_s=offs, offsets_sigma_s=sig, bias_cov=bias)
+    t0 = float(truth.stamps_s[0])
+    phase = {n: (tr.stamps_s - t0) % gap_every_s for n, tr in tracks.items()}
+    cut = {n: tr.select((phase[n] < 10.0) | (phase[n] > 10.0 + gap_s)) for n, tr in tracks.items()}
+    odo = read_odometry(rec / "run" / "odometry.csv")
+    gap, _ = fuse_tracks(cut, odo, opts)
+    b = gap.status == 2
+    q, mx = _track_nees(gap, truth, b)
+    print(f"| bridged poses alone, {gap_s:g} s gaps every {gap_every_s:g} s | {len(q)} | {fmt(q)} | {1e3 * mx:.2f} |",
+          flush=True)
+    doc = load_yaml(sync) or {}
+    lc = rec / "truth" / "laser_clocks.yaml"
+    scan = (((load_yaml(lc) or {}).get("run") or {}).get("clock_offsets_s") or {}) if lc.is_file() else {}
+    print("\n| sensor | offset to GTvision's (ms) | 95 % interval | truth (ms) | error (ms) |")
+    print("|---|---|---|---|---|")
+    for name, v in (doc.get("sources") or {}).items():
+        if "offset_to_vision_s" not in v:
+            continue
+        kind, sensor = name.split("/", 1)
+        true = float(scan.get(sensor, float("nan"))) if kind == "laser" else 0.0  # cameras: the GT clock
+        if v.get("verdict") != "ok":
+            print(f"| {name} | {v.get('verdict')} ({v.get('reason')}) | | {1e3 * true:+.3f} | |")
+            continue
+        o, ci = float(v["offset_to_vision_s"]), v.get("ci95_to_vision_s") or [float("nan")] * 2
+        print(f"| {name} | {1e3 * o:+.3f} | [{1e3 * ci[0]:+.2f}, {1e3 * ci[1]:+.2f}] | {1e3 * true:+.3f} | "
+              f"{1e3 * (o - true):+.3f} |")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=1.0)
@@ -701,9 +796,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--minutes", type=float, default=3.0, help="--consistency: the synthetic run's length")
     ap.add_argument("--laps", type=int, default=3, help="--consistency: laps of the lapped run")
+    ap.add_argument("--recording", type=Path, default=None,
+                    help="with --results: a recording's pipeline results against its truth (fused, bridged, offsets)")
+    ap.add_argument("--results", type=Path, default=None, help="the results folder of --recording (gtrig run)")
     a = ap.parse_args(argv)
     if a.consistency:
         part_consistency(a.seeds, a.minutes, a.laps)
+        return 0
+    if a.recording is not None:
+        if a.results is None:
+            ap.error("--recording needs --results")
+        part_recording(a.recording, a.results)
         return 0
     if a.seeds_root is not None:
         part_seeds(a.seeds_root)

@@ -26,11 +26,13 @@ Levels
     dictionary of the rig's markers; reading not counted).
 
 ``consistency``: the validation poses rendered by the test renderer at three grey-level noises and two
-    blurs, the rig stated exactly (sigmas 1e-6): NEES/dof with 95 % intervals in 6-DoF and planar, and the
-    corner variance factors the recording's residuals gave.
+    blurs, the rig stated exactly (sigmas 1e-6): NEES/dof with 95 % intervals in 6-DoF and planar, the
+    corner variance factors the recording's residuals gave, each axis's mean squared z-score and the stops
+    left with one marker view.
 
 Usage: ``python bench/vision.py [--seeds 0 1 2] [--level corners images] [--workers 2]``;
-``python bench/vision.py --level consistency --seeds 0 [--noise-grey 0.5 1.5 4] [--blur-px 0.5 1.5]``;
+``python bench/vision.py --level consistency --seeds 0 [--noise-grey 0.5 1.5 4] [--blur-px 0.5 1.5]
+[--stop-images 2]``;
 ``python bench/vision.py --level recording --recording REC --rig REC_OUT/rig.calibrated.yaml --workers 2``;
 ``python bench/vision.py --level tracking --recording REC --rig RIG --workers 2 [--sequence run]``
 """
@@ -384,8 +386,9 @@ def bench_consistency(seeds: list[int], frames: int, noises: list[float], blurs:
 
     exact = RigUncertainty(1e-6, 1e-6, 1e-6, 1e-6)
     print("\n### Consistency: test renderer, the rig stated exactly, validation poses\n")
-    print("| seed | noise (grey) | blur (px) | mode | localized | pos mean (mm) | NEES/dof [95 %] | corner factors |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| seed | noise (grey) | blur (px) | mode | localized | pos mean (mm) | NEES/dof [95 %] | corner factors "
+          "| mean z^2: x, y, z, roll, pitch, yaw | single-view stops |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for seed in seeds:
         scene = make_scene(seed)
         rig = scene.rig_true
@@ -398,17 +401,21 @@ def bench_consistency(seeds: list[int], frames: int, noises: list[float], blurs:
                         res = run_recording(Path(d), rig, "validation", planar=planar, workers=1,
                                             options=VisionOptions(planar=planar, rig_uncertainty=exact))
                         dims = list(PLANAR_INDEX) if planar else list(range(6))
-                        ne, pe = [], []
+                        ne, pe, z2, single = [], [], [], 0
                         for e, T in zip(res.estimates, Ts, strict=True):
                             if e.ok:
                                 xi = pose_error_xi(e.T_world_robot, T)
                                 ne.append(nees(xi[dims], e.cov_6x6[np.ix_(dims, dims)]) / len(dims))
                                 pe.append(float(np.linalg.norm(xi[:3])))
+                                # per axis: which directions the corner model under- or overstates
+                                z2.append(xi**2 / np.diag(e.cov_6x6))
+                                single += len(e.views) == 1
                         iv = batch_interval(np.array(ne))
                         fac = ", ".join(f"{v:.3f}" for _, v in res.corner_scale)
+                        zs = ", ".join(f"{v:.2f}" for v in np.mean(z2, axis=0))
                         print(f"| {seed} | {noise:g} | {blur:g} | {'planar' if planar else '6-DoF'} | "
                               f"{len(ne)}/{len(Ts)} | {1000 * np.mean(pe):.3f} | {iv.value:.2f} [{iv.low:.2f}, "
-                              f"{iv.high:.2f}] | {fac} |", flush=True)
+                              f"{iv.high:.2f}] | {fac} | {zs} | {single} |", flush=True)
 
 
 def main() -> None:
@@ -420,6 +427,8 @@ def main() -> None:
                     help="level consistency: the renders' grey-level noise")
     ap.add_argument("--blur-px", type=float, nargs="+", default=[0.5, 1.5],
                     help="level consistency: the renders' blur")
+    ap.add_argument("--stop-images", type=int, default=2,
+                    help="level consistency: images per camera and stop (averaged by GTvision)")
     ap.add_argument("--recording", type=Path, help="a simulated recording (level recording)")
     ap.add_argument("--rig", type=Path, help="its calibrated rig (level recording)")
     ap.add_argument("--noise-px", type=float, default=0.08)
@@ -432,7 +441,7 @@ def main() -> None:
     if "images" in a.level:
         bench_images(a.seeds[0], a.workers, a.frames)
     if "consistency" in a.level:
-        bench_consistency(a.seeds, min(a.frames, 2), a.noise_grey, a.blur_px)
+        bench_consistency(a.seeds, a.stop_images, a.noise_grey, a.blur_px)
     if "recording" in a.level:
         if a.recording is None or a.rig is None:
             ap.error("--level recording needs --recording and --rig")

@@ -39,6 +39,14 @@ class EkfResult:
     nis: np.ndarray
 
 
+#: a fix whose predicted variance exceeds its own by more than this on an axis (the first fix after an
+#: odometry jump, :data:`gtrig.fusion.process.JUMP_SIGMA`) updates the covariance in Joseph's form:
+#: the subtraction's rounding there, the prediction's variance times 1e-16, is no longer small against
+#: what is left (a lapped recording's filter lost positive definiteness 6 nodes after its 4th jump).
+#: Elsewhere (a run's start, 0.1 m against 1 mm: 1e4) the cheaper subtraction, whose outputs it keeps.
+JOSEPH_RATIO = 1.0e8
+
+
 @nb.njit(cache=True, nogil=True)
 def _mm(A, B, out, transpose_b=False):  # noqa: ANN001, ANN202
     """out = A @ B (or A @ B^T), small blocks, no allocation."""
@@ -153,6 +161,10 @@ def _apply_fix(j, d, fix_alpha, fix_kind, fix_z, fix_cov, fix_gcov, fix_lever, g
             Kg[a, b] = kab
             t += kab * nu[b]
         mu[a] += t
+    for a in range(mdim):
+        if S[a, a] > JOSEPH_RATIO * fix_cov[j, a, a]:
+            _joseph_update(Pj, Kg, Jq, al, d, mdim, fix_cov[j])
+            return
     for a in range(nj):
         for b in range(a + 1):
             t = 0.0
@@ -161,6 +173,37 @@ def _apply_fix(j, d, fix_alpha, fix_kind, fix_z, fix_cov, fix_gcov, fix_lever, g
             Pj[a, b] -= t
             if b != a:
                 Pj[b, a] -= t
+
+
+@nb.njit(cache=True, nogil=True)
+def _joseph_update(Pj, Kg, Jq, al, d, mdim, R):  # noqa: ANN001, ANN202
+    """``Pj <- (I - K H) Pj (I - K H)^T + K R K^T`` (Joseph's form) for a fix with ``H = [(1 - al) Jq, al Jq,
+    0]`` on (x_i[:3], x_{i+1}[:3], K): a sum of two positive semi-definite terms, where ``Pj - K S K^T``
+    would subtract two numbers of the prediction's size to leave one of the fix's."""
+    nj = Pj.shape[0]
+    A = np.eye(nj)
+    for a in range(nj):
+        for c in range(3):
+            t = 0.0
+            for b in range(mdim):
+                t += Kg[a, b] * Jq[b, c]
+            A[a, c] -= (1.0 - al) * t
+            A[a, d + c] -= al * t
+    AP = np.empty((nj, nj))
+    _mm(A, Pj, AP)
+    _mm(AP, A, Pj, True)
+    for a in range(nj):
+        for b in range(nj):
+            t = 0.0
+            for c in range(mdim):
+                for e in range(mdim):
+                    t += Kg[a, c] * R[c, e] * Kg[b, e]
+            Pj[a, b] += t
+    for a in range(nj):  # exactly symmetric, as the subtraction above keeps it
+        for b in range(a):
+            t = 0.5 * (Pj[a, b] + Pj[b, a])
+            Pj[a, b] = t
+            Pj[b, a] = t
 
 
 @nb.njit(cache=True, nogil=True)

@@ -317,13 +317,31 @@ def _node_stamps(t0: float, t1: float, odometry: OdometryLog | None, rate_hz: fl
 
 
 def _odometry_between(stamps: np.ndarray, odometry: OdometryLog, opts: FusionOptions,
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The odometry at the nodes (N, 3), its increments (N-1, 3) and their covariances (N-1, 3, 3), the
-    jumps cut (:func:`~gtrig.fusion.process.cut_at_jumps`)."""
+    jumps cut (:func:`~gtrig.fusion.process.cut_at_jumps`), and which increments (N-1,) are jumps."""
     odo = interpolate_odometry(odometry, stamps)
     u, qcov = odometry_increments(odo, stamps, opts.odometry)
-    u, qcov = cut_at_jumps(u, qcov, odometry_jumps(u, np.diff(stamps), opts.jumps))
-    return odo, u, qcov
+    jump = odometry_jumps(u, np.diff(stamps), opts.jumps)
+    u, qcov = cut_at_jumps(u, qcov, jump)
+    return odo, u, qcov, jump
+
+
+#: the covariance (m^2, rad^2) that makes a fix say nothing (a fix inside a jump's step)
+_NO_INFORMATION = 1.0e12
+
+
+def _fixes_across_jumps(cov: np.ndarray, node: np.ndarray, alpha: np.ndarray, jump: np.ndarray) -> np.ndarray:
+    """The fixes' covariances (M, 3, 3), those taken between the two records either side of an odometry
+    jump (``jump`` (N-1,) per step) made uninformative: which side of the jump such a fix was taken on is
+    unknown, and interpolated between the poses either side it would pull the new segment's first pose
+    to the old one's (a lapped recording's every other lap then lost all its fixes to the gate)."""
+    lost = jump[node] & (alpha > 0.0)
+    if not lost.any():
+        return cov
+    cov = cov.copy()
+    cov[lost] = _NO_INFORMATION * np.eye(3)
+    return cov
 
 
 def build_chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: OdometryLog | None, opts: FusionOptions,
@@ -335,9 +353,10 @@ def build_chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: Odometr
     N = stamps.size
     node = np.clip(np.searchsorted(stamps, fx["stamps"], "right") - 1, 0, N - 2)
     alpha = np.clip((fx["stamps"] - stamps[node]) / (stamps[node + 1] - stamps[node]), 0.0, 1.0)
-    W = _fix_whitening(fx["cov"], fx["kind"])
+    fix_cov = fx["cov"]
     if odometry is not None:
-        odo, u, qcov = _odometry_between(stamps, odometry, opts)
+        odo, u, qcov, jump = _odometry_between(stamps, odometry, opts)
+        fix_cov = _fixes_across_jumps(fix_cov, node, alpha, jump)
         if slip is not None:
             qcov = qcov * slip[:, None, None]
         proc, d = PROCESS_ODOMETRY, 3
@@ -353,6 +372,7 @@ def build_chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: Odometr
         proc_W = whitening(constant_velocity_cov(np.diff(stamps), opts.cv))
         odo_fix = np.zeros((fx["stamps"].size, 3))
         tol = (0.2, np.deg2rad(10.0))
+    W = _fix_whitening(fix_cov, fx["kind"])
     # robust anchor from the first fixes (first 10 s or 200 fixes)
     first = np.flatnonzero(fx["stamps"] <= fx["stamps"][0] + 10.0)[:200]
     if odometry is None:
@@ -370,7 +390,7 @@ def build_chain(stamps: np.ndarray, fx: dict[str, np.ndarray], odometry: Odometr
         P0[2, 2] = np.pi**2  # heading unknown: only positions seen
     chain = FactorChain(
         stamps_s=stamps, process=proc, proc_u=np.ascontiguousarray(u), proc_W=np.ascontiguousarray(proc_W),
-        fix_node=node.astype(np.int64), fix_alpha=alpha, fix_kind=fx["kind"], fix_z=fx["z"], fix_cov=fx["cov"],
+        fix_node=node.astype(np.int64), fix_alpha=alpha, fix_kind=fx["kind"], fix_z=fx["z"], fix_cov=fix_cov,
         fix_W=np.ascontiguousarray(W), fix_lever=fx["lever"], fix_source=fx["source"], fix_stamps_s=fx["stamps"],
         sources=sources, x0=X[0].copy(), W0=whitening(P0[None])[0], k0=k0,
         Wk=whitening(Pk[None])[0] if Pk.size else np.zeros((0, 0)))
@@ -537,7 +557,7 @@ def _smooth(stamps: np.ndarray, seg: dict[str, np.ndarray], odometry: OdometryLo
     covariances widened there (``slip``)."""
     if odometry is not None and slip is None and opts.slip_ratio > 0:
         keep: dict[str, np.ndarray] = {k: seg[k] for k in ("cov", "gate_cov") if k in seg}
-        _, u, qcov = _odometry_between(stamps, odometry, opts)
+        _, u, qcov, _ = _odometry_between(stamps, odometry, opts)
         W = whitening(qcov)
         f = np.ones(stamps.size - 1)
         for _ in range(SLIP_PASSES):

@@ -123,8 +123,12 @@ def odometry_jumps(u: np.ndarray, dt_s: np.ndarray, jumps: OdometryJumps) -> np.
     return (dist > jumps.max_speed_mps * dt_s + jumps.tol_m) | (turn > jumps.max_yaw_rate_radps * dt_s + jumps.tol_rad)
 
 
-#: an increment across a jump: no motion, with this standard deviation (m, rad): it ties nothing
-JUMP_SIGMA = (1.0e3, 1.0e3, 1.0e2)
+#: an increment across a jump: no motion, with this standard deviation (m, rad): it ties nothing that the
+#: fixes do not set (10 m against their millimetres: a pull of 1e-8 of the jump; a full turn in heading),
+#: and the gate still lets the first fix after any jump within the room in (4.6 sigma: 46 m). Larger
+#: sigmas leave the solvers with variances 1e12 times their fixes': at 100 m and 10 rad the filter and the
+#: batch solve of a lapped 10 minutes lost positive definiteness (bench/fusion.py --recording)
+JUMP_SIGMA = (10.0, 10.0, 2.0 * np.pi)
 
 
 def cut_at_jumps(u: np.ndarray, cov: np.ndarray, jump: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -12,6 +12,7 @@ from scipy.stats import t as student_t
 from gtrig.errors import InputError
 from gtrig.fusion.fuse import FusionOptions, fuse
 from gtrig.fusion.measurements import Fixes
+from gtrig.fusion.process import OdometryJumps
 from gtrig.sync.offset import OffsetEstimate, Verdict
 
 _NAN2 = (float("nan"), float("nan"))
@@ -47,15 +48,68 @@ REFERENCE_WINDOW_S = 600.0
 REFERENCE_OVERLAP_S = 30.0
 
 
+def jump_stamps(fixes: list[Fixes], jumps: OdometryJumps | None = None) -> np.ndarray:
+    """Stamps (s) where a source's consecutive fixes move faster than the robot can (``jumps``; position
+    fixes by their position alone): each the first fix after a jump, as a recording joined from laps or a
+    relocalised robot shows (default :class:`~gtrig.fusion.process.OdometryJumps`). Sorted, unique."""
+    jumps = OdometryJumps() if jumps is None else jumps
+    out = []
+    for f in fixes:
+        if len(f) < 2:
+            continue
+        d = np.diff(f.value, axis=0)
+        dist = np.hypot(d[:, 0], d[:, 1])
+        turn = np.abs((d[:, 2] + np.pi) % (2 * np.pi) - np.pi) if f.dim == 3 else np.zeros(dist.size)
+        dt = np.diff(f.stamps_s)
+        hit = (dist > jumps.max_speed_mps * dt + jumps.tol_m) | (turn > jumps.max_yaw_rate_radps * dt + jumps.tol_rad)
+        out.append(f.stamps_s[1:][hit])
+    return np.unique(np.concatenate(out)) if out else np.zeros(0)
+
+
 def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float = 0.5,
                     window_s: float = REFERENCE_WINDOW_S, overlap_s: float = REFERENCE_OVERLAP_S) -> Reference:
     """The fixes smoothed by the constant-velocity model (robust batch MAP, no odometry) on a ``rate_hz``
     grid, one segment per stretch without a gap over ``max_gap_s``; the fits use only times with poses of
     the reference within 50 ms on both sides, so no gap is interpolated across.
 
+    Where the fixes jump (:func:`jump_stamps`) the reference is cut: smoothed across, the constant-velocity
+    model made the robot cross the room in a few frames there, and those speeds, a thousand times the
+    robot's, outweighed every other time of the offset fits (a lapped recording's scanner offsets 2-14 ms
+    off, its cameras' intervals 25-80 ms wide). Each piece between jumps is smoothed on its own.
+
     Fixes spanning more than ``window_s`` are smoothed a window of ``window_s`` at a time (each seeing
     ``overlap_s`` of fixes beyond its ends, its own part kept), so that the memory does not grow with the
     recording's length; a shorter span is one batch, as before."""
+    cuts = jump_stamps(fixes)
+    if cuts.size == 0:
+        return _reference_between_jumps(fixes, rate_hz, max_gap_s, window_s, overlap_s)
+    edges = np.r_[-np.inf, cuts, np.inf]
+    parts = []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        # the piece's fixes: from the first fix after a jump up to, not including, the next jump's
+        sel = [f.between(a, np.nextafter(b, -np.inf)) for f in fixes]
+        if sum(len(f) for f in sel) < 3:
+            continue
+        try:
+            parts.append(_reference_between_jumps([f for f in sel if len(f)], rate_hz, max_gap_s, window_s, overlap_s))
+        except InputError:  # a few scattered fixes between two jumps: nothing to smooth
+            continue
+    return _joined(parts)
+
+
+def _joined(parts: list[Reference]) -> Reference:
+    """References of successive spans as one (yaw unwrapped over the whole)."""
+    if not parts:
+        raise InputError("fusion: no segment with at least three fixes")
+    xyt = np.concatenate([p.xytheta for p in parts])
+    xyt[:, 2] = np.unwrap(xyt[:, 2])  # each part's yaw was unwrapped from its own start
+    return Reference(np.concatenate([p.stamps_s for p in parts]), xyt, np.concatenate([p.velocity for p in parts]),
+                     np.concatenate([p.cov for p in parts]))
+
+
+def _reference_between_jumps(fixes: list[Fixes], rate_hz: float, max_gap_s: float, window_s: float,
+                             overlap_s: float) -> Reference:
+    """:func:`reference_track` of fixes without a jump: one batch, or windows of ``window_s``."""
     t0 = min(float(f.stamps_s[0]) for f in fixes if len(f))
     t1 = max(float(f.stamps_s[-1]) for f in fixes if len(f))
     if t1 - t0 <= window_s:
@@ -73,12 +127,7 @@ def reference_track(fixes: list[Fixes], rate_hz: float = 50.0, max_gap_s: float 
             continue
         keep = (ref.stamps_s >= a) & (ref.stamps_s < b)
         parts.append(Reference(ref.stamps_s[keep], ref.xytheta[keep], ref.velocity[keep], ref.cov[keep]))
-    if not parts:
-        raise InputError("fusion: no segment with at least three fixes")
-    xyt = np.concatenate([p.xytheta for p in parts])
-    xyt[:, 2] = np.unwrap(xyt[:, 2])  # each window's yaw was unwrapped from its own start
-    return Reference(np.concatenate([p.stamps_s for p in parts]), xyt, np.concatenate([p.velocity for p in parts]),
-                     np.concatenate([p.cov for p in parts]))
+    return _joined(parts)
 
 
 def _reference_part(fixes: list[Fixes], rate_hz: float, max_gap_s: float) -> Reference:

@@ -6,7 +6,7 @@ import pytest
 
 from gtrig.fusion.measurements import fixes_from_track
 from gtrig.sync.cameras import camera_membership, camera_offsets, checkpoint_membership
-from gtrig.sync.reference import Reference, reference_track
+from gtrig.sync.reference import Reference, jump_stamps, near_reference, reference_track
 from gtrig.sync.returns import ScannerReturns, recording_returns
 from gtrig.sync.scanners import hull_distances, restamp_laser, scanner_offsets
 from gtrig.trajectory import PoseTrack
@@ -398,3 +398,25 @@ def test_reference_in_windows_is_the_whole_batch_and_bounded(tmp_path) -> None: 
     assert np.abs(windowed.velocity - whole.velocity).max() < 1e-7
     assert np.allclose(windowed.cov, whole.cov, rtol=1e-6, atol=1e-15)
     assert peak_windowed < 0.5 * peak_whole
+
+
+def test_reference_is_cut_where_its_fixes_jump() -> None:
+    """Two laps of a path joined with 0.36 s between them (a recording made of laps): the robot is back
+    at the lap's start, 3 m back, after the seam. The reference has no pose across the seam and never
+    moves faster than the path does (smoothed across, it went back at some 8 m/s, speeds that outweighed
+    every other time of the offset fits)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 30.0, 1 / 75)
+    xyt = np.column_stack([0.1 * t, 0.5 * np.sin(0.2 * t), 0.3 * np.sin(0.1 * t)])
+    cov = np.tile(np.diag([1e-6, 1e-6, 1e-5]), (t.size, 1, 1))
+    period = 30.36
+    z = np.r_[xyt, xyt] + rng.multivariate_normal(np.zeros(3), cov[0], 2 * t.size)
+    fixes = [fixes_from_track(PoseTrack.from_xytheta(np.r_[t, t + period], z, cov=np.r_[cov, cov], source="v"), "v")]
+    cuts = jump_stamps(fixes)
+    assert cuts.size == 1 and abs(cuts[0] - period) < 1e-9
+    ref = reference_track(fixes)
+    seam = (ref.stamps_s > t[-1] + 0.05) & (ref.stamps_s < period - 0.05)  # a grid step past the fixes at most
+    assert not seam.any()
+    assert not near_reference(ref, np.array([t[-1] + 0.18]), 0.05).any()
+    speed = np.hypot(ref.velocity[:, 0], ref.velocity[:, 1])
+    assert speed.max() < 0.3  # the path's own: 0.14 m/s at most
