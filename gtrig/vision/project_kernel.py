@@ -13,9 +13,11 @@ import numba as nb
 import numpy as np
 
 # one signature, compiled (or loaded from the cache) when the module is imported: any layout of the
-# arrays is taken, and the workers forked from a process that imported it never load it again
+# arrays is taken, and the workers forked from a process that imported it never load it again; the inputs
+# are typed read-only, which writable arrays match too (a rig's arrays may be frozen)
+_I1, _I2, _I3 = (nb.types.Array(nb.float64, d, "A", readonly=True) for d in (1, 2, 3))
 _F1, _F2, _F3 = nb.float64[:], nb.float64[:, :], nb.float64[:, :, :]
-_SIGNATURE = nb.void(_F2, _F2, _F1, _F3, _F2, _F1, _F1, _F1, _F1, _F1, _F2, nb.boolean, _F2, _F1, _F3)
+_SIGNATURE = nb.void(_I2, _I2, _I1, _I3, _I2, _I1, _I1, _I1, _I1, _I1, _I2, nb.boolean, _F2, _F1, _F3)
 
 
 @nb.njit(_SIGNATURE, cache=True, fastmath=False, nogil=True)
