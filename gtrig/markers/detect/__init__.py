@@ -159,6 +159,9 @@ class DetectorParams:
     tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored levels
         back to light, where the blurred-step model holds.
+    max_columns : pixel columns across each edge that the edge fits take at most: a longer edge takes every
+        k-th column (:func:`.edges.band_stride`); 0 takes them all (about 8 times the time on a 200 px
+        marker for 0.004 px less corner error on the renders, ``bench/markers.py --refine-only``).
     """
 
     peers: PeerParams = field(default_factory=PeerParams)
@@ -177,12 +180,13 @@ class DetectorParams:
     min_soft_margin: float = 18.0
     threads: int = 0
     tone: Tone = "linear"
+    max_columns: int = 24
 
     def refine_settings(self) -> RefineSettings:
         """The edge fits' part of these settings."""
         return RefineSettings(self.band_px, self.white_end, self.margin_cells, self.max_blur_px, self.min_contrast,
                               self.max_rel_rms, self.max_corner_shift_px, self.max_corner_shift_side, self.passes,
-                              self.iterations, self.tol, self.tone)
+                              self.iterations, self.tol, self.tone, self.max_columns)
 
 
 _UNDISTORTERS: OrderedDict[tuple[bytes, bytes, tuple[int, int]], Undistorter] = OrderedDict()

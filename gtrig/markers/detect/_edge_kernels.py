@@ -30,10 +30,11 @@ _NP = 7
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np.float64],
-                w_in: NDArray[np.float64], w_out: NDArray[np.float64], excl: NDArray[np.float64]
+                w_in: NDArray[np.float64], w_out: NDArray[np.float64], excl: NDArray[np.float64],
+                stride: NDArray[np.int64]
                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """Band pixels of the edges ``p0 -> p1`` (E, 2) without a lens model: x, y, value, edge (each (M,),
-    sorted by edge; :func:`.edges.gather_band`)."""
+    sorted by edge; :func:`.edges.gather_band`), every ``stride[e]``-th column."""
     E = p0.shape[0]
     t = np.empty((E, 2))
     nrm = np.empty((E, 2))
@@ -43,18 +44,20 @@ def _gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np
         L[e] = math.hypot(tx, ty)
         t[e, 0], t[e, 1] = tx / L[e], ty / L[e]
         nrm[e, 0], nrm[e, 1] = t[e, 1], -t[e, 0]
-    xy, v, es = band_pixels(gray, p0, t, nrm, L, w_in, w_out, excl)
+    xy, v, es = band_pixels(gray, p0, t, nrm, L, w_in, w_out, excl, stride)
     return xy[:, 0].copy(), xy[:, 1].copy(), v, es
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _gather_undistorted(gray: NDArray[np.uint8], map_x: NDArray[np.float32], map_y: NDArray[np.float32],
                         boxes: NDArray[np.int64], p0: NDArray[np.float64], p1: NDArray[np.float64],
-                        w_in: NDArray[np.float64], w_out: NDArray[np.float64], excl: NDArray[np.float64]
+                        w_in: NDArray[np.float64], w_out: NDArray[np.float64], excl: NDArray[np.float64],
+                        stride: NDArray[np.int64]
                         ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """Band pixels in undistorted coordinates: the raw pixels of each edge's box ``(x0, y0, x1, y1)``
     (E, 4; end exclusive, empty when ``x1 <= x0``) in row-major order whose undistorted position
-    (``map_x``, ``map_y``) lies in the band (:func:`.edges.gather_band` with a lens model)."""
+    (``map_x``, ``map_y``) lies in the band (:func:`.edges.gather_band` with a lens model), of the raw
+    columns (rows, for an edge nearer the vertical) that are multiples of ``stride[e]``."""
     E = p0.shape[0]
     M = 0
     for e in range(E):
@@ -73,8 +76,13 @@ def _gather_undistorted(gray: NDArray[np.uint8], map_x: NDArray[np.float32], map
         L = math.hypot(tx, ty)
         tx, ty = tx / L, ty / L
         nx, ny = ty, -tx
+        vertical = abs(ty) > abs(tx)
         for iy in range(y0, y1):
+            if vertical and iy % stride[e] != 0:
+                continue
             for ix in range(x0, x1):
+                if not vertical and ix % stride[e] != 0:
+                    continue
                 px = float(map_x[iy, ix])
                 py = float(map_y[iy, ix])
                 rx, ry = px - p0[e, 0], py - p0[e, 1]
@@ -299,9 +307,12 @@ def _context(x: NDArray[np.float64], y: NDArray[np.float64], es: NDArray[np.int6
     N = x.shape[0]
     d = np.empty(N)
     sg = np.empty(N)
+    cs = np.empty((4, 2))
+    for k in range(4):
+        cs[k, 0], cs[k, 1] = math.cos(P[k, 0]), math.sin(P[k, 0])
     for i in range(N):
         e = es[i]
-        d[i] = math.cos(P[e, 0]) * (x[i] - mid[e, 0]) + math.sin(P[e, 0]) * (y[i] - mid[e, 1]) - P[e, 1]
+        d[i] = cs[e, 0] * (x[i] - mid[e, 0]) + cs[e, 1] * (y[i] - mid[e, 1]) - P[e, 1]
         sg[i] = sigma[e]
     return marker_context(x, y, np.zeros(N, np.int64), H, sg, white, d)
 
@@ -355,7 +366,7 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
                 map_y: NDArray[np.float32], boxes: NDArray[np.int64], p0: NDArray[np.float64],
                 p1: NDArray[np.float64], sigma0: NDArray[np.float64], w_in: NDArray[np.float64],
                 w_out: NDArray[np.float64], w_look: NDArray[np.float64], excl: NDArray[np.float64],
-                white: NDArray[np.float64], band_cfg: NDArray[np.float64], fit_cfg: NDArray[np.float64],
+                stride: NDArray[np.int64], white: NDArray[np.float64], band_cfg: NDArray[np.float64], fit_cfg: NDArray[np.float64],
                 first: bool, last: bool, P: NDArray[np.float64], mid: NDArray[np.float64],
                 sigma: NDArray[np.float64], cov: NDArray[np.float64], rms: NDArray[np.float64],
                 n_px: NDArray[np.int64], ok: NDArray[np.bool_]) -> None:
@@ -369,7 +380,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
     p0, p1 : (4Q, 2) the edges' end points; replaced by the fitted lines' points nearest to them.
     sigma0 : (4Q,) the blur the pass starts from; replaced by the median per quad of the fitted blurs.
     w_in, w_out, w_look, excl : (4Q,) the band's limits (:func:`.edges.gather_band`); ``w_look`` the
-        outer limit read for the paper's end (``w_out`` itself when that is not looked for).
+        outer limit read for the paper's end (``w_out`` itself when that is not looked for); stride : (4Q,)
+        the column stride of each band (:func:`.edges.band_stride`).
     white : (Q, n, n) white cells. band_cfg : (white end looked for (0/1), bins' origin, bin width,
         white-end drop, white-end sigmas, blur lower clip, blur upper clip).
     fit_cfg : :func:`_fit_edge`'s ``cfg``. first, last : the first (plain steps) and last (covariances)
@@ -390,9 +402,9 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
         w_band = w_look[sl] if look else w_out[sl]
         if undistorted:
             x, y, raw, es = _gather_undistorted(gray, map_x, map_y, boxes[sl], p0[sl], p1[sl], w_in[sl], w_band,
-                                                excl[sl])
+                                                excl[sl], stride[sl])
         else:
-            x, y, raw, es = _gather_raw(gray, p0[sl], p1[sl], w_in[sl], w_band, excl[sl])
+            x, y, raw, es = _gather_raw(gray, p0[sl], p1[sl], w_in[sl], w_band, excl[sl], stride[sl])
         starts = _edge_starts(es)
         if look:
             x, y, raw, es = _trim_to_paper(x, y, raw, es, starts, p0[sl], p1[sl], w_in[sl], w_out[sl], w_look[sl],
