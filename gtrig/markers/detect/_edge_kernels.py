@@ -406,6 +406,31 @@ def _trim_to_paper(x: NDArray[np.float64], y: NDArray[np.float64], raw: NDArray[
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _unstride_clipped(raw: NDArray[np.float64], es: NDArray[np.int64], stride: NDArray[np.int64],
+                      share: float) -> bool:
+    """Set a quad's column strides ``stride`` (4,) to 1 when more than ``share`` of one of its edges' band
+    pixels (raw levels ``raw``, edges ``es`` in 0..3) are clipped at 0 or 255 (:func:`.edges.unstride_clipped`);
+    returns whether they changed (the band is then gathered again)."""
+    strided = False
+    for k in range(4):
+        strided = strided or stride[k] > 1
+    if not strided:
+        return False
+    n = np.zeros(4, np.int64)
+    n_clip = np.zeros(4, np.int64)
+    for i in range(raw.shape[0]):
+        n[es[i]] += 1
+        if raw[i] >= 255.0 or raw[i] <= 0.0:
+            n_clip[es[i]] += 1
+    for k in range(4):
+        if n_clip[k] > share * n[k]:
+            for j in range(4):
+                stride[j] = 1
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray[np.float32],
                 map_y: NDArray[np.float32], boxes: NDArray[np.int64], p0: NDArray[np.float64],
                 p1: NDArray[np.float64], sigma0: NDArray[np.float64], w_in: NDArray[np.float64],
@@ -444,11 +469,14 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
         e0 = 4 * q
         sl = slice(e0, e0 + 4)
         w_band = w_look[sl] if look else w_out[sl]
-        if undistorted:
-            x, y, raw, es = _gather_undistorted(gray, map_x, map_y, boxes[sl], p0[sl], p1[sl], w_in[sl], w_band,
-                                                excl[sl], stride[sl])
-        else:
-            x, y, raw, es = _gather_raw(gray, p0[sl], p1[sl], w_in[sl], w_band, excl[sl], stride[sl])
+        for _attempt in range(2):
+            if undistorted:
+                x, y, raw, es = _gather_undistorted(gray, map_x, map_y, boxes[sl], p0[sl], p1[sl], w_in[sl], w_band,
+                                                    excl[sl], stride[sl])
+            else:
+                x, y, raw, es = _gather_raw(gray, p0[sl], p1[sl], w_in[sl], w_band, excl[sl], stride[sl])
+            if not _unstride_clipped(raw, es, stride[sl], fit_cfg[5]):
+                break
         starts = _edge_starts(es)
         if look:
             x, y, raw, es = _trim_to_paper(x, y, raw, es, starts, p0[sl], p1[sl], w_in[sl], w_out[sl], w_look[sl],

@@ -790,9 +790,12 @@ def refine_quads_stepwise(
     p1 = np.roll(quads, -1, axis=1).reshape(-1, 2)
     sigma = np.full(len(p0), 1.0)
     fit = None
+    stride = band_stride(side.ravel(), prm)
     for k in range(prm.passes):
         w_in, w_out, w_look, excl = band_limits(sigma, side.ravel(), cell, border, k == 0, prm)
-        samples = gather_band(gray, p0, p1, w_in, w_look, excl, undist, band_stride(side.ravel(), prm))
+        samples = gather_band(gray, p0, p1, w_in, w_look, excl, undist, stride)
+        if unstride_clipped(samples, stride):
+            samples = gather_band(gray, p0, p1, w_in, w_look, excl, undist, stride)
         if prm.white_end:
             d = across_edge(samples, p0, p1)
             w_out = np.minimum(w_out, white_extent(samples, p0, p1, sigma, w_in, w_look, d))
@@ -814,6 +817,23 @@ def refine_quads_stepwise(
         raise ValueError("refine_quads_stepwise: params.passes must be at least 1")
     corners, cov = intersect_corners(fit, len(quads))
     return fit, corners, cov
+
+
+def unstride_clipped(samples: EdgeSamples, stride: NDArray[np.int64]) -> bool:
+    """Set the column strides ``stride`` (E,) of every edge of a quad (edges ``4q .. 4q + 3``) to 1, in
+    place, where more than :data:`CLIPPED_EDGE_SHARE` of one of its edges' band pixels ``samples`` (raw
+    levels) are clipped at 0 or 255; returns whether any changed. A clipped edge is fitted on one side of
+    its ramp with the pixel-integrated step, whose line depends on the pixels' phases across the edge:
+    every column keeps them (on over-exposed renders a stride of 3 doubled the corner error)."""
+    E = len(stride)
+    cnt = np.bincount(samples.edge, minlength=E)
+    clipped = (samples.val >= 255.0) | (samples.val <= 0.0)
+    n_clip = np.bincount(samples.edge, weights=clipped.astype(np.float64), minlength=E)
+    quad = (n_clip > CLIPPED_EDGE_SHARE * cnt).reshape(-1, 4).any(axis=1) & (stride.reshape(-1, 4) > 1).any(axis=1)
+    if not quad.any():
+        return False
+    stride.reshape(-1, 4)[quad] = 1
+    return True
 
 
 def _raw_boxes(shape: tuple[int, ...], p0: NDArray[np.float64], p1: NDArray[np.float64], w_in: NDArray[np.float64],
