@@ -160,8 +160,9 @@ class DetectorParams:
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored levels
         back to light, where the blurred-step model holds.
     max_columns : pixel columns across each edge that the edge fits take at most: a longer edge takes every
-        k-th column (:func:`.edges.band_stride`); 0 takes them all (about 8 times the time on a 200 px
-        marker for 0.004 px less corner error on the renders, ``bench/markers.py --refine-only``).
+        k-th column (:func:`.edges.band_stride`; a quad with a clipped edge takes them all); 0 takes them all
+        (on the renders' refinement, ``bench/markers.py --refine-only``: 1.9 times the time per marker for
+        0.004 px less corner RMS than 24 columns).
     """
 
     peers: PeerParams = field(default_factory=PeerParams)
@@ -180,7 +181,7 @@ class DetectorParams:
     min_soft_margin: float = 18.0
     threads: int = 0
     tone: Tone = "linear"
-    max_columns: int = 24
+    max_columns: int = 32
 
     def refine_settings(self) -> RefineSettings:
         """The edge fits' part of these settings."""

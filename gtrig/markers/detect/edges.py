@@ -649,7 +649,7 @@ class RefineParams:
     look_sigmas: float = 3.0
     margin_cells: float | None = None
     max_blur_px: float = 5.0
-    max_columns: int = 24
+    max_columns: int = 32
 
 
 def band_stride(side: NDArray[np.float64], params: RefineParams) -> NDArray[np.int64]:
