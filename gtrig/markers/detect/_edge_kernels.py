@@ -56,8 +56,8 @@ def _gather_undistorted(gray: NDArray[np.uint8], map_x: NDArray[np.float32], map
                         ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """Band pixels in undistorted coordinates: the raw pixels of each edge's box ``(x0, y0, x1, y1)``
     (E, 4; end exclusive, empty when ``x1 <= x0``) in row-major order whose undistorted position
-    (``map_x``, ``map_y``) lies in the band (:func:`.edges.gather_band` with a lens model), of the raw
-    columns (rows, for an edge nearer the vertical) that are multiples of ``stride[e]``."""
+    (``map_x``, ``map_y``) lies in the band (:func:`.edges.gather_band` with a lens model), of every
+    ``stride[e]``-th raw column (row, for an edge nearer the vertical) from the box's first."""
     E = p0.shape[0]
     M = 0
     for e in range(E):
@@ -78,10 +78,10 @@ def _gather_undistorted(gray: NDArray[np.uint8], map_x: NDArray[np.float32], map
         nx, ny = ty, -tx
         vertical = abs(ty) > abs(tx)
         for iy in range(y0, y1):
-            if vertical and iy % stride[e] != 0:
+            if vertical and (iy - y0) % stride[e] != 0:
                 continue
             for ix in range(x0, x1):
-                if not vertical and ix % stride[e] != 0:
+                if not vertical and (ix - x0) % stride[e] != 0:
                     continue
                 px = float(map_x[iy, ix])
                 py = float(map_y[iy, ix])

@@ -475,8 +475,8 @@ def band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.
                excl: NDArray[np.float64], stride: NDArray[np.int64], out_x: NDArray[np.int64],
                out_y: NDArray[np.int64], out_e: NDArray[np.int64], fill: bool) -> int:
     """The pixels of every edge's band (:func:`.edges.gather_band` without a lens model): count them,
-    and with ``fill`` write them; returns the count. Only the columns of the edge's major axis that are
-    multiples of ``stride[e]`` are taken."""
+    and with ``fill`` write them; returns the count. Only every ``stride[e]``-th column of the edge's major
+    axis is taken, counted from the column of the edge's start point."""
     h, w = shape_hw
     m = 0
     for e in range(p0.shape[0]):
@@ -496,8 +496,10 @@ def band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.
                 umin, umax = min(umin, cu), max(umax, cu)
         u0 = max(math.ceil(umin - 1e-6), 0)
         u1 = min(math.floor(umax + 1e-6), size_u - 1)
+        # the columns counted from the one of the edge's start point: a crop of the image takes the same
+        a0 = int(math.floor(Au))
         for col in range(u0, u1 + 1):
-            if col % stride[e] != 0:
+            if (col - a0) % stride[e] != 0:
                 continue
             du = col - Au
             if abs(Tv) < 1e-9:
@@ -532,7 +534,7 @@ def band_pixels(gray: NDArray[np.uint8], p0: NDArray[np.float64], t: NDArray[np.
 
     Each band is the parallelogram ``s in [excl, L - excl]``, ``d in [-w_in, w_out]``; it is scanned
     along the edge's major axis, where it is an interval of the other axis in every column; of the
-    columns, those whose index is a multiple of ``stride[e]`` (E,) are taken.
+    columns, every ``stride[e]``-th (E,) is taken, counted from the one of ``p0[e]``.
     """
     shape_hw = (gray.shape[0], gray.shape[1])
     z = np.empty(0, np.int64)

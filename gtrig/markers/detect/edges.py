@@ -144,8 +144,9 @@ def gather_band(
     of the direction ``p0 -> p1`` on screen for a clockwise quad) and leaves ``end_excl[e]`` pixels out
     at both ends. With ``undist`` the band is selected in undistorted coordinates (raw pixels mapped
     through ``undist.map_x/map_y``) and the returned coordinates are undistorted. ``stride`` (E,) or
-    scalar: only the raw pixel columns across the edge (rows, for an edge nearer the vertical) whose
-    index is a multiple of it are taken (:func:`band_stride`).
+    scalar: only every ``stride``-th raw pixel column across the edge (row, for an edge nearer the
+    vertical) is taken (:func:`band_stride`), counted from the column of ``p0`` (with ``undist``, from the
+    first of the band's raw bounding box), so that a crop of the image takes the same pixels.
     """
     p0 = np.asarray(p0, np.float64)
     p1 = np.asarray(p1, np.float64)
@@ -161,8 +162,12 @@ def gather_band(
         xy, val, edge = _kernels.band_pixels(np.ascontiguousarray(gray), p0, t, n, L, w_in, w_out, end_excl, step)
         return EdgeSamples(xy, val, edge, _starts(edge, E))
     ix, iy, edge = _band_boxes_undistorted(gray.shape, p0, p1, t, n, w_in, w_out, undist)
-    major = np.where(np.abs(t[edge, 1]) > np.abs(t[edge, 0]), iy, ix)
-    on = major % step[edge] == 0
+    # every stride-th raw column (row) from the first of the edge's box (:func:`_band_boxes_undistorted`)
+    vertical = np.abs(t[edge, 1]) > np.abs(t[edge, 0])
+    major = np.where(vertical, iy, ix)
+    first = np.full(E, np.iinfo(np.int64).max)
+    np.minimum.at(first, edge, major)
+    on = (major - first[edge]) % step[edge] == 0
     ix, iy, edge = ix[on], iy[on], edge[on]
     px = undist.map_x[iy, ix].astype(np.float64)
     py = undist.map_y[iy, ix].astype(np.float64)
