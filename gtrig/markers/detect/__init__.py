@@ -161,8 +161,8 @@ class DetectorParams:
         back to light, where the blurred-step model holds.
     max_columns : pixel columns across each edge that the edge fits take at most: a longer edge takes every
         k-th column (:func:`.edges.band_stride`; a quad with a clipped edge takes them all); 0 takes them all
-        (on the renders' refinement, ``bench/markers.py --refine-only``: 1.9 times the time per marker for
-        0.004 px less corner RMS than 24 columns).
+        (on the renders: 1.4 times the time per marker of 32 columns for 0.003 px less corner RMS; the
+        trade-off in docs/markers.md).
     """
 
     peers: PeerParams = field(default_factory=PeerParams)

@@ -435,7 +435,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
                 map_y: NDArray[np.float32], boxes: NDArray[np.int64], p0: NDArray[np.float64],
                 p1: NDArray[np.float64], sigma0: NDArray[np.float64], w_in: NDArray[np.float64],
                 w_out: NDArray[np.float64], w_look: NDArray[np.float64], excl: NDArray[np.float64],
-                stride: NDArray[np.int64], white: NDArray[np.float64], band_cfg: NDArray[np.float64], fit_cfg: NDArray[np.float64],
+                stride: NDArray[np.int64], white: NDArray[np.float64], band_cfg: NDArray[np.float64],
+                fit_cfg: NDArray[np.float64],
                 first: bool, last: bool, P: NDArray[np.float64], mid: NDArray[np.float64],
                 sigma: NDArray[np.float64], cov: NDArray[np.float64], rms: NDArray[np.float64],
                 n_px: NDArray[np.int64], ok: NDArray[np.bool_]) -> None:
