@@ -13,9 +13,12 @@ Three tables, every peer measured in the same run on the same images:
   supersampled homography rendering, Gaussian blur, area downsampling, noise 3, a cluttered and unevenly
   lit background) with three AprilTag 36h11 markers each, across marker side, tilt, blur 0-2 px and
   lighting: corner RMS error against the truth (correctly identified markers), detection rate, false
-  detections per image, for gtrig and OpenCV with each ``cornerRefinementMethod``;
-- the speed table: milliseconds per image of gtrig and OpenCV's ``ArucoDetector`` (no refinement, its
-  default threads) on the renders and on each real set, and their ratio (medians).
+  detections per image, for gtrig, OpenCV with each ``cornerRefinementMethod`` and AprilTag 3 at
+  ``quad_decimate=1``;
+- the speed table: milliseconds per image of gtrig, OpenCV's ``ArucoDetector`` (no refinement, its
+  default threads) and AprilTag 3 at ``quad_decimate=1`` (the budget where recall needs its small tags)
+  on the renders and on each real set, their ratios (wall-clock medians), and on the renders the ratio
+  of the process CPU time (all threads; on a loaded machine the wall clock mostly measures waiting).
 
 ``--hard`` runs the harder simulated set (JPEG 60-95, half Bayer-demosaiced, textured, pale or cluttered
 backgrounds, glare, print gain, paper texture, bent prints, markers of 10-70 px, blur 0-1.5 px, noise 2-5)
@@ -137,17 +140,21 @@ def _scene(rng: np.random.Generator, side: float, tilt: float, blur: float, ligh
 def _bench_renders(rng: np.random.Generator, quick: bool) -> None:
     dets: dict[str, Any] = {"gtrig": MarkerDetector(FAMILY)}
     dets.update({f"cv2 {k}": _opencv("DICT_APRILTAG_36h11", k) for k in CV_REFINE})
+    dets["apriltag3"] = _apriltag3()  # quad_decimate 1: the time budget where recall needs its small tags
     sides = [20, 35, 60, 120] if quick else [20, 30, 45, 70, 120, 200]
     tilts = [0, 45] if quick else [0, 30, 60]
     blurs = [0.0, 0.5, 1.0, 2.0]
     lights = ["uniform", "dim"] if quick else ["uniform", "gradient", "dim"]
     by_blur: dict[tuple[str, float], Stats] = {}
     every: dict[str, Stats] = {k: Stats() for k in dets}
+    cpu: dict[str, float] = {k: 0.0 for k in dets}  # process CPU (every thread), s
     _run("gtrig", dets["gtrig"], _scene(rng, 60, 0, 1.0, "uniform")[0])  # compile the kernels first
     for side, tilt, blur, light in itertools.product(sides, tilts, blurs, lights):
         img, truths = _scene(rng, side, tilt, blur, light)
         for name, det in dets.items():
+            c0 = time.process_time()
             out, ms = _run(name, det, img)
+            cpu[name] += time.process_time() - c0
             by_blur.setdefault((name, blur), Stats()).add(out, truths, ms)
             every[name].add(out, truths, ms)
     n = len(sides) * len(tilts) * len(blurs) * len(lights)
@@ -164,10 +171,13 @@ def _bench_renders(rng: np.random.Generator, quick: bool) -> None:
     gain = min(min(by_blur[(k, b)].rms for k in dets if k.startswith("cv2")) / by_blur[("gtrig", b)].rms
                for b in blurs if b <= 1.0)
     print(f"gtrig RMS at blur <= 1 px: {acc:.4f} px (target <= 0.10); best OpenCV / gtrig >= {gain:.2f} (target >= 3)")
-    g, c = np.array(every["gtrig"].ms), np.array(every["cv2 NONE"].ms)
-    print(f"\nspeed, renders 1024 x 768 ({n} images, OpenCV's default threads {cv2.getNumThreads()}): gtrig "
-          f"{np.median(g):.1f} ms, OpenCV {np.median(c):.1f} ms; gtrig / OpenCV {np.median(g) / np.median(c):.2f} "
-          f"(medians; target <= 1.5)")
+    g, c, a = (np.median(every[k].ms) for k in ("gtrig", "cv2 NONE", "apriltag3"))
+    found = {k: every[k].found for k in ("gtrig", "cv2 NONE", "apriltag3")}
+    print(f"\nspeed, renders 1024 x 768 ({n} images, OpenCV's default threads {cv2.getNumThreads()}, AprilTag 3 "
+          f"quad_decimate 1): wall medians gtrig {g:.1f} ms, OpenCV {c:.1f} ms, AprilTag 3 {a:.1f} ms; "
+          f"gtrig / OpenCV {g / c:.2f} (target <= 1.5), gtrig / AprilTag 3 {g / a:.2f}; process CPU per image "
+          f"gtrig / OpenCV {cpu['gtrig'] / cpu['cv2 NONE']:.2f}; markers found gtrig {found['gtrig']}, OpenCV "
+          f"{found['cv2 NONE']}, AprilTag 3 {found['apriltag3']} of {every['gtrig'].total}")
 
 
 # ---------------------------------------------------------------------------------------------- photos

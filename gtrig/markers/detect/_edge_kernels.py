@@ -30,10 +30,11 @@ _NP = 7
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np.float64],
-                w_in: NDArray[np.float64], w_out: NDArray[np.float64], excl: NDArray[np.float64]
+                w_in: NDArray[np.float64], w_out: NDArray[np.float64], excl: NDArray[np.float64],
+                stride: NDArray[np.int64]
                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """Band pixels of the edges ``p0 -> p1`` (E, 2) without a lens model: x, y, value, edge (each (M,),
-    sorted by edge; :func:`.edges.gather_band`)."""
+    sorted by edge; :func:`.edges.gather_band`), every ``stride[e]``-th column."""
     E = p0.shape[0]
     t = np.empty((E, 2))
     nrm = np.empty((E, 2))
@@ -43,18 +44,20 @@ def _gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np
         L[e] = math.hypot(tx, ty)
         t[e, 0], t[e, 1] = tx / L[e], ty / L[e]
         nrm[e, 0], nrm[e, 1] = t[e, 1], -t[e, 0]
-    xy, v, es = band_pixels(gray, p0, t, nrm, L, w_in, w_out, excl)
+    xy, v, es = band_pixels(gray, p0, t, nrm, L, w_in, w_out, excl, stride)
     return xy[:, 0].copy(), xy[:, 1].copy(), v, es
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _gather_undistorted(gray: NDArray[np.uint8], map_x: NDArray[np.float32], map_y: NDArray[np.float32],
                         boxes: NDArray[np.int64], p0: NDArray[np.float64], p1: NDArray[np.float64],
-                        w_in: NDArray[np.float64], w_out: NDArray[np.float64], excl: NDArray[np.float64]
+                        w_in: NDArray[np.float64], w_out: NDArray[np.float64], excl: NDArray[np.float64],
+                        stride: NDArray[np.int64]
                         ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """Band pixels in undistorted coordinates: the raw pixels of each edge's box ``(x0, y0, x1, y1)``
     (E, 4; end exclusive, empty when ``x1 <= x0``) in row-major order whose undistorted position
-    (``map_x``, ``map_y``) lies in the band (:func:`.edges.gather_band` with a lens model)."""
+    (``map_x``, ``map_y``) lies in the band (:func:`.edges.gather_band` with a lens model), of every
+    ``stride[e]``-th raw column (row, for an edge nearer the vertical) from the box's first."""
     E = p0.shape[0]
     M = 0
     for e in range(E):
@@ -73,8 +76,13 @@ def _gather_undistorted(gray: NDArray[np.uint8], map_x: NDArray[np.float32], map
         L = math.hypot(tx, ty)
         tx, ty = tx / L, ty / L
         nx, ny = ty, -tx
+        vertical = abs(ty) > abs(tx)
         for iy in range(y0, y1):
+            if vertical and (iy - y0) % stride[e] != 0:
+                continue
             for ix in range(x0, x1):
+                if not vertical and (ix - x0) % stride[e] != 0:
+                    continue
                 px = float(map_x[iy, ix])
                 py = float(map_y[iy, ix])
                 rx, ry = px - p0[e, 0], py - p0[e, 1]
@@ -245,12 +253,56 @@ def _fit_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[np.fl
     for p in range(_NP):
         ok = ok and math.isfinite(P[p])
     if want_cov:
-        Ci = np.linalg.pinv(JTJ)
+        _line_block_inverse(JTJ, cov)
         for p in range(2):
             for q in range(2):
-                cov[p, q] = Ci[p, q] * s2
+                cov[p, q] *= s2
                 ok = ok and math.isfinite(cov[p, q])
     return sigma, math.sqrt(s2), ok
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _line_block_inverse(A: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+    """The (theta, rho) block (2, 2) of ``A^-1`` for the symmetric (7, 7) ``A`` of an edge's normal
+    equations, into ``out``: Cholesky of ``A`` scaled to a unit diagonal (its columns are grey levels,
+    pixels and radians), two solves; the pseudo-inverse's block (NumPy's ``pinv``, a tenth of the speed)
+    where ``A`` is not positive definite."""
+    n = A.shape[0]
+    d = np.empty(n)
+    for i in range(n):
+        if not (A[i, i] > 0.0):
+            out[:, :] = np.linalg.pinv(A)[:2, :2]
+            return
+        d[i] = 1.0 / math.sqrt(A[i, i])
+    Lw = np.zeros((n, n))
+    for j in range(n):
+        acc = A[j, j] * d[j] * d[j]
+        for k in range(j):
+            acc -= Lw[j, k] * Lw[j, k]
+        if not (acc > 1e-14):
+            out[:, :] = np.linalg.pinv(A)[:2, :2]
+            return
+        Lw[j, j] = math.sqrt(acc)
+        for i in range(j + 1, n):
+            acc = A[i, j] * d[i] * d[j]
+            for k in range(j):
+                acc -= Lw[i, k] * Lw[j, k]
+            Lw[i, j] = acc / Lw[j, j]
+    y = np.empty(n)
+    for c in range(2):
+        # L y = e_c, then L^T x = y; x is column c of the scaled inverse
+        for i in range(n):
+            acc = 1.0 if i == c else 0.0
+            for k in range(i):
+                acc -= Lw[i, k] * y[k]
+            y[i] = acc / Lw[i, i]
+        for i in range(n - 1, -1, -1):
+            acc = y[i]
+            for k in range(i + 1, n):
+                acc -= Lw[k, i] * y[k]
+            y[i] = acc / Lw[i, i]
+        for r in range(2):
+            out[r, c] = y[r] * d[r] * d[c]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -299,9 +351,12 @@ def _context(x: NDArray[np.float64], y: NDArray[np.float64], es: NDArray[np.int6
     N = x.shape[0]
     d = np.empty(N)
     sg = np.empty(N)
+    cs = np.empty((4, 2))
+    for k in range(4):
+        cs[k, 0], cs[k, 1] = math.cos(P[k, 0]), math.sin(P[k, 0])
     for i in range(N):
         e = es[i]
-        d[i] = math.cos(P[e, 0]) * (x[i] - mid[e, 0]) + math.sin(P[e, 0]) * (y[i] - mid[e, 1]) - P[e, 1]
+        d[i] = cs[e, 0] * (x[i] - mid[e, 0]) + cs[e, 1] * (y[i] - mid[e, 1]) - P[e, 1]
         sg[i] = sigma[e]
     return marker_context(x, y, np.zeros(N, np.int64), H, sg, white, d)
 
@@ -351,11 +406,37 @@ def _trim_to_paper(x: NDArray[np.float64], y: NDArray[np.float64], raw: NDArray[
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _unstride_clipped(raw: NDArray[np.float64], es: NDArray[np.int64], stride: NDArray[np.int64],
+                      share: float) -> bool:
+    """Set a quad's column strides ``stride`` (4,) to 1 when more than ``share`` of one of its edges' band
+    pixels (raw levels ``raw``, edges ``es`` in 0..3) are clipped at 0 or 255 (:func:`.edges.unstride_clipped`);
+    returns whether they changed (the band is then gathered again)."""
+    strided = False
+    for k in range(4):
+        strided = strided or stride[k] > 1
+    if not strided:
+        return False
+    n = np.zeros(4, np.int64)
+    n_clip = np.zeros(4, np.int64)
+    for i in range(raw.shape[0]):
+        n[es[i]] += 1
+        if raw[i] >= 255.0 or raw[i] <= 0.0:
+            n_clip[es[i]] += 1
+    for k in range(4):
+        if n_clip[k] > share * n[k]:
+            for j in range(4):
+                stride[j] = 1
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray[np.float32],
                 map_y: NDArray[np.float32], boxes: NDArray[np.int64], p0: NDArray[np.float64],
                 p1: NDArray[np.float64], sigma0: NDArray[np.float64], w_in: NDArray[np.float64],
                 w_out: NDArray[np.float64], w_look: NDArray[np.float64], excl: NDArray[np.float64],
-                white: NDArray[np.float64], band_cfg: NDArray[np.float64], fit_cfg: NDArray[np.float64],
+                stride: NDArray[np.int64], white: NDArray[np.float64], band_cfg: NDArray[np.float64],
+                fit_cfg: NDArray[np.float64],
                 first: bool, last: bool, P: NDArray[np.float64], mid: NDArray[np.float64],
                 sigma: NDArray[np.float64], cov: NDArray[np.float64], rms: NDArray[np.float64],
                 n_px: NDArray[np.int64], ok: NDArray[np.bool_]) -> None:
@@ -369,7 +450,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
     p0, p1 : (4Q, 2) the edges' end points; replaced by the fitted lines' points nearest to them.
     sigma0 : (4Q,) the blur the pass starts from; replaced by the median per quad of the fitted blurs.
     w_in, w_out, w_look, excl : (4Q,) the band's limits (:func:`.edges.gather_band`); ``w_look`` the
-        outer limit read for the paper's end (``w_out`` itself when that is not looked for).
+        outer limit read for the paper's end (``w_out`` itself when that is not looked for); stride : (4Q,)
+        the column stride of each band (:func:`.edges.band_stride`).
     white : (Q, n, n) white cells. band_cfg : (white end looked for (0/1), bins' origin, bin width,
         white-end drop, white-end sigmas, blur lower clip, blur upper clip).
     fit_cfg : :func:`_fit_edge`'s ``cfg``. first, last : the first (plain steps) and last (covariances)
@@ -388,11 +470,14 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
         e0 = 4 * q
         sl = slice(e0, e0 + 4)
         w_band = w_look[sl] if look else w_out[sl]
-        if undistorted:
-            x, y, raw, es = _gather_undistorted(gray, map_x, map_y, boxes[sl], p0[sl], p1[sl], w_in[sl], w_band,
-                                                excl[sl])
-        else:
-            x, y, raw, es = _gather_raw(gray, p0[sl], p1[sl], w_in[sl], w_band, excl[sl])
+        for _attempt in range(2):
+            if undistorted:
+                x, y, raw, es = _gather_undistorted(gray, map_x, map_y, boxes[sl], p0[sl], p1[sl], w_in[sl], w_band,
+                                                    excl[sl], stride[sl])
+            else:
+                x, y, raw, es = _gather_raw(gray, p0[sl], p1[sl], w_in[sl], w_band, excl[sl], stride[sl])
+            if not _unstride_clipped(raw, es, stride[sl], fit_cfg[5]):
+                break
         starts = _edge_starts(es)
         if look:
             x, y, raw, es = _trim_to_paper(x, y, raw, es, starts, p0[sl], p1[sl], w_in[sl], w_out[sl], w_look[sl],

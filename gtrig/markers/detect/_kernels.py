@@ -23,6 +23,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+_SQRT_2PI = math.sqrt(2.0 * math.pi)
 
 
 # Abramowitz and Stegun 26.2.17: Phi(z) = 1 - phi(z) t (b1 + t (b2 + ... + t b5)), t = 1 / (1 + p |z|),
@@ -43,6 +44,51 @@ def _ndtr_from_pdf(z: float, pdf: float) -> float:
 @njit(cache=True, inline="always", error_model="numpy")
 def _ndtr(z: float) -> float:
     return _ndtr_from_pdf(z, _INV_SQRT_2PI * math.exp(-0.5 * z * z))
+
+
+#: nodes per unit of the tabulated normal CDF and density (:func:`_ndtr_pdf_tab`) and their reach (the CDF
+#: is 0 or 1 to 1e-19 beyond)
+_TAB_PER_UNIT = 64
+_TAB_REACH = 9.0
+_TAB_Z = np.arange(-_TAB_REACH * _TAB_PER_UNIT, _TAB_REACH * _TAB_PER_UNIT + 1) / _TAB_PER_UNIT
+#: the normal CDF and density at the nodes (the CDF from libm's erfc, as SciPy's ``ndtr``)
+_TAB_CDF = np.array([0.5 * math.erfc(-z / math.sqrt(2.0)) for z in _TAB_Z])
+_TAB_PDF = _INV_SQRT_2PI * np.exp(-0.5 * _TAB_Z**2)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _ndtr_pdf_tab(z: float) -> tuple[float, float]:
+    """Standard normal CDF and density at ``z``, each the cubic Hermite interpolant of the table's two
+    nodes around ``z`` (values and slopes: ``Phi' = phi``, ``phi' = -z phi``): absolute errors below 3e-10,
+    and continuous with their slopes (a Levenberg-Marquardt on a model with steps of its own rounding
+    takes different paths from starts a rounding apart)."""
+    u = (z + _TAB_REACH) * _TAB_PER_UNIT
+    if not (u > 0.0):
+        return (0.0, 0.0) if u <= 0.0 else (u, u)  # (NaN stays NaN)
+    if u >= 2.0 * _TAB_REACH * _TAB_PER_UNIT:
+        return 1.0, 0.0
+    k = int(u)
+    t = u - k
+    h = 1.0 / _TAB_PER_UNIT
+    t2 = t * t
+    t3 = t2 * t
+    h00 = 2.0 * t3 - 3.0 * t2 + 1.0
+    h10 = (t3 - 2.0 * t2 + t) * h
+    h01 = 3.0 * t2 - 2.0 * t3
+    h11 = (t3 - t2) * h
+    p0, p1 = _TAB_PDF[k], _TAB_PDF[k + 1]
+    z0 = k * h - _TAB_REACH
+    z1 = z0 + h
+    cdf = h00 * _TAB_CDF[k] + h10 * p0 + h01 * _TAB_CDF[k + 1] + h11 * p1
+    pdf = h00 * p0 - h10 * z0 * p0 + h01 * p1 - h11 * z1 * p1
+    return cdf, pdf
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _ndtr_tab(z: float) -> float:
+    """Standard normal CDF at ``z`` from the table (:func:`_ndtr_pdf_tab`), without an exponential (the
+    per-pixel sums of the marker's modelled light take a dozen CDFs per pixel)."""
+    return _ndtr_pdf_tab(z)[0]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -131,8 +177,8 @@ def edge_normal_eq(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArra
                 q4 = -b * sP  # minus d pred / d log sigma at unit shading
             else:
                 z = d * isg
-                e = math.exp(-0.5 * z * z)
-                Phi = _ndtr_from_pdf(z, _INV_SQRT_2PI * e)
+                Phi, pdf = _ndtr_pdf_tab(z)
+                e = pdf * _SQRT_2PI
                 g = gk * e
                 q4 = g * d
             Phi += extra[i]
@@ -215,6 +261,9 @@ def lm_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
         for p in range(7):
             A[p, p] += lam * (JTJ[p, p] + 1e-9)
         delta = _solve(A, JTr)
+        if not slow and abs(delta[1]) + abs(delta[0]) * wt < tol:
+            # converged: a step this small is not worth the normal equations at its end
+            break
         for p in range(7):
             Pn[p] = P[p] + delta[p]
         Pn[4] = min(max(Pn[4], ls_lo), ls_hi)
@@ -279,31 +328,27 @@ def edge_lm(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
     return P, cur, JTJ
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _ndtr_sat(z: float) -> float:
-    # 0 or 1 to double precision beyond 9 SD: most grid lines are far from a given band pixel
-    if z >= 9.0:
-        return 1.0
-    if z <= -9.0:
-        return 0.0
-    return _ndtr(z)
+#: reach of the grid lines' blurred steps in :func:`marker_context`, in SDs: beyond it the CDF is 0 or 1 to
+#: 1e-9 (a millionth of a grey level at full contrast), and the lines are set without evaluating (at 9 SDs
+#: a small marker's pixel summed the cells of the whole grid)
+_CONTEXT_SDS = 6.0
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _saturated_grid(t: float, s: float, n: int, F: NDArray[np.float64]) -> tuple[int, int]:
-    """``F[k] = Phi((t - k) / s)`` for the grid lines ``k = 0..n``, 1 or 0 (to 1e-19) beyond 9 SDs and
-    set without evaluating there (:func:`_ndtr_sat`), and the range ``[k0, k1)`` of the cells ``k``
+    """``F[k] = Phi((t - k) / s)`` for the grid lines ``k = 0..n`` (:func:`_ndtr_tab`), 1 or 0 beyond
+    :data:`_CONTEXT_SDS` and set without evaluating there, and the range ``[k0, k1)`` of the cells ``k``
     whose ``F[k] - F[k + 1]`` may differ from 0."""
-    lo = max(0, int(math.ceil(t - 9.0 * s)))
-    hi = min(n, int(math.floor(t + 9.0 * s)))
+    lo = max(0, int(math.ceil(t - _CONTEXT_SDS * s)))
+    hi = min(n, int(math.floor(t + _CONTEXT_SDS * s)))
     for k in range(0, min(lo, n + 1)):
         F[k] = 1.0
     for k in range(lo, hi + 1):
-        F[k] = _ndtr_sat((t - k) / s)
+        F[k] = _ndtr_tab((t - k) / s)
     for k in range(max(hi + 1, lo), n + 1):
         F[k] = 0.0
     if hi < lo:
-        # no line within 9 SDs: the one cell where F steps from 1 to 0, if any
+        # no line within reach: the one cell where F steps from 1 to 0, if any
         return (lo - 1, lo) if 0 < lo <= n else (0, 0)
     return max(lo - 1, 0), min(hi + 1, n)
 
@@ -353,7 +398,7 @@ def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray
                     acc += white[g, r, c] * (Fx[c] - Fx[c + 1])
             R += Yr * acc
         S = (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
-        out[i] = 1.0 - S + R - _ndtr(dist[i] / sigma[i])
+        out[i] = 1.0 - S + R - _ndtr_tab(dist[i] / sigma[i])
     return out
 
 
@@ -427,10 +472,11 @@ def cell_profiles(x: NDArray[np.float64], y: NDArray[np.float64], H: NDArray[np.
 @njit(cache=True, nogil=True, error_model="numpy")
 def band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.float64], nrm: NDArray[np.float64],
                L: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64],
-               excl: NDArray[np.float64], out_x: NDArray[np.int64], out_y: NDArray[np.int64],
-               out_e: NDArray[np.int64], fill: bool) -> int:
+               excl: NDArray[np.float64], stride: NDArray[np.int64], out_x: NDArray[np.int64],
+               out_y: NDArray[np.int64], out_e: NDArray[np.int64], fill: bool) -> int:
     """The pixels of every edge's band (:func:`.edges.gather_band` without a lens model): count them,
-    and with ``fill`` write them; returns the count."""
+    and with ``fill`` write them; returns the count. Only every ``stride[e]``-th column of the edge's major
+    axis is taken, counted from the column of the edge's start point."""
     h, w = shape_hw
     m = 0
     for e in range(p0.shape[0]):
@@ -450,7 +496,11 @@ def band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.
                 umin, umax = min(umin, cu), max(umax, cu)
         u0 = max(math.ceil(umin - 1e-6), 0)
         u1 = min(math.floor(umax + 1e-6), size_u - 1)
+        # the columns counted from the one of the edge's start point: a crop of the image takes the same
+        a0 = int(math.floor(Au))
         for col in range(u0, u1 + 1):
+            if (col - a0) % stride[e] != 0:
+                continue
             du = col - Au
             if abs(Tv) < 1e-9:
                 s_a, s_b = -np.inf, np.inf
@@ -477,20 +527,22 @@ def band_scan(shape_hw: tuple[int, int], p0: NDArray[np.float64], t: NDArray[np.
 @njit(cache=True, nogil=True, error_model="numpy")
 def band_pixels(gray: NDArray[np.uint8], p0: NDArray[np.float64], t: NDArray[np.float64], nrm: NDArray[np.float64],
                 L: NDArray[np.float64], w_in: NDArray[np.float64], w_out: NDArray[np.float64],
-                excl: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+                excl: NDArray[np.float64], stride: NDArray[np.int64]
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """Band pixels of every edge (E edges from ``p0`` along unit ``t``, normal ``nrm``, length ``L``):
     coordinates (M, 2), values (M,) and edge index (M,), sorted by edge, then along and across it.
 
     Each band is the parallelogram ``s in [excl, L - excl]``, ``d in [-w_in, w_out]``; it is scanned
-    along the edge's major axis, where it is an interval of the other axis in every column.
+    along the edge's major axis, where it is an interval of the other axis in every column; of the
+    columns, every ``stride[e]``-th (E,) is taken, counted from the one of ``p0[e]``.
     """
     shape_hw = (gray.shape[0], gray.shape[1])
     z = np.empty(0, np.int64)
-    M = band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, z, z, z, False)
+    M = band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, stride, z, z, z, False)
     xs = np.empty(M, np.int64)
     ys = np.empty(M, np.int64)
     es = np.empty(M, np.int64)
-    band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, xs, ys, es, True)
+    band_scan(shape_hw, p0, t, nrm, L, w_in, w_out, excl, stride, xs, ys, es, True)
     xy = np.empty((M, 2))
     val = np.empty(M)
     for i in range(M):

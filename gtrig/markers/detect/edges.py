@@ -136,13 +136,17 @@ def gather_band(
     w_out: NDArray[np.float64],
     end_excl: NDArray[np.float64],
     undist: Undistorter | None = None,
+    stride: NDArray[np.int64] | int = 1,
 ) -> EdgeSamples:
     """Pixels in a band around each edge ``p0[e] -> p1[e]`` (E, 2), in fit coordinates.
 
     The band spans ``-w_in[e] <= d <= w_out[e]`` across the edge (``d > 0`` outside, i.e. to the left
     of the direction ``p0 -> p1`` on screen for a clockwise quad) and leaves ``end_excl[e]`` pixels out
     at both ends. With ``undist`` the band is selected in undistorted coordinates (raw pixels mapped
-    through ``undist.map_x/map_y``) and the returned coordinates are undistorted.
+    through ``undist.map_x/map_y``) and the returned coordinates are undistorted. ``stride`` (E,) or
+    scalar: only every ``stride``-th raw pixel column across the edge (row, for an edge nearer the
+    vertical) is taken (:func:`band_stride`), counted from the column of ``p0`` (with ``undist``, from the
+    first of the band's raw bounding box), so that a crop of the image takes the same pixels.
     """
     p0 = np.asarray(p0, np.float64)
     p1 = np.asarray(p1, np.float64)
@@ -153,10 +157,18 @@ def gather_band(
     n = np.column_stack([t[:, 1], -t[:, 0]])
     w_in, w_out, end_excl = (np.ascontiguousarray(np.broadcast_to(np.asarray(a, np.float64), (E,)))
                              for a in (w_in, w_out, end_excl))
+    step = np.ascontiguousarray(np.broadcast_to(np.asarray(stride, np.int64), (E,)))
     if undist is None:
-        xy, val, edge = _kernels.band_pixels(np.ascontiguousarray(gray), p0, t, n, L, w_in, w_out, end_excl)
+        xy, val, edge = _kernels.band_pixels(np.ascontiguousarray(gray), p0, t, n, L, w_in, w_out, end_excl, step)
         return EdgeSamples(xy, val, edge, _starts(edge, E))
     ix, iy, edge = _band_boxes_undistorted(gray.shape, p0, p1, t, n, w_in, w_out, undist)
+    # every stride-th raw column (row) from the first of the edge's box (:func:`_band_boxes_undistorted`)
+    vertical = np.abs(t[edge, 1]) > np.abs(t[edge, 0])
+    major = np.where(vertical, iy, ix)
+    first = np.full(E, np.iinfo(np.int64).max)
+    np.minimum.at(first, edge, major)
+    on = (major - first[edge]) % step[edge] == 0
+    ix, iy, edge = ix[on], iy[on], edge[on]
     px = undist.map_x[iy, ix].astype(np.float64)
     py = undist.map_y[iy, ix].astype(np.float64)
     # the exact band test (the pixel sets above are supersets)
@@ -629,6 +641,9 @@ class RefineParams:
         recovers an edge whose plain-step fit collapsed to a sharp step (white cells one border-width
         inside pull sigma to 0 on small markers); its end points are the fitted lines' points nearest
         to the previous ones.
+    max_columns : pixel columns across each edge at most (:func:`band_stride`): a longer edge takes every
+        k-th column, so that a large marker costs about what one of ``max_columns`` pixels does; 0 takes
+        every column.
     """
 
     passes: int = 3
@@ -639,6 +654,16 @@ class RefineParams:
     look_sigmas: float = 3.0
     margin_cells: float | None = None
     max_blur_px: float = 5.0
+    max_columns: int = 32
+
+
+def band_stride(side: NDArray[np.float64], params: RefineParams) -> NDArray[np.int64]:
+    """Each edge's column stride (E,) for edges ``side`` (E,) pixels long: ``floor(side / max_columns)``,
+    at least 1 (every column with ``max_columns = 0``)."""
+    side = np.asarray(side, np.float64)
+    if params.max_columns <= 0:
+        return np.ones(side.shape, np.int64)
+    return np.maximum(np.floor(side / params.max_columns), 1).astype(np.int64)
 
 
 def band_limits(sigma: NDArray[np.float64], side: NDArray[np.float64], cell: NDArray[np.float64],
@@ -722,6 +747,7 @@ def refine_quads(
     no_map = np.zeros((0, 0), np.float32)
     fit_cfg = np.array([prm.iterations, prm.tol, CLIPPED_ITER_FACTOR, CLIP_LOW, CLIP_HIGH, CLIPPED_EDGE_SHARE,
                         PIXEL_VAR, SHARP_SIGMA_PX, MAX_CLIPPED_WHITE])
+    stride = band_stride(L, prm)
     cut = [0, n_q]
     if threads > 1 and n_q > 1:
         cut = [0, *sorted({round(k * n_q / SPLIT_PARTS) for k in range(1, SPLIT_PARTS)} - {0, n_q}), n_q]
@@ -731,7 +757,7 @@ def refine_quads(
                              WHITE_END_DROP, WHITE_END_SIGMAS, 0.3, prm.max_blur_px])
         boxes = np.zeros((0, 4), np.int64) if undist is None else _raw_boxes(gray.shape, p0, p1, w_in, w_look, undist)
         maps = (no_map, no_map) if undist is None else (undist.map_x, undist.map_y)
-        arrays = (p0, p1, sigma0, w_in, w_out, w_look, excl)
+        arrays = (p0, p1, sigma0, w_in, w_out, w_look, excl, stride)
         parts = [(gray, lut, *maps, boxes[4 * a:4 * b] if undist is not None else boxes,
                   *(x[4 * a:4 * b] for x in arrays), W[a:b], band_cfg, fit_cfg, k == 0, k == prm.passes - 1,
                   *(x[4 * a:4 * b] for x in (P, mid, sigma, cov_line, rms, n_px, ok)))
@@ -769,9 +795,12 @@ def refine_quads_stepwise(
     p1 = np.roll(quads, -1, axis=1).reshape(-1, 2)
     sigma = np.full(len(p0), 1.0)
     fit = None
+    stride = band_stride(side.ravel(), prm)
     for k in range(prm.passes):
         w_in, w_out, w_look, excl = band_limits(sigma, side.ravel(), cell, border, k == 0, prm)
-        samples = gather_band(gray, p0, p1, w_in, w_look, excl, undist)
+        samples = gather_band(gray, p0, p1, w_in, w_look, excl, undist, stride)
+        if unstride_clipped(samples, stride):
+            samples = gather_band(gray, p0, p1, w_in, w_look, excl, undist, stride)
         if prm.white_end:
             d = across_edge(samples, p0, p1)
             w_out = np.minimum(w_out, white_extent(samples, p0, p1, sigma, w_in, w_look, d))
@@ -793,6 +822,23 @@ def refine_quads_stepwise(
         raise ValueError("refine_quads_stepwise: params.passes must be at least 1")
     corners, cov = intersect_corners(fit, len(quads))
     return fit, corners, cov
+
+
+def unstride_clipped(samples: EdgeSamples, stride: NDArray[np.int64]) -> bool:
+    """Set the column strides ``stride`` (E,) of every edge of a quad (edges ``4q .. 4q + 3``) to 1, in
+    place, where more than :data:`CLIPPED_EDGE_SHARE` of one of its edges' band pixels ``samples`` (raw
+    levels) are clipped at 0 or 255; returns whether any changed. A clipped edge is fitted on one side of
+    its ramp with the pixel-integrated step, whose line depends on the pixels' phases across the edge:
+    every column keeps them (on over-exposed renders a stride of 3 doubled the corner error)."""
+    E = len(stride)
+    cnt = np.bincount(samples.edge, minlength=E)
+    clipped = (samples.val >= 255.0) | (samples.val <= 0.0)
+    n_clip = np.bincount(samples.edge, weights=clipped.astype(np.float64), minlength=E)
+    quad = (n_clip > CLIPPED_EDGE_SHARE * cnt).reshape(-1, 4).any(axis=1) & (stride.reshape(-1, 4) > 1).any(axis=1)
+    if not quad.any():
+        return False
+    stride.reshape(-1, 4)[quad] = 1
+    return True
 
 
 def _raw_boxes(shape: tuple[int, ...], p0: NDArray[np.float64], p1: NDArray[np.float64], w_in: NDArray[np.float64],

@@ -45,6 +45,7 @@ class RefineSettings:
     iterations: int = 10
     tol: float = 1e-3
     tone: Tone = "linear"
+    max_columns: int = 32
 
 
 @dataclass(frozen=True)
@@ -83,7 +84,7 @@ def refine_quads(gray: NDArray[np.uint8], quads: NDArray[np.float64], white: NDA
     Q = np.asarray(quads, np.float64)
     side = np.linalg.norm(Q - np.roll(Q, -1, axis=1), axis=2)  # (Q, 4)
     params = RefineParams(s.passes, s.iterations, s.tol, s.band_px, s.white_end, WHITE_LOOK_SIGMAS, s.margin_cells,
-                          s.max_blur_px)
+                          s.max_blur_px, s.max_columns)
     light = None if s.tone == "linear" else to_light(np.arange(256, dtype=np.float64), s.tone)
     fit, corners, cov = edge_refine(gray, Q, white, border_cells, params, und, light, threads)
     ok_e = (fit.ok & (fit.b >= s.min_contrast) & (fit.rms <= s.max_rel_rms * np.abs(fit.b))
