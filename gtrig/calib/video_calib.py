@@ -1,4 +1,4 @@
-"""Calibrate fixed cameras from videos of a hand-held ChArUco board: each lens, then the network.
+"""Calibrate fixed cameras from videos of a hand-held ChArUco board or AprilGrid: each lens, then the network.
 
 The steps: frame times read and checked (:mod:`gtrig.io.video`), the board's corners in every ``step``-th
 frame (:mod:`gtrig.calib.video_detect`), each camera's lens from its views
@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from gtrig.calib.charuco import CharucoBoard
+from gtrig.calib.idboards import IdBoard
 from gtrig.calib.intrinsics import PointSetFit, calibrate_point_sets
 from gtrig.calib.video_detect import VideoDetections, detect_videos, find_videos
 from gtrig.calib.video_network import RelativePose, VideoNetworkResult, calibrate_video_network, relative_poses
@@ -56,7 +56,7 @@ class VideoCalibration:
     pairs: tuple[RelativePose, ...]
 
 
-def fit_lens(det: VideoDetections, board: CharucoBoard, *, estimate_k3: bool = False) -> PointSetFit:
+def fit_lens(det: VideoDetections, board: IdBoard, *, estimate_k3: bool = False) -> PointSetFit:
     """A camera's intrinsics from its views with at least :data:`MIN_LENS_CORNERS` corners.
 
     The lens's ``extra`` holds OpenCV's ``std`` and ``std_views``, the views' jackknife deviations
@@ -78,7 +78,7 @@ def fit_lens(det: VideoDetections, board: CharucoBoard, *, estimate_k3: bool = F
 
 def calibrate_from_videos(
     videos_dir: str | os.PathLike[str],
-    board: CharucoBoard,
+    board: IdBoard,
     *,
     step: int = 1,
     lenses: Mapping[str, CameraIntrinsics] | None = None,
@@ -91,7 +91,7 @@ def calibrate_from_videos(
     Parameters
     ----------
     videos_dir : ``<cam>.mp4`` videos with their frame-time files (:func:`gtrig.calib.video_detect.find_videos`).
-    board : the ChArUco board.
+    board : the ChArUco board or AprilGrid (its corners found by its own detector).
     step : read every ``step``-th frame.
     lenses : intrinsics to hold instead of calibrating them, by camera name (all or some).
     reference : the camera whose frame is the world (default: the first by name).

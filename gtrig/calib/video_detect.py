@@ -1,4 +1,5 @@
-"""ChArUco corners in every (or every n-th) frame of the cameras' videos, with frame times and instants."""
+"""A board's corners (ChArUco board or AprilGrid) in every (or every n-th) frame of the cameras' videos,
+with frame times and instants."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gtrig.calib.charuco import CharucoBoard, CharucoCornerDetector, CharucoView
+from gtrig.calib.charuco import CharucoView
+from gtrig.calib.idboards import IdBoard, corner_detector
 from gtrig.errors import InputError
 from gtrig.io.video import CameraVideo, read_camera_video
 
@@ -43,10 +45,11 @@ class VideoDetections:
     views: tuple[CharucoView, ...]
 
 
-def detect_video(video: CameraVideo, board: CharucoBoard, step: int = 1, *, mirrored: bool = False) -> VideoDetections:
-    """Detect ``board`` in every ``step``-th frame of ``video`` (frames decoded one at a time); ``mirrored``:
-    the video is left-right mirrored (:meth:`CharucoCornerDetector.detect`)."""
-    detector = CharucoCornerDetector(board)
+def detect_video(video: CameraVideo, board: IdBoard, step: int = 1, *, mirrored: bool = False) -> VideoDetections:
+    """Detect ``board`` (a ChArUco board or an AprilGrid, by its own detector) in every ``step``-th frame of
+    ``video`` (frames decoded one at a time); ``mirrored``: the video is left-right mirrored (the frame is
+    flipped back before detection, :meth:`CharucoCornerDetector.detect`)."""
+    detector = corner_detector(board)
     ks: list[int] = []
     views: list[CharucoView] = []
     size: tuple[int, int] = (0, 0)
@@ -85,7 +88,7 @@ def find_videos(folder: str | os.PathLike[str]) -> list[CameraVideo]:
     return out
 
 
-def detect_videos(videos: Sequence[CameraVideo], board: CharucoBoard, step: int = 1,
+def detect_videos(videos: Sequence[CameraVideo], board: IdBoard, step: int = 1,
                   mirrored: Sequence[str] = ()) -> dict[str, VideoDetections]:
     """:func:`detect_video` for each camera, by camera name; the cameras named in ``mirrored`` are flipped."""
     unknown = set(mirrored) - {v.camera for v in videos}

@@ -36,7 +36,7 @@ from scipy.sparse.linalg import spsolve
 from scipy.spatial.transform import Rotation
 
 from gtrig import geometry as geo
-from gtrig.calib.charuco import CharucoBoard
+from gtrig.calib.idboards import IdBoard
 from gtrig.calib.video_detect import VideoDetections
 from gtrig.errors import ConvergenceError, InputError
 from gtrig.geometry.se3avg import mean_pose
@@ -106,7 +106,7 @@ class VideoNetworkResult:
 
 
 def board_observations(
-    dets: Mapping[str, VideoDetections], cams: Mapping[str, CameraIntrinsics], board: CharucoBoard,
+    dets: Mapping[str, VideoDetections], cams: Mapping[str, CameraIntrinsics], board: IdBoard,
     min_corners: int = MIN_CORNERS,
 ) -> list[BoardObservation]:
     """Every view with ``min_corners`` or more, with its PnP pose (method, step 1)."""
@@ -322,7 +322,7 @@ def _solve(prob: _Problem, cams: Mapping[str, CameraIntrinsics], P: np.ndarray, 
 def calibrate_video_network(
     dets: Mapping[str, VideoDetections],
     cams: Mapping[str, CameraIntrinsics],
-    board: CharucoBoard,
+    board: IdBoard,
     reference: str | None = None,
     *,
     huber_px: float = 1.0,

@@ -328,7 +328,8 @@ def _given_lenses(path: Path | None) -> dict:
 @handle_errors
 def video(
     board: Path = typer.Option(
-        ..., "--board", help="ChArUco board file: gtrig's (YAML/TOML) or caliscope's charuco.toml."
+        ..., "--board", help="ChArUco board (gtrig's YAML/TOML, caliscope's charuco.toml) or AprilGrid "
+        "(Kalibr's target YAML or gtrig's) file; a chessboard is refused."
     ),
     videos: Path = typer.Option(
         ..., "--videos", help="Folder of <cam>.mp4 with <cam>.timestamps.csv, or caliscope's timestamps.csv."
@@ -344,21 +345,16 @@ def video(
         [], "--mirrored", help="A camera whose video is left-right mirrored (repeat for several)."
     ),
 ) -> None:
-    """Calibrate fixed cameras from videos of a hand-held ChArUco board: lenses, then relative poses."""
-    from gtrig.calib.charuco import CharucoBoard
+    """Calibrate fixed cameras from videos of a hand-held ChArUco board or AprilGrid: lenses, then relative poses."""
     from gtrig.calib.targets import read_id_board_file
     from gtrig.calib.video_calib import calibrate_from_videos, write_video_calibration
     from gtrig.cli import checks
-    from gtrig.errors import InputError
 
     checks.input_folder("--videos", videos)
     checks.output_folder("--out", out)
     checks.not_inside("--out", out, videos, "the videos' folder")
     checks.count("--step", step, lo=1, hi=1000)
     b = read_id_board_file(board)
-    if not isinstance(b, CharucoBoard):
-        raise InputError(f"--board {board}: {b.spec()}: gtrig calib video takes ChArUco boards (an AprilGrid's "
-                         "lenses: gtrig calib intrinsics --board)")
     given = _given_lenses(lenses)
     cal = calibrate_from_videos(videos, b, step=step, lenses=given, reference=reference, estimate_k3=k3,
                                 mirrored=mirrored)

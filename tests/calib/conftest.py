@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from gtrig.calib import synth
+from gtrig.calib.aprilgrid import AprilGrid
 from gtrig.calib.chessboard import Board
 
 SIZE = (480, 360)
@@ -29,3 +30,16 @@ def sweep_dir(tmp_path_factory) -> Path:
         cv2.imwrite(str(d / f"{i:03d}.png"), img)
     cv2.imwrite(str(d / "blank.jpg"), np.full((SIZE[1], SIZE[0]), 128, np.uint8))
     return d
+
+
+def aprilgrid_texture(g: AprilGrid) -> synth.Texture:
+    """The printed AprilGrid ``g`` on a white sheet reaching 0.6 tag beyond its tags (NaN off the sheet)."""
+    x0, y0, x1, y1 = g.extent_m()
+    margin = 0.6 * g.tag_m
+
+    def tex(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        v = np.where(g.black(x, y), 25.0, 225.0)
+        sheet = (x > x0 - margin) & (x < x1 + margin) & (y > y0 - margin) & (y < y1 + margin)
+        return np.where(sheet, v, np.nan)
+
+    return tex

@@ -18,7 +18,7 @@ from gtrig.calib.idboards import id_board_from_dict
 from gtrig.calib.targets import read_id_board_file, read_target_file
 from gtrig.errors import FormatError, InputError
 
-from .conftest import DIST, SIZE, K
+from .conftest import DIST, SIZE, K, aprilgrid_texture
 
 KALIBR_APRILGRID = """target_type: 'aprilgrid' #gridtype
 tagCols: 5               #number of apriltags
@@ -78,18 +78,6 @@ def test_sweep_board_of_boards_yaml_round_trips() -> None:
 GRID = AprilGrid(5, 4, 0.03, 0.3)
 
 
-def _texture(g: AprilGrid) -> synth.Texture:
-    x0, y0, x1, y1 = g.extent_m()
-    margin = 0.6 * g.tag_m
-
-    def tex(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        v = np.where(g.black(x, y), 25.0, 225.0)
-        sheet = (x > x0 - margin) & (x < x1 + margin) & (y > y0 - margin) & (y < y1 + margin)
-        return np.where(sheet, v, np.nan)
-
-    return tex
-
-
 def _views(n: int, rng: np.random.Generator) -> list[np.ndarray]:
     """Poses ``T_cam_board`` with the whole grid in view, tilted up to 40 deg, turned any way."""
     P = GRID.object_points()
@@ -110,7 +98,7 @@ def aprilgrid_sweep(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, lis
     rng = np.random.default_rng(3)
     poses = _views(8, rng)
     for i, T in enumerate(poses):
-        img = synth.render(K, DIST, SIZE, np.eye(4), [synth.Plane(T, _texture(GRID))], supersample=2, rng=rng)
+        img = synth.render(K, DIST, SIZE, np.eye(4), [synth.Plane(T, aprilgrid_texture(GRID))], supersample=2, rng=rng)
         cv2.imwrite(str(d / f"{i:03d}.png"), img)
     return d, poses
 
