@@ -16,7 +16,11 @@ Method
    depends on its camera's and its board's 12 unknowns).
 5. **Uncertainty.** ``Cov = s^2 (J^T J)^-1`` at the optimum, ``s^2`` the residual variance per degree of
    freedom; the baselines' and relative angles' standard deviations are propagated from it to first order
-   (cross terms between the cameras kept). The intrinsics' own uncertainty is not included.
+   (cross terms between the cameras kept). The held intrinsics' uncertainty is added as for any two-step
+   estimate: ``Cov += A Cov_lens A^T`` with ``A = -(J^T W J)^-1 J^T W J_lens`` the first-order sensitivity of
+   the solution to the intrinsics (``J_lens`` by central differences of the same residuals), ``Cov_lens``
+   diagonal from each lens's ``extra["std_honest"]`` (else ``extra["std"]``; a lens with neither adds
+   nothing).
 
 The reference camera's frame is the world: poses are ``T_ref_cam``.
 """
@@ -279,6 +283,69 @@ def _jacobian(x: np.ndarray, prob: _Problem, cams: Mapping[str, CameraIntrinsics
     return J
 
 
+#: the intrinsics whose sigmas are propagated: ``fx fy cx cy`` (pixels), ``k1 k2 p1 p2 k3``
+LENS_PARAMS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+
+
+def lens_sigmas(cam: CameraIntrinsics) -> np.ndarray:
+    """The lens's standard deviations (9,) in :data:`LENS_PARAMS` order; zero where none is stated.
+
+    ``extra["std_honest"]`` (the larger of OpenCV's and the views' jackknife) if present, else ``extra["std"]``.
+    """
+    std = cam.extra.get("std_honest") or cam.extra.get("std") or {}
+    sig = np.array([float(std.get(k, 0.0)) for k in LENS_PARAMS])
+    return np.where(np.isfinite(sig), sig, 0.0)
+
+
+def _shift_lens(cam: CameraIntrinsics, k: int, h: float) -> CameraIntrinsics:
+    """The lens with parameter ``LENS_PARAMS[k]`` moved by ``h``."""
+    K = cam.camera_matrix.astype(float).copy()
+    dist = np.zeros(5)
+    dist[: min(5, cam.dist_coeffs.size)] = np.ravel(cam.dist_coeffs)[:5]
+    if k < 4:
+        K[(0, 1, 0, 1)[k], (0, 1, 2, 2)[k]] += h
+    else:
+        dist[k - 4] += h
+    return CameraIntrinsics(cam.image_size, K, dist)
+
+
+def _lens_jacobian(x: np.ndarray, prob: _Problem, cams: Mapping[str, CameraIntrinsics], P: np.ndarray,
+                   lens_order: tuple[str, ...]) -> np.ndarray:
+    """Dense (M, 9L) derivative of the residuals w.r.t. each lens's :data:`LENS_PARAMS`, central differences."""
+    blocks = _blocks(prob)
+    col = {c: 9 * k for k, c in enumerate(lens_order)}
+    J = np.zeros((sum(2 * len(o.ids) for o in prob.obs), 9 * len(lens_order)))
+    r = 0
+    for k, o in enumerate(prob.obs):
+        m = 2 * len(o.ids)
+        if o.camera in col:
+            T_cam_ref, T_ref_board = _poses(x, prob, blocks, k)
+            for d in range(9):
+                h = 1e-4 if d < 4 else 1e-6
+                up, down = _shift_lens(cams[o.camera], d, h), _shift_lens(cams[o.camera], d, -h)
+                J[r: r + m, col[o.camera] + d] = (_obs_residual(o, up, P, T_cam_ref, T_ref_board)
+                                                  - _obs_residual(o, down, P, T_cam_ref, T_ref_board)) / (2 * h)
+        r += m
+    return J
+
+
+def _lens_covariance(x: np.ndarray, prob: _Problem, cams: Mapping[str, CameraIntrinsics], P: np.ndarray,
+                    J: np.ndarray, w: np.ndarray, H_inv: np.ndarray) -> np.ndarray:
+    """The (N, N) covariance the held lenses' sigmas add to the unknowns: ``A Cov_lens A^T`` (method, step 5).
+
+    ``J`` (M, N) and ``w`` (M,) are the unknowns' Jacobian and IRLS weights at the solution, ``H_inv`` (N, N)
+    the inverse of ``J^T W J``.
+    """
+    lens_order = tuple(sorted({o.camera for o in prob.obs}))
+    sig = np.concatenate([lens_sigmas(cams[c]) for c in lens_order])
+    if not np.any(sig > 0):
+        return np.zeros_like(H_inv)
+    J_lens = _lens_jacobian(x, prob, cams, P, lens_order)
+    A = -H_inv @ (J.T @ (J_lens * w[:, None]))
+    As = A * sig[None, :]
+    return As @ As.T
+
+
 def _huber_weights(r: np.ndarray, huber_px: float) -> np.ndarray:
     """Per residual, the IRLS weight of its corner's pixel error under a Huber loss."""
     e = np.linalg.norm(r.reshape(-1, 2), axis=1)
@@ -327,6 +394,7 @@ def calibrate_video_network(
     *,
     huber_px: float = 1.0,
     min_corners: int = MIN_CORNERS,
+    lens_uncertainty: bool = True,
 ) -> VideoNetworkResult:
     """The cameras' relative poses (module docstring).
 
@@ -336,6 +404,7 @@ def calibrate_video_network(
     cams : each camera's intrinsics (held).
     board : the board.
     reference : the camera whose frame is the world (default: the first by name).
+    lens_uncertainty : add the held lenses' sigmas (:func:`lens_sigmas`) to ``cov`` (method, step 5).
 
     Raises
     ------
@@ -355,7 +424,10 @@ def calibrate_video_network(
     x, r, J, w = _solve(prob, cams, P, huber_px)
     dof = max(r.size - n, 1)
     s2 = float(np.sum(w * r * r) / dof)
-    cov_all = s2 * np.linalg.pinv(J.T @ (J * w[:, None]))
+    H_inv = np.linalg.pinv(J.T @ (J * w[:, None]))
+    cov_all = s2 * H_inv
+    if lens_uncertainty:
+        cov_all = cov_all + _lens_covariance(x, prob, cams, P, J, w, H_inv)
     T_ref_cam = {ref: np.eye(4)}
     for k, c in enumerate(prob.order):
         T_ref_cam[c] = geo.inv_T(_perturb(prob.T_cam_ref0[c], x[6 * k: 6 * k + 6]))

@@ -135,7 +135,8 @@ def test_two_recordings_lenses_consistent(root: Path, board, detections, intrins
             assert z < 5.0, (c, k, z)
 
 
-def _pose_differences(res, peer) -> tuple[np.ndarray, np.ndarray]:
+def _pose_differences(res, peer, max_sigma_mm: float = 5.0,
+                      max_sigma_deg: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """Per pair: |baseline - caliscope's| (m) and the angle between the two relative rotations (deg)."""
     d_base, d_rot = [], []
     for rp in relative_poses(res):
@@ -143,7 +144,7 @@ def _pose_differences(res, peer) -> tuple[np.ndarray, np.ndarray]:
         T_g = geo.inv_T(res.T_ref_cam[rp.cam_a]) @ res.T_ref_cam[rp.cam_b]
         d_base.append(abs(rp.baseline_m - np.linalg.norm(T_p[:3, 3])))
         d_rot.append(np.degrees(np.linalg.norm(cv2.Rodrigues(T_p[:3, :3].T @ T_g[:3, :3])[0])))
-        assert 0 < rp.sigma_baseline_m < 0.005 and 0 < rp.sigma_angle_deg < 0.5
+        assert 0 < rp.sigma_baseline_m < max_sigma_mm / 1000 and 0 < rp.sigma_angle_deg < max_sigma_deg
     return np.array(d_base), np.array(d_rot)
 
 
@@ -158,9 +159,14 @@ def test_relative_poses_near_caliscopes(root: Path, board, detections, intrinsic
     assert d_base.max() < 0.020  # measured at most 16.9 mm (cam_1-cam_2), median 6 mm
     assert d_rot.max() < 1.5  # measured at most 0.94 deg
     res = calibrate_video_network(detections[s], {c: f.camera for c, f in intrinsics[s].items()}, board)
-    d_base, d_rot = _pose_differences(res, peer)
+    d_base, d_rot = _pose_differences(res, peer, 100.0, 10.0)
     assert d_base.max() < 0.020  # measured at most 14.9 mm
     assert d_rot.max() < 4.5  # measured at most 3.7 deg: lenses from 13-23 views of a 12-corner board
+    # the lenses' sigmas (principal points uncertain by 8-28 px) widen the pairs' to 9-45 mm and 1.3-3.2 deg,
+    # which cover those differences: measured at most 0.5 sigma in baseline, 1.6 in rotation
+    rps = relative_poses(res)
+    assert np.all(d_base < 3 * np.array([rp.sigma_baseline_m for rp in rps]))
+    assert np.all(d_rot < 3 * np.array([rp.sigma_angle_deg for rp in rps]))
 
 
 def test_cli_calib_video_writes_lenses_and_network(root: Path, tmp_path: Path) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -72,3 +74,24 @@ def test_network_recovers_simulated_cameras_with_consistent_covariance() -> None
 def test_frame_timing_of_regular_stamps_has_no_gaps() -> None:
     ft = frame_timing(np.arange(100) / 30.0)
     assert (ft.n_dropped, ft.n_duplicated) == (0, 0) and ft.period_s == pytest.approx(1 / 30)
+
+
+def test_lens_sigma_widens_the_pose_covariance_by_the_solution_sensitivity() -> None:
+    """One uncertain parameter (cam b's fx) adds the rank-one ``a a^T sigma^2``, ``a`` the poses' shift per pixel
+    of fx, which re-solving with a shifted fx measures."""
+    rng = np.random.default_rng(7)
+    dets, _ = _scene(rng, noise_px=0.3)
+    sigma_fx = 4.0
+    uncertain = replace(LENS, extra={"std_honest": {"fx": sigma_fx}})
+    cams = {"a": LENS, "b": uncertain, "c": LENS}
+    held = calibrate_video_network(dets, cams, BOARD, "a", lens_uncertainty=False)
+    full = calibrate_video_network(dets, cams, BOARD, "a")
+    added = np.sqrt(np.clip(np.diag(full.cov - held.cov), 0, None))
+    shifted_lens = replace(LENS, camera_matrix=LENS.camera_matrix + np.diag([sigma_fx, 0.0, 0.0]))
+    shifted = calibrate_video_network(dets, {**cams, "b": shifted_lens}, BOARD, "a", lens_uncertainty=False)
+    for k, n in enumerate(held.order):
+        T0, T1 = geo.inv_T(held.T_ref_cam[n]), geo.inv_T(shifted.T_ref_cam[n])
+        moved = np.abs(np.concatenate([Rotation.from_matrix(T1[:3, :3] @ T0[:3, :3].T).as_rotvec(),
+                                       T1[:3, 3] - T0[:3, 3]]))
+        assert np.max(moved) > 1e-4  # fx of 4 px moves the cameras measurably
+        np.testing.assert_allclose(added[6 * k: 6 * k + 6], moved, rtol=0.15, atol=2e-6)
