@@ -36,10 +36,10 @@ def wrap(a: float) -> float:
 
 
 @_jit
-def chol_inv(A: np.ndarray, out: np.ndarray) -> bool:
-    """``out = A^{-1}`` for a small symmetric positive-definite ``A`` (Cholesky); False if not PD."""
+def chol_factor(A: np.ndarray, L: np.ndarray) -> bool:
+    """``L`` (n, n, zeroed by the caller) = the lower Cholesky factor of a small symmetric ``A`` (n, n);
+    False, ``L`` left part-filled, if ``A`` is not positive definite."""
     n = A.shape[0]
-    L = np.zeros((n, n))
     for j in range(n):
         s = A[j, j]
         for k in range(j):
@@ -52,6 +52,16 @@ def chol_inv(A: np.ndarray, out: np.ndarray) -> bool:
             for k in range(j):
                 t -= L[i, k] * L[j, k]
             L[i, j] = t / L[j, j]
+    return True
+
+
+@_jit
+def chol_inv(A: np.ndarray, out: np.ndarray) -> bool:
+    """``out = A^{-1}`` for a small symmetric positive-definite ``A`` (Cholesky); False if not PD."""
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    if not chol_factor(A, L):
+        return False
     # inverse of L, then L^-T L^-1
     Li = np.zeros((n, n))
     for j in range(n):

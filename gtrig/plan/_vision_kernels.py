@@ -8,31 +8,22 @@ small blocks (no batched temporaries, no LAPACK call per group).
 
 from __future__ import annotations
 
-import math
-
 import numba as nb
 import numpy as np
 
-from gtrig.fusion.kernels import chol_inv
+from gtrig.fusion.kernels import chol_factor, chol_inv
 
 _jit = nb.njit(cache=True, fastmath=False, nogil=True)
 
 
 @_jit
 def _cholesky(A: np.ndarray) -> np.ndarray:
-    """Lower Cholesky factor of a small symmetric positive-definite matrix."""
+    """Lower Cholesky factor of a small symmetric positive-definite matrix (NaN if it is not one, so that
+    what is computed from it is NaN too)."""
     n = A.shape[0]
     L = np.zeros((n, n))
-    for j in range(n):
-        s = A[j, j]
-        for q in range(j):
-            s -= L[j, q] * L[j, q]
-        L[j, j] = math.sqrt(s)
-        for i in range(j + 1, n):
-            t = A[i, j]
-            for q in range(j):
-                t -= L[i, q] * L[j, q]
-            L[i, j] = t / L[j, j]
+    if not chol_factor(A, L):
+        L[:] = np.nan
     return L
 
 
