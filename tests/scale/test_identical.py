@@ -13,16 +13,14 @@ import sys
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
+from vision_synth import write_rendered_run
 
 from gtrig.executor import open_executor
-from gtrig.io.frames import write_frame_index
 from gtrig.rig.load import dump_rig
 from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
 from gtrig.vision.sequence import run_recording, write_pose_track_files
-from gtrig.vision.synthetic import render_markers, visible_views
 from tests.scale.cluster import REPO, _env, dask_cluster
 
 pytest.importorskip("distributed")
@@ -36,19 +34,9 @@ def run_rec(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
     scene = make_scene(0)
     rig = scene.rig_true
     out = tmp_path_factory.mktemp("rec")
-    rng = np.random.default_rng(1)
     x, y, th = VALIDATION_POSES[3]
     Ts = [scene.T_world_robot(x + 0.02 * k * np.cos(th), y + 0.02 * k * np.sin(th), th) for k in range(INSTANTS)]
-    for c, cam in enumerate(rig.cameras):
-        seen = [any(n == cam.name for n, _, _ in visible_views(rig, T)) for T in Ts]
-        if not any(seen):
-            continue
-        folder = out / "run" / "cameras" / cam.name
-        folder.mkdir(parents=True)
-        blank = np.full((cam.resolution[1], cam.resolution[0]), 90, np.uint8)
-        for k, T in enumerate(Ts):
-            cv2.imwrite(str(folder / f"{k:06d}.png"), render_markers(rig, cam.name, T, rng) if seen[k] else blank)
-        write_frame_index(folder, 0.1 * np.arange(INSTANTS) + 0.001 * c, [f"{k:06d}.png" for k in range(INSTANTS)])
+    write_rendered_run(out, rig, Ts, 0.1 * np.arange(INSTANTS), np.random.default_rng(1))
     dump_rig(rig, out / "rig.yaml")
     return out, rig
 

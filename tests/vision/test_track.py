@@ -5,13 +5,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
+from vision_synth import write_rendered_run
 
 from gtrig import geometry as geo
 from gtrig.errors import InputError
-from gtrig.io.frames import write_frame_index
 from gtrig.rig.models import Rig
 from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
 from gtrig.vision.observations import MarkerView
@@ -167,21 +166,9 @@ def _run_poses() -> tuple[Rig, list[np.ndarray]]:
 @pytest.fixture(scope="module")
 def run_rec(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
     """A short run, rendered: the robot driving and turning past validation pose 4 at 0.3 m/s."""
-    from gtrig.vision.synthetic import render_markers, visible_views
-
     rig, Ts = _run_poses()
     out = tmp_path_factory.mktemp("rec")
-    rng = np.random.default_rng(3)
-    for c, cam in enumerate(rig.cameras):
-        seen = [any(n == cam.name for n, _, _ in visible_views(rig, T)) for T in Ts]
-        if not any(seen):
-            continue
-        folder = out / "run" / "cameras" / cam.name
-        folder.mkdir(parents=True)
-        blank = np.full((cam.resolution[1], cam.resolution[0]), 90, np.uint8)
-        for k, T in enumerate(Ts):
-            cv2.imwrite(str(folder / f"{k:06d}.png"), render_markers(rig, cam.name, T, rng) if seen[k] else blank)
-        write_frame_index(folder, np.arange(FRAMES) / RATE_HZ + 0.001 * c, [f"{k:06d}.png" for k in range(FRAMES)])
+    write_rendered_run(out, rig, Ts, np.arange(FRAMES) / RATE_HZ, np.random.default_rng(3))
     return out, rig
 
 
