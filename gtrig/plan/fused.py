@@ -115,8 +115,8 @@ def _per_step(rate_hz: float | None, step_s: float) -> float:
 
 
 def fused_covariance(cov_vision: np.ndarray, cov_laser: np.ndarray, persistent_vision: np.ndarray | None,
-                     persistent_laser: np.ndarray | None, heading_rad: np.ndarray, velocity_xytheta: np.ndarray, rates: SourceRates,
-                     settings: FusionPlanSettings = FusionPlanSettings()) -> np.ndarray:
+                     persistent_laser: np.ndarray | None, heading_rad: np.ndarray, velocity_xytheta: np.ndarray,
+                     rates: SourceRates, settings: FusionPlanSettings = FusionPlanSettings()) -> np.ndarray:
     """Fusion's covariance (K, 3, 3) of x, y (m) and yaw (rad) at K poses (module docstring).
 
     Parameters

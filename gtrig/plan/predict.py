@@ -93,15 +93,16 @@ def source_rates(rig: Rig) -> SourceRates:
                        scanner_rate_hz(rig) if rig.laser_scanners else None)
 
 
-def fuse_sources(rig: Rig, grid: PlanGrid, idx: np.ndarray | slice, cov_vision: np.ndarray, cov_laser: np.ndarray,
-                 persistent_vision: np.ndarray | None, settings: FusionPlanSettings) -> np.ndarray:
-    """Fusion's covariance (n, 3, 3) at the poses ``idx`` of ``grid`` from the sources' covariances there
-    and GTvision's persistent part (each (n, 3, 3), nan: uncovered; :func:`gtrig.plan.fused.fused_covariance`;
-    GTlaser's is averaged as fusion averages it, its persistent part being the track's own)."""
-    theta = grid.poses_xytheta()[idx, 2]
-    vel = grid.path_velocity[idx] if grid.path_velocity is not None else None
+def fuse_sources(rig: Rig, poses_xytheta: np.ndarray, path_velocity: np.ndarray | None, cov_vision: np.ndarray,
+                 cov_laser: np.ndarray, persistent_vision: np.ndarray | None, settings: FusionPlanSettings
+                 ) -> np.ndarray:
+    """Fusion's covariance (K, 3, 3) at poses (K, 3) from the sources' covariances there and GTvision's
+    persistent part (each (K, 3, 3), nan: uncovered; :func:`gtrig.plan.fused.fused_covariance`), the robot
+    moving at ``path_velocity`` (K, 3) or, None, forward at ``settings.speed_mps``. GTlaser's covariance
+    is averaged whole, as fusion averages its track's."""
+    theta = np.asarray(poses_xytheta, dtype=float)[:, 2]
     return fused_covariance(cov_vision, cov_laser, persistent_vision, None, theta,
-                            plan_velocity(theta, vel, settings.speed_mps), source_rates(rig), settings)
+                            plan_velocity(theta, path_velocity, settings.speed_mps), source_rates(rig), settings)
 
 
 def fuse_information(covs: list[np.ndarray]) -> np.ndarray:
@@ -167,7 +168,7 @@ def predict_plan(rig: Rig, grid: PlanGrid, settings: PlanSettings = PlanSettings
 
         cov_v = cov_v + stamp_jitter_covariance(views, np.array([c.stamp_sigma_s for c in rig.cameras]),
                                                 grid.path_velocity)
-    fused = fuse_sources(rig, grid, slice(None), cov_v, cov_l, per_v, settings.fusion)
+    fused = fuse_sources(rig, poses, grid.path_velocity, cov_v, cov_l, per_v, settings.fusion)
     log.info("plan: %d poses (%d cells x %d headings)", K, grid.n_cells, grid.n_headings)
     return PlanResult(grid, tuple(c.name for c in rig.cameras), tuple(s.name for s in rig.laser_scanners),
                       {"vision": cov_v, "laser": cov_l, "fused": fused}, views, side_px, beams, sides, per_v)
