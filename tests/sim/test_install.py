@@ -168,6 +168,13 @@ def test_a_rig_with_its_own_outline_gives_scans_of_that_outline(tmp_path: Path) 
     plan = load_rig(tmp_path / "plan.yaml")
     scene = install(plan, 0)
     assert np.allclose(scene.walls, outline_walls(outline))
+    # a path is checked against the planned walls: beyond the GT room's but inside the outline drives
+    from gtrig.sim.recording import check_path
+
+    beyond = c + 1.15 * (gt[1].mean(axis=0) - c)  # past the middle of a GT room wall
+    check_path(PlannedPath(np.arange(2.0), np.array([[*c, 0.0], [*beyond, 0.0]])), scene.walls[:, 0])
+    with pytest.raises(InputError, match="outside"):
+        check_path(PlannedPath(np.arange(2.0), np.array([[*c, 0.0], [*beyond, 0.0]])))
     # the world points mark the new walls' feet, 5 cm inside
     assert np.allclose(_segment_distance(scene.world_points_xy, scene.walls), 0.05, atol=1e-9)
     cfg = SimConfig(laser=LaserSimConfig(people=0, mixed_pixels=False, dropout_prob=0.0))
