@@ -7,14 +7,15 @@ the plan's CPU time per pose over the estimator's (``estimate_frame``) per pose,
 
     python bench/plan.py [--grid-m 0.05] [--headings 16] [--workers 1] [--figures docs/figures]
     python bench/plan.py --suggest 25 --grid-m 0.1 --headings 16 [--suggest-kind scanners]
-    python bench/plan.py --honesty RESULTS=RECORDING [RESULTS=RECORDING ...] [--calibrated]
+    python bench/plan.py --honesty RESULTS=RECORDING [RESULTS=RECORDING ...] [--calibrated] [--instant]
 
 ``--honesty``: the plan's predicted sigmas of GTlaser, fusion and GTvision at the true poses of simulated
 runs (``gtrig run`` results folders beside the recordings ``gtrig sim`` wrote, with their truth) against
 the runs' errors, per region of the floor (the camera that sees the robot best) and pooled over the runs;
 and each camera's predicted coverage against the share of its images in which the run found a marker.
 The plan is made from the recording's ``rig.yaml`` (the planned rig) with ``gtrig plan``'s default rig
-sigmas, or with ``--calibrated`` from the results' ``rig.calibrated.yaml`` (its calibrated covariances).
+sigmas, or with ``--calibrated`` from the results' ``rig.calibrated.yaml`` (its calibrated covariances);
+``--instant`` predicts fusion as the two sources' information at one instant (no smoother).
 """
 
 from __future__ import annotations
@@ -168,9 +169,10 @@ def _camera_stamps(recording: Path, camera: str) -> np.ndarray:
         return np.array([float(r["stamp_s"]) for r in csv.DictReader(f)])
 
 
-def honesty(pairs: list[str], calibrated: bool, every: int = 3) -> None:
+def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: int = 3) -> None:
     """Predicted against measured, per region and source (module docstring)."""
     from gtrig.io.tum import read_tum
+    from gtrig.plan.fused import FusionPlanSettings
     from gtrig.plan.grid import path_grid
     from gtrig.plan.honesty import best_camera_region, coverage_check, pose_errors, region_ratios
     from gtrig.plan.predict import PlanSettings, predict_plan
@@ -180,7 +182,8 @@ def honesty(pairs: list[str], calibrated: bool, every: int = 3) -> None:
     from gtrig.vision.covariance import RigUncertainty
 
     ru = RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))  # gtrig plan's defaults
-    settings = PlanSettings(vision=VisionPlanSettings(rig_uncertainty=ru))
+    settings = PlanSettings(vision=VisionPlanSettings(rig_uncertainty=ru),
+                            fusion=FusionPlanSettings(smooth=not instant))
     sources = (("laser", "gt_laser.tum"), ("fused", "gt_fused.tum"), ("vision", "gt_vision_run.tum"))
     pooled: dict[tuple[str, int], list[np.ndarray]] = {}
     for pair in pairs:
@@ -237,9 +240,10 @@ def main() -> None:
     ap.add_argument("--honesty", nargs="+", metavar="RESULTS=RECORDING", default=None,
                     help="check the plan against these simulated runs instead (module docstring)")
     ap.add_argument("--calibrated", action="store_true", help="with --honesty: plan with the calibrated rig")
+    ap.add_argument("--instant", action="store_true", help="with --honesty: fusion without its smoother")
     a = ap.parse_args()
     if a.honesty:
-        honesty(a.honesty, a.calibrated)
+        honesty(a.honesty, a.calibrated, a.instant)
     elif a.suggest:
         suggestion(a.grid_m, a.headings, a.suggest, a.suggest_kind, a.workers)
     elif a.figures is not None:

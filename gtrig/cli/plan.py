@@ -74,6 +74,9 @@ def command(
     marker_sigma_mm: float = typer.Option(0.3, "--marker-sigma-mm", help="Marker position sigma on the robot after "
                                           "calibration (markers without pose_cov)."),
     marker_sigma_deg: float = typer.Option(0.05, "--marker-sigma-deg", help="Marker orientation sigma."),
+    speed_mps: float = typer.Option(0.3, "--speed-mps", help="The robot's speed over an area (m/s): fusion's "
+                                    "odometry noise between fixes grows with it (a --path with stamps moves at "
+                                    "its own)."),
     workers: int = typer.Option(2, "--workers", help="Processes."),
     suggest: str | None = typer.Option(None, "--suggest", help="cameras:N,scanners:M (either or both): add N cameras "
                                        "and M fixed scanners, each where it most increases the share meeting the "
@@ -93,6 +96,7 @@ def command(
     from gtrig import geometry as geo
     from gtrig.cli import checks
     from gtrig.errors import InputError
+    from gtrig.plan.fused import FusionPlanSettings
     from gtrig.plan.grid import area_grid, default_area, path_grid
     from gtrig.plan.predict import PlanSettings
     from gtrig.plan.vision import VisionPlanSettings
@@ -102,6 +106,7 @@ def command(
     checks.number("--grid-m", grid_m, lo=0.0, lo_open=True, hi=5.0, unit="m")
     checks.count("--headings", headings, 1, 360)
     checks.workers(workers)
+    checks.number("--speed-mps", speed_mps, lo=0.0, hi=10.0, unit="m/s")
     checks.number("--target-mm", target_mm, lo=0.0, lo_open=True, hi=1000.0, unit="mm")
     checks.number("--target-deg", target_deg, lo=0.0, lo_open=True, hi=180.0, unit="deg")
     for name, v in (("--camera-sigma-mm", camera_sigma_mm), ("--marker-sigma-mm", marker_sigma_mm)):
@@ -133,7 +138,8 @@ def command(
         grid = area_grid(poly, grid_m, headings)
     ru = RigUncertainty(camera_sigma_mm / 1000, math.radians(camera_sigma_deg), marker_sigma_mm / 1000,
                         math.radians(marker_sigma_deg))
-    settings = PlanSettings(vision=VisionPlanSettings(rig_uncertainty=ru))
+    settings = PlanSettings(vision=VisionPlanSettings(rig_uncertainty=ru),
+                            fusion=FusionPlanSettings(speed_mps=speed_mps))
     if workers == 0:
         import os
 

@@ -129,14 +129,17 @@ def path_grid(xy: np.ndarray, theta_rad: np.ndarray, stamps_s: np.ndarray | None
 
 
 def default_area(rig: Rig) -> np.ndarray:
-    """The area a rig instruments when none is given: the convex hull (V, 2) of its laser scanners'
-    positions and survey reference points (world xy, metres).
+    """The area a rig instruments when none is given: the room's outline when the rig gives one
+    (``world.outline_xy``), else the convex hull (V, 2) of its laser scanners' positions and survey
+    reference points (world xy, metres).
 
     Raises
     ------
     InputError
         When they are fewer than 3 or collinear (then ``--area`` or ``--path`` must say where).
     """
+    if rig.world.outline_xy is not None:
+        return check_polygon(np.asarray(rig.world.outline_xy, dtype=float), "world.outline_xy")
     pts = [s.T_world_scanner.xyz[:2] for s in rig.laser_scanners]
     pts += [p.xy for p in rig.survey.reference_points]
     P = np.unique(np.asarray(pts, dtype=float).reshape(-1, 2), axis=0)

@@ -1,8 +1,9 @@
 """The plan: GTvision's, GTlaser's and the fused pose covariance at every pose of a grid or path.
 
-The fused covariance is the inverse of the sum of the two sources' planar informations (x, y, yaw),
-as fusion combines independent measurements of one instant; where only one source covers a pose it
-is that source's. On a path with time stamps, GTvision's covariance also holds the cameras' time-stamp
+The fused covariance is what fusion's smoother makes of the two sources' fixes with odometry between
+them (:mod:`gtrig.plan.fused`: the fixes of neighbouring instants averaged over the odometry's noise at
+the robot's speed, the markers' pose errors kept); where only one source covers a pose it is that
+source's, smoothed alike. On a path with time stamps, GTvision's covariance also holds the cameras' time-stamp
 jitter times the robot's velocity (:func:`gtrig.plan.motion.stamp_jitter_covariance`): an image stamped
 off by ``dt`` shows the robot where it was ``dt`` earlier or later. Poses are processed in chunks so that
 memory stays bounded.
@@ -16,8 +17,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gtrig.errors import InputError
+from gtrig.plan.fused import FusionPlanSettings, SourceRates, fused_covariance, plan_velocity
 from gtrig.plan.grid import PlanGrid
-from gtrig.plan.laser import LaserPlanSettings, predict_laser
+from gtrig.plan.laser import LaserPlanSettings, predict_laser, scanner_rate_hz
 from gtrig.plan.vision import VisionPlanSettings, predict_vision
 from gtrig.rig.models import Rig
 from gtrig.vision.observations import VisionModel
@@ -29,10 +31,11 @@ SOURCES = ("vision", "laser", "fused")
 
 @dataclass(frozen=True)
 class PlanSettings:
-    """Noise models of both sources and the chunk size (poses per chunk)."""
+    """Noise models of both sources and of fusion, and the chunk size (poses per chunk)."""
 
     vision: VisionPlanSettings = field(default_factory=VisionPlanSettings)
     laser: LaserPlanSettings = field(default_factory=LaserPlanSettings)
+    fusion: FusionPlanSettings = field(default_factory=FusionPlanSettings)
     chunk_poses: int = 2048
 
 
@@ -50,6 +53,8 @@ class PlanResult:
     side_px : (K, n_cameras) smallest marker side each camera sees, pixels (0: none).
     beams : (K, n_scanners) beams each scanner puts on the hull.
     sides : (K, n_scanners) hull sides each scanner sees with enough beams for the ICP.
+    vision_persistent : (K, 3, 3) the part of ``cov["vision"]`` held by the markers' pose errors, the same
+        in every image (:func:`gtrig.plan.vision.marker_part`; nan: uncovered), or None (none).
     """
 
     grid: PlanGrid
@@ -60,6 +65,7 @@ class PlanResult:
     side_px: np.ndarray
     beams: np.ndarray
     sides: np.ndarray
+    vision_persistent: np.ndarray | None = None
 
     @property
     def poses_xytheta(self) -> np.ndarray:
@@ -77,6 +83,26 @@ class PlanResult:
     def sigma_yaw_rad(self, source: str) -> np.ndarray:
         """(K,) the yaw's standard deviation, rad; nan: uncovered."""
         return np.sqrt(self.cov[source][:, 2, 2])
+
+
+def source_rates(rig: Rig) -> SourceRates:
+    """GTvision's fix rate (the median of the cameras' frame rates; None when no camera states one) and
+    GTlaser's (:func:`gtrig.plan.laser.scanner_rate_hz`), Hz."""
+    cam = [c.rate_hz for c in rig.cameras if c.rate_hz is not None]
+    return SourceRates(float(np.median(cam)) if cam else None,
+                       scanner_rate_hz(rig) if rig.laser_scanners else None)
+
+
+def fuse_sources(rig: Rig, poses_xytheta: np.ndarray, path_velocity: np.ndarray | None, cov_vision: np.ndarray,
+                 cov_laser: np.ndarray, persistent_vision: np.ndarray | None, settings: FusionPlanSettings
+                 ) -> np.ndarray:
+    """Fusion's covariance (K, 3, 3) at poses (K, 3) from the sources' covariances there and GTvision's
+    persistent part (each (K, 3, 3), nan: uncovered; :func:`gtrig.plan.fused.fused_covariance`), the robot
+    moving at ``path_velocity`` (K, 3) or, None, forward at ``settings.speed_mps``. GTlaser's covariance
+    is averaged whole, as fusion averages its track's."""
+    theta = np.asarray(poses_xytheta, dtype=float)[:, 2]
+    return fused_covariance(cov_vision, cov_laser, persistent_vision, None, theta,
+                            plan_velocity(theta, path_velocity, settings.speed_mps), source_rates(rig), settings)
 
 
 def fuse_information(covs: list[np.ndarray]) -> np.ndarray:
@@ -97,12 +123,12 @@ def fuse_information(covs: list[np.ndarray]) -> np.ndarray:
 
 
 def _predict_block(rig: Rig, poses: np.ndarray, settings: PlanSettings
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Both sources at poses (K, 3), chunk by chunk: vision and laser covariances (K, 3, 3), views,
-    smallest sides, beams and sides per sensor."""
+    smallest sides, beams and sides per sensor, and vision's persistent part (K, 3, 3)."""
     K = poses.shape[0]
     n_c, n_s = len(rig.cameras), len(rig.laser_scanners)
-    cov_v, cov_l = np.full((K, 3, 3), np.nan), np.full((K, 3, 3), np.nan)
+    cov_v, cov_l, per_v = np.full((K, 3, 3), np.nan), np.full((K, 3, 3), np.nan), np.full((K, 3, 3), np.nan)
     views, side_px = np.zeros((K, n_c), dtype=np.int16), np.zeros((K, n_c), dtype=np.float32)
     beams, sides = np.zeros((K, n_s), dtype=np.int32), np.zeros((K, n_s), dtype=np.int8)
     model = VisionModel.from_rig(rig) if rig.cameras and rig.robot.markers else None
@@ -112,10 +138,11 @@ def _predict_block(rig: Rig, poses: np.ndarray, settings: PlanSettings
         if model is not None:
             pv = predict_vision(rig, poses[a:b], settings.vision, model)
             cov_v[a:b], views[a:b], side_px[a:b] = pv.cov_xytheta, pv.views, pv.side_px
+            per_v[a:b] = pv.cov_persistent_xytheta
         if n_s:
             pl = predict_laser(rig, poses[a:b], settings.laser)
             cov_l[a:b], beams[a:b], sides[a:b] = pl.cov_xytheta, pl.beams, pl.sides
-    return cov_v, cov_l, views, side_px, beams, sides
+    return cov_v, cov_l, views, side_px, beams, sides, per_v
 
 
 def predict_plan(rig: Rig, grid: PlanGrid, settings: PlanSettings = PlanSettings(), workers: int = 1) -> PlanResult:
@@ -135,13 +162,13 @@ def predict_plan(rig: Rig, grid: PlanGrid, settings: PlanSettings = PlanSettings
             futures = [ex.submit(_predict_block, rig, poses[a:b], settings)
                        for a, b in zip(edges[:-1], edges[1:], strict=True)]
             parts = [f.result() for f in futures]
-    cov_v, cov_l, views, side_px, beams, sides = (np.concatenate(x) for x in zip(*parts, strict=True))
+    cov_v, cov_l, views, side_px, beams, sides, per_v = (np.concatenate(x) for x in zip(*parts, strict=True))
     if grid.path_velocity is not None and rig.cameras:
         from gtrig.plan.motion import stamp_jitter_covariance
 
         cov_v = cov_v + stamp_jitter_covariance(views, np.array([c.stamp_sigma_s for c in rig.cameras]),
                                                 grid.path_velocity)
-    fused = fuse_information([cov_v, cov_l])
+    fused = fuse_sources(rig, poses, grid.path_velocity, cov_v, cov_l, per_v, settings.fusion)
     log.info("plan: %d poses (%d cells x %d headings)", K, grid.n_cells, grid.n_headings)
     return PlanResult(grid, tuple(c.name for c in rig.cameras), tuple(s.name for s in rig.laser_scanners),
-                      {"vision": cov_v, "laser": cov_l, "fused": fused}, views, side_px, beams, sides)
+                      {"vision": cov_v, "laser": cov_l, "fused": fused}, views, side_px, beams, sides, per_v)

@@ -26,9 +26,10 @@ from gtrig import geometry as geo
 from gtrig.errors import InputError
 from gtrig.plan.laser import LaserInformation, laser_covariance, laser_information, predict_laser, scanner_rate_hz
 from gtrig.plan.maps import summarize_target
-from gtrig.plan.predict import PlanResult, PlanSettings, fuse_information
+from gtrig.plan.predict import PlanResult, PlanSettings, fuse_sources
 from gtrig.plan.visibility import camera_sight
 from gtrig.plan.vision import (
+    marker_part,
     planar_covariance,
     pose_covariance,
     predict_vision,
@@ -113,15 +114,18 @@ def _with_camera(rig: Rig, plan: PlanResult, cam: Camera, settings: PlanSettings
                          settings.vision.min_side_px)
     hit = np.flatnonzero(sight.visible.any(axis=1))
     cov_v = plan.cov["vision"].copy()
+    per_v = np.full(cov_v.shape, np.nan) if plan.vision_persistent is None else plan.vision_persistent.copy()
     views = np.column_stack([plan.views, np.zeros(poses.shape[0], dtype=plan.views.dtype)])
     side = np.column_stack([plan.side_px, np.zeros(poses.shape[0], dtype=plan.side_px.dtype)])
     step = max(1, int(settings.chunk_poses))
     for a in range(0, hit.size, step):
         h = hit[a:a + step]
         pv = predict_vision(rig2, poses[h], settings.vision, model)
-        cov_v[h], views[h], side[h] = pv.cov_xytheta, pv.views, pv.side_px
-    cov = {"vision": cov_v, "laser": plan.cov["laser"], "fused": fuse_information([cov_v, plan.cov["laser"]])}
-    return rig2, replace(plan, camera_names=(*plan.camera_names, cam.name), cov=cov, views=views, side_px=side)
+        cov_v[h], views[h], side[h], per_v[h] = pv.cov_xytheta, pv.views, pv.side_px, pv.cov_persistent_xytheta
+    fused = fuse_sources(rig2, poses, plan.grid.path_velocity, cov_v, plan.cov["laser"], per_v, settings.fusion)
+    cov = {"vision": cov_v, "laser": plan.cov["laser"], "fused": fused}
+    return rig2, replace(plan, camera_names=(*plan.camera_names, cam.name), cov=cov, views=views, side_px=side,
+                         vision_persistent=per_v)
 
 
 def _with_scanner(rig: Rig, plan: PlanResult, scanner: LaserScanner, settings: PlanSettings) -> tuple[Rig, PlanResult]:
@@ -136,7 +140,9 @@ def _with_scanner(rig: Rig, plan: PlanResult, scanner: LaserScanner, settings: P
     for a in range(0, K, step):
         pl = predict_laser(rig2, poses[a:a + step], settings.laser)
         cov_l[a:a + step], beams[a:a + step], sides[a:a + step] = pl.cov_xytheta, pl.beams, pl.sides
-    cov = {"vision": plan.cov["vision"], "laser": cov_l, "fused": fuse_information([plan.cov["vision"], cov_l])}
+    fused = fuse_sources(rig2, poses, plan.grid.path_velocity, plan.cov["vision"], cov_l, plan.vision_persistent,
+                         settings.fusion)
+    cov = {"vision": plan.cov["vision"], "laser": cov_l, "fused": fused}
     return rig2, replace(plan, scanner_names=(*plan.scanner_names, scanner.name), cov=cov, beams=beams, sides=sides)
 
 
@@ -161,12 +167,12 @@ class _Candidate:
     model: VisionModel | None
 
 
-def _candidate_fused(c: _Candidate, poses: np.ndarray, cov_v: np.ndarray, cov_l: np.ndarray,
-                     H_vision: np.ndarray | None, laser: LaserInformation | None, settings: PlanSettings
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def _candidate_fused(c: _Candidate, poses: np.ndarray, chunk: dict[str, np.ndarray], H_vision: np.ndarray | None,
+                     laser: LaserInformation | None, settings: PlanSettings) -> tuple[np.ndarray, np.ndarray]:
     """The poses (n,) of a chunk the candidate changes and the fused covariance (n, 3, 3) there, from the
-    rig's vision covariance ``cov_v`` and laser covariance ``cov_l`` (Kc, 3, 3), its vision normal matrices
+    rig's covariances at the chunk's poses (``chunk``: :func:`_fusion_inputs`), its vision normal matrices
     ``H_vision`` (Kc, D, D, priors included) or laser pieces, plus the candidate's own."""
+    cov_v, cov_l, per_v, vel = chunk["vision"], chunk["laser"], chunk["vision_persistent"], chunk.get("velocity")
     if c.kind == "camera":
         assert H_vision is not None and isinstance(c.sensor, Camera)
         own = vision_information(c.rig, poses, settings.vision, c.model, (c.sensor.name,), priors=False)
@@ -175,15 +181,30 @@ def _candidate_fused(c: _Candidate, poses: np.ndarray, cov_v: np.ndarray, cov_l:
             return hit, np.zeros((0, 3, 3))
         H = own.H
         H += H_vision[hit]
-        new_v = planar_covariance(pose_covariance(H))
-        return hit, fuse_information([new_v, cov_l[hit]])
+        cov6 = pose_covariance(H)
+        new_v = planar_covariance(cov6)
+        return hit, fuse_sources(c.rig, poses[hit], None if vel is None else vel[hit], new_v, cov_l[hit],
+                                 marker_part(H, cov6), settings.fusion)
     assert laser is not None
     own_l = laser_information(c.rig, poses, settings.laser)
     hit = np.flatnonzero(own_l.beams[:, 0] > 0)
     if hit.size == 0:
         return hit, np.zeros((0, 3, 3))
     new_l = laser_covariance(laser.take(hit).plus(own_l.take(hit)), scanner_rate_hz(c.rig), settings.laser).cov_xytheta
-    return hit, fuse_information([cov_v[hit], new_l])
+    return hit, fuse_sources(c.rig, poses[hit], None if vel is None else vel[hit], cov_v[hit], new_l, per_v[hit],
+                             settings.fusion)
+
+
+def _fusion_inputs(plan: PlanResult) -> dict[str, np.ndarray]:
+    """Per pose of the plan, what a candidate's fused covariance is made from: the sources' covariances
+    (``"vision"``, ``"laser"``, ``"fused"``), GTvision's persistent part (``"vision_persistent"``) and, on
+    a path with stamps, the robot's velocity (``"velocity"``)."""
+    out = dict(plan.cov)
+    out["vision_persistent"] = (np.full(plan.cov["vision"].shape, np.nan) if plan.vision_persistent is None
+                                else plan.vision_persistent)
+    if plan.grid.path_velocity is not None:
+        out["velocity"] = plan.grid.path_velocity
+    return out
 
 
 def _cell_results(rig: Rig, cands: list[_Candidate], poses: np.ndarray, cov: dict[str, np.ndarray], n_headings: int,
@@ -202,7 +223,7 @@ def _cell_results(rig: Rig, cands: list[_Candidate], poses: np.ndarray, cov: dic
     for c0 in range(0, C, cells_per_chunk):
         c1 = min(C, c0 + cells_per_chunk)
         a, b = c0 * Hn, c1 * Hn
-        cov_v, cov_l = cov["vision"][a:b], cov["laser"][a:b]
+        chunk = {k: v[a:b] for k, v in cov.items()}
         base_sxy, base_syaw = _sigmas(cov["fused"][a:b])
         H_vision = None
         if P_vision is not None:
@@ -212,7 +233,7 @@ def _cell_results(rig: Rig, cands: list[_Candidate], poses: np.ndarray, cov: dic
         laser = laser_information(rig, poses[a:b], settings.laser) if any_scan else None
         for j, c in enumerate(cands):
             sxy, syaw = base_sxy.copy(), base_syaw.copy()
-            hit, fused = _candidate_fused(c, poses[a:b], cov_v, cov_l, H_vision, laser, settings)
+            hit, fused = _candidate_fused(c, poses[a:b], chunk, H_vision, laser, settings)
             sxy[hit], syaw[hit] = _sigmas(fused)
             ok = (sxy <= target_xy_m) & (syaw <= target_yaw_rad)
             meets[j, c0:c1] = ok.reshape(-1, Hn).all(axis=1)
@@ -228,14 +249,15 @@ def _score_candidates(rig: Rig, plan: PlanResult, cands: list[_Candidate], targe
     C, Hn = g.n_cells, g.n_headings
     poses = plan.poses_xytheta
     args = (Hn, target_xy_m, target_yaw_rad, settings)
+    inputs = _fusion_inputs(plan)
     if workers <= 1 or C * Hn < 4 * settings.chunk_poses:
-        meets, worst = _cell_results(rig, cands, poses, plan.cov, *args)
+        meets, worst = _cell_results(rig, cands, poses, inputs, *args)
     else:
         from gtrig.parallel import process_pool
 
         edges = np.linspace(0, C, 4 * workers + 1).astype(int) * Hn
         with process_pool(workers) as ex:
-            futures = [ex.submit(_cell_results, rig, cands, poses[a:b], {k: v[a:b] for k, v in plan.cov.items()},
+            futures = [ex.submit(_cell_results, rig, cands, poses[a:b], {k: v[a:b] for k, v in inputs.items()},
                                  *args) for a, b in zip(edges[:-1], edges[1:], strict=True)]
             parts = [f.result() for f in futures]
         meets, worst = (np.concatenate(x, axis=1) for x in zip(*parts, strict=True))

@@ -76,12 +76,15 @@ class VisionPrediction:
     cov_6x6 : (K, 6, 6) the full one over (dt, dphi), world axes (GTvision's ``cov_6x6``).
     views : (K, n_cameras) markers each camera sees whole.
     side_px : (K, n_cameras) smallest marker side each camera sees, pixels (0: none).
+    cov_persistent_xytheta : (K, 3, 3) the part of ``cov_xytheta`` held by the markers' pose errors on the
+        robot (:func:`marker_part`), the same in every image of a run; nan where no marker is seen.
     """
 
     cov_xytheta: np.ndarray
     cov_6x6: np.ndarray
     views: np.ndarray
     side_px: np.ndarray
+    cov_persistent_xytheta: np.ndarray
 
 
 def corner_information(side_px: np.ndarray, noise: CornerNoise, floor_px: float) -> np.ndarray:
@@ -265,6 +268,16 @@ def vision_information(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlan
     return VisionInformation(seen, H, views, side_min)
 
 
+def marker_part(H: np.ndarray, cov_6x6: np.ndarray) -> np.ndarray:
+    """(K, 3, 3) the part of the planar pose covariance that the markers' corrections add: ``cov_6x6`` (K, 6, 6,
+    from the normal matrices ``H`` (K, D, D)) less the pose covariance with the markers held at their poses
+    (the inverse of the pose block of ``H``), x, y (m) and yaw (rad). A marker's pose error on the robot is
+    the same in every image, so this part does not average over a run's images; it is positive
+    semi-definite (a marginal of the difference of the Schur complement's inverse and the block's)."""
+    fixed = planar_covariance(np.linalg.inv(H[:, :6, :6]))
+    return planar_covariance(cov_6x6) - fixed
+
+
 def planar_covariance(cov_6x6: np.ndarray) -> np.ndarray:
     """The x, y, yaw block (K, 3, 3) of pose covariances (K, 6, 6) over (dt, dphi)."""
     i = np.array(PLANAR_INDEX)
@@ -276,6 +289,8 @@ def predict_vision(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSett
     """GTvision's predicted covariance at planar poses (K, 3) on a flat floor (module docstring)."""
     info = vision_information(rig, poses_xytheta, settings, model)
     cov6 = np.full((info.seen.shape[0], 6, 6), np.nan)
+    persistent = np.full((info.seen.shape[0], 3, 3), np.nan)
     if info.H.shape[0]:
         cov6[info.seen] = pose_covariance(info.H)
-    return VisionPrediction(planar_covariance(cov6), cov6, info.views, info.side_px)
+        persistent[info.seen] = marker_part(info.H, cov6[info.seen])
+    return VisionPrediction(planar_covariance(cov6), cov6, info.views, info.side_px, persistent)

@@ -409,8 +409,28 @@ class Survey(_Strict):
 
 
 class World(_Strict):
+    """The world frame's name and, optionally, the room's outline: its walls' feet as a polygon ``(x, y)``
+    in the world frame, metres, corner after corner (``gtrig sim --rig`` builds the room's walls from it)."""
+
     name: str = "world"
     description: str = ""
+    outline_xy: tuple[tuple[float, float], ...] | None = None
+
+    @field_validator("outline_xy")
+    @classmethod
+    def _outline(cls, v: tuple[tuple[float, float], ...] | None) -> tuple[tuple[float, float], ...] | None:
+        if v is None:
+            return v
+        if len(v) < 3:
+            raise ValueError(f"a room outline needs at least 3 corners, got {len(v)}")
+        for p in v:
+            for c in p:
+                _check_metres(c, MAX_ROOM_EXTENT_M, "outline_xy")
+        x, y = [p[0] for p in v], [p[1] for p in v]
+        area = 0.5 * abs(sum(x[i] * y[i - 1] - x[i - 1] * y[i] for i in range(len(v))))
+        if area <= 0.0:
+            raise ValueError("the room outline encloses no area")
+        return v
 
 
 class Rig(_Strict):

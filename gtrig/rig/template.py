@@ -155,8 +155,10 @@ FIELD_NOTES: dict[str, str] = {
                                  "plus aiming, typically 0.001-0.002.",
 }
 
-#: fields the calibrations add; the template shows them as comments where they would go
+#: fields the calibrations add, and optional ones; the template shows them as comments where they would go
 LATER_NOTES: dict[str, str] = {
+    "world": "outline_xy: the room's outline, its walls' feet as corners [[x, y], ...] (m) in order; "
+             "`gtrig sim --rig` builds the simulated room's walls on it. Optional.",
     "cameras[]": "pose_cov: written by `gtrig calib network` (covariance of T_world_cam and the lens); "
                  "leave it out.",
     "robot.markers[]": "pose_cov: written by `gtrig markers calibrate-robot` (6 x 6, m and rad); leave "

@@ -16,9 +16,12 @@ order, so that the GT room's own design (:func:`gtrig.sim.gtroom.design_rig`) gi
 - the operator's nominal rig: the true camera and scanner poses taped to 3 cm, 1 deg (scanners 2 deg in
   heading), the planned intrinsics and markers.
 
-The room itself (walls, clutter, world points, calibration objects and boards, the validation poses) is
-the GT room's; the plan's sensors must fit in it. What the simulator cannot simulate is refused with one
-line naming the rig's field (:func:`check_plan`).
+The room is the GT room (walls, clutter, world points, calibration objects and boards, the validation
+poses) unless the plan gives its own outline (``world.outline_xy``): then the walls stand on that
+outline, the 16 world points mark its wall feet (spread evenly along it, 5 cm inside), and of the GT
+room's clutter and calibration objects only those standing inside it are kept. The plan's sensors must
+fit in the room. What the simulator cannot simulate is refused with one line naming the rig's field
+(:func:`check_plan`).
 """
 
 from __future__ import annotations
@@ -42,6 +45,8 @@ from gtrig.sim.gtroom import (
     room_walls,
 )
 
+#: how far inside the walls the world points mark their feet, metres (the GT room's are pushed out by this)
+WORLD_POINT_INSET_M = 0.05
 #: the farthest a camera's optical axis may meet the floor, metres (farther: it looks at the walls)
 MAX_AIM_DISTANCE_M = 30.0
 #: how far a marker may lie from the robot's top plate (height, metres; tilt, degrees)
@@ -59,6 +64,34 @@ def inside_polygon(xy: np.ndarray, polygon_xy: np.ndarray) -> bool:
         if (y0 > y) != (y1 > y) and x < x0 + (y - y0) * (x1 - x0) / (y1 - y0):
             inside = not inside
     return inside
+
+
+def room_outline(plan: Rig) -> np.ndarray:
+    """The room's outline (V, 2), world xy, metres: the plan's ``world.outline_xy``, else the GT room's."""
+    if plan.world.outline_xy is not None:
+        return np.asarray(plan.world.outline_xy, dtype=float)
+    return room_walls()[:, 0]
+
+
+def outline_walls(outline_xy: np.ndarray) -> np.ndarray:
+    """Wall segments (V, 2, 2) along an outline (V, 2): corner i to corner i + 1, the last back to the first."""
+    P = np.asarray(outline_xy, dtype=float)
+    return np.stack([P, np.roll(P, -1, axis=0)], axis=1)
+
+
+def outline_world_points(outline_xy: np.ndarray, n: int = len(WORLD_POINTS_XY)) -> np.ndarray:
+    """``n`` world points (n, 2) marking the walls' feet of an outline (V, 2): evenly spread along its
+    perimeter (half a spacing from the first corner), :data:`WORLD_POINT_INSET_M` inside it."""
+    walls = outline_walls(outline_xy)
+    d = walls[:, 1] - walls[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    P = walls[:, 0]
+    ccw = np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1]) > 0
+    inward = np.column_stack([-d[:, 1], d[:, 0]]) / length[:, None] * (1.0 if ccw else -1.0)
+    s = (np.arange(n) + 0.5) * length.sum() / n
+    k = np.minimum(np.searchsorted(np.cumsum(length), s, side="right"), len(length) - 1)
+    u = (s - (np.cumsum(length) - length)[k]) / length[k]
+    return walls[k, 0] + u[:, None] * d[k] + WORLD_POINT_INSET_M * inward[k]
 
 
 def floor_aim(T_world_cam: np.ndarray) -> np.ndarray | None:
@@ -82,7 +115,7 @@ def _check_cameras(plan: Rig, room_xy: np.ndarray) -> None:
             raise InputError(f"{where}.rate_hz: the simulator records video; give the camera's frame rate")
         T = c.T_world_cam.matrix()
         if not inside_polygon(T[:2, 3], room_xy) or not 0.0 < T[2, 3] < 10.0:
-            raise InputError(f"{where}.T_world_cam: the camera is outside the simulated GT room "
+            raise InputError(f"{where}.T_world_cam: the camera is outside the simulated room "
                              "(inside its walls, 0-10 m high)")
         if floor_aim(T) is None:
             raise InputError(f"{where}.T_world_cam: the optical axis does not meet the floor within "
@@ -96,7 +129,7 @@ def _check_scanners(plan: Rig, room_xy: np.ndarray) -> None:
         where = f"laser_scanners[{i}] ({s.name})"
         T = s.T_world_scanner.matrix()
         if not inside_polygon(T[:2, 3], room_xy):
-            raise InputError(f"{where}.T_world_scanner: the scanner is outside the simulated GT room's walls")
+            raise InputError(f"{where}.T_world_scanner: the scanner is outside the simulated room's walls")
         if np.degrees(np.arccos(np.clip(T[2, 2], -1.0, 1.0))) > SCANNER_TILT_TOL_DEG:
             raise InputError(f"{where}.T_world_scanner: the simulator's scanners scan a horizontal plane "
                              "(roll and pitch 0)")
@@ -146,7 +179,7 @@ def world_board_pose() -> np.ndarray:
 
 def check_plan(plan: Rig) -> None:
     """Refuse, with one line naming the field, a planned rig the simulator cannot simulate."""
-    room_xy = room_walls()[:, 0]
+    room_xy = room_outline(plan)
     _check_cameras(plan, room_xy)
     _check_world_board(plan)
     _check_scanners(plan, room_xy)
@@ -240,8 +273,12 @@ def install(plan: Rig, seed: int = 0, anchor_id: int = DIMA_MARKER_ID) -> Scene:
     T12_nom = geo.make_T(np.eye(3), [CHESSBOARD_SQUARES[0] * CHESSBOARD_SQUARE_M + DOUBLE_BOARD_GAP_M, 0, 0])
     T12_true = T12_nom @ geo.T_from_xyz_rpy(rng.normal(0, 0.002, 3), np.radians(rng.normal(0, 0.2, 3)))
     T_world_board = world_board_pose()
+    outline = room_outline(plan)
+    own = plan.world.outline_xy is not None
+    boxes = tuple(b for b in clutter() if inside_polygon(np.asarray(b.centre_xy), outline)) if own else clutter()
+    world_points = outline_world_points(outline) if own else WORLD_POINTS_XY.copy()
     return Scene(
-        seed=seed, rig_true=rig_true, rig_nominal=rig_nominal, walls=room_walls(), boxes=clutter(),
-        floor=Floor.random(rng), world_points_xy=WORLD_POINTS_XY.copy(), reference_true_xy=ref_true,
+        seed=seed, rig_true=rig_true, rig_nominal=rig_nominal, walls=outline_walls(outline), boxes=boxes,
+        floor=Floor.random(rng), world_points_xy=world_points, reference_true_xy=ref_true,
         T_board1_board2_true=T12_true, T_board1_board2_nominal=T12_nom, T_world_board=T_world_board,
     )

@@ -234,9 +234,9 @@ def _scene(cfg: SimConfig, plan: Rig | None) -> Scene:
     return configure_scene(install(plan, cfg.seed), cfg)
 
 
-def check_path(path: PlannedPath) -> None:
+def check_path(path: PlannedPath, outline_xy: np.ndarray | None = None) -> None:
     """Refuse, with one line, a path the simulator cannot drive: fewer than 2 poses, stamps not
-    increasing, a pose outside the GT room's walls."""
+    increasing, a pose outside the room's walls (``outline_xy`` (V, 2), world xy; None: the GT room's)."""
     from gtrig.sim.gtroom import room_walls
     from gtrig.sim.install import inside_polygon
 
@@ -248,11 +248,11 @@ def check_path(path: PlannedPath) -> None:
     if np.any(np.diff(t) <= 0):
         i = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 2
         raise InputError(f"--path: pose {i}: the stamps must increase")
-    walls = room_walls()[:, 0]
+    walls = room_walls()[:, 0] if outline_xy is None else np.asarray(outline_xy, dtype=float)
     for i, xy in enumerate(p[:, :2]):
         if not inside_polygon(xy, walls):
             raise InputError(f"--path: pose {i + 1} at ({xy[0]:.2f}, {xy[1]:.2f}) m is outside the simulated "
-                             "GT room's walls")
+                             "room's walls")
 
 
 Step = Callable[[Scene, Timeline, Path, SimConfig], None]
@@ -324,7 +324,7 @@ def simulate(
         raise InputError(f"unknown scenario {cfg.scenario!r}; available: gtroom, outdoor")
     scene = _scene(cfg, plan)
     if path is not None:
-        check_path(path)
+        check_path(path, scene.walls[:, 0])
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     state_path = out / STATE_FILE

@@ -138,3 +138,58 @@ def test_a_path_outside_the_room_is_refused(tmp_path: Path) -> None:
     r = CliRunner().invoke(app, ["sim", "--path", str(tmp_path / "p.tum"), "--out", str(tmp_path / "rec"), "--quick"])
     assert r.exit_code != 0 and "pose 3" in r.output and "outside" in r.output, r.output
     assert not (tmp_path / "rec").exists()
+
+
+def _segment_distance(p: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """Distance (M,) of points (M, 2) to the nearest of wall segments (S, 2, 2)."""
+    a, e = walls[:, 0], walls[:, 1] - walls[:, 0]
+    u = np.clip(np.einsum("msj,sj->ms", p[:, None] - a[None], e) / np.einsum("sj,sj->s", e, e), 0, 1)
+    return np.min(np.linalg.norm(a[None] + u[..., None] * e[None] - p[:, None], axis=2), axis=1)
+
+
+def test_a_rig_with_its_own_outline_gives_scans_of_that_outline(tmp_path: Path) -> None:
+    from gtrig.laser.fuse import scan_points_world
+    from gtrig.sim.config import LaserSimConfig
+    from gtrig.sim.gtroom import room_walls
+    from gtrig.sim.install import outline_walls
+    from gtrig.sim.lasers import configure_scene, simulate_fixed_scans
+
+    gt = room_walls()
+    c = gt[:, 0].mean(axis=0)
+    # a pentagon around the GT room: its corners 1.5 m farther out, a fifth corner off the first wall
+    corners = gt[:, 0] + np.sign(gt[:, 0] - c) * 1.5
+    bulge = 0.5 * (corners[0] + corners[1]) + 1.2 * (0.5 * (corners[0] + corners[1]) - c) / np.linalg.norm(
+        0.5 * (corners[0] + corners[1]) - c)
+    outline = np.vstack([corners[:1], bulge, corners[1:]])
+    d = design_rig()
+    plan = d.model_copy(update={"world": d.world.model_copy(update={
+        "outline_xy": tuple((float(x), float(y)) for x, y in outline)})})
+    dump_rig(plan, tmp_path / "plan.yaml")  # the outline round-trips through the rig file
+    plan = load_rig(tmp_path / "plan.yaml")
+    scene = install(plan, 0)
+    assert np.allclose(scene.walls, outline_walls(outline))
+    # a path is checked against the planned walls: beyond the GT room's but inside the outline drives
+    from gtrig.sim.recording import check_path
+
+    beyond = c + 1.15 * (gt[1].mean(axis=0) - c)  # past the middle of a GT room wall
+    check_path(PlannedPath(np.arange(2.0), np.array([[*c, 0.0], [*beyond, 0.0]])), scene.walls[:, 0])
+    with pytest.raises(InputError, match="outside"):
+        check_path(PlannedPath(np.arange(2.0), np.array([[*c, 0.0], [*beyond, 0.0]])))
+    # the world points mark the new walls' feet, 5 cm inside
+    assert np.allclose(_segment_distance(scene.world_points_xy, scene.walls), 0.05, atol=1e-9)
+    cfg = SimConfig(laser=LaserSimConfig(people=0, mixed_pixels=False, dropout_prob=0.0))
+    scene = configure_scene(scene, cfg)
+    scans, _ = simulate_fixed_scans(scene, None, np.array([[0.0, 0.1]]), cfg, 1, ideal=True)
+    pts = np.concatenate([scan_points_world(scans[s.name].ranges_m[:1], s)[0]
+                          for s in scene.rig_true.laser_scanners])
+    pts = pts[np.isfinite(pts[:, 0])]
+    on_new = _segment_distance(pts, scene.walls) < 0.01
+    on_old = _segment_distance(pts, gt) < 0.05
+    assert on_new.mean() > 0.5, on_new.mean()  # most beams end on the planned walls, the rest on clutter
+    assert not np.any(on_old & ~on_new)  # none on the GT room's walls
+    # the same design without an outline still scans the GT room's walls
+    built = configure_scene(install(d, 0), cfg)
+    scans0, _ = simulate_fixed_scans(built, None, np.array([[0.0, 0.1]]), cfg, 1, ideal=True)
+    p0 = np.concatenate([scan_points_world(scans0[s.name].ranges_m[:1], s)[0] for s in built.rig_true.laser_scanners])
+    p0 = p0[np.isfinite(p0[:, 0])]
+    assert np.mean(_segment_distance(p0, gt) < 0.01) > 0.5
