@@ -178,12 +178,33 @@ def _rms_sigma(cov_xytheta: np.ndarray) -> tuple[float, float]:
 VISION_PARTS = ("corner", "corner+camera", "corner+marker", "all, one instant")
 
 
-def vision_detail(rig: Rig, res: Path, stamps_s: np.ndarray, true_xyt: np.ndarray, err: np.ndarray,
+def instant_cameras(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, sync_tol_s: float = 0.005) -> np.ndarray:
+    """(K, n_cameras) bool: the cameras with an image within ``sync_tol_s`` of each GTvision pose's stamp
+    (``stamps_s`` (K,)) in which the run found a marker (its checkpoint)."""
+    from gtrig.report.coverage import read_checkpoint
+
+    per, _ = read_checkpoint(res / "gt_vision_run.checkpoint")
+    out = np.zeros((stamps_s.size, len(rig.cameras)), dtype=bool)
+    for j, cam in enumerate(rig.cameras):
+        st = _camera_stamps(rec, cam.name)
+        marked = np.zeros(st.size, dtype=bool)
+        c = per.get(cam.name)
+        if c is not None:
+            marked[np.asarray(c.rows, dtype=int)] = np.asarray(c.marked, dtype=bool)
+        i = np.clip(np.searchsorted(st, stamps_s), 1, st.size - 1)
+        for n in (i - 1, i):
+            out[:, j] |= (np.abs(st[n] - stamps_s) <= sync_tol_s) & marked[n]
+    return out
+
+
+def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt: np.ndarray, err: np.ndarray,
                   plan_cov: np.ndarray, region: np.ndarray, ru, pooled: dict) -> None:  # noqa: ANN001
     """GTvision per region: the plan's ratio with and without the poses whose error the run's own
     covariance (``gt_vision_run_cov.csv``) does not explain (NEES beyond chi-square 3 dof at 0.1 %), the
     run's covariance's own ratio, and what the plan's sigma is made of (corner noise alone, with the
-    cameras' pose errors, with the markers', all at one instant: without the time-stamp jitter)."""
+    cameras' pose errors, with the markers', all at one instant: without the time-stamp jitter); and the
+    plan's ratio when each pose is predicted from the cameras whose images made it (``own``, at one
+    instant: without the jitter)."""
     from gtrig.io.posetrack import read_covariance_csv
     from gtrig.plan.honesty import extreme_poses, region_ratios
     from gtrig.plan.vision import VisionPlanSettings, predict_vision
@@ -196,12 +217,24 @@ def vision_detail(rig: Rig, res: Path, stamps_s: np.ndarray, true_xyt: np.ndarra
     variants = (RigUncertainty.none(), RigUncertainty(ru.camera_xyz_m, ru.camera_rot_rad, 0.0, 0.0),
                 RigUncertainty(0.0, 0.0, ru.marker_xyz_m, ru.marker_rot_rad), ru)
     parts = [predict_vision(rig, true_xyt, VisionPlanSettings(rig_uncertainty=u)).cov_xytheta for u in variants]
+    # the cameras whose images made each pose: GTvision's instant holds the images within its sync
+    # tolerance (5 ms), one camera's in most instants of free-running cameras
+    own = instant_cameras(rig, rec, res, stamps_s)
+    cov_own = np.full_like(parts[-1], np.nan)
+    for combo in {tuple(r) for r in own if r.any()}:
+        m = np.all(own == np.array(combo), axis=1)
+        sub = rig.model_copy(update={"cameras": tuple(c for c, k in zip(rig.cameras, combo, strict=True) if k)})
+        cov_own[m] = predict_vision(sub, true_xyt[m], VisionPlanSettings(rig_uncertainty=ru)).cov_xytheta
+    print(f"  vision: poses made of one camera's images {100 * np.mean(own.sum(axis=1) == 1):.0f} %, of two "
+          f"{100 * np.mean(own.sum(axis=1) == 2):.0f} %")
     print(f"  vision: {int(flagged.sum())} of {err.shape[0]} poses flagged (NEES under the run's covariance "
           f"beyond chi2(3) at 0.1 %)")
     by = {r.region: r for r in region_ratios(err, plan_cov, region)}
     kept = {r.region: r for r in region_ratios(err, plan_cov, region, keep=~flagged)}
     own = {r.region: r for r in region_ratios(err, run_cov, region)}
     own_kept = {r.region: r for r in region_ratios(err, run_cov, region, keep=~flagged)}
+    inst = {r.region: r for r in region_ratios(err, cov_own, region)}
+    inst_kept = {r.region: r for r in region_ratios(err, cov_own, region, keep=~flagged)}
     for reg, r in by.items():
         m = region == reg
         sig = [_rms_sigma(c[m & np.isfinite(c[:, 0, 0])]) for c in parts]
@@ -211,10 +244,17 @@ def vision_detail(rig: Rig, res: Path, stamps_s: np.ndarray, true_xyt: np.ndarra
               + (f"{k.position:.2f}/{k.yaw:.2f} (error {1e3 * k.rms_error_m:.2f} mm)" if k else "-")
               + (f"; run's covariance all {o.position:.2f}/{o.yaw:.2f} ({1e3 * o.rms_sigma_m:.2f} mm)" if o else "")
               + (f", without flagged {ok_.position:.2f}/{ok_.yaw:.2f}" if ok_ else ""))
+        if reg in inst:
+            i_, ik = inst[reg], inst_kept.get(reg)
+            print(f"      plan from the pose's own cameras (one instant, no jitter): "
+                  f"all {i_.position:.2f}/{i_.yaw:.2f} "
+                  f"({1e3 * i_.rms_sigma_m:.2f} mm)"
+                  + (f", without flagged {ik.position:.2f}/{ik.yaw:.2f}" if ik else ""))
         print("      plan sigma parts (mm / deg): " + ", ".join(
             f"{n} {1e3 * a:.2f}/{np.degrees(b):.4f}" for n, (a, b) in zip(VISION_PARTS, sig, strict=True))
             + f", with the jitter {1e3 * r.rms_sigma_m:.2f}/{np.degrees(r.rms_sigma_rad):.4f}")
-        for key, rr in (("all", r), ("kept", k), ("run", o), ("run kept", ok_)):
+        for key, rr in (("all", r), ("kept", k), ("run", o), ("run kept", ok_), ("own", inst.get(reg)),
+                        ("own kept", inst_kept.get(reg))):
             if rr is not None:
                 pooled.setdefault((key, reg), []).append(np.array(
                     [rr.poses, rr.rms_error_m**2, rr.rms_sigma_m**2, rr.rms_error_rad**2, rr.rms_sigma_rad**2]))
@@ -268,8 +308,8 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
                       f"{r.position:.2f} ({1e3 * r.rms_error_m:.3f} / {1e3 * r.rms_sigma_m:.3f} mm), yaw {r.yaw:.2f} "
                       f"({np.degrees(r.rms_error_rad):.4f} / {np.degrees(r.rms_sigma_rad):.4f} deg)")
             if src == "vision":
-                vision_detail(rig, res, t[keep], true_xyt, err, plan.cov[src], region, settings.vision.rig_uncertainty,
-                              vision_pooled)
+                vision_detail(rig, rec, res, t[keep], true_xyt, err, plan.cov[src], region,
+                              settings.vision.rig_uncertainty, vision_pooled)
         per, _ = read_checkpoint(res / "gt_vision_run.checkpoint")
         for cam in rig.cameras:
             stamps = _camera_stamps(rec, cam.name)
@@ -289,10 +329,10 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
         pos, yaw, _ = _pooled_ratio(rows)
         print(f"  {src:<6} region cam{reg}: position {pos:.2f}, yaw {yaw:.2f}")
     print("GTvision pooled: plan's ratio position/yaw, all poses and without the flagged ones; the run's "
-          "covariance's; the plan's sigma parts (mm / deg):")
+          "covariance's; the plan's from each pose's own cameras; the plan's sigma parts (mm / deg):")
     for reg in sorted({k[1] for k in vision_pooled}):
         line = f"  region cam{reg}:"
-        for key in ("all", "kept", "run", "run kept"):
+        for key in ("all", "kept", "run", "run kept", "own", "own kept"):
             rows = vision_pooled.get((key, reg))
             if rows:
                 pos, yaw, e = _pooled_ratio(rows)
