@@ -204,7 +204,7 @@ def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt
     run's covariance's own ratio, and what the plan's sigma is made of (corner noise alone, with the
     cameras' pose errors, with the markers', all at one instant: without the time-stamp jitter); and the
     plan's ratio when each pose is predicted from the cameras whose images made it (``own``, at one
-    instant: without the jitter)."""
+    instant: without the jitter), and with the plan's instants per camera (``per camera``, likewise)."""
     from gtrig.io.posetrack import read_covariance_csv
     from gtrig.plan.honesty import extreme_poses, region_ratios
     from gtrig.plan.vision import VisionPlanSettings, predict_vision
@@ -217,6 +217,7 @@ def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt
     variants = (RigUncertainty.none(), RigUncertainty(ru.camera_xyz_m, ru.camera_rot_rad, 0.0, 0.0),
                 RigUncertainty(0.0, 0.0, ru.marker_xyz_m, ru.marker_rot_rad), ru)
     parts = [predict_vision(rig, true_xyt, VisionPlanSettings(rig_uncertainty=u)).cov_xytheta for u in variants]
+    free = predict_vision(rig, true_xyt, VisionPlanSettings(rig_uncertainty=ru, instants="per_camera")).cov_of_a_pose
     # the cameras whose images made each pose: GTvision's instant holds the images within its sync
     # tolerance (5 ms), one camera's in most instants of free-running cameras
     own = instant_cameras(rig, rec, res, stamps_s)
@@ -234,6 +235,8 @@ def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt
     own = {r.region: r for r in region_ratios(err, run_cov, region)}
     own_kept = {r.region: r for r in region_ratios(err, run_cov, region, keep=~flagged)}
     inst = {r.region: r for r in region_ratios(err, cov_own, region)}
+    per_cam = {r.region: r for r in region_ratios(err, free, region)}
+    per_cam_kept = {r.region: r for r in region_ratios(err, free, region, keep=~flagged)}
     inst_kept = {r.region: r for r in region_ratios(err, cov_own, region, keep=~flagged)}
     for reg, r in by.items():
         m = region == reg
@@ -250,11 +253,17 @@ def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt
                   f"all {i_.position:.2f}/{i_.yaw:.2f} "
                   f"({1e3 * i_.rms_sigma_m:.2f} mm)"
                   + (f", without flagged {ik.position:.2f}/{ik.yaw:.2f}" if ik else ""))
+        if reg in per_cam:
+            f_, fk = per_cam[reg], per_cam_kept.get(reg)
+            print(f"      plan with instants per camera (one instant, no jitter): all {f_.position:.2f}/{f_.yaw:.2f} "
+                  f"({1e3 * f_.rms_sigma_m:.2f} mm)"
+                  + (f", without flagged {fk.position:.2f}/{fk.yaw:.2f}" if fk else ""))
         print("      plan sigma parts (mm / deg): " + ", ".join(
             f"{n} {1e3 * a:.2f}/{np.degrees(b):.4f}" for n, (a, b) in zip(VISION_PARTS, sig, strict=True))
             + f", with the jitter {1e3 * r.rms_sigma_m:.2f}/{np.degrees(r.rms_sigma_rad):.4f}")
         for key, rr in (("all", r), ("kept", k), ("run", o), ("run kept", ok_), ("own", inst.get(reg)),
-                        ("own kept", inst_kept.get(reg))):
+                        ("own kept", inst_kept.get(reg)), ("per camera", per_cam.get(reg)),
+                        ("per camera kept", per_cam_kept.get(reg))):
             if rr is not None:
                 pooled.setdefault((key, reg), []).append(np.array(
                     [rr.poses, rr.rms_error_m**2, rr.rms_sigma_m**2, rr.rms_error_rad**2, rr.rms_sigma_rad**2]))
@@ -329,10 +338,11 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
         pos, yaw, _ = _pooled_ratio(rows)
         print(f"  {src:<6} region cam{reg}: position {pos:.2f}, yaw {yaw:.2f}")
     print("GTvision pooled: plan's ratio position/yaw, all poses and without the flagged ones; the run's "
-          "covariance's; the plan's from each pose's own cameras; the plan's sigma parts (mm / deg):")
+          "covariance's; the plan's from each pose's own cameras and with instants per camera; the plan's sigma "
+          "parts (mm / deg):")
     for reg in sorted({k[1] for k in vision_pooled}):
         line = f"  region cam{reg}:"
-        for key in ("all", "kept", "run", "run kept", "own", "own kept"):
+        for key in ("all", "kept", "run", "run kept", "own", "own kept", "per camera", "per camera kept"):
             rows = vision_pooled.get((key, reg))
             if rows:
                 pos, yaw, e = _pooled_ratio(rows)

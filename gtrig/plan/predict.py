@@ -55,7 +55,8 @@ class PlanResult:
     beams : (K, n_scanners) beams each scanner puts on the hull.
     sides : (K, n_scanners) hull sides each scanner sees with enough beams for the ICP.
     vision_persistent : (K, 3, 3) the part of GTvision's covariance (all cameras seeing the pose) held by
-        the markers' pose errors, the same in every image (:func:`gtrig.plan.vision.marker_part`; nan: uncovered), or None (none).
+        the markers' pose errors, the same in every image (:func:`gtrig.plan.vision.marker_part`; nan:
+        uncovered), or None (none).
     """
 
     grid: PlanGrid
