@@ -57,6 +57,8 @@ class PlanResult:
     vision_persistent : (K, 3, 3) the part of GTvision's covariance (all cameras seeing the pose) held by
         the markers' pose errors, the same in every image (:func:`gtrig.plan.vision.marker_part`; nan:
         uncovered), or None (none).
+    vision_instant : (K, 3, 3) GTvision's covariance from all cameras seeing the pose at one instant,
+        fusion's input, where ``cov["vision"]`` is another (instants per camera); None: ``cov["vision"]``.
     """
 
     grid: PlanGrid
@@ -68,6 +70,12 @@ class PlanResult:
     beams: np.ndarray
     sides: np.ndarray
     vision_persistent: np.ndarray | None = None
+    vision_instant: np.ndarray | None = None
+
+    @property
+    def vision_for_fusion(self) -> np.ndarray:
+        """(K, 3, 3) GTvision's covariance as fusion takes it (``vision_instant``, else ``cov["vision"]``)."""
+        return self.cov["vision"] if self.vision_instant is None else self.vision_instant
 
     @property
     def poses_xytheta(self) -> np.ndarray:
@@ -175,4 +183,5 @@ def predict_plan(rig: Rig, grid: PlanGrid, settings: PlanSettings = PlanSettings
     fused = fuse_sources(rig, poses, grid.path_velocity, cov_v, cov_l, per_v, settings.fusion)
     log.info("plan: %d poses (%d cells x %d headings)", K, grid.n_cells, grid.n_headings)
     return PlanResult(grid, tuple(c.name for c in rig.cameras), tuple(s.name for s in rig.laser_scanners),
-                      {"vision": pose_v, "laser": cov_l, "fused": fused}, views, side_px, beams, sides, per_v)
+                      {"vision": pose_v, "laser": cov_l, "fused": fused}, views, side_px, beams, sides, per_v,
+                      cov_v if settings.vision.instants == "per_camera" else None)

@@ -118,3 +118,30 @@ def test_free_running_cameras_make_each_pose_of_one_camera(rig):
     r = np.array(ratios)
     assert r.shape[0] >= 8 and np.all(np.abs(r - 1) < 0.2), r
     assert len(wider) >= 3 and np.all(np.array(wider) > 1.1), wider
+
+
+def test_instants_per_camera_leave_fusion_as_it_is():
+    """The plan with instants per camera: GTvision's covariance of a pose is the per-camera one, at
+    least as wide as all cameras' together, and fusion's (which takes all cameras' information per
+    second) is the same to the bit."""
+    from dataclasses import replace
+
+    from gtrig.plan.grid import area_grid
+    from gtrig.plan.predict import PlanSettings, predict_plan
+    from gtrig.sim.gtroom import room_walls
+
+    rig = make_scene(0).rig_nominal
+    grid = area_grid(room_walls()[:, 0], 0.4, 4)
+    together = PlanSettings(vision=VisionPlanSettings(rig_uncertainty=CALIBRATED))
+    free = replace(together, vision=replace(together.vision, instants="per_camera"))
+    a, b = predict_plan(rig, grid, together), predict_plan(rig, grid, free)
+    np.testing.assert_array_equal(a.cov["fused"], b.cov["fused"])
+    np.testing.assert_array_equal(a.cov["vision"], b.vision_for_fusion)
+    seen = np.isfinite(a.cov["vision"][:, 0, 0])
+    assert seen.sum() > 50 and np.array_equal(seen, np.isfinite(b.cov["vision"][:, 0, 0]))
+    va, vb = np.trace(a.cov["vision"][seen], axis1=1, axis2=2), np.trace(b.cov["vision"][seen], axis1=1, axis2=2)
+    assert np.all(vb >= va * (1 - 1e-9))
+    several = (a.views[seen] > 0).sum(axis=1) >= 2
+    assert several.sum() > 10 and np.median(vb[several] / va[several]) > 1.3
+    single = ~several
+    np.testing.assert_allclose(vb[single], va[single], rtol=1e-9)
