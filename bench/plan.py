@@ -169,6 +169,114 @@ def _camera_stamps(recording: Path, camera: str) -> np.ndarray:
         return np.array([float(r["stamp_s"]) for r in csv.DictReader(f)])
 
 
+def _rms_sigma(cov_xytheta: np.ndarray) -> tuple[float, float]:
+    """RMS position sigma per axis (m) and RMS yaw sigma (rad) of covariances (K, 3, 3)."""
+    v = np.diagonal(cov_xytheta, axis1=1, axis2=2)
+    return float(np.sqrt(np.mean(v[:, :2]))), float(np.sqrt(np.mean(v[:, 2])))
+
+
+VISION_PARTS = ("corner", "corner+camera", "corner+marker", "all, one instant")
+
+
+def instant_cameras(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, sync_tol_s: float = 0.005) -> np.ndarray:
+    """(K, n_cameras) bool: the cameras with an image within ``sync_tol_s`` of each GTvision pose's stamp
+    (``stamps_s`` (K,)) in which the run found a marker (its checkpoint)."""
+    from gtrig.report.coverage import read_checkpoint
+
+    per, _ = read_checkpoint(res / "gt_vision_run.checkpoint")
+    out = np.zeros((stamps_s.size, len(rig.cameras)), dtype=bool)
+    for j, cam in enumerate(rig.cameras):
+        st = _camera_stamps(rec, cam.name)
+        marked = np.zeros(st.size, dtype=bool)
+        c = per.get(cam.name)
+        if c is not None:
+            marked[np.asarray(c.rows, dtype=int)] = np.asarray(c.marked, dtype=bool)
+        i = np.clip(np.searchsorted(st, stamps_s), 1, st.size - 1)
+        for n in (i - 1, i):
+            out[:, j] |= (np.abs(st[n] - stamps_s) <= sync_tol_s) & marked[n]
+    return out
+
+
+def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt: np.ndarray, err: np.ndarray,
+                  plan_cov: np.ndarray, region: np.ndarray, ru, pooled: dict) -> None:  # noqa: ANN001
+    """GTvision per region: the plan's ratio with and without the poses whose error the run's own
+    covariance (``gt_vision_run_cov.csv``) does not explain (NEES beyond chi-square 3 dof at 0.1 %), the
+    run's covariance's own ratio, and what the plan's sigma is made of (corner noise alone, with the
+    cameras' pose errors, with the markers', all at one instant: without the time-stamp jitter); and the
+    plan's ratio when each pose is predicted from the cameras whose images made it (``own``, at one
+    instant: without the jitter), and with the plan's instants per camera (``per camera``, likewise)."""
+    from gtrig.io.posetrack import read_covariance_csv
+    from gtrig.plan.honesty import extreme_poses, region_ratios
+    from gtrig.plan.vision import VisionPlanSettings, predict_vision
+    from gtrig.vision.covariance import RigUncertainty
+
+    st, cov, _, _, _, _ = read_covariance_csv(res / "gt_vision_run_cov.csv")
+    i = np.clip(np.searchsorted(st, stamps_s), 0, st.size - 1)
+    run_cov = np.where((np.abs(st[i] - stamps_s) < 1e-6)[:, None, None], cov[i], np.nan)
+    flagged = extreme_poses(err, run_cov)
+    variants = (RigUncertainty.none(), RigUncertainty(ru.camera_xyz_m, ru.camera_rot_rad, 0.0, 0.0),
+                RigUncertainty(0.0, 0.0, ru.marker_xyz_m, ru.marker_rot_rad), ru)
+    parts = [predict_vision(rig, true_xyt, VisionPlanSettings(rig_uncertainty=u)).cov_xytheta for u in variants]
+    free = predict_vision(rig, true_xyt, VisionPlanSettings(rig_uncertainty=ru, instants="per_camera")).cov_of_a_pose
+    # the cameras whose images made each pose: GTvision's instant holds the images within its sync
+    # tolerance (5 ms), one camera's in most instants of free-running cameras
+    own = instant_cameras(rig, rec, res, stamps_s)
+    cov_own = np.full_like(parts[-1], np.nan)
+    for combo in {tuple(r) for r in own if r.any()}:
+        m = np.all(own == np.array(combo), axis=1)
+        sub = rig.model_copy(update={"cameras": tuple(c for c, k in zip(rig.cameras, combo, strict=True) if k)})
+        cov_own[m] = predict_vision(sub, true_xyt[m], VisionPlanSettings(rig_uncertainty=ru)).cov_xytheta
+    print(f"  vision: poses made of one camera's images {100 * np.mean(own.sum(axis=1) == 1):.0f} %, of two "
+          f"{100 * np.mean(own.sum(axis=1) == 2):.0f} %")
+    print(f"  vision: {int(flagged.sum())} of {err.shape[0]} poses flagged (NEES under the run's covariance "
+          f"beyond chi2(3) at 0.1 %)")
+    by = {r.region: r for r in region_ratios(err, plan_cov, region)}
+    kept = {r.region: r for r in region_ratios(err, plan_cov, region, keep=~flagged)}
+    own = {r.region: r for r in region_ratios(err, run_cov, region)}
+    own_kept = {r.region: r for r in region_ratios(err, run_cov, region, keep=~flagged)}
+    inst = {r.region: r for r in region_ratios(err, cov_own, region)}
+    per_cam = {r.region: r for r in region_ratios(err, free, region)}
+    per_cam_kept = {r.region: r for r in region_ratios(err, free, region, keep=~flagged)}
+    inst_kept = {r.region: r for r in region_ratios(err, cov_own, region, keep=~flagged)}
+    for reg, r in by.items():
+        m = region == reg
+        sig = [_rms_sigma(c[m & np.isfinite(c[:, 0, 0])]) for c in parts]
+        k, o, ok_ = kept.get(reg), own.get(reg), own_kept.get(reg)
+        print(f"  vision region cam{reg}: {int((m & flagged).sum())} flagged; plan pos/yaw all "
+              f"{r.position:.2f}/{r.yaw:.2f}, without flagged "
+              + (f"{k.position:.2f}/{k.yaw:.2f} (error {1e3 * k.rms_error_m:.2f} mm)" if k else "-")
+              + (f"; run's covariance all {o.position:.2f}/{o.yaw:.2f} ({1e3 * o.rms_sigma_m:.2f} mm)" if o else "")
+              + (f", without flagged {ok_.position:.2f}/{ok_.yaw:.2f}" if ok_ else ""))
+        if reg in inst:
+            i_, ik = inst[reg], inst_kept.get(reg)
+            print(f"      plan from the pose's own cameras (one instant, no jitter): "
+                  f"all {i_.position:.2f}/{i_.yaw:.2f} "
+                  f"({1e3 * i_.rms_sigma_m:.2f} mm)"
+                  + (f", without flagged {ik.position:.2f}/{ik.yaw:.2f}" if ik else ""))
+        if reg in per_cam:
+            f_, fk = per_cam[reg], per_cam_kept.get(reg)
+            print(f"      plan with instants per camera (one instant, no jitter): all {f_.position:.2f}/{f_.yaw:.2f} "
+                  f"({1e3 * f_.rms_sigma_m:.2f} mm)"
+                  + (f", without flagged {fk.position:.2f}/{fk.yaw:.2f}" if fk else ""))
+        print("      plan sigma parts (mm / deg): " + ", ".join(
+            f"{n} {1e3 * a:.2f}/{np.degrees(b):.4f}" for n, (a, b) in zip(VISION_PARTS, sig, strict=True))
+            + f", with the jitter {1e3 * r.rms_sigma_m:.2f}/{np.degrees(r.rms_sigma_rad):.4f}")
+        for key, rr in (("all", r), ("kept", k), ("run", o), ("run kept", ok_), ("own", inst.get(reg)),
+                        ("own kept", inst_kept.get(reg)), ("per camera", per_cam.get(reg)),
+                        ("per camera kept", per_cam_kept.get(reg))):
+            if rr is not None:
+                pooled.setdefault((key, reg), []).append(np.array(
+                    [rr.poses, rr.rms_error_m**2, rr.rms_sigma_m**2, rr.rms_error_rad**2, rr.rms_sigma_rad**2]))
+        for n, (a, b) in zip(VISION_PARTS, sig, strict=True):
+            pooled.setdefault(("part " + n, reg), []).append(np.array([m.sum(), a**2, b**2]))
+
+
+def _pooled_ratio(rows: list[np.ndarray]) -> tuple[float, float, float]:
+    """Poses-weighted pooled (position ratio, yaw ratio, RMS error m) of region rows (poses, e2, s2, y2, ys2)."""
+    e2, s2, y2, ys2 = np.sum([r[0] * r[1:] for r in rows], axis=0) / np.sum([r[0] for r in rows])
+    return float(np.sqrt(e2 / s2)), float(np.sqrt(y2 / ys2)), float(np.sqrt(e2))
+
+
 def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: int = 3) -> None:
     """Predicted against measured, per region and source (module docstring)."""
     from gtrig.io.tum import read_tum
@@ -186,6 +294,7 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
                             fusion=FusionPlanSettings(smooth=not instant))
     sources = (("laser", "gt_laser.tum"), ("fused", "gt_fused.tum"), ("vision", "gt_vision_run.tum"))
     pooled: dict[tuple[str, int], list[np.ndarray]] = {}
+    vision_pooled: dict[tuple[str, int], list[np.ndarray]] = {}
     for pair in pairs:
         res_s, _, rec_s = pair.partition("=")
         res, rec = Path(res_s), Path(rec_s)
@@ -207,6 +316,9 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
                 print(f"  {src:<6} region cam{r.region}: {r.poses:4d} poses, RMS error / sigma: position "
                       f"{r.position:.2f} ({1e3 * r.rms_error_m:.3f} / {1e3 * r.rms_sigma_m:.3f} mm), yaw {r.yaw:.2f} "
                       f"({np.degrees(r.rms_error_rad):.4f} / {np.degrees(r.rms_sigma_rad):.4f} deg)")
+            if src == "vision":
+                vision_detail(rig, rec, res, t[keep], true_xyt, err, plan.cov[src], region,
+                              settings.vision.rig_uncertainty, vision_pooled)
         per, _ = read_checkpoint(res / "gt_vision_run.checkpoint")
         for cam in rig.cameras:
             stamps = _camera_stamps(rec, cam.name)
@@ -223,8 +335,24 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
     print("pooled over the runs (RMS error / RMS sigma per region):")
     for (src, reg), rows in sorted(pooled.items()):
         # poses-weighted mean squares over the runs
-        e2, s2, y2, ys2 = np.sum([r[0] * r[1:] for r in rows], axis=0) / np.sum([r[0] for r in rows])
-        print(f"  {src:<6} region cam{reg}: position {np.sqrt(e2 / s2):.2f}, yaw {np.sqrt(y2 / ys2):.2f}")
+        pos, yaw, _ = _pooled_ratio(rows)
+        print(f"  {src:<6} region cam{reg}: position {pos:.2f}, yaw {yaw:.2f}")
+    print("GTvision pooled: plan's ratio position/yaw, all poses and without the flagged ones; the run's "
+          "covariance's; the plan's from each pose's own cameras and with instants per camera; the plan's sigma "
+          "parts (mm / deg):")
+    for reg in sorted({k[1] for k in vision_pooled}):
+        line = f"  region cam{reg}:"
+        for key in ("all", "kept", "run", "run kept", "own", "own kept", "per camera", "per camera kept"):
+            rows = vision_pooled.get((key, reg))
+            if rows:
+                pos, yaw, e = _pooled_ratio(rows)
+                line += f" {key} {pos:.2f}/{yaw:.2f} ({1e3 * e:.2f} mm);"
+        parts = []
+        for n in VISION_PARTS:
+            rows = vision_pooled.get(("part " + n, reg), [])
+            a2, b2 = np.sum([r[0] * r[1:] for r in rows], axis=0) / np.sum([r[0] for r in rows])
+            parts.append(f"{n} {1e3 * np.sqrt(a2):.2f}/{np.degrees(np.sqrt(b2)):.4f}")
+        print(line + " parts " + ", ".join(parts))
 
 
 def main() -> None:

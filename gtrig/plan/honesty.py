@@ -45,13 +45,16 @@ def pose_errors(estimate_xytheta: np.ndarray, truth_xytheta: np.ndarray) -> np.n
     return err
 
 
-def region_ratios(err_xytheta: np.ndarray, cov_xytheta: np.ndarray, region: np.ndarray, min_poses: int = 10
-                  ) -> tuple[RegionRatio, ...]:
+def region_ratios(err_xytheta: np.ndarray, cov_xytheta: np.ndarray, region: np.ndarray, min_poses: int = 10,
+                  keep: np.ndarray | None = None) -> tuple[RegionRatio, ...]:
     """Per region (label ``region`` (K,)), the RMS error of ``err_xytheta`` (K, 3) over the RMS sigma of the
-    predicted ``cov_xytheta`` (K, 3, 3); poses whose prediction is not finite are left out, regions with
-    fewer than ``min_poses`` poses are not reported. Sorted by label."""
+    predicted ``cov_xytheta`` (K, 3, 3); poses whose prediction is not finite, or not in ``keep`` (K,) bool
+    when given, are left out, regions with fewer than ``min_poses`` poses are not reported. Sorted by
+    label."""
     var = np.diagonal(np.asarray(cov_xytheta, dtype=float), axis1=1, axis2=2)
     ok = np.all(np.isfinite(var), axis=1) & np.all(np.isfinite(err_xytheta), axis=1)
+    if keep is not None:
+        ok &= np.asarray(keep, dtype=bool)
     out = []
     for r in np.unique(region[ok]):
         m = ok & (region == r)
@@ -64,6 +67,30 @@ def region_ratios(err_xytheta: np.ndarray, cov_xytheta: np.ndarray, region: np.n
         s_yaw = float(np.sqrt(np.mean(var[m, 2])))
         out.append(RegionRatio(int(r), n, e_pos / s_pos, e_yaw / s_yaw, e_pos, s_pos, e_yaw, s_yaw))
     return tuple(out)
+
+
+def nees(err_xytheta: np.ndarray, cov_xytheta: np.ndarray) -> np.ndarray:
+    """(K,) normalized estimation error squared ``e^T C^-1 e`` of errors ``err_xytheta`` (K, 3) (x, y in m,
+    yaw in rad) under covariances ``cov_xytheta`` (K, 3, 3) in the same units; nan where either is not
+    finite or the covariance is singular. Chi-square with 3 degrees of freedom when ``C`` is honest."""
+    e = np.asarray(err_xytheta, dtype=float)
+    c = np.asarray(cov_xytheta, dtype=float)
+    out = np.full(e.shape[0], np.nan)
+    ok = np.all(np.isfinite(e), axis=1) & np.all(np.isfinite(c.reshape(c.shape[0], -1)), axis=1)
+    ok[ok] &= np.linalg.det(c[ok]) > 0
+    if ok.any():
+        out[ok] = np.einsum("ki,ki->k", e[ok], np.linalg.solve(c[ok], e[ok][:, :, None])[:, :, 0])
+    return out
+
+
+def extreme_poses(err_xytheta: np.ndarray, cov_xytheta: np.ndarray, alpha: float = 1e-3) -> np.ndarray:
+    """(K,) bool: the poses whose NEES (:func:`nees`) under ``cov_xytheta`` (K, 3, 3), e.g. the run's own
+    per-pose covariance, exceeds the chi-square (3 degrees of freedom) quantile ``1 - alpha``: errors that
+    covariance does not explain. Poses without a finite NEES are not extreme."""
+    from scipy.stats import chi2
+
+    n = nees(err_xytheta, cov_xytheta)
+    return np.isfinite(n) & (n > chi2.ppf(1.0 - alpha, 3))
 
 
 def best_camera_region(views: np.ndarray) -> np.ndarray:

@@ -48,13 +48,17 @@ class PlanResult:
     grid : where the poses are.
     camera_names, scanner_names : the rig's, in its order.
     cov : {"vision" | "laser" | "fused": (K, 3, 3)} covariance of x, y (m) and yaw (rad), world frame;
-        nan where the source does not cover the pose.
+        nan where the source does not cover the pose. GTvision's is the covariance of one of its poses
+        (:attr:`gtrig.plan.vision.VisionPlanSettings.instants`).
     views : (K, n_cameras) markers each camera sees whole.
     side_px : (K, n_cameras) smallest marker side each camera sees, pixels (0: none).
     beams : (K, n_scanners) beams each scanner puts on the hull.
     sides : (K, n_scanners) hull sides each scanner sees with enough beams for the ICP.
-    vision_persistent : (K, 3, 3) the part of ``cov["vision"]`` held by the markers' pose errors, the same
-        in every image (:func:`gtrig.plan.vision.marker_part`; nan: uncovered), or None (none).
+    vision_persistent : (K, 3, 3) the part of GTvision's covariance (all cameras seeing the pose) held by
+        the markers' pose errors, the same in every image (:func:`gtrig.plan.vision.marker_part`; nan:
+        uncovered), or None (none).
+    vision_instant : (K, 3, 3) GTvision's covariance from all cameras seeing the pose at one instant,
+        fusion's input, where ``cov["vision"]`` is another (instants per camera); None: ``cov["vision"]``.
     """
 
     grid: PlanGrid
@@ -66,6 +70,12 @@ class PlanResult:
     beams: np.ndarray
     sides: np.ndarray
     vision_persistent: np.ndarray | None = None
+    vision_instant: np.ndarray | None = None
+
+    @property
+    def vision_for_fusion(self) -> np.ndarray:
+        """(K, 3, 3) GTvision's covariance as fusion takes it (``vision_instant``, else ``cov["vision"]``)."""
+        return self.cov["vision"] if self.vision_instant is None else self.vision_instant
 
     @property
     def poses_xytheta(self) -> np.ndarray:
@@ -122,13 +132,14 @@ def fuse_information(covs: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def _predict_block(rig: Rig, poses: np.ndarray, settings: PlanSettings
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _predict_block(rig: Rig, poses: np.ndarray, settings: PlanSettings) -> tuple[np.ndarray, ...]:
     """Both sources at poses (K, 3), chunk by chunk: vision and laser covariances (K, 3, 3), views,
-    smallest sides, beams and sides per sensor, and vision's persistent part (K, 3, 3)."""
+    smallest sides, beams and sides per sensor, vision's persistent part (K, 3, 3) and the covariance of
+    one GTvision pose (K, 3, 3, :attr:`gtrig.plan.vision.VisionPrediction.cov_of_a_pose`)."""
     K = poses.shape[0]
     n_c, n_s = len(rig.cameras), len(rig.laser_scanners)
     cov_v, cov_l, per_v = np.full((K, 3, 3), np.nan), np.full((K, 3, 3), np.nan), np.full((K, 3, 3), np.nan)
+    pose_v = np.full((K, 3, 3), np.nan)
     views, side_px = np.zeros((K, n_c), dtype=np.int16), np.zeros((K, n_c), dtype=np.float32)
     beams, sides = np.zeros((K, n_s), dtype=np.int32), np.zeros((K, n_s), dtype=np.int8)
     model = VisionModel.from_rig(rig) if rig.cameras and rig.robot.markers else None
@@ -138,11 +149,11 @@ def _predict_block(rig: Rig, poses: np.ndarray, settings: PlanSettings
         if model is not None:
             pv = predict_vision(rig, poses[a:b], settings.vision, model)
             cov_v[a:b], views[a:b], side_px[a:b] = pv.cov_xytheta, pv.views, pv.side_px
-            per_v[a:b] = pv.cov_persistent_xytheta
+            per_v[a:b], pose_v[a:b] = pv.cov_persistent_xytheta, pv.cov_of_a_pose
         if n_s:
             pl = predict_laser(rig, poses[a:b], settings.laser)
             cov_l[a:b], beams[a:b], sides[a:b] = pl.cov_xytheta, pl.beams, pl.sides
-    return cov_v, cov_l, views, side_px, beams, sides, per_v
+    return cov_v, cov_l, views, side_px, beams, sides, per_v, pose_v
 
 
 def predict_plan(rig: Rig, grid: PlanGrid, settings: PlanSettings = PlanSettings(), workers: int = 1) -> PlanResult:
@@ -162,13 +173,15 @@ def predict_plan(rig: Rig, grid: PlanGrid, settings: PlanSettings = PlanSettings
             futures = [ex.submit(_predict_block, rig, poses[a:b], settings)
                        for a, b in zip(edges[:-1], edges[1:], strict=True)]
             parts = [f.result() for f in futures]
-    cov_v, cov_l, views, side_px, beams, sides, per_v = (np.concatenate(x) for x in zip(*parts, strict=True))
+    cov_v, cov_l, views, side_px, beams, sides, per_v, pose_v = (np.concatenate(x) for x in zip(*parts, strict=True))
     if grid.path_velocity is not None and rig.cameras:
         from gtrig.plan.motion import stamp_jitter_covariance
 
-        cov_v = cov_v + stamp_jitter_covariance(views, np.array([c.stamp_sigma_s for c in rig.cameras]),
-                                                grid.path_velocity)
+        jitter = stamp_jitter_covariance(views, np.array([c.stamp_sigma_s for c in rig.cameras]), grid.path_velocity)
+        cov_v, pose_v = cov_v + jitter, pose_v + jitter
+    # fusion takes GTvision's information per instant of all cameras: the same per second either way
     fused = fuse_sources(rig, poses, grid.path_velocity, cov_v, cov_l, per_v, settings.fusion)
     log.info("plan: %d poses (%d cells x %d headings)", K, grid.n_cells, grid.n_headings)
     return PlanResult(grid, tuple(c.name for c in rig.cameras), tuple(s.name for s in rig.laser_scanners),
-                      {"vision": cov_v, "laser": cov_l, "fused": fused}, views, side_px, beams, sides, per_v)
+                      {"vision": pose_v, "laser": cov_l, "fused": fused}, views, side_px, beams, sides, per_v,
+                      cov_v if settings.vision.instants == "per_camera" else None)

@@ -113,7 +113,7 @@ def _with_camera(rig: Rig, plan: PlanResult, cam: Camera, settings: PlanSettings
     sight = camera_sight(model.cameras[cam.name], corners, poses, rig.robot.hull, settings.vision.margin_px,
                          settings.vision.min_side_px)
     hit = np.flatnonzero(sight.visible.any(axis=1))
-    cov_v = plan.cov["vision"].copy()
+    cov_v, pose_v = plan.vision_for_fusion.copy(), plan.cov["vision"].copy()
     per_v = np.full(cov_v.shape, np.nan) if plan.vision_persistent is None else plan.vision_persistent.copy()
     views = np.column_stack([plan.views, np.zeros(poses.shape[0], dtype=plan.views.dtype)])
     side = np.column_stack([plan.side_px, np.zeros(poses.shape[0], dtype=plan.side_px.dtype)])
@@ -122,10 +122,11 @@ def _with_camera(rig: Rig, plan: PlanResult, cam: Camera, settings: PlanSettings
         h = hit[a:a + step]
         pv = predict_vision(rig2, poses[h], settings.vision, model)
         cov_v[h], views[h], side[h], per_v[h] = pv.cov_xytheta, pv.views, pv.side_px, pv.cov_persistent_xytheta
+        pose_v[h] = pv.cov_of_a_pose
     fused = fuse_sources(rig2, poses, plan.grid.path_velocity, cov_v, plan.cov["laser"], per_v, settings.fusion)
-    cov = {"vision": cov_v, "laser": plan.cov["laser"], "fused": fused}
+    cov = {"vision": pose_v, "laser": plan.cov["laser"], "fused": fused}
     return rig2, replace(plan, camera_names=(*plan.camera_names, cam.name), cov=cov, views=views, side_px=side,
-                         vision_persistent=per_v)
+                         vision_persistent=per_v, vision_instant=None if plan.vision_instant is None else cov_v)
 
 
 def _with_scanner(rig: Rig, plan: PlanResult, scanner: LaserScanner, settings: PlanSettings) -> tuple[Rig, PlanResult]:
@@ -140,7 +141,7 @@ def _with_scanner(rig: Rig, plan: PlanResult, scanner: LaserScanner, settings: P
     for a in range(0, K, step):
         pl = predict_laser(rig2, poses[a:a + step], settings.laser)
         cov_l[a:a + step], beams[a:a + step], sides[a:a + step] = pl.cov_xytheta, pl.beams, pl.sides
-    fused = fuse_sources(rig2, poses, plan.grid.path_velocity, plan.cov["vision"], cov_l, plan.vision_persistent,
+    fused = fuse_sources(rig2, poses, plan.grid.path_velocity, plan.vision_for_fusion, cov_l, plan.vision_persistent,
                          settings.fusion)
     cov = {"vision": plan.cov["vision"], "laser": cov_l, "fused": fused}
     return rig2, replace(plan, scanner_names=(*plan.scanner_names, scanner.name), cov=cov, beams=beams, sides=sides)
@@ -200,6 +201,7 @@ def _fusion_inputs(plan: PlanResult) -> dict[str, np.ndarray]:
     (``"vision"``, ``"laser"``, ``"fused"``), GTvision's persistent part (``"vision_persistent"``) and, on
     a path with stamps, the robot's velocity (``"velocity"``)."""
     out = dict(plan.cov)
+    out["vision"] = plan.vision_for_fusion
     out["vision_persistent"] = (np.full(plan.cov["vision"].shape, np.nan) if plan.vision_persistent is None
                                 else plan.vision_persistent)
     if plan.grid.path_velocity is not None:

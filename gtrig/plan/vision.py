@@ -26,11 +26,20 @@ the one GTvision's synthetic corners are drawn with (:class:`gtrig.vision.synthe
 ``anisotropy`` at a random angle), plus the estimator's floor (``VisionOptions.corner_floor_px``).
 A random orientation of the anisotropy is averaged over in the information: each axis gets the mean
 of the two principal informations.
+
+Instants. GTvision makes one pose of the images of one instant (images of different cameras within
+its sync tolerance). Cameras triggered together put every camera seeing the robot in one instant
+(``instants="together"``). Free-running cameras (the simulator's: their images tens of ms apart) make
+one pose of each camera's image (``instants="per_camera"``): a GTvision pose there holds one camera's
+information, and the covariance of GTvision's poses at a place is the mean of the covariances of the
+cameras seeing it (each makes as many poses). Either way the information per second is the same (the
+sum over the cameras), which is what fusion's prediction takes (:attr:`VisionPrediction.cov_xytheta`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -56,6 +65,8 @@ class VisionPlanSettings:
         hand-measured markers); the rig's own ``pose_cov`` entries override them.
     prior : the floor prior (GTvision's planar mode).
     margin_px, min_side_px : a marker closer to the image border or smaller is not seen.
+    instants : "together" (cameras triggered together: one GTvision pose of every camera seeing the
+        robot) or "per_camera" (free-running cameras: one pose of each camera's image; module docstring).
     """
 
     corner_noise: CornerNoise = field(default_factory=CornerNoise)
@@ -64,6 +75,7 @@ class VisionPlanSettings:
     prior: PlanarPrior = field(default_factory=PlanarPrior)
     margin_px: float = MARGIN_PX
     min_side_px: float = MIN_SIDE_PX
+    instants: Literal["together", "per_camera"] = "together"
 
 
 @dataclass(frozen=True)
@@ -78,6 +90,10 @@ class VisionPrediction:
     side_px : (K, n_cameras) smallest marker side each camera sees, pixels (0: none).
     cov_persistent_xytheta : (K, 3, 3) the part of ``cov_xytheta`` held by the markers' pose errors on the
         robot (:func:`marker_part`), the same in every image of a run; nan where no marker is seen.
+    cov_pose_xytheta : (K, 3, 3) the covariance of one GTvision pose as the instants make it
+        (:attr:`VisionPlanSettings.instants`): ``cov_xytheta`` for cameras triggered together, the mean
+        over the cameras seeing the pose of each one's own for free-running cameras; None: the same as
+        ``cov_xytheta``.
     """
 
     cov_xytheta: np.ndarray
@@ -85,6 +101,12 @@ class VisionPrediction:
     views: np.ndarray
     side_px: np.ndarray
     cov_persistent_xytheta: np.ndarray
+    cov_pose_xytheta: np.ndarray | None = None
+
+    @property
+    def cov_of_a_pose(self) -> np.ndarray:
+        """(K, 3, 3) the covariance of one GTvision pose (``cov_pose_xytheta``, else ``cov_xytheta``)."""
+        return self.cov_xytheta if self.cov_pose_xytheta is None else self.cov_pose_xytheta
 
 
 def corner_information(side_px: np.ndarray, noise: CornerNoise, floor_px: float) -> np.ndarray:
@@ -287,10 +309,31 @@ def planar_covariance(cov_6x6: np.ndarray) -> np.ndarray:
 def predict_vision(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSettings = VisionPlanSettings(),
                    model: VisionModel | None = None) -> VisionPrediction:
     """GTvision's predicted covariance at planar poses (K, 3) on a flat floor (module docstring)."""
+    model = VisionModel.from_rig(rig) if model is None else model
     info = vision_information(rig, poses_xytheta, settings, model)
     cov6 = np.full((info.seen.shape[0], 6, 6), np.nan)
     persistent = np.full((info.seen.shape[0], 3, 3), np.nan)
     if info.H.shape[0]:
         cov6[info.seen] = pose_covariance(info.H)
         persistent[info.seen] = marker_part(info.H, cov6[info.seen])
-    return VisionPrediction(planar_covariance(cov6), cov6, info.views, info.side_px, persistent)
+    per_pose = per_camera_covariance(rig, poses_xytheta, settings, model) if settings.instants == "per_camera" \
+        else None
+    return VisionPrediction(planar_covariance(cov6), cov6, info.views, info.side_px, persistent, per_pose)
+
+
+def per_camera_covariance(rig: Rig, poses_xytheta: np.ndarray, settings: VisionPlanSettings,
+                          model: VisionModel) -> np.ndarray:
+    """(K, 3, 3) the mean over the cameras seeing each planar pose (K, 3) of the covariance (x, y in m,
+    yaw in rad, world frame) GTvision has from that camera's image alone: the covariance of GTvision's
+    poses there when the cameras run free (module docstring); nan where no camera sees a marker whole."""
+    K = np.asarray(poses_xytheta).reshape(-1, 3).shape[0]
+    total, count = np.zeros((K, 3, 3)), np.zeros(K)
+    for cam in rig.cameras:
+        info = vision_information(rig, poses_xytheta, settings, model, (cam.name,))
+        if info.H.shape[0]:
+            total[info.seen] += planar_covariance(pose_covariance(info.H))
+            count[info.seen] += 1
+    out = np.full((K, 3, 3), np.nan)
+    ok = count > 0
+    out[ok] = total[ok] / count[ok, None, None]
+    return out

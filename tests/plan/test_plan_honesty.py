@@ -79,3 +79,28 @@ def test_rms_error_over_predicted_sigma_per_region():
         assert 0.7 <= pos <= 1.4 and 0.7 <= yaw <= 1.4, (r, m.sum(), pos, yaw)
     print("region (camera), poses, RMS error / predicted sigma: position, yaw:", ratios)
     assert len(ratios) >= 3
+
+
+def test_extreme_poses_are_the_errors_the_covariance_does_not_explain():
+    from gtrig.plan.honesty import extreme_poses, nees, region_ratios
+
+    rng = np.random.default_rng(5)
+    k = 900
+    # per-pose covariances: mm in position, hundredths of a degree in yaw, correlated
+    A = rng.normal(size=(k, 3, 3)) * np.array([1e-3, 1e-3, 3e-4])[:, None]
+    cov = A @ A.transpose(0, 2, 1) + np.diag([1e-7, 1e-7, 1e-8])
+    err = np.linalg.cholesky(cov) @ rng.normal(size=(k, 3, 1))
+    err = err[:, :, 0]
+    n = nees(err, cov)
+    assert 2.7 < np.mean(n) < 3.3  # chi-square, 3 degrees of freedom
+    region = np.arange(k) % 3
+    bad = rng.choice(k, 18, replace=False)
+    err[bad, :2] += rng.choice([-1, 1], (18, 2)) * 0.02  # 20 mm: wrong poses
+    flagged = extreme_poses(err, cov)
+    assert set(bad) <= set(np.flatnonzero(flagged))
+    assert flagged.sum() <= bad.size + 5
+    with_bad = region_ratios(err, cov, region)
+    without = region_ratios(err, cov, region, keep=~flagged)
+    assert all(r.position > 1.4 for r in with_bad)
+    assert all(0.85 < r.position < 1.15 and 0.85 < r.yaw < 1.15 for r in without), without
+    assert sum(r.poses for r in without) == k - int(flagged.sum())

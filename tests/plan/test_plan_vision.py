@@ -85,3 +85,63 @@ def test_camera_jacobian_is_the_estimators(rig):
     p_world = sc.p_robot @ T[:3, :3].T + T[:3, 3]
     got = camera_jacobian(J, p_world, sc.cam_centre_w)
     assert np.allclose(got, ref, rtol=1e-9, atol=1e-6)
+
+
+def test_free_running_cameras_make_each_pose_of_one_camera(rig):
+    """With ``instants="per_camera"`` the predicted covariance of a pose is the mean over the cameras
+    seeing it of GTvision's covariance from that camera's image alone; where two cameras see the
+    robot it is wider than the one of both cameras together."""
+    from dataclasses import replace
+
+    poses = VALIDATION_POSES
+    settings = VisionPlanSettings(rig_uncertainty=CALIBRATED, instants="per_camera")
+    pred = predict_vision(rig, poses, settings)
+    model = VisionModel.from_rig(rig)
+    rng = np.random.default_rng(7)
+    i = [0, 1, 5]
+    ratios, wider = [], []
+    for k, (x, y, th) in enumerate(poses):
+        obs = synthetic_observations(rig, geo.se2_to_T(x, y, th), 0.0, rng)
+        cams = obs.cameras_with_views()
+        covs = []
+        for c in cams:
+            est = estimate_frame(model, replace(obs, views=tuple(v for v in obs.views if v.camera == c)),
+                                 VisionOptions(rig_uncertainty=CALIBRATED))
+            if est.ok and est.cov_6x6 is not None:
+                covs.append(est.cov_6x6[np.ix_(i, i)])
+        if len(covs) != len(cams) or not covs or pred.views[k].astype(bool).sum() != len(cams):
+            continue  # an ambiguous single-marker view, or a view the plan's margins leave out
+        mean = np.mean(covs, axis=0)
+        ratios.append(np.sqrt(np.diag(pred.cov_of_a_pose[k]) / np.diag(mean)))
+        if len(cams) >= 2:
+            wider.append(np.sqrt(np.diag(pred.cov_of_a_pose[k])[:2] / np.diag(pred.cov_xytheta[k])[:2]))
+    r = np.array(ratios)
+    assert r.shape[0] >= 8 and np.all(np.abs(r - 1) < 0.2), r
+    assert len(wider) >= 3 and np.all(np.array(wider) > 1.1), wider
+
+
+def test_instants_per_camera_leave_fusion_as_it_is():
+    """The plan with instants per camera: GTvision's covariance of a pose is the per-camera one, at
+    least as wide as all cameras' together, and fusion's (which takes all cameras' information per
+    second) is the same to the bit."""
+    from dataclasses import replace
+
+    from gtrig.plan.grid import area_grid
+    from gtrig.plan.predict import PlanSettings, predict_plan
+    from gtrig.sim.gtroom import room_walls
+
+    rig = make_scene(0).rig_nominal
+    grid = area_grid(room_walls()[:, 0], 0.4, 4)
+    together = PlanSettings(vision=VisionPlanSettings(rig_uncertainty=CALIBRATED))
+    free = replace(together, vision=replace(together.vision, instants="per_camera"))
+    a, b = predict_plan(rig, grid, together), predict_plan(rig, grid, free)
+    np.testing.assert_array_equal(a.cov["fused"], b.cov["fused"])
+    np.testing.assert_array_equal(a.cov["vision"], b.vision_for_fusion)
+    seen = np.isfinite(a.cov["vision"][:, 0, 0])
+    assert seen.sum() > 50 and np.array_equal(seen, np.isfinite(b.cov["vision"][:, 0, 0]))
+    va, vb = np.trace(a.cov["vision"][seen], axis1=1, axis2=2), np.trace(b.cov["vision"][seen], axis1=1, axis2=2)
+    assert np.all(vb >= va * (1 - 1e-9))
+    several = (a.views[seen] > 0).sum(axis=1) >= 2
+    assert several.sum() > 10 and np.median(vb[several] / va[several]) > 1.3
+    single = ~several
+    np.testing.assert_allclose(vb[single], va[single], rtol=1e-9)
