@@ -122,7 +122,7 @@ def unblur_cells(
 
 
 def soft_code_margin(
-    whiteness: NDArray[np.floating], codes: NDArray[np.uint8]
+    whiteness: NDArray[np.floating], codes: NDArray[np.generic], codes_sq: NDArray[np.float64] | None = None
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """The code nearest the solved cells in the least-squares sense, and its lead over the runner-up.
 
@@ -136,7 +136,9 @@ def soft_code_margin(
     Parameters
     ----------
     whiteness : (Q, d, d) float, the solved data cells (about 0 black, 1 white), in the quads' orientation.
-    codes : (K, d, d) 0 / 1, every code in each rotation as read in a quad's orientation.
+    codes : (K, d, d) or (K, d^2) 0 / 1, every code in each rotation as read in a quad's orientation (float64
+        rows are used as they are: :class:`.verify.CodeBook` keeps them so).
+    codes_sq : (K,) float, each code's sum of squares, when the caller keeps it (computed otherwise).
 
     Returns
     -------
@@ -145,9 +147,10 @@ def soft_code_margin(
         cells' residual variance estimated from the best code's own fit (chi-square units).
     """
     w = whiteness.reshape(len(whiteness), -1).astype(np.float64)
-    c = codes.reshape(len(codes), -1).astype(np.float64)
+    c = np.asarray(codes.reshape(len(codes), -1), np.float64)
+    c_sq = (c * c).sum(axis=1) if codes_sq is None else codes_sq
     # |w - c|^2 = |w|^2 - 2 w.c + |c|^2, one product for every code (4096 ids x 4 rotations for BCH)
-    d2 = (w * w).sum(axis=1)[:, None] - 2.0 * (w @ c.T) + (c * c).sum(axis=1)[None, :]
+    d2 = (w * w).sum(axis=1)[:, None] - 2.0 * (w @ c.T) + c_sq[None, :]
     two = np.argpartition(d2, 1, axis=1)[:, :2]
     pair = np.take_along_axis(d2, two, axis=1)
     order = np.argsort(pair, axis=1)

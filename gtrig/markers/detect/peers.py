@@ -147,18 +147,22 @@ def opencv_candidates(gray: NDArray[np.uint8], family: MarkerFamily) -> list[Pee
             for c, i in zip(corners, ids.ravel(), strict=True)]
 
 
-def apriltag3_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams) -> list[PeerCandidate]:
-    """AprilTag 3's markers of ``family`` in ``gray`` with at most ``params.at3_max_hamming`` corrected bits."""
+def apriltag3_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams,
+                         threads: int = 1) -> list[PeerCandidate]:
+    """AprilTag 3's markers of ``family`` in ``gray`` with at most ``params.at3_max_hamming`` corrected bits,
+    found with ``threads`` threads."""
     from gtrig.markers.apriltag3 import at3_detect
 
     return [PeerCandidate(c, i, "apriltag3", h)
-            for i, h, c in at3_detect(gray, AT3_NAMES[family.value], params.at3_quad_decimate)
+            for i, h, c in at3_detect(gray, AT3_NAMES[family.value], params.at3_quad_decimate, threads)
             if h <= params.at3_max_hamming]
 
 
-def find_peer_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams) -> list[PeerCandidate]:
+def find_peer_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams,
+                         threads: int = 1) -> list[PeerCandidate]:
     """Every peer's candidates, pooled: where two peers report the same ID at the same place (centres
-    closer than a quarter of the side), the first (OpenCV's) is kept."""
+    closer than a quarter of the side), the first (OpenCV's) is kept. OpenCV runs with its own thread setting,
+    AprilTag 3 with ``threads`` (the detector's: AprilTag 3's default is one)."""
     out: list[PeerCandidate] = []
     more: list[PeerCandidate] = []
     if params.opencv and uses_opencv(family):
@@ -167,7 +171,7 @@ def find_peer_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: 
             opened = cv2.morphologyEx(gray, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
             more += opencv_candidates(np.asarray(opened, np.uint8), family)
     if uses_apriltag3(family) and (params.apriltag3 or not uses_opencv(family)):
-        more += apriltag3_candidates(gray, family, params)
+        more += apriltag3_candidates(gray, family, params, threads)
     for c in more:
         if not any(o.id == c.id and _same_place(o.quad_px, c.quad_px) for o in out):
             out.append(c)
