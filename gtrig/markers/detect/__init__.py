@@ -391,16 +391,30 @@ def _dedupe(dets: list[Detection], trace: list[Rejection] | None = None) -> list
     area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1))
     unrefined = np.array([not np.isfinite(d.blur_px) for d in dets])
     order = np.lexsort((-area, np.array([d.hamming for d in dets]), unrefined))
-    centre = q.mean(axis=1)
+    near = _near(q.mean(axis=1), 0.25 * np.sqrt(area))
+    kept = np.zeros(len(dets), bool)
     keep: list[int] = []
     for i in order:
-        if keep and np.any(np.linalg.norm(centre[keep] - centre[i], axis=1) < 0.25 * np.sqrt(area[keep])):
+        if (near[i] & kept).any():
             if trace is not None:
                 why = f"ID {dets[i].id}: another detection here"
                 trace.append(Rejection(dets[i].corners_px.copy(), "duplicate", why))
             continue
+        kept[i] = True
         keep.append(int(i))
     return [dets[i] for i in sorted(keep)]
+
+
+def _near(centre: NDArray[np.float64], reach: NDArray[np.float64], block: int = 512) -> NDArray[np.bool_]:
+    """(D, D) bool: centre ``i`` lies within ``reach[j]`` of centre ``j`` (centres (D, 2) px, reach (D,) px),
+    the diagonal false; the distances in blocks of rows (memory bounded for thousands of markers)."""
+    n = len(centre)
+    out = np.zeros((n, n), bool)
+    for r0 in range(0, n, block):
+        d = np.linalg.norm(centre[r0:r0 + block, None, :] - centre[None, :, :], axis=2)
+        out[r0:r0 + block] = d < reach[None, :]
+    np.fill_diagonal(out, False)
+    return out
 
 
 def to_gray(image: NDArray[np.generic]) -> NDArray[np.uint8]:

@@ -143,8 +143,8 @@ def opencv_candidates(gray: NDArray[np.uint8], family: MarkerFamily) -> list[Pee
     corners, ids, _ = _opencv_for_thread(family).detectMarkers(gray)
     if ids is None:
         return []
-    return [PeerCandidate(np.asarray(c, np.float64).reshape(4, 2), int(i), "opencv")
-            for c, i in zip(corners, ids.ravel(), strict=True)]
+    quads = np.asarray(corners, np.float64).reshape(-1, 4, 2)
+    return [PeerCandidate(q, int(i), "opencv") for q, i in zip(quads, ids.ravel().tolist(), strict=True)]
 
 
 def apriltag3_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams,
