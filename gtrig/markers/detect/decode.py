@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -56,6 +58,15 @@ def sample_cells(
     return vals.mean(axis=3)
 
 
+@functools.cache
+def _data_samples(n: int, border: int) -> NDArray[np.float64]:
+    """(S, 3) homogeneous marker-unit points of the 3 x 3 samples of every data cell of an ``n x n`` grid with a
+    ``border``-cell border, row by row (the same for every quad; shared, not to be written)."""
+    c = (np.arange(border, n - border)[:, None] + 0.5 + _OFFS[None, :]).ravel() / n  # (3 d,)
+    gy, gx = np.meshgrid(c, c, indexing="ij")
+    return np.ascontiguousarray(np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)], -1))
+
+
 def unblur_cells(
     gray: NDArray[np.uint8],
     quads: NDArray[np.float64],
@@ -90,9 +101,7 @@ def unblur_cells(
     """
     d = n - 2 * border
     Q = len(quads)
-    c = (np.arange(border, n - border)[:, None] + 0.5 + _OFFS[None, :]).ravel() / n  # (3 d,)
-    gy, gx = np.meshgrid(c, c, indexing="ij")
-    mu = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)], -1)  # (S, 3) marker units
+    mu = _data_samples(n, border)  # (S, 3) marker units
     Hm = quad_homographies(quads)  # fit coords -> marker units
     # every quad at once (the loop over quads with a dozen small array operations each was most of
     # the cost): the same element-wise formulas, and one batched solve
@@ -105,7 +114,7 @@ def unblur_cells(
     # the design by the compiled kernel (every sample's product of the cells' profiles across the two
     # axes, 0 where negligible); its normal matrix by syrk where it is dense, by the products of each
     # row's non-zero entries where it is sparse (sharp markers: 1-4 of the d^2 per row)
-    M, r, nnz = _kernels.unblur_rows(np.ascontiguousarray(px), np.ascontiguousarray(mu), np.ascontiguousarray(Hm),
+    M, r, nnz = _kernels.unblur_rows(np.ascontiguousarray(px), mu, np.ascontiguousarray(Hm),
                                      np.ascontiguousarray(vals, np.float64), np.ascontiguousarray(sigma, np.float64),
                                      np.ascontiguousarray(black, np.float64),
                                      np.ascontiguousarray(contrast, np.float64), n, border)
