@@ -7,9 +7,11 @@ Both run without their own corner refinement (gtrig refines every corner, :mod:`
   al., "Speeded up detection of squared fiducial markers", Image and Vision Computing 76, 2018) with its
   default parameters, for every family with an OpenCV dictionary and for ARToolKitPlus' codes as a
   custom dictionary whose ``markerBorderBits`` is the family's border (3 cells for the standard border);
-- AprilTag 3 (:mod:`gtrig.markers.apriltag3`) at its default decimation for the AprilTag families it
-  reads. On the real photos it finds tags that OpenCV misses (far, tilted 36h11 tags of the FRC field)
-  and OpenCV finds some it misses: for 16h5, 25h9 and 36h11 both run and their candidates are pooled.
+- AprilTag 3 (:mod:`gtrig.markers.apriltag3`) at its default decimation, with the detector's threads, for
+  the AprilTag families it reads. On the real photos it finds tags that OpenCV misses (far, tilted 36h11
+  tags of the FRC field) and OpenCV finds some it misses: for 16h5, 25h9 and 36h11 both run and their
+  candidates are pooled. Neither OpenCV's rejected candidates (one of PhotonVision's three such tags lies
+  among them) nor AprilTag 3 on crops around them finds the others: it runs on the whole image.
 
 A candidate is a quad in raw pixels, corners top-left, top-right, bottom-right, bottom-left as printed,
 with the peer's ID; gtrig's cells confirm or refuse it (:mod:`.verify`).
