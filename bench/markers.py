@@ -15,10 +15,14 @@ Three tables, every peer measured in the same run on the same images:
   lighting: corner RMS error against the truth (correctly identified markers), detection rate, false
   detections per image, for gtrig, OpenCV with each ``cornerRefinementMethod`` and AprilTag 3 at
   ``quad_decimate=1``;
-- the speed table: milliseconds per image of gtrig, OpenCV's ``ArucoDetector`` (no refinement, its
-  default threads) and AprilTag 3 at ``quad_decimate=1`` (the budget where recall needs its small tags)
-  on the renders and on each real set, their ratios (wall-clock medians), and on the renders the ratio
-  of the process CPU time (all threads; on a loaded machine the wall clock mostly measures waiting).
+- the speed tables (``--quick`` or default for the renders, ``--photos`` for each real set): milliseconds
+  per image of gtrig, OpenCV's ``ArucoDetector`` (no refinement) and AprilTag 3 at ``quad_decimate=1``,
+  each with its default threads, and the budget that applies to the set, decided in the same run: 1.5x
+  OpenCV's time, unless gtrig without its AprilTag 3 pass misses on some image of the set a marker that a
+  peer finds; then, on the AprilTag images, AprilTag 3's time at ``quad_decimate=1`` (the small-tag setting
+  that recall then calls for), and 1.5x OpenCV's on the others. Times are medians of ``--repeat`` runs per
+  image (wall clock, and process CPU time of all threads, which a loaded machine disturbs less), summed
+  over the set.
 
 ``--hard`` runs the harder simulated set (JPEG 60-95, half Bayer-demosaiced, textured, pale or cluttered
 backgrounds, glare, print gain, paper texture, bent prints, markers of 10-70 px, blur 0-1.5 px, noise 2-5)
@@ -27,7 +31,7 @@ corners, and it is not a target.
 
 Usage::
 
-    python bench/markers.py --photos        # the real photos and their speed
+    python bench/markers.py --photos        # the real photos and their speed (--repeat 3: medians of 3 runs)
     python bench/markers.py                 # the renders: accuracy and speed
     python bench/markers.py --quick         # a smaller grid of renders
     python bench/markers.py --hard          # the harder simulated set
@@ -50,7 +54,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from gtrig.markers.detect import DetectorParams, MarkerDetector
+from gtrig.markers.detect import DetectorParams, MarkerDetector, PeerParams
 from gtrig.markers.families import marker_cells
 from gtrig.markers.synth import clutter_background, homography_from_pose, render, textured_background
 from gtrig.rig.models import MarkerFamily
@@ -115,6 +119,64 @@ def _run(name: str, det: Any, img: np.ndarray) -> tuple[list[tuple[int, np.ndarr
     return out, (time.perf_counter() - t0) * 1000.0
 
 
+def _timed(fn: Any, repeat: int) -> tuple[Any, float, float]:
+    """``fn()``'s result and its median wall-clock and process CPU (every thread) times over ``repeat`` runs, ms."""
+    ms, cpu = [], []
+    out = None
+    for _ in range(max(1, repeat)):
+        t0, c0 = time.perf_counter(), time.process_time()
+        out = fn()
+        ms.append((time.perf_counter() - t0) * 1000.0)
+        cpu.append((time.process_time() - c0) * 1000.0)
+    return out, float(np.median(ms)), float(np.median(cpu))
+
+
+@dataclass
+class Budget:
+    """One set's time, its peers' and its budget (:func:`_speed_row`), ms summed over its images."""
+
+    images: int = 0
+    gtrig: float = 0.0
+    opencv: float = 0.0
+    at3_qd1: float = 0.0  # on the AprilTag images
+    at3_images: int = 0
+    opencv_at3_images: float = 0.0  # OpenCV's time on the AprilTag images
+    needs_at3: bool = False  # gtrig without its AprilTag 3 pass misses a marker a peer finds somewhere
+
+    def add(self, gtrig: float, opencv: float, at3_qd1: float | None, missed: bool) -> None:
+        self.images += 1
+        self.gtrig += gtrig
+        self.opencv += opencv
+        if at3_qd1 is not None:
+            self.at3_images += 1
+            self.at3_qd1 += at3_qd1
+            self.opencv_at3_images += opencv
+        self.needs_at3 |= missed
+
+    @property
+    def budget(self) -> float:
+        """ms: 1.5x OpenCV's, or AprilTag 3's at qd=1 on the AprilTag images where recall needs it."""
+        if self.needs_at3 and self.at3_images:
+            return self.at3_qd1 + 1.5 * (self.opencv - self.opencv_at3_images)
+        return 1.5 * self.opencv
+
+
+SPEED_HEADER = (f"{'set':28s} {'images':>6s} {'gtrig ms':>9s} {'OpenCV ms':>9s} {'AT3qd1 ms':>9s} {'gtrig/cv':>8s} "
+                f"{'budget':>10s} {'budget ms':>9s} {'gtrig/budget':>12s} {'met':>4s} {'CPU gtrig/budget':>16s} "
+                f"{'met':>4s}")
+
+
+def _speed_row(name: str, b: Budget, cpu: Budget) -> str:
+    """One row of the speed table: wall-clock ms per image (means of the per-image medians), the budget and
+    whether it is met; then the same by process CPU time (all threads), which a loaded machine disturbs less."""
+    n = max(b.images, 1)
+    at3 = f"{b.at3_qd1 / b.at3_images:9.1f}" if b.at3_images else f"{'-':>9s}"
+    kind = "AT3 qd=1" if b.needs_at3 and b.at3_images else "1.5x cv"
+    return (f"{name:28s} {b.images:6d} {b.gtrig / n:9.1f} {b.opencv / n:9.1f} {at3} {b.gtrig / b.opencv:8.2f} "
+            f"{kind:>10s} {b.budget / n:9.1f} {b.gtrig / b.budget:12.2f} {'yes' if b.gtrig <= b.budget else 'no':>4s} "
+            f"{cpu.gtrig / cpu.budget:16.2f} {'yes' if cpu.gtrig <= cpu.budget else 'no':>4s}")
+
+
 def _opencv(dictionary: str, refine: str = "NONE") -> Any:
     p = cv2.aruco.DetectorParameters()
     p.cornerRefinementMethod = CV_REFINE[refine]
@@ -138,7 +200,8 @@ def _scene(rng: np.random.Generator, side: float, tilt: float, blur: float, ligh
 
 
 def _bench_renders(rng: np.random.Generator, quick: bool) -> None:
-    dets: dict[str, Any] = {"gtrig": MarkerDetector(FAMILY)}
+    no_at3 = DetectorParams(peers=PeerParams(apriltag3=False))
+    dets: dict[str, Any] = {"gtrig": MarkerDetector(FAMILY), "gtrig no AT3": MarkerDetector(FAMILY, params=no_at3)}
     dets.update({f"cv2 {k}": _opencv("DICT_APRILTAG_36h11", k) for k in CV_REFINE})
     dets["apriltag3"] = _apriltag3()  # quad_decimate 1: the time budget where recall needs its small tags
     sides = [20, 35, 60, 120] if quick else [20, 30, 45, 70, 120, 200]
@@ -148,15 +211,24 @@ def _bench_renders(rng: np.random.Generator, quick: bool) -> None:
     by_blur: dict[tuple[str, float], Stats] = {}
     every: dict[str, Stats] = {k: Stats() for k in dets}
     cpu: dict[str, float] = {k: 0.0 for k in dets}  # process CPU (every thread), s
+    speed, speed_cpu = Budget(), Budget()
     _run("gtrig", dets["gtrig"], _scene(rng, 60, 0, 1.0, "uniform")[0])  # compile the kernels first
     for side, tilt, blur, light in itertools.product(sides, tilts, blurs, lights):
         img, truths = _scene(rng, side, tilt, blur, light)
+        found: dict[str, set[int]] = {}
+        ms_of: dict[str, float] = {}
+        cpu_of: dict[str, float] = {}
         for name, det in dets.items():
             c0 = time.process_time()
             out, ms = _run(name, det, img)
             cpu[name] += time.process_time() - c0
+            cpu_of[name] = (time.process_time() - c0) * 1000.0
             by_blur.setdefault((name, blur), Stats()).add(out, truths, ms)
             every[name].add(out, truths, ms)
+            found[name], ms_of[name] = _found(out, truths), ms
+        missed = bool((found["cv2 NONE"] | found["apriltag3"]) - found["gtrig no AT3"])
+        speed.add(ms_of["gtrig"], ms_of["cv2 NONE"], ms_of["apriltag3"], missed)
+        speed_cpu.add(cpu_of["gtrig"], cpu_of["cv2 NONE"], cpu_of["apriltag3"], missed)
     n = len(sides) * len(tilts) * len(blurs) * len(lights)
     print(f"renders: {n} images 1024 x 768, 3 AprilTag 36h11 each, sides {sides} px, tilts {tilts} deg, "
           f"lights {lights}, noise 3")
@@ -172,12 +244,20 @@ def _bench_renders(rng: np.random.Generator, quick: bool) -> None:
                for b in blurs if b <= 1.0)
     print(f"gtrig RMS at blur <= 1 px: {acc:.4f} px (target <= 0.10); best OpenCV / gtrig >= {gain:.2f} (target >= 3)")
     g, c, a = (np.median(every[k].ms) for k in ("gtrig", "cv2 NONE", "apriltag3"))
-    found = {k: every[k].found for k in ("gtrig", "cv2 NONE", "apriltag3")}
-    print(f"\nspeed, renders 1024 x 768 ({n} images, OpenCV's default threads {cv2.getNumThreads()}, AprilTag 3 "
-          f"quad_decimate 1): wall medians gtrig {g:.1f} ms, OpenCV {c:.1f} ms, AprilTag 3 {a:.1f} ms; "
-          f"gtrig / OpenCV {g / c:.2f} (target <= 1.5), gtrig / AprilTag 3 {g / a:.2f}; process CPU per image "
-          f"gtrig / OpenCV {cpu['gtrig'] / cpu['cv2 NONE']:.2f}; markers found gtrig {found['gtrig']}, OpenCV "
-          f"{found['cv2 NONE']}, AprilTag 3 {found['apriltag3']} of {every['gtrig'].total}")
+    n_found = {k: every[k].found for k in ("gtrig", "gtrig no AT3", "cv2 NONE", "apriltag3")}
+    print(f"\nspeed, renders 1024 x 768 ({n} images; OpenCV's default threads {cv2.getNumThreads()}, AprilTag 3 "
+          f"quad_decimate 1 with its default one): wall medians gtrig {g:.1f} ms, OpenCV {c:.1f} ms, AprilTag 3 "
+          f"{a:.1f} ms; process CPU per image gtrig / OpenCV {cpu['gtrig'] / cpu['cv2 NONE']:.2f}; markers found "
+          f"gtrig {n_found['gtrig']}, without its AprilTag 3 pass {n_found['gtrig no AT3']}, OpenCV "
+          f"{n_found['cv2 NONE']}, AprilTag 3 {n_found['apriltag3']} of {every['gtrig'].total}")
+    print(SPEED_HEADER)
+    print(_speed_row("renders", speed, speed_cpu))
+
+
+def _found(out: list[tuple[int, np.ndarray]], truths: list) -> set[int]:
+    """Indices of the true markers that ``out`` finds (ID and corners within 5 px)."""
+    return {k for k, t in enumerate(truths)
+            if any(mid == t.marker_id and np.abs(c - t.corners_px).max() < 5 for mid, c in out)}
 
 
 # ---------------------------------------------------------------------------------------------- photos
@@ -212,41 +292,54 @@ class _Row:
     found: dict[str, int] = field(default_factory=dict)
     ms: dict[str, list[float]] = field(default_factory=dict)
     wrong: int = 0
+    speed: Budget = field(default_factory=Budget)
+    speed_cpu: Budget = field(default_factory=Budget)
 
 
-def _photo(path: Path, dictionary: str, set_name: str, row: _Row, dets: dict[tuple[str, str], MarkerDetector]) -> None:
-    """One photo into ``row``: every detector's valid IDs and time."""
+def _photo(path: Path, dictionary: str, set_name: str, row: _Row, dets: dict[tuple[str, str, bool], MarkerDetector],
+           repeat: int) -> None:
+    """One photo into ``row``: every detector's valid IDs and time (median of ``repeat`` runs), and whether
+    gtrig without its AprilTag 3 pass misses a marker a peer finds."""
     from gtrig.io.imagetone import declared_tone
     from gtrig.markers.apriltag3 import at3_detect
 
     gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     fam, tone = _family_of(dictionary), declared_tone(path)
-    det = dets.setdefault((fam, tone), MarkerDetector(fam, params=DetectorParams(tone=tone)))
+
+    def detector(at3: bool) -> MarkerDetector:
+        return dets.setdefault((fam, tone, at3), MarkerDetector(fam, params=DetectorParams(
+            tone=tone, peers=PeerParams(apriltag3=at3))))
+
     seen: dict[str, dict[int, np.ndarray]] = {}
-    t0 = time.perf_counter()
-    seen["gtrig"] = {d.id: d.corners_px.mean(axis=0) for d in det.detect(gray)}
-    times = {"gtrig": time.perf_counter() - t0}
-    out, ms = _run("cv2", _opencv(dictionary), gray)
-    seen["OpenCV"], times["OpenCV"] = {i: c.mean(axis=0) for i, c in out}, ms / 1000.0
+    times: dict[str, float] = {}
+    cpu: dict[str, float] = {}
+    res, times["gtrig"], cpu["gtrig"] = _timed(lambda: detector(True).detect(gray), repeat)
+    seen["gtrig"] = {d.id: d.corners_px.mean(axis=0) for d in res}
+    cvd = _opencv(dictionary)
+    (out, _), times["OpenCV"], cpu["OpenCV"] = _timed(lambda: _run("cv2", cvd, gray), repeat)
+    seen["OpenCV"] = {i: c.mean(axis=0) for i, c in out}
+    without_at3 = set(seen["gtrig"])
     if dictionary in _AT3:
         at3 = {}
         for label, qd in (("AT3", 2.0), ("AT3 qd=1", 1.0)):
-            t0 = time.perf_counter()
-            at3[label] = at3_detect(gray, _AT3[dictionary], qd)
-            times[label] = time.perf_counter() - t0
+            at3[label], times[label], cpu[label] = _timed(lambda q=qd: at3_detect(gray, _AT3[dictionary], q), repeat)
         # a reading with two corrected bits counts where another peer confirms it (16h5: many are false)
         sure = set(seen["OpenCV"]) | {i for res in at3.values() for i, h, _ in res if h <= 1}
         for label, res in at3.items():
             seen[label] = {i: c.mean(axis=0) for i, h, c in res if h <= 1 or i in sure}
+        without_at3 = {d.id for d in detector(False).detect(gray)}
     printed = (_TOP[path.name][1] if set_name == "top-level" else
                _PRINTED.get((set_name, dictionary), set().union(*(set(v) for k, v in seen.items() if k != "gtrig"))))
     row.photos += 1
     for k, v in seen.items():
         row.found[k] = row.found.get(k, 0) + len(set(v) & printed)
-        row.ms.setdefault(k, []).append(1000.0 * times[k])
+        row.ms.setdefault(k, []).append(times[k])
     peers = [v for k, v in seen.items() if k != "gtrig"]
     row.wrong += sum(1 for i, c in seen["gtrig"].items() if i not in printed
                      and not any(i in p and np.linalg.norm(p[i] - c) < 10 for p in peers))
+    missed = any((set(p) & printed) - without_at3 for p in peers)
+    row.speed.add(times["gtrig"], times["OpenCV"], times.get("AT3 qd=1"), missed)
+    row.speed_cpu.add(cpu["gtrig"], cpu["OpenCV"], cpu.get("AT3 qd=1"), missed)
 
 
 def _refine_inputs(img: NDArray[np.uint8], truths: list, cvd: Any
@@ -334,27 +427,34 @@ def _bench_refine_only(rng: np.random.Generator) -> None:
     _bench_refine(scenes)
 
 
-def _bench_photos() -> None:
+def _bench_photos(repeat: int) -> None:
     if not REAL.is_dir():
         print(f"{REAL}: not found, real photos left out")
         return
-    dets: dict[tuple[str, str], MarkerDetector] = {}
+    dets: dict[tuple[str, str, bool], MarkerDetector] = {}
     MarkerDetector("aruco_4x4_50").detect(_scene(np.random.default_rng(0), 60, 0, 1.0, "uniform")[0])  # compile
     print("real photos (../shared/data/markers_real): markers found with an ID printed in the set; wrong: gtrig's "
-          "IDs not printed and not reported there by a peer; ms per photo (mean); OpenCV: ArucoDetector defaults; "
-          f"AT3: AprilTag 3 defaults (qd=1: quad_decimate 1), AprilTag families only; OpenCV threads "
-          f"{cv2.getNumThreads()}, AprilTag 3 one thread")
+          "IDs not printed and not reported there by a peer; ms per photo (mean of each photo's median of "
+          f"{repeat}); OpenCV: ArucoDetector defaults; AT3: AprilTag 3 defaults (qd=1: quad_decimate 1), AprilTag "
+          f"families only; OpenCV threads {cv2.getNumThreads()}, AprilTag 3 one thread (its default)")
     cols = ["gtrig", "OpenCV", "AT3", "AT3 qd=1"]
     print(f"{'set':28s} {'photos':>6s} " + " ".join(f"{c:>9s}" for c in cols) + f" {'wrong':>5s} "
           + " ".join(f"{c + ' ms':>12s}" for c in cols) + f" {'gtrig/OpenCV':>12s}")
+    speed = {}
     for name, photos in _sets().items():
         row = _Row()
         for path, dictionary in photos:
-            _photo(path, dictionary, name, row, dets)
+            _photo(path, dictionary, name, row, dets, repeat)
         found = " ".join(f"{row.found[c]:9d}" if c in row.found else f"{'-':>9s}" for c in cols)
         ms = {c: float(np.mean(row.ms[c])) for c in cols if c in row.ms}
         times = " ".join(f"{ms[c]:12.1f}" if c in ms else f"{'-':>12s}" for c in cols)
         print(f"{name:28s} {row.photos:6d} {found} {row.wrong:5d} {times} {ms['gtrig'] / ms['OpenCV']:12.2f}")
+        speed[name] = (row.speed, row.speed_cpu)
+    print("\nspeed per set (budget: 1.5x OpenCV, or AprilTag 3 qd=1's time on the AprilTag photos where gtrig "
+          "without its AprilTag 3 pass misses a marker a peer finds on some photo of the set)")
+    print(SPEED_HEADER)
+    for name, (b, c) in speed.items():
+        print(_speed_row(name, b, c))
     _board_fits()
 
 
@@ -451,6 +551,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="a smaller grid of renders")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--photos", action="store_true", help="the real photos of ../shared/data/markers_real")
+    ap.add_argument("--repeat", type=int, default=3, help="--photos: runs per photo and detector (the median is kept)")
     ap.add_argument("--hard", action="store_true", help="the harder simulated set (JPEG, Bayer, glare, ...)")
     ap.add_argument("--per-side", type=int, default=50, help="--hard: images per marker side")
     ap.add_argument("--refine-only", action="store_true",
@@ -458,7 +559,7 @@ def main() -> None:
     a = ap.parse_args()
     rng = np.random.default_rng(a.seed)
     if a.photos:
-        _bench_photos()
+        _bench_photos(a.repeat)
     elif a.hard:
         _bench_hard(rng, a.per_side)
     elif a.refine_only:

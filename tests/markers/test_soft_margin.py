@@ -54,3 +54,23 @@ def test_runner_up_is_measured_in_residual_units() -> None:
     best, lead = soft_code_margin(w, codes)
     assert best[0] == 0
     assert lead[0] == pytest.approx((1.62 - 0.02) / (0.02 / 4))
+
+
+@pytest.mark.parametrize("family", [MarkerFamily.APRILTAG_16H5, MarkerFamily.ARUCO_5X5_1000])
+def test_code_book_holds_the_familys_codes(family: MarkerFamily) -> None:
+    """The detector's per-family tables (made once) are the family's codes and printed cells, and the soft
+    reading through them is the one from the plain codes."""
+    from gtrig.markers.detect.verify import code_book
+    from gtrig.markers.families import all_codes, marker_cells
+
+    book = code_book(family)
+    spec = family_spec(family)
+    assert np.array_equal(book.codes, all_codes(family))
+    assert np.array_equal(book.flat, book.codes.reshape(len(book.codes), -1))
+    ids = np.random.default_rng(1).integers(spec.n_ids, size=5)
+    assert np.array_equal(book.cells[ids], [marker_cells(family, int(i)) for i in ids])
+    w = book.codes[ids].astype(float) + np.random.default_rng(2).normal(0.0, 0.2, (5,) + book.codes.shape[1:])
+    best, lead = soft_code_margin(w, book.flat, book.flat_sq)
+    best0, lead0 = soft_code_margin(w, book.codes)
+    assert np.array_equal(best, ids) and np.array_equal(best, best0)
+    np.testing.assert_allclose(lead, lead0, rtol=1e-12)

@@ -64,29 +64,51 @@ def test_two_threads_give_the_same_detections_on_clutter() -> None:
             np.testing.assert_array_equal(x.corner_cov, y.corner_cov)
 
 
-def test_opencv_pool_held_to_one_thread_inside_and_restored() -> None:
-    """A detection holds OpenCV's pool to one thread while it runs (its own threads share the work) and
-    restores the caller's setting, also when detections overlap in two threads; the default threads
-    (0) follow the setting as it was on the call."""
+def test_detection_never_resets_opencvs_threads(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Detections in three threads at once leave OpenCV's thread setting alone (setting it stops and
+    restarts OpenCV's workers, milliseconds on a loaded machine), and the default threads (0) follow it."""
     before = cv2.getNumThreads()
-    seen: list[int] = []
+    calls: list[int] = []
+    real = cv2.setNumThreads
     try:
-        cv2.setNumThreads(2)
-        with _threads.opencv_one_thread():
-            seen.append(cv2.getNumThreads())
-            with _threads.opencv_one_thread():  # nested (another detection in another thread)
-                seen.append(cv2.getNumThreads())
-            seen.append(cv2.getNumThreads())
-        assert seen == [1, 1, 1]
-        assert cv2.getNumThreads() == 2
-        img = np.full((120, 160), 200, np.uint8)
-        workers = [threading.Thread(target=MarkerDetector(MarkerFamily.APRILTAG_36H11).detect, args=(img,))
+        real(2)
+        monkeypatch.setattr(cv2, "setNumThreads", lambda n: calls.append(n))
+        rng = np.random.default_rng(2)
+        fam = MarkerFamily.APRILTAG_36H11
+        markers = [(fam, 5 + i, homography_from_pose(50, (120 + 200 * i, 200), 20, 30 * i, 0)) for i in range(3)]
+        img, _ = render((400, 640), markers, blur_px=0.8, noise=2.0, rng=rng)
+        found: list[int] = []
+        workers = [threading.Thread(target=lambda: found.append(len(MarkerDetector(fam).detect(img))))
                    for _ in range(3)]
         for w in workers:
             w.start()
         for w in workers:
             w.join()
-        assert cv2.getNumThreads() == 2
+        assert found == [3, 3, 3]
+        assert calls == [] and cv2.getNumThreads() == 2
         assert _threads.threads(0) == 2
     finally:
-        cv2.setNumThreads(before)
+        real(before)
+
+
+def test_few_quads_fit_in_the_calling_thread() -> None:
+    assert _threads.fit_threads(2, _threads.MIN_SPLIT_QUADS - 1) == 1
+    assert _threads.fit_threads(2, _threads.MIN_SPLIT_QUADS) == 2
+    assert _threads.fit_threads(0, 50) == _threads.threads(0)
+
+
+def test_apriltag3_gives_the_same_tags_with_two_threads() -> None:
+    """The detector runs AprilTag 3 with its own thread count: the library's detections (IDs, corrected
+    bits, corners) do not depend on it."""
+    from gtrig.markers.apriltag3 import at3_detect
+
+    rng = np.random.default_rng(5)
+    fam = MarkerFamily.APRILTAG_36H11
+    markers = [(fam, 11 * i + 2, homography_from_pose(s, (110 + 170 * i, 150 + 40 * i), 30, 50 * i, 20 * i))
+               for i, s in enumerate((24, 40, 70, 110))]
+    img, _ = render((420, 720), markers, blur_px=0.6, noise=2.0,
+                    background=clutter_background((420, 720), rng, n_shapes=25), rng=rng)
+    one, two = at3_detect(img, "tag36h11", 2.0, 1), at3_detect(img, "tag36h11", 2.0, 2)
+    assert len(one) >= 3
+    key = sorted((i, h, c.round(9).tobytes()) for i, h, c in one)
+    assert key == sorted((i, h, c.round(9).tobytes()) for i, h, c in two)

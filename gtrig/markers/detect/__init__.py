@@ -39,9 +39,8 @@ from gtrig.markers.detect import _blas, _threads
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.peers import PeerCandidate, PeerParams, find_peer_candidates
 from gtrig.markers.detect.refine import RefineSettings, fit_reason, refine_quads
-from gtrig.markers.detect.tone import Tone
-from gtrig.markers.detect.verify import Verdict, read_whiteness, read_whiteness_plain, verify_ids
-from gtrig.markers.families import FamilySpec, all_codes, decode_batch, family_spec, marker_cells
+from gtrig.markers.detect.verify import Verdict, code_book, read_whiteness, read_whiteness_plain, verify_ids
+from gtrig.markers.families import FamilySpec, decode_batch, family_spec
 from gtrig.rig.models import MarkerFamily
 
 __all__ = ["AT3_ONLY_SIGMA_PX", "DETECTOR_VERSION", "Detection", "DetectorParams", "MarkerDetector", "PeerParams",
@@ -119,8 +118,9 @@ class Rejection:
 
 
 @dataclass(frozen=True)
-class DetectorParams:
-    """Detector settings.
+class DetectorParams(RefineSettings):
+    """Detector settings: the edge fits' (:class:`.refine.RefineSettings`, whose fields these are, with a
+    wider ``max_rel_rms``) and the peers', verification's and threads'.
 
     peers : which of the field's detectors give the candidates (:class:`.peers.PeerParams`).
     band_px : half-width of the edge band beyond ``3 sigma`` (pixels; the limits of a small marker's
@@ -154,8 +154,9 @@ class DetectorParams:
     min_soft_margin : a peer's ID is refused when the code nearest gtrig's solved cells is another ID's
         and leads the peer's by at least this many chi-square units (:mod:`.verify`); 0: only the hard
         reading can refuse it.
-    threads : threads the edge fits may use; 0 follows OpenCV's setting (``cv2.getNumThreads()``). The
-        peers run with their own default threads.
+    threads : threads the edge fits and AprilTag 3 may use; 0 follows OpenCV's setting
+        (``cv2.getNumThreads()``). OpenCV's detector runs with its own setting; the edge fits of fewer than
+        :data:`._threads.MIN_SPLIT_QUADS` quads stay in the calling thread.
     tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored levels
         back to light, where the blurred-step model holds.
@@ -165,29 +166,15 @@ class DetectorParams:
         trade-off in docs/markers.md).
     """
 
-    peers: PeerParams = field(default_factory=PeerParams)
-    band_px: float = 5.0
-    white_end: bool = True
-    margin_cells: float | None = None
-    max_blur_px: float = 5.0
-    min_contrast: float = 12.0
     max_rel_rms: float = 0.5
-    max_corner_shift_px: float = 4.0
-    max_corner_shift_side: float = 0.1
+    peers: PeerParams = field(default_factory=PeerParams)
     keep_unrefined: bool = True
-    passes: int = 3
-    iterations: int = 10
-    tol: float = 1e-3
     min_soft_margin: float = 18.0
     threads: int = 0
-    tone: Tone = "linear"
-    max_columns: int = 32
 
     def refine_settings(self) -> RefineSettings:
-        """The edge fits' part of these settings."""
-        return RefineSettings(self.band_px, self.white_end, self.margin_cells, self.max_blur_px, self.min_contrast,
-                              self.max_rel_rms, self.max_corner_shift_px, self.max_corner_shift_side, self.passes,
-                              self.iterations, self.tol, self.tone, self.max_columns)
+        """The edge fits' part of these settings (these settings themselves: a :class:`.refine.RefineSettings`)."""
+        return self
 
 
 _UNDISTORTERS: OrderedDict[tuple[bytes, bytes, tuple[int, int]], Undistorter] = OrderedDict()
@@ -245,13 +232,13 @@ class MarkerDetector:
         gray = to_gray(image)
         if min(gray.shape) < 8:
             return []
-        cands = find_peer_candidates(gray, self.spec.family, self.params.peers)
+        cands = find_peer_candidates(gray, self.spec.family, self.params.peers, _threads.threads(self.params.threads))
         if not cands:
             return []
         if not self.spec.edge_model:
             return _dedupe([_unrefined(c) for c in cands], trace)
-        nt = _threads.threads(self.params.threads)
-        with _blas.one_thread(), _threads.opencv_one_thread():
+        nt = _threads.fit_threads(self.params.threads, len(cands))
+        with _blas.one_thread():
             return _dedupe(self._refine_and_verify(gray, cands, trace, nt), trace)
 
     def detect_expected(self, image: NDArray[np.generic], quads_px: NDArray[np.float64],
@@ -291,8 +278,8 @@ class MarkerDetector:
         gray = to_gray(image)
         if min(gray.shape) < 8:
             return []
-        nt = _threads.threads(self.params.threads)
-        with _blas.one_thread(), _threads.opencv_one_thread():
+        nt = _threads.fit_threads(self.params.threads, len(Q0))
+        with _blas.one_thread():
             return self._confirm_expected(gray, Q0, expected, nt)
 
     def _confirm_expected(self, gray: NDArray[np.uint8], Q0: NDArray[np.float64], expected: NDArray[np.int64],
@@ -301,13 +288,13 @@ class MarkerDetector:
         p, spec = self.params, self.spec
         und = self._undistorter(gray.shape)
         Q = Q0 if und is None else und.to_undistorted(Q0.reshape(-1, 2)).reshape(-1, 4, 2)
-        white = np.array([marker_cells(spec.family, int(i)) for i in expected], np.float64)
-        r = refine_quads(gray, Q, white, spec.border_cells, und, p.refine_settings(), nt)
+        book = code_book(spec.family)
+        r = refine_quads(gray, Q, book.cells[expected], spec.border_cells, und, p, nt)
         idx = np.flatnonzero(r.ok)
         if not len(idx):
             return []
         w = read_whiteness(gray, r, idx, spec, p.tone, p.max_blur_px, und)
-        v = verify_ids(w, expected[idx], spec, all_codes(spec.family), p.min_soft_margin)
+        v = verify_ids(w, expected[idx], spec, book, p.min_soft_margin)
         read, rot, _ = decode_batch(spec.family, (w > 0.5).astype(np.uint8), spec.max_correction)
         ok = v.ok & (read == expected[idx]) & (rot == 0) & (v.rot == 0)
         cands = [PeerCandidate(Q0[q], int(expected[q]), "opencv") for q in idx]
@@ -324,27 +311,25 @@ class MarkerDetector:
         Q0 = np.array([c.quad_px for c in cands])  # (Q, 4, 2) raw
         Q = Q0 if und is None else und.to_undistorted(Q0.reshape(-1, 2)).reshape(-1, 4, 2)
         peer_ids = np.array([c.id for c in cands], np.int64)
-        white = np.array([marker_cells(spec.family, int(i)) for i in peer_ids], np.float64)
-        s = p.refine_settings()
-        r = refine_quads(gray, Q, white, spec.border_cells, und, s, nt)
-        codes = all_codes(spec.family)
+        book = code_book(spec.family)
+        r = refine_quads(gray, Q, book.cells[peer_ids], spec.border_cells, und, p, nt)
         idx = np.flatnonzero(r.ok)
         out = []
         if len(idx):
             w = read_whiteness(gray, r, idx, spec, p.tone, p.max_blur_px, und)
-            v = verify_ids(w, peer_ids[idx], spec, codes, p.min_soft_margin)
+            v = verify_ids(w, peer_ids[idx], spec, book, p.min_soft_margin)
             out += self._accepted(cands, idx, v, r.corners[idx], r.cov[idx], r.blur[idx], und, trace)
         bad = np.flatnonzero(~r.ok)
         if trace is not None and not p.keep_unrefined:
             for q in bad:
-                trace.append(Rejection(Q0[q].copy(), "fit", f"{_who(cands[q])}: {fit_reason(r, int(q), s)}"))
+                trace.append(Rejection(Q0[q].copy(), "fit", f"{_who(cands[q])}: {fit_reason(r, int(q), p)}"))
         if len(bad) and p.keep_unrefined:
             # the peer's corners moved to the nearest grey-level corner (OpenCV's cornerSubPix), gtrig's
             # cells read through them
             Qb = _corner_subpix(gray, Q0[bad])
             Qb = Qb if und is None else und.to_undistorted(Qb.reshape(-1, 2)).reshape(-1, 4, 2)
             w = read_whiteness_plain(gray, Qb, spec, und)
-            v = verify_ids(w, peer_ids[bad], spec, codes, p.min_soft_margin)
+            v = verify_ids(w, peer_ids[bad], spec, book, p.min_soft_margin)
             cov = np.tile(np.eye(2) * UNREFINED_SIGMA_PX**2, (len(bad), 4, 1, 1))
             out += self._accepted(cands, bad, v, Qb, cov, np.full(len(bad), np.nan), und, trace)
         return out
@@ -406,16 +391,30 @@ def _dedupe(dets: list[Detection], trace: list[Rejection] | None = None) -> list
     area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1))
     unrefined = np.array([not np.isfinite(d.blur_px) for d in dets])
     order = np.lexsort((-area, np.array([d.hamming for d in dets]), unrefined))
-    centre = q.mean(axis=1)
+    near = _near(q.mean(axis=1), 0.25 * np.sqrt(area))
+    kept = np.zeros(len(dets), bool)
     keep: list[int] = []
     for i in order:
-        if keep and np.any(np.linalg.norm(centre[keep] - centre[i], axis=1) < 0.25 * np.sqrt(area[keep])):
+        if (near[i] & kept).any():
             if trace is not None:
                 why = f"ID {dets[i].id}: another detection here"
                 trace.append(Rejection(dets[i].corners_px.copy(), "duplicate", why))
             continue
+        kept[i] = True
         keep.append(int(i))
     return [dets[i] for i in sorted(keep)]
+
+
+def _near(centre: NDArray[np.float64], reach: NDArray[np.float64], block: int = 512) -> NDArray[np.bool_]:
+    """(D, D) bool: centre ``i`` lies within ``reach[j]`` of centre ``j`` (centres (D, 2) px, reach (D,) px),
+    the diagonal false; the distances in blocks of rows (memory bounded for thousands of markers)."""
+    n = len(centre)
+    out = np.zeros((n, n), bool)
+    for r0 in range(0, n, block):
+        d = np.linalg.norm(centre[r0:r0 + block, None, :] - centre[None, :, :], axis=2)
+        out[r0:r0 + block] = d < reach[None, :]
+    np.fill_diagonal(out, False)
+    return out
 
 
 def to_gray(image: NDArray[np.generic]) -> NDArray[np.uint8]:

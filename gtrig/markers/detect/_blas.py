@@ -83,7 +83,17 @@ def gram(m: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 _lock = threading.Lock()
-_state: dict[str, Any] = {"depth": 0, "limiter": None, "controller": None}
+_state: dict[str, Any] = {"depth": 0, "libs": None, "saved": []}
+
+
+def _blas_libraries() -> list[Any]:
+    """threadpoolctl's controllers of the BLAS libraries loaded (looked up once: the lookup reads every
+    loaded library, a tenth of a millisecond, where setting a count through them takes a microsecond)."""
+    if _state["libs"] is None:
+        from threadpoolctl import ThreadpoolController
+
+        _state["libs"] = list(ThreadpoolController().select(user_api="blas").lib_controllers)
+    return list(_state["libs"])
 
 
 @contextmanager
@@ -92,15 +102,17 @@ def one_thread() -> Iterator[None]:
 
     The thread count is process-wide: the first caller in sets it to 1 and the last one out restores
     it, so detections in several threads at once (the detector's helper thread, a user's pool) never
-    restore it under one another.
+    restore it under one another. A library already at one thread is not touched.
     """
     with _lock:
         if _state["depth"] == 0:
-            if _state["controller"] is None:
-                from threadpoolctl import ThreadpoolController
-
-                _state["controller"] = ThreadpoolController()
-            _state["limiter"] = _state["controller"].limit(limits=1, user_api="blas")
+            saved = []
+            for lib in _blas_libraries():
+                n = int(lib.get_num_threads())
+                if n != 1:
+                    lib.set_num_threads(1)
+                    saved.append((lib, n))
+            _state["saved"] = saved
         _state["depth"] += 1
     try:
         yield
@@ -108,5 +120,6 @@ def one_thread() -> Iterator[None]:
         with _lock:
             _state["depth"] -= 1
             if _state["depth"] == 0:
-                _state["limiter"].restore_original_limits()
-                _state["limiter"] = None
+                for lib, n in _state["saved"]:
+                    lib.set_num_threads(n)
+                _state["saved"] = []

@@ -3,6 +3,11 @@
 The compiled kernels (:mod:`._kernels`) and OpenCV release the GIL, so two threads of one detection
 really run at once; the detector follows OpenCV's thread setting (``cv2.getNumThreads()``), which
 OpenCV's own ArUco detector uses too and which GTvision's worker processes set to 1.
+
+OpenCV's own pool is left as the caller set it: the OpenCV calls after the peers (``cv2.remap`` of the
+cells' samples, ``cv2.cornerSubPix``) are below the size at which OpenCV splits a call into stripes, and
+setting its thread count stops and restarts its workers (0.1 ms idle, 2 ms on a loaded machine, twice
+per detection).
 """
 
 from __future__ import annotations
@@ -12,7 +17,6 @@ import os
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
 from typing import Any, TypeVar
 
 import cv2
@@ -36,6 +40,18 @@ os.register_at_fork(after_in_child=_forget_pool)
 def threads(setting: int) -> int:
     """Threads a detection may use: ``setting``, or OpenCV's when it is 0."""
     return setting if setting > 0 else cv2.getNumThreads()
+
+
+#: quads below which the edge fits stay in the calling thread: handing a pass's parts to the helper thread
+#: costs about 40 us per pass (3 passes), a marker's fit about 0.2 ms, and on a loaded machine the helper
+#: may not run at all before the caller has done the work
+MIN_SPLIT_QUADS = 4
+
+
+def fit_threads(setting: int, n_quads: int) -> int:
+    """Threads the edge fits of ``n_quads`` quads use: :func:`threads` of ``setting``, 1 below
+    :data:`MIN_SPLIT_QUADS`."""
+    return 1 if n_quads < MIN_SPLIT_QUADS else threads(setting)
 
 
 def helper_pool() -> ThreadPoolExecutor:
@@ -101,36 +117,3 @@ def ordered_map(fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], threads:
             raise err
         yield results[k]
         results[k] = None
-
-
-_OPEN, _CLAIMED, _SKIPPED = 0, 1, 2
-
-
-_CV_LOCK = threading.Lock()
-_CV_STATE: dict[str, int] = {"depth": 0, "saved": 0}
-
-
-@contextmanager
-def opencv_one_thread() -> Iterator[None]:
-    """OpenCV's own thread pool held to one thread while any detection is inside (process-wide, like
-    :func:`._blas.one_thread` for BLAS: the first caller in sets it, the last one out restores it).
-
-    A detection with two threads already runs its parts side by side (the split kernels), so OpenCV
-    splitting each call into stripes only adds threads to cores that are busy: its pool's workers wake for
-    the stripes of small boxes and wait spinning after them. Held to one thread, the GT room's images took
-    13 % less CPU and 6 % less wall time with the detector's two threads. The results of the OpenCV calls
-    do not depend on the stripes.
-    """
-    with _CV_LOCK:
-        if _CV_STATE["depth"] == 0:
-            _CV_STATE["saved"] = cv2.getNumThreads()
-            if _CV_STATE["saved"] != 1:
-                cv2.setNumThreads(1)
-        _CV_STATE["depth"] += 1
-    try:
-        yield
-    finally:
-        with _CV_LOCK:
-            _CV_STATE["depth"] -= 1
-            if _CV_STATE["depth"] == 0 and _CV_STATE["saved"] != 1:
-                cv2.setNumThreads(_CV_STATE["saved"])

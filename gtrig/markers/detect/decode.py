@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -56,6 +58,15 @@ def sample_cells(
     return vals.mean(axis=3)
 
 
+@functools.cache
+def _data_samples(n: int, border: int) -> NDArray[np.float64]:
+    """(S, 3) homogeneous marker-unit points of the 3 x 3 samples of every data cell of an ``n x n`` grid with a
+    ``border``-cell border, row by row (the same for every quad; shared, not to be written)."""
+    c = (np.arange(border, n - border)[:, None] + 0.5 + _OFFS[None, :]).ravel() / n  # (3 d,)
+    gy, gx = np.meshgrid(c, c, indexing="ij")
+    return np.ascontiguousarray(np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)], -1))
+
+
 def unblur_cells(
     gray: NDArray[np.uint8],
     quads: NDArray[np.float64],
@@ -90,9 +101,7 @@ def unblur_cells(
     """
     d = n - 2 * border
     Q = len(quads)
-    c = (np.arange(border, n - border)[:, None] + 0.5 + _OFFS[None, :]).ravel() / n  # (3 d,)
-    gy, gx = np.meshgrid(c, c, indexing="ij")
-    mu = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)], -1)  # (S, 3) marker units
+    mu = _data_samples(n, border)  # (S, 3) marker units
     Hm = quad_homographies(quads)  # fit coords -> marker units
     # every quad at once (the loop over quads with a dozen small array operations each was most of
     # the cost): the same element-wise formulas, and one batched solve
@@ -105,7 +114,7 @@ def unblur_cells(
     # the design by the compiled kernel (every sample's product of the cells' profiles across the two
     # axes, 0 where negligible); its normal matrix by syrk where it is dense, by the products of each
     # row's non-zero entries where it is sparse (sharp markers: 1-4 of the d^2 per row)
-    M, r, nnz = _kernels.unblur_rows(np.ascontiguousarray(px), np.ascontiguousarray(mu), np.ascontiguousarray(Hm),
+    M, r, nnz = _kernels.unblur_rows(np.ascontiguousarray(px), mu, np.ascontiguousarray(Hm),
                                      np.ascontiguousarray(vals, np.float64), np.ascontiguousarray(sigma, np.float64),
                                      np.ascontiguousarray(black, np.float64),
                                      np.ascontiguousarray(contrast, np.float64), n, border)
@@ -122,7 +131,7 @@ def unblur_cells(
 
 
 def soft_code_margin(
-    whiteness: NDArray[np.floating], codes: NDArray[np.uint8]
+    whiteness: NDArray[np.floating], codes: NDArray[np.generic], codes_sq: NDArray[np.float64] | None = None
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """The code nearest the solved cells in the least-squares sense, and its lead over the runner-up.
 
@@ -136,7 +145,9 @@ def soft_code_margin(
     Parameters
     ----------
     whiteness : (Q, d, d) float, the solved data cells (about 0 black, 1 white), in the quads' orientation.
-    codes : (K, d, d) 0 / 1, every code in each rotation as read in a quad's orientation.
+    codes : (K, d, d) or (K, d^2) 0 / 1, every code in each rotation as read in a quad's orientation (float64
+        rows are used as they are: :class:`.verify.CodeBook` keeps them so).
+    codes_sq : (K,) float, each code's sum of squares, when the caller keeps it (computed otherwise).
 
     Returns
     -------
@@ -145,9 +156,10 @@ def soft_code_margin(
         cells' residual variance estimated from the best code's own fit (chi-square units).
     """
     w = whiteness.reshape(len(whiteness), -1).astype(np.float64)
-    c = codes.reshape(len(codes), -1).astype(np.float64)
+    c = np.asarray(codes.reshape(len(codes), -1), np.float64)
+    c_sq = (c * c).sum(axis=1) if codes_sq is None else codes_sq
     # |w - c|^2 = |w|^2 - 2 w.c + |c|^2, one product for every code (4096 ids x 4 rotations for BCH)
-    d2 = (w * w).sum(axis=1)[:, None] - 2.0 * (w @ c.T) + (c * c).sum(axis=1)[None, :]
+    d2 = (w * w).sum(axis=1)[:, None] - 2.0 * (w @ c.T) + c_sq[None, :]
     two = np.argpartition(d2, 1, axis=1)[:, :2]
     pair = np.take_along_axis(d2, two, axis=1)
     order = np.argsort(pair, axis=1)

@@ -7,9 +7,11 @@ Both run without their own corner refinement (gtrig refines every corner, :mod:`
   al., "Speeded up detection of squared fiducial markers", Image and Vision Computing 76, 2018) with its
   default parameters, for every family with an OpenCV dictionary and for ARToolKitPlus' codes as a
   custom dictionary whose ``markerBorderBits`` is the family's border (3 cells for the standard border);
-- AprilTag 3 (:mod:`gtrig.markers.apriltag3`) at its default decimation for the AprilTag families it
-  reads. On the real photos it finds tags that OpenCV misses (far, tilted 36h11 tags of the FRC field)
-  and OpenCV finds some it misses: for 16h5, 25h9 and 36h11 both run and their candidates are pooled.
+- AprilTag 3 (:mod:`gtrig.markers.apriltag3`) at its default decimation, with the detector's threads, for
+  the AprilTag families it reads. On the real photos it finds tags that OpenCV misses (far, tilted 36h11
+  tags of the FRC field) and OpenCV finds some it misses: for 16h5, 25h9 and 36h11 both run and their
+  candidates are pooled. Neither OpenCV's rejected candidates (one of PhotonVision's three such tags lies
+  among them) nor AprilTag 3 on crops around them finds the others: it runs on the whole image.
 
 A candidate is a quad in raw pixels, corners top-left, top-right, bottom-right, bottom-left as printed,
 with the peer's ID; gtrig's cells confirm or refuse it (:mod:`.verify`).
@@ -143,22 +145,26 @@ def opencv_candidates(gray: NDArray[np.uint8], family: MarkerFamily) -> list[Pee
     corners, ids, _ = _opencv_for_thread(family).detectMarkers(gray)
     if ids is None:
         return []
-    return [PeerCandidate(np.asarray(c, np.float64).reshape(4, 2), int(i), "opencv")
-            for c, i in zip(corners, ids.ravel(), strict=True)]
+    quads = np.asarray(corners, np.float64).reshape(-1, 4, 2)
+    return [PeerCandidate(q, int(i), "opencv") for q, i in zip(quads, ids.ravel().tolist(), strict=True)]
 
 
-def apriltag3_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams) -> list[PeerCandidate]:
-    """AprilTag 3's markers of ``family`` in ``gray`` with at most ``params.at3_max_hamming`` corrected bits."""
+def apriltag3_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams,
+                         threads: int = 1) -> list[PeerCandidate]:
+    """AprilTag 3's markers of ``family`` in ``gray`` with at most ``params.at3_max_hamming`` corrected bits,
+    found with ``threads`` threads."""
     from gtrig.markers.apriltag3 import at3_detect
 
     return [PeerCandidate(c, i, "apriltag3", h)
-            for i, h, c in at3_detect(gray, AT3_NAMES[family.value], params.at3_quad_decimate)
+            for i, h, c in at3_detect(gray, AT3_NAMES[family.value], params.at3_quad_decimate, threads)
             if h <= params.at3_max_hamming]
 
 
-def find_peer_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams) -> list[PeerCandidate]:
+def find_peer_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams,
+                         threads: int = 1) -> list[PeerCandidate]:
     """Every peer's candidates, pooled: where two peers report the same ID at the same place (centres
-    closer than a quarter of the side), the first (OpenCV's) is kept."""
+    closer than a quarter of the side), the first (OpenCV's) is kept. OpenCV runs with its own thread setting,
+    AprilTag 3 with ``threads`` (the detector's: AprilTag 3's default is one)."""
     out: list[PeerCandidate] = []
     more: list[PeerCandidate] = []
     if params.opencv and uses_opencv(family):
@@ -167,7 +173,7 @@ def find_peer_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: 
             opened = cv2.morphologyEx(gray, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
             more += opencv_candidates(np.asarray(opened, np.uint8), family)
     if uses_apriltag3(family) and (params.apriltag3 or not uses_opencv(family)):
-        more += apriltag3_candidates(gray, family, params)
+        more += apriltag3_candidates(gray, family, params, threads)
     for c in more:
         if not any(o.id == c.id and _same_place(o.quad_px, c.quad_px) for o in out):
             out.append(c)
