@@ -436,10 +436,9 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
                 p1: NDArray[np.float64], sigma0: NDArray[np.float64], w_in: NDArray[np.float64],
                 w_out: NDArray[np.float64], w_look: NDArray[np.float64], excl: NDArray[np.float64],
                 stride: NDArray[np.int64], white: NDArray[np.float64], band_cfg: NDArray[np.float64],
-                fit_cfg: NDArray[np.float64],
-                first: bool, last: bool, P: NDArray[np.float64], mid: NDArray[np.float64],
-                sigma: NDArray[np.float64], cov: NDArray[np.float64], rms: NDArray[np.float64],
-                n_px: NDArray[np.int64], ok: NDArray[np.bool_]) -> None:
+                fit_cfg: NDArray[np.float64], first: bool, active: NDArray[np.bool_], P: NDArray[np.float64],
+                mid: NDArray[np.float64], sigma: NDArray[np.float64], cov: NDArray[np.float64],
+                rms: NDArray[np.float64], n_px: NDArray[np.int64], ok: NDArray[np.bool_]) -> None:
     """One pass of :func:`.edges.refine_quads` over ``Q`` quads (edges ``4q .. 4q + 3``), in place.
 
     Parameters
@@ -453,9 +452,10 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
         outer limit read for the paper's end (``w_out`` itself when that is not looked for); stride : (4Q,)
         the column stride of each band (:func:`.edges.band_stride`).
     white : (Q, n, n) white cells. band_cfg : (white end looked for (0/1), bins' origin, bin width,
-        white-end drop, white-end sigmas, blur lower clip, blur upper clip).
-    fit_cfg : :func:`_fit_edge`'s ``cfg``. first, last : the first (plain steps) and last (covariances)
-        passes.
+        white-end drop, white-end sigmas, blur lower clip, blur upper clip, settling move in pixels).
+    fit_cfg : :func:`_fit_edge`'s ``cfg``. first : the first pass (plain steps, no covariances).
+    active : (Q,) the quads this pass fits; one whose corners (:func:`quad_corners`) moved less than the
+        settling move in a pass after the first is set False (it keeps this pass's fits).
     P, mid, sigma, cov, rms, n_px, ok : (4Q, 7), (4Q, 2), (4Q,), (4Q, 2, 2), (4Q,) x 3: the fits of
         :class:`.edges.EdgeFit` (``P`` its parameters), read as the previous pass's and replaced.
     """
@@ -463,10 +463,13 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
     undistorted = boxes.shape[0] > 0
     look, lo_bins, step, drop, end_sigmas, s_lo, s_hi = (band_cfg[0] > 0.5, band_cfg[1], band_cfg[2], band_cfg[3],
                                                          band_cfg[4], band_cfg[5], band_cfg[6])
+    settle = band_cfg[7]
     init = np.empty((4, _NP))
     init_mid = np.empty((4, 2))
     new_mid = np.empty(2)
     for q in range(Q):
+        if not active[q]:
+            continue
         e0 = 4 * q
         sl = slice(e0, e0 + 4)
         w_band = w_look[sl] if look else w_out[sl]
@@ -507,10 +510,32 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
                 X0[i] = x[i] - new_mid[0]
                 X1[i] = y[i] - new_mid[1]
             sg, r, good = _fit_edge(X0, X1, v, extra, lo, hi, ty, -tx, new_mid, sigma0[e], init[k], init_mid[k],
-                                    not first, last, fit_cfg, P[e], cov[e])
+                                    not first, not first, fit_cfg, P[e], cov[e])
             mid[e, 0], mid[e, 1] = new_mid[0], new_mid[1]
             sigma[e], rms[e], n_px[e], ok[e] = sg, r, hi - lo, good
+        if not first and corner_move(init, init_mid, P[sl], mid[sl]) < settle:
+            active[q] = False
         _next_pass(P[sl], mid[sl], sigma[sl], s_lo, s_hi, p0[sl], p1[sl], sigma0[sl])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def corner_move(P0: NDArray[np.float64], mid0: NDArray[np.float64], P1: NDArray[np.float64],
+                mid1: NDArray[np.float64]) -> float:
+    """The largest distance (px) between the corners of a quad's lines ``P0`` (4, 7), ``mid0`` (4, 2) and
+    those of ``P1``, ``mid1`` (:func:`quad_corners`; NaN where either has no intersection)."""
+    c0 = np.empty((4, 2))
+    c1 = np.empty((4, 2))
+    cov = np.empty((4, 2, 2))
+    no_cov = np.zeros((4, 2, 2))
+    quad_corners(P0[:, 0].copy(), P0[:, 1].copy(), mid0, no_cov, c0, cov)
+    quad_corners(P1[:, 0].copy(), P1[:, 1].copy(), mid1, no_cov, c1, cov)
+    move = 0.0
+    for i in range(4):
+        dist = math.hypot(c1[i, 0] - c0[i, 0], c1[i, 1] - c0[i, 1])
+        if math.isnan(dist):
+            return np.nan
+        move = max(move, dist)
+    return move
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
