@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from gtrig.markers.detect._kernels import band_pixels, lm_edge, marker_context, quad_homographies
+from gtrig.markers.detect._kernels import lm_edge, marker_context, quad_homographies
 
 #: column of the parameters ``(theta, rho, a, b, log sigma, c, c_u)`` (:func:`.edges.fit_edges`)
 _NP = 7
@@ -34,18 +34,79 @@ def _gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np
                 stride: NDArray[np.int64]
                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """Band pixels of the edges ``p0 -> p1`` (E, 2) without a lens model: x, y, value, edge (each (M,),
-    sorted by edge; :func:`.edges.gather_band`), every ``stride[e]``-th column."""
+    sorted by edge; :func:`.edges.gather_band`), every ``stride[e]``-th column.
+
+    The pixels and their order are those of :func:`._kernels.band_pixels` (the same scan and tests), in
+    one scan into arrays sized by a bound: each column of the edge's major axis holds at most
+    ``(w_in + w_out) / |n_v| + 2`` pixels (``n_v`` the normal's minor component, at least ``1 / sqrt 2``).
+    """
+    h, w = gray.shape[0], gray.shape[1]
     E = p0.shape[0]
     t = np.empty((E, 2))
     nrm = np.empty((E, 2))
     L = np.empty(E)
+    finite = np.zeros(E, np.bool_)
+    bound = 0
     for e in range(E):
         tx, ty = p1[e, 0] - p0[e, 0], p1[e, 1] - p0[e, 1]
         L[e] = math.hypot(tx, ty)
         t[e, 0], t[e, 1] = tx / L[e], ty / L[e]
         nrm[e, 0], nrm[e, 1] = t[e, 1], -t[e, 0]
-    xy, v, es = band_pixels(gray, p0, t, nrm, L, w_in, w_out, excl, stride)
-    return xy[:, 0].copy(), xy[:, 1].copy(), v, es
+        swap = abs(t[e, 1]) > abs(t[e, 0])
+        nv = abs(nrm[e, 0] if swap else nrm[e, 1])
+        span = L[e] + w_in[e] + w_out[e]  # the band's extent along the major axis, at most
+        per_col = (w_in[e] + w_out[e]) / max(nv, 0.5) + 3.0
+        # an edge with a NaN end point or limit has no pixel (every test fails): left out
+        finite[e] = (math.isfinite(span) and math.isfinite(per_col) and math.isfinite(p0[e, 0])
+                     and math.isfinite(p0[e, 1]) and math.isfinite(excl[e]) and L[e] > 0.0)
+        if finite[e]:
+            bound += int((span / stride[e] + 3.0) * per_col)
+    xs = np.empty(bound)
+    ys = np.empty(bound)
+    vs = np.empty(bound)
+    es = np.empty(bound, np.int64)
+    m = 0
+    for e in range(E):
+        if not finite[e]:
+            continue
+        swap = abs(t[e, 1]) > abs(t[e, 0])
+        iu, iv = (1, 0) if swap else (0, 1)
+        Au, Av, Tu, Tv, Nu, Nv = p0[e, iu], p0[e, iv], t[e, iu], t[e, iv], nrm[e, iu], nrm[e, iv]
+        size_u, size_v = (h, w) if swap else (w, h)
+        s_lo, s_hi = excl[e], L[e] - excl[e]
+        if s_hi < s_lo:
+            continue
+        d_lo, d_hi = -w_in[e], w_out[e]
+        umin, umax = np.inf, -np.inf
+        for sv in (s_lo, s_hi):
+            for dv in (d_lo, d_hi):
+                cu = Au + sv * Tu + dv * Nu
+                umin, umax = min(umin, cu), max(umax, cu)
+        u0 = max(math.ceil(umin - 1e-6), 0)
+        u1 = min(math.floor(umax + 1e-6), size_u - 1)
+        a0 = int(math.floor(Au))
+        for col in range(u0, u1 + 1):
+            if (col - a0) % stride[e] != 0:
+                continue
+            du = col - Au
+            if abs(Tv) < 1e-9:
+                s_a, s_b = -np.inf, np.inf
+            else:
+                s_a, s_b = (s_lo - du * Tu) / Tv, (s_hi - du * Tu) / Tv
+            d_a, d_b = (d_lo - du * Nu) / Nv, (d_hi - du * Nu) / Nv
+            lo = max(min(s_a, s_b), min(d_a, d_b)) + Av
+            hi = min(max(s_a, s_b), max(d_a, d_b)) + Av
+            v0 = max(math.ceil(lo - 1e-6), 0)
+            v1 = min(math.floor(hi + 1e-6), size_v - 1)
+            for v in range(v0, v1 + 1):
+                x, y = (v, col) if swap else (col, v)
+                rx, ry = x - p0[e, 0], y - p0[e, 1]
+                ss = rx * t[e, 0] + ry * t[e, 1]
+                dd = rx * nrm[e, 0] + ry * nrm[e, 1]
+                if dd >= d_lo and dd <= d_hi and ss >= s_lo and ss <= s_hi:
+                    xs[m], ys[m], vs[m], es[m] = x, y, gray[y, x], e
+                    m += 1
+    return xs[:m], ys[:m], vs[:m], es[:m]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -337,6 +398,20 @@ def quad_corners(theta: NDArray[np.float64], rho: NDArray[np.float64], mid: NDAr
             cov[i, 0, 1] += m00 * j10 + m01 * j11
             cov[i, 1, 0] += m10 * j00 + m11 * j01
             cov[i, 1, 1] += m10 * j10 + m11 * j11
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def all_quad_corners(theta: NDArray[np.float64], rho: NDArray[np.float64], mid: NDArray[np.float64],
+                     cov_line: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`quad_corners` of every quad of the lines ``4q .. 4q + 3`` (theta, rho (4Q,), mid (4Q, 2),
+    cov_line (4Q, 2, 2)): corners (Q, 4, 2) and their covariances (Q, 4, 2, 2)."""
+    Q = theta.shape[0] // 4
+    corners = np.empty((Q, 4, 2))
+    cov = np.empty((Q, 4, 2, 2))
+    for q in range(Q):
+        e0 = 4 * q
+        quad_corners(theta[e0:e0 + 4], rho[e0:e0 + 4], mid[e0:e0 + 4], cov_line[e0:e0 + 4], corners[q], cov[q])
+    return corners, cov
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

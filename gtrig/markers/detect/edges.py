@@ -767,18 +767,18 @@ def refine_quads(
         boxes = np.zeros((0, 4), np.int64) if undist is None else _raw_boxes(gray.shape, p0, p1, w_in, w_look, undist)
         maps = (no_map, no_map) if undist is None else (undist.map_x, undist.map_y)
         arrays = (p0, p1, sigma0, w_in, w_out, w_look, excl, stride)
-        parts = [(gray, lut, *maps, boxes[4 * a:4 * b] if undist is not None else boxes,
-                  *(x[4 * a:4 * b] for x in arrays), W[a:b], band_cfg, fit_cfg, k == 0, active[a:b],
-                  *(x[4 * a:4 * b] for x in (P, mid, sigma, cov_line, rms, n_px, ok)))
-                 for a, b in itertools.pairwise(cut)]
+        fits = (P, mid, sigma, cov_line, rms, n_px, ok)
+        if len(cut) == 2:  # one part: the arrays themselves
+            parts = [(gray, lut, *maps, boxes, *arrays, W, band_cfg, fit_cfg, k == 0, active, *fits)]
+        else:
+            parts = [(gray, lut, *maps, boxes[4 * a:4 * b] if undist is not None else boxes,
+                      *(x[4 * a:4 * b] for x in arrays), W[a:b], band_cfg, fit_cfg, k == 0, active[a:b],
+                      *(x[4 * a:4 * b] for x in fits))
+                     for a, b in itertools.pairwise(cut)]
         _threads.run_split(_edge_kernels.refine_pass, parts)
     fit = EdgeFit(P[:, 0].copy(), P[:, 1].copy(), mid, P[:, 2].copy(), P[:, 3].copy(), sigma, P[:, 5:7].copy(),
                   cov_line, rms, n_px, ok)
-    corners = np.empty((n_q, 4, 2))
-    cov = np.empty((n_q, 4, 2, 2))
-    for q in range(n_q):
-        _edge_kernels.quad_corners(fit.theta[4 * q:4 * q + 4], fit.rho[4 * q:4 * q + 4], mid[4 * q:4 * q + 4],
-                                   cov_line[4 * q:4 * q + 4], corners[q], cov[q])
+    corners, cov = _edge_kernels.all_quad_corners(fit.theta, fit.rho, mid, cov_line)
     return fit, corners, cov
 
 
