@@ -36,6 +36,7 @@ Usage::
     python bench/markers.py --quick         # a smaller grid of renders
     python bench/markers.py --hard          # the harder simulated set
     python bench/markers.py --refine-only   # the edge refinement alone, against cornerSubPix
+    python bench/markers.py --refine-only --sweep   # its time against accuracy for several settings
 """
 
 from __future__ import annotations
@@ -417,14 +418,75 @@ def _bench_refine(scenes: list[tuple[NDArray[np.uint8], list, float]]) -> None:
     print(f"compiled against stepwise: largest corner difference {worst:.2e} px")
 
 
-def _bench_refine_only(rng: np.random.Generator) -> None:
-    """``--refine-only`` on the quick grid of renders."""
+#: ``--refine-only --sweep``'s settings of the edge refinement (:class:`.edges.RefineParams` fields)
+SWEEP: list[dict[str, Any]] = [{}, {"settle_px": 0.0, "first_columns": 0}, {"settle_px": 0.2}, {"passes": 2},
+                               {"max_columns": 24}, {"max_columns": 16}, {"max_columns": 12}, {"max_columns": 8},
+                               {"max_columns": 8, "passes": 2}]
+
+
+def _bench_refine_sweep(scenes: list[tuple[NDArray[np.uint8], list, float]]) -> None:
+    """``--refine-only --sweep``: time against accuracy of the compiled refinement for the settings
+    :data:`SWEEP`, each against cornerSubPix timed in the same loop (one thread, CPU time of this thread,
+    three rounds, the median); corner RMS against the truth, and the corners' normalised squared errors
+    ``e^T C^-1 e`` (chi-square with 2 degrees of freedom if the covariances are right: median 1.39)."""
+    import dataclasses
+
+    from gtrig.markers.detect.edges import RefineParams, refine_quads
+    from gtrig.markers.families import family_spec
+
+    cvd = _opencv("DICT_APRILTAG_36h11")
+    bc = family_spec(FAMILY).border_cells
+    crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
+    inputs = [(img, *_refine_inputs(img, truths, cvd), blur) for img, truths, blur in scenes]
+    inputs = [x for x in inputs if len(x[1])]
+    n_markers = sum(len(x[1]) for x in inputs)
+    default = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    print(f"{'settings':40s} {'ms/marker':>9s} {'x subpix':>8s} {'RMS blur<=1':>11s} {'RMS blur 2':>10s} "
+          f"{'NEES med':>8s} {'in 95%':>6s}")
+    try:
+        for kw in SWEEP:
+            prm = dataclasses.replace(RefineParams(), **kw)
+            for img, Q, W, _T, _b in inputs[:2]:
+                refine_quads(img, Q, W, bc, prm)  # compiled kernels warm
+            cpu, sub = [], []
+            for _round in range(3):
+                c = d = 0.0
+                for img, Q, W, _T, _b in inputs:
+                    t0 = time.thread_time()
+                    cv2.cornerSubPix(img, Q.reshape(-1, 1, 2).astype(np.float32), (5, 5), (-1, -1), crit)
+                    d += time.thread_time() - t0
+                    t0 = time.thread_time()
+                    refine_quads(img, Q, W, bc, prm)
+                    c += time.thread_time() - t0
+                cpu.append(c)
+                sub.append(d)
+            err: dict[bool, list[float]] = {True: [], False: []}
+            z2: list[float] = []
+            for img, Q, W, T, blur in inputs:
+                _fit, corners, cov = refine_quads(img, Q, W, bc, prm)
+                err[blur <= 1.0].extend(np.sum((corners - T) ** 2, axis=2).ravel().tolist())
+                r = (corners - T).reshape(-1, 2)
+                z2.extend(np.einsum("ni,ni->n", r, np.linalg.solve(cov.reshape(-1, 2, 2), r[..., None])[..., 0]))
+            z = np.asarray(z2)
+            print(f"{str(kw or 'default'):40s} {1000 * np.median(cpu) / n_markers:9.3f} "
+                  f"{np.median(cpu) / np.median(sub):8.1f} {np.sqrt(np.mean(err[True])):11.4f} "
+                  f"{np.sqrt(np.mean(err[False])):10.4f} {np.median(z):8.2f} {np.mean(z < 5.991):6.2f}")
+    finally:
+        cv2.setNumThreads(default)
+
+
+def _bench_refine_only(rng: np.random.Generator, sweep: bool) -> None:
+    """``--refine-only`` on the quick grid of renders (with ``sweep``, :func:`_bench_refine_sweep`)."""
     scenes = []
     for side, tilt, blur, light in itertools.product([20, 35, 60, 120], [0, 45], [0.0, 0.5, 1.0, 2.0],
                                                      ["uniform", "dim"]):
         img, truths = _scene(rng, side, tilt, blur, light)
         scenes.append((img, truths, blur))
-    _bench_refine(scenes)
+    if sweep:
+        _bench_refine_sweep(scenes)
+    else:
+        _bench_refine(scenes)
 
 
 def _bench_photos(repeat: int) -> None:
@@ -556,6 +618,8 @@ def main() -> None:
     ap.add_argument("--per-side", type=int, default=50, help="--hard: images per marker side")
     ap.add_argument("--refine-only", action="store_true",
                     help="the edge refinement alone on OpenCV's quads of the renders, against cornerSubPix")
+    ap.add_argument("--sweep", action="store_true",
+                    help="--refine-only: time against accuracy for several settings of the refinement")
     a = ap.parse_args()
     rng = np.random.default_rng(a.seed)
     if a.photos:
@@ -563,7 +627,7 @@ def main() -> None:
     elif a.hard:
         _bench_hard(rng, a.per_side)
     elif a.refine_only:
-        _bench_refine_only(rng)
+        _bench_refine_only(rng, a.sweep)
     else:
         _bench_renders(rng, a.quick)
 

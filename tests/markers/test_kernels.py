@@ -108,7 +108,8 @@ def _quads(rng: np.random.Generator, Q: int) -> np.ndarray:
 
 def test_homographies_and_marker_context() -> None:
     """The kernels' homographies take each quad's corners to the unit square; the compiled context
-    equals its NumPy form within the normal CDF's approximation (sums of 20 terms of 7.5e-8 each)."""
+    equals its NumPy form within the normal CDF's approximations (the grid lines' CDFs linear in a table,
+    7.5e-6 each, in differences and products of a few of them; the edge's own 7.5e-8)."""
     rng = np.random.default_rng(8)
     quads = _quads(rng, 3)
     H = _kernels.quad_homographies(quads)
@@ -123,7 +124,7 @@ def test_homographies_and_marker_context() -> None:
     sigma, dist = rng.uniform(0.4, 2.0, N), rng.uniform(-5, 5, N)
     H9 = H.reshape(-1, 9)
     got = _kernels.marker_context(xy[:, 0].copy(), xy[:, 1].copy(), q, H9, sigma, white, dist)
-    np.testing.assert_allclose(got, _context_numpy(xy[:, 0], xy[:, 1], q, H9, sigma, white, dist), atol=2e-6)
+    np.testing.assert_allclose(got, _context_numpy(xy[:, 0], xy[:, 1], q, H9, sigma, white, dist), atol=4e-5)
 
 
 def test_cell_design_is_the_profiles() -> None:

@@ -69,3 +69,20 @@ def test_compiled_refinement_with_a_lens_model_tone_and_two_threads() -> None:
         _ref, c_ref, _ = refine_quads_stepwise(img, quads, white, bc, prm, und, light if tone != "linear" else None)
         _fit, corners, _ = refine_quads(img, quads, white, bc, prm, und, light, threads=2)
         assert np.abs(corners - c_ref).max() < 1e-6
+
+
+@pytest.mark.parametrize(("seed", "side", "blur"), [(6, 22.0, 1.0), (7, 60.0, 0.5), (8, 35.0, 2.0)])
+def test_settled_quads_and_a_sparse_first_pass_keep_the_corners(seed: int, side: float, blur: float) -> None:
+    """A quad stopped once a pass moved its corners less than ``settle_px`` keeps them within that of
+    where the remaining pass puts them, with covariances of the same size; a first pass on fewer columns
+    (it only gives the start) leaves the corners as near the truth as one on every column."""
+    img, quads, white, true = _scene(seed, side, blur)
+    bc = family_spec(FAMILY).border_cells
+    _fit, fast, cov = refine_quads(img, quads, white, bc, RefineParams())
+    _fit, every_pass, cov_every = refine_quads(img, quads, white, bc, RefineParams(settle_px=0.0))
+    _fit, dense_first, _cov = refine_quads(img, quads, white, bc, RefineParams(first_columns=0))
+    assert np.abs(fast - every_pass).max() < 0.1
+    np.testing.assert_allclose(np.sqrt(np.trace(cov, axis1=2, axis2=3)),
+                               np.sqrt(np.trace(cov_every, axis1=2, axis2=3)), rtol=0.5)
+    rms_fast, rms_dense = (float(np.sqrt(np.mean(np.sum((c - true) ** 2, axis=2)))) for c in (fast, dense_first))
+    assert rms_fast < 1.25 * rms_dense + 0.01

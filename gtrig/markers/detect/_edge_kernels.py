@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from gtrig.markers.detect._kernels import band_pixels, lm_edge, marker_context, quad_homographies
+from gtrig.markers.detect._kernels import lm_edge, marker_context, quad_homographies
 
 #: column of the parameters ``(theta, rho, a, b, log sigma, c, c_u)`` (:func:`.edges.fit_edges`)
 _NP = 7
@@ -34,18 +34,79 @@ def _gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np
                 stride: NDArray[np.int64]
                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """Band pixels of the edges ``p0 -> p1`` (E, 2) without a lens model: x, y, value, edge (each (M,),
-    sorted by edge; :func:`.edges.gather_band`), every ``stride[e]``-th column."""
+    sorted by edge; :func:`.edges.gather_band`), every ``stride[e]``-th column.
+
+    The pixels and their order are those of :func:`._kernels.band_pixels` (the same scan and tests), in
+    one scan into arrays sized by a bound: each column of the edge's major axis holds at most
+    ``(w_in + w_out) / |n_v| + 2`` pixels (``n_v`` the normal's minor component, at least ``1 / sqrt 2``).
+    """
+    h, w = gray.shape[0], gray.shape[1]
     E = p0.shape[0]
     t = np.empty((E, 2))
     nrm = np.empty((E, 2))
     L = np.empty(E)
+    finite = np.zeros(E, np.bool_)
+    bound = 0
     for e in range(E):
         tx, ty = p1[e, 0] - p0[e, 0], p1[e, 1] - p0[e, 1]
         L[e] = math.hypot(tx, ty)
         t[e, 0], t[e, 1] = tx / L[e], ty / L[e]
         nrm[e, 0], nrm[e, 1] = t[e, 1], -t[e, 0]
-    xy, v, es = band_pixels(gray, p0, t, nrm, L, w_in, w_out, excl, stride)
-    return xy[:, 0].copy(), xy[:, 1].copy(), v, es
+        swap = abs(t[e, 1]) > abs(t[e, 0])
+        nv = abs(nrm[e, 0] if swap else nrm[e, 1])
+        span = L[e] + w_in[e] + w_out[e]  # the band's extent along the major axis, at most
+        per_col = (w_in[e] + w_out[e]) / max(nv, 0.5) + 3.0
+        # an edge with a NaN end point or limit has no pixel (every test fails): left out
+        finite[e] = (math.isfinite(span) and math.isfinite(per_col) and math.isfinite(p0[e, 0])
+                     and math.isfinite(p0[e, 1]) and math.isfinite(excl[e]) and L[e] > 0.0)
+        if finite[e]:
+            bound += int((span / stride[e] + 3.0) * per_col)
+    xs = np.empty(bound)
+    ys = np.empty(bound)
+    vs = np.empty(bound)
+    es = np.empty(bound, np.int64)
+    m = 0
+    for e in range(E):
+        if not finite[e]:
+            continue
+        swap = abs(t[e, 1]) > abs(t[e, 0])
+        iu, iv = (1, 0) if swap else (0, 1)
+        Au, Av, Tu, Tv, Nu, Nv = p0[e, iu], p0[e, iv], t[e, iu], t[e, iv], nrm[e, iu], nrm[e, iv]
+        size_u, size_v = (h, w) if swap else (w, h)
+        s_lo, s_hi = excl[e], L[e] - excl[e]
+        if s_hi < s_lo:
+            continue
+        d_lo, d_hi = -w_in[e], w_out[e]
+        umin, umax = np.inf, -np.inf
+        for sv in (s_lo, s_hi):
+            for dv in (d_lo, d_hi):
+                cu = Au + sv * Tu + dv * Nu
+                umin, umax = min(umin, cu), max(umax, cu)
+        u0 = max(math.ceil(umin - 1e-6), 0)
+        u1 = min(math.floor(umax + 1e-6), size_u - 1)
+        a0 = int(math.floor(Au))
+        for col in range(u0, u1 + 1):
+            if (col - a0) % stride[e] != 0:
+                continue
+            du = col - Au
+            if abs(Tv) < 1e-9:
+                s_a, s_b = -np.inf, np.inf
+            else:
+                s_a, s_b = (s_lo - du * Tu) / Tv, (s_hi - du * Tu) / Tv
+            d_a, d_b = (d_lo - du * Nu) / Nv, (d_hi - du * Nu) / Nv
+            lo = max(min(s_a, s_b), min(d_a, d_b)) + Av
+            hi = min(max(s_a, s_b), max(d_a, d_b)) + Av
+            v0 = max(math.ceil(lo - 1e-6), 0)
+            v1 = min(math.floor(hi + 1e-6), size_v - 1)
+            for v in range(v0, v1 + 1):
+                x, y = (v, col) if swap else (col, v)
+                rx, ry = x - p0[e, 0], y - p0[e, 1]
+                ss = rx * t[e, 0] + ry * t[e, 1]
+                dd = rx * nrm[e, 0] + ry * nrm[e, 1]
+                if dd >= d_lo and dd <= d_hi and ss >= s_lo and ss <= s_hi:
+                    xs[m], ys[m], vs[m], es[m] = x, y, gray[y, x], e
+                    m += 1
+    return xs[:m], ys[:m], vs[:m], es[:m]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -340,6 +401,20 @@ def quad_corners(theta: NDArray[np.float64], rho: NDArray[np.float64], mid: NDAr
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def all_quad_corners(theta: NDArray[np.float64], rho: NDArray[np.float64], mid: NDArray[np.float64],
+                     cov_line: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`quad_corners` of every quad of the lines ``4q .. 4q + 3`` (theta, rho (4Q,), mid (4Q, 2),
+    cov_line (4Q, 2, 2)): corners (Q, 4, 2) and their covariances (Q, 4, 2, 2)."""
+    Q = theta.shape[0] // 4
+    corners = np.empty((Q, 4, 2))
+    cov = np.empty((Q, 4, 2, 2))
+    for q in range(Q):
+        e0 = 4 * q
+        quad_corners(theta[e0:e0 + 4], rho[e0:e0 + 4], mid[e0:e0 + 4], cov_line[e0:e0 + 4], corners[q], cov[q])
+    return corners, cov
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def _context(x: NDArray[np.float64], y: NDArray[np.float64], es: NDArray[np.int64], P: NDArray[np.float64],
              mid: NDArray[np.float64], sigma: NDArray[np.float64], white: NDArray[np.float64]) -> NDArray[np.float64]:
     """:func:`.edges.marker_context` of one quad's band pixels (edges ``es`` in 0..3) at its previous fits
@@ -436,10 +511,9 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
                 p1: NDArray[np.float64], sigma0: NDArray[np.float64], w_in: NDArray[np.float64],
                 w_out: NDArray[np.float64], w_look: NDArray[np.float64], excl: NDArray[np.float64],
                 stride: NDArray[np.int64], white: NDArray[np.float64], band_cfg: NDArray[np.float64],
-                fit_cfg: NDArray[np.float64],
-                first: bool, last: bool, P: NDArray[np.float64], mid: NDArray[np.float64],
-                sigma: NDArray[np.float64], cov: NDArray[np.float64], rms: NDArray[np.float64],
-                n_px: NDArray[np.int64], ok: NDArray[np.bool_]) -> None:
+                fit_cfg: NDArray[np.float64], first: bool, active: NDArray[np.bool_], P: NDArray[np.float64],
+                mid: NDArray[np.float64], sigma: NDArray[np.float64], cov: NDArray[np.float64],
+                rms: NDArray[np.float64], n_px: NDArray[np.int64], ok: NDArray[np.bool_]) -> None:
     """One pass of :func:`.edges.refine_quads` over ``Q`` quads (edges ``4q .. 4q + 3``), in place.
 
     Parameters
@@ -453,9 +527,10 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
         outer limit read for the paper's end (``w_out`` itself when that is not looked for); stride : (4Q,)
         the column stride of each band (:func:`.edges.band_stride`).
     white : (Q, n, n) white cells. band_cfg : (white end looked for (0/1), bins' origin, bin width,
-        white-end drop, white-end sigmas, blur lower clip, blur upper clip).
-    fit_cfg : :func:`_fit_edge`'s ``cfg``. first, last : the first (plain steps) and last (covariances)
-        passes.
+        white-end drop, white-end sigmas, blur lower clip, blur upper clip, settling move in pixels).
+    fit_cfg : :func:`_fit_edge`'s ``cfg``. first : the first pass (plain steps, no covariances).
+    active : (Q,) the quads this pass fits; one whose corners (:func:`quad_corners`) moved less than the
+        settling move in a pass after the first is set False (it keeps this pass's fits).
     P, mid, sigma, cov, rms, n_px, ok : (4Q, 7), (4Q, 2), (4Q,), (4Q, 2, 2), (4Q,) x 3: the fits of
         :class:`.edges.EdgeFit` (``P`` its parameters), read as the previous pass's and replaced.
     """
@@ -463,10 +538,13 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
     undistorted = boxes.shape[0] > 0
     look, lo_bins, step, drop, end_sigmas, s_lo, s_hi = (band_cfg[0] > 0.5, band_cfg[1], band_cfg[2], band_cfg[3],
                                                          band_cfg[4], band_cfg[5], band_cfg[6])
+    settle = band_cfg[7]
     init = np.empty((4, _NP))
     init_mid = np.empty((4, 2))
     new_mid = np.empty(2)
     for q in range(Q):
+        if not active[q]:
+            continue
         e0 = 4 * q
         sl = slice(e0, e0 + 4)
         w_band = w_look[sl] if look else w_out[sl]
@@ -507,10 +585,32 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
                 X0[i] = x[i] - new_mid[0]
                 X1[i] = y[i] - new_mid[1]
             sg, r, good = _fit_edge(X0, X1, v, extra, lo, hi, ty, -tx, new_mid, sigma0[e], init[k], init_mid[k],
-                                    not first, last, fit_cfg, P[e], cov[e])
+                                    not first, not first, fit_cfg, P[e], cov[e])
             mid[e, 0], mid[e, 1] = new_mid[0], new_mid[1]
             sigma[e], rms[e], n_px[e], ok[e] = sg, r, hi - lo, good
+        if not first and corner_move(init, init_mid, P[sl], mid[sl]) < settle:
+            active[q] = False
         _next_pass(P[sl], mid[sl], sigma[sl], s_lo, s_hi, p0[sl], p1[sl], sigma0[sl])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def corner_move(P0: NDArray[np.float64], mid0: NDArray[np.float64], P1: NDArray[np.float64],
+                mid1: NDArray[np.float64]) -> float:
+    """The largest distance (px) between the corners of a quad's lines ``P0`` (4, 7), ``mid0`` (4, 2) and
+    those of ``P1``, ``mid1`` (:func:`quad_corners`; NaN where either has no intersection)."""
+    c0 = np.empty((4, 2))
+    c1 = np.empty((4, 2))
+    cov = np.empty((4, 2, 2))
+    no_cov = np.zeros((4, 2, 2))
+    quad_corners(P0[:, 0].copy(), P0[:, 1].copy(), mid0, no_cov, c0, cov)
+    quad_corners(P1[:, 0].copy(), P1[:, 1].copy(), mid1, no_cov, c1, cov)
+    move = 0.0
+    for i in range(4):
+        dist = math.hypot(c1[i, 0] - c0[i, 0], c1[i, 1] - c0[i, 1])
+        if math.isnan(dist):
+            return np.nan
+        move = max(move, dist)
+    return move
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

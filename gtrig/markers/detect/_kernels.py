@@ -91,6 +91,20 @@ def _ndtr_tab(z: float) -> float:
     return _ndtr_pdf_tab(z)[0]
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _ndtr_lin(z: float) -> float:
+    """Standard normal CDF at ``z``, linear between the table's nodes (:func:`_ndtr_pdf_tab`'s): absolute
+    error below 7.5e-6 (``h^2 / 8`` times the density's largest slope), at a third of the cubic's work.
+    For sums held fixed during a fit (:func:`marker_context`), where no derivative is taken."""
+    u = (z + _TAB_REACH) * _TAB_PER_UNIT
+    if not (u > 0.0):
+        return 0.0 if u <= 0.0 else u  # (NaN stays NaN)
+    if u >= 2.0 * _TAB_REACH * _TAB_PER_UNIT:
+        return 1.0
+    k = int(u)
+    return _TAB_CDF[k] + (u - k) * (_TAB_CDF[k + 1] - _TAB_CDF[k])
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _pixel_step(d: float, s: float, cos_t: float, sin_t: float) -> tuple[float, float, float]:
     """Scalar :func:`.edges.pixel_step`: profile, d/d d and d/d log s of the pixel-integrated step."""
@@ -336,15 +350,16 @@ _CONTEXT_SDS = 6.0
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _saturated_grid(t: float, s: float, n: int, F: NDArray[np.float64]) -> tuple[int, int]:
-    """``F[k] = Phi((t - k) / s)`` for the grid lines ``k = 0..n`` (:func:`_ndtr_tab`), 1 or 0 beyond
+    """``F[k] = Phi((t - k) / s)`` for the grid lines ``k = 0..n`` (:func:`_ndtr_lin`), 1 or 0 beyond
     :data:`_CONTEXT_SDS` and set without evaluating there, and the range ``[k0, k1)`` of the cells ``k``
     whose ``F[k] - F[k + 1]`` may differ from 0."""
     lo = max(0, int(math.ceil(t - _CONTEXT_SDS * s)))
     hi = min(n, int(math.floor(t + _CONTEXT_SDS * s)))
     for k in range(0, min(lo, n + 1)):
         F[k] = 1.0
+    inv = 1.0 / s
     for k in range(lo, hi + 1):
-        F[k] = _ndtr_tab((t - k) / s)
+        F[k] = _ndtr_lin((t - k) * inv)
     for k in range(max(hi + 1, lo), n + 1):
         F[k] = 0.0
     if hi < lo:
