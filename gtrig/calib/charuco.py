@@ -136,7 +136,8 @@ class CharucoView:
     ----------
     ids : (N,) corner IDs (indices into the board's ``object_points()``), increasing.
     corners_px : (N, 2) subpixel corner positions, pixels (pixel centres at integers).
-    cov_px : (N, 2, 2) each corner's covariance, px^2, when the detector states one (else None).
+    cov_px : (N, 2, 2) each corner's covariance, px^2, when the detector states one (else None); NaN for
+        a corner it could not refine (:class:`CharucoCornerDetector`).
     """
 
     ids: np.ndarray
@@ -147,7 +148,9 @@ class CharucoView:
 class CharucoCornerDetector:
     """OpenCV's ``CharucoDetector`` for one board, set up once and used on many images; its corners are
     then refined on their saddles (:mod:`gtrig.calib.saddle`) with the strip along the squares' edges that
-    the markers leave free, and given a covariance; corners the refinement does not confirm are left out.
+    the markers leave free, and given a covariance. A corner the refinement cannot take (squares too small
+    in the image for the strip, a window over the image's edge, a saddle that does not converge near its
+    seed) keeps OpenCV's position and a NaN covariance.
     """
 
     def __init__(self, board: CharucoBoard) -> None:
@@ -170,9 +173,7 @@ class CharucoCornerDetector:
         order = np.argsort(ids_)
         ids_, xy = ids_[order], np.asarray(corners, dtype=np.float64).reshape(-1, 2)[order]
         fit = self.refine(img, ids_, xy)
-        if fit.ok.sum() < min_corners:
-            return None
-        return CharucoView(ids_[fit.ok], fit.corners_px[fit.ok], fit.cov_px[fit.ok])
+        return CharucoView(ids_, fit.corners_px, fit.cov_px)
 
     def refine(self, grey: np.ndarray, ids: np.ndarray, corners_px: np.ndarray) -> SaddleFit:
         """Corners ``corners_px`` (N, 2) with IDs ``ids`` (N,) refined on their saddles in ``grey``."""
