@@ -17,7 +17,8 @@ def _warped_view(scale: float, noise: float, seed: int = 0) -> tuple[np.ndarray,
     centre), blurred by 0.7 px and with Gaussian noise: the image and its inner corners' true pixels."""
     s = PX_PER_SQUARE_PRINT
     printed = BOARD.opencv_board().generateImage((BOARD.squares_x * s, BOARD.squares_y * s), marginSize=0,
-                                                 borderBits=1).astype(np.float64) * (175 / 255) + 40  # black 40, white 215: the noise never clips
+                                                 borderBits=1).astype(np.float64)
+    printed = printed * (175 / 255) + 40  # black 40, white 215: the noise never clips
     H = np.array([[scale * 0.95, scale * 0.12, 60.0], [-scale * 0.05, scale * 0.9, 50.0], [2e-5, 1e-4, 1.0]])
     size = (640, 480)
     img = cv2.warpPerspective(printed, H, size, flags=cv2.INTER_AREA, borderValue=215.0)

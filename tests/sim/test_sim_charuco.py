@@ -17,7 +17,8 @@ from gtrig.sim.render import PinholeCamera
 from gtrig.sim.textures import board_object_points, sim_charuco_board
 
 
-def test_sweep_charuco_corners_match_the_truth_as_closely_as_the_chessboards_with_their_covariance(tmp_path: Path) -> None:
+def test_sweep_charuco_corners_match_the_truth_as_closely_as_the_chessboards_with_covariances(
+        tmp_path: Path) -> None:
     cfg = SimConfig(seed=0)
     scene = make_scene(0)
     cam = scene.rig_true.cameras[0]
