@@ -12,8 +12,9 @@ therefore mapped into the board by a local homography (from the neighbouring cor
 on the two board lines through the saddle are kept: a pixel counts when it lies within ``band`` squares
 of one of the lines and within ``reach`` squares of the saddle along it. A marker of side ``marker_m``
 centred in its square leaves a strip of ``(square_m - marker_m) / 2`` along the square's edges, so with
-``band`` under that strip (less the blur) no marker edge enters, while the window reaches as far along
-the edges as the chessboard's (:func:`gtrig.calib.chessboard.detect_corners`).
+``band`` under that strip by :data:`GUARD_PX` (the blur of the print's edges) no marker edge enters,
+while the window reaches as far along the edges as the chessboard's
+(:func:`gtrig.calib.chessboard.detect_corners`).
 
 Covariance
 ----------
@@ -93,8 +94,7 @@ def _grid_to_board(H: np.ndarray, q: np.ndarray) -> np.ndarray:
     return x / w[:, None]
 
 
-def _window(grey: np.ndarray, centre: np.ndarray, half: int
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def _window(grey: np.ndarray, centre: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray] | None:
     """The pixels (M, 2), their gradients (M, 2) in a square window of ``half`` pixels about ``centre``;
     None when the window leaves the image."""
     cx, cy = int(round(centre[0])), int(round(centre[1]))
@@ -106,7 +106,7 @@ def _window(grey: np.ndarray, centre: np.ndarray, half: int
     gy = 0.5 * (patch[2:, 1:-1] - patch[:-2, 1:-1])
     ys, xs = np.mgrid[cy - half:cy + half + 1, cx - half:cx + half + 1]
     q = np.column_stack([xs.ravel(), ys.ravel()]).astype(np.float64)
-    return q, np.column_stack([gx.ravel(), gy.ravel()]), np.array([cx, cy])
+    return q, np.column_stack([gx.ravel(), gy.ravel()])
 
 
 def _solve(q: np.ndarray, g: np.ndarray, wt: np.ndarray, noise_grey: float
@@ -166,7 +166,7 @@ def refine_one(grey: np.ndarray, seed_px: np.ndarray, H_board_px: np.ndarray, ma
         win = _window(grey, p, half)
         if win is None:
             return None
-        q, g, _ = win
+        q, g = win
         # the homography follows the saddle: the board's origin moved onto the current estimate
         H = _translated(H_board_px, p)
         uv = _grid_to_board(H, q)
