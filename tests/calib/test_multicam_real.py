@@ -160,13 +160,15 @@ def test_relative_poses_near_caliscopes(root: Path, board, detections, intrinsic
     assert d_rot.max() < 1.5  # measured at most 0.94 deg
     res = calibrate_video_network(detections[s], {c: f.camera for c, f in intrinsics[s].items()}, board)
     d_base, d_rot = _pose_differences(res, peer, 100.0, 10.0)
-    assert d_base.max() < 0.020  # measured at most 14.9 mm
-    assert d_rot.max() < 4.5  # measured at most 3.7 deg: lenses from 13-23 views of a 12-corner board
-    # the lenses' sigmas (principal points uncertain by 8-28 px) widen the pairs' to 9-45 mm and 1.3-3.2 deg,
-    # which cover those differences: measured at most 0.5 sigma in baseline, 1.6 in rotation
+    # lenses from 13-23 views of a 12-corner board: a small change of the corners moves them by a sigma or
+    # two (principal points uncertain by 6-30 px). Measured at most 36.7 mm and 5.7 deg (2.4 and 3.8 sigmas)
+    # with the corners refined on their saddles; 14.9 mm and 3.7 deg (0.5 and 1.9 sigmas) with OpenCV's own
+    # ChArUco corners. With caliscope's lenses (above) the refined corners agree as well or better.
+    assert d_base.max() < 0.040
+    assert d_rot.max() < 6.0
     rps = relative_poses(res)
     assert np.all(d_base < 3 * np.array([rp.sigma_baseline_m for rp in rps]))
-    assert np.all(d_rot < 3 * np.array([rp.sigma_angle_deg for rp in rps]))
+    assert np.all(d_rot < 4 * np.array([rp.sigma_angle_deg for rp in rps]))
 
 
 def test_cli_calib_video_writes_lenses_and_network(root: Path, tmp_path: Path) -> None:
@@ -273,10 +275,9 @@ def test_cli_vision_board_writes_poses_and_covariances(root: Path, tmp_path: Pat
 
 
 def test_lens_sigmas_from_the_views_scatter(board, detections, intrinsics) -> None:
-    """The delete-one-view jackknife of each lens: for cam_0 (23 and 29 views) it is 1.5-2 times OpenCV's
-    corner-independent sigmas, and with the larger of the two the recordings' fx, fy, cx, cy differ by at
-    most 3.3 sigmas (4.6 with OpenCV's alone); what is left is cam_0's fx and cy and cam_3's cx at about 3:
-    docs/calibrate-from-video.md, "Limits"."""
+    """The delete-one-view jackknife of each lens against OpenCV's corner-independent sigmas, and with the
+    larger of the two the recordings' fx, fy, cx, cy differ by at most 2.6 sigmas (docs/calibrate-from-video.md,
+    "Limits")."""
     from gtrig.calib.view_jackknife import view_jackknife_std
 
     P = board.object_points()
@@ -290,14 +291,16 @@ def test_lens_sigmas_from_the_views_scatter(board, detections, intrinsics) -> No
             jk = view_jackknife_std([P[v.ids] for v in used], [v.corners_px for v in used], f.camera)
             honest[(s, c)] = {k: max(f.std[k], jk[k]) for k in ("fx", "fy", "cx", "cy")}
             ratio[(s, c)] = jk["fx"] / f.std["fx"]
-    assert ratio[(RECORDINGS[0], "cam_0")] > 1.5 and ratio[(RECORDINGS[1], "cam_1")] > 1.5  # measured 1.80, 1.80
+    # with the corners refined on their saddles the views scatter as OpenCV's sigmas say (jackknife / OpenCV
+    # 0.57-1.69 over the eight lenses; 1.80 for cam_0 with OpenCV's own ChArUco corners)
+    assert all(0.4 < r < 2.5 for r in ratio.values()), ratio
     z_max = 0.0
     for c in CAMS:
         a, b = (intrinsics[s][c].camera.camera_matrix for s in RECORDINGS)
         for k, (i, j) in (("fx", (0, 0)), ("fy", (1, 1)), ("cx", (0, 2)), ("cy", (1, 2))):
             sa, sb = (honest[(s, c)][k] for s in RECORDINGS)
             z_max = max(z_max, abs(a[i, j] - b[i, j]) / np.hypot(sa, sb))
-    assert z_max < 3.6  # measured 3.30 (cam_0's fx)
+    assert z_max < 3.0  # measured 2.59 (3.30 with OpenCV's own ChArUco corners)
 
 
 def test_camera_time_offsets_from_the_boards_motion(board_tracks) -> None:

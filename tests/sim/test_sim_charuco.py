@@ -17,7 +17,8 @@ from gtrig.sim.render import PinholeCamera
 from gtrig.sim.textures import board_object_points, sim_charuco_board
 
 
-def test_sweep_charuco_corners_match_the_truth_as_closely_as_the_chessboards(tmp_path: Path) -> None:
+def test_sweep_charuco_corners_match_the_truth_as_closely_as_the_chessboards_with_covariances(
+        tmp_path: Path) -> None:
     cfg = SimConfig(seed=0)
     scene = make_scene(0)
     cam = scene.rig_true.cameras[0]
@@ -28,6 +29,7 @@ def test_sweep_charuco_corners_match_the_truth_as_closely_as_the_chessboards(tmp
     chess = Board(board.squares_x - 1, board.squares_y - 1, board.square_m)
     shared = simcams._StillShared(scene, cfg.camera, 0)
     err_charuco, err_chess = [], []
+    nees: list[float] = []
     for k, T in enumerate(poses):
         for is_charuco in (True, False):
             path = tmp_path / f"{k}_{is_charuco}.png"
@@ -40,6 +42,9 @@ def test_sweep_charuco_corners_match_the_truth_as_closely_as_the_chessboards(tmp
                 P = board.object_points()[v.ids] - [board.square_m, board.square_m, 0.0]
                 uv = pc.project(T_world_cam, geo.transform_points(T, P))
                 err_charuco.append(np.linalg.norm(v.corners_px - uv, axis=1))
+                assert v.cov_px is not None
+                d = v.corners_px - uv
+                nees.extend(np.einsum("ni,nij,nj->n", d, np.linalg.inv(v.cov_px), d))
             else:
                 c = detect_corners(grey, chess)
                 assert c is not None
@@ -48,8 +53,12 @@ def test_sweep_charuco_corners_match_the_truth_as_closely_as_the_chessboards(tmp
                 err_chess.append(min(np.linalg.norm(c - uv, axis=1).mean(),
                                      np.linalg.norm(c[::-1] - uv, axis=1).mean()))
     e = np.concatenate(err_charuco)
-    assert e.mean() < 0.12 and e.max() < 0.4, (e.mean(), e.max())
-    assert e.mean() < 3.0 * np.mean(err_chess)
+    # the saddles refined along the strip the markers leave free: measured mean 0.029 px, max 0.079 px, the
+    # chessboard's 0.040 px (OpenCV's own ChArUco corners: 2.6x the refined RMS, bench/calib_charuco.py)
+    assert e.mean() < 0.04 and e.max() < 0.2, (e.mean(), e.max())
+    assert e.mean() < np.mean(err_chess)
+    # the stated covariances: median NEES / 2 measured 1.77 on these two views (0.70-0.79 over 48 views)
+    assert np.all(np.isfinite(nees)) and 0.3 < np.median(nees) / 2 < 3.0, np.median(nees)
 
 
 def test_the_sweeps_board_setting_keeps_chessboard_recordings_resumable() -> None:
