@@ -88,8 +88,8 @@ def read_camera_corners(checkpoint: str | os.PathLike[str], model: VisionModel,
         if cam not in model.cameras or cam not in camera_stamps_s:
             continue
         for row, dets in d["frames"]:
-            ids = [int(m) for m, _, _ in dets]
-            for m, uv, cov in dets:
+            ids = [int(e[0]) for e in dets]
+            for m, uv, cov, *_ in dets:  # (a fourth entry, the detector's blur, where it gave one)
                 if int(m) in model.corners_robot and ids.count(int(m)) == 1:
                     views.setdefault(cam, []).append(
                         MarkerView(cam, int(m), np.asarray(uv, float), np.asarray(cov, float) + floor, int(row)))
