@@ -12,7 +12,10 @@ Steps:
 4. the remaining residuals say how noisy this frame's corners are: the frame's variance factor
    (chi-square over redundancy) scales its covariance when above 1 (a posteriori, as in geodetic adjustment); a
    frame whose factor exceeds ``max_variance_factor`` is reported with the reason "inconsistent
-   residuals", never silently kept.
+   residuals", never silently kept;
+5. what the blur's pull on each view's corners towards the marker's centre does to the pose is added to
+   the covariance (``VisionOptions.blur_pull``): the pull is common to a marker's four corners, so no
+   residual shows it, and a blurred marker seen alone looked farther away than it was.
 
 The corner covariances are the detector's plus an isotropic floor (``corner_floor_px``), times a
 variance factor per camera (``VisionOptions.corner_scale``) that :mod:`gtrig.vision.noise` estimates
