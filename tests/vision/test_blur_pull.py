@@ -71,3 +71,32 @@ def test_edge_pull_moves_a_square_inwards() -> None:
     for c in (np.array([[0, 0], [10, 0], [10, 10], [0, 10.0]]), np.array([[0, 0], [0, 10], [10, 10], [10, 0.0]])):
         moved = (edge_pull_jacobian(c) @ np.ones(4)).reshape(4, 2)
         assert np.allclose(moved, np.sign(c.mean(axis=0) - c))
+
+
+def test_considered_pull_is_the_fits_response_to_moved_edges() -> None:
+    # one marker in one camera, exact corners: the covariance considered for the pull must be what the
+    # fit does when each edge is moved (finite differences through the whole nonlinear fit)
+    from gtrig.vision.covariance import blur_consider_covariance
+    from gtrig.vision.observations import MarkerView, VisionModel, stack_corners
+    from gtrig.vision.refine import refine_pose
+    from gtrig.vision.synthetic import visible_views
+
+    scene = make_scene(0)
+    T = scene.T_world_robot(*VALIDATION_POSES[8])
+    cam, mid, uv = visible_views(scene.rig_true, T)[0]
+    model = VisionModel.from_rig(scene.rig_true)
+    cov = np.tile(0.05**2 * np.eye(2), (4, 1, 1))
+
+    def fit(corners: np.ndarray):  # noqa: ANN202
+        sc = stack_corners(model, [MarkerView(cam, mid, corners, cov)])
+        return sc, refine_pose(sc, T, None)
+
+    sc, f0 = fit(uv)
+    E = edge_pull_jacobian(uv)
+    eps = 1e-3
+    G = np.column_stack([pose_error_xi(fit(uv + eps * E[:, k].reshape(4, 2))[1].T_world_robot, f0.T_world_robot) / eps
+                         for k in range(4)])
+    S = 0.5 * np.ones((4, 4)) + 0.25 * np.eye(4)
+    want = G @ S @ G.T
+    got = blur_consider_covariance(f0.J, sc.sqrt_info, f0.weights, sc.view, sc.uv, np.array([1.0]), f0.cov_6x6)
+    assert np.allclose(got, want, rtol=0.05, atol=1e-3 * np.max(np.abs(want)))
