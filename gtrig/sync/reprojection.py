@@ -70,8 +70,8 @@ def read_camera_corners(checkpoint: str | os.PathLike[str], model: VisionModel,
                         camera_stamps_s: Mapping[str, np.ndarray], floor_px: float = 0.1,
                         ) -> dict[str, CameraCorners]:
     """Every camera's marker corners from GTvision's checkpoint of detections (version 5: one line per
-    camera and time window, ``{"camera", "frames": [[row, [[marker_id, corners (4, 2), cov (4, 2, 2)],
-    ...]], ...]}``).
+    camera and time window, ``{"camera", "frames": [[row, [[marker_id, corners (4, 2), cov (4, 2, 2)(,
+    blur)], ...]], ...]}``).
 
     Markers not on the robot and IDs seen twice in one image are dropped (as GTvision does); each corner's
     covariance gets GTvision's isotropic floor ``floor_px^2 I`` (the detector's covariance alone ignores

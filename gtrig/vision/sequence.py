@@ -451,7 +451,8 @@ def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: 
     stamped ``stamps_s``, needed when tracking), in order, markers tracked from image to image when
     ``ctx.track`` says so (:class:`gtrig.vision.track.CameraTracker`, started afresh in every chunk; markers
     that appear looked for back in the chunk's images before, :mod:`gtrig.vision.backfill`):
-    ``[[row, [[marker_id, corners, cov], ...]], ...]``, the checkpoint's JSON form."""
+    ``[[row, [[marker_id, corners, cov(, blur)], ...]], ...]``, the checkpoint's JSON form (the detector's
+    blur where it gave one)."""
     from gtrig.vision.backfill import track_with_backfill
     from gtrig.vision.track import CameraTracker
 
