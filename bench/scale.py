@@ -35,6 +35,7 @@ Usage::
     python bench/scale.py --laser-source REC --rig RESULTS/rig.calibrated.yaml --laser-minutes 5 15 --work W
     python bench/scale.py --run-source REC --run-results RESULTS --run-minutes 5 15 60 --work W
     python bench/scale.py --sync-rerun W/run_10min/recording W/run_10min/results OUT
+    python bench/scale.py --run-source REC --run-results RESULTS --tracks-minutes 60 --work W
 """
 
 from __future__ import annotations
@@ -473,6 +474,31 @@ def long_run(source: Path, results: Path, work: Path, minutes: float, workers: i
     return r
 
 
+def lapped_tracks(source: Path, results: Path, work: Path, minutes: float) -> tuple[Path, Path]:
+    """A lapped recording ``minutes`` long (:func:`make_long_run`) with a results folder holding ``results``'
+    GTvision and GTlaser tracks of ``source`` lapped the same way (their stamps moved on by the lap's
+    period, as the images and scans they come from), the run's detection checkpoint seeded, the rig and the
+    bias files copied: what :func:`rerun_sync_fusion` needs, without the hours of GTvision and GTlaser on
+    the long recording (their poses on repeated images and scans are the short run's, but at the seams,
+    where the long run's tracking starts again). Returns (recording, results)."""
+    import shutil
+
+    base = work / f"tracks_{minutes:g}min"
+    rec, out = base / "recording", base / "results"
+    _, reps, period = make_long_run(source, rec, 60 * minutes)
+    end = lap_of(source)[1] + 60 * minutes
+    (out / ".gtrig").mkdir(parents=True, exist_ok=True)
+    for name in ("gt_vision_run.tum", "gt_vision_run_cov.csv", "gt_laser.tum", "gt_laser_cov.csv"):
+        if not (out / name).is_file():
+            repeat_stamped(results / name, out / name, period, reps, end, 6)
+    for name in ("gt_vision_run_bias.yaml", "gt_laser_bias.yaml", "rig.calibrated.yaml"):
+        shutil.copy(results / name, out / name)
+    if not (out / "gt_vision_run.checkpoint").is_file():
+        seed_checkpoint(rec, results / "rig.calibrated.yaml", results / "gt_vision_run.checkpoint",
+                        out / "gt_vision_run.checkpoint")
+    return rec, out
+
+
 #: what :func:`rerun_sync_fusion` links from a results folder into its own
 _SYNC_INPUTS = ("gt_vision_run.tum", "gt_vision_run_cov.csv", "gt_vision_run_bias.yaml", "gt_laser.tum",
                 "gt_laser_cov.csv", "gt_laser_bias.yaml", "gt_vision_run.checkpoint", ".gtrig/scans")
@@ -495,7 +521,7 @@ def rerun_sync_fusion(rec: Path, results: Path, out: Path) -> None:
 
     (out / ".gtrig").mkdir(parents=True, exist_ok=True)
     for name in _SYNC_INPUTS:
-        if not (out / name).exists():
+        if not (out / name).exists() and (results / name).exists():
             (out / name).symlink_to((results / name).resolve())
     scanners, _ = calibrate_recording(rec)
     rig = load_rig(results / "rig.calibrated.yaml").model_copy(update={"laser_scanners": scanners.laser_scanners})
@@ -566,6 +592,9 @@ def main() -> None:
     ap.add_argument("--run-workers", type=int, default=2, help="--workers of those runs")
     ap.add_argument("--sync-rerun", nargs=3, type=Path, metavar=("REC", "RESULTS", "OUT"),
                     help="the sync and fusion stages again on RESULTS' tracks of REC, into OUT (rerun_sync_fusion)")
+    ap.add_argument("--tracks-minutes", type=float, default=None,
+                    help="with --run-source and --run-results: a lapped recording this long with the short run's "
+                         "tracks lapped (lapped_tracks), then --sync-rerun on it into WORK/tracks_<m>min/sync")
     ap.add_argument("--child", nargs="*", help=argparse.SUPPRESS)
     ap.add_argument("--laser-child", nargs=3, help=argparse.SUPPRESS)
     a = ap.parse_args()
@@ -575,6 +604,12 @@ def main() -> None:
         return
     if a.sync_rerun:
         rerun_sync_fusion(*a.sync_rerun)
+        return
+    if a.tracks_minutes:
+        if a.run_source is None or a.run_results is None:
+            ap.error("--tracks-minutes needs --run-source REC and --run-results RESULTS")
+        rec, res = lapped_tracks(a.run_source, a.run_results, a.work, a.tracks_minutes)
+        rerun_sync_fusion(rec, res, res.parent / "sync")
         return
     if a.run_minutes:
         if a.run_source is None or a.run_results is None:
