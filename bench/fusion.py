@@ -765,19 +765,24 @@ def part_recording(rec: Path, res: Path, gap_every_s: float = 20.0, gap_s: float
     doc = load_yaml(sync) or {}
     lc = rec / "truth" / "laser_clocks.yaml"
     scan = (((load_yaml(lc) or {}).get("run") or {}).get("clock_offsets_s") or {}) if lc.is_file() else {}
-    print("\n| sensor | offset to GTvision's (ms) | 95 % interval | truth (ms) | error (ms) |")
-    print("|---|---|---|---|---|")
+    # a lapped recording repeats one lap's sensor data (the same noise draws) lap after lap: its blocks of
+    # time are copies, so the jackknife's interval is narrower than one lap's by sqrt(laps), the error not
+    laps = len(report.get("odometry_jumps_s", [])) + 1
+    print(f"\n| sensor | offset to GTvision's (ms) | 95 % interval | truth (ms) | error (ms) | "
+          f"error / half-interval x sqrt(laps {laps}) |")
+    print("|---|---|---|---|---|---|")
     for name, v in (doc.get("sources") or {}).items():
         if "offset_to_vision_s" not in v:
             continue
         kind, sensor = name.split("/", 1)
         true = float(scan.get(sensor, float("nan"))) if kind == "laser" else 0.0  # cameras: the GT clock
         if v.get("verdict") != "ok":
-            print(f"| {name} | {v.get('verdict')} ({v.get('reason')}) | | {1e3 * true:+.3f} | |")
+            print(f"| {name} | {v.get('verdict')} ({v.get('reason')}) | | {1e3 * true:+.3f} | | |")
             continue
         o, ci = float(v["offset_to_vision_s"]), v.get("ci95_to_vision_s") or [float("nan")] * 2
+        half = 0.5 * (float(ci[1]) - float(ci[0])) * np.sqrt(laps)
         print(f"| {name} | {1e3 * o:+.3f} | [{1e3 * ci[0]:+.2f}, {1e3 * ci[1]:+.2f}] | {1e3 * true:+.3f} | "
-              f"{1e3 * (o - true):+.3f} |")
+              f"{1e3 * (o - true):+.3f} | {(o - true) / half:+.2f} |")
 
 
 def main(argv: list[str] | None = None) -> int:

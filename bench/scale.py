@@ -34,6 +34,8 @@ Usage::
     python bench/scale.py --source REC --rig RESULTS/rig.calibrated.yaml --minutes 60 --work /tmp/scale
     python bench/scale.py --laser-source REC --rig RESULTS/rig.calibrated.yaml --laser-minutes 5 15 --work W
     python bench/scale.py --run-source REC --run-results RESULTS --run-minutes 5 15 60 --work W
+    python bench/scale.py --sync-rerun W/run_10min/recording W/run_10min/results OUT
+    python bench/scale.py --run-source REC --run-results RESULTS --tracks-minutes 60 --work W
 """
 
 from __future__ import annotations
@@ -472,6 +474,72 @@ def long_run(source: Path, results: Path, work: Path, minutes: float, workers: i
     return r
 
 
+def lapped_tracks(source: Path, results: Path, work: Path, minutes: float) -> tuple[Path, Path]:
+    """A lapped recording ``minutes`` long (:func:`make_long_run`) with a results folder holding ``results``'
+    GTvision and GTlaser tracks of ``source`` lapped the same way (their stamps moved on by the lap's
+    period, as the images and scans they come from), the run's detection checkpoint seeded, the rig and the
+    bias files copied: what :func:`rerun_sync_fusion` needs, without the hours of GTvision and GTlaser on
+    the long recording (their poses on repeated images and scans are the short run's, but at the seams,
+    where the long run's tracking starts again). Returns (recording, results)."""
+    import shutil
+
+    base = work / f"tracks_{minutes:g}min"
+    rec, out = base / "recording", base / "results"
+    _, reps, period = make_long_run(source, rec, 60 * minutes)
+    end = lap_of(source)[1] + 60 * minutes
+    (out / ".gtrig").mkdir(parents=True, exist_ok=True)
+    for name in ("gt_vision_run.tum", "gt_vision_run_cov.csv", "gt_laser.tum", "gt_laser_cov.csv"):
+        if not (out / name).is_file():
+            repeat_stamped(results / name, out / name, period, reps, end, 6)
+    for name in ("gt_vision_run_bias.yaml", "gt_laser_bias.yaml", "rig.calibrated.yaml"):
+        shutil.copy(results / name, out / name)
+    if not (out / "gt_vision_run.checkpoint").is_file():
+        seed_checkpoint(rec, results / "rig.calibrated.yaml", results / "gt_vision_run.checkpoint",
+                        out / "gt_vision_run.checkpoint")
+    return rec, out
+
+
+#: what :func:`rerun_sync_fusion` links from a results folder into its own
+_SYNC_INPUTS = ("gt_vision_run.tum", "gt_vision_run_cov.csv", "gt_vision_run_bias.yaml", "gt_laser.tum",
+                "gt_laser_cov.csv", "gt_laser_bias.yaml", "gt_vision_run.checkpoint", ".gtrig/scans")
+
+
+def rerun_sync_fusion(rec: Path, results: Path, out: Path) -> None:
+    """The pipeline's sync and fusion stages again on ``results``' GTvision and GTlaser tracks of ``rec``, into
+    ``out`` (the tracks, checkpoint and scan cache linked; ``out/rig.calibrated.yaml`` written): a lapped
+    recording's, after a change to either stage, without the hours of the stages before. The rig is
+    ``results/rig.calibrated.yaml`` with the fixed scanners calibrated again from ``rec`` as the laser stage
+    does (that file holds the recording's nominal scanner poses when a later run of the calibration stages
+    alone rewrote it; timed against those, the scanners' offsets come out several milliseconds off)."""
+    from gtrig.config import RunConfig
+    from gtrig.io.posetrack import read_pose_track
+    from gtrig.laser.recording import calibrate_recording
+    from gtrig.pipeline.context import Products, StageInput
+    from gtrig.pipeline.fusion import fusion, sync
+    from gtrig.rig import load_rig
+    from gtrig.rig.load import dump_rig
+
+    (out / ".gtrig").mkdir(parents=True, exist_ok=True)
+    for name in _SYNC_INPUTS:
+        if not (out / name).exists() and (results / name).exists():
+            (out / name).symlink_to((results / name).resolve())
+    scanners, _ = calibrate_recording(rec)
+    rig = load_rig(results / "rig.calibrated.yaml").model_copy(update={"laser_scanners": scanners.laser_scanners})
+    dump_rig(rig, out / "rig.calibrated.yaml")
+    tracks = {"GTvision/run": read_pose_track(out / "gt_vision_run.tum", out / "gt_vision_run_cov.csv", "vision"),
+              "GTlaser/run": read_pose_track(out / "gt_laser.tum", out / "gt_laser_cov.csv", "laser")}
+    t = time.time()
+    synced = sync(StageInput(rec, out, RunConfig(), Products(rig=rig, tracks=tracks), True, workers=1))
+    print(f"sync: {time.time() - t:.0f} s wall", flush=True)
+    t = time.time()
+    fused = fusion(StageInput(rec, out, RunConfig(), Products(rig=rig, tracks=tracks,
+                                                              clock_offsets=synced.products["clock_offsets"]),
+                              True, workers=1))
+    print(f"fusion: {time.time() - t:.0f} s wall", flush=True)
+    for row in synced.rows + synced.checks + fused.rows + fused.checks:
+        print(f"  {row.stage} | {row.metric} | {row.value:.4g} {row.unit} | {row.target} | {row.ok}", flush=True)
+
+
 def _child(args: list[str]) -> dict[str, object]:
     cmd = [sys.executable, __file__, "--child", *args]
     env = dict(os.environ, PYTHONPATH=str(REPO), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
@@ -522,12 +590,26 @@ def main() -> None:
     ap.add_argument("--run-minutes", type=float, nargs="*", default=[],
                     help="gtrig run end to end on a full recording this long (minutes, each in its own process)")
     ap.add_argument("--run-workers", type=int, default=2, help="--workers of those runs")
+    ap.add_argument("--sync-rerun", nargs=3, type=Path, metavar=("REC", "RESULTS", "OUT"),
+                    help="the sync and fusion stages again on RESULTS' tracks of REC, into OUT (rerun_sync_fusion)")
+    ap.add_argument("--tracks-minutes", type=float, default=None,
+                    help="with --run-source and --run-results: a lapped recording this long with the short run's "
+                         "tracks lapped (lapped_tracks), then --sync-rerun on it into WORK/tracks_<m>min/sync")
     ap.add_argument("--child", nargs="*", help=argparse.SUPPRESS)
     ap.add_argument("--laser-child", nargs=3, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.laser_child:
         rec, rig, mode = a.laser_child
         print(json.dumps(child_laser(Path(rec), Path(rig), mode)))
+        return
+    if a.sync_rerun:
+        rerun_sync_fusion(*a.sync_rerun)
+        return
+    if a.tracks_minutes:
+        if a.run_source is None or a.run_results is None:
+            ap.error("--tracks-minutes needs --run-source REC and --run-results RESULTS")
+        rec, res = lapped_tracks(a.run_source, a.run_results, a.work, a.tracks_minutes)
+        rerun_sync_fusion(rec, res, res.parent / "sync")
         return
     if a.run_minutes:
         if a.run_source is None or a.run_results is None:

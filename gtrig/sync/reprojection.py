@@ -70,8 +70,8 @@ def read_camera_corners(checkpoint: str | os.PathLike[str], model: VisionModel,
                         camera_stamps_s: Mapping[str, np.ndarray], floor_px: float = 0.1,
                         ) -> dict[str, CameraCorners]:
     """Every camera's marker corners from GTvision's checkpoint of detections (version 5: one line per
-    camera and time window, ``{"camera", "frames": [[row, [[marker_id, corners (4, 2), cov (4, 2, 2)],
-    ...]], ...]}``).
+    camera and time window, ``{"camera", "frames": [[row, [[marker_id, corners (4, 2), cov (4, 2, 2)(,
+    blur)], ...]], ...]}``).
 
     Markers not on the robot and IDs seen twice in one image are dropped (as GTvision does); each corner's
     covariance gets GTvision's isotropic floor ``floor_px^2 I`` (the detector's covariance alone ignores
@@ -88,8 +88,8 @@ def read_camera_corners(checkpoint: str | os.PathLike[str], model: VisionModel,
         if cam not in model.cameras or cam not in camera_stamps_s:
             continue
         for row, dets in d["frames"]:
-            ids = [int(m) for m, _, _ in dets]
-            for m, uv, cov in dets:
+            ids = [int(e[0]) for e in dets]
+            for m, uv, cov, *_ in dets:  # (a fourth entry, the detector's blur, where it gave one)
                 if int(m) in model.corners_robot and ids.count(int(m)) == 1:
                     views.setdefault(cam, []).append(
                         MarkerView(cam, int(m), np.asarray(uv, float), np.asarray(cov, float) + floor, int(row)))

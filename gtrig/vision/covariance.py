@@ -223,3 +223,78 @@ def nees(err: np.ndarray, cov: np.ndarray) -> float:
     the dimension of ``err`` when the covariances are right."""
     err = np.asarray(err, dtype=float)
     return float(err @ np.linalg.solve(cov, err))
+
+
+#: the blur's pull on a marker's corners (:func:`blur_scale_sigma_px`): at ``side / blur`` of
+#: :data:`BLUR_PULL_REF_RATIO` the corners sit :data:`BLUR_PULL_REF_PX` towards the marker's centre, and the
+#: pull falls by e every :data:`BLUR_PULL_DECAY_RATIO` more of the ratio (test renders at blur 1.5 px, sides
+#: 47-86 px: 0.44-0.51 px at 47 px, 0.32-0.36 at 52, 0.08 at 59, 0.02 at 75; at blur 0.5, 0.01 px)
+BLUR_PULL_REF_RATIO = 31.5
+BLUR_PULL_REF_PX = 0.5
+BLUR_PULL_DECAY_RATIO = 4.5
+
+
+def blur_scale_sigma_px(side_px: np.ndarray, blur_px: np.ndarray) -> np.ndarray:
+    """The sigma (pixels, along each corner's direction from the marker's centre) of the shrinkage a
+    blur leaves in a marker's detected corners: ``(V,)`` from the markers' mean side in the image
+    ``side_px`` (V,) and the detector's fitted edge blur ``blur_px`` (V,) (NaN: no term, 0).
+
+    A blurred marker's outer edge mixes with the edges of its own border and cells inside it, so the
+    edge fits pull all four corners towards the centre together: the marker looks smaller, a single
+    marker farther away. The pull is a few hundredths of a pixel while the marker's side is over 45
+    blurs, and grows to half a pixel at 30 blurs (1.5 px blur on a 47 px marker: 55 mm of depth at 3.9
+    m for a marker seen alone); its direction is known but its size depends on the cells next to the
+    border, so it enters the covariance as a zero-mean error of this sigma, one draw per marker image.
+    """
+    side = np.asarray(side_px, float)
+    blur = np.asarray(blur_px, float)
+    ratio = np.divide(side, blur, out=np.full(side.shape, np.inf), where=np.isfinite(blur) & (blur > 0))
+    return BLUR_PULL_REF_PX * np.exp(-(ratio - BLUR_PULL_REF_RATIO) / BLUR_PULL_DECAY_RATIO)
+
+
+def edge_pull_jacobian(corners_px: np.ndarray) -> np.ndarray:
+    """How a marker's four corners (4, 2) move (8, 4) when each of its four edges (corner k to k + 1)
+    moves one pixel towards the marker's centre along its normal: a corner is where its two edges
+    cross, so it follows both."""
+    c = np.asarray(corners_px, float)
+    e = np.roll(c, -1, axis=0) - c
+    n = np.column_stack([-e[:, 1], e[:, 0]]) / np.linalg.norm(e, axis=1, keepdims=True)
+    n *= np.sign(np.sum(n * (c.mean(axis=0) - c), axis=1))[:, None]  # inwards
+    out = np.zeros((8, 4))
+    for k in range(4):
+        a, b = (k - 1) % 4, k  # the edges that meet at corner k
+        M = np.vstack([n[a], n[b]])
+        out[2 * k:2 * k + 2][:, [a, b]] = np.linalg.inv(M)
+    return out
+
+
+def blur_consider_covariance(J_whitened: np.ndarray, sqrt_info: np.ndarray, weights: np.ndarray,
+                             view: np.ndarray, corners_px: np.ndarray, sigma_px: np.ndarray,
+                             cov_6x6: np.ndarray) -> np.ndarray:
+    """The pose covariance (6, 6) a fit takes from each view's blur pull (:func:`blur_scale_sigma_px`),
+    considered (not estimated).
+
+    Each edge of a view moves towards the centre by a shift common to the view plus one of its own,
+    both of sigma ``sigma_px / sqrt(2)`` (the corner's pull along the diagonal is the edges' shift times
+    sqrt 2; the test renders show the edges' own shifts as large as the common one: the cells next to
+    each edge differ). The pose's first-order change is ``G = -cov_6x6 sum_i w_i J_i^T dr_i`` per edge
+    shift (``dr`` the whitened residuals' change, ``-L^T`` times the corners' move of
+    :func:`edge_pull_jacobian`); the covariance is ``sum_v G_v S_v G_v^T``.
+
+    Parameters
+    ----------
+    J_whitened : (N, 2, 6) the fit's whitened corner Jacobian in ``xi``. sqrt_info : (N, 2, 2) ``L``
+        of each corner (whitened residual ``L^T r``). weights : (N,) the fit's robust weights.
+    view : (N,) each corner's view (four corners a view, in order). corners_px : (N, 2) the observed
+        corners. sigma_px : (V,) each view's pull sigma. cov_6x6 : the fit's covariance (the inverse
+        normal matrix's pose block).
+    """
+    out = np.zeros((6, 6))
+    S_unit = 0.5 * np.ones((4, 4)) + 0.25 * np.eye(4)
+    for v in np.flatnonzero(np.asarray(sigma_px) > 1e-6):
+        m = view == v
+        E = edge_pull_jacobian(corners_px[m]).reshape(4, 2, 4)
+        dr = -np.einsum("nji,njk->nik", sqrt_info[m], E)  # (4, 2, 4): whitened residuals per edge shift
+        G = -cov_6x6 @ np.einsum("n,nia,nik->ak", weights[m], J_whitened[m], dr)
+        out += sigma_px[v] ** 2 * G @ S_unit @ G.T
+    return out

@@ -13,6 +13,7 @@ marker corners in the robot frame), computed once per rig.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -50,6 +51,10 @@ class MarkerView:
         Covariance of each corner, px^2.
     frame : int
         Row of the image in its camera's frame index (-1: unknown).
+    blur_px : float
+        The detector's fitted edge blur sigma of this marker, pixels (NaN: not known); with the
+        marker's size in the image it sizes the blur's pull on the corners
+        (:func:`gtrig.vision.covariance.blur_scale_sigma_px`).
     """
 
     camera: str
@@ -57,6 +62,7 @@ class MarkerView:
     corners_px: np.ndarray
     corner_cov: np.ndarray
     frame: int = -1
+    blur_px: float = float("nan")
 
     def __post_init__(self) -> None:
         c = np.array(self.corners_px, dtype=float).reshape(4, 2)
@@ -125,7 +131,7 @@ def views_from_detections(camera: str, detections: Iterable[Any], known_ids: set
         if mid in out:
             dup.add(mid)
         out[mid] = MarkerView(camera, mid, np.asarray(d.corners_px, dtype=float),
-                              np.asarray(cov, dtype=float))
+                              np.asarray(cov, dtype=float), blur_px=float(getattr(d, "blur_px", math.nan)))
     return [v for k, v in sorted(out.items()) if k not in dup]
 
 

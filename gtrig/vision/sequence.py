@@ -36,6 +36,7 @@ import csv
 import hashlib
 import json
 import logging
+import math
 import os
 import pickle
 import tempfile
@@ -434,11 +435,14 @@ def _seed(ctx: WorkerContext, model: VisionModel, detect: Any) -> None:
 
 
 def _views_to_json(views: Sequence[MarkerView]) -> list[list[Any]]:
-    return [[v.marker_id, _arr(v.corners_px), _arr(v.corner_cov)] for v in views]
+    # the detector's blur only where it gave one (a view without it reads back as before)
+    return [[v.marker_id, _arr(v.corners_px), _arr(v.corner_cov)] + ([v.blur_px] if math.isfinite(v.blur_px) else [])
+            for v in views]
 
 
 def _views_from_json(camera: str, row: int, d: list[list[Any]]) -> tuple[MarkerView, ...]:
-    return tuple(MarkerView(camera, int(m), np.array(uv), np.array(cov), row) for m, uv, cov in d)
+    return tuple(MarkerView(camera, int(e[0]), np.array(e[1]), np.array(e[2]), row,
+                            float(e[3]) if len(e) > 3 else math.nan) for e in d)
 
 
 def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: Sequence[str],
@@ -447,7 +451,8 @@ def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: 
     stamped ``stamps_s``, needed when tracking), in order, markers tracked from image to image when
     ``ctx.track`` says so (:class:`gtrig.vision.track.CameraTracker`, started afresh in every chunk; markers
     that appear looked for back in the chunk's images before, :mod:`gtrig.vision.backfill`):
-    ``[[row, [[marker_id, corners, cov], ...]], ...]``, the checkpoint's JSON form."""
+    ``[[row, [[marker_id, corners, cov(, blur)], ...]], ...]``, the checkpoint's JSON form (the detector's
+    blur where it gave one)."""
     from gtrig.vision.backfill import track_with_backfill
     from gtrig.vision.track import CameraTracker
 
