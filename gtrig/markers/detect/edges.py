@@ -644,9 +644,11 @@ class RefineParams:
     max_columns : pixel columns across each edge at most (:func:`band_stride`): a longer edge takes every
         k-th column, so that a large marker costs about what one of ``max_columns`` pixels does; 0 takes
         every column.
-    first_columns : the first pass's columns at most (:func:`band_stride`; it only gives the next passes their
-        start: with 16 columns instead of 32 it took 40 % less time and the corners after the last pass
-        were as close to the truth); 0 takes ``max_columns``.
+    first_columns : the first pass's columns at most (:func:`band_stride`); 0 takes ``max_columns``. The first
+        pass only gives the next ones their start, and 16 columns instead of 32 took 40 % less time with the
+        renders' corners as close to the truth, but at 1.5 px blur a small marker's later passes then settled
+        elsewhere: one pose of ``tests/vision/test_blur_pull.py`` at NEES / dof 8.1 (0.9 with 32), so the
+        default keeps every column.
     settle_px : a quad whose corners moved less than this (pixels) in a pass after the first stops there,
         with that pass's fits and covariances (a pass moving them 0.1 px left the next one's move below
         0.08 px and the corner RMS unchanged on the renders of ``bench/markers.py --refine-only``, 60 % of
@@ -663,7 +665,7 @@ class RefineParams:
     max_blur_px: float = 5.0
     max_columns: int = 32
     settle_px: float = 0.1
-    first_columns: int = 16
+    first_columns: int = 0
 
 
 def band_stride(side: NDArray[np.float64], params: RefineParams, first: bool = False) -> NDArray[np.int64]:
