@@ -10,6 +10,8 @@ Each image of a camera is searched where its markers are expected and where it c
   gave no candidate for, typically one smeared by motion, is looked for at its predicted corners: the edge
   model is refined from them and the marker kept only when its cells, read through the refined corners,
   give its ID (``MarkerDetector.detect_expected``). One still missing makes the image searched whole again.
+  A marker leaving the image, predicted with three corners inside it, is looked for the same way (the
+  peers find no closed outline for it) and kept on its corners inside the image.
 * **Change**: the image is reduced to the mean grey level of cells of ``cell_px`` pixels; a cell whose
   mean moved by more than ``change_level`` from the last time that place was searched (a marker coming
   into view, the robot moving or turning) is searched, with a margin of ``change_margin_px``. A fixed
@@ -49,6 +51,11 @@ RegionDetectFn = Callable[[np.ndarray, Box | None], list[MarkerView]]
 #: ``expect(image, [(marker_id, corners_px), ...])``: of markers predicted at corners (4, 2) (the whole
 #: image's pixels, printed order), those confirmed there (refined from the prediction, their ID read).
 ExpectFn = Callable[[np.ndarray, Sequence[tuple[int, np.ndarray]]], list[MarkerView]]
+
+
+#: Version of the tracking rules (what is looked for where), part of :meth:`TrackOptions.key`: 2 looks for
+#: markers cut by the image's edge.
+TRACK_RULES = 2
 
 
 @dataclass(frozen=True)
@@ -103,11 +110,12 @@ class TrackOptions:
                 raise InputError(f"tracking: {name} must be >= 0 (got {v})")
 
     def key(self) -> str:
-        """What the detections depend on (a checkpoint's key): "whole" when not tracking."""
+        """What the detections depend on (a checkpoint's key): "whole" when not tracking; tracking's rules
+        carry :data:`TRACK_RULES` (raised when they change which markers are looked for)."""
         if not self.enabled:
             return "whole"
-        return (f"track/{self.full_every_s!r}/{self.margin_px!r}/{self.motion_margin!r}/{self.size_margin!r}/"
-                f"{self.cell_px}/{self.change_level!r}/{self.change_margin_px!r}/{self.window_px}")
+        return (f"track{TRACK_RULES}/{self.full_every_s!r}/{self.margin_px!r}/{self.motion_margin!r}/"
+                f"{self.size_margin!r}/{self.cell_px}/{self.change_level!r}/{self.change_margin_px!r}/{self.window_px}")
 
     @property
     def windows_px(self) -> tuple[int, int, int]:
@@ -209,11 +217,18 @@ def _union(boxes: Sequence[tuple[float, float, float, float]]) -> tuple[float, f
     return float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 2].max()), float(b[:, 3].max())
 
 
-def inside_image(corners: np.ndarray, size: tuple[int, int], border: float = 2.0) -> bool:
-    """Every corner (4, 2) at least ``border`` pixels inside an image of ``size`` (w, h)."""
+def inside_image(corners: np.ndarray, size: tuple[int, int], border: float = 2.0, at_least: int = 4) -> bool:
+    """At least ``at_least`` of the corners (4, 2) (all of them by default) ``border`` pixels or more inside
+    an image of ``size`` (w, h)."""
     w, h = size
-    return bool(np.all(corners >= border) and np.all(corners[:, 0] <= w - 1 - border)
-                and np.all(corners[:, 1] <= h - 1 - border))
+    ok = ((corners[:, 0] >= border) & (corners[:, 1] >= border) & (corners[:, 0] <= w - 1 - border)
+          & (corners[:, 1] <= h - 1 - border))
+    return int(ok.sum()) >= at_least
+
+
+#: A tracked marker predicted with this many corners inside the image is looked for at its predicted corners
+#: (one cut by the image's edge is kept on its corners inside the image, :mod:`gtrig.vision.detect`).
+CONFIRM_CORNERS = 3
 
 
 @dataclass
@@ -230,8 +245,10 @@ class CameraTracker:
         the image that the search (of a region or of the whole image) did not find is looked for at its
         predicted corners with it: a motion blur can leave the peers without a candidate where the edge
         model still fits the marker's edges and its cells still read as its ID. A marker predicted across
-        the image's edge is not (its corners outside the image would be extrapolated from short edges, with
-        errors of most of a pixel that their covariances do not show).
+        the image's edge with :data:`CONFIRM_CORNERS` corners inside it is looked for too (the peers find no
+        closed outline there); ``expect`` keeps it on its corners inside the image (its corners outside
+        would be extrapolated from short edges, with errors of most of a pixel that their covariances do
+        not show). Such a marker, when not found, does not make the image searched whole.
     """
 
     detect: RegionDetectFn
@@ -289,7 +306,7 @@ class CameraTracker:
         if self.expect is None:
             return []
         todo = [e for e in expected if e.marker_id not in found and e.marker_id not in tried
-                and inside_image(e.corners_px, self.size)]
+                and inside_image(e.corners_px, self.size, at_least=CONFIRM_CORNERS)]
         if todo:
             got = {v.marker_id: v for v in self.expect(image, [(e.marker_id, e.corners_px) for e in todo])}
             tried.update({e.marker_id: got.get(e.marker_id) for e in todo})
