@@ -52,6 +52,10 @@ RegionDetectFn = Callable[[np.ndarray, Box | None], list[MarkerView]]
 #: image's pixels, printed order), those confirmed there (refined from the prediction, their ID read).
 ExpectFn = Callable[[np.ndarray, Sequence[tuple[int, np.ndarray]]], list[MarkerView]]
 
+#: ``siblings(views)``: from the markers found in an image, other markers predicted there
+#: ``[(marker_id, corners_px), ...]`` (:func:`gtrig.vision.siblings.cut_siblings`).
+SiblingsFn = Callable[[list[MarkerView]], list[tuple[int, np.ndarray]]]
+
 
 #: Version of the tracking rules (what is looked for where), part of :meth:`TrackOptions.key`: 2 looks for
 #: markers cut by the image's edge.
@@ -128,7 +132,9 @@ class TrackStats:
     """How the images of a camera were searched: ``whole``, in a ``region``, or ``skipped`` (nothing
     expected, nothing changed); ``lost``: whole-image passes made because a tracked marker was missing;
     ``confirmed``: tracked markers the peers missed, found at their predicted corners;
-    ``confirmed_back``: markers found in the images before they appeared (:mod:`gtrig.vision.backfill`)."""
+    ``confirmed_back``: markers found in the images before they appeared (:mod:`gtrig.vision.backfill`);
+    ``confirmed_siblings``: markers cut by the image's edge found where the image's other markers place
+    them (:mod:`gtrig.vision.siblings`)."""
 
     whole: int = 0
     region: int = 0
@@ -137,6 +143,7 @@ class TrackStats:
     region_area_px: int = 0
     confirmed: int = 0
     confirmed_back: int = 0
+    confirmed_siblings: int = 0
 
     def add(self, other: TrackStats) -> None:
         self.whole += other.whole
@@ -146,6 +153,7 @@ class TrackStats:
         self.region_area_px += other.region_area_px
         self.confirmed += other.confirmed
         self.confirmed_back += other.confirmed_back
+        self.confirmed_siblings += other.confirmed_siblings
 
 
 @dataclass(frozen=True)
@@ -249,12 +257,15 @@ class CameraTracker:
         closed outline there); ``expect`` keeps it on its corners inside the image (its corners outside
         would be extrapolated from short edges, with errors of most of a pixel that their covariances do
         not show). Such a marker, when not found, does not make the image searched whole.
+    siblings : ``siblings(views)`` (:data:`SiblingsFn`), or None: with ``expect``, when tracking, the markers
+        the image's found markers place across its edge are looked for there too.
     """
 
     detect: RegionDetectFn
     size: tuple[int, int]
     options: TrackOptions = TrackOptions()
     expect: ExpectFn | None = None
+    siblings: SiblingsFn | None = None
     stats: TrackStats = field(default_factory=TrackStats)
     _last_whole_s: float | None = None
     _prev: dict[int, tuple[float, np.ndarray]] = field(default_factory=dict)
@@ -287,6 +298,8 @@ class CameraTracker:
             self._searched = cells
         kept = {id(v) for v in views}
         self.stats.confirmed += sum(v is not None and id(v) in kept for v in tried.values())
+        if o.enabled:
+            views = views + self._confirm_siblings(image, views, tried)
         self._before = self._prev
         self._prev = {v.marker_id: (stamp_s, v.corners_px) for v in views}
         return views
@@ -312,6 +325,19 @@ class CameraTracker:
             tried.update({e.marker_id: got.get(e.marker_id) for e in todo})
         return [v for e in expected if e.marker_id not in found
                 and (v := tried.get(e.marker_id)) is not None]
+
+    def _confirm_siblings(self, image: np.ndarray, views: list[MarkerView], tried: dict[int, MarkerView | None]
+                          ) -> list[MarkerView]:
+        """Markers that ``views`` (the image's found markers) place across the image's edge, not tried in
+        this image yet, confirmed there by ``expect``."""
+        if self.expect is None or self.siblings is None or not views:
+            return []
+        todo = [(m, c) for m, c in self.siblings(views) if m not in tried]
+        if not todo:
+            return []
+        got = [v for v in self.expect(image, todo) if v.marker_id in {m for m, _ in todo}]
+        self.stats.confirmed_siblings += len(got)
+        return got
 
     def _search_region(self, image: np.ndarray, expected: Sequence[_Expected], cells: np.ndarray,
                        tried: dict[int, MarkerView | None]) -> tuple[list[MarkerView], bool]:
