@@ -95,3 +95,24 @@ def test_the_tracker_follows_a_marker_out_of_the_image_while_three_corners_are_i
     assert asked == [2, 3, 4] and tk.stats.confirmed == 3
     # a cut marker missing does not make the image searched whole (only the start is)
     assert tk.stats.lost == 0 and tk.stats.whole == 1
+
+
+def test_the_second_start_band_ends_before_the_surround_of_a_narrow_margin() -> None:
+    from gtrig.markers.detect import DetectorParams
+    from gtrig.vision.detect import RETRY_BAND_PX
+
+    # a marker printed with a one-cell white margin on a light grey surround (reflectance 0.75), sharp
+    # (blur 0.3 px), refitted from corners within half a pixel, as the second start does
+    rng = np.random.default_rng(0)
+    img, truths = render((300, 400), [(FAM, 30, homography_from_pose(62, (200, 150), 30, 20, 15))], blur_px=0.3,
+                         noise=2.0, quiet_cells=1.0, background=np.full((300, 400), 0.75), rng=rng)
+    t = truths[0].corners_px
+    start = (t + np.array([[0.4, -0.3], [-0.2, 0.4], [0.3, 0.3], [-0.4, -0.2]]))[None]
+    rms = {}
+    for band in (RETRY_BAND_PX, DetectorParams().band_px):
+        got = MarkerDetector(FAM, params=DetectorParams(band_px=band)).detect_expected(img, start, np.array([30]))
+        assert [d.id for d in got] == [30]
+        rms[band] = float(np.sqrt(np.mean(np.sum((got[0].corners_px - t) ** 2, axis=1))))
+    # the default band reaches past the margin into the surround and moves the lines by a few hundredths of
+    # a pixel; the second start's band stays on the margin
+    assert rms[RETRY_BAND_PX] < 0.02 and rms[DetectorParams().band_px] > 2 * rms[RETRY_BAND_PX]
