@@ -39,6 +39,10 @@ MEASURED_BORDER_PX = 1.0
 #: Measured corners a marker cut by the image's edge needs to be kept.
 MIN_MEASURED_CORNERS = 3
 
+#: Version of what this module makes of the markers package's detections (the second start, the corners
+#: released outside the image), part of the detector's version in GTvision's checkpoint key.
+VIEWS_VERSION = 2
+
 #: Edge band beyond ``3 sigma`` of the second start (:func:`_second_start`), px, against the markers
 #: package's 5 px (``DetectorParams.band_px``, an allowance for a phone's sharpening halo).
 RETRY_BAND_PX = 2.0
@@ -269,7 +273,7 @@ def make_detector(rig: Rig, which: str = "auto") -> ArucoDetector | GtrigDetecto
                                  "is not available") from None
             log.warning("gtrig.markers.detect is not available: falling back to OpenCV ArUco corners")
             return ArucoDetector(rig)
-        return GtrigDetector(rig, impl, str(getattr(mod, "DETECTOR_VERSION", "")))
+        return GtrigDetector(rig, impl, f"{getattr(mod, 'DETECTOR_VERSION', '')}/{VIEWS_VERSION}")
     if which == "aruco":
         return ArucoDetector(rig)
     raise InputError(f"unknown detector {which!r}; choose auto, gtrig or aruco")
