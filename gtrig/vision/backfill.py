@@ -8,7 +8,8 @@ them (constant velocity in the image, like :func:`gtrig.vision.track.predict_mar
 images before, which are still held, and the marker is confirmed there by ``expect``
 (:data:`gtrig.vision.track.ExpectFn`: the edge model refined from the prediction, the marker kept only
 when its cells read its ID). Each confirmed image gives the motion for the one before, up to
-``lookback`` images back; a prediction not inside the image by 2 px ends the walk.
+``lookback`` images back; a prediction with fewer than three corners inside the image by 2 px ends the
+walk (a marker cut by the image's edge is kept on its corners inside the image, :mod:`gtrig.vision.detect`).
 
 Only the images of one chunk are used (the first ones of a chunk have no earlier images to fill), so the
 detections do not depend on how the work is split; deterministic like the forward tracker.
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gtrig.vision.observations import MarkerView
-from gtrig.vision.track import CameraTracker, ExpectFn, inside_image
+from gtrig.vision.track import CONFIRM_CORNERS, CameraTracker, ExpectFn, inside_image
 
 __all__ = ["track_with_backfill"]
 
@@ -66,7 +67,7 @@ def _fill_back(held: deque[_Held], expect: ExpectFn, size: tuple[int, int], look
             if h.has(mid) or near.stamp_s <= h.stamp_s or far.stamp_s <= near.stamp_s:
                 break
             c = _predict_back(near, far, mid, h.stamp_s)
-            if not inside_image(c, size):
+            if not inside_image(c, size, at_least=CONFIRM_CORNERS):
                 break
             got = [v for v in expect(h.image, [(mid, c)]) if v.marker_id == mid]
             if not got:

@@ -450,10 +450,12 @@ def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: 
     """Markers detected in one camera's images ``rows`` (read here, on the worker, from ``paths``;
     stamped ``stamps_s``, needed when tracking), in order, markers tracked from image to image when
     ``ctx.track`` says so (:class:`gtrig.vision.track.CameraTracker`, started afresh in every chunk; markers
-    that appear looked for back in the chunk's images before, :mod:`gtrig.vision.backfill`):
+    that appear looked for back in the chunk's images before, :mod:`gtrig.vision.backfill`; markers cut by
+    the image's edge looked for where the image's other markers place them, :mod:`gtrig.vision.siblings`):
     ``[[row, [[marker_id, corners, cov(, blur)], ...]], ...]``, the checkpoint's JSON form (the detector's
     blur where it gave one)."""
     from gtrig.vision.backfill import track_with_backfill
+    from gtrig.vision.siblings import cut_siblings
     from gtrig.vision.track import CameraTracker
 
     st = _state(ctx)
@@ -464,7 +466,8 @@ def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: 
     detect = st["detect"]
     expect = getattr(detect, "expected", None)
     tracker = CameraTracker(lambda img, box: detect(img, cam, tone, box), cam.size, ctx.track,
-                            None if expect is None else (lambda img, predicted: expect(img, cam, tone, predicted)))
+                            None if expect is None else (lambda img, predicted: expect(img, cam, tone, predicted)),
+                            lambda views: cut_siblings(views, cam, st["model"]))
     if ctx.track.enabled and (stamps_s is None or len(stamps_s) != len(rows)):
         raise ValueError("tracking needs the images' time stamps")
     # each image file or video frame read as the tracker asks for it

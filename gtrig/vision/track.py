@@ -10,6 +10,8 @@ Each image of a camera is searched where its markers are expected and where it c
   gave no candidate for, typically one smeared by motion, is looked for at its predicted corners: the edge
   model is refined from them and the marker kept only when its cells, read through the refined corners,
   give its ID (``MarkerDetector.detect_expected``). One still missing makes the image searched whole again.
+  A marker leaving the image, predicted with three corners inside it, is looked for the same way (the
+  peers find no closed outline for it) and kept on its corners inside the image.
 * **Change**: the image is reduced to the mean grey level of cells of ``cell_px`` pixels; a cell whose
   mean moved by more than ``change_level`` from the last time that place was searched (a marker coming
   into view, the robot moving or turning) is searched, with a margin of ``change_margin_px``. A fixed
@@ -49,6 +51,15 @@ RegionDetectFn = Callable[[np.ndarray, Box | None], list[MarkerView]]
 #: ``expect(image, [(marker_id, corners_px), ...])``: of markers predicted at corners (4, 2) (the whole
 #: image's pixels, printed order), those confirmed there (refined from the prediction, their ID read).
 ExpectFn = Callable[[np.ndarray, Sequence[tuple[int, np.ndarray]]], list[MarkerView]]
+
+#: ``siblings(views)``: from the markers found in an image, other markers predicted there
+#: ``[(marker_id, corners_px), ...]`` (:func:`gtrig.vision.siblings.cut_siblings`).
+SiblingsFn = Callable[[list[MarkerView]], list[tuple[int, np.ndarray]]]
+
+
+#: Version of the tracking rules (what is looked for where), part of :meth:`TrackOptions.key`: 2 looks for
+#: markers cut by the image's edge.
+TRACK_RULES = 2
 
 
 @dataclass(frozen=True)
@@ -103,11 +114,12 @@ class TrackOptions:
                 raise InputError(f"tracking: {name} must be >= 0 (got {v})")
 
     def key(self) -> str:
-        """What the detections depend on (a checkpoint's key): "whole" when not tracking."""
+        """What the detections depend on (a checkpoint's key): "whole" when not tracking; tracking's rules
+        carry :data:`TRACK_RULES` (raised when they change which markers are looked for)."""
         if not self.enabled:
             return "whole"
-        return (f"track/{self.full_every_s!r}/{self.margin_px!r}/{self.motion_margin!r}/{self.size_margin!r}/"
-                f"{self.cell_px}/{self.change_level!r}/{self.change_margin_px!r}/{self.window_px}")
+        return (f"track{TRACK_RULES}/{self.full_every_s!r}/{self.margin_px!r}/{self.motion_margin!r}/"
+                f"{self.size_margin!r}/{self.cell_px}/{self.change_level!r}/{self.change_margin_px!r}/{self.window_px}")
 
     @property
     def windows_px(self) -> tuple[int, int, int]:
@@ -120,7 +132,9 @@ class TrackStats:
     """How the images of a camera were searched: ``whole``, in a ``region``, or ``skipped`` (nothing
     expected, nothing changed); ``lost``: whole-image passes made because a tracked marker was missing;
     ``confirmed``: tracked markers the peers missed, found at their predicted corners;
-    ``confirmed_back``: markers found in the images before they appeared (:mod:`gtrig.vision.backfill`)."""
+    ``confirmed_back``: markers found in the images before they appeared (:mod:`gtrig.vision.backfill`);
+    ``confirmed_siblings``: markers cut by the image's edge found where the image's other markers place
+    them (:mod:`gtrig.vision.siblings`)."""
 
     whole: int = 0
     region: int = 0
@@ -129,6 +143,7 @@ class TrackStats:
     region_area_px: int = 0
     confirmed: int = 0
     confirmed_back: int = 0
+    confirmed_siblings: int = 0
 
     def add(self, other: TrackStats) -> None:
         self.whole += other.whole
@@ -138,6 +153,7 @@ class TrackStats:
         self.region_area_px += other.region_area_px
         self.confirmed += other.confirmed
         self.confirmed_back += other.confirmed_back
+        self.confirmed_siblings += other.confirmed_siblings
 
 
 @dataclass(frozen=True)
@@ -209,11 +225,18 @@ def _union(boxes: Sequence[tuple[float, float, float, float]]) -> tuple[float, f
     return float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 2].max()), float(b[:, 3].max())
 
 
-def inside_image(corners: np.ndarray, size: tuple[int, int], border: float = 2.0) -> bool:
-    """Every corner (4, 2) at least ``border`` pixels inside an image of ``size`` (w, h)."""
+def inside_image(corners: np.ndarray, size: tuple[int, int], border: float = 2.0, at_least: int = 4) -> bool:
+    """At least ``at_least`` of the corners (4, 2) (all of them by default) ``border`` pixels or more inside
+    an image of ``size`` (w, h)."""
     w, h = size
-    return bool(np.all(corners >= border) and np.all(corners[:, 0] <= w - 1 - border)
-                and np.all(corners[:, 1] <= h - 1 - border))
+    ok = ((corners[:, 0] >= border) & (corners[:, 1] >= border) & (corners[:, 0] <= w - 1 - border)
+          & (corners[:, 1] <= h - 1 - border))
+    return int(ok.sum()) >= at_least
+
+
+#: A tracked marker predicted with this many corners inside the image is looked for at its predicted corners
+#: (one cut by the image's edge is kept on its corners inside the image, :mod:`gtrig.vision.detect`).
+CONFIRM_CORNERS = 3
 
 
 @dataclass
@@ -230,14 +253,19 @@ class CameraTracker:
         the image that the search (of a region or of the whole image) did not find is looked for at its
         predicted corners with it: a motion blur can leave the peers without a candidate where the edge
         model still fits the marker's edges and its cells still read as its ID. A marker predicted across
-        the image's edge is not (its corners outside the image would be extrapolated from short edges, with
-        errors of most of a pixel that their covariances do not show).
+        the image's edge with :data:`CONFIRM_CORNERS` corners inside it is looked for too (the peers find no
+        closed outline there); ``expect`` keeps it on its corners inside the image (its corners outside
+        would be extrapolated from short edges, with errors of most of a pixel that their covariances do
+        not show). Such a marker, when not found, does not make the image searched whole.
+    siblings : ``siblings(views)`` (:data:`SiblingsFn`), or None: with ``expect``, when tracking, the markers
+        the image's found markers place across its edge are looked for there too.
     """
 
     detect: RegionDetectFn
     size: tuple[int, int]
     options: TrackOptions = TrackOptions()
     expect: ExpectFn | None = None
+    siblings: SiblingsFn | None = None
     stats: TrackStats = field(default_factory=TrackStats)
     _last_whole_s: float | None = None
     _prev: dict[int, tuple[float, np.ndarray]] = field(default_factory=dict)
@@ -270,6 +298,8 @@ class CameraTracker:
             self._searched = cells
         kept = {id(v) for v in views}
         self.stats.confirmed += sum(v is not None and id(v) in kept for v in tried.values())
+        if o.enabled:
+            views = views + self._confirm_siblings(image, views, tried)
         self._before = self._prev
         self._prev = {v.marker_id: (stamp_s, v.corners_px) for v in views}
         return views
@@ -289,12 +319,25 @@ class CameraTracker:
         if self.expect is None:
             return []
         todo = [e for e in expected if e.marker_id not in found and e.marker_id not in tried
-                and inside_image(e.corners_px, self.size)]
+                and inside_image(e.corners_px, self.size, at_least=CONFIRM_CORNERS)]
         if todo:
             got = {v.marker_id: v for v in self.expect(image, [(e.marker_id, e.corners_px) for e in todo])}
             tried.update({e.marker_id: got.get(e.marker_id) for e in todo})
         return [v for e in expected if e.marker_id not in found
                 and (v := tried.get(e.marker_id)) is not None]
+
+    def _confirm_siblings(self, image: np.ndarray, views: list[MarkerView], tried: dict[int, MarkerView | None]
+                          ) -> list[MarkerView]:
+        """Markers that ``views`` (the image's found markers) place across the image's edge, not tried in
+        this image yet, confirmed there by ``expect``."""
+        if self.expect is None or self.siblings is None or not views:
+            return []
+        todo = [(m, c) for m, c in self.siblings(views) if m not in tried]
+        if not todo:
+            return []
+        got = [v for v in self.expect(image, todo) if v.marker_id in {m for m, _ in todo}]
+        self.stats.confirmed_siblings += len(got)
+        return got
 
     def _search_region(self, image: np.ndarray, expected: Sequence[_Expected], cells: np.ndarray,
                        tried: dict[int, MarkerView | None]) -> tuple[list[MarkerView], bool]:
