@@ -671,12 +671,15 @@ def band_stride(side: NDArray[np.float64], params: RefineParams, first: bool = F
     at least 1 (every column with ``max_columns = 0``); for the ``first`` pass with
     :attr:`RefineParams.first_columns` where that is fewer."""
     side = np.asarray(side, np.float64)
+    return _edge_kernels.band_stride(np.ascontiguousarray(side.ravel()), _columns(params, first)).reshape(side.shape)
+
+
+def _columns(params: RefineParams, first: bool) -> int:
+    """The columns a pass takes at most (0: every column; :func:`band_stride`)."""
     cols = params.max_columns
     if first and params.first_columns > 0 and (cols <= 0 or params.first_columns < cols):
         cols = params.first_columns
-    if cols <= 0:
-        return np.ones(side.shape, np.int64)
-    return np.maximum(np.floor(side / cols), 1).astype(np.int64)
+    return max(cols, 0)
 
 
 def band_limits(sigma: NDArray[np.float64], side: NDArray[np.float64], cell: NDArray[np.float64],
@@ -689,18 +692,15 @@ def band_limits(sigma: NDArray[np.float64], side: NDArray[np.float64], cell: NDA
     border widths. The first pass (plain steps) keeps the band inside the black border and away from the
     ends; the next ones model the corners and the data cells, so the band may reach into them.
     """
-    w = 3.0 * sigma + params.band_px
-    w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
-    if first:
-        w_in = np.maximum(1.0, np.minimum(w, border - 1.5 * sigma))
-        excl = np.minimum(np.maximum(3.0 * sigma + 1.0, 0.08 * side), 0.3 * side)
-    else:
-        w_in = np.maximum(1.0, np.minimum(w, border + 0.5 * cell))
-        excl = np.minimum(sigma, 0.3 * side)
-    if params.margin_cells is not None:
-        w_out = np.maximum(1.0, np.minimum(w_out, params.margin_cells * cell - 2.0 * sigma))
-    w_look = w_out + params.look_sigmas * sigma if params.white_end else w_out
-    return w_in, w_out, w_look, excl
+    sigma, side, cell, border = (np.ascontiguousarray(a, np.float64).ravel()
+                                 for a in np.broadcast_arrays(sigma, side, cell, border))
+    # (the formulas: w = 3 sigma + band_px; w_out = max(1.5, min(w, cell + 1)), and with a known margin at most
+    # margin_cells cell - 2 sigma, at least 1; the first pass: w_in = max(1, min(w, border - 1.5 sigma)), ends
+    # min(max(3 sigma + 1, 0.08 side), 0.3 side) left out; the next: w_in = max(1, min(w, border + cell / 2)),
+    # ends min(sigma, 0.3 side); w_look = w_out + look_sigmas sigma)
+    margin = np.nan if params.margin_cells is None else float(params.margin_cells)
+    return _edge_kernels.band_limits(sigma, side, cell, border, first, float(params.band_px), margin,
+                                     params.white_end, float(params.look_sigmas))
 
 
 def refine_quads(
@@ -740,6 +740,8 @@ def refine_quads(
     prm = params or RefineParams()
     Q0 = np.ascontiguousarray(quads, np.float64).reshape(-1, 4, 2)
     n_q = len(Q0)
+    if undist is None and (threads <= 1 or n_q <= 1):
+        return _refine_in_one_call(gray, Q0, white, border_cells, prm, light)
     n = white.shape[1]
     E = 4 * n_q
     side = np.linalg.norm(Q0 - np.roll(Q0, -1, axis=1), axis=2)  # (Q, 4)
@@ -759,8 +761,7 @@ def refine_quads(
     W = np.ascontiguousarray(white, np.float64)
     gray = np.ascontiguousarray(gray)
     no_map = np.zeros((0, 0), np.float32)
-    fit_cfg = np.array([prm.iterations, prm.tol, CLIPPED_ITER_FACTOR, CLIP_LOW, CLIP_HIGH, CLIPPED_EDGE_SHARE,
-                        PIXEL_VAR, SHARP_SIGMA_PX, MAX_CLIPPED_WHITE])
+    fit_cfg = _fit_cfg(prm)
     stride = band_stride(L, prm)
     first_stride = band_stride(L, prm, first=True)
     active = np.ones(n_q, bool)
@@ -791,6 +792,29 @@ def refine_quads(
                   cov_line, rms, n_px, ok)
     corners, cov = _edge_kernels.all_quad_corners(fit.theta, fit.rho, mid, cov_line)
     return fit, corners, cov
+
+
+def _refine_in_one_call(gray: NDArray[np.uint8], quads: NDArray[np.float64], white: NDArray[np.float64],
+                        border_cells: int, prm: RefineParams, light: NDArray[np.float64] | None
+                        ) -> tuple[EdgeFit, NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`refine_quads` without a lens model in one thread: its passes in one compiled call
+    (:func:`._edge_kernels.refine_all`)."""
+    lut = np.arange(256, dtype=np.float64) if light is None else np.ascontiguousarray(light, np.float64)
+    cfg = np.array([prm.passes, _columns(prm, False), _columns(prm, True), prm.band_px,
+                    np.nan if prm.margin_cells is None else prm.margin_cells, float(prm.white_end), prm.look_sigmas,
+                    PROFILE_STEP_PX, WHITE_END_DROP, WHITE_END_SIGMAS, prm.max_blur_px, prm.settle_px], np.float64)
+    P, mid, sigma, cov_line, rms, n_px, ok, corners, cov = _edge_kernels.refine_all(
+        np.ascontiguousarray(gray), lut, quads, np.ascontiguousarray(white, np.float64), int(border_cells), cfg,
+        _fit_cfg(prm))
+    fit = EdgeFit(P[:, 0].copy(), P[:, 1].copy(), mid, P[:, 2].copy(), P[:, 3].copy(), sigma, P[:, 5:7].copy(),
+                  cov_line, rms, n_px, ok)
+    return fit, corners, cov
+
+
+def _fit_cfg(prm: RefineParams) -> NDArray[np.float64]:
+    """The edge fits' settings of :func:`._edge_kernels.refine_pass` (``fit_cfg``)."""
+    return np.array([prm.iterations, prm.tol, CLIPPED_ITER_FACTOR, CLIP_LOW, CLIP_HIGH, CLIPPED_EDGE_SHARE,
+                     PIXEL_VAR, SHARP_SIGMA_PX, MAX_CLIPPED_WHITE], np.float64)
 
 
 def refine_quads_stepwise(
