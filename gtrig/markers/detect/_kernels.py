@@ -349,40 +349,23 @@ _CONTEXT_SDS = 6.0
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _grid_window(t: float, s: float, n: int, F: NDArray[np.float64]) -> tuple[int, int, float, float]:
-    """The blurred indicators ``Phi((t - k) / s)`` of the grid lines ``k = 0..n`` (:func:`_ndtr_lin`), 1 or 0
-    beyond :data:`_CONTEXT_SDS` and set without evaluating there: the range ``[k0, k1)`` of the cells ``k``
-    whose ``F[k] - F[k + 1]`` may differ from 0, with ``F[k0..k1]`` written (the other entries are left as
-    they are), and the values at the outer lines 0 and ``n``."""
+def _saturated_grid(t: float, s: float, n: int, F: NDArray[np.float64]) -> tuple[int, int]:
+    """``F[k] = Phi((t - k) / s)`` for the grid lines ``k = 0..n`` (:func:`_ndtr_lin`), 1 or 0 beyond
+    :data:`_CONTEXT_SDS` and set without evaluating there, and the range ``[k0, k1)`` of the cells ``k``
+    whose ``F[k] - F[k + 1]`` may differ from 0."""
     lo = max(0, int(math.ceil(t - _CONTEXT_SDS * s)))
     hi = min(n, int(math.floor(t + _CONTEXT_SDS * s)))
+    for k in range(0, min(lo, n + 1)):
+        F[k] = 1.0
     inv = 1.0 / s
+    for k in range(lo, hi + 1):
+        F[k] = _ndtr_lin((t - k) * inv)
+    for k in range(max(hi + 1, lo), n + 1):
+        F[k] = 0.0
     if hi < lo:
         # no line within reach: the one cell where F steps from 1 to 0, if any
-        k0, k1 = (lo - 1, lo) if 0 < lo <= n else (0, 0)
-    else:
-        k0, k1 = max(lo - 1, 0), min(hi + 1, n)
-    if k1 > k0:
-        for k in range(k0, k1 + 1):
-            F[k] = 1.0 if k < lo else (_ndtr_lin((t - k) * inv) if k <= hi else 0.0)
-    f0 = 1.0 if 0 < lo else (_ndtr_lin(t * inv) if 0 <= hi else 0.0)
-    fn = 1.0 if n < lo else (_ndtr_lin((t - n) * inv) if n <= hi else 0.0)
-    return k0, k1, f0, fn
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def white_prefix(white: NDArray[np.float64]) -> NDArray[np.int64]:
-    """Counts of the non-zero cells of each quad's ``white`` (Q, n, n) in the blocks ``[0, r) x [0, c)``:
-    (Q, n + 1, n + 1); a block's count is four look-ups (:func:`marker_context` skips the blocks without a
-    white cell)."""
-    Q, n = white.shape[0], white.shape[1]
-    out = np.zeros((Q, n + 1, n + 1), np.int64)
-    for g in range(Q):
-        for r in range(n):
-            for c in range(n):
-                out[g, r + 1, c + 1] = (out[g, r, c + 1] + out[g, r + 1, c] - out[g, r, c]
-                                        + (1 if white[g, r, c] != 0.0 else 0))
-    return out
+        return (lo - 1, lo) if 0 < lo <= n else (0, 0)
+    return max(lo - 1, 0), min(hi + 1, n)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -398,17 +381,12 @@ def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray
     sigma : (N,) blur of each pixel's edge, pixels.
     white : (Q, n, n) white cells.
     dist : (N,) signed distance of each pixel to its edge's line, pixels.
-
-    Only the grid lines within :data:`_CONTEXT_SDS` of a pixel are evaluated (:func:`_grid_window`), and
-    the white cells' sum is left out where the cells within reach are all black (:func:`white_prefix`;
-    most of a band lies over the black border and the paper): the values are those of the full sums.
     """
     N = x.shape[0]
     n = white.shape[1]
     out = np.empty(N)
     Fx = np.empty(n + 1)
     Fy = np.empty(n + 1)
-    cnt = white_prefix(white)
     for i in range(N):
         g = quad[i]  # (elements indexed in place: a view per pixel costs more than the pixel's sums)
         xi, yi = x[i], y[i]
@@ -420,22 +398,21 @@ def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray
         ay, by = H[g, 3] - my * H[g, 6], H[g, 4] - my * H[g, 7]
         sx = scale * math.sqrt(ax * ax + bx * bx)  # (libm's hypot guards against overflow at 4x the cost)
         sy = scale * math.sqrt(ay * ay + by * by)
-        # only the grid lines within reach have a CDF other than 0 or 1: the cells' sum runs over the rows
-        # and columns between them (the other products are 0)
-        c0, c1, fx0, fxn = _grid_window(mx * n, sx, n, Fx)
-        r0, r1, fy0, fyn = _grid_window(my * n, sy, n, Fy)
+        # only the grid lines within 9 SDs have a CDF other than 0 or 1: the cells' sum runs over the
+        # rows and columns between them (the other products are 0)
+        c0, c1 = _saturated_grid(mx * n, sx, n, Fx)
+        r0, r1 = _saturated_grid(my * n, sy, n, Fy)
         R = 0.0
-        if r1 > r0 and c1 > c0 and cnt[g, r1, c1] - cnt[g, r0, c1] - cnt[g, r1, c0] + cnt[g, r0, c0] > 0:
-            for r in range(r0, r1):
-                Yr = Fy[r] - Fy[r + 1]
-                if Yr == 0.0:
-                    continue
-                acc = 0.0
-                for c in range(c0, c1):
-                    if white[g, r, c] != 0.0:
-                        acc += white[g, r, c] * (Fx[c] - Fx[c + 1])
-                R += Yr * acc
-        S = (fx0 - fxn) * (fy0 - fyn)
+        for r in range(r0, r1):
+            Yr = Fy[r] - Fy[r + 1]
+            if Yr == 0.0:
+                continue
+            acc = 0.0
+            for c in range(c0, c1):
+                if white[g, r, c] != 0.0:
+                    acc += white[g, r, c] * (Fx[c] - Fx[c + 1])
+            R += Yr * acc
+        S = (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
         out[i] = 1.0 - S + R - _ndtr_tab(dist[i] / sigma[i])
     return out
 
