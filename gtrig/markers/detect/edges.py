@@ -643,7 +643,7 @@ class RefineParams:
         to the previous ones.
     max_columns : pixel columns across each edge at most (:func:`band_stride`): a longer edge takes every
         k-th column, so that a large marker costs about what one of ``max_columns`` pixels does; 0 takes
-        every column. 28 (on the renders of ``bench/markers.py --refine-only --sweep``: 12 % less time than
+        every column. 28 (on the renders of ``bench/markers.py --refine-only --sweep``: 12-16 % less time than
         32 for corners 0.0007 / 0.002 px RMS further at blur <= 1 / 2 px; 24 let a sharpened edge's corners
         drift past 0.095 px).
     first_columns : the first pass's columns at most (:func:`band_stride`; it only gives the next passes their
@@ -733,7 +733,8 @@ def refine_quads(
     border_cells : black border width, cells.
     undist : lens model; ``quads`` are then undistorted pixels.
     light : (256,) light of each grey level (:func:`.tone.to_light`); None for linear levels.
-    threads : with 2 the quads are shared with a helper thread.
+    threads : with 2 the quads are shared with a helper thread; with 1 and no lens model every pass runs in
+        one compiled call (:func:`._edge_kernels.refine_all`: no interpreter work between the passes).
 
     Returns
     -------
