@@ -420,8 +420,8 @@ def _bench_refine(scenes: list[tuple[NDArray[np.uint8], list, float]]) -> None:
 
 #: ``--refine-only --sweep``'s settings of the edge refinement (:class:`.edges.RefineParams` fields)
 SWEEP: list[dict[str, Any]] = [{}, {"settle_px": 0.0, "first_columns": 0}, {"settle_px": 0.2}, {"passes": 2},
-                               {"max_columns": 24}, {"max_columns": 16}, {"max_columns": 12}, {"max_columns": 8},
-                               {"max_columns": 8, "passes": 2}]
+                               {"max_columns": 32}, {"max_columns": 24}, {"max_columns": 16}, {"max_columns": 12},
+                               {"max_columns": 8}, {"max_columns": 8, "passes": 2}]
 
 
 def _bench_refine_sweep(scenes: list[tuple[NDArray[np.uint8], list, float]]) -> None:

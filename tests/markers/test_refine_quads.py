@@ -86,3 +86,45 @@ def test_settled_quads_and_a_sparse_first_pass_keep_the_corners(seed: int, side:
                                np.sqrt(np.trace(cov_every, axis1=2, axis2=3)), rtol=0.5)
     rms_fast, rms_dense = (float(np.sqrt(np.mean(np.sum((c - true) ** 2, axis=2)))) for c in (fast, dense_first))
     assert rms_fast < 1.25 * rms_dense + 0.01
+
+
+def test_one_compiled_call_is_the_pass_loop_without_the_white_end_and_with_stored_tone() -> None:
+    """Without a lens model in one thread every pass runs in one compiled call; with two threads the passes
+    are called in turn from Python. Both, and the step functions, give the same corners with a known
+    margin, no white-end search and sRGB-stored levels."""
+    img, quads, white, true = _scene(9, 30.0, 1.0)
+    bc = family_spec(FAMILY).border_cells
+    light = to_light(np.arange(256, dtype=np.float64), "srgb")
+    for prm in (RefineParams(white_end=False, margin_cells=1.0), RefineParams(passes=2, max_columns=0)):
+        _ref, c_ref, cov_ref = refine_quads_stepwise(img, quads, white, bc, prm, None, light)
+        _fit, one, cov_one = refine_quads(img, quads, white, bc, prm, None, light, threads=1)
+        _fit, loop, cov_loop = refine_quads(img, quads, white, bc, prm, None, light, threads=2)
+        assert np.abs(one - c_ref).max() < 1e-6 and np.abs(loop - c_ref).max() < 1e-6
+        assert np.allclose(cov_one, cov_loop, rtol=1e-6, atol=1e-12)
+        assert np.abs(one - true).max() < 1.0  # (the stored tone taken back: the corners found, not lost)
+
+
+def test_band_limits_follow_their_formulas() -> None:
+    """The compiled band limits are the documented formulas, first pass and next, with and without a known
+    margin and the white-end search, NaN blurs kept NaN."""
+    from gtrig.markers.detect.edges import band_limits
+
+    rng = np.random.default_rng(3)
+    sigma = np.append(rng.uniform(0.2, 4.0, 40), np.nan)
+    side = rng.uniform(10.0, 200.0, 41)
+    cell = side / 8.0
+    border = cell * rng.integers(1, 3, 41)
+    for first in (True, False):
+        for prm in (RefineParams(), RefineParams(margin_cells=0.5, white_end=False, band_px=2.0)):
+            w_in, w_out, w_look, excl = band_limits(sigma, side, cell, border, first, prm)
+            w = 3.0 * sigma + prm.band_px
+            out = np.maximum(1.5, np.minimum(w, cell + 1.0))
+            if prm.margin_cells is not None:
+                out = np.maximum(1.0, np.minimum(out, prm.margin_cells * cell - 2.0 * sigma))
+            inner = border - 1.5 * sigma if first else border + 0.5 * cell
+            ends = (np.minimum(np.maximum(3.0 * sigma + 1.0, 0.08 * side), 0.3 * side) if first
+                    else np.minimum(sigma, 0.3 * side))
+            np.testing.assert_array_equal(w_in, np.maximum(1.0, np.minimum(w, inner)))
+            np.testing.assert_array_equal(w_out, out)
+            np.testing.assert_array_equal(w_look, out + prm.look_sigmas * sigma if prm.white_end else out)
+            np.testing.assert_array_equal(excl, ends)

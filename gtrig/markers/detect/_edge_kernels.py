@@ -633,3 +633,160 @@ def _next_pass(P: NDArray[np.float64], mid: NDArray[np.float64], sigma: NDArray[
             dist = (c * pt[k, 0] + sn * pt[k, 1]) - off
             pt[k, 0] -= dist * c
             pt[k, 1] -= dist * sn
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _nan_max(a: float, b: float) -> float:
+    """``np.maximum`` of two floats (NaN if either is)."""
+    return a + b if (math.isnan(a) or math.isnan(b)) else (a if a >= b else b)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _nan_min(a: float, b: float) -> float:
+    """``np.minimum`` of two floats (NaN if either is)."""
+    return a + b if (math.isnan(a) or math.isnan(b)) else (a if a <= b else b)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def band_limits(sigma: NDArray[np.float64], side: NDArray[np.float64], cell: NDArray[np.float64],
+                border: NDArray[np.float64], first: bool, band_px: float, margin_cells: float, white_end: bool,
+                look_sigmas: float
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`.edges.band_limits` (its formulas) for edges of blur ``sigma``, length ``side``, cell and border
+    widths ``cell``, ``border`` (all (E,), pixels): ``w_in``, ``w_out``, ``w_look``, the ends left out (E,).
+    ``margin_cells`` NaN when the margin is unknown; ``w_look`` is ``w_out`` without ``white_end``."""
+    E = sigma.shape[0]
+    w_in = np.empty(E)
+    w_out = np.empty(E)
+    w_look = np.empty(E)
+    excl = np.empty(E)
+    for e in range(E):
+        s = sigma[e]
+        w = 3.0 * s + band_px
+        wo = _nan_max(1.5, _nan_min(w, cell[e] + 1.0))
+        if first:
+            w_in[e] = _nan_max(1.0, _nan_min(w, border[e] - 1.5 * s))
+            excl[e] = _nan_min(_nan_max(3.0 * s + 1.0, 0.08 * side[e]), 0.3 * side[e])
+        else:
+            w_in[e] = _nan_max(1.0, _nan_min(w, border[e] + 0.5 * cell[e]))
+            excl[e] = _nan_min(s, 0.3 * side[e])
+        if not math.isnan(margin_cells):
+            wo = _nan_max(1.0, _nan_min(wo, margin_cells * cell[e] - 2.0 * s))
+        w_out[e] = wo
+        w_look[e] = wo + look_sigmas * s if white_end else wo
+    return w_in, w_out, w_look, excl
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def band_stride(side: NDArray[np.float64], columns: int) -> NDArray[np.int64]:
+    """:func:`.edges.band_stride`: ``floor(side / columns)``, at least 1, for edges ``side`` (E,) pixels long
+    (every column, 1, with ``columns`` 0)."""
+    out = np.ones(side.shape[0], np.int64)
+    if columns > 0:
+        for e in range(side.shape[0]):
+            out[e] = max(int(math.floor(side[e] / columns)), 1)
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def quad_sides(quads: NDArray[np.float64], n: int, border_cells: int
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Each edge's length, the cell and the border widths (all (4Q,), pixels) of quads (Q, 4, 2) with ``n``
+    cells a side and ``border_cells`` of border (:func:`.edges.refine_quads`)."""
+    Q = quads.shape[0]
+    L = np.empty(4 * Q)
+    cell = np.empty(4 * Q)
+    border = np.empty(4 * Q)
+    for q in range(Q):
+        tot = 0.0
+        for k in range(4):
+            j = (k + 1) % 4
+            dx, dy = quads[q, k, 0] - quads[q, j, 0], quads[q, k, 1] - quads[q, j, 1]
+            L[4 * q + k] = math.sqrt(dx * dx + dy * dy)
+            tot += L[4 * q + k]
+        for k in range(4):
+            cell[4 * q + k] = tot / 4.0 / n
+            border[4 * q + k] = cell[4 * q + k] * border_cells
+    return L, cell, border
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def widest_inner(w_in: NDArray[np.float64], active: NDArray[np.bool_]) -> float:
+    """The widest inner band ``w_in`` (4Q,) of the ``active`` (Q,) quads (NaN if one is; -inf for none):
+    the origin of :func:`.edges.white_extent`'s bins, shared by the pass."""
+    out = -np.inf
+    for q in range(active.shape[0]):
+        if active[q]:
+            for k in range(4):
+                out = _nan_max(out, w_in[4 * q + k])
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], quads: NDArray[np.float64],
+               white: NDArray[np.float64], border_cells: int, cfg: NDArray[np.float64], fit_cfg: NDArray[np.float64]
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                          NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_], NDArray[np.float64],
+                          NDArray[np.float64]]:
+    """Every pass of :func:`.edges.refine_quads` without a lens model, in one thread (its loop, compiled).
+
+    Parameters
+    ----------
+    gray : (H, W) image; lut : (256,) light of each level; quads : (Q, 4, 2) candidate corners;
+    white : (Q, n, n) white cells; border_cells : border width, cells.
+    cfg : (passes, columns, first pass's columns (0: every column), band px, margin cells (NaN: unknown),
+        white end looked for (0 / 1), look sigmas, profile step, white-end drop, white-end sigmas, max blur
+        px, settle px): :class:`.edges.RefineParams` and the constants of :mod:`.edges`.
+    fit_cfg : :func:`_fit_edge`'s ``cfg``.
+
+    Returns
+    -------
+    P (4Q, 7), mid (4Q, 2), sigma (4Q,), cov_line (4Q, 2, 2), rms (4Q,), n_px (4Q,), ok (4Q,), corners
+    (Q, 4, 2) and their covariances (Q, 4, 2, 2).
+    """
+    Q, n = quads.shape[0], white.shape[1]
+    E = 4 * Q
+    passes, columns, first_columns = int(cfg[0]), int(cfg[1]), int(cfg[2])
+    band_px, margin_cells, white_end, look_sigmas = cfg[3], cfg[4], cfg[5] > 0.5, cfg[6]
+    L, cell, border = quad_sides(quads, n, border_cells)
+    p0 = np.empty((E, 2))
+    p1 = np.empty((E, 2))
+    for q in range(Q):
+        for k in range(4):
+            for c in range(2):
+                p0[4 * q + k, c] = quads[q, k, c]
+                p1[4 * q + k, c] = quads[q, (k + 1) % 4, c]
+    sigma0 = np.full(E, 1.0)
+    P = np.zeros((E, _NP))
+    mid = np.zeros((E, 2))
+    sigma = np.zeros(E)
+    rms = np.zeros(E)
+    cov_line = np.zeros((E, 2, 2))
+    n_px = np.zeros(E, np.int64)
+    ok = np.zeros(E, np.bool_)
+    stride = band_stride(L, columns)
+    first_stride = band_stride(L, first_columns)
+    first_stride0 = first_stride.copy()
+    active = np.ones(Q, np.bool_)
+    no_map = np.zeros((0, 0), np.float32)
+    no_boxes = np.zeros((0, 4), np.int64)
+    band_cfg = np.array([cfg[5], 0.0, cfg[7], cfg[8], cfg[9], 0.3, cfg[10], cfg[11]])
+    for k in range(passes):
+        if not active.any():
+            break
+        w_in, w_out, w_look, excl = band_limits(sigma0, L, cell, border, k == 0, band_px, margin_cells, white_end,
+                                              look_sigmas)
+        band_cfg[1] = widest_inner(w_in, active)
+        refine_pass(gray, lut, no_map, no_map, no_boxes, p0, p1, sigma0, w_in, w_out, w_look, excl,
+                    first_stride if k == 0 else stride, white, band_cfg, fit_cfg, k == 0, active, P, mid, sigma,
+                    cov_line, rms, n_px, ok)
+        if k == 0:
+            for q in range(Q):
+                changed = False
+                for j in range(4):
+                    changed = changed or first_stride[4 * q + j] != first_stride0[4 * q + j]
+                if changed:
+                    for j in range(4):
+                        stride[4 * q + j] = 1
+    corners, cov = all_quad_corners(P[:, 0].copy(), P[:, 1].copy(), mid, cov_line)
+    return P, mid, sigma, cov_line, rms, n_px, ok, corners, cov

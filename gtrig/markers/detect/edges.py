@@ -643,7 +643,9 @@ class RefineParams:
         to the previous ones.
     max_columns : pixel columns across each edge at most (:func:`band_stride`): a longer edge takes every
         k-th column, so that a large marker costs about what one of ``max_columns`` pixels does; 0 takes
-        every column.
+        every column. 28 (on the renders of ``bench/markers.py --refine-only --sweep``: 12-16 % less time than
+        32 for corners 0.0007 / 0.002 px RMS further at blur <= 1 / 2 px; 24 let a sharpened edge's corners
+        drift past 0.095 px).
     first_columns : the first pass's columns at most (:func:`band_stride`); 0 takes ``max_columns``. The first
         pass only gives the next ones their start, and 16 columns instead of 32 took 40 % less time with the
         renders' corners as close to the truth, but at 1.5 px blur a small marker's later passes then settled
@@ -663,7 +665,7 @@ class RefineParams:
     look_sigmas: float = 3.0
     margin_cells: float | None = None
     max_blur_px: float = 5.0
-    max_columns: int = 32
+    max_columns: int = 28
     settle_px: float = 0.1
     first_columns: int = 0
 
@@ -673,12 +675,15 @@ def band_stride(side: NDArray[np.float64], params: RefineParams, first: bool = F
     at least 1 (every column with ``max_columns = 0``); for the ``first`` pass with
     :attr:`RefineParams.first_columns` where that is fewer."""
     side = np.asarray(side, np.float64)
+    return _edge_kernels.band_stride(np.ascontiguousarray(side.ravel()), _columns(params, first)).reshape(side.shape)
+
+
+def _columns(params: RefineParams, first: bool) -> int:
+    """The columns a pass takes at most (0: every column; :func:`band_stride`)."""
     cols = params.max_columns
     if first and params.first_columns > 0 and (cols <= 0 or params.first_columns < cols):
         cols = params.first_columns
-    if cols <= 0:
-        return np.ones(side.shape, np.int64)
-    return np.maximum(np.floor(side / cols), 1).astype(np.int64)
+    return max(cols, 0)
 
 
 def band_limits(sigma: NDArray[np.float64], side: NDArray[np.float64], cell: NDArray[np.float64],
@@ -691,18 +696,15 @@ def band_limits(sigma: NDArray[np.float64], side: NDArray[np.float64], cell: NDA
     border widths. The first pass (plain steps) keeps the band inside the black border and away from the
     ends; the next ones model the corners and the data cells, so the band may reach into them.
     """
-    w = 3.0 * sigma + params.band_px
-    w_out = np.maximum(1.5, np.minimum(w, cell + 1.0))
-    if first:
-        w_in = np.maximum(1.0, np.minimum(w, border - 1.5 * sigma))
-        excl = np.minimum(np.maximum(3.0 * sigma + 1.0, 0.08 * side), 0.3 * side)
-    else:
-        w_in = np.maximum(1.0, np.minimum(w, border + 0.5 * cell))
-        excl = np.minimum(sigma, 0.3 * side)
-    if params.margin_cells is not None:
-        w_out = np.maximum(1.0, np.minimum(w_out, params.margin_cells * cell - 2.0 * sigma))
-    w_look = w_out + params.look_sigmas * sigma if params.white_end else w_out
-    return w_in, w_out, w_look, excl
+    sigma, side, cell, border = (np.ascontiguousarray(a, np.float64).ravel()
+                                 for a in np.broadcast_arrays(sigma, side, cell, border))
+    # (the formulas: w = 3 sigma + band_px; w_out = max(1.5, min(w, cell + 1)), and with a known margin at most
+    # margin_cells cell - 2 sigma, at least 1; the first pass: w_in = max(1, min(w, border - 1.5 sigma)), ends
+    # min(max(3 sigma + 1, 0.08 side), 0.3 side) left out; the next: w_in = max(1, min(w, border + cell / 2)),
+    # ends min(sigma, 0.3 side); w_look = w_out + look_sigmas sigma)
+    margin = np.nan if params.margin_cells is None else float(params.margin_cells)
+    return _edge_kernels.band_limits(sigma, side, cell, border, first, float(params.band_px), margin,
+                                     params.white_end, float(params.look_sigmas))
 
 
 def refine_quads(
@@ -733,7 +735,8 @@ def refine_quads(
     border_cells : black border width, cells.
     undist : lens model; ``quads`` are then undistorted pixels.
     light : (256,) light of each grey level (:func:`.tone.to_light`); None for linear levels.
-    threads : with 2 the quads are shared with a helper thread.
+    threads : with 2 the quads are shared with a helper thread; with 1 and no lens model every pass runs in
+        one compiled call (:func:`._edge_kernels.refine_all`: no interpreter work between the passes).
 
     Returns
     -------
@@ -742,6 +745,8 @@ def refine_quads(
     prm = params or RefineParams()
     Q0 = np.ascontiguousarray(quads, np.float64).reshape(-1, 4, 2)
     n_q = len(Q0)
+    if undist is None and (threads <= 1 or n_q <= 1):
+        return _refine_in_one_call(gray, Q0, white, border_cells, prm, light)
     n = white.shape[1]
     E = 4 * n_q
     side = np.linalg.norm(Q0 - np.roll(Q0, -1, axis=1), axis=2)  # (Q, 4)
@@ -761,8 +766,7 @@ def refine_quads(
     W = np.ascontiguousarray(white, np.float64)
     gray = np.ascontiguousarray(gray)
     no_map = np.zeros((0, 0), np.float32)
-    fit_cfg = np.array([prm.iterations, prm.tol, CLIPPED_ITER_FACTOR, CLIP_LOW, CLIP_HIGH, CLIPPED_EDGE_SHARE,
-                        PIXEL_VAR, SHARP_SIGMA_PX, MAX_CLIPPED_WHITE])
+    fit_cfg = _fit_cfg(prm)
     stride = band_stride(L, prm)
     first_stride = band_stride(L, prm, first=True)
     active = np.ones(n_q, bool)
@@ -793,6 +797,29 @@ def refine_quads(
                   cov_line, rms, n_px, ok)
     corners, cov = _edge_kernels.all_quad_corners(fit.theta, fit.rho, mid, cov_line)
     return fit, corners, cov
+
+
+def _refine_in_one_call(gray: NDArray[np.uint8], quads: NDArray[np.float64], white: NDArray[np.float64],
+                        border_cells: int, prm: RefineParams, light: NDArray[np.float64] | None
+                        ) -> tuple[EdgeFit, NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`refine_quads` without a lens model in one thread: its passes in one compiled call
+    (:func:`._edge_kernels.refine_all`)."""
+    lut = np.arange(256, dtype=np.float64) if light is None else np.ascontiguousarray(light, np.float64)
+    cfg = np.array([prm.passes, _columns(prm, False), _columns(prm, True), prm.band_px,
+                    np.nan if prm.margin_cells is None else prm.margin_cells, float(prm.white_end), prm.look_sigmas,
+                    PROFILE_STEP_PX, WHITE_END_DROP, WHITE_END_SIGMAS, prm.max_blur_px, prm.settle_px], np.float64)
+    P, mid, sigma, cov_line, rms, n_px, ok, corners, cov = _edge_kernels.refine_all(
+        np.ascontiguousarray(gray), lut, quads, np.ascontiguousarray(white, np.float64), int(border_cells), cfg,
+        _fit_cfg(prm))
+    fit = EdgeFit(P[:, 0].copy(), P[:, 1].copy(), mid, P[:, 2].copy(), P[:, 3].copy(), sigma, P[:, 5:7].copy(),
+                  cov_line, rms, n_px, ok)
+    return fit, corners, cov
+
+
+def _fit_cfg(prm: RefineParams) -> NDArray[np.float64]:
+    """The edge fits' settings of :func:`._edge_kernels.refine_pass` (``fit_cfg``)."""
+    return np.array([prm.iterations, prm.tol, CLIPPED_ITER_FACTOR, CLIP_LOW, CLIP_HIGH, CLIPPED_EDGE_SHARE,
+                     PIXEL_VAR, SHARP_SIGMA_PX, MAX_CLIPPED_WHITE], np.float64)
 
 
 def refine_quads_stepwise(

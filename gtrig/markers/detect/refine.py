@@ -45,7 +45,7 @@ class RefineSettings:
     iterations: int = 10
     tol: float = 1e-3
     tone: Tone = "linear"
-    max_columns: int = 32
+    max_columns: int = 28
 
 
 @dataclass(frozen=True)
