@@ -29,15 +29,16 @@ _NP = 7
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np.float64],
+def gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np.float64],
                 w_in: NDArray[np.float64], w_out: NDArray[np.float64], excl: NDArray[np.float64],
                 stride: NDArray[np.int64]
                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """Band pixels of the edges ``p0 -> p1`` (E, 2) without a lens model: x, y, value, edge (each (M,),
     sorted by edge; :func:`.edges.gather_band`), every ``stride[e]``-th column.
 
-    The pixels and their order are those of :func:`._kernels.band_pixels` (the same scan and tests), in
-    one scan into arrays sized by a bound: each column of the edge's major axis holds at most
+    Each band is the parallelogram ``s in [excl, L - excl]``, ``d in [-w_in, w_out]`` (``s`` along the edge
+    from ``p0``, ``d`` across it); it is scanned along the edge's major axis, where it is an interval of the
+    other axis in every column, in one scan into arrays sized by a bound: each column of the edge's major axis holds at most
     ``(w_in + w_out) / |n_v| + 2`` pixels (``n_v`` the normal's minor component, at least ``1 / sqrt 2``).
     """
     h, w = gray.shape[0], gray.shape[1]
@@ -553,7 +554,7 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
                 x, y, raw, es = _gather_undistorted(gray, map_x, map_y, boxes[sl], p0[sl], p1[sl], w_in[sl], w_band,
                                                     excl[sl], stride[sl])
             else:
-                x, y, raw, es = _gather_raw(gray, p0[sl], p1[sl], w_in[sl], w_band, excl[sl], stride[sl])
+                x, y, raw, es = gather_raw(gray, p0[sl], p1[sl], w_in[sl], w_band, excl[sl], stride[sl])
             if not _unstride_clipped(raw, es, stride[sl], fit_cfg[5]):
                 break
         starts = _edge_starts(es)

@@ -159,8 +159,8 @@ def gather_band(
                              for a in (w_in, w_out, end_excl))
     step = np.ascontiguousarray(np.broadcast_to(np.asarray(stride, np.int64), (E,)))
     if undist is None:
-        xy, val, edge = _kernels.band_pixels(np.ascontiguousarray(gray), p0, t, n, L, w_in, w_out, end_excl, step)
-        return EdgeSamples(xy, val, edge, _starts(edge, E))
+        x, y, val, edge = _edge_kernels.gather_raw(np.ascontiguousarray(gray), p0, p1, w_in, w_out, end_excl, step)
+        return EdgeSamples(np.column_stack([x, y]), val, edge, _starts(edge, E))
     ix, iy, edge = _band_boxes_undistorted(gray.shape, p0, p1, t, n, w_in, w_out, undist)
     # every stride-th raw column (row) from the first of the edge's box (:func:`_band_boxes_undistorted`)
     vertical = np.abs(t[edge, 1]) > np.abs(t[edge, 0])
