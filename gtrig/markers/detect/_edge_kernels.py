@@ -39,7 +39,8 @@ def gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np.
     Each band is the parallelogram ``s in [excl, L - excl]``, ``d in [-w_in, w_out]`` (``s`` along the edge
     from ``p0``, ``d`` across it); it is scanned along the edge's major axis, where it is an interval of the
     other axis in every column, in one scan into arrays sized by a bound: each column of the edge's major
-    axis holds at most ``(w_in + w_out) / |n_v| + 2`` pixels (``n_v`` the normal's minor component, at least ``1 / sqrt 2``).
+    axis holds at most ``(w_in + w_out) / |n_v| + 2`` pixels (``n_v`` the normal's minor component, at
+    least ``1 / sqrt 2``).
     """
     h, w = gray.shape[0], gray.shape[1]
     E = p0.shape[0]
