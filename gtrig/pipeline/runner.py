@@ -36,6 +36,9 @@ from gtrig.pipeline.rows import write_accuracy_csv
 
 log = logging.getLogger(__name__)
 
+#: why a stage left out by ``--stages`` did not run
+NOT_ASKED = "not asked for (--stages) and not finished before"
+
 
 @dataclass(frozen=True)
 class PipelineResult:
@@ -88,7 +91,6 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
     ``executor`` (:mod:`gtrig.executor`; None: local processes, ``config.workers``), ``progress`` follows
     them."""
     from gtrig.rig import load_rig
-    from gtrig.rig.load import dump_rig
 
     cfg = config or RunConfig()
     if only:
@@ -140,7 +142,7 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
                 reused.append(st.name)
                 log.info("%s: reused (finished before with the same inputs, options and code)", st.name)
         if result is None and not wanted:
-            skipped[st.name] = "not asked for (--stages) and not finished before"
+            skipped[st.name] = NOT_ASKED
             continue
         if result is None:
             if on_stage:
@@ -163,14 +165,28 @@ def run_stages(stages: Sequence[Stage], rec: str | Path, out: str | Path, config
         products = products.updated(result.products)
         for name in result.products:
             producer_key[name] = key
-        if "rig" in result.products:
-            dump_rig(products.rig, out_p / "rig.calibrated.yaml")  # type: ignore[arg-type]
         rows.extend(result.rows)
         checks.extend(result.checks)
         seconds[st.name] = time.perf_counter() - t
+    _write_rig(stages, products, skipped, out_p / "rig.calibrated.yaml")
     if rows:
         write_accuracy_csv(out_p / "accuracy.csv", rows)
     if checks:
         write_accuracy_csv(out_p / "summary.csv", checks)
     return PipelineResult(tuple(rows), seconds, skipped, tuple(checks), tuple(reused), products, exit_code,
                           refused)
+
+
+def _write_rig(stages: Sequence[Stage], products: Products, skipped: dict[str, str], path: Path) -> None:
+    """The run's rig into ``path``, unless a stage that calibrates part of it was left out while an earlier
+    run's file is there: that file would otherwise lose the part (a run of the camera stages alone wrote
+    the recording's nominal scanner poses over the calibrated ones). Nothing is written when no stage that
+    calibrates the rig ran or was reused."""
+    from gtrig.rig.load import dump_rig
+
+    left_out = [st.name for st in stages if "rig" in st.produces and skipped.get(st.name) == NOT_ASKED]
+    if left_out and path.is_file():
+        log.warning("%s kept from an earlier run: this run left out %s", path.name, ", ".join(left_out))
+        return
+    if any("rig" in st.produces and st.name not in skipped for st in stages):
+        dump_rig(products.rig, path)  # type: ignore[arg-type]

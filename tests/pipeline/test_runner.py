@@ -172,3 +172,31 @@ def test_stage_declarations_are_checked(rec: Path, tmp_path: Path) -> None:
     sneaky = Stage("sneaky", "sneaky", lambda inp: StageOutput({"survey": 1}), produces=("tracks/x",))
     with pytest.raises(ValueError, match="does not declare"):
         run_stages((sneaky,), rec, tmp_path / "out", RunConfig())
+
+
+def _rig_stages() -> tuple[Stage, ...]:
+    def hull(inp: StageInput, **kw: float) -> StageOutput:
+        rig = inp.products.rig
+        assert rig is not None
+        robot = rig.robot.model_copy(update={"hull": rig.robot.hull.model_copy(update=kw)})
+        return StageOutput({"rig": rig.model_copy(update={"robot": robot})})
+
+    return (Stage("length", "length", lambda inp: hull(inp, length_m=0.80), produces=("rig",)),
+            Stage("width", "width", lambda inp: hull(inp, width_m=0.60), produces=("rig",)))
+
+
+def test_a_run_leaving_out_a_calibration_keeps_the_earlier_rig(rec: Path, tmp_path: Path) -> None:
+    """A run of some calibration stages alone does not write the recording's nominal values over what the
+    others calibrated before; on a fresh output it writes what it has."""
+    from gtrig.rig import load_rig
+
+    out = tmp_path / "out"
+    run_stages(_rig_stages(), rec, out)
+    hull = load_rig(out / "rig.calibrated.yaml").robot.hull
+    assert (hull.length_m, hull.width_m) == (0.80, 0.60)
+    r = run_stages(_rig_stages(), rec, out, only=["length"], reuse=False)
+    assert "width" in r.skipped
+    assert load_rig(out / "rig.calibrated.yaml").robot.hull.width_m == 0.60
+    run_stages(_rig_stages(), rec, tmp_path / "fresh", only=["length"])
+    hull = load_rig(tmp_path / "fresh" / "rig.calibrated.yaml").robot.hull
+    assert (hull.length_m, hull.width_m) == (0.80, 0.57)
