@@ -162,8 +162,8 @@ class DetectorParams(RefineSettings):
         back to light, where the blurred-step model holds.
     max_columns : pixel columns across each edge that the edge fits take at most: a longer edge takes every
         k-th column (:func:`.edges.band_stride`; a quad with a clipped edge takes them all); 0 takes them all
-        (on the renders: 1.4 times the time per marker of 32 columns for 0.003 px less corner RMS; the
-        trade-off in docs/markers.md).
+        (the default 28, :class:`.edges.RefineParams`; the trade-off between time and corner RMS in
+        docs/markers.md).
     """
 
     max_rel_rms: float = 0.5
