@@ -95,20 +95,3 @@ def test_few_quads_fit_in_the_calling_thread() -> None:
     assert _threads.fit_threads(2, _threads.MIN_SPLIT_QUADS - 1) == 1
     assert _threads.fit_threads(2, _threads.MIN_SPLIT_QUADS) == 2
     assert _threads.fit_threads(0, 50) == _threads.threads(0)
-
-
-def test_apriltag3_gives_the_same_tags_with_two_threads() -> None:
-    """The detector runs AprilTag 3 with its own thread count: the library's detections (IDs, corrected
-    bits, corners) do not depend on it."""
-    from gtrig.markers.apriltag3 import at3_detect
-
-    rng = np.random.default_rng(5)
-    fam = MarkerFamily.APRILTAG_36H11
-    markers = [(fam, 11 * i + 2, homography_from_pose(s, (110 + 170 * i, 150 + 40 * i), 30, 50 * i, 20 * i))
-               for i, s in enumerate((24, 40, 70, 110))]
-    img, _ = render((420, 720), markers, blur_px=0.6, noise=2.0,
-                    background=clutter_background((420, 720), rng, n_shapes=25), rng=rng)
-    one, two = at3_detect(img, "tag36h11", 2.0, 1), at3_detect(img, "tag36h11", 2.0, 2)
-    assert len(one) >= 3
-    key = sorted((i, h, c.round(9).tobytes()) for i, h, c in one)
-    assert key == sorted((i, h, c.round(9).tobytes()) for i, h, c in two)

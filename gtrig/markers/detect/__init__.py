@@ -232,7 +232,9 @@ class MarkerDetector:
         gray = to_gray(image)
         if min(gray.shape) < 8:
             return []
-        cands = find_peer_candidates(gray, self.spec.family, self.params.peers, _threads.threads(self.params.threads))
+        # AprilTag 3 on one thread: its clustering's union-find is shared by its workers without locks
+        # (AprilRobotics/apriltag#387), and with two threads it crashed a test process
+        cands = find_peer_candidates(gray, self.spec.family, self.params.peers)
         if not cands:
             return []
         if not self.spec.edge_model:

@@ -7,7 +7,7 @@ Both run without their own corner refinement (gtrig refines every corner, :mod:`
   al., "Speeded up detection of squared fiducial markers", Image and Vision Computing 76, 2018) with its
   default parameters, for every family with an OpenCV dictionary and for ARToolKitPlus' codes as a
   custom dictionary whose ``markerBorderBits`` is the family's border (3 cells for the standard border);
-- AprilTag 3 (:mod:`gtrig.markers.apriltag3`) at its default decimation, with the detector's threads, for
+- AprilTag 3 (:mod:`gtrig.markers.apriltag3`) at its default decimation and its default one thread, for
   the AprilTag families it reads. On the real photos it finds tags that OpenCV misses (far, tilted 36h11
   tags of the FRC field) and OpenCV finds some it misses: for 16h5, 25h9 and 36h11 both run and their
   candidates are pooled. Neither OpenCV's rejected candidates (one of PhotonVision's three such tags lies
@@ -164,7 +164,7 @@ def find_peer_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: 
                          threads: int = 1) -> list[PeerCandidate]:
     """Every peer's candidates, pooled: where two peers report the same ID at the same place (centres
     closer than a quarter of the side), the first (OpenCV's) is kept. OpenCV runs with its own thread setting,
-    AprilTag 3 with ``threads`` (the detector's: AprilTag 3's default is one)."""
+    AprilTag 3 with ``threads`` (its default one: more race in its clustering)."""
     out: list[PeerCandidate] = []
     more: list[PeerCandidate] = []
     if params.opencv and uses_opencv(family):
