@@ -3,7 +3,9 @@
 
 One detector per family, decimation and thread count is made once per process and never destroyed: destroying one
 now and then crashes the process (a double free in ``Detector.__del__``, pupil-labs/apriltags issues
-46 and 52), so at exit each is disarmed (its pointer dropped) and the operating system frees it.
+46 and 52), so at exit each is disarmed (its pointer dropped) and the operating system frees it. A
+detector is used by one thread at a time (a lock each): the library keeps a detection's working state in
+the detector, and two threads detecting with one detector crashed the process.
 
 The newer families' detectors correct one bit (:data:`NEWER_FAMILY_BITS`) instead of the binding's fixed
 two: AprilTag 3 tabulates every code within the corrected bits, and at two bits the tables of
@@ -30,6 +32,7 @@ __all__ = ["At3Family", "at3_detect", "at3_family", "tag_cells"]
 
 _LOCK = threading.Lock()
 _DETECTORS: dict[tuple[str, float, int], Any] = {}
+_IN_USE: dict[int, threading.Lock] = {}  # id of a detector -> the lock its detections hold
 _FAMILIES: dict[str, Any] = {}
 
 #: the families whose detector corrects the binding's two bits (AprilTag 3's defaults)
@@ -103,6 +106,7 @@ def detector(name: str, quad_decimate: float = 2.0, threads: int = 1) -> Any:
                 det.libc.apriltag_detector_add_family_bits(det.tag_detector_ptr, _family_ptr(det.libc, name),
                                                            NEWER_FAMILY_BITS)
             _DETECTORS[key] = det
+            _IN_USE[id(det)] = threading.Lock()
         return det
 
 
@@ -133,7 +137,9 @@ def at3_detect(gray: NDArray[np.uint8], name: str, quad_decimate: float = 2.0, t
     det = detector(name, quad_decimate, threads)
     order = [1, 0, 3, 2] if name in CLASSIC else [3, 2, 1, 0]
     out = []
-    for d in det.detect(np.ascontiguousarray(gray, np.uint8)):
+    with _IN_USE[id(det)]:
+        found = det.detect(np.ascontiguousarray(gray, np.uint8))
+    for d in found:
         c = np.asarray(d.corners, np.float64)
         out.append((int(d.tag_id), int(d.hamming), c[order].copy()))
     return out
