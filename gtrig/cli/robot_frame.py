@@ -55,9 +55,11 @@ def command(
     fit = fit_validation(names, val, survey.poses.names, survey.poses.xytheta, survey.poses_cov_joint())
     dump_rig(rig_tied_to_survey(r, fit), out)
     d, sd = fit.d_xytheta, np.sqrt(np.diag(fit.cov_d))
-    console.print(f"{out}: markers moved by {1000 * d[0]:.2f} mm, {1000 * d[1]:.2f} mm, "
-                  f"{math.degrees(d[2]):.4f} deg (sigma {1000 * sd[0]:.2f} mm, {1000 * sd[1]:.2f} mm, "
-                  f"{math.degrees(sd[2]):.4f} deg) from {int(fit.used.sum())} of {len(names)} stops; "
+    # rounded before printing, so that an offset below the last digit reads 0.00, never -0.00
+    dx, dy, dth = round(1000 * d[0], 2) + 0.0, round(1000 * d[1], 2) + 0.0, round(math.degrees(d[2]), 4) + 0.0
+    console.print(f"{out}: markers moved by {dx:.2f} mm, {dy:.2f} mm, {dth:.4f} deg "
+                  f"(sigma {1000 * sd[0]:.2f} mm, {1000 * sd[1]:.2f} mm, {math.degrees(sd[2]):.4f} deg) "
+                  f"from {int(fit.used.sum())} of {len(names)} stops; "
                   f"chi2 {fit.chi2:.1f} over {fit.dof} dof", highlight=False)
     for name in fit.excluded:
         console.print(f"left out: stop {name} (disagrees with the others)", highlight=False)

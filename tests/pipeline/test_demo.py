@@ -75,14 +75,16 @@ def test_demo_quick_runs_every_stage_against_truth(demo: Path, tmp_path: Path) -
     assert 0.2 < rows[("GTvision", "validation, mean NEES / dof")] < 8.0
 
     # the verb on its own: the calibrated rig is in the surveyed frame already, so a second fit finds
-    # no offset, and the rig it writes keeps the fit's common frame error
+    # no offset, and the rig it writes keeps the fit's common frame error. Not to the last bit: markers cut
+    # by the image's edge are looked for where the rig places them, so the tied rig's sub-micrometre move
+    # moves their start and the poses by as much (0.3 um measured)
     r2 = CliRunner().invoke(app, ["robot-frame", "--rig", str(res / "rig.calibrated.yaml"), "--recording",
                                   str(out / "recording"), "--out", str(tmp_path / "rig2.yaml"), "--workers", "1"])
     assert r2.exit_code == 0, r2.output
     assert "markers moved by 0.00 mm, 0.00 mm" in r2.output and "from 26 of 26 stops" in r2.output
     twice = load_rig(tmp_path / "rig2.yaml")
     for m in twice.robot.markers:
-        np.testing.assert_allclose(m.T_robot_marker.matrix(), cal.marker(m.id).T_robot_marker.matrix(), atol=1e-7)
+        np.testing.assert_allclose(m.T_robot_marker.matrix(), cal.marker(m.id).T_robot_marker.matrix(), atol=2e-6)
     yaw_sd_deg = np.degrees(np.sqrt(np.asarray(twice.robot.markers_frame_cov)[5, 5]))
     assert 0 < yaw_sd_deg < 0.05  # the survey's, not the hand's 0.1 deg
     bad = CliRunner().invoke(app, ["robot-frame", "--rig", str(out / "recording" / "rig.yaml"), "--recording",
