@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 
 from gtrig.errors import InputError
-from gtrig.vision.detect import Box
+from gtrig.vision.detect import Box, measured_corners
 from gtrig.vision.observations import MarkerView
 
 log = logging.getLogger(__name__)
@@ -228,10 +228,8 @@ def _union(boxes: Sequence[tuple[float, float, float, float]]) -> tuple[float, f
 def inside_image(corners: np.ndarray, size: tuple[int, int], border: float = 2.0, at_least: int = 4) -> bool:
     """At least ``at_least`` of the corners (4, 2) (all of them by default) ``border`` pixels or more inside
     an image of ``size`` (w, h)."""
-    w, h = size
-    ok = ((corners[:, 0] >= border) & (corners[:, 1] >= border) & (corners[:, 0] <= w - 1 - border)
-          & (corners[:, 1] <= h - 1 - border))
-    return int(ok.sum()) >= at_least
+    # measured_corners counts its border from the image's outer edge, half a pixel before the first centre
+    return int(measured_corners(np.asarray(corners, float), size, border + 0.5).sum()) >= at_least
 
 
 #: A tracked marker predicted with this many corners inside the image is looked for at its predicted corners

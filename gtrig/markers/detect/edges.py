@@ -793,8 +793,7 @@ def refine_quads(
         _threads.run_split(_edge_kernels.refine_pass, parts)
         if k == 0:
             _keep_unstrided(first_stride, stride, L, prm)
-    fit = EdgeFit(P[:, 0].copy(), P[:, 1].copy(), mid, P[:, 2].copy(), P[:, 3].copy(), sigma, P[:, 5:7].copy(),
-                  cov_line, rms, n_px, ok)
+    fit = _edge_fit(P, mid, sigma, cov_line, rms, n_px, ok)
     corners, cov = _edge_kernels.all_quad_corners(fit.theta, fit.rho, mid, cov_line)
     return fit, corners, cov
 
@@ -811,9 +810,15 @@ def _refine_in_one_call(gray: NDArray[np.uint8], quads: NDArray[np.float64], whi
     P, mid, sigma, cov_line, rms, n_px, ok, corners, cov = _edge_kernels.refine_all(
         np.ascontiguousarray(gray), lut, quads, np.ascontiguousarray(white, np.float64), int(border_cells), cfg,
         _fit_cfg(prm))
-    fit = EdgeFit(P[:, 0].copy(), P[:, 1].copy(), mid, P[:, 2].copy(), P[:, 3].copy(), sigma, P[:, 5:7].copy(),
-                  cov_line, rms, n_px, ok)
-    return fit, corners, cov
+    return _edge_fit(P, mid, sigma, cov_line, rms, n_px, ok), corners, cov
+
+
+def _edge_fit(P: NDArray[np.float64], mid: NDArray[np.float64], sigma: NDArray[np.float64],
+              cov_line: NDArray[np.float64], rms: NDArray[np.float64], n_px: NDArray[np.int64],
+              ok: NDArray[np.bool_]) -> EdgeFit:
+    """The :class:`EdgeFit` of the compiled passes' parameters ``P`` (4Q, 7) and fits."""
+    return EdgeFit(P[:, 0].copy(), P[:, 1].copy(), mid, P[:, 2].copy(), P[:, 3].copy(), sigma, P[:, 5:7].copy(),
+                   cov_line, rms, n_px, ok)
 
 
 def _fit_cfg(prm: RefineParams) -> NDArray[np.float64]:
