@@ -115,23 +115,6 @@ def fuse_sources(rig: Rig, poses_xytheta: np.ndarray, path_velocity: np.ndarray 
                             plan_velocity(theta, path_velocity, settings.speed_mps), source_rates(rig), settings)
 
 
-def fuse_information(covs: list[np.ndarray]) -> np.ndarray:
-    """Covariance (K, 3, 3) of independent estimates (each (K, 3, 3), nan where absent): the inverse of
-    the sum of their informations; nan where none is present."""
-    K = covs[0].shape[0]
-    info = np.zeros((K, 3, 3))
-    have = np.zeros(K, dtype=bool)
-    for C in covs:
-        ok = np.all(np.isfinite(C), axis=(1, 2))
-        if ok.any():
-            info[ok] += np.linalg.inv(C[ok])
-        have |= ok
-    out = np.full((K, 3, 3), np.nan)
-    if have.any():
-        out[have] = np.linalg.inv(info[have])
-    return out
-
-
 def _predict_block(rig: Rig, poses: np.ndarray, settings: PlanSettings) -> tuple[np.ndarray, ...]:
     """Both sources at poses (K, 3), chunk by chunk: vision and laser covariances (K, 3, 3), views,
     smallest sides, beams and sides per sensor, vision's persistent part (K, 3, 3) and the covariance of
