@@ -154,8 +154,9 @@ class DetectorParams(RefineSettings):
     min_soft_margin : a peer's ID is refused when the code nearest gtrig's solved cells is another ID's
         and leads the peer's by at least this many chi-square units (:mod:`.verify`); 0: only the hard
         reading can refuse it.
-    threads : threads the edge fits and AprilTag 3 may use; 0 follows OpenCV's setting
-        (``cv2.getNumThreads()``). OpenCV's detector runs with its own setting; the edge fits of fewer than
+    threads : threads the edge fits may use; 0 follows OpenCV's setting
+        (``cv2.getNumThreads()``). OpenCV's detector runs with its own setting and AprilTag 3 on its one
+        thread (:func:`.peers.apriltag3_candidates`); the edge fits of fewer than
         :data:`._threads.MIN_SPLIT_QUADS` quads stay in the calling thread.
     tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored levels
@@ -232,8 +233,6 @@ class MarkerDetector:
         gray = to_gray(image)
         if min(gray.shape) < 8:
             return []
-        # AprilTag 3 on one thread: its clustering's union-find is shared by its workers without locks
-        # (AprilRobotics/apriltag#387), and with two threads it crashed a test process
         cands = find_peer_candidates(gray, self.spec.family, self.params.peers)
         if not cands:
             return []

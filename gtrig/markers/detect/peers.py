@@ -149,22 +149,20 @@ def opencv_candidates(gray: NDArray[np.uint8], family: MarkerFamily) -> list[Pee
     return [PeerCandidate(q, int(i), "opencv") for q, i in zip(quads, ids.ravel().tolist(), strict=True)]
 
 
-def apriltag3_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams,
-                         threads: int = 1) -> list[PeerCandidate]:
-    """AprilTag 3's markers of ``family`` in ``gray`` with at most ``params.at3_max_hamming`` corrected bits,
-    found with ``threads`` threads."""
+def apriltag3_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams) -> list[PeerCandidate]:
+    """AprilTag 3's markers of ``family`` in ``gray`` with at most ``params.at3_max_hamming`` corrected bits
+    (its default one thread: with more, its clustering races, AprilRobotics/apriltag#387)."""
     from gtrig.markers.apriltag3 import at3_detect
 
     return [PeerCandidate(c, i, "apriltag3", h)
-            for i, h, c in at3_detect(gray, AT3_NAMES[family.value], params.at3_quad_decimate, threads)
+            for i, h, c in at3_detect(gray, AT3_NAMES[family.value], params.at3_quad_decimate)
             if h <= params.at3_max_hamming]
 
 
-def find_peer_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams,
-                         threads: int = 1) -> list[PeerCandidate]:
+def find_peer_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams) -> list[PeerCandidate]:
     """Every peer's candidates, pooled: where two peers report the same ID at the same place (centres
     closer than a quarter of the side), the first (OpenCV's) is kept. OpenCV runs with its own thread setting,
-    AprilTag 3 with ``threads`` (its default one: more race in its clustering)."""
+    AprilTag 3 on its one thread."""
     out: list[PeerCandidate] = []
     more: list[PeerCandidate] = []
     if params.opencv and uses_opencv(family):
@@ -173,7 +171,7 @@ def find_peer_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: 
             opened = cv2.morphologyEx(gray, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
             more += opencv_candidates(np.asarray(opened, np.uint8), family)
     if uses_apriltag3(family) and (params.apriltag3 or not uses_opencv(family)):
-        more += apriltag3_candidates(gray, family, params, threads)
+        more += apriltag3_candidates(gray, family, params)
     for c in more:
         if not any(o.id == c.id and _same_place(o.quad_px, c.quad_px) for o in out):
             out.append(c)
