@@ -197,6 +197,43 @@ def instant_cameras(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, sync_t
     return out
 
 
+#: share of a marker region's pixels at the 8-bit clip above which its image counts as over-exposed
+CLIPPED_SHARE = 0.02
+
+
+def overexposed_poses(rig: Rig, rec: Path, stamps_s: np.ndarray, true_xyt: np.ndarray, sync_tol_s: float = 0.005
+                      ) -> np.ndarray:
+    """(K,) bool: the GTvision poses (``stamps_s`` (K,), true planar poses ``true_xyt`` (K, 3)) one of whose
+    instant's images (within ``sync_tol_s``) clips the white of the robot's markers: more than
+    :data:`CLIPPED_SHARE` of the pixels in the box of the markers' projected corners at 255 (the robot in a
+    sunlit patch of the floor)."""
+    from gtrig.io.frames import read_frame_index
+    from gtrig.vision.observations import VisionModel
+
+    model = VisionModel.from_rig(rig)
+    corners = np.concatenate([model.corners_robot[m.id] for m in rig.robot.markers])
+    out = np.zeros(stamps_s.size, dtype=bool)
+    for cam in rig.cameras:
+        g = model.cameras[cam.name]
+        index = read_frame_index(rec / "run" / "cameras" / cam.name)
+        st = index.stamps_s
+        i = np.clip(np.searchsorted(st, stamps_s), 1, st.size - 1)
+        for n in (i - 1, i):
+            for k in np.flatnonzero((np.abs(st[n] - stamps_s) <= sync_tol_s) & ~out):
+                p_cam = geo.transform_points(g.T_cam_world @ geo.se2_to_T(*true_xyt[k]), corners)
+                if np.any(p_cam[:, 2] <= 0.05):
+                    continue
+                uv = geo.project_points(p_cam, g.K, g.dist)
+                (x0, y0), (x1, y1) = np.floor(uv.min(axis=0)).astype(int), np.ceil(uv.max(axis=0)).astype(int) + 1
+                w, h = g.size
+                x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+                if x1 - x0 < 2 or y1 - y0 < 2:
+                    continue
+                img = index.read(int(n[k]))
+                out[k] = np.mean(img[y0:y1, x0:x1] >= 255) > CLIPPED_SHARE
+    return out
+
+
 def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt: np.ndarray, err: np.ndarray,
                   plan_cov: np.ndarray, region: np.ndarray, ru, pooled: dict) -> None:  # noqa: ANN001
     """GTvision per region: the plan's ratio with and without the poses whose error the run's own
@@ -269,6 +306,26 @@ def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt
                     [rr.poses, rr.rms_error_m**2, rr.rms_sigma_m**2, rr.rms_error_rad**2, rr.rms_sigma_rad**2]))
         for n, (a, b) in zip(VISION_PARTS, sig, strict=True):
             pooled.setdefault(("part " + n, reg), []).append(np.array([m.sum(), a**2, b**2]))
+    exposure_split(rig, rec, stamps_s, true_xyt, err, {"plan": plan_cov, "run": run_cov}, region, pooled)
+
+
+def exposure_split(rig: Rig, rec: Path, stamps_s: np.ndarray, true_xyt: np.ndarray, err: np.ndarray,
+                   covs: dict[str, np.ndarray], region: np.ndarray, pooled: dict) -> None:  # noqa: ANN001
+    """GTvision per region, the poses from images whose markers' white is clipped (:func:`overexposed_poses`)
+    apart from the others: each covariance of ``covs`` (name: (K, 3, 3)) against the errors ``err`` (K, 3)."""
+    from gtrig.plan.honesty import region_ratios
+
+    over = overexposed_poses(rig, rec, stamps_s, true_xyt)
+    print(f"  vision: {int(over.sum())} of {over.size} poses from images with the markers' white clipped")
+    for name, cov in covs.items():
+        for label, keep in (("well exposed", ~over), ("clipped", over)):
+            rr = region_ratios(err, cov, region, min_poses=3, keep=keep)
+            print(f"      {name}, {label}: " + "; ".join(
+                f"cam{r.region} {r.poses} poses {r.position:.2f}/{r.yaw:.2f} ({1e3 * r.rms_error_m:.2f} mm)"
+                for r in rr))
+            for r in rr:
+                pooled.setdefault((f"{name} {label}", r.region), []).append(np.array(
+                    [r.poses, r.rms_error_m**2, r.rms_sigma_m**2, r.rms_error_rad**2, r.rms_sigma_rad**2]))
 
 
 def _pooled_ratio(rows: list[np.ndarray]) -> tuple[float, float, float]:
@@ -342,7 +399,8 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
           "parts (mm / deg):")
     for reg in sorted({k[1] for k in vision_pooled}):
         line = f"  region cam{reg}:"
-        for key in ("all", "kept", "run", "run kept", "own", "own kept", "per camera", "per camera kept"):
+        for key in ("all", "kept", "run", "run kept", "own", "own kept", "per camera", "per camera kept",
+                    "plan well exposed", "plan clipped", "run well exposed", "run clipped"):
             rows = vision_pooled.get((key, reg))
             if rows:
                 pos, yaw, e = _pooled_ratio(rows)
