@@ -8,6 +8,7 @@ the plan's CPU time per pose over the estimator's (``estimate_frame``) per pose,
     python bench/plan.py [--grid-m 0.05] [--headings 16] [--workers 1] [--figures docs/figures]
     python bench/plan.py --suggest 25 --grid-m 0.1 --headings 16 [--suggest-kind scanners]
     python bench/plan.py --honesty RESULTS=RECORDING [RESULTS=RECORDING ...] [--calibrated] [--instant]
+        [--corner-px SIGMA FLOOR]
 
 ``--honesty``: the plan's predicted sigmas of GTlaser, fusion and GTvision at the true poses of simulated
 runs (``gtrig run`` results folders beside the recordings ``gtrig sim`` wrote, with their truth) against
@@ -15,7 +16,10 @@ the runs' errors, per region of the floor (the camera that sees the robot best) 
 and each camera's predicted coverage against the share of its images in which the run found a marker.
 The plan is made from the recording's ``rig.yaml`` (the planned rig) with ``gtrig plan``'s default rig
 sigmas, or with ``--calibrated`` from the results' ``rig.calibrated.yaml`` (its calibrated covariances);
-``--instant`` predicts fusion as the two sources' information at one instant (no smoother).
+``--instant`` predicts fusion as the two sources' information at one instant (no smoother); ``--corner-px``
+sets the plan's corner noise (sigma at an 80 px marker, growing as the square root of 80 px over the
+side, and the floor added to it). GTvision's poses are also split by exposure: those from images in
+which the robot's markers clip at white (the robot in a sunlit patch) apart from the others.
 """
 
 from __future__ import annotations
@@ -235,26 +239,30 @@ def overexposed_poses(rig: Rig, rec: Path, stamps_s: np.ndarray, true_xyt: np.nd
 
 
 def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt: np.ndarray, err: np.ndarray,
-                  plan_cov: np.ndarray, region: np.ndarray, ru, pooled: dict) -> None:  # noqa: ANN001
+                  plan_cov: np.ndarray, region: np.ndarray, base, pooled: dict) -> None:  # noqa: ANN001
     """GTvision per region: the plan's ratio with and without the poses whose error the run's own
     covariance (``gt_vision_run_cov.csv``) does not explain (NEES beyond chi-square 3 dof at 0.1 %), the
     run's covariance's own ratio, and what the plan's sigma is made of (corner noise alone, with the
     cameras' pose errors, with the markers', all at one instant: without the time-stamp jitter); and the
     plan's ratio when each pose is predicted from the cameras whose images made it (``own``, at one
-    instant: without the jitter), and with the plan's instants per camera (``per camera``, likewise)."""
+    instant: without the jitter), and with the plan's instants per camera (``per camera``, likewise); every
+    prediction with the corner noise of ``base`` (the plan's :class:`VisionPlanSettings`)."""
+    from dataclasses import replace
+
     from gtrig.io.posetrack import read_covariance_csv
     from gtrig.plan.honesty import extreme_poses, region_ratios
-    from gtrig.plan.vision import VisionPlanSettings, predict_vision
+    from gtrig.plan.vision import predict_vision
     from gtrig.vision.covariance import RigUncertainty
 
+    ru = base.rig_uncertainty
     st, cov, _, _, _, _ = read_covariance_csv(res / "gt_vision_run_cov.csv")
     i = np.clip(np.searchsorted(st, stamps_s), 0, st.size - 1)
     run_cov = np.where((np.abs(st[i] - stamps_s) < 1e-6)[:, None, None], cov[i], np.nan)
     flagged = extreme_poses(err, run_cov)
     variants = (RigUncertainty.none(), RigUncertainty(ru.camera_xyz_m, ru.camera_rot_rad, 0.0, 0.0),
                 RigUncertainty(0.0, 0.0, ru.marker_xyz_m, ru.marker_rot_rad), ru)
-    parts = [predict_vision(rig, true_xyt, VisionPlanSettings(rig_uncertainty=u)).cov_xytheta for u in variants]
-    free = predict_vision(rig, true_xyt, VisionPlanSettings(rig_uncertainty=ru, instants="per_camera")).cov_of_a_pose
+    parts = [predict_vision(rig, true_xyt, replace(base, rig_uncertainty=u)).cov_xytheta for u in variants]
+    free = predict_vision(rig, true_xyt, replace(base, instants="per_camera")).cov_of_a_pose
     # the cameras whose images made each pose: GTvision's instant holds the images within its sync
     # tolerance (5 ms), one camera's in most instants of free-running cameras
     own = instant_cameras(rig, rec, res, stamps_s)
@@ -262,7 +270,7 @@ def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt
     for combo in {tuple(r) for r in own if r.any()}:
         m = np.all(own == np.array(combo), axis=1)
         sub = rig.model_copy(update={"cameras": tuple(c for c, k in zip(rig.cameras, combo, strict=True) if k)})
-        cov_own[m] = predict_vision(sub, true_xyt[m], VisionPlanSettings(rig_uncertainty=ru)).cov_xytheta
+        cov_own[m] = predict_vision(sub, true_xyt[m], base).cov_xytheta
     print(f"  vision: poses made of one camera's images {100 * np.mean(own.sum(axis=1) == 1):.0f} %, of two "
           f"{100 * np.mean(own.sum(axis=1) == 2):.0f} %")
     print(f"  vision: {int(flagged.sum())} of {err.shape[0]} poses flagged (NEES under the run's covariance "
@@ -334,8 +342,10 @@ def _pooled_ratio(rows: list[np.ndarray]) -> tuple[float, float, float]:
     return float(np.sqrt(e2 / s2)), float(np.sqrt(y2 / ys2)), float(np.sqrt(e2))
 
 
-def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: int = 3) -> None:
-    """Predicted against measured, per region and source (module docstring)."""
+def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: int = 3,
+            corner_px: tuple[float, float] | None = None) -> None:
+    """Predicted against measured, per region and source (module docstring); ``corner_px``: the plan's
+    corner sigma at an 80 px marker and its floor, pixels (None: the plan's defaults)."""
     from gtrig.io.tum import read_tum
     from gtrig.plan.fused import FusionPlanSettings
     from gtrig.plan.grid import path_grid
@@ -345,10 +355,14 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
     from gtrig.report.coverage import read_checkpoint
     from gtrig.rig.load import load_rig
     from gtrig.vision.covariance import RigUncertainty
+    from gtrig.vision.synthetic import CornerNoise
 
     ru = RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))  # gtrig plan's defaults
-    settings = PlanSettings(vision=VisionPlanSettings(rig_uncertainty=ru),
-                            fusion=FusionPlanSettings(smooth=not instant))
+    vision = VisionPlanSettings(rig_uncertainty=ru)
+    if corner_px is not None:
+        vision = VisionPlanSettings(rig_uncertainty=ru, corner_noise=CornerNoise(corner_px[0], 80.0),
+                                    corner_floor_px=corner_px[1])
+    settings = PlanSettings(vision=vision, fusion=FusionPlanSettings(smooth=not instant))
     sources = (("laser", "gt_laser.tum"), ("fused", "gt_fused.tum"), ("vision", "gt_vision_run.tum"))
     pooled: dict[tuple[str, int], list[np.ndarray]] = {}
     vision_pooled: dict[tuple[str, int], list[np.ndarray]] = {}
@@ -374,8 +388,8 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
                       f"{r.position:.2f} ({1e3 * r.rms_error_m:.3f} / {1e3 * r.rms_sigma_m:.3f} mm), yaw {r.yaw:.2f} "
                       f"({np.degrees(r.rms_error_rad):.4f} / {np.degrees(r.rms_sigma_rad):.4f} deg)")
             if src == "vision":
-                vision_detail(rig, rec, res, t[keep], true_xyt, err, plan.cov[src], region,
-                              settings.vision.rig_uncertainty, vision_pooled)
+                vision_detail(rig, rec, res, t[keep], true_xyt, err, plan.cov[src], region, settings.vision,
+                              vision_pooled)
         per, _ = read_checkpoint(res / "gt_vision_run.checkpoint")
         for cam in rig.cameras:
             stamps = _camera_stamps(rec, cam.name)
@@ -427,9 +441,12 @@ def main() -> None:
                     help="check the plan against these simulated runs instead (module docstring)")
     ap.add_argument("--calibrated", action="store_true", help="with --honesty: plan with the calibrated rig")
     ap.add_argument("--instant", action="store_true", help="with --honesty: fusion without its smoother")
+    ap.add_argument("--corner-px", nargs=2, type=float, metavar=("SIGMA", "FLOOR"), default=None,
+                    help="with --honesty: the plan's corner sigma at an 80 px marker and its floor, px "
+                         "(default: the plan's)")
     a = ap.parse_args()
     if a.honesty:
-        honesty(a.honesty, a.calibrated, a.instant)
+        honesty(a.honesty, a.calibrated, a.instant, corner_px=None if a.corner_px is None else tuple(a.corner_px))
     elif a.suggest:
         suggestion(a.grid_m, a.headings, a.suggest, a.suggest_kind, a.workers)
     elif a.figures is not None:
