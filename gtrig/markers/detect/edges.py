@@ -472,7 +472,8 @@ def fit_edges(
         P[slow, 4] = np.log(np.sqrt(np.maximum(np.exp(2 * P[slow, 4]) - PIXEL_VAR, 0.05**2)))
         # start the white level above the clip: from there the clipped pixels agree and the ramp's
         # pixels pull it down smoothly; from the clip level the hinge can hold it (a local minimum)
-        P[saturated, 3] = np.maximum(P[saturated, 3], 2.0 * (CLIP_HIGH - P[saturated, 2]))
+        P[saturated, 3] = np.minimum(np.maximum(P[saturated, 3], 2.0 * (CLIP_HIGH - P[saturated, 2])),
+                                     MAX_CLIPPED_WHITE * (CLIP_HIGH - P[saturated, 2]))
     # a clipped edge's white level converges slowly (only the ramp's unclipped pixels set it) and
     # drags the line with it: such edges get more iterations and must also settle their contrast
     bounds = np.concatenate([[0], np.cumsum(cnt.astype(np.int64))])
@@ -509,6 +510,35 @@ def fit_edges(
     refit = fit_edges(sub, p0[sharp], p1[sharp], np.asarray(sigma0, np.float64)[sharp], iterations, None
                       if extra is None else ext[sel], sub_init, tol, threads, pixel_model=True)
     return _merge(out, sharp, refit)
+
+
+def share_white(samples: EdgeSamples, fit: EdgeFit, sigma0: NDArray[np.float64], first: bool,
+                params: RefineParams, extra: NDArray[np.float64] | None = None) -> EdgeFit:
+    """``fit`` of quads' edges (4q .. 4q + 3) with each quad's saturated edges refitted where their white
+    level exceeds the paper's, read on the quad's sharpest saturated edge (``_edge_kernels.share_white``,
+    which :func:`refine_quads` calls in each pass): a clipped edge smeared across by motion trades its
+    contrast against its blur and runs its white level up, moving its line into the white.
+
+    ``samples``, ``sigma0`` and ``extra`` are those ``fit`` was fitted from; ``first`` the first pass
+    (no covariances).
+    """
+    E = len(fit.theta)
+    v = np.ascontiguousarray(samples.val, np.float64)
+    rel = samples.xy - fit.mid[samples.edge]
+    X0, X1 = np.ascontiguousarray(rel[:, 0]), np.ascontiguousarray(rel[:, 1])
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(samples.edge, minlength=E))]).astype(np.int64)
+    ext = np.zeros(len(v)) if extra is None else np.ascontiguousarray(extra, np.float64)
+    # (the blur's parameter is not read: a refit starts from ``sigma0``)
+    P = np.column_stack([fit.theta, fit.rho, fit.a, fit.b, np.zeros(E), fit.shade])
+    mid, sigma, cov = fit.mid.copy(), fit.sigma.copy(), fit.cov_line.copy()
+    rms, ok = fit.rms.copy(), fit.ok.copy()
+    cfg = _fit_cfg(params)
+    for q in range(E // 4):
+        sl = slice(4 * q, 4 * q + 4)
+        _edge_kernels.share_white(X0, X1, v, ext, bounds[4 * q:4 * q + 5], np.ascontiguousarray(sigma0[sl]), first,
+                                  cfg, P[sl], mid[sl], sigma[sl], cov[sl], rms[sl], ok[sl])
+    return EdgeFit(P[:, 0].copy(), P[:, 1].copy(), mid, P[:, 2].copy(), P[:, 3].copy(), sigma, P[:, 5:7].copy(),
+                   cov, rms, fit.n_px, ok)
 
 
 def _subset(fit: EdgeFit, sel: NDArray[np.bool_]) -> EdgeFit:
@@ -878,12 +908,14 @@ def refine_quads_stepwise(
         if light is not None:
             samples = dataclasses.replace(samples, val=np.asarray(light, np.float64)[samples.val.astype(np.intp)])
         if fit is None:
-            fit = fit_edges(samples, a0, a1, sg, iterations=prm.iterations, tol=prm.tol)
+            fit = share_white(samples, fit_edges(samples, a0, a1, sg, iterations=prm.iterations, tol=prm.tol), sg,
+                              True, prm)
         else:
             prev = _subset(fit, on)
             before, _ = intersect_corners(prev, len(qs))
             extra = marker_context(samples, prev, before, white[qs])
             new = fit_edges(samples, a0, a1, sg, iterations=prm.iterations, extra=extra, init=prev, tol=prm.tol)
+            new = share_white(samples, new, sg, False, prm, extra)
             after, _ = intersect_corners(new, len(qs))
             # a quad whose corners this pass moved less than settle_px stops (NaN moves go on)
             active[qs[np.linalg.norm(after - before, axis=2).max(axis=1) < prm.settle_px]] = False
