@@ -5,9 +5,8 @@ One detector per family and decimation, on the library's default one thread (wit
 races and crashed a test process: AprilRobotics/apriltag#387), is made once per process and never
 destroyed: destroying one now and then crashes the process (a double free in ``Detector.__del__``,
 pupil-labs/apriltags issues 46 and 52), so at exit each is disarmed (its pointer dropped) and the
-operating system frees it. A
-detector is used by one thread at a time (a lock each): the library keeps a detection's working state in
-the detector, and two threads detecting with one detector crashed the process.
+operating system frees it. A detector is used by one thread at a time (a lock each): the library keeps a
+detection's working state in the detector, and two threads detecting with one detector crashed the process.
 
 The newer families' detectors correct one bit (:data:`NEWER_FAMILY_BITS`) instead of the binding's fixed
 two: AprilTag 3 tabulates every code within the corrected bits, and at two bits the tables of
