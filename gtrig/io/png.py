@@ -3,7 +3,7 @@
 A camera frame of 1024 x 768 costs about 6 ms to decode through OpenCV (libpng), 4 ms of it in zlib's
 inflate: the largest share of GTvision's CPU per tracked image. ISA-L's inflate (the ``isal`` package)
 takes a quarter of zlib's time on these streams and the rows' filters are undone by a compiled kernel,
-which brings a frame to about 1.5 ms. Without ``isal`` the standard library's zlib inflates (the output is
+which brings a frame to about 2 ms. Without ``isal`` the standard library's zlib inflates (the output is
 the same; only the time differs).
 
 Handled here: greyscale (colour type 0) of 8 or 16 bits per sample, not interlaced, without a
