@@ -9,9 +9,8 @@ and end points; the last pass adds the lines' covariances and the corners
 (:func:`.edges.intersect_corners`). The arithmetic is the same as theirs, step for step, so the
 results agree with them to rounding; what goes is the interpreter's work per step and per edge, and
 the temporaries of the array forms (most of the time on a marker of a few hundred band pixels per
-edge). The quads are independent within a pass: the caller may split them between threads. The one
-value shared by all quads of a pass (the origin of :func:`.edges.white_extent`'s bins, the widest
-inner band) is given by the caller.
+edge). The quads are independent: the caller may split them between threads, and a quad's results do
+not depend on the others fitted with it.
 """
 
 from __future__ import annotations
@@ -158,10 +157,12 @@ def _gather_undistorted(gray: NDArray[np.uint8], map_x: NDArray[np.float32], map
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _white_limit(d: NDArray[np.float64], v: NDArray[np.float64], lo_i: int, hi_i: int, lo: float, step: float,
+def _white_limit(d: NDArray[np.float64], v: NDArray[np.float64], lo_i: int, hi_i: int, step: float,
                  sigma: float, w_in: float, w_look: float, drop: float, end_sigmas: float) -> float:
     """:func:`.edges.white_extent` of one edge: its pixels ``lo_i:hi_i`` at distances ``d`` across it,
-    values ``v``; bins of ``step`` from ``-lo``. Returns the outer limit (at most ``w_look``)."""
+    values ``v``; bins of ``step`` on multiples of ``step`` (:func:`.edges.profile_origin`). Returns the
+    outer limit (at most ``w_look``)."""
+    lo = step * (math.floor(w_in / step) + 1.0)
     nb = int(math.floor((lo + w_look) / step)) + 2
     cnt = np.zeros(nb, np.int64)
     tot = np.zeros(nb)
@@ -454,7 +455,7 @@ def _edge_starts(es: NDArray[np.int64]) -> NDArray[np.int64]:
 def _trim_to_paper(x: NDArray[np.float64], y: NDArray[np.float64], raw: NDArray[np.float64], es: NDArray[np.int64],
                    starts: NDArray[np.int64], p0: NDArray[np.float64], p1: NDArray[np.float64],
                    w_in: NDArray[np.float64], w_out: NDArray[np.float64], w_look: NDArray[np.float64],
-                   sigma: NDArray[np.float64], lo: float, step: float, drop: float, end_sigmas: float
+                   sigma: NDArray[np.float64], step: float, drop: float, end_sigmas: float
                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """A quad's band pixels (x, y, values, edge 0..3; ``starts`` of :func:`_edge_starts`) without those
     beyond the paper's end (:func:`_white_limit`, at most ``w_out``) or beyond ``w_out`` itself
@@ -472,8 +473,8 @@ def _trim_to_paper(x: NDArray[np.float64], y: NDArray[np.float64], raw: NDArray[
         d[i] = (x[i] - p0[k, 0]) * unit[k, 1] - (y[i] - p0[k, 1]) * unit[k, 0]
     lim = np.empty(4)
     for k in range(4):
-        lim[k] = min(w_out[k], _white_limit(d, raw, starts[k], starts[k + 1], lo, step, sigma[k], w_in[k],
-                                            w_look[k], drop, end_sigmas))
+        lim[k] = min(w_out[k], _white_limit(d, raw, starts[k], starts[k + 1], step, sigma[k], w_in[k], w_look[k],
+                                            drop, end_sigmas))
     m = 0
     for i in range(N):
         if d[i] <= lim[es[i]]:
@@ -528,8 +529,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
     w_in, w_out, w_look, excl : (4Q,) the band's limits (:func:`.edges.gather_band`); ``w_look`` the
         outer limit read for the paper's end (``w_out`` itself when that is not looked for); stride : (4Q,)
         the column stride of each band (:func:`.edges.band_stride`).
-    white : (Q, n, n) white cells. band_cfg : (white end looked for (0/1), bins' origin, bin width,
-        white-end drop, white-end sigmas, blur lower clip, blur upper clip, settling move in pixels).
+    white : (Q, n, n) white cells. band_cfg : (white end looked for (0/1), bin width, white-end drop,
+        white-end sigmas, blur lower clip, blur upper clip, settling move in pixels).
     fit_cfg : :func:`_fit_edge`'s ``cfg``. first : the first pass (plain steps, no covariances).
     active : (Q,) the quads this pass fits; one whose corners (:func:`quad_corners`) moved less than the
         settling move in a pass after the first is set False (it keeps this pass's fits).
@@ -538,9 +539,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
     """
     Q = white.shape[0]
     undistorted = boxes.shape[0] > 0
-    look, lo_bins, step, drop, end_sigmas, s_lo, s_hi = (band_cfg[0] > 0.5, band_cfg[1], band_cfg[2], band_cfg[3],
-                                                         band_cfg[4], band_cfg[5], band_cfg[6])
-    settle = band_cfg[7]
+    look, step, drop, end_sigmas = band_cfg[0] > 0.5, band_cfg[1], band_cfg[2], band_cfg[3]
+    s_lo, s_hi, settle = band_cfg[4], band_cfg[5], band_cfg[6]
     init = np.empty((4, _NP))
     init_mid = np.empty((4, 2))
     new_mid = np.empty(2)
@@ -561,7 +561,7 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
         starts = _edge_starts(es)
         if look:
             x, y, raw, es = _trim_to_paper(x, y, raw, es, starts, p0[sl], p1[sl], w_in[sl], w_out[sl], w_look[sl],
-                                           sigma0[sl], lo_bins, step, drop, end_sigmas)
+                                           sigma0[sl], step, drop, end_sigmas)
             starts = _edge_starts(es)
         N = x.shape[0]
         v = np.empty(N)
@@ -713,18 +713,6 @@ def quad_sides(quads: NDArray[np.float64], n: int, border_cells: int
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def widest_inner(w_in: NDArray[np.float64], active: NDArray[np.bool_]) -> float:
-    """The widest inner band ``w_in`` (4Q,) of the ``active`` (Q,) quads (NaN if one is; -inf for none):
-    the origin of :func:`.edges.white_extent`'s bins, shared by the pass."""
-    out = -np.inf
-    for q in range(active.shape[0]):
-        if active[q]:
-            for k in range(4):
-                out = _nan_max(out, w_in[4 * q + k])
-    return out
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
 def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], quads: NDArray[np.float64],
                white: NDArray[np.float64], border_cells: int, cfg: NDArray[np.float64], fit_cfg: NDArray[np.float64]
                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
@@ -772,13 +760,12 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], quads: NDArray
     active = np.ones(Q, np.bool_)
     no_map = np.zeros((0, 0), np.float32)
     no_boxes = np.zeros((0, 4), np.int64)
-    band_cfg = np.array([cfg[5], 0.0, cfg[7], cfg[8], cfg[9], 0.3, cfg[10], cfg[11]])
+    band_cfg = np.array([cfg[5], cfg[7], cfg[8], cfg[9], 0.3, cfg[10], cfg[11]])
     for k in range(passes):
         if not active.any():
             break
         w_in, w_out, w_look, excl = band_limits(sigma0, L, cell, border, k == 0, band_px, margin_cells, white_end,
                                               look_sigmas)
-        band_cfg[1] = widest_inner(w_in, active)
         refine_pass(gray, lut, no_map, no_map, no_boxes, p0, p1, sigma0, w_in, w_out, w_look, excl,
                     first_stride if k == 0 else stride, white, band_cfg, fit_cfg, k == 0, active, P, mid, sigma,
                     cov_line, rms, n_px, ok)
