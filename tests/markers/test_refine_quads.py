@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gtrig.markers.detect import _edge_kernels
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.edges import RefineParams, refine_quads, refine_quads_stepwise
 from gtrig.markers.detect.tone import to_light
@@ -132,3 +133,26 @@ def test_band_limits_follow_their_formulas() -> None:
             np.testing.assert_array_equal(w_out, out)
             np.testing.assert_array_equal(w_look, out + prm.look_sigmas * sigma if prm.white_end else out)
             np.testing.assert_array_equal(excl, ends)
+
+
+def test_band_boxes_hold_every_raw_pixel_of_the_band() -> None:
+    """With a lens model the compiled passes scan each band's box in the raw image: every raw pixel whose
+    undistorted position lies in the band (up to ``max(w_in, w_out)`` across the edge and beyond its ends)
+    is inside it, and the box is not much larger than those pixels' own."""
+    K = np.array([[700.0, 0, 511.5], [0, 700.0, 383.5], [0, 0, 1]])
+    dist = np.array([-0.25, 0.12, 2e-4, -3e-4, -0.02, 0.0, 0.0, 0.0])
+    und = Undistorter(K, dist[:5], (768, 1024))
+    rng = np.random.default_rng(3)
+    p0 = rng.uniform([60.0, 60.0], [960.0, 700.0], (12, 2))
+    p1 = p0 + rng.uniform(-50.0, 50.0, (12, 2))
+    w_in, w_out = rng.uniform(1.0, 8.0, 12), rng.uniform(1.0, 8.0, 12)
+    boxes = _edge_kernels.raw_boxes(768, 1024, p0, p1, w_in, w_out, K, dist)
+    for e in range(12):
+        t = (p1[e] - p0[e]) / np.linalg.norm(p1[e] - p0[e])
+        rel = np.stack([und.map_x - p0[e, 0], und.map_y - p0[e, 1]], axis=-1)
+        s, d = rel @ t, rel @ np.array([t[1], -t[0]])
+        ext = max(w_in[e], w_out[e])
+        iy, ix = np.nonzero((np.abs(d) <= ext) & (s >= -ext) & (s <= np.linalg.norm(p1[e] - p0[e]) + ext))
+        x0, y0, x1, y1 = boxes[e]
+        assert ix.min() >= x0 and ix.max() < x1 and iy.min() >= y0 and iy.max() < y1
+        assert ix.min() - x0 <= 3 and x1 - ix.max() <= 4 and iy.min() - y0 <= 3 and y1 - iy.max() <= 4
