@@ -42,9 +42,9 @@ def threads(setting: int) -> int:
     return setting if setting > 0 else cv2.getNumThreads()
 
 
-#: quads below which the edge fits stay in the calling thread: handing a pass's parts to the helper thread
-#: costs about 40 us per pass (3 passes), a marker's fit about 0.2 ms, and on a loaded machine the helper
-#: may not run at all before the caller has done the work
+#: quads below which the edge fits stay in the calling thread: handing a share of the quads to the helper
+#: thread costs about 40 us (once per refinement: a share's passes run in one compiled call), a marker's fit
+#: about 0.5 ms, and on a loaded machine the helper may not run at all before the caller has done the work
 MIN_SPLIT_QUADS = 4
 
 
