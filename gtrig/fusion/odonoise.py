@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import nnls
 
 from gtrig.fusion.measurements import Fixes, FixModel
-from gtrig.fusion.process import OdometryJumps, OdometryNoise, odometry_increments, odometry_jumps
+from gtrig.fusion.process import OdometryJumps, OdometryNoise, odometry_increments, odometry_jumps, wheel_travel
 from gtrig.io.odometry import OdometryLog
 
 log = logging.getLogger(__name__)
@@ -157,8 +157,7 @@ class _DeadReckoning:
 def _unit_covariances(u: np.ndarray, dt_s: np.ndarray, wheelbase_m: float) -> np.ndarray:
     """(4, N-1, 3, 3) each increment's covariance per unit of the four variances: wheel slip (m^2 per m),
     side slip (m^2 per m), position floor (m^2 per s), heading floor (rad^2 per s)."""
-    ds = np.hypot(u[:, 0], u[:, 1])
-    wr, wl = np.abs(ds + u[:, 2] * wheelbase_m / 2), np.abs(ds - u[:, 2] * wheelbase_m / 2)
+    wr, wl = wheel_travel(u, wheelbase_m)
     Q = np.zeros((4, u.shape[0], 3, 3))
     Q[0, :, 0, 0] = (wr + wl) / 4
     Q[0, :, 2, 2] = (wr + wl) / wheelbase_m**2
