@@ -11,7 +11,6 @@ from gtrig.fusion.odonoise import fit_odometry_noise
 from gtrig.fusion.process import OdometryNoise
 from gtrig.io.odometry import OdometryLog
 from gtrig.sim.floor import Floor
-from gtrig.sim.gtroom import continuous_path
 from gtrig.sim.motion import RobotMotion
 from gtrig.sim.odometry import OdometryErrors, simulate_odometry
 from gtrig.trajectory import PoseTrack
@@ -21,8 +20,13 @@ SLIP = 0.002  # the simulated wheels' slip, m per sqrt(m)
 
 @pytest.fixture(scope="module")
 def motion() -> RobotMotion:
-    st, xyth = continuous_path(duration_s=60.0)
-    return RobotMotion(st + 100.0, xyth, Floor.flat())
+    """Three minutes of a robot wandering at 0.2-0.4 m/s and turning both ways (a fit needs 250 windows)."""
+    st = 100.0 + np.arange(0.0, 180.0, 0.005)
+    v = 0.3 + 0.1 * np.sin(st / 17.0)
+    w = 0.6 * np.sin(st / 5.3) + 0.3 * np.sin(st / 2.1)
+    th = np.cumsum(w) * 0.005
+    xyth = np.column_stack([np.cumsum(v * np.cos(th)) * 0.005, np.cumsum(v * np.sin(th)) * 0.005, th])
+    return RobotMotion(st, xyth, Floor.flat())
 
 
 def _run(motion: RobotMotion, seed: int) -> tuple[list[PoseTrack], OdometryLog]:
@@ -39,15 +43,16 @@ def _run(motion: RobotMotion, seed: int) -> tuple[list[PoseTrack], OdometryLog]:
 
 
 def _bridged_nees(motion: RobotMotion, opts: FusionOptions, seeds: range) -> float:
-    """Mean NEES/dof of the poses bridged over 3 s gaps cut every 10 s from both sources, over ``seeds``."""
+    """Mean NEES/dof of the poses bridged over 3 s gaps cut every 20 s from both sources, over ``seeds``."""
     q = []
     for seed in seeds:
         tracks, odo = _run(motion, seed)
-        t0 = motion.stamps_s[0] + 2.0 + 5.0 * (seed % 2)
-        cut = [t.select(((t.stamps_s - t0) % 10.0 < 5.0) | ((t.stamps_s - t0) % 10.0 > 8.0)) for t in tracks]
-        track, _ = fuse([fixes_from_track(t) for t in cut], odo, opts)
+        t0 = motion.stamps_s[0] + 5.0 + 10.0 * (seed % 2)
+        cut = [t.select(((t.stamps_s - t0) % 20.0 < 10.0) | ((t.stamps_s - t0) % 20.0 > 13.0)) for t in tracks]
+        track, report = fuse([fixes_from_track(t) for t in cut], odo, opts)
+        assert ("windows" in report.odometry_noise) == opts.fit_odometry_noise
         b = track.status == 2
-        assert b.sum() > 400  # five gaps of 150 nodes: the check is not empty
+        assert b.sum() > 1200  # eight gaps of 150 nodes at least: the check is not empty
         q.append(nees(track.select(b), motion) / 3)
     return float(np.mean(np.concatenate(q)))
 
@@ -71,15 +76,15 @@ def test_bridged_poses_are_consistent_when_the_model_has_floors_the_wheels_do_no
     # the stated model's floors per second (0.5 mm and 0.5 mrad per sqrt(s)) are errors that wheels
     # rolling on a floor do not make: taken as stated, a 3 s bridge's covariance is too wide
     opts = FusionOptions(correlation_s=0.0)
-    fitted = _bridged_nees(motion, opts, range(12))
+    fitted = _bridged_nees(motion, opts, range(6))
     assert 0.75 < fitted < 1.5, fitted
-    stated = _bridged_nees(motion, FusionOptions(correlation_s=0.0, fit_odometry_noise=False), range(12))
-    assert stated < 0.7, stated
+    stated = _bridged_nees(motion, FusionOptions(correlation_s=0.0, fit_odometry_noise=False), range(6))
+    assert stated < 0.7, (stated, fitted)
 
 
-def test_a_short_run_keeps_the_stated_model(motion: RobotMotion) -> None:
+def test_a_run_too_short_to_fit_keeps_the_stated_model(motion: RobotMotion) -> None:
     tracks, odo = _run(motion, 0)
-    short = [fixes_from_track(t.select(t.stamps_s < motion.stamps_s[0] + 8.0)) for t in tracks]
+    short = [fixes_from_track(t.select(t.stamps_s < motion.stamps_s[0] + 90.0)) for t in tracks]
     _, report = fuse(short, odo, FusionOptions())
     assert "windows" not in report.odometry_noise
     assert report.odometry_noise["slip_m_per_sqrt_m"] == OdometryNoise().slip_m_per_sqrt_m
