@@ -70,10 +70,10 @@ class FusionOptions:
         down-weighted there. 0: off.
     odometry : the odometry noise model (the start of its fit, with ``fit_odometry_noise``); cv : the
         constant-velocity model (no odometry).
-    fit_odometry_noise : the odometry's random errors (wheel slip and side slip per metre, floors per
-        second) fitted to how far it and the pose sources disagree over windows of a few seconds, the
-        sources' own noise taken out (gtrig.fusion.odonoise); ``odometry`` as given where the run is too
-        short for the fit. False: ``odometry`` as given.
+    fit_odometry_noise : the odometry's random errors (the wheels' slip per metre, the side slip at its
+        stated ratio to it, and a floor per second) fitted to how far it and the pose sources disagree over
+        windows of a few seconds, the sources' own noise taken out (gtrig.fusion.odonoise); ``odometry``
+        as given where the run is too short for the fit. False: ``odometry`` as given.
     prior_sigma : (x, y, yaw) sigmas of the start around the robust anchor (m, m, rad).
     bias_cov : per source, the covariance of the error its fixes share over the whole run (its calibration:
         the scanners' registration, the robot frame's fit), over world (x, y, yaw) (3 x 3; m^2, rad^2) for
