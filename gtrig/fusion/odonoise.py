@@ -157,29 +157,16 @@ class _DeadReckoning:
         return _relative(self.at(w.t_a), self.at(w.t_b))
 
 
-def _unit_covariances(u: np.ndarray, dt_s: np.ndarray, wheelbase_m: float) -> np.ndarray:
-    """(4, N-1, 3, 3) each increment's covariance per unit of the four variances: wheel slip (m^2 per m),
-    side slip (m^2 per m), position floor (m^2 per s), heading floor (rad^2 per s)."""
-    wr, wl = wheel_travel(u, wheelbase_m)
-    Q = np.zeros((4, u.shape[0], 3, 3))
-    Q[0, :, 0, 0] = (wr + wl) / 4
-    Q[0, :, 2, 2] = (wr + wl) / wheelbase_m**2
-    Q[0, :, 0, 2] = Q[0, :, 2, 0] = (wr - wl) / (2 * wheelbase_m)
-    Q[1, :, 1, 1] = (wr + wl) / 4
-    Q[2, :, 0, 0] = Q[2, :, 1, 1] = dt_s
-    Q[3, :, 2, 2] = dt_s
-    return Q
-
-
 #: increments per slice in :func:`_sensitivities`: its temporaries stay a slice's, not an hour's
 CHUNK = 1 << 15
 
 
 def _sensitivities(dr: _DeadReckoning, w: _Windows, u: np.ndarray, wheelbase_m: float) -> np.ndarray:
-    """(4, W, 3, 3): each window's relative-pose covariance per unit of each variance
-    (:func:`_unit_covariances` of the increments ``u`` (N-1, 3)), from the increments whose middle lies
-    inside it: an increment's error moves the window's end by its own translation error turned into the
-    window's frame, and by its heading error times the lever from the increment's end to the window's end."""
+    """(4, W, 3, 3): each window's relative-pose covariance per unit of each variance (wheel slip and side
+    slip, m^2 per m rolled; position and heading floors, m^2 and rad^2 per s), from the increments ``u``
+    (N-1, 3) whose middle lies inside it: an increment's error moves the window's end by its own
+    translation error turned into the window's frame (columns ``c0``, ``c1``), and by its heading error
+    times the lever from the increment's end to the window's end (``c2``)."""
     st = dr.stamps_s
     mid = 0.5 * (st[:-1] + st[1:])
     out = np.zeros((4, w.t_a.size, 3, 3))
@@ -195,12 +182,22 @@ def _sensitivities(dr: _DeadReckoning, w: _Windows, u: np.ndarray, wheelbase_m: 
         lever = end[j, :2] - dr.xy[i + 1]  # world of the dead reckoning; turned into the window's frame below
         ca, sa = np.cos(th0), np.sin(th0)
         lx, ly = ca * lever[:, 0] + sa * lever[:, 1], -sa * lever[:, 0] + ca * lever[:, 1]
-        J = np.zeros((i.size, 3, 3))
-        J[:, 0, 0], J[:, 0, 1], J[:, 1, 0], J[:, 1, 1] = c, -s, s, c
-        J[:, 0, 2], J[:, 1, 2], J[:, 2, 2] = -ly, lx, 1.0
-        Q = _unit_covariances(u[i], st[i + 1] - st[i], wheelbase_m)
-        for k in range(4):
-            np.add.at(out[k], j, J @ Q[k] @ np.swapaxes(J, 1, 2))
+        zero, one = np.zeros(i.size), np.ones(i.size)
+        c0, c1, c2 = (np.column_stack(v) for v in ((c, s, zero), (-s, c, zero), (-ly, lx, one)))
+        wr, wl = wheel_travel(u[i], wheelbase_m)
+        dt = st[i + 1] - st[i]
+
+        def outer(x: np.ndarray, y: np.ndarray, f: np.ndarray) -> np.ndarray:
+            return f[:, None, None] * x[:, :, None] * y[:, None, :]
+
+        # the slip model's covariance per increment (process.odometry_increments) per unit of each variance
+        terms = (outer(c0, c0, (wr + wl) / 4) + outer(c2, c2, (wr + wl) / wheelbase_m**2)
+                 + outer(c0, c2, (wr - wl) / (2 * wheelbase_m)) + outer(c2, c0, (wr - wl) / (2 * wheelbase_m)),
+                 outer(c1, c1, (wr + wl) / 4), outer(c0, c0, dt) + outer(c1, c1, dt), outer(c2, c2, dt))
+        # the increments are in time order, so their windows are too: one sum per run of equal windows
+        first = np.flatnonzero(np.r_[True, j[1:] != j[:-1]])
+        for k, t in enumerate(terms):
+            out[k, j[first]] += np.add.reduceat(t, first, axis=0)
     return out
 
 
@@ -332,7 +329,8 @@ def fit_odometry_noise(fixes: list[Fixes], odometry: OdometryLog, given: Odometr
     keep = np.ones(mis.size, bool)
     nees_given = float("nan")
     for it in range(iterations):
-        A = mis.sensitivities(k)
+        if it < 2:  # after the parameters' first step the sensitivities barely move (a 1 % turn scale)
+            A = mis.sensitivities(k)
         S = mis.F + np.einsum("k,kwij->wij", theta, A)
         k = _fit_parameters(partial(mis.odometry, mask=keep), mis.rel_fix[keep], S[keep], k, k0, Pk)
         r = mis.rel_fix - mis.odometry(k)
