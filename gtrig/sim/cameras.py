@@ -388,7 +388,7 @@ def render_sequence(scene: Scene, rig_true_camera: Camera, motion: RobotMotion, 
     folder.mkdir(parents=True, exist_ok=True)
     ci = _cam_index(scene, rig_true_camera.name)
     stamps_s = np.asarray(stamps_s, float)
-    draw = cfg.noise_draw_of("recording")
+    draw = cfg.noise_draw_of("sensors")
     shared = _SeqShared(scene, rig_true_camera, motion, folder, cfg.camera, int(seed), ci, draw)
     _cached_view(scene, rig_true_camera, cfg.camera)  # once, before forking: workers inherit it
     _parallel_map(_seq_frame, shared, list(enumerate(stamps_s.tolist())), cfg.workers)

@@ -87,20 +87,21 @@ class SimConfig(_Cfg):
         default=0, ge=0, description="0: the seed's own measurement noise; k > 0: the k-th independent draw of "
         "it, everything else (scene, rig, paths, people, clock offsets, odometry calibration, calibration "
         "poses) the seed's: Monte Carlo evaluation (docs/simulator.md, 'Noise draws')")
-    noise_redrawn: Literal["all", "calibration"] = Field(
-        default="all", description="what noise_draw redraws: every measurement's noise, or only the "
-        "calibration images' (calib/, handheld/)")
+    noise_redrawn: Literal["all", "sensors", "calibration"] = Field(
+        default="all", description="what noise_draw redraws: every measurement's noise; the sensors' "
+        "(cameras, scanners, odometry), the survey's readings kept; or only the calibration images' "
+        "(calib/, handheld/)")
     camera: CameraSimConfig = CameraSimConfig()
     laser: LaserSimConfig = LaserSimConfig()
     motion: MotionSimConfig = MotionSimConfig()
 
-    def noise_draw_of(self, data: Literal["calibration", "recording"]) -> int:
+    def noise_draw_of(self, data: Literal["calibration", "sensors", "survey"]) -> int:
         """The noise draw of ``data``: ``calibration`` the calibration images (``calib/``, ``handheld/``),
-        ``recording`` every other measurement (sequences' images and stamps, scans, odometry, survey);
-        0 is the seed's own noise."""
-        if data == "recording" and self.noise_redrawn == "calibration":
-            return 0
-        return self.noise_draw
+        ``sensors`` the sequences' images and stamps, the scans and the odometry, ``survey`` the hand
+        laser's readings; 0 is the seed's own noise."""
+        redrawn = {"all": ("calibration", "sensors", "survey"), "sensors": ("calibration", "sensors"),
+                   "calibration": ("calibration",)}[self.noise_redrawn]
+        return self.noise_draw if data in redrawn else 0
 
     @classmethod
     def quick_defaults(cls, seed: int = 0) -> SimConfig:

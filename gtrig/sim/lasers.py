@@ -398,7 +398,7 @@ def simulate_fixed_scans(
     for si, sc in enumerate(scene.rig_true.laser_scanners):
         rng = np.random.default_rng([seed, si])
         # the clock offset and phase are the scanner's own; the range noise, dropouts and jitter are redrawn
-        noise = noise_stream(rng, [seed, si], cfg.noise_draw_of("recording"))
+        noise = noise_stream(rng, [seed, si], cfg.noise_draw_of("sensors"))
         T_ws = sc.T_world_scanner.matrix()
         T_sw = geo.inv_T(T_ws)
         segs, z_top, seg_refl = static_segments(scene, T_ws[:2, 3])
@@ -506,7 +506,7 @@ def simulate_onboard_scans(
     info = ScanSimInfo()
     for si, sc in enumerate(scene.rig_true.robot.onboard_scanners):
         rng = np.random.default_rng([seed, 100 + si])
-        noise = noise_stream(rng, [seed, 100 + si], cfg.noise_draw_of("recording"))
+        noise = noise_stream(rng, [seed, 100 + si], cfg.noise_draw_of("sensors"))
         T_rs = sc.T_robot_scanner.matrix()
         ang = sc.angles_rad
         B = len(ang)

@@ -126,7 +126,7 @@ def write_odometry(
     rng = np.random.default_rng([seed, 0x0D0])
     errors = OdometryErrors.draw(rng)
     rate = scene.rig_true.robot.odometry.rate_hz
-    slip = noise_stream(rng, [seed, 0x0D0], cfg.noise_draw_of("recording"))
+    slip = noise_stream(rng, [seed, 0x0D0], cfg.noise_draw_of("sensors"))
     log = simulate_odometry(motion, t0, t1, rate, errors, slip)
     if cfg.odometry_clock_offset_s:
         log = OdometryLog(log.stamps_s + cfg.odometry_clock_offset_s, log.xytheta, log.v_mps, log.omega_radps)

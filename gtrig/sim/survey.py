@@ -226,7 +226,7 @@ def write_survey(
     seed : random seed of the hand-laser noise.
     survey_cfg : robot-point layout and readings per pose.
     """
-    draw = 0 if cfg is None else cfg.noise_draw_of("recording")
+    draw = 0 if cfg is None else cfg.noise_draw_of("survey")
     key = [seed, 0x5E7]
     sv = simulate_survey(scene, T_world_robot_validation, noise_stream(np.random.default_rng(key), key, draw),
                          survey_cfg)
