@@ -8,10 +8,13 @@ figures lie within 5 % of each other (what a 5 % tolerance passes when only the 
 given the results of another run on the seed's own noise (``--compare``), how many standard deviations
 its figure lies from the draws' mean. Then the analytic check of the validation's yaw: each marker's yaw
 in the robot frame over the draws against the yaw sigma the marker calibration states (``markers.yaml``),
-and the common yaw offset of the validation stops (mean signed yaw error) over the draws.
+and the common yaw offset of the validation stops (mean signed yaw error) over the draws. ``--own``
+counts the results of the same code on the seed's own recording (draw 0) as one more draw: their z is
+then from the other draws.
 
     python bench/spread.py --out DIR [--seeds 1 2] [--draws 3] [--redrawn all|calibration]
-                           [--compare /path/s{seed}/results] [--workers 0] [--tabulate-only]
+                           [--compare /path/s{seed}/results] [--own /path/s{seed}/results]
+                           [--workers 0] [--tabulate-only]
 
 Recordings go to ``DIR/s<seed>/draw<k>/recording`` (``sensors<k>``, ``calibration<k>`` with
 ``--redrawn``) and results to ``.../results``; finished ones are
@@ -121,18 +124,21 @@ def units_of(path: Path) -> dict[Figure, str]:
 
 
 def table(seed: int, done: list[Draw], compare: Path | None) -> None:
-    """The figures' spread over the finished draws of one seed, and the compared run's z-scores."""
+    """The figures' spread over the finished draws of one seed, and the compared run's z-scores (from the
+    other draws' mean and standard deviation when it is one of the draws)."""
     tables = [read_accuracy_csv(d.results / "accuracy.csv") for d in done]
     units = units_of(done[0].results / "accuracy.csv")
     today = read_accuracy_csv(compare / "accuracy.csv") if compare and (compare / "accuracy.csv").is_file() else {}
+    others = spreads([t for d, t in zip(done, tables, strict=True) if d.results != compare])
     print(f"\n### seed {seed}: {len(done)} noise draws (draws {', '.join(str(d.draw) for d in done)})\n")
     name = f"value in {compare}" if today else "compared value"
     print(f"| figure | unit | mean | sd | CV % | two draws within 5 % | {name} | z |\n"
           "|---|---|---|---|---|---|---|---|")
     for fig, s in spreads(tables).items():
         v = today.get(fig, math.nan)
+        z = others[fig].z(v) if fig in others else math.nan
         print(f"| {fig[0]}: {fig[1]} | {units.get(fig, '')} | {s.mean:.4g} | {s.sd:.2g} | {100 * s.cv:.1f} | "
-              f"{100 * s.p_within(0.05):.0f} % | {v:.4g} | {s.z(v):+.1f} |")
+              f"{100 * s.p_within(0.05):.0f} % | {v:.4g} | {z:+.1f} |")
 
 
 def marker_yaws(d: Draw) -> dict[int, tuple[float, float]]:
@@ -185,7 +191,8 @@ def yaw_check(seed: int, done: list[Draw], compare: Path | None) -> None:
     line = (f"\ncommon yaw offset of the validation stops per draw: {', '.join(f'{x:+.4f}' for x in off)} deg; "
             f"mean {off.mean():+.4f}, sd {off.std(ddof=1) if off.size > 1 else math.nan:.4f} deg; the robot "
             f"frame's stated yaw sigma (median) {sig:.4f} deg")
-    if compare is not None and (compare / "gt_vision_validation.tum").is_file():
+    if compare is not None and compare not in {d.results for d in done} and \
+            (compare / "gt_vision_validation.tum").is_file():
         line += f"; {compare}: {common_yaw_offset_deg(Draw(seed, 0, done[0].recording, compare)):+.4f} deg"
     print(line)
 
@@ -198,6 +205,8 @@ def main() -> int:
     ap.add_argument("--redrawn", choices=["all", "sensors", "calibration"], default="all",
                     help="the simulator's noise_redrawn")
     ap.add_argument("--compare", default=None, help="results on the seed's own noise, '{seed}' replaced")
+    ap.add_argument("--own", default=None, help="results of the same code and run settings on the seed's own "
+                    "recording (draw 0), '{seed}' replaced: counted as one more draw")
     ap.add_argument("--workers", type=int, default=0)
     ap.add_argument("--tabulate-only", action="store_true")
     a = ap.parse_args()
@@ -211,6 +220,8 @@ def main() -> int:
     for s in a.seeds:
         done = [d for d in all_draws[s] if (d.results / "accuracy.csv").is_file()]
         compare = Path(a.compare.format(seed=s)) if a.compare else None
+        if a.own and done:
+            done.insert(0, Draw(s, 0, done[0].recording, Path(a.own.format(seed=s))))
         if len(done) < 2:
             print(f"\nseed {s}: {len(done)} finished draw(s), fewer than 2: no spread")
             continue
