@@ -271,7 +271,8 @@ STEPS: tuple[tuple[str, Step], ...] = (
 
 def _default_noise_settings(cfg: SimConfig) -> set[str]:
     """The noise-draw settings at their defaults: named neither in ``sim_config.yaml`` nor in the key, so
-    that a recording of the seed's own noise has the files and key it had without them."""
+    that a recording of the seed's own noise has one key and one ``sim_config.yaml`` whichever version of
+    the simulator wrote it."""
     unset = {"noise_draw"} if cfg.noise_draw == 0 else set()
     return unset | ({"noise_redrawn"} if cfg.noise_redrawn == "all" else set())
 
