@@ -384,6 +384,7 @@ def part_seeds(root: Path) -> None:
                       f"({int(near.sum())} poses) | | | | | | |")
         print(f"|  | fused: {rep.seconds:.2f} s, {sum(int(v['rejected']) for v in rep.sources.values())} fixes "
               f"rejected, {len(fused)} poses | | | | | | |")
+        print(f"|  | odometry noise: {_noise(rep.odometry_noise)} | | | | | | |")
         # a 3 s gap cut out of both sources, mid-run (a quick recording is shorter than a minute): the
         # bridged poses against their ellipses
         g0 = min(float(odo.stamps_s[0]) + 30.0, 0.5 * (float(odo.stamps_s[0]) + float(odo.stamps_s[-1])) - 1.5)
@@ -398,6 +399,18 @@ def part_seeds(root: Path) -> None:
         p = np.hypot(e[:, 0], e[:, 1]) * 1e3
         print(f"|  | 3 s gap: {int(b.sum())} bridged poses, max error {p.max():.2f} mm, NEES/dof {q.mean() / 3:.2f}, "
               f"inside 3 sigma {np.mean(q < 14.16) * 100:.1f} % | | | | | | |")
+
+
+def _noise(n: dict[str, float]) -> str:
+    """The fusion report's odometry noise model in a line (slip, floors; the fit's windows and NEES/dof)."""
+    if not n:
+        return "none"
+    out = (f"slip {n['slip_m_per_sqrt_m'] * 1e3:.2f} mm/sqrt(m), floors {n['floor_m_per_sqrt_s'] * 1e3:.2f} mm and "
+           f"{n['floor_rad_per_sqrt_s'] * 1e3:.2f} mrad per sqrt(s)")
+    if "windows" in n:
+        out += (f", fitted on {n['windows']:.0f} windows (their NEES/dof {n['window_nees_given']:.2f} stated, "
+                f"{n['window_nees_fitted']:.2f} fitted)")
+    return out
 
 
 def _ms(e) -> str:  # noqa: ANN001
@@ -739,6 +752,7 @@ def part_recording(rec: Path, res: Path, gap_every_s: float = 20.0, gap_s: float
     report = json.loads((res / "fusion_report.json").read_text(encoding="utf-8"))
     print(f"## {rec} (results {res}): {truth.stamps_s[-1] - truth.stamps_s[0]:.0f} s, "
           f"{len(report.get('odometry_jumps_s', []))} odometry jumps found by fusion")
+    print(f"odometry noise: {_noise(report.get('odometry_noise', {}))}")
     print("| track | poses | NEES/dof [95 %] | max pos error (mm) |")
     print("|---|---|---|---|")
     # every pose the track gives as ground truth: measured and bridged alike (a score of the OK poses

@@ -19,8 +19,8 @@ Levels
     run: the whole GTvision stage's images per second (reading, detection, noise calibration, estimation;
     wall, and CPU per image, this process's and its workers', a figure a loaded machine disturbs less,
     split into reading, detection and estimation, with the images per second that CPU allows on the
-    workers' cores with and without the reading: an 8-bit 1024 x 768 PNG costs about 6 ms to decode, of
-    which zlib's inflate alone is 4 ms, whatever OpenCV's read flags),
+    workers' cores with and without the reading: an 8-bit 1024 x 768 PNG costs about 2 ms to decode
+    through :mod:`gtrig.io.png`, 6 ms through OpenCV),
     the localized share and the accuracy against the truth of both, beside OpenCV's bare whole-image
     detection of the same images (``cv2.aruco.ArucoDetector`` with its default parameters and threads, a
     dictionary of the rig's markers; reading not counted).
@@ -344,8 +344,8 @@ def bench_tracking(rec: Path, rig_path: Path, workers: int, sequence: str) -> No
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     print("\n".join(rows))
     print("\n(images/s: wall, this machine as loaded; CPU per image: this process's and its workers'; read: "
-          "cv2.imread of each image in this process; estimate: the stage run again from its checkpointed "
-          "detections (noise calibration, estimation, flips, motion); detect: the rest)")
+          "gtrig.io.frames.read_image of each image in this process; estimate: the stage run again from its "
+          "checkpointed detections (noise calibration, estimation, flips, motion); detect: the rest)")
     print(f"\nOpenCV ArucoDetector (defaults, its own threads), the same {n_cv} images: {n_cv / t_cv:.1f} images/s "
           f"of detection ({1e3 * t_cv / n_cv:.2f} ms per image, {found} markers; reading the images, not counted: "
           f"{1e3 * t_read / n_cv:.2f} ms per image, {read_ms:.2f} ms CPU)")

@@ -26,6 +26,7 @@ from gtrig.fusion.chain import PROCESS_CV, PROCESS_ODOMETRY, FactorChain
 from gtrig.fusion.ekf import smooth_ekf
 from gtrig.fusion.init import odom_in_world
 from gtrig.fusion.measurements import Fixes, FixModel, fixes_from_track
+from gtrig.fusion.odonoise import NoiseFit, fit_odometry_noise
 from gtrig.fusion.process import (
     ConstantVelocityNoise,
     OdometryJumps,
@@ -67,7 +68,12 @@ class FusionOptions:
         innovation squared per dof of its source's fixes within this window (the gate's, at least 1):
         a source that disagrees with the prediction over a stretch by more than its covariance allows is
         down-weighted there. 0: off.
-    odometry : the odometry noise model; cv : the constant-velocity model (no odometry).
+    odometry : the odometry noise model (the start of its fit, with ``fit_odometry_noise``); cv : the
+        constant-velocity model (no odometry).
+    fit_odometry_noise : the odometry's random errors (the wheels' slip per metre, the side slip at its
+        stated ratio to it, and a floor per second) fitted to how far it and the pose sources disagree over
+        windows of a few seconds, the sources' own noise taken out (gtrig.fusion.odonoise); ``odometry``
+        as given where the run is too short for the fit. False: ``odometry`` as given.
     prior_sigma : (x, y, yaw) sigmas of the start around the robust anchor (m, m, rad).
     bias_cov : per source, the covariance of the error its fixes share over the whole run (its calibration:
         the scanners' registration, the robot frame's fit), over world (x, y, yaw) (3 x 3; m^2, rad^2) for
@@ -110,6 +116,7 @@ class FusionOptions:
     innovation_window_s: float = 1.0
     huber_k: float = 3.0
     odometry: OdometryNoise = OdometryNoise()
+    fit_odometry_noise: bool = True
     cv: ConstantVelocityNoise = ConstantVelocityNoise()
     prior_sigma: tuple[float, float, float] = (0.1, 0.1, 0.1)
     correlation_s: float = 0.5
@@ -156,6 +163,9 @@ class FusionReport:
     seconds: float
     #: stamps (s, reference clock) of the odometry's jumps, each the start of a new odometry segment
     odometry_jumps_s: tuple[float, ...] = ()
+    #: the odometry noise model used, and with its fit (FusionOptions.fit_odometry_noise) the windows it was
+    #: fitted on and their NEES/dof under the given model and the fitted one
+    odometry_noise: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, object]:
         return asdict(self)
@@ -746,6 +756,14 @@ def _jump_stamps(odometry: OdometryLog | None, jumps: OdometryJumps) -> tuple[fl
     return tuple(float(t) for t in odometry.stamps_s[1:][hit])
 
 
+def _noise_summary(noise: OdometryNoise, fit: NoiseFit | None) -> dict[str, float]:
+    """The odometry noise model used (its random errors), with the fit's windows and NEES when fitted."""
+    if fit is not None:
+        return fit.summary()
+    return {"slip_m_per_sqrt_m": noise.slip_m_per_sqrt_m, "lateral_ratio": noise.lateral_ratio,
+            "floor_m_per_sqrt_s": noise.floor_m_per_sqrt_s, "floor_rad_per_sqrt_s": noise.floor_rad_per_sqrt_s}
+
+
 def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: FusionOptions | None = None,
          ) -> tuple[PoseTrack, FusionReport]:
     """Smooth absolute fixes with odometry (or constant velocity) into one trajectory.
@@ -782,6 +800,7 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
     # gets a pose even where the nearest fixes beyond it lie past the odometry's ends
     span0 = min(float(f.stamps_s[0]) for f in fixes)
     span1 = max(float(f.stamps_s[-1]) for f in fixes)
+    noise_fit: NoiseFit | None = None
     if odometry is not None:
         if len(odometry) < 2:
             raise InputError("fusion: the odometry has fewer than two records")
@@ -795,6 +814,9 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
             kept.append(inside)
         fixes = kept
         _check_units(fixes, odometry)
+        noise_fit = fit_odometry_noise(fixes, odometry, opts.odometry, opts.jumps) if opts.fit_odometry_noise else None
+        if noise_fit is not None:
+            opts = replace(opts, odometry=noise_fit.noise)
     counts = [_decorrelation_counts(f, opts.correlation_s) for f in fixes]
     per_source = {s: {"offered": float(len(f)), "used": 0.0, "rejected": 0.0, "downweighted": 0.0,
                       "offset_s": float(opts.offsets_s.get(s, 0.0)),
@@ -838,7 +860,8 @@ def fuse(fixes: Sequence[Fixes], odometry: OdometryLog | None = None, options: F
     track = parts.track()
     report = FusionReport(opts.estimator, "odometry" if odometry is not None else "constant velocity", per_source,
                           tuple(parts.segments), tuple(sorted(parts.outliers, key=lambda o: o.stamp_s)),
-                          time.perf_counter() - t_start, _jump_stamps(odometry, opts.jumps))
+                          time.perf_counter() - t_start, _jump_stamps(odometry, opts.jumps),
+                          _noise_summary(opts.odometry, noise_fit) if odometry is not None else {})
     return track, report
 
 

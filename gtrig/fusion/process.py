@@ -17,7 +17,9 @@ from gtrig.io.odometry import OdometryLog
 
 @dataclass(frozen=True)
 class OdometryNoise:
-    """Odometry's random errors and the prior on its systematic ones.
+    """Odometry's random errors and the prior on its systematic ones. Fusion fits the slip and the floors
+    on the run (``FusionOptions.fit_odometry_noise``, gtrig.fusion.odonoise): these values are the fit's
+    start and the model of a run too short to fit.
 
     Attributes
     ----------
@@ -61,6 +63,14 @@ def interpolate_odometry(log: OdometryLog, stamps_s: np.ndarray) -> np.ndarray:
                             np.interp(stamps_s, log.stamps_s, th)])
 
 
+def wheel_travel(u: np.ndarray, wheelbase_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """How far (m, >= 0) the right and the left wheel roll over each increment ``u`` (N-1, 3) (robot frame,
+    m, m, rad) of a differential drive with that wheelbase: the two (N-1,) arrays."""
+    ds = np.hypot(u[:, 0], u[:, 1])
+    half_b = wheelbase_m / 2
+    return np.abs(ds + u[:, 2] * half_b), np.abs(ds - u[:, 2] * half_b)
+
+
 def odometry_increments(xytheta: np.ndarray, stamps_s: np.ndarray, noise: OdometryNoise,
                         ) -> tuple[np.ndarray, np.ndarray]:
     """Robot-frame increments between consecutive odometry poses and their noise.
@@ -79,10 +89,7 @@ def odometry_increments(xytheta: np.ndarray, stamps_s: np.ndarray, noise: Odomet
     d = np.diff(xytheta, axis=0)
     c, s = np.cos(xytheta[:-1, 2]), np.sin(xytheta[:-1, 2])
     u = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
-    ds = np.hypot(u[:, 0], u[:, 1])
-    half_b = noise.wheelbase_m / 2
-    wr = np.abs(ds + u[:, 2] * half_b)
-    wl = np.abs(ds - u[:, 2] * half_b)
+    wr, wl = wheel_travel(u, noise.wheelbase_m)
     s2 = noise.slip_m_per_sqrt_m**2
     dt = np.diff(stamps_s)
     var_fwd = s2 * (wr + wl) / 4 + noise.floor_m_per_sqrt_s**2 * dt

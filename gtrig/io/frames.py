@@ -102,6 +102,9 @@ _DECODERS: dict[str, _VideoDecoder] = {}
 def read_image(source: str | os.PathLike[str]) -> np.ndarray:
     """An 8-bit grey image from an image file or from ``<video>#frame=<n>`` (:meth:`FrameIndex.source`).
 
+    Greyscale PNGs are decoded by :mod:`gtrig.io.png`, every other file by OpenCV (``IMREAD_GRAYSCALE``);
+    both give the same pixels.
+
     Videos are decoded forward by one decoder per video and process (the stages read frames in time
     order, so a sequence costs one decode of the video, not one seek per frame).
     """
@@ -114,11 +117,27 @@ def read_image(source: str | os.PathLike[str]) -> np.ndarray:
                 _DECODERS.pop(next(iter(_DECODERS))).cap.release()
             dec = _DECODERS[path] = _VideoDecoder(path)
         return dec.frame(int(n))
-    img = cv2.imread(s, cv2.IMREAD_GRAYSCALE)
+    img = _read_grey_png(s) if s[-4:].lower() == ".png" else None
+    if img is None:
+        img = cv2.imread(s, cv2.IMREAD_GRAYSCALE)
     if img is None:
         raise FormatError(f"{s}: cannot read the image")
     check_image_size(img, s)
     return img
+
+
+def _read_grey_png(path: str) -> np.ndarray | None:
+    """A greyscale PNG decoded by :func:`gtrig.io.png.decode_grey_png` (the same pixels as OpenCV's, in a
+    third of its time), or None: any other PNG, one beyond :data:`MAX_IMAGE_PIXELS`, or a file that cannot be
+    opened, is OpenCV's to read (and refuse)."""
+    from gtrig.io.png import decode_grey_png  # compiled on first use, not by every reader of timestamps
+
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError:
+        return None
+    return decode_grey_png(data, MAX_IMAGE_PIXELS)
 
 
 #: the largest image a stage processes: 64 megapixels (a 12 MP photo is far inside; a 20000 x 20000 px

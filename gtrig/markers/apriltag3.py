@@ -1,11 +1,12 @@
 """AprilTag 3 (Wang and Olson, "AprilTag 2: Efficient and robust fiducial detection", IROS 2016; the
 ``pupil-apriltags`` binding of the AprilRobotics C library): detectors and code tables.
 
-One detector per family, decimation and thread count is made once per process and never destroyed: destroying one
-now and then crashes the process (a double free in ``Detector.__del__``, pupil-labs/apriltags issues
-46 and 52), so at exit each is disarmed (its pointer dropped) and the operating system frees it. A
-detector is used by one thread at a time (a lock each): the library keeps a detection's working state in
-the detector, and two threads detecting with one detector crashed the process.
+One detector per family and decimation, on the library's default one thread (with two its clustering
+races and crashed a test process: AprilRobotics/apriltag#387), is made once per process and never
+destroyed: destroying one now and then crashes the process (a double free in ``Detector.__del__``,
+pupil-labs/apriltags issues 46 and 52), so at exit each is disarmed (its pointer dropped) and the
+operating system frees it. A detector is used by one thread at a time (a lock each): the library keeps a
+detection's working state in the detector, and two threads detecting with one detector crashed the process.
 
 The newer families' detectors correct one bit (:data:`NEWER_FAMILY_BITS`) instead of the binding's fixed
 two: AprilTag 3 tabulates every code within the corrected bits, and at two bits the tables of
@@ -31,7 +32,7 @@ from numpy.typing import NDArray
 __all__ = ["At3Family", "at3_detect", "at3_family", "tag_cells"]
 
 _LOCK = threading.Lock()
-_DETECTORS: dict[tuple[str, float, int], Any] = {}
+_DETECTORS: dict[tuple[str, float], Any] = {}
 _IN_USE: dict[int, threading.Lock] = {}  # id of a detector -> the lock its detections hold
 _FAMILIES: dict[str, Any] = {}
 
@@ -83,22 +84,21 @@ def _disarm() -> None:
 atexit.register(_disarm)
 
 
-def detector(name: str, quad_decimate: float = 2.0, threads: int = 1) -> Any:
+def detector(name: str, quad_decimate: float = 2.0) -> Any:
     """The process's AprilTag 3 detector for the family ``name`` (e.g. ``tag36h11``) at ``quad_decimate``,
-    with ``threads`` threads (the library's default is one); without its own edge refinement for the classic
-    families (gtrig refines their corners), with it for the newer ones (their corners are AprilTag 3's)."""
-    threads = max(1, int(threads))
-    key = (name, float(quad_decimate), threads)
+    on one thread; without its own edge refinement for the classic families (gtrig refines their corners),
+    with it for the newer ones (their corners are AprilTag 3's)."""
+    key = (name, float(quad_decimate))
     with _LOCK:
         det = _DETECTORS.get(key)
         if det is None:
             from pupil_apriltags import Detector
 
             if name in CLASSIC:
-                det = Detector(families=name, nthreads=threads, quad_decimate=float(quad_decimate), refine_edges=0)
+                det = Detector(families=name, nthreads=1, quad_decimate=float(quad_decimate), refine_edges=0)
             else:
                 # made for a small family, then given the newer family at fewer corrected bits
-                det = Detector(families="tag16h5", nthreads=threads, quad_decimate=float(quad_decimate),
+                det = Detector(families="tag16h5", nthreads=1, quad_decimate=float(quad_decimate),
                                refine_edges=1)
                 det.libc.apriltag_detector_clear_families.restype = None
                 det.libc.apriltag_detector_clear_families(det.tag_detector_ptr)
@@ -122,10 +122,10 @@ def _family_ptr(libc: Any, name: str) -> Any:
     return fam
 
 
-def at3_detect(gray: NDArray[np.uint8], name: str, quad_decimate: float = 2.0, threads: int = 1
+def at3_detect(gray: NDArray[np.uint8], name: str, quad_decimate: float = 2.0
                ) -> list[tuple[int, int, NDArray[np.float64]]]:
-    """AprilTag 3's detections of the family ``name`` in ``gray`` (H, W) uint8, with ``threads`` threads (the
-    library's default one; its detections do not depend on them).
+    """AprilTag 3's detections of the family ``name`` in ``gray`` (H, W) uint8 (on the calling thread; it
+    releases the GIL).
 
     Returns
     -------
@@ -134,7 +134,7 @@ def at3_detect(gray: NDArray[np.uint8], name: str, quad_decimate: float = 2.0, t
     lists them counter-clockwise on the page, from the printed top-right for the classic families and from
     the bottom-left for the newer ones, whose patterns :func:`tag_cells` lays out; measured on rendered tags).
     """
-    det = detector(name, quad_decimate, threads)
+    det = detector(name, quad_decimate)
     order = [1, 0, 3, 2] if name in CLASSIC else [3, 2, 1, 0]
     out = []
     with _IN_USE[id(det)]:

@@ -28,7 +28,7 @@ from gtrig.io.tum import Trajectory, write_tum
 from gtrig.parallel import process_pool
 from gtrig.rig.models import Camera, Pose
 from gtrig.sim import gtroom
-from gtrig.sim.config import CameraSimConfig, SimConfig
+from gtrig.sim.config import CameraSimConfig, SimConfig, noise_stream
 from gtrig.sim.gtroom import Scene
 from gtrig.sim.motion import RobotMotion
 from gtrig.sim.render import (
@@ -314,8 +314,10 @@ def _parallel_map(fn: Callable[[Any, Any], Any], shared: Any, jobs: list[Any], w
         return list(ex.map(_call, jobs, chunksize=chunk))
 
 
-def _frame_rng(seed: int, cam_index: int, frame: int, salt: int = 0) -> np.random.Generator:
-    return np.random.default_rng([int(seed) & 0x7FFFFFFF, cam_index + 1, frame, salt])
+def _frame_rng(seed: int, cam_index: int, frame: int, salt: int = 0, draw: int = 0) -> np.random.Generator:
+    # an image's own stream: its noise does not depend on the order or the process it is rendered in
+    key = [int(seed) & 0x7FFFFFFF, cam_index + 1, frame, salt]
+    return noise_stream(np.random.default_rng(key), key, draw)
 
 
 def _write_png(path: Path, img: np.ndarray, ccfg: CameraSimConfig) -> None:
@@ -337,22 +339,26 @@ class _SeqShared:
     ccfg: CameraSimConfig
     seed: int
     cam_index: int
+    noise_draw: int = 0
 
 
 def _seq_frame(sh: _SeqShared, job: tuple[int, float]) -> None:
     k, t = job
     view = _cached_view(sh.scene, sh.cam, sh.ccfg)
-    img = render_robot_frame(sh.scene, view, sh.motion, t, sh.ccfg, _frame_rng(sh.seed, sh.cam_index, k))
+    rng = _frame_rng(sh.seed, sh.cam_index, k, 0, sh.noise_draw)
+    img = render_robot_frame(sh.scene, view, sh.motion, t, sh.ccfg, rng)
     _write_png(sh.folder / f"{k:06d}.png", img, sh.ccfg)
 
 
-def jittered_stamps(stamps_s: np.ndarray, jitter_s: float, seed: int, cam_index: int) -> np.ndarray:
+def jittered_stamps(stamps_s: np.ndarray, jitter_s: float, seed: int, cam_index: int,
+                    noise_draw: int = 0) -> np.ndarray:
     """Written time stamps: the true mid-exposure times plus Gaussian jitter (trigger and transfer
-    latency), clipped to 0.45 of the smallest frame spacing so that they still increase."""
+    latency, drawn from ``noise_draw``: :func:`gtrig.sim.config.noise_stream`), clipped to 0.45 of the
+    smallest frame spacing so that they still increase."""
     stamps_s = np.asarray(stamps_s, float)
     if jitter_s <= 0 or stamps_s.size == 0:
         return stamps_s.copy()
-    j = np.array([_frame_rng(seed, cam_index, k, 1).normal(0.0, jitter_s) for k in range(stamps_s.size)])
+    j = np.array([_frame_rng(seed, cam_index, k, 1, noise_draw).normal(0.0, jitter_s) for k in range(stamps_s.size)])
     if stamps_s.size > 1:
         lim = 0.45 * float(np.min(np.diff(stamps_s)))
         j = np.clip(j, -lim, lim)
@@ -382,10 +388,11 @@ def render_sequence(scene: Scene, rig_true_camera: Camera, motion: RobotMotion, 
     folder.mkdir(parents=True, exist_ok=True)
     ci = _cam_index(scene, rig_true_camera.name)
     stamps_s = np.asarray(stamps_s, float)
-    shared = _SeqShared(scene, rig_true_camera, motion, folder, cfg.camera, int(seed), ci)
+    draw = cfg.noise_draw_of("sensors")
+    shared = _SeqShared(scene, rig_true_camera, motion, folder, cfg.camera, int(seed), ci, draw)
     _cached_view(scene, rig_true_camera, cfg.camera)  # once, before forking: workers inherit it
     _parallel_map(_seq_frame, shared, list(enumerate(stamps_s.tolist())), cfg.workers)
-    written = jittered_stamps(stamps_s, cfg.camera.stamp_jitter_s, int(seed), ci)
+    written = jittered_stamps(stamps_s, cfg.camera.stamp_jitter_s, int(seed), ci, draw)
     write_frame_index(folder, written, [f"{k:06d}.png" for k in range(stamps_s.size)])
     log.debug("%s: %d frames", folder, stamps_s.size)
     return written
@@ -498,6 +505,7 @@ class _StillShared:
     scene: Scene
     ccfg: CameraSimConfig
     seed: int
+    noise_draw: int = 0
 
 
 #: one still image: the camera, the boards' poses ``T_world_board``, the file, the camera's index, the
@@ -516,7 +524,7 @@ def _still_frame(sh: _StillShared, job: _StillJob) -> None:
     order = np.argsort([-np.linalg.norm(T[:3, 3] - eye) for T in boards])
     faces = [faces[i] for i in order]
     extent = np.vstack([_board_world_points(T) for T in boards])
-    img = render_faces_frame(view, faces, sh.ccfg, _frame_rng(sh.seed, cam_index, k, 2), extent)
+    img = render_faces_frame(view, faces, sh.ccfg, _frame_rng(sh.seed, cam_index, k, 2, sh.noise_draw), extent)
     _write_png(Path(path), img, sh.ccfg)
 
 
@@ -581,7 +589,8 @@ def write_calibration_sets(scene: Scene, rec_dir: str | os.PathLike[str], cfg: S
         log.warning("no camera sees the whole world board")
     for c in cams:
         _cached_view(scene, c, cfg.camera)  # once, before forking: workers inherit them
-    _parallel_map(_still_frame, _StillShared(scene, cfg.camera, cfg.seed), jobs, cfg.workers)
+    shared = _StillShared(scene, cfg.camera, cfg.seed, cfg.noise_draw_of("calibration"))
+    _parallel_map(_still_frame, shared, jobs, cfg.workers)
 
     cols, rows = gtroom.CHESSBOARD_SQUARES
     nominal = {
@@ -670,6 +679,7 @@ class _HandShared:
     motion: RobotMotion
     seed: int
     folder: Path
+    noise_draw: int = 0
 
 
 def _hand_frame(sh: _HandShared, job: tuple[int, np.ndarray]) -> None:
@@ -679,7 +689,7 @@ def _hand_frame(sh: _HandShared, job: tuple[int, np.ndarray]) -> None:
     centre = geo.transform_points(T_world_robot, np.array([[0.0, 0.0, gtroom.ROBOT_TOP_M]]))[0]
     inv_focus = 1.0 / float((geo.inv_T(T_world_cam) @ np.r_[centre, 1.0])[2])
     view = make_view(sh.scene, cam, T_world_cam, sh.ccfg, s=1, focus_inv_depth=inv_focus)
-    img = render_robot_frame(sh.scene, view, sh.motion, 0.0, sh.ccfg, _frame_rng(sh.seed, 99, k, 3),
+    img = render_robot_frame(sh.scene, view, sh.motion, 0.0, sh.ccfg, _frame_rng(sh.seed, 99, k, 3, sh.noise_draw),
                              focus_inv_depth=inv_focus)
     _write_png(sh.folder / f"{k:06d}.png", img, sh.ccfg)
 
@@ -701,8 +711,8 @@ def write_handheld_set(scene: Scene, rec_dir: str | os.PathLike[str], cfg: SimCo
     folder.mkdir(parents=True, exist_ok=True)
     # the hand is steady and the exposure short: no motion blur in the survey images
     ccfg = cfg.camera.model_copy(update={"motion_blur": False})
-    _parallel_map(_hand_frame, _HandShared(scene, ccfg, motion, cfg.seed, folder),
-                  list(enumerate(poses)), cfg.workers)
+    shared = _HandShared(scene, ccfg, motion, cfg.seed, folder, cfg.noise_draw_of("calibration"))
+    _parallel_map(_hand_frame, shared, list(enumerate(poses)), cfg.workers)
     doc = {
         "image_size": [cam.size[0], cam.size[1]],
         "camera_matrix": cam.K.tolist(),

@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Literal
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
+
+#: appended, with the draw, to a noise stream's key: no stream of draw 0 has a key of that form
+NOISE_DRAW_SALT = 0x4E015E
 
 
 class _Cfg(BaseModel):
@@ -78,11 +83,36 @@ class SimConfig(_Cfg):
         default=0.0, ge=-60, le=60,
         description="the robot's clock (odometry, onboard scanners) minus the GT room's clock; written to "
         "truth/robot_clock.yaml, for checking time sync")
+    noise_draw: int = Field(
+        default=0, ge=0, description="0: the seed's own measurement noise; k > 0: the k-th independent draw of "
+        "it, everything else (scene, rig, paths, people, clock offsets, odometry calibration, calibration "
+        "poses) the seed's: Monte Carlo evaluation (docs/simulator.md, 'Noise draws')")
+    noise_redrawn: Literal["all", "sensors", "calibration"] = Field(
+        default="all", description="what noise_draw redraws: every measurement's noise; the sensors' "
+        "(cameras, scanners, odometry), the survey's readings kept; or only the calibration images' "
+        "(calib/, handheld/)")
     camera: CameraSimConfig = CameraSimConfig()
     laser: LaserSimConfig = LaserSimConfig()
     motion: MotionSimConfig = MotionSimConfig()
+
+    def noise_draw_of(self, data: Literal["calibration", "sensors", "survey"]) -> int:
+        """The noise draw of ``data``: ``calibration`` the calibration images (``calib/``, ``handheld/``),
+        ``sensors`` the sequences' images and stamps, the scans and the odometry, ``survey`` the hand
+        laser's readings; 0 is the seed's own noise."""
+        redrawn = {"all": ("calibration", "sensors", "survey"), "sensors": ("calibration", "sensors"),
+                   "calibration": ("calibration",)}[self.noise_redrawn]
+        return self.noise_draw if data in redrawn else 0
 
     @classmethod
     def quick_defaults(cls, seed: int = 0) -> SimConfig:
         return cls(seed=seed, quick=True, run_duration_s=6.0, static_pose_s=0.2, background_s=1.0,
                    n_intrinsic_views=8, n_pair_views=4, n_world_board_views=1, n_handheld_views=8)
+
+
+def noise_stream(rng: np.random.Generator, key: Sequence[int], draw: int) -> np.random.Generator:
+    """The generator of a measurement's noise: ``rng`` itself for draw 0 (the seed's own noise, which
+    ``rng`` may share with geometric draws made before it), else an independent stream of ``key``
+    (the integers ``rng`` was seeded with) and ``draw``, which leaves ``rng``'s geometric draws as they are."""
+    if draw == 0:
+        return rng
+    return np.random.default_rng([*(int(k) for k in key), NOISE_DRAW_SALT, int(draw)])

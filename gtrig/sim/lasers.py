@@ -29,7 +29,7 @@ from gtrig import geometry as geo
 from gtrig.errors import InputError
 from gtrig.io.scans import ScanLog, write_scans
 from gtrig.rig.models import BeamTiming, Hull, LaserScanner, StampAt
-from gtrig.sim.config import SimConfig
+from gtrig.sim.config import SimConfig, noise_stream
 from gtrig.sim.gtroom import Box, Scene
 from gtrig.sim.motion import RobotMotion
 from gtrig.sim.people import HIP_HALF_WIDTH_M, LEG_RADIUS_M, LEG_SWING_M, People, simulate_people
@@ -397,6 +397,8 @@ def simulate_fixed_scans(
 
     for si, sc in enumerate(scene.rig_true.laser_scanners):
         rng = np.random.default_rng([seed, si])
+        # the clock offset and phase are the scanner's own; the range noise, dropouts and jitter are redrawn
+        noise = noise_stream(rng, [seed, si], cfg.noise_draw_of("sensors"))
         T_ws = sc.T_world_scanner.matrix()
         T_sw = geo.inv_T(T_ws)
         segs, z_top, seg_refl = static_segments(scene, T_ws[:2, 3])
@@ -459,11 +461,11 @@ def simulate_fixed_scans(
                 closer = d_dyn < cur
                 R[k_c, b_c] = np.where(closer, d_dyn, cur)
                 rho[k_c, b_c] = np.where(closer, r_dyn, rho[k_c, b_c])
-        ranges = _sensor_model(R, rho, sc.range_sigma_m, sc.range_max_m, cfg, rng, ideal)
+        ranges = _sensor_model(R, rho, sc.range_sigma_m, sc.range_max_m, cfg, noise, ideal)
         # the driver stamps the scan at the start, middle or end of its sweep
         stamps = starts + offset + _stamp_offset(delays, sc.stamp_at)
         if not ideal:
-            stamps = stamps + rng.normal(0.0, STAMP_JITTER_SIGMA_S, K)
+            stamps = stamps + noise.normal(0.0, STAMP_JITTER_SIGMA_S, K)
         out[sc.name] = ScanLog(stamps, ranges.reshape(K, B))
         info.clock_offsets_s[sc.name] = offset
         info.n_scans[sc.name] = K
@@ -504,6 +506,7 @@ def simulate_onboard_scans(
     info = ScanSimInfo()
     for si, sc in enumerate(scene.rig_true.robot.onboard_scanners):
         rng = np.random.default_rng([seed, 100 + si])
+        noise = noise_stream(rng, [seed, 100 + si], cfg.noise_draw_of("sensors"))
         T_rs = sc.T_robot_scanner.matrix()
         ang = sc.angles_rad
         B = len(ang)
@@ -554,10 +557,10 @@ def simulate_onboard_scans(
                 closer = dl < R[idx]
                 R[idx] = np.where(closer, dl, R[idx])
                 rho[idx] = np.where(closer, LEG_REFLECTIVITY, rho[idx])
-        ranges = _sensor_model(R, rho, ONBOARD_RANGE_SIGMA_M, sc.range_max_m, cfg, rng, ideal)
+        ranges = _sensor_model(R, rho, ONBOARD_RANGE_SIGMA_M, sc.range_max_m, cfg, noise, ideal)
         stamps = starts + offset
         if not ideal:
-            stamps = stamps + rng.normal(0.0, STAMP_JITTER_SIGMA_S, K)
+            stamps = stamps + noise.normal(0.0, STAMP_JITTER_SIGMA_S, K)
         out[sc.name] = ScanLog(stamps, ranges.reshape(K, B))
         info.clock_offsets_s[sc.name] = offset
         info.n_scans[sc.name] = K

@@ -18,7 +18,7 @@ import numpy as np
 
 from gtrig.errors import InputError
 from gtrig.io.odometry import OdometryLog, write_odometry_csv
-from gtrig.sim.config import SimConfig
+from gtrig.sim.config import SimConfig, noise_stream
 from gtrig.sim.gtroom import Scene
 from gtrig.sim.motion import RobotMotion
 
@@ -121,12 +121,13 @@ def write_odometry(
 
     The stamps are on the robot's clock: the GT clock plus ``cfg.odometry_clock_offset_s`` (the samples
     themselves are taken at the same true instants). Returns the errors drawn from ``seed`` (the same seed
-    gives the same file).
+    gives the same file); ``cfg.noise_draw`` redraws the slip, never the errors.
     """
     rng = np.random.default_rng([seed, 0x0D0])
     errors = OdometryErrors.draw(rng)
     rate = scene.rig_true.robot.odometry.rate_hz
-    log = simulate_odometry(motion, t0, t1, rate, errors, rng)
+    slip = noise_stream(rng, [seed, 0x0D0], cfg.noise_draw_of("sensors"))
+    log = simulate_odometry(motion, t0, t1, rate, errors, slip)
     if cfg.odometry_clock_offset_s:
         log = OdometryLog(log.stamps_s + cfg.odometry_clock_offset_s, log.xytheta, log.v_mps, log.omega_radps)
     write_odometry_csv(path, log)

@@ -112,7 +112,8 @@ def _write_rigs_and_truth(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig)
     # the lab knows its cameras' time-stamp jitter (datasheet, or a sync test): the rig says it
     dump_rig(_with_stamp_sigma(scene.rig_nominal, cfg), out / "rig.yaml")
     dump_rig(_with_stamp_sigma(scene.rig_true, cfg), out / "truth" / "rig.yaml")
-    atomic_write_text(out / "sim_config.yaml", yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
+    settings = cfg.model_dump(mode="json", exclude=_default_noise_settings(cfg))
+    atomic_write_text(out / "sim_config.yaml", yaml.safe_dump(settings, sort_keys=False))
     run_T = tl.run.T_world_robot_many(tl.run.stamps_s)
     write_tum(out / "truth" / "run.tum", Trajectory.from_matrices(tl.run.stamps_s, run_T))
     mid = tl.validation_intervals_s.mean(axis=1)
@@ -268,12 +269,20 @@ STEPS: tuple[tuple[str, Step], ...] = (
 )
 
 
+def _default_noise_settings(cfg: SimConfig) -> set[str]:
+    """The noise-draw settings at their defaults: named neither in ``sim_config.yaml`` nor in the key, so
+    that a recording of the seed's own noise has one key and one ``sim_config.yaml`` whichever version of
+    the simulator wrote it."""
+    unset = {"noise_draw"} if cfg.noise_draw == 0 else set()
+    return unset | ({"noise_redrawn"} if cfg.noise_redrawn == "all" else set())
+
+
 def _config_key(cfg: SimConfig, plan: Rig | None = None, path: PlannedPath | None = None) -> str:
     # workers change speed, never output
     # the robot clock's offset joined the settings later: at its default it leaves the key unchanged
     # so did the sweeps' board (chessboard by default)
     skip = ({"workers"} | ({"odometry_clock_offset_s"} if cfg.odometry_clock_offset_s == 0 else set())
-            | ({"calib_board"} if cfg.calib_board == "chessboard" else set()))
+            | ({"calib_board"} if cfg.calib_board == "chessboard" else set()) | _default_noise_settings(cfg))
     doc: dict[str, Any] = cfg.model_dump(mode="json", exclude=skip)
     # a planned rig and path are part of what is simulated (absent: the key is the built-in scene's)
     if plan is not None:

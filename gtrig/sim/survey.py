@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from gtrig.io.survey_csv import Distances, NamedPoints, write_distances, write_named_xy
+from gtrig.sim.config import SimConfig, noise_stream
 from gtrig.sim.gtroom import WORLD_POINT_NAMES, Scene
 
 
@@ -210,7 +211,7 @@ def write_survey(
     scene: Scene,
     T_world_robot_validation: np.ndarray,
     rec_dir: str | os.PathLike[str],
-    cfg: object | None = None,
+    cfg: SimConfig | None = None,
     seed: int = 0,
     survey_cfg: SurveySimConfig = SurveySimConfig(),
 ) -> SimulatedSurvey:
@@ -221,11 +222,13 @@ def write_survey(
     scene : the installation (truth and nominal).
     T_world_robot_validation : (P, 4, 4) true robot poses at the validation stops (P = 26 in the GT room).
     rec_dir : the recording folder.
-    cfg : the simulator settings (unused: the survey has no setting there; kept for a uniform call).
+    cfg : the simulator settings (its noise draw redraws the readings' noise); None: the seed's own noise.
     seed : random seed of the hand-laser noise.
     survey_cfg : robot-point layout and readings per pose.
     """
-    del cfg
-    sv = simulate_survey(scene, T_world_robot_validation, np.random.default_rng([seed, 0x5E7]), survey_cfg)
+    draw = 0 if cfg is None else cfg.noise_draw_of("survey")
+    key = [seed, 0x5E7]
+    sv = simulate_survey(scene, T_world_robot_validation, noise_stream(np.random.default_rng(key), key, draw),
+                         survey_cfg)
     write_simulated_survey(sv, rec_dir)
     return sv

@@ -11,20 +11,26 @@ with ``t_image`` the image's stamp (the frame-time file's), ``delta_c`` the came
 stamps (relative to a reference camera, whose offset is 0: only differences are observable) and ``rho_c``
 its line delay (seconds per image row; 0 for a global shutter). At each instant seen by two cameras or more
 the pose is a nuisance: its six parameters are projected out of that instant's residuals, and ``delta``,
-``rho`` solved by linear least squares over all instants (one Gauss-Newton step from the tracked poses,
-which fitted the instants without timing). The velocity is the central difference of the neighbouring
-instants' poses, so instants at the ends of the track or after a gap are left out.
+``rho`` solved by least squares over all instants. The body's motion about an instant is the polynomial
+through its pose and up to two neighbours' on each side (:func:`local_motion`), so instants at the ends of
+the track or after a gap are left out; each point is moved along it to its exposure time (Gauss-Newton on
+``delta``, ``rho``). The tracked poses blend cameras exposed tens of milliseconds apart: they are refitted
+at their instants' stamps with the estimated timing, and the polynomials and timing solved again.
 
-The covariance is the residuals' variance factor times the inverse normal matrix: it includes whatever
-the timing model leaves unexplained, but not the velocities' own error (a hand-moved board's velocity from
-poses 1/6 s apart is good to a few tens of percent: an offset's interval is that much optimistic).
+The interval is the larger of two covariances: the residuals' variance factor times the inverse normal
+matrix (residuals independent), and a sandwich whose middle is the per-instant scores' autocovariance over
+neighbouring instants (Newey-West, Bartlett weights). What the timing model leaves out acts instant by
+instant and not point by point: a velocity error moves every point of an instant together, a webcam whose
+exposure wanders from its frame times by a few milliseconds from frame to frame shifts all of that
+image's points along their motion, and neighbouring instants share poses and the hand's motion. The
+sandwich sees these through the residuals' correlation; the variance factor does not.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -48,6 +54,8 @@ class CameraTiming:
     rms_px : {"stamps": residual RMS with the image stamps only, "model": with the offsets and line delays}
         over the instants used, after the poses were refitted.
     instants, points : instants and points used; variance_factor : the residuals' chi-square per dof.
+    sigma_offset_model_s : (C,) the offsets' sigmas from the variance factor alone (residuals taken as
+        independent); ``sigma_offset_s`` is the larger of these and the autocorrelation-robust sigmas.
     """
 
     reference: str
@@ -60,96 +68,251 @@ class CameraTiming:
     instants: int
     points: int
     variance_factor: float
+    sigma_offset_model_s: np.ndarray
 
 
-def body_velocity(poses: Sequence[BodyPose], i: int, max_gap_s: float) -> np.ndarray | None:
-    """World-frame twist (6,) ``(v, omega)`` (m/s, rad/s) of instant ``i`` by central differences of its
-    neighbours' poses, or None without both within ``max_gap_s``."""
-    if i == 0 or i + 1 >= len(poses):
+@dataclass(frozen=True)
+class LocalMotion:
+    """The body's motion near one instant: the polynomial in time through its pose and its neighbours'.
+
+    Attributes
+    ----------
+    scale_s : the time unit of the polynomial, seconds.
+    coeffs : (n, 6) coefficients of ``(s / scale_s) ** m``, ``m = 0 .. n - 1``, of the world-frame
+        displacement ``(dp, dphi)`` (m, rad: position change and rotation vector of ``R(t) R(t0)^T``) at
+        ``s`` seconds after the instant's stamp ``t0``.
+    """
+
+    scale_s: float
+    coeffs: np.ndarray
+
+    def displacement(self, tau_s: np.ndarray) -> np.ndarray:
+        """(N, 6) displacement ``(dp, dphi)`` at ``tau_s`` (N,) seconds after the instant."""
+        x = np.asarray(tau_s, float) / self.scale_s
+        return np.vander(x, len(self.coeffs), increasing=True) @ self.coeffs - self.coeffs[0]
+
+    def twist(self, tau_s: np.ndarray) -> np.ndarray:
+        """(N, 6) world-frame twist ``(v, omega)`` (m/s, rad/s) at ``tau_s`` (N,) seconds after the instant."""
+        x = np.asarray(tau_s, float) / self.scale_s
+        m = np.arange(1, len(self.coeffs))
+        return (m * x[:, None] ** (m - 1)) @ self.coeffs[1:] / self.scale_s
+
+
+def local_motion(poses: Sequence[BodyPose], i: int, max_gap_s: float, reach: int = 2) -> LocalMotion | None:
+    """The polynomial (:class:`LocalMotion`) through the pose of instant ``i`` and up to ``reach`` tracked
+    neighbours on each side (consecutive, each within ``max_gap_s`` of the next), or None without one on
+    each side.
+
+    A hand-moved board at a few frames per second turns within the span of a central difference, which then
+    underestimates the speed (by 6 % for a 0.6 Hz sway at 6 frames/s) and overestimates every offset by as
+    much; the degree-4 polynomial through five poses errs by 0.5 %, and its curvature carries the
+    acceleration over offsets of tens of milliseconds.
+    """
+    def ok(k: int) -> bool:
+        return 0 <= k < len(poses) and poses[k].ok and poses[k].T_world_body is not None
+
+    if not ok(i):
         return None
-    a, b = poses[i - 1], poses[i + 1]
-    if not (a.ok and b.ok) or a.T_world_body is None or b.T_world_body is None:
+    ks = [i]
+    for side in (-1, 1):
+        k = i
+        while abs(k - i) < reach and ok(k + side) and abs(poses[k + side].stamp_s - poses[k].stamp_s) <= max_gap_s:
+            k += side
+            ks.append(k)
+    ks.sort()
+    if ks[0] == i or ks[-1] == i or len({poses[k].stamp_s for k in ks}) < len(ks):
         return None
-    dt = b.stamp_s - a.stamp_s
-    if dt <= 0 or b.stamp_s - poses[i].stamp_s > max_gap_s or poses[i].stamp_s - a.stamp_s > max_gap_s:
-        return None
-    v = (b.T_world_body[:3, 3] - a.T_world_body[:3, 3]) / dt
-    w = Rotation.from_matrix(b.T_world_body[:3, :3] @ a.T_world_body[:3, :3].T).as_rotvec() / dt
-    return np.r_[v, w]
+    T = {k: poses[k].T_world_body for k in ks}
+    T_i = T[i]
+    assert T_i is not None
+    t_s = np.array([poses[k].stamp_s for k in ks]) - poses[i].stamp_s
+    scale = float(np.max(np.abs(t_s)))
+    d = np.array([np.r_[Tk[:3, 3] - T_i[:3, 3], Rotation.from_matrix(Tk[:3, :3] @ T_i[:3, :3].T).as_rotvec()]
+                  for Tk in (T[k] for k in ks) if Tk is not None])
+    return LocalMotion(scale, np.linalg.solve(np.vander(t_s / scale, len(ks), increasing=True), d))
 
 
-def _instant_system(cameras: Mapping[str, CameraGeometry], body: PointBody, inst: BodyInstant, pose: BodyPose,
-                    vel: np.ndarray, names: list[str], sigma_px: float, line_delay: bool, all_views: bool
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Whitened ``(Q r_stamps, Q B, Q r_none)`` of one instant (pose projected out): the residuals with the
-    image stamps, the timing parameters' columns, the residuals without any timing."""
+@dataclass(frozen=True)
+class _InstantRows:
+    """One instant's points for the timing fit: predicted and observed pixels (N, 2), the pose Jacobian
+    (N, 2, 6), each point's camera (N,) (index into the names), image stamp minus the instant's (N,) s,
+    row from the image centre (N,), the projector (2N, 2N) that removes the pose, the whitened pose
+    Jacobian's pseudo-inverse (6, 2N), and the local motion."""
+
+    uv_pred: np.ndarray
+    uv_obs: np.ndarray
+    J: np.ndarray
+    cam: np.ndarray
+    dt_img_s: np.ndarray
+    row: np.ndarray
+    Q: np.ndarray
+    A_pinv: np.ndarray
+    motion: LocalMotion
+
+
+def _instant_rows(cameras: Mapping[str, CameraGeometry], body: PointBody, inst: BodyInstant, pose: BodyPose,
+                  motion: LocalMotion, names: list[str], sigma_px: float, all_views: bool) -> _InstantRows:
     assert pose.T_world_body is not None
     views = [v for v in inst.views if (all_views or v.camera in pose.cameras) and v.camera in names]
     sc = stack_body(cameras, body, views, sigma_px)
     uv, _z, J = project_pose(sc, pose.T_world_body)
     assert J is not None
-    g = J @ vel  # (N, 2) pixels per second
-    cam_of = np.array([names.index(sc.camera_names[k]) for k in sc.cam])
-    dt_img = np.repeat([v.stamp_s - inst.stamp_s for v in views], [len(v.ids) for v in views])
-    r = (uv - sc.uv + g * dt_img[:, None]).reshape(-1) / sigma_px
-    C = len(names)
-    B = np.zeros((len(cam_of), 2, 2 * C if line_delay else C))
-    rows = sc.uv[:, 1] - np.array([cameras[sc.camera_names[k]].size[1] / 2 for k in sc.cam])
-    for k in range(C):
-        m = cam_of == k
+    A = J.reshape(-1, 6) / sigma_px
+    A_pinv = np.linalg.pinv(A)
+    return _InstantRows(uv, sc.uv, J, np.array([names.index(sc.camera_names[k]) for k in sc.cam]),
+                        np.repeat([v.stamp_s - inst.stamp_s for v in views], [len(v.ids) for v in views]),
+                        sc.uv[:, 1] - np.array([cameras[sc.camera_names[k]].size[1] / 2 for k in sc.cam]),
+                        np.eye(len(A)) - A @ A_pinv, A_pinv, motion)
+
+
+def _exposure_s(rows: _InstantRows, theta: np.ndarray, n_cams: int) -> np.ndarray:
+    """Each point's exposure time (N,) after the instant's stamp, seconds, with the timing ``theta``."""
+    line_delay = len(theta) > n_cams
+    return rows.dt_img_s + theta[rows.cam] + (theta[n_cams + rows.cam] * rows.row if line_delay else 0.0)
+
+
+def _moved_residuals(rows: _InstantRows, theta: np.ndarray, n_cams: int, sigma_px: float) -> np.ndarray:
+    """Whitened residuals (2N,) with the body moved to each point's exposure time (pose not projected out)."""
+    move = np.einsum("nij,nj->ni", rows.J, rows.motion.displacement(_exposure_s(rows, theta, n_cams)))
+    return (rows.uv_pred - rows.uv_obs + move).reshape(-1) / sigma_px
+
+
+def _instant_system(rows: _InstantRows, theta: np.ndarray, n_cams: int, sigma_px: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Whitened ``(Q r, Q B, Q r_none)`` of one instant (pose projected out), linearised at the timing
+    ``theta`` (offsets, then line delays if any): the residuals with the body moved to each point's
+    exposure time, the timing parameters' columns, the residuals without any timing."""
+    line_delay = len(theta) > n_cams
+    tau = _exposure_s(rows, theta, n_cams)
+    g = np.einsum("nij,nj->ni", rows.J, rows.motion.twist(tau))  # pixels per second
+    B = np.zeros((len(tau), 2, len(theta)))
+    for k in range(n_cams):
+        m = rows.cam == k
         B[m, :, k] = g[m]
         if line_delay:
-            B[m, :, C + k] = g[m] * rows[m, None]
-    B = B.reshape(-1, B.shape[2]) / sigma_px
-    A = J.reshape(-1, 6) / sigma_px
-    Q = np.eye(len(r)) - A @ np.linalg.pinv(A)
-    return Q @ r, Q @ B, Q @ ((uv - sc.uv).reshape(-1) / sigma_px)
+            B[m, :, n_cams + k] = g[m] * rows.row[m, None]
+    r = _moved_residuals(rows, theta, n_cams, sigma_px)
+    return (rows.Q @ r, rows.Q @ (B.reshape(-1, len(theta)) / sigma_px),
+            rows.Q @ ((rows.uv_pred - rows.uv_obs).reshape(-1) / sigma_px))
+
+
+def _hac_covariance(scores: np.ndarray, index: np.ndarray, N_inv: np.ndarray, lags: int) -> np.ndarray:
+    """Covariance of a least-squares estimate whose per-instant scores (G, p) ``scores`` (the whitened
+    columns times the residuals) are correlated between instants up to ``lags`` apart (``index`` (G,) the
+    instants' positions in the track): ``N_inv M N_inv`` with ``M`` the scores' Bartlett-weighted
+    autocovariance (Newey and West), scaled by ``G / (G - p)`` for the parameters fitted."""
+    G, n_par = scores.shape
+    M = scores.T @ scores
+    for a in range(G):
+        for b in range(a + 1, G):
+            gap = index[b] - index[a]
+            if gap > lags:
+                break
+            w = 1.0 - gap / (lags + 1.0)
+            M += w * (np.outer(scores[a], scores[b]) + np.outer(scores[b], scores[a]))
+    return N_inv @ M @ N_inv * G / max(G - n_par, 1)
+
+
+def _fit_timing(rows: Sequence[_InstantRows], free: list[int], theta0: np.ndarray, n_cams: int, sigma_px: float,
+                iterations: int) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+    """Gauss-Newton on the timing parameters ``free`` from ``theta0`` (the others held): the motion is a
+    polynomial in each point's exposure time. Returns the parameters and each instant's system at them."""
+    theta = theta0.copy()
+    parts = [_instant_system(r, theta, n_cams, sigma_px) for r in rows]
+    for _ in range(iterations):
+        N = sum(qB.T @ qB for _, qB, _ in parts)
+        b = sum(qB.T @ qr for qr, qB, _ in parts)
+        theta[free] -= np.linalg.solve(N[np.ix_(free, free)], b[free])
+        parts = [_instant_system(r, theta, n_cams, sigma_px) for r in rows]
+    return theta, parts
+
+
+def _timing_rows(cameras: Mapping[str, CameraGeometry], body: PointBody, instants: Sequence[BodyInstant],
+                 poses: Sequence[BodyPose], names: list[str], max_gap_s: float, sigma_px: float, all_views: bool
+                 ) -> tuple[list[_InstantRows], list[int]]:
+    """The rows of every instant with a local motion and two cameras or more, and those instants' indices."""
+    rows, used = [], []
+    for i, (inst, pose) in enumerate(zip(instants, poses, strict=True)):
+        motion = local_motion(poses, i, max_gap_s)
+        if motion is None or not pose.ok or len(pose.cameras) + (len(pose.rejected) if all_views else 0) < 2:
+            continue
+        rows.append(_instant_rows(cameras, body, inst, pose, motion, names, sigma_px, all_views))
+        used.append(i)
+    return rows, used
+
+
+def _poses_at_stamps(poses: Sequence[BodyPose], rows: Sequence[_InstantRows], used: Sequence[int],
+                     theta: np.ndarray, n_cams: int, sigma_px: float) -> list[BodyPose]:
+    """The poses refitted at their instants' stamps with each point moved to its exposure time: the tracked
+    poses blend cameras exposed tens of milliseconds apart, and the local motions run through them."""
+    out = list(poses)
+    for r, i in zip(rows, used, strict=True):
+        T = poses[i].T_world_body
+        assert T is not None
+        xi = -r.A_pinv @ _moved_residuals(r, theta, n_cams, sigma_px)  # world-frame (dt, dphi)
+        T_new = T.copy()
+        T_new[:3, :3] = Rotation.from_rotvec(xi[3:]).as_matrix() @ T[:3, :3]
+        T_new[:3, 3] = T[:3, 3] + xi[:3]
+        out[i] = replace(poses[i], T_world_body=T_new)
+    return out
 
 
 def estimate_timing(cameras: Mapping[str, CameraGeometry], body: PointBody, instants: Sequence[BodyInstant],
                     poses: Sequence[BodyPose], reference: str | None = None, *, line_delay: bool = True,
                     max_gap_s: float = 0.5, options: BodyOptions | None = None,
-                    all_views: bool = True) -> CameraTiming:
+                    all_views: bool = True, lags: int = 3, iterations: int = 3, refits: int = 3) -> CameraTiming:
     """The cameras' offsets (and line delays) from the body's motion over ``instants`` (module docstring).
 
     ``all_views``: the views the pose fit dropped as outliers count too (a camera whose offset is large
     is dropped at every instant where the body moves; the pose is refitted here with its offset).
+    ``lags``: instants this many apart or fewer may share a motion-model error (they share poses, and the
+    hand's motion between them); the interval allows for it. ``iterations``: Gauss-Newton steps on the
+    timing per refit of the poses at their stamps; ``refits``: how many times.
+
+    Raises
+    ------
+    ValueError
+        ``reference`` is not among the tracked cameras.
     """
     options = options or BodyOptions()
+    sigma = options.sigma_px
     names = sorted({c for p in poses if p.ok for c in (*p.cameras, *(p.rejected if all_views else ()))})
-    ref = reference or names[0]
+    ref = reference or (names[0] if names else "")
+    if ref not in names:
+        raise ValueError(f"reference camera {ref!r} is in no tracked instant (cameras: {', '.join(names)})")
     C = len(names)
     n_par = 2 * C if line_delay else C
-    NtN, Ntb = np.zeros((n_par, n_par)), np.zeros(n_par)
-    parts = []
-    for i, (inst, pose) in enumerate(zip(instants, poses, strict=True)):
-        vel = body_velocity(poses, i, max_gap_s)
-        if vel is None or not pose.ok or len(pose.cameras) + (len(pose.rejected) if all_views else 0) < 2:
-            continue
-        qr, qB, q0 = _instant_system(cameras, body, inst, pose, vel, names, options.sigma_px, line_delay,
-                                     all_views)
-        NtN += qB.T @ qB
-        Ntb += qB.T @ qr
-        parts.append((qr, qB, q0))
-    free = [k for k in range(n_par) if k != names.index(ref) and np.any(NtN[k] != 0)]
-    theta = np.zeros(n_par)
-    cov = np.full((n_par, n_par), np.nan)
+    rows, used = _timing_rows(cameras, body, instants, poses, names, max_gap_s, sigma, all_views)
+    stamps_only = [_instant_system(r, np.zeros(n_par), C, sigma) for r in rows]
+    N0 = sum((qB.T @ qB for _, qB, _ in stamps_only), np.zeros((n_par, n_par)))
+    free = [k for k in range(n_par) if k != names.index(ref) and np.any(N0[k] != 0)]
+    theta, parts = np.zeros(n_par), stamps_only
+    cov_model = cov_hac = np.full((n_par, n_par), np.nan)
     n_rows = sum(len(q) for q, _, _ in parts)
+    dof = n_rows - 6 * len(parts) - len(free)
+    vf = math.nan
     if parts and free:
-        Nf = NtN[np.ix_(free, free)]
-        theta[free] = -np.linalg.solve(Nf, Ntb[free])
-        ss = sum(float(np.sum((qr + qB @ theta) ** 2)) for qr, qB, _ in parts)
-        dof = n_rows - 6 * len(parts) - len(free)
-        s2 = ss / dof if dof > 0 else math.nan
-        cov[np.ix_(free, free)] = max(s2, 1.0) * np.linalg.inv(Nf)
-    sig = np.sqrt(np.clip(np.diag(cov), 0, None))
-    sig[names.index(ref)] = 0.0
-    rms = {k: float(np.sqrt(2 * np.mean(np.concatenate([f(*p) for p in parts]) ** 2)) * options.sigma_px)
-           if parts else math.nan
-           for k, f in (("none", lambda qr, qB, q0: q0), ("stamps", lambda qr, qB, q0: qr),
-                        ("model", lambda qr, qB, q0: qr + qB @ theta))}
-    vf = (sum(float(np.sum((qr + qB @ theta) ** 2)) for qr, qB, _ in parts)
-          / max(n_rows - 6 * len(parts) - len(free), 1))
+        theta, parts = _fit_timing(rows, free, theta, C, sigma, iterations)
+        poses_now = list(poses)
+        for _ in range(refits):
+            poses_now = _poses_at_stamps(poses_now, rows, used, theta, C, sigma)
+            rows, _used = _timing_rows(cameras, body, instants, poses_now, names, max_gap_s, sigma, all_views)
+            theta, parts = _fit_timing(rows, free, theta, C, sigma, iterations)
+        vf = sum(float(np.sum(qr**2)) for qr, _, _ in parts) / dof if dof > 0 else math.nan
+        N_inv = np.linalg.inv(sum(qB.T @ qB for _, qB, _ in parts)[np.ix_(free, free)])
+        cov_model, cov_hac = cov_model.copy(), cov_hac.copy()
+        cov_model[np.ix_(free, free)] = max(vf, 1.0) * N_inv
+        scores = np.array([qB[:, free].T @ qr for qr, qB, _ in parts])
+        cov_hac[np.ix_(free, free)] = _hac_covariance(scores, np.array(used), N_inv, lags)
+    sig_model = np.sqrt(np.clip(np.diag(cov_model), 0, None))
+    sig = np.fmax(sig_model, np.sqrt(np.clip(np.diag(cov_hac), 0, None)))
+    sig[names.index(ref)] = sig_model[names.index(ref)] = 0.0
+
+    def rms(res: list[np.ndarray]) -> float:
+        return float(np.sqrt(2 * np.mean(np.concatenate(res) ** 2)) * sigma) if res else math.nan
+
+    rms_px = {"none": rms([q0 for _, _, q0 in stamps_only]), "stamps": rms([qs for qs, _, _ in stamps_only]),
+              "model": rms([qr for qr, _, _ in parts])}
     nan = np.full(C, np.nan)
     return CameraTiming(ref, tuple(names), theta[:C], sig[:C], theta[C:] if line_delay else nan,
-                        sig[C:] if line_delay else nan, rms, len(parts), n_rows // 2, vf)
+                        sig[C:] if line_delay else nan, rms_px, len(parts), n_rows // 2, vf, sig_model[:C])

@@ -40,8 +40,9 @@ MEASURED_BORDER_PX = 1.0
 MIN_MEASURED_CORNERS = 3
 
 #: Version of what this module makes of the markers package's detections (the second start, the corners
-#: released outside the image), part of the detector's version in GTvision's checkpoint key.
-VIEWS_VERSION = 2
+#: released outside the image, a window's lens maps cut from the whole image's), part of the detector's
+#: version in GTvision's checkpoint key.
+VIEWS_VERSION = 3
 
 #: Edge band beyond ``3 sigma`` of the second start (:func:`_second_start`), px, against the markers
 #: package's 5 px (``DetectorParams.band_px``, an allowance for a phone's sharpening halo).
@@ -155,8 +156,10 @@ class GtrigDetector:
         if det is None:
             K = np.array(camera.K, float)
             if box is not None:
-                K[0, 2] -= box[0]
-                K[1, 2] -= box[1]
+                from gtrig.markers.detect.camera import declare_crop
+
+                # the window's lens maps cut from the whole image's: a window's own would cost a few detections
+                K = declare_crop(K, np.asarray(camera.dist, float), (camera.size[1], camera.size[0]), box)
             kw: dict[str, Any] = {"tone": tone, **({"band_px": RETRY_BAND_PX} if retry else {})}
             args = () if self._params is None else (self._params(**kw),)
             det = self._per_camera[key] = self._cls(self.family, K, camera.dist, *args)

@@ -21,12 +21,14 @@ Each image of a camera is searched where its markers are expected and where it c
   tracked marker is lost, and when the region to search fits in no window.
 
 The region searched in one image is one window holding the union of the above: a square of
-``window_px / 2``, ``3 window_px / 4`` or ``window_px`` pixels (the smallest that holds it) at a fixed place,
-on a grid of a quarter of its side. The detector of a window (its camera matrix shifted by the window's
-corner; the distortion coefficients are unchanged, which is exact) is made once per process and camera:
-its undistortion maps cost as much as five detections in it, so windows that followed the robot pixel by
-pixel would cost more than they save. Deterministic: the same images in the same order give the same
-detections.
+``window_px / 2``, ``3 window_px / 4``, ``window_px``, ``5 window_px / 4`` or ``3 window_px / 2`` pixels (the
+smallest that holds it, clipped to the image) at a fixed place, on a grid of a quarter of its side. A robot
+near a camera, whose moving body changes the cells around its markers, makes regions of 500-600 px: a window
+of 640 or 768 px costs OpenCV's candidate stage a half or three quarters of the whole image's. The detector
+of a window (its camera matrix shifted by the window's corner; the distortion coefficients are unchanged,
+which is exact) is made once per process and camera, its undistortion maps cut from the whole image's
+(:func:`gtrig.markers.detect.camera.declare_crop`). Deterministic: the same images in the same order give
+the same detections.
 """
 
 from __future__ import annotations
@@ -58,8 +60,8 @@ SiblingsFn = Callable[[list[MarkerView]], list[tuple[int, np.ndarray]]]
 
 
 #: Version of the tracking rules (what is looked for where), part of :meth:`TrackOptions.key`: 2 looks for
-#: markers cut by the image's edge.
-TRACK_RULES = 2
+#: markers cut by the image's edge, 3 has windows up to ``3 window_px / 2``.
+TRACK_RULES = 3
 
 
 @dataclass(frozen=True)
@@ -88,8 +90,8 @@ class TrackOptions:
     change_margin_px : float
         A changed area is searched this far around it (a marker only partly inside it).
     window_px : int
-        Side of the largest window, pixels (module docstring); a region that fits in none is searched
-        whole.
+        The windows' sides are a half, three quarters, one, five quarters and three halves of this, pixels
+        (module docstring); a region that fits in none is searched whole.
     """
 
     enabled: bool = True
@@ -122,9 +124,10 @@ class TrackOptions:
                 f"{self.size_margin!r}/{self.cell_px}/{self.change_level!r}/{self.change_margin_px!r}/{self.window_px}")
 
     @property
-    def windows_px(self) -> tuple[int, int, int]:
+    def windows_px(self) -> tuple[int, ...]:
         """The windows' sides, pixels, smallest first."""
-        return self.window_px // 2, 3 * self.window_px // 4, self.window_px
+        w = self.window_px
+        return w // 2, 3 * w // 4, w, 5 * w // 4, 3 * w // 2
 
 
 @dataclass
@@ -171,6 +174,12 @@ def cell_means(image: np.ndarray, cell_px: int) -> np.ndarray:
     g = image if image.ndim == 2 else image.mean(axis=2)
     h, w = g.shape[:2]
     size = (max(1, w // cell_px), max(1, h // cell_px))
+    if g.dtype == np.uint8 and w % cell_px == 0 and h % cell_px == 0 and not cell_px & (cell_px - 1):
+        from gtrig.vision.cell_kernel import cell_means_into
+
+        out = np.empty((size[1], size[0]), np.float32)
+        cell_means_into(g, cell_px, out)  # the area resize's values (a power of two divides exactly), faster
+        return out
     return cv2.resize(np.asarray(g, np.float32), size, interpolation=cv2.INTER_AREA)
 
 

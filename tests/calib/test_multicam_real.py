@@ -305,16 +305,18 @@ def test_lens_sigmas_from_the_views_scatter(board, detections, intrinsics) -> No
 
 def test_camera_time_offsets_from_the_boards_motion(board_tracks) -> None:
     """Each camera's exposure offset from its frame times, from the board's motion: the offsets explain part
-    of the cameras' disagreement (residual RMS down by 5-28 %); the cameras were moved between the two
-    recordings, so their offsets are not compared across them."""
+    of the cameras' disagreement; the residuals, correlated instant by instant (the webcams' exposures wander
+    from their frame times), widen the intervals beyond the variance factor's. The cameras were moved between
+    the two recordings, so their offsets are not compared across them."""
     from gtrig.vision.body_timing import estimate_timing
 
     for s in RECORDINGS:
         cams, track, _sc = board_tracks[s]
         tm = estimate_timing(cams, track.body, track.instants, track.poses, "cam_0", line_delay=False)
         assert tm.instants >= 15 and tm.cameras == CAMS, s
-        assert tm.offset_s[0] == 0 and np.all(np.abs(tm.offset_s) < 0.05), (s, tm.offset_s)
-        assert np.all(np.isfinite(tm.sigma_offset_s)) and np.all(tm.sigma_offset_s[1:] < 0.01), s
-        # measured 1.39 -> 1.00 px and 1.44 -> 1.36 px; offsets cam_1 -24.4, -3.5 ms, cam_2 +29.1, +18.0 ms,
-        # cam_3 +19.9, +21.1 ms
+        assert tm.offset_s[0] == 0 and np.all(np.abs(tm.offset_s) < 0.06), (s, tm.offset_s)
+        assert np.all(np.isfinite(tm.sigma_offset_s)) and np.all(tm.sigma_offset_s[1:] < 0.03), s
+        assert np.all(tm.sigma_offset_s >= tm.sigma_offset_model_s), s
+        # measured cam_1 -27.1 / -5.0 ms, cam_2 +30.5 / +17.5, cam_3 +20.3 / +21.5, sigmas 0.9-14.9 ms (from the
+        # variance factor 0.7-6.3 ms); residual RMS 1.39 -> 0.97 px and 1.44 -> 1.36 px
         assert tm.rms_px["model"] < 0.97 * tm.rms_px["stamps"], (s, tm.rms_px)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gtrig.markers.detect import _edge_kernels
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.edges import RefineParams, refine_quads, refine_quads_stepwise
 from gtrig.markers.detect.tone import to_light
@@ -88,19 +89,23 @@ def test_settled_quads_and_a_sparse_first_pass_keep_the_corners(seed: int, side:
     assert rms_fast < 1.25 * rms_dense + 0.01
 
 
-def test_one_compiled_call_is_the_pass_loop_without_the_white_end_and_with_stored_tone() -> None:
-    """Without a lens model in one thread every pass runs in one compiled call; with two threads the passes
-    are called in turn from Python. Both, and the step functions, give the same corners with a known
-    margin, no white-end search and sRGB-stored levels."""
+def test_one_compiled_call_per_share_without_the_white_end_and_with_stored_tone() -> None:
+    """Without a lens model every pass of a share of the quads runs in one compiled call: one thread (one
+    share) and two (the quads shared between them) give the same results to the last bit, and those of the
+    step functions to rounding, with a known margin, no white-end search and sRGB-stored levels; a quad
+    refined alone gets the results it gets among the others (the white end's bins are its own)."""
     img, quads, white, true = _scene(9, 30.0, 1.0)
     bc = family_spec(FAMILY).border_cells
     light = to_light(np.arange(256, dtype=np.float64), "srgb")
     for prm in (RefineParams(white_end=False, margin_cells=1.0), RefineParams(passes=2, max_columns=0)):
         _ref, c_ref, cov_ref = refine_quads_stepwise(img, quads, white, bc, prm, None, light)
         _fit, one, cov_one = refine_quads(img, quads, white, bc, prm, None, light, threads=1)
-        _fit, loop, cov_loop = refine_quads(img, quads, white, bc, prm, None, light, threads=2)
-        assert np.abs(one - c_ref).max() < 1e-6 and np.abs(loop - c_ref).max() < 1e-6
-        assert np.allclose(cov_one, cov_loop, rtol=1e-6, atol=1e-12)
+        _fit, split, cov_split = refine_quads(img, quads, white, bc, prm, None, light, threads=2)
+        assert np.abs(one - c_ref).max() < 1e-6
+        assert np.array_equal(one, split) and np.array_equal(cov_one, cov_split)
+        for q in range(len(quads)):
+            _fit, alone, cov_alone = refine_quads(img, quads[q:q + 1], white[q:q + 1], bc, prm, None, light)
+            assert np.array_equal(alone[0], one[q]) and np.array_equal(cov_alone[0], cov_one[q])
         assert np.abs(one - true).max() < 1.0  # (the stored tone taken back: the corners found, not lost)
 
 
@@ -128,3 +133,26 @@ def test_band_limits_follow_their_formulas() -> None:
             np.testing.assert_array_equal(w_out, out)
             np.testing.assert_array_equal(w_look, out + prm.look_sigmas * sigma if prm.white_end else out)
             np.testing.assert_array_equal(excl, ends)
+
+
+def test_band_boxes_hold_every_raw_pixel_of_the_band() -> None:
+    """With a lens model the compiled passes scan each band's box in the raw image: every raw pixel whose
+    undistorted position lies in the band (up to ``max(w_in, w_out)`` across the edge and beyond its ends)
+    is inside it, and the box is not much larger than those pixels' own."""
+    K = np.array([[700.0, 0, 511.5], [0, 700.0, 383.5], [0, 0, 1]])
+    dist = np.array([-0.25, 0.12, 2e-4, -3e-4, -0.02, 0.0, 0.0, 0.0])
+    und = Undistorter(K, dist[:5], (768, 1024))
+    rng = np.random.default_rng(3)
+    p0 = rng.uniform([60.0, 60.0], [960.0, 700.0], (12, 2))
+    p1 = p0 + rng.uniform(-50.0, 50.0, (12, 2))
+    w_in, w_out = rng.uniform(1.0, 8.0, 12), rng.uniform(1.0, 8.0, 12)
+    boxes = _edge_kernels.raw_boxes(768, 1024, p0, p1, w_in, w_out, K, dist)
+    for e in range(12):
+        t = (p1[e] - p0[e]) / np.linalg.norm(p1[e] - p0[e])
+        rel = np.stack([und.map_x - p0[e, 0], und.map_y - p0[e, 1]], axis=-1)
+        s, d = rel @ t, rel @ np.array([t[1], -t[0]])
+        ext = max(w_in[e], w_out[e])
+        iy, ix = np.nonzero((np.abs(d) <= ext) & (s >= -ext) & (s <= np.linalg.norm(p1[e] - p0[e]) + ext))
+        x0, y0, x1, y1 = boxes[e]
+        assert ix.min() >= x0 and ix.max() < x1 and iy.min() >= y0 and iy.max() < y1
+        assert ix.min() - x0 <= 3 and x1 - ix.max() <= 4 and iy.min() - y0 <= 3 and y1 - iy.max() <= 4

@@ -40,6 +40,40 @@ def test_ordered_map_raises_where_the_result_is_taken() -> None:
     assert got == [0, 1, 2, 3, 4]
 
 
+def test_beside_hands_back_the_result_or_the_error_once() -> None:
+    calls: list[int] = []
+
+    def f(k: int) -> tuple[int, str]:
+        calls.append(k)
+        if k < 0:
+            raise ValueError("negative")
+        return k * k, threading.current_thread().name
+
+    jobs = [_threads.Beside(f, k) for k in range(8)]
+    assert [j.result()[0] for j in jobs] == [k * k for k in range(8)]
+    assert [j.result()[0] for j in jobs] == [k * k for k in range(8)]  # taken again: not run again
+    bad = _threads.Beside(f, -1)
+    with pytest.raises(ValueError, match="negative"):
+        bad.result()
+    time.sleep(0.05)  # the helpers have reached every job by now
+    assert sorted(calls) == [-1, *range(8)]
+
+
+def test_beside_runs_in_the_caller_when_no_helper_is_free() -> None:
+    """With both helper threads held by other work, the result is computed by the caller, at once."""
+    release = threading.Event()
+    held = [_threads.helper_pool().submit(release.wait, 10.0) for _ in range(2)]
+    try:
+        job = _threads.Beside(lambda: threading.current_thread().name)
+        t0 = time.perf_counter()
+        assert job.result() == threading.current_thread().name
+        assert time.perf_counter() - t0 < 1.0
+    finally:
+        release.set()
+        for h in held:
+            h.result()
+
+
 def test_two_threads_give_the_same_detections_on_clutter() -> None:
     """Large, small and blurred markers on clutter, in dim light: one thread and two give the same
     detections, bit for bit (the edge fits split between the threads)."""

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from gtrig.cli.main import app
 from gtrig.errors import InputError
-from gtrig.io.frames import read_frame_index
+from gtrig.io.frames import read_frame_index, read_image
 from gtrig.io.recording import summarize
 from gtrig.io.scans import read_scans
 from gtrig.io.tum import read_tum
@@ -82,3 +82,48 @@ def test_same_seed_same_truth(rec: Path, tmp_path: Path) -> None:
 def test_cli_errors_are_one_line(tmp_path: Path) -> None:
     r = CliRunner().invoke(app, ["sim", "--scenario", "warehouse", "--out", str(tmp_path / "r"), "--quick"])
     assert r.exit_code == 2 and "unknown scenario 'warehouse'" in r.output and "Traceback" not in r.output
+
+
+def _same(a: Path, b: Path, rel: str) -> bool:
+    return (a / rel).read_bytes() == (b / rel).read_bytes()
+
+
+def _image_difference(a: Path, b: Path, rel: str) -> np.ndarray:
+    return read_image(a / rel).astype(float) - read_image(b / rel).astype(float)
+
+
+def test_a_noise_draw_keeps_the_geometry_and_redraws_the_measurements(rec: Path, tmp_path: Path) -> None:
+    out = tmp_path / "draw1"
+    simulate(tiny().model_copy(update={"noise_draw": 1}), out)
+    # the scene, rig, paths, board and hand-held poses, clock offsets and odometry errors are the seed's
+    for rel in ["rig.yaml", "calib/boards.yaml", "survey/reference_points.csv", "survey/robot_points.csv",
+                *(str(p.relative_to(rec)) for p in (rec / "truth").iterdir())]:
+        assert _same(rec, out, rel), rel
+    # every measurement's noise is drawn anew, with the statistics of the seed's own
+    rig = load_rig(rec / "rig.yaml")
+    sc = rig.laser_scanners[0]
+    r0 = read_scans(rec / "background" / "lasers" / f"{sc.name}.csv", sc).ranges_m
+    r1 = read_scans(out / "background" / "lasers" / f"{sc.name}.csv", sc).ranges_m
+    both = np.isfinite(r0) & np.isfinite(r1)
+    # the same static room and people, two draws of 1 cm range noise: their difference has sd sqrt(2) cm
+    assert both.sum() > 2000 and 0.0125 < float(np.std((r1 - r0)[both])) < 0.016
+    d = _image_difference(rec, out, "run/cameras/cam1/000003.png")
+    assert 1.5 < float(np.std(d)) < 4.5 and abs(float(np.mean(d))) < 0.1
+    w0, w1 = (np.loadtxt(p / "survey" / "world_distances.csv", delimiter=",", skiprows=1, usecols=2)
+              for p in (rec, out))
+    assert 0.0008 < float(np.std(w1 - w0)) < 0.00135  # two draws of the hand laser's 0.75 mm
+    o0, o1 = (np.loadtxt(p / "run" / "odometry.csv", delimiter=",", skiprows=1) for p in (rec, out))
+    assert np.array_equal(o0[:, 0], o1[:, 0]) and not np.array_equal(o0[:, 1:4], o1[:, 1:4])
+    assert float(np.abs(o1[:, 1:3] - o0[:, 1:3]).max()) < 0.01  # wheel slip only: millimetres over the run
+    assert not _same(rec, out, "calib/intrinsics/cam0/000000.png")
+
+
+def test_a_calibration_noise_draw_redraws_the_calibration_images_only(rec: Path, tmp_path: Path) -> None:
+    out = tmp_path / "calib_draw"
+    simulate(tiny().model_copy(update={"noise_draw": 2, "noise_redrawn": "calibration"}), out)
+    for rel in ("run/lasers/laser0.csv", "run/odometry.csv", "survey/world_distances.csv",
+                "run/cameras/cam1/000003.png", "run/cameras/cam1/timestamps.csv"):
+        assert _same(rec, out, rel), rel
+    d = _image_difference(rec, out, "calib/intrinsics/cam0/000000.png")
+    assert 1.5 < float(np.std(d)) < 4.5
+    assert not _same(rec, out, "handheld/images/000000.png")

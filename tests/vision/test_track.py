@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from vision_synth import write_rendered_run
@@ -15,7 +16,7 @@ from gtrig.rig.models import Rig
 from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
 from gtrig.vision.observations import MarkerView
 from gtrig.vision.sequence import run_recording
-from gtrig.vision.track import CameraTracker, TrackOptions, predict_marker, window_for
+from gtrig.vision.track import CameraTracker, TrackOptions, cell_means, predict_marker, window_for
 
 FRAMES = 8
 RATE_HZ = 10.0
@@ -43,6 +44,17 @@ def test_windows_hold_the_region_at_fixed_places() -> None:
     assert w == (768, 512, 1024, 768)  # against the image's far edges
     assert window_for((-50.0, -50.0, -1.0, 10.0), size, (256,)) is None  # outside the image
     assert window_for((0.0, 0.0, 600.0, 100.0), size, (256, 384, 512)) == ()  # fits in none
+
+
+def test_cell_means_are_the_area_resize_of_the_image() -> None:
+    rng = np.random.default_rng(2)
+    for shape, cell in (((768, 1024), 16), ((48, 80), 16), ((40, 24), 8), ((50, 70), 16), ((45, 60), 15)):
+        img = rng.integers(0, 256, shape).astype(np.uint8)
+        want = cv2.resize(img.astype(np.float32), (shape[1] // cell, shape[0] // cell), interpolation=cv2.INTER_AREA)
+        np.testing.assert_array_equal(cell_means(img, cell), want)
+    colour = rng.integers(0, 256, (32, 48, 3)).astype(np.uint8)
+    np.testing.assert_allclose(cell_means(colour, 16), cv2.resize(colour.mean(axis=2).astype(np.float32), (3, 2),
+                                                                  interpolation=cv2.INTER_AREA), rtol=1e-6)
 
 
 class _Scripted:

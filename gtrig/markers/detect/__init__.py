@@ -4,7 +4,8 @@ Pipeline:
 
 1. candidates and IDs (:mod:`.peers`): OpenCV's ArUco detector for every family with an OpenCV
    dictionary and for ARToolKitPlus' codes as custom dictionaries, AprilTag 3 for the AprilTag families
-   it reads (pooled with OpenCV's for 16h5, 25h9 and 36h11), both without their own corner refinement;
+   it reads (pooled with OpenCV's for 16h5, 25h9 and 36h11, on a second thread while OpenCV's candidates
+   go through the next steps), both without their own corner refinement;
 2. edges (:mod:`.refine`, :mod:`.edges`): a blurred-step model ``a + b Phi(d / sigma)`` fitted by
    Gauss-Newton to all the pixels of a band around each edge, in undistorted coordinates when a camera
    is given; the first pass fits plain steps, the next ones hold the modelled light of the other edges
@@ -37,7 +38,7 @@ from numpy.typing import NDArray
 from gtrig.errors import InputError
 from gtrig.markers.detect import _blas, _threads
 from gtrig.markers.detect.camera import Undistorter
-from gtrig.markers.detect.peers import PeerCandidate, PeerParams, find_peer_candidates
+from gtrig.markers.detect.peers import PeerCandidate, PeerParams, find_peer_candidates, peer_batches
 from gtrig.markers.detect.refine import RefineSettings, fit_reason, refine_quads
 from gtrig.markers.detect.verify import Verdict, code_book, read_whiteness, read_whiteness_plain, verify_ids
 from gtrig.markers.families import FamilySpec, decode_batch, family_spec
@@ -154,9 +155,10 @@ class DetectorParams(RefineSettings):
     min_soft_margin : a peer's ID is refused when the code nearest gtrig's solved cells is another ID's
         and leads the peer's by at least this many chi-square units (:mod:`.verify`); 0: only the hard
         reading can refuse it.
-    threads : threads the edge fits may use; 0 follows OpenCV's setting
+    threads : threads a detection may use; 0 follows OpenCV's setting
         (``cv2.getNumThreads()``). OpenCV's detector runs with its own setting and AprilTag 3 on its one
-        thread (:func:`.peers.apriltag3_candidates`); the edge fits of fewer than
+        thread (:func:`.peers.apriltag3_candidates`), with 2 or more beside OpenCV's detection and the edge
+        fits of OpenCV's candidates (:func:`.peers.peer_batches`); the edge fits of fewer than
         :data:`._threads.MIN_SPLIT_QUADS` quads stay in the calling thread.
     tone : how the camera stores light (:mod:`.tone`): ``"linear"`` (machine-vision cameras, the
         simulator) or ``"srgb"`` (phones, webcams, most JPEG photos); the edge fits take the stored levels
@@ -233,14 +235,22 @@ class MarkerDetector:
         gray = to_gray(image)
         if min(gray.shape) < 8:
             return []
-        cands = find_peer_candidates(gray, self.spec.family, self.params.peers)
-        if not cands:
-            return []
         if not self.spec.edge_model:
-            return _dedupe([_unrefined(c) for c in cands], trace)
-        nt = _threads.fit_threads(self.params.threads, len(cands))
+            return _dedupe([_unrefined(c) for c in find_peer_candidates(gray, self.spec.family, self.params.peers)],
+                           trace)
+        # each peer's batch is refined as it comes (AprilTag 3's may still run beside OpenCV's); the
+        # detections keep the order of one batch of all the candidates: the refined ones, then the peer's
+        # corners kept unrefined
+        refined: list[Detection] = []
+        unrefined: list[Detection] = []
         with _blas.one_thread():
-            return _dedupe(self._refine_and_verify(gray, cands, trace, nt), trace)
+            for cands in peer_batches(gray, self.spec.family, self.params.peers, _threads.threads(self.params.threads)):
+                if cands:
+                    nt = _threads.fit_threads(self.params.threads, len(cands))
+                    r, u = self._refine_and_verify(gray, cands, trace, nt)
+                    refined += r
+                    unrefined += u
+        return _dedupe(refined + unrefined, trace)
 
     def detect_expected(self, image: NDArray[np.generic], quads_px: NDArray[np.float64],
                         ids: NDArray[np.int64]) -> list[Detection]:
@@ -305,8 +315,10 @@ class MarkerDetector:
                               r.cov[idx[keep]], r.blur[idx[keep]], und, None)
 
     def _refine_and_verify(self, gray: NDArray[np.uint8], cands: list[PeerCandidate],
-                           trace: list[Rejection] | None, nt: int) -> list[Detection]:
-        """The peers' candidates refined (:mod:`.refine`) and their IDs verified (:mod:`.verify`)."""
+                           trace: list[Rejection] | None, nt: int) -> tuple[list[Detection], list[Detection]]:
+        """The peers' candidates refined (:mod:`.refine`) and their IDs verified (:mod:`.verify`): the
+        detections refined, and those kept with the peer's corners (``keep_unrefined``), each in the
+        candidates' order."""
         p, spec = self.params, self.spec
         und = self._undistorter(gray.shape)
         Q0 = np.array([c.quad_px for c in cands])  # (Q, 4, 2) raw
@@ -315,11 +327,12 @@ class MarkerDetector:
         book = code_book(spec.family)
         r = refine_quads(gray, Q, book.cells[peer_ids], spec.border_cells, und, p, nt)
         idx = np.flatnonzero(r.ok)
-        out = []
+        out: list[Detection] = []
+        kept: list[Detection] = []
         if len(idx):
             w = read_whiteness(gray, r, idx, spec, p.tone, p.max_blur_px, und)
             v = verify_ids(w, peer_ids[idx], spec, book, p.min_soft_margin)
-            out += self._accepted(cands, idx, v, r.corners[idx], r.cov[idx], r.blur[idx], und, trace)
+            out = self._accepted(cands, idx, v, r.corners[idx], r.cov[idx], r.blur[idx], und, trace)
         bad = np.flatnonzero(~r.ok)
         if trace is not None and not p.keep_unrefined:
             for q in bad:
@@ -332,8 +345,8 @@ class MarkerDetector:
             w = read_whiteness_plain(gray, Qb, spec, und)
             v = verify_ids(w, peer_ids[bad], spec, book, p.min_soft_margin)
             cov = np.tile(np.eye(2) * UNREFINED_SIGMA_PX**2, (len(bad), 4, 1, 1))
-            out += self._accepted(cands, bad, v, Qb, cov, np.full(len(bad), np.nan), und, trace)
-        return out
+            kept = self._accepted(cands, bad, v, Qb, cov, np.full(len(bad), np.nan), und, trace)
+        return out, kept
 
     def _accepted(self, cands: list[PeerCandidate], idx: NDArray[np.int64], v: Verdict, corners: NDArray[np.float64],
                   cov: NDArray[np.float64], blur: NDArray[np.float64], und: Undistorter | None,

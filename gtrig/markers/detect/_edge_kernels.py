@@ -9,9 +9,8 @@ and end points; the last pass adds the lines' covariances and the corners
 (:func:`.edges.intersect_corners`). The arithmetic is the same as theirs, step for step, so the
 results agree with them to rounding; what goes is the interpreter's work per step and per edge, and
 the temporaries of the array forms (most of the time on a marker of a few hundred band pixels per
-edge). The quads are independent within a pass: the caller may split them between threads. The one
-value shared by all quads of a pass (the origin of :func:`.edges.white_extent`'s bins, the widest
-inner band) is given by the caller.
+edge). The quads are independent: the caller may split them between threads, and a quad's results do
+not depend on the others fitted with it.
 """
 
 from __future__ import annotations
@@ -111,6 +110,51 @@ def gather_raw(gray: NDArray[np.uint8], p0: NDArray[np.float64], p1: NDArray[np.
     return xs[:m], ys[:m], vs[:m], es[:m]
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _to_raw(u: float, v: float, K: NDArray[np.float64], dist: NDArray[np.float64]) -> tuple[float, float]:
+    """The raw pixel of the undistorted pixel ``(u, v)`` for the camera ``K`` (3, 3) and OpenCV's
+    distortion ``dist`` (8,) (:meth:`.camera.Undistorter.to_raw`)."""
+    y = (v - K[1, 2]) / K[1, 1]
+    x = (u - K[0, 2] - K[0, 1] * y) / K[0, 0]
+    k1, k2, p1, p2, k3, k4, k5, k6 = dist[0], dist[1], dist[2], dist[3], dist[4], dist[5], dist[6], dist[7]
+    r2 = x * x + y * y
+    radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    return K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def raw_boxes(h: int, w: int, p0: NDArray[np.float64], p1: NDArray[np.float64], w_in: NDArray[np.float64],
+              w_out: NDArray[np.float64], K: NDArray[np.float64], dist: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Each band's box in the raw image of ``h`` x ``w`` pixels (E, 4) as ``(x0, y0, x1, y1)``, end exclusive
+    (empty for an edge with a NaN): the bounding box of the raw positions (:func:`_to_raw`) of the corners
+    of the edge ``p0 -> p1`` (E, 2, undistorted) widened by ``max(w_in, w_out)`` (E,) along and across it,
+    one pixel more on each side and one for the end (:func:`_gather_undistorted`)."""
+    E = p0.shape[0]
+    out = np.zeros((E, 4), np.int64)
+    for e in range(E):
+        tx, ty = p1[e, 0] - p0[e, 0], p1[e, 1] - p0[e, 1]
+        L = math.hypot(tx, ty)
+        tx, ty = tx / L, ty / L
+        nx, ny = ty, -tx
+        ext = _nan_max(w_in[e], w_out[e])
+        lo_x, lo_y, hi_x, hi_y = np.inf, np.inf, -np.inf, -np.inf
+        finite = True
+        for a, sa, sb in ((p0, -1.0, -1.0), (p0, 1.0, -1.0), (p1, -1.0, 1.0), (p1, 1.0, 1.0)):
+            # the corner a + ext (sa n + sb t)
+            rx, ry = _to_raw(a[e, 0] + ext * (sa * nx + sb * tx), a[e, 1] + ext * (sa * ny + sb * ty), K, dist)
+            finite = finite and math.isfinite(rx) and math.isfinite(ry)
+            lo_x, hi_x = min(lo_x, rx), max(hi_x, rx)
+            lo_y, hi_y = min(lo_y, ry), max(hi_y, ry)
+        if finite:
+            out[e, 0] = max(int(math.floor(lo_x)) - 1, 0)
+            out[e, 1] = max(int(math.floor(lo_y)) - 1, 0)
+            out[e, 2] = min(int(math.ceil(hi_x)) + 2, w)
+            out[e, 3] = min(int(math.ceil(hi_y)) + 2, h)
+    return out
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _gather_undistorted(gray: NDArray[np.uint8], map_x: NDArray[np.float32], map_y: NDArray[np.float32],
                         boxes: NDArray[np.int64], p0: NDArray[np.float64], p1: NDArray[np.float64],
@@ -158,10 +202,12 @@ def _gather_undistorted(gray: NDArray[np.uint8], map_x: NDArray[np.float32], map
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _white_limit(d: NDArray[np.float64], v: NDArray[np.float64], lo_i: int, hi_i: int, lo: float, step: float,
+def _white_limit(d: NDArray[np.float64], v: NDArray[np.float64], lo_i: int, hi_i: int, step: float,
                  sigma: float, w_in: float, w_look: float, drop: float, end_sigmas: float) -> float:
     """:func:`.edges.white_extent` of one edge: its pixels ``lo_i:hi_i`` at distances ``d`` across it,
-    values ``v``; bins of ``step`` from ``-lo``. Returns the outer limit (at most ``w_look``)."""
+    values ``v``; bins of ``step`` on multiples of ``step`` (:func:`.edges.profile_origin`). Returns the
+    outer limit (at most ``w_look``)."""
+    lo = step * (math.floor(w_in / step) + 1.0)
     nb = int(math.floor((lo + w_look) / step)) + 2
     cnt = np.zeros(nb, np.int64)
     tot = np.zeros(nb)
@@ -454,7 +500,7 @@ def _edge_starts(es: NDArray[np.int64]) -> NDArray[np.int64]:
 def _trim_to_paper(x: NDArray[np.float64], y: NDArray[np.float64], raw: NDArray[np.float64], es: NDArray[np.int64],
                    starts: NDArray[np.int64], p0: NDArray[np.float64], p1: NDArray[np.float64],
                    w_in: NDArray[np.float64], w_out: NDArray[np.float64], w_look: NDArray[np.float64],
-                   sigma: NDArray[np.float64], lo: float, step: float, drop: float, end_sigmas: float
+                   sigma: NDArray[np.float64], step: float, drop: float, end_sigmas: float
                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """A quad's band pixels (x, y, values, edge 0..3; ``starts`` of :func:`_edge_starts`) without those
     beyond the paper's end (:func:`_white_limit`, at most ``w_out``) or beyond ``w_out`` itself
@@ -472,8 +518,8 @@ def _trim_to_paper(x: NDArray[np.float64], y: NDArray[np.float64], raw: NDArray[
         d[i] = (x[i] - p0[k, 0]) * unit[k, 1] - (y[i] - p0[k, 1]) * unit[k, 0]
     lim = np.empty(4)
     for k in range(4):
-        lim[k] = min(w_out[k], _white_limit(d, raw, starts[k], starts[k + 1], lo, step, sigma[k], w_in[k],
-                                            w_look[k], drop, end_sigmas))
+        lim[k] = min(w_out[k], _white_limit(d, raw, starts[k], starts[k + 1], step, sigma[k], w_in[k], w_look[k],
+                                            drop, end_sigmas))
     m = 0
     for i in range(N):
         if d[i] <= lim[es[i]]:
@@ -528,8 +574,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
     w_in, w_out, w_look, excl : (4Q,) the band's limits (:func:`.edges.gather_band`); ``w_look`` the
         outer limit read for the paper's end (``w_out`` itself when that is not looked for); stride : (4Q,)
         the column stride of each band (:func:`.edges.band_stride`).
-    white : (Q, n, n) white cells. band_cfg : (white end looked for (0/1), bins' origin, bin width,
-        white-end drop, white-end sigmas, blur lower clip, blur upper clip, settling move in pixels).
+    white : (Q, n, n) white cells. band_cfg : (white end looked for (0/1), bin width, white-end drop,
+        white-end sigmas, blur lower clip, blur upper clip, settling move in pixels).
     fit_cfg : :func:`_fit_edge`'s ``cfg``. first : the first pass (plain steps, no covariances).
     active : (Q,) the quads this pass fits; one whose corners (:func:`quad_corners`) moved less than the
         settling move in a pass after the first is set False (it keeps this pass's fits).
@@ -538,9 +584,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
     """
     Q = white.shape[0]
     undistorted = boxes.shape[0] > 0
-    look, lo_bins, step, drop, end_sigmas, s_lo, s_hi = (band_cfg[0] > 0.5, band_cfg[1], band_cfg[2], band_cfg[3],
-                                                         band_cfg[4], band_cfg[5], band_cfg[6])
-    settle = band_cfg[7]
+    look, step, drop, end_sigmas = band_cfg[0] > 0.5, band_cfg[1], band_cfg[2], band_cfg[3]
+    s_lo, s_hi, settle = band_cfg[4], band_cfg[5], band_cfg[6]
     init = np.empty((4, _NP))
     init_mid = np.empty((4, 2))
     new_mid = np.empty(2)
@@ -561,7 +606,7 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
         starts = _edge_starts(es)
         if look:
             x, y, raw, es = _trim_to_paper(x, y, raw, es, starts, p0[sl], p1[sl], w_in[sl], w_out[sl], w_look[sl],
-                                           sigma0[sl], lo_bins, step, drop, end_sigmas)
+                                           sigma0[sl], step, drop, end_sigmas)
             starts = _edge_starts(es)
         N = x.shape[0]
         v = np.empty(N)
@@ -767,29 +812,23 @@ def quad_sides(quads: NDArray[np.float64], n: int, border_cells: int
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def widest_inner(w_in: NDArray[np.float64], active: NDArray[np.bool_]) -> float:
-    """The widest inner band ``w_in`` (4Q,) of the ``active`` (Q,) quads (NaN if one is; -inf for none):
-    the origin of :func:`.edges.white_extent`'s bins, shared by the pass."""
-    out = -np.inf
-    for q in range(active.shape[0]):
-        if active[q]:
-            for k in range(4):
-                out = _nan_max(out, w_in[4 * q + k])
-    return out
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], quads: NDArray[np.float64],
-               white: NDArray[np.float64], border_cells: int, cfg: NDArray[np.float64], fit_cfg: NDArray[np.float64]
+def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray[np.float32],
+               map_y: NDArray[np.float32], K: NDArray[np.float64], dist: NDArray[np.float64],
+               quads: NDArray[np.float64], white: NDArray[np.float64], border_cells: int, cfg: NDArray[np.float64],
+               fit_cfg: NDArray[np.float64]
                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
                           NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_], NDArray[np.float64],
                           NDArray[np.float64]]:
-    """Every pass of :func:`.edges.refine_quads` without a lens model, in one thread (its loop, compiled).
+    """Every pass of :func:`.edges.refine_quads` in one thread (its loop, compiled).
 
     Parameters
     ----------
-    gray : (H, W) image; lut : (256,) light of each level; quads : (Q, 4, 2) candidate corners;
-    white : (Q, n, n) white cells; border_cells : border width, cells.
+    gray : (H, W) image; lut : (256,) light of each level.
+    map_x, map_y, K, dist : with a lens model, the undistorted position of every raw pixel (H, W), the camera
+        (3, 3) and OpenCV's distortion coefficients (8,) (:class:`.camera.Undistorter`); without, ``map_x`` is
+        empty (0, 0).
+    quads : (Q, 4, 2) candidate corners (fit coordinates); white : (Q, n, n) white cells; border_cells : border
+        width, cells.
     cfg : (passes, columns, first pass's columns (0: every column), band px, margin cells (NaN: unknown),
         white end looked for (0 / 1), look sigmas, profile step, white-end drop, white-end sigmas, max blur
         px, settle px): :class:`.edges.RefineParams` and the constants of :mod:`.edges`.
@@ -824,16 +863,16 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], quads: NDArray
     first_stride = band_stride(L, first_columns)
     first_stride0 = first_stride.copy()
     active = np.ones(Q, np.bool_)
-    no_map = np.zeros((0, 0), np.float32)
-    no_boxes = np.zeros((0, 4), np.int64)
-    band_cfg = np.array([cfg[5], 0.0, cfg[7], cfg[8], cfg[9], 0.3, cfg[10], cfg[11]])
+    boxes = np.zeros((0, 4), np.int64)
+    band_cfg = np.array([cfg[5], cfg[7], cfg[8], cfg[9], 0.3, cfg[10], cfg[11]])
     for k in range(passes):
         if not active.any():
             break
         w_in, w_out, w_look, excl = band_limits(sigma0, L, cell, border, k == 0, band_px, margin_cells, white_end,
                                               look_sigmas)
-        band_cfg[1] = widest_inner(w_in, active)
-        refine_pass(gray, lut, no_map, no_map, no_boxes, p0, p1, sigma0, w_in, w_out, w_look, excl,
+        if map_x.shape[0] > 0:
+            boxes = raw_boxes(gray.shape[0], gray.shape[1], p0, p1, w_in, w_look, K, dist)
+        refine_pass(gray, lut, map_x, map_y, boxes, p0, p1, sigma0, w_in, w_out, w_look, excl,
                     first_stride if k == 0 else stride, white, band_cfg, fit_cfg, k == 0, active, P, mid, sigma,
                     cov_line, rms, n_px, ok)
         if k == 0:

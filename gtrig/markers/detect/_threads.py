@@ -1,6 +1,6 @@
 """Threads of one detection: how many it may use, and the helper threads that run parts beside it.
 
-The compiled kernels (:mod:`._kernels`) and OpenCV release the GIL, so two threads of one detection
+The compiled kernels (:mod:`._kernels`), OpenCV and AprilTag 3 release the GIL, so two threads of one detection
 really run at once; the detector follows OpenCV's thread setting (``cv2.getNumThreads()``), which
 OpenCV's own ArUco detector uses too and which GTvision's worker processes set to 1.
 
@@ -17,7 +17,7 @@ import os
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, TypeVar
+from typing import Any, Generic, TypeVar
 
 import cv2
 
@@ -42,9 +42,9 @@ def threads(setting: int) -> int:
     return setting if setting > 0 else cv2.getNumThreads()
 
 
-#: quads below which the edge fits stay in the calling thread: handing a pass's parts to the helper thread
-#: costs about 40 us per pass (3 passes), a marker's fit about 0.2 ms, and on a loaded machine the helper
-#: may not run at all before the caller has done the work
+#: quads below which the edge fits stay in the calling thread: handing a share of the quads to the helper
+#: thread costs about 40 us (once per refinement: a share's passes run in one compiled call), a marker's fit
+#: about 0.5 ms, and on a loaded machine the helper may not run at all before the caller has done the work
 MIN_SPLIT_QUADS = 4
 
 
@@ -117,3 +117,39 @@ def ordered_map(fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], threads:
             raise err
         yield results[k]
         results[k] = None
+
+
+class Beside(Generic[T]):
+    """``fn(*args)`` started on a helper thread (:func:`helper_pool`) while the caller works on, its result
+    taken with :meth:`result`.
+
+    The call is claimed once, by the helper or by :meth:`result`, whichever reaches it first: a caller
+    never waits for a call nobody has started (the helper pool may be busy with another detection's work, or
+    a loaded machine may not have run its thread yet), only for one a helper is finishing.
+    """
+
+    def __init__(self, fn: Callable[..., T], *args: Any) -> None:
+        self._fn, self._args = fn, args
+        self._claims = itertools.count()  # next() on a count is atomic under the GIL
+        self._done = threading.Event()
+        self._value: list[T] = []
+        self._error: BaseException | None = None
+        helper_pool().submit(self._run_unclaimed)
+
+    def _run_unclaimed(self) -> None:
+        if next(self._claims):
+            return
+        try:
+            self._value.append(self._fn(*self._args))
+        except BaseException as exc:  # handed to the caller, raised by result()
+            self._error = exc
+        finally:
+            self._done.set()
+
+    def result(self) -> T:
+        """``fn(*args)``, run here if no helper has started it; its exception, if it raised one."""
+        self._run_unclaimed()
+        self._done.wait()
+        if self._error is not None:
+            raise self._error
+        return self._value[0]

@@ -212,8 +212,10 @@ def white_extent(
 
     The mean of each edge's band pixels is taken in bins of :data:`PROFILE_STEP_PX` across the edge
     (``d``, pixels, > 0 outside; the mean, not the median, since the fit's bias follows the mean
-    deficit). The black level is the darkest bin inside (``-w_in <= d <= -sigma``), the white level
-    the mean over ``2 sigma <= d <= 2 sigma + 1``; walking outward from ``2 sigma``, the plateau
+    deficit), bounded at multiples of the bin width from the line (:func:`profile_origin`), so that an
+    edge's bins do not depend on the other edges measured with it. The black level is the darkest
+    bin inside (``-w_in <= d <= -sigma``), the white level the mean over
+    ``2 sigma <= d <= 2 sigma + 1``; walking outward from ``2 sigma``, the plateau
     ends where the profile first falls :data:`WHITE_END_DROP` of the contrast below the white
     level; the paper's end is then where it is half-way between the white level and the lowest bin
     beyond (linearly interpolated between bin centres: a step's half-way point, whatever the
@@ -244,7 +246,7 @@ def white_extent(
         return out
     e = samples.edge
     d = across_edge(samples, p0, p1) if across is None else across
-    lo = float(np.max(w_in))
+    lo = profile_origin(float(np.max(w_in)))
     nb = int(np.ceil((lo + float(np.max(w_out))) / PROFILE_STEP_PX)) + 1
     # the bins' counts and sums in one compiled pass (the same sums, in the pixels' order)
     cnt, tot = _kernels.band_profile(np.ascontiguousarray(d, np.float64), np.ascontiguousarray(e, np.int64),
@@ -291,6 +293,13 @@ def white_extent(
     floor = np.minimum(w_out[rows], np.maximum(1.5, sigma[rows]))
     out[rows] = np.clip(lim, floor, w_out[rows])
     return out
+
+
+def profile_origin(w_in: float) -> float:
+    """The origin (pixels inside the line) of :func:`white_extent`'s bins for inner bands up to ``w_in``
+    wide: the first multiple of :data:`PROFILE_STEP_PX` beyond ``w_in``, so that every bin is bounded at
+    multiples of the bin width from the line and no pixel of the band is before the first."""
+    return float(PROFILE_STEP_PX * (np.floor(w_in / PROFILE_STEP_PX) + 1.0))
 
 
 def trim_outer(samples: EdgeSamples, p0: NDArray[np.float64], p1: NDArray[np.float64],
@@ -765,82 +774,46 @@ def refine_quads(
     border_cells : black border width, cells.
     undist : lens model; ``quads`` are then undistorted pixels.
     light : (256,) light of each grey level (:func:`.tone.to_light`); None for linear levels.
-    threads : with 2 the quads are shared with a helper thread; with 1 and no lens model every pass runs in
-        one compiled call (:func:`._edge_kernels.refine_all`: no interpreter work between the passes).
+    threads : with 2 the quads are shared with a helper thread (each quad's results are those of one thread:
+        the quads do not depend on each other). Every pass of a share of the quads runs in one compiled call
+        (:func:`._edge_kernels.refine_all`: no interpreter work between the passes).
 
     Returns
     -------
     fit : the last pass's :class:`EdgeFit` (edges ``4q .. 4q+3``); corners : (Q, 4, 2); cov : (Q, 4, 2, 2).
     """
     prm = params or RefineParams()
-    Q0 = np.ascontiguousarray(quads, np.float64).reshape(-1, 4, 2)
-    n_q = len(Q0)
-    if undist is None and (threads <= 1 or n_q <= 1):
-        return _refine_in_one_call(gray, Q0, white, border_cells, prm, light)
-    n = white.shape[1]
-    E = 4 * n_q
-    side = np.linalg.norm(Q0 - np.roll(Q0, -1, axis=1), axis=2)  # (Q, 4)
-    cell = np.repeat(side.mean(axis=1) / n, 4)
-    border = cell * border_cells
-    L = side.ravel()
-    p0 = Q0.reshape(-1, 2).copy()
-    p1 = np.roll(Q0, -1, axis=1).reshape(-1, 2).copy()
-    sigma0 = np.full(E, 1.0)
-    P = np.zeros((E, 7))
-    mid = np.zeros((E, 2))
-    sigma, rms = np.zeros(E), np.zeros(E)
-    cov_line = np.zeros((E, 2, 2))
-    n_px = np.zeros(E, np.int64)
-    ok = np.zeros(E, bool)
-    lut = np.arange(256, dtype=np.float64) if light is None else np.ascontiguousarray(light, np.float64)
-    W = np.ascontiguousarray(white, np.float64)
-    gray = np.ascontiguousarray(gray)
-    no_map = np.zeros((0, 0), np.float32)
-    fit_cfg = _fit_cfg(prm)
-    stride = band_stride(L, prm)
-    first_stride = band_stride(L, prm, first=True)
-    active = np.ones(n_q, bool)
-    cut = [0, n_q]
-    if threads > 1 and n_q > 1:
-        cut = [0, *sorted({round(k * n_q / SPLIT_PARTS) for k in range(1, SPLIT_PARTS)} - {0, n_q}), n_q]
-    for k in range(prm.passes):
-        if not active.any():
-            break
-        w_in, w_out, w_look, excl = band_limits(sigma0, L, cell, border, k == 0, prm)
-        band_cfg = np.array([float(prm.white_end), float(np.max(w_in.reshape(-1, 4)[active])), PROFILE_STEP_PX,
-                             WHITE_END_DROP, WHITE_END_SIGMAS, 0.3, prm.max_blur_px, prm.settle_px])
-        boxes = np.zeros((0, 4), np.int64) if undist is None else _raw_boxes(gray.shape, p0, p1, w_in, w_look, undist)
-        maps = (no_map, no_map) if undist is None else (undist.map_x, undist.map_y)
-        arrays = (p0, p1, sigma0, w_in, w_out, w_look, excl, first_stride if k == 0 else stride)
-        fits = (P, mid, sigma, cov_line, rms, n_px, ok)
-        if len(cut) == 2:  # one part: the arrays themselves
-            parts = [(gray, lut, *maps, boxes, *arrays, W, band_cfg, fit_cfg, k == 0, active, *fits)]
-        else:
-            parts = [(gray, lut, *maps, boxes[4 * a:4 * b] if undist is not None else boxes,
-                      *(x[4 * a:4 * b] for x in arrays), W[a:b], band_cfg, fit_cfg, k == 0, active[a:b],
-                      *(x[4 * a:4 * b] for x in fits))
-                     for a, b in itertools.pairwise(cut)]
-        _threads.run_split(_edge_kernels.refine_pass, parts)
-        if k == 0:
-            _keep_unstrided(first_stride, stride, L, prm)
-    fit = _edge_fit(P, mid, sigma, cov_line, rms, n_px, ok)
-    corners, cov = _edge_kernels.all_quad_corners(fit.theta, fit.rho, mid, cov_line)
-    return fit, corners, cov
-
-
-def _refine_in_one_call(gray: NDArray[np.uint8], quads: NDArray[np.float64], white: NDArray[np.float64],
-                        border_cells: int, prm: RefineParams, light: NDArray[np.float64] | None
-                        ) -> tuple[EdgeFit, NDArray[np.float64], NDArray[np.float64]]:
-    """:func:`refine_quads` without a lens model in one thread: its passes in one compiled call
-    (:func:`._edge_kernels.refine_all`)."""
+    quads = np.ascontiguousarray(quads, np.float64).reshape(-1, 4, 2)
     lut = np.arange(256, dtype=np.float64) if light is None else np.ascontiguousarray(light, np.float64)
     cfg = np.array([prm.passes, _columns(prm, False), _columns(prm, True), prm.band_px,
                     np.nan if prm.margin_cells is None else prm.margin_cells, float(prm.white_end), prm.look_sigmas,
                     PROFILE_STEP_PX, WHITE_END_DROP, WHITE_END_SIGMAS, prm.max_blur_px, prm.settle_px], np.float64)
-    P, mid, sigma, cov_line, rms, n_px, ok, corners, cov = _edge_kernels.refine_all(
-        np.ascontiguousarray(gray), lut, quads, np.ascontiguousarray(white, np.float64), int(border_cells), cfg,
-        _fit_cfg(prm))
+    gray = np.ascontiguousarray(gray)
+    W = np.ascontiguousarray(white, np.float64)
+    if undist is None:
+        lens: tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]] = (
+            np.zeros((0, 0), np.float32), np.zeros((0, 0), np.float32), np.eye(3), np.zeros(8))
+    else:
+        dist = np.zeros(8)
+        dist[:min(8, undist.dist.size)] = undist.dist[:8]  # (the coefficients of Undistorter.to_raw)
+        lens = (undist.map_x, undist.map_y, np.ascontiguousarray(undist.K, np.float64), dist)
+    fit_cfg = _fit_cfg(prm)
+    parts = [(gray, lut, *lens, quads[a:b], W[a:b], int(border_cells), cfg, fit_cfg)
+             for a, b in itertools.pairwise(_quad_cuts(len(quads), threads))]
+    res = _threads.run_split(_edge_kernels.refine_all, parts)
+    if len(res) == 1:
+        P, mid, sigma, cov_line, rms, n_px, ok, corners, cov = res[0]
+    else:
+        P, mid, sigma, cov_line, rms, n_px, ok, corners, cov = (np.concatenate(x) for x in zip(*res, strict=True))
     return _edge_fit(P, mid, sigma, cov_line, rms, n_px, ok), corners, cov
+
+
+def _quad_cuts(n_q: int, threads: int) -> list[int]:
+    """Bounds of the shares of ``n_q`` quads for ``threads`` (:data:`SPLIT_PARTS` shares with two, one
+    with one)."""
+    if threads <= 1 or n_q <= 1:
+        return [0, n_q]
+    return [0, *sorted({round(k * n_q / SPLIT_PARTS) for k in range(1, SPLIT_PARTS)} - {0, n_q}), n_q]
 
 
 def _edge_fit(P: NDArray[np.float64], mid: NDArray[np.float64], sigma: NDArray[np.float64],
@@ -954,22 +927,3 @@ def _keep_unstrided(first_stride: NDArray[np.int64], stride: NDArray[np.int64], 
     the quads whose first pass :func:`unstride_clipped` set to every column (``first_stride`` (E,))."""
     changed = (first_stride != band_stride(side, params, first=True)).reshape(-1, 4).any(axis=1)
     stride.reshape(-1, 4)[changed] = 1
-
-
-def _raw_boxes(shape: tuple[int, ...], p0: NDArray[np.float64], p1: NDArray[np.float64], w_in: NDArray[np.float64],
-               w_out: NDArray[np.float64], undist: Undistorter) -> NDArray[np.int64]:
-    """Each band's bounding box in the raw image (E, 4) as ``(x0, y0, x1, y1)``, end exclusive
-    (:func:`_band_boxes_undistorted`'s boxes, the corners of all edges mapped in one call)."""
-    h, w = shape[:2]
-    t = p1 - p0
-    L = np.hypot(t[:, 0], t[:, 1])
-    t = t / L[:, None]
-    n = np.column_stack([t[:, 1], -t[:, 0]])
-    ext = np.maximum(w_in, w_out)[:, None]
-    pts = np.stack([p0 - ext * (n + t), p0 + ext * (n - t), p1 - ext * (n - t), p1 + ext * (n + t)], axis=1)
-    box = undist.to_raw(pts.reshape(-1, 2)).reshape(-1, 4, 2)
-    x0 = np.maximum(np.floor(box[:, :, 0].min(axis=1)).astype(np.int64) - 1, 0)
-    x1 = np.minimum(np.ceil(box[:, :, 0].max(axis=1)).astype(np.int64) + 2, w)
-    y0 = np.maximum(np.floor(box[:, :, 1].min(axis=1)).astype(np.int64) - 1, 0)
-    y1 = np.minimum(np.ceil(box[:, :, 1].max(axis=1)).astype(np.int64) + 2, h)
-    return np.ascontiguousarray(np.column_stack([x0, y0, x1, y1]), np.int64)

@@ -20,7 +20,9 @@ with the peer's ID; gtrig's cells confirm or refuse it (:mod:`.verify`).
 from __future__ import annotations
 
 import functools
+import itertools
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -28,10 +30,11 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from gtrig.markers.detect import _threads
 from gtrig.markers.families import AT3_NAMES, family_spec, marker_cells, opencv_dictionary_name
 from gtrig.rig.models import MarkerFamily
 
-__all__ = ["PeerCandidate", "PeerParams", "find_peer_candidates"]
+__all__ = ["PeerCandidate", "PeerParams", "find_peer_candidates", "peer_batches"]
 
 Source = Literal["opencv", "apriltag3"]
 
@@ -160,20 +163,41 @@ def apriltag3_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: 
 
 
 def find_peer_candidates(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams) -> list[PeerCandidate]:
-    """Every peer's candidates, pooled: where two peers report the same ID at the same place (centres
-    closer than a quarter of the side), the first (OpenCV's) is kept. OpenCV runs with its own thread setting,
-    AprilTag 3 on its one thread."""
-    out: list[PeerCandidate] = []
-    more: list[PeerCandidate] = []
+    """Every peer's candidates, pooled (:func:`peer_batches`' batches in turn, in the calling thread)."""
+    return [c for batch in peer_batches(gray, family, params) for c in batch]
+
+
+def peer_batches(gray: NDArray[np.uint8], family: MarkerFamily, params: PeerParams, threads: int = 1
+                 ) -> Iterator[list[PeerCandidate]]:
+    """The peers' candidates in two batches, as they come: OpenCV's (with its opened pass's), then AprilTag 3's.
+    Where two peers report the same ID at the same place (centres closer than a quarter of the side), the
+    first (OpenCV's) is kept: the second batch holds AprilTag 3's others only.
+
+    With ``threads`` of 2 or more, AprilTag 3 runs on a helper thread (:class:`._threads.Beside`, on its
+    one thread) while OpenCV runs with its own thread setting and the caller works on OpenCV's batch: on the
+    real photos AprilTag 3 takes 1-3 times OpenCV's time, which then goes to the second core.
+    """
+    run_at3 = uses_apriltag3(family) and (params.apriltag3 or not uses_opencv(family))
+    at3: _threads.Beside[list[PeerCandidate]] | None = None
+    if run_at3 and threads >= 2:
+        at3 = _threads.Beside(apriltag3_candidates, gray, family, params)
+    held: list[PeerCandidate] = []
     if params.opencv and uses_opencv(family):
-        out += opencv_candidates(gray, family)
+        held = opencv_candidates(gray, family)
         if params.opened_pass:
             opened = cv2.morphologyEx(gray, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-            more += opencv_candidates(np.asarray(opened, np.uint8), family)
-    if uses_apriltag3(family) and (params.apriltag3 or not uses_opencv(family)):
-        more += apriltag3_candidates(gray, family, params)
+            held += _others(held, opencv_candidates(np.asarray(opened, np.uint8), family))
+        yield held
+    if run_at3:
+        yield _others(held, at3.result() if at3 is not None else apriltag3_candidates(gray, family, params))
+
+
+def _others(held: list[PeerCandidate], more: list[PeerCandidate]) -> list[PeerCandidate]:
+    """The candidates of ``more`` in turn that neither ``held`` nor an earlier one of them holds: the same ID
+    at the same place (:func:`_same_place`)."""
+    out: list[PeerCandidate] = []
     for c in more:
-        if not any(o.id == c.id and _same_place(o.quad_px, c.quad_px) for o in out):
+        if not any(o.id == c.id and _same_place(o.quad_px, c.quad_px) for o in itertools.chain(held, out)):
             out.append(c)
     return out
 

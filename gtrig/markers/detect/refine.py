@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from gtrig.markers.detect.camera import Undistorter
 from gtrig.markers.detect.edges import EdgeFit, RefineParams
 from gtrig.markers.detect.edges import refine_quads as edge_refine
-from gtrig.markers.detect.tone import Tone, to_light
+from gtrig.markers.detect.tone import Tone, light_table
 
 __all__ = ["RefineSettings", "Refined", "refine_quads", "fit_reason"]
 
@@ -85,15 +85,16 @@ def refine_quads(gray: NDArray[np.uint8], quads: NDArray[np.float64], white: NDA
     side = np.linalg.norm(Q - np.roll(Q, -1, axis=1), axis=2)  # (Q, 4)
     params = RefineParams(s.passes, s.iterations, s.tol, s.band_px, s.white_end, WHITE_LOOK_SIGMAS, s.margin_cells,
                           s.max_blur_px, s.max_columns)
-    light = None if s.tone == "linear" else to_light(np.arange(256, dtype=np.float64), s.tone)
+    light = None if s.tone == "linear" else light_table(s.tone)
     fit, corners, cov = edge_refine(gray, Q, white, border_cells, params, und, light, threads)
     ok_e = (fit.ok & (fit.b >= s.min_contrast) & (fit.rms <= s.max_rel_rms * np.abs(fit.b))
             & (fit.sigma <= s.max_blur_px) & (fit.sigma >= 0.06))
     ok = ok_e.reshape(-1, 4).all(axis=1)
     shift = np.linalg.norm(corners - Q, axis=2).max(axis=1)
-    ok &= np.all(np.isfinite(corners.reshape(len(Q), -1)), axis=1) & (shift <= _shift_limit(side, s))
+    limit = _shift_limit(side, s)
+    ok &= np.all(np.isfinite(corners.reshape(len(Q), -1)), axis=1) & (shift <= limit)
     ok &= np.all(np.isfinite(cov.reshape(len(Q), -1)), axis=1)
-    return Refined(corners, cov, ok, shift, _shift_limit(side, s), fit)
+    return Refined(corners, cov, ok, shift, limit, fit)
 
 
 def _shift_limit(side: NDArray[np.float64], s: RefineSettings) -> NDArray[np.float64]:

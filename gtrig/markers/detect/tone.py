@@ -36,10 +36,11 @@ def linear_to_srgb(v: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 @functools.lru_cache(maxsize=2)
-def _lut(tone: Tone) -> NDArray[np.float64]:
-    """Light (256,) of each 8-bit level. Levels 1-254 stay strictly inside (0.5, 254.5): the edge fits
-    take the levels beyond those bounds for clipped pixels (:data:`.edges.CLIP_LOW`), which in light
-    the darkest unclipped levels (1-6 in sRGB) would otherwise reach."""
+def light_table(tone: Tone) -> NDArray[np.float64]:
+    """Light (256,) of each 8-bit level, made once per tone (shared: not to be written). Levels 1-254 stay
+    strictly inside (0.5, 254.5): the edge fits take the levels beyond those bounds for clipped pixels
+    (:data:`.edges.CLIP_LOW`), which in light the darkest unclipped levels (1-6 in sRGB) would otherwise
+    reach."""
     g = np.arange(256, dtype=np.float64)
     if tone == "linear":
         return g
@@ -52,7 +53,7 @@ def to_light(values: NDArray[np.float64], tone: Tone) -> NDArray[np.float64]:
     """8-bit grey levels (any shape, integer-valued) as light on the 0-255 scale."""
     if tone == "linear":
         return values
-    return _lut(tone)[np.clip(np.rint(values), 0, 255).astype(np.intp)]
+    return light_table(tone)[np.clip(np.rint(values), 0, 255).astype(np.intp)]
 
 
 def to_levels(light: NDArray[np.float64], tone: Tone) -> NDArray[np.float64]:
