@@ -650,9 +650,9 @@ WHITE_SHARE_TOL = 0.1
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def share_white(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[np.float64], extra: NDArray[np.float64],
-                 starts: NDArray[np.int64], sigma0: NDArray[np.float64], first: bool, cfg: NDArray[np.float64],
-                 P: NDArray[np.float64], mid: NDArray[np.float64], sigma: NDArray[np.float64],
-                 cov: NDArray[np.float64], rms: NDArray[np.float64], ok: NDArray[np.bool_]) -> None:
+                starts: NDArray[np.int64], sigma0: NDArray[np.float64], first: bool, cfg: NDArray[np.float64],
+                P: NDArray[np.float64], mid: NDArray[np.float64], sigma: NDArray[np.float64],
+                cov: NDArray[np.float64], rms: NDArray[np.float64], ok: NDArray[np.bool_]) -> None:
     """Refit a quad's saturated edges whose white level exceeds the paper's, in place.
 
     One sheet under one light has one white level. A clipped edge sees only the foot of its ramp; when the
