@@ -34,14 +34,8 @@ OFFSET_S = {"cam_0": 0.0, "cam_1": -0.030, "cam_2": 0.022, "cam_3": 0.021}
 FPS = 6.0
 
 
-def _look_at(centre: np.ndarray, target: np.ndarray) -> np.ndarray:
-    z = (target - centre) / np.linalg.norm(target - centre)
-    x = np.cross(z, [0, 0, 1.0])
-    x /= np.linalg.norm(x)
-    return geo.make_T(np.column_stack([x, np.cross(z, x), z]), centre)
 
-
-CAMS = {f"cam_{i}": camera_geometry(f"cam_{i}", K, DIST, _look_at(c, np.zeros(3)), (1280, 720))
+CAMS = {f"cam_{i}": camera_geometry(f"cam_{i}", K, DIST, geo.look_at(c, np.zeros(3)), (1280, 720))
         for i, c in enumerate(np.array([[1.2, 0, 0.4], [0, 1.1, 0.5], [-0.9, -0.8, 0.3], [0.8, -1.0, 0.6]]))}
 
 

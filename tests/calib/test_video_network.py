@@ -21,17 +21,10 @@ DIST = np.array([0.05, -0.1, 0.001, -0.001, 0.0])
 LENS = CameraIntrinsics((1280, 720), K, DIST)
 
 
-def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """T_world_cam of a camera at ``eye`` looking at ``target`` (z forward, y down)."""
-    z = (target - eye) / np.linalg.norm(target - eye)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    return geo.make_T(np.column_stack([x, np.cross(z, x), z]), eye)
-
 
 def _scene(rng: np.random.Generator, noise_px: float) -> tuple[dict[str, VideoDetections], dict[str, np.ndarray]]:
     eyes = {"a": [1.2, 0, 0.3], "b": [0, 1.2, 0.4], "c": [-1.1, 0.2, 0.2]}
-    T_world_cam = {n: _look_at(np.array(e), np.zeros(3)) for n, e in eyes.items()}
+    T_world_cam = {n: geo.look_at(np.array(e), np.zeros(3)) for n, e in eyes.items()}
     P = BOARD.object_points()
     views: dict[str, list[tuple[int, CharucoView]]] = {n: [] for n in eyes}
     for inst in range(40):

@@ -19,15 +19,8 @@ SQUARE = 0.054
 BOARD = PointBody("board", np.array([[(c + 1) * SQUARE, (r + 1) * SQUARE, 0.0] for r in range(4) for c in range(3)]))
 
 
-def _look_at(centre: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """T_world_cam of a camera at ``centre`` looking at ``target`` (z forward, world z up in the image)."""
-    z = (target - centre) / np.linalg.norm(target - centre)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    return geo.make_T(np.column_stack([x, np.cross(z, x), z]), centre)
 
-
-CAMS = {f"cam_{i}": camera_geometry(f"cam_{i}", K, DIST, _look_at(c, np.zeros(3)), (1280, 720))
+CAMS = {f"cam_{i}": camera_geometry(f"cam_{i}", K, DIST, geo.look_at(c, np.zeros(3)), (1280, 720))
         for i, c in enumerate(np.array([[1.2, 0.0, 0.4], [0.0, 1.1, 0.5], [-0.9, -0.8, 0.3]]))}
 
 
