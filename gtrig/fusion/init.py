@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from gtrig.errors import InputError
+from gtrig.geometry import wrap_angle
 
 
 def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -23,10 +24,6 @@ def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _inverse(a: np.ndarray) -> np.ndarray:
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     return np.stack([-c * a[..., 0] - s * a[..., 1], s * a[..., 0] - c * a[..., 1], -a[..., 2]], axis=-1)
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (a + np.pi) % (2 * np.pi) - np.pi
 
 
 def odom_in_world(pose_z: np.ndarray, odo_at_fix: np.ndarray, pos_z: np.ndarray, odo_at_pos: np.ndarray,
@@ -42,11 +39,11 @@ def odom_in_world(pose_z: np.ndarray, odo_at_fix: np.ndarray, pos_z: np.ndarray,
     if len(pose_z):
         cand = _compose(pose_z, _inverse(odo_at_fix))  # (A, 3)
         dp = np.hypot(cand[:, None, 0] - cand[None, :, 0], cand[:, None, 1] - cand[None, :, 1])
-        dth = np.abs(_wrap(cand[:, None, 2] - cand[None, :, 2]))
+        dth = np.abs(wrap_angle(cand[:, None, 2] - cand[None, :, 2]))
         agree = (dp < tol_m) & (dth < tol_rad)
         best = int(np.argmax(agree.sum(axis=1)))
         sel = cand[agree[best]]
-        th = cand[best, 2] + np.mean(_wrap(sel[:, 2] - cand[best, 2]))
+        th = cand[best, 2] + np.mean(wrap_angle(sel[:, 2] - cand[best, 2]))
         return np.array([np.median(sel[:, 0]), np.median(sel[:, 1]), th])
     if len(pos_z) < 3:
         raise InputError("fusion: fewer than three fixes at the start of a segment; nothing to anchor it")

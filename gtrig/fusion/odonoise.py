@@ -31,6 +31,7 @@ from scipy.optimize import nnls
 
 from gtrig.fusion.measurements import Fixes, FixModel
 from gtrig.fusion.process import OdometryJumps, OdometryNoise, odometry_increments, odometry_jumps, wheel_travel
+from gtrig.geometry import wrap_angle
 from gtrig.io.odometry import OdometryLog
 
 log = logging.getLogger(__name__)
@@ -110,15 +111,11 @@ def _windows(f: Fixes, length_s: float) -> _Windows:
     return _Windows(s[a], s[b], f.value[a], f.value[b], f.cov[a], f.cov[b])
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 def _relative(za: np.ndarray, zb: np.ndarray) -> np.ndarray:
     """(W, 3) pose b in the frame of pose a (x, y, yaw)."""
     c, s = np.cos(za[:, 2]), np.sin(za[:, 2])
     d = zb[:, :2] - za[:, :2]
-    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], _wrap(zb[:, 2] - za[:, 2])])
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], wrap_angle(zb[:, 2] - za[:, 2])])
 
 
 def _fix_share(w: _Windows) -> np.ndarray:
@@ -213,7 +210,7 @@ def _fit_parameters(m_of: Callable[[np.ndarray], np.ndarray], rel_fix: np.ndarra
     covariances ``S`` (W, 3, 3)), with the prior ``(k0, Pk)``; ``m_of(k)`` the odometry's relative poses."""
     m = m_of(k)
     r0 = rel_fix - m
-    r0[:, 2] = _wrap(r0[:, 2])
+    r0[:, 2] = wrap_angle(r0[:, 2])
     G = np.zeros((r0.shape[0], 3, 3))
     for a in range(3):
         h = np.zeros(3)
@@ -334,7 +331,7 @@ def fit_odometry_noise(fixes: list[Fixes], odometry: OdometryLog, given: Odometr
         S = mis.F + np.einsum("k,kwij->wij", theta, A)
         k = _fit_parameters(partial(mis.odometry, mask=keep), mis.rel_fix[keep], S[keep], k, k0, Pk)
         r = mis.rel_fix - mis.odometry(k)
-        r[:, 2] = _wrap(r[:, 2])
+        r[:, 2] = wrap_angle(r[:, 2])
         q = _nis(r, S)
         keep = _trimmed(q)
         if it == 0:

@@ -546,8 +546,7 @@ def share_white(samples: EdgeSamples, fit: EdgeFit, sigma0: NDArray[np.float64],
         sl = slice(4 * q, 4 * q + 4)
         _edge_kernels.share_white(X0, X1, v, ext, bounds[4 * q:4 * q + 5], np.ascontiguousarray(sigma0[sl]), first,
                                   cfg, P[sl], mid[sl], sigma[sl], cov[sl], rms[sl], ok[sl])
-    return EdgeFit(P[:, 0].copy(), P[:, 1].copy(), mid, P[:, 2].copy(), P[:, 3].copy(), sigma, P[:, 5:7].copy(),
-                   cov, rms, fit.n_px, ok)
+    return _edge_fit(P, mid, sigma, cov, rms, fit.n_px, ok)
 
 
 def _subset(fit: EdgeFit, sel: NDArray[np.bool_]) -> EdgeFit:
