@@ -32,7 +32,7 @@ log = logging.getLogger(__name__)
 
 #: a view enters a lens's calibration with this many corners or more
 MIN_LENS_CORNERS = 6
-#: time blocks of the lens's block jackknife, seconds: longer than the 0.5-1.5 s over which a hand-held
+#: time blocks of the lens's block jackknife, seconds: about the 0.5-1.5 s over which a hand-held
 #: board's views (and a webcam's focus) stay correlated, short enough for 4 or more blocks in a 10 s sweep
 LENS_BLOCK_S = 1.0
 
