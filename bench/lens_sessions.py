@@ -96,11 +96,17 @@ def shared_lens_focals(dets: dict[str, VideoDetections], P: np.ndarray) -> None:
                  if len(v.ids) >= MIN_LENS_CORNERS] for r, d in dets.items()}
     alls = [x for r in views for x in views[r]]
     size = next(iter(dets.values())).image_size
-    fit = calibrate_point_sets([x[0] for x in alls], [x[1] for x in alls], [str(i) for i in range(len(alls))],
-                               size)
-    K = fit.camera.camera_matrix
-    print(f"  one lens for {', '.join(views)}: fx {K[0, 0]:.1f} fy {K[1, 1]:.1f} cx {K[0, 2]:.1f} "
-          f"cy {K[1, 2]:.1f} px, RMS {fit.camera.rms_px:.3f} px over {len(fit.names)} views")
+    for k3 in (True, False):  # the lens without k3 (gtrig's default) last: its single views are refitted
+        fit = calibrate_point_sets([x[0] for x in alls], [x[1] for x in alls], [str(i) for i in range(len(alls))],
+                                   size, estimate_k3=k3)
+        K = fit.camera.camera_matrix
+        rec = np.repeat(list(views), [len(v) for v in views.values()])[[int(n) for n in fit.names]]
+        n_c = np.array([len(alls[int(n)][0]) for n in fit.names])
+        rms = {r: float(np.sqrt(np.sum((n_c * fit.per_view_rms_px**2)[rec == r]) / n_c[rec == r].sum()))
+               for r in views}
+        print(f"  one lens{' with k3' if k3 else ''} for {', '.join(views)}: fx {K[0, 0]:.1f} fy {K[1, 1]:.1f} "
+              f"cx {K[0, 2]:.1f} cy {K[1, 2]:.1f} px, RMS {fit.camera.rms_px:.3f} px over {len(fit.names)} views ("
+              + ", ".join(f"{r} {v:.3f}" for r, v in rms.items()) + ")")
     mean = {}
     for r, vs in views.items():
         f = view_focals(vs, fit.camera)
@@ -120,6 +126,7 @@ def main() -> None:
     ap.add_argument("--step", type=int, default=2, help="read every n-th frame")
     args = ap.parse_args()
     board = read_board_file(ROOT / "charuco_calibration" / "charuco.toml")
+    P = board.object_points()
     peer = read_caliscope_cameras(ROOT / "post_optimization" / "camera_array.toml")
     with tempfile.TemporaryDirectory() as tmp:
         dets = {}
@@ -143,6 +150,12 @@ def main() -> None:
             print(f"  {r}: {len(f.names)} views, RMS {lens.rms_px:.3f} px; " + "; ".join(
                 f"{k} {v:.1f} ({x['std'][k]:.1f} / {x['std_views'][k]:.1f} / {x['std_blocks'][k]:.1f})"
                 for k, v in zip(KEYS, vals, strict=True)))
+            own = view_focals([(P[v.ids], v.corners_px, float(t)) for v, t in zip(dets[r][c].views, dets[r][c].stamps_s,
+                                                                                strict=True)
+                               if len(v.ids) >= MIN_LENS_CORNERS], lens)
+            z = f.T_cam_board[:, 2, 3]
+            print(f"    single-view focal with this lens {own[:, 1].min():.0f}-{own[:, 1].max():.0f} px over "
+                  f"{np.ptp(own[:, 0]):.1f} s; board {z.min():.2f}-{z.max():.2f} m away")
         shared_lens_focals({r: dets[r][c] for r in dets if c in lenses[r]}, board.object_points())
     print("largest difference between recordings per camera, combined sigmas (OpenCV / max with the "
           "single-view jackknife / std_honest, the block jackknife's too):")
