@@ -23,7 +23,7 @@ from gtrig.calib.idboards import IdBoard
 from gtrig.calib.intrinsics import PointSetFit, calibrate_point_sets
 from gtrig.calib.video_detect import VideoDetections, detect_videos, find_videos
 from gtrig.calib.video_network import RelativePose, VideoNetworkResult, calibrate_video_network, relative_poses
-from gtrig.calib.view_jackknife import view_jackknife_std
+from gtrig.calib.view_jackknife import block_jackknife_std, view_jackknife_std
 from gtrig.io.atomic import atomic_group, atomic_write_text
 from gtrig.io.camfile import CameraIntrinsics, write_cam_yaml
 from gtrig.io.video import CameraVideo
@@ -32,6 +32,9 @@ log = logging.getLogger(__name__)
 
 #: a view enters a lens's calibration with this many corners or more
 MIN_LENS_CORNERS = 6
+#: time blocks of the lens's block jackknife, seconds: about the 0.5-1.5 s over which a hand-held
+#: board's views (and a webcam's focus) stay correlated, short enough for 4 or more blocks in a 10 s sweep
+LENS_BLOCK_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -59,20 +62,23 @@ class VideoCalibration:
 def fit_lens(det: VideoDetections, board: IdBoard, *, estimate_k3: bool = False) -> PointSetFit:
     """A camera's intrinsics from its views with at least :data:`MIN_LENS_CORNERS` corners.
 
-    The lens's ``extra`` holds OpenCV's ``std`` and ``std_views``, the views' jackknife deviations
-    (:mod:`gtrig.calib.view_jackknife`); ``std_honest`` is the larger of the two per parameter.
+    The lens's ``extra`` holds OpenCV's ``std``, ``std_views`` (the delete-one-view jackknife) and
+    ``std_blocks`` (the delete-one-time-block jackknife, blocks of :data:`LENS_BLOCK_S`;
+    :mod:`gtrig.calib.view_jackknife`); ``std_honest`` is the largest of the three per parameter.
     """
     P = board.object_points()
     keep = [k for k, v in enumerate(det.views) if len(v.ids) >= MIN_LENS_CORNERS]
     names = [f"{det.camera}@{det.stamps_s[k]:.3f}s" for k in keep]
     fit = calibrate_point_sets([P[det.views[k].ids] for k in keep], [det.views[k].corners_px for k in keep],
                                names, det.image_size, estimate_k3=estimate_k3)
-    used = [det.views[keep[names.index(n)]] for n in fit.names]
-    jk = view_jackknife_std([P[v.ids] for v in used], [v.corners_px for v in used], fit.camera,
-                            estimate_k3=estimate_k3)
+    idx = [keep[names.index(n)] for n in fit.names]
+    obj = [P[det.views[k].ids] for k in idx]
+    img = [det.views[k].corners_px for k in idx]
+    jk = view_jackknife_std(obj, img, fit.camera, estimate_k3=estimate_k3)
+    jb = block_jackknife_std(obj, img, fit.camera, det.stamps_s[idx], LENS_BLOCK_S, estimate_k3=estimate_k3)
     std = fit.camera.extra["std"]
-    honest = {k: max(float(std[k]), jk[k]) if np.isfinite(jk[k]) else float(std[k]) for k in std}
-    cam = replace(fit.camera, extra={**fit.camera.extra, "std_views": jk, "std_honest": honest})
+    honest = {k: float(np.nanmax([float(std[k]), jk[k], jb[k]])) for k in std}
+    cam = replace(fit.camera, extra={**fit.camera.extra, "std_views": jk, "std_blocks": jb, "std_honest": honest})
     return replace(fit, camera=cam)
 
 

@@ -290,7 +290,8 @@ LENS_PARAMS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 def lens_sigmas(cam: CameraIntrinsics) -> np.ndarray:
     """The lens's standard deviations (9,) in :data:`LENS_PARAMS` order; zero where none is stated.
 
-    ``extra["std_honest"]`` (the larger of OpenCV's and the views' jackknife) if present, else ``extra["std"]``.
+    ``extra["std_honest"]`` (the largest of OpenCV's and the jackknives over views and over 1 s blocks) if present,
+    else ``extra["std"]``.
     """
     std = cam.extra.get("std_honest") or cam.extra.get("std") or {}
     sig = np.array([float(std.get(k, 0.0)) for k in LENS_PARAMS])

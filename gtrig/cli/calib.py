@@ -1,4 +1,4 @@
-"""``gtrig calib intrinsics | network | recording | check | steady | video``: camera calibration."""
+"""``gtrig calib intrinsics | network | recording | check | steady | video | compare-lenses``: camera calibration."""
 
 from __future__ import annotations
 
@@ -370,3 +370,36 @@ def video(
     for p in cal.pairs:
         console.print(f"  {p.cam_a}-{p.cam_b}: baseline {1000 * p.baseline_m:.1f} ± "
                       f"{1000 * p.sigma_baseline_m:.1f} mm, angle {p.angle_deg:.2f} ± {p.sigma_angle_deg:.2f} deg")
+
+
+@app.command("compare-lenses")
+@handle_errors
+def compare_lenses_cmd(
+    a: Path = typer.Argument(..., help="First calibration: a folder of <cam>.yaml or caliscope's .toml."),
+    b: Path = typer.Argument(..., help="Second calibration of the same cameras, the same forms."),
+    limit: float = typer.Option(3.0, "--limit", help="Name the parameters differing by more combined sigmas."),
+) -> None:
+    """Compare two calibrations of the same cameras: fx, fy, cx, cy differences in combined sigmas."""
+    from gtrig.calib.lens_compare import compare_lenses, differing
+    from gtrig.cli import checks
+    from gtrig.errors import InputError
+
+    for name, p in (("A", a), ("B", b)):
+        if not p.exists():
+            raise InputError(f"{name} {p}: no such folder or file")
+    checks.number("--limit", limit, lo=0, lo_open=True)
+    la, lb = _given_lenses(a), _given_lenses(b)
+    diffs = compare_lenses(la, lb)
+    if not diffs:
+        raise InputError(f"{a} and {b}: no camera in both")
+    for d in diffs:
+        console.print(f"  {d.camera} {d.parameter}: {d.value_a_px:.1f} ± {d.sigma_a_px:.1f} against "
+                      f"{d.value_b_px:.1f} ± {d.sigma_b_px:.1f} px: {d.z:.2f} combined sigma")
+    bad = differing(diffs, limit)
+    for d in bad:
+        console.print(styled(f"{d.camera} {d.parameter} differs by {d.z:.1f} combined sigma "
+                             f"({d.value_a_px - d.value_b_px:+.1f} px)", "bold"))
+    if not bad:
+        worst = max((d for d in diffs if d.z == d.z), key=lambda d: d.z, default=None)
+        tail = f" (largest {worst.camera} {worst.parameter}, {worst.z:.2f})" if worst else " (no sigmas stated)"
+        console.print(f"every lens parameter within {limit:g} combined sigma{tail}")
