@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -15,7 +16,7 @@ if TYPE_CHECKING:
 
 
 def run(board: Path, videos: Path, cameras: Path, out: Path, covariance: Path | None, step: int,
-        sigma_px: float, line_delay: bool = False, drift: bool = False) -> None:
+        sigma_px: float, line_delay: bool = False, drift: bool = False, timing_windows: int = 0) -> None:
     """Track the board, write its poses (TUM, ``T_world_board``) and covariances, print the shape check and
     the cameras' time offsets (and drifts, line delays) from the board's motion, with the halves check."""
     from gtrig.calib.charuco import read_board_file
@@ -30,6 +31,7 @@ def run(board: Path, videos: Path, cameras: Path, out: Path, covariance: Path | 
     checks.input_folder("--videos", videos)
     checks.count("--step", step, lo=1, hi=1000)
     checks.number("--sigma-px", sigma_px, lo=0.0, lo_open=True, hi=100.0, unit="px")
+    checks.count("--timing-windows", timing_windows, lo=0, hi=100)
     checks.outputs([board, cameras], [out, covariance])
     b = read_board_file(board)
     cams = read_cameras(cameras)
@@ -55,6 +57,8 @@ def run(board: Path, videos: Path, cameras: Path, out: Path, covariance: Path | 
                   f"{sc.tri_edges} edges, flatness RMS {mm * sc.tri_plane_rms_m:.3f} mm over {sc.tri_instants} "
                   f"instants; rigidity NEES/dof {sc.rigidity_nees:.2f}", highlight=False)
     _print_timing(cams, track, BodyOptions(sigma_px=sigma_px), line_delay, drift)
+    if timing_windows:
+        _print_windows(cams, track, BodyOptions(sigma_px=sigma_px), timing_windows)
 
 
 def _print_timing(cams: Mapping[str, CameraGeometry], track: BodyTrack, options: BodyOptions, line_delay: bool,
@@ -91,3 +95,21 @@ def _print_timing(cams: Mapping[str, CameraGeometry], track: BodyTrack, options:
         text += f", drifts by {', '.join(f'{h.drift_ratio[k]:.2f}' for k in others)}"
     console.print(text + " of their combined 95 % intervals (above 1: the model does not hold over the recording)",
                   highlight=False)
+
+
+def _print_windows(cams: Mapping[str, CameraGeometry], track: BodyTrack, options: BodyOptions, parts: int) -> None:
+    """Print the constant offsets of ``parts`` equal spans of the recording, each fitted apart: the offsets
+    against time."""
+    from gtrig.vision.body_timing_halves import timing_windows
+
+    fits = timing_windows(cams, track.body, track.instants, track.poses, parts=parts, options=options)
+    console.print(f"  offsets in {parts} equal spans of the recording, each fitted apart (95 % intervals):",
+                  highlight=False)
+    for tm in fits:
+        if not tm.instants:
+            continue
+        text = "; ".join(f"{c} {1000 * o:+.1f} ± {1960 * s:.1f} ms" if math.isfinite(s) else f"{c} not seen"
+                         for c, o, s in zip(tm.cameras, tm.offset_s, tm.sigma_offset_s, strict=True)
+                         if c != tm.reference)
+        console.print(f"    {tm.span_s[0] - tm.mid_s:+.2f} to {tm.span_s[1] - tm.mid_s:+.2f} s from the midpoint "
+                      f"({tm.instants} instants): {text}", highlight=False)
