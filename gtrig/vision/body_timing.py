@@ -12,12 +12,12 @@ stamps at ``t_mid`` (relative to a reference camera, whose offset is 0: only dif
 ``kappa_c`` its drift (seconds per second, optional: a camera whose exposures slide against the host's
 frame stamps, by a clock skew or a changing stamping latency) and ``rho_c`` its line delay (seconds per
 image row; 0 for a global shutter). ``t_mid`` is the midpoint of the tracked instants' stamps, where the
-offsets and their drifts are least correlated. At each instant seen by two cameras or more
-the pose is a nuisance: its six parameters are projected out of that instant's residuals, and ``delta``,
+offsets and their drifts are least correlated. At each instant seen by two cameras or more the pose is a
+nuisance: its six parameters are projected out of that instant's residuals, and ``delta``, ``kappa``,
 ``rho`` solved by least squares over all instants. The body's motion about an instant is the polynomial
 through its pose and up to two neighbours' on each side (:func:`local_motion`), so instants at the ends of
 the track or after a gap are left out; each point is moved along it to its exposure time (Gauss-Newton on
-``delta``, ``rho``). The tracked poses blend cameras exposed tens of milliseconds apart: they are refitted
+the timing). The tracked poses blend cameras exposed tens of milliseconds apart: they are refitted
 at their instants' stamps with the estimated timing, and the polynomials and timing solved again.
 
 The interval is the larger of two covariances: the residuals' variance factor times the inverse normal
@@ -59,7 +59,7 @@ class CameraTiming:
     line_delay_s, sigma_line_delay_s : (C,) seconds per image row (nan when not estimated).
     mid_s : the time (frame-time clock, seconds) the offsets refer to; span_s : (first, last) stamp of the
         instants used.
-    rms_px : {"stamps": residual RMS with the image stamps only, "model": with the offsets and line delays}
+    rms_px : {"stamps": residual RMS with the image stamps only, "model": with the fitted timing}
         over the instants used, after the poses were refitted.
     instants, points : instants and points used; variance_factor : the residuals' chi-square per dof.
     sigma_offset_model_s : (C,) the offsets' sigmas from the variance factor alone (residuals taken as
@@ -81,12 +81,6 @@ class CameraTiming:
     sigma_drift_s_per_s: np.ndarray
     mid_s: float
     span_s: tuple[float, float]
-
-    def offset_at(self, t_s: float) -> np.ndarray:
-        """(C,) each camera's offset at ``t_s`` (frame-time clock), seconds: ``offset_s`` plus the drift
-        (none when not estimated)."""
-        drift = np.nan_to_num(self.drift_s_per_s, nan=0.0)
-        return self.offset_s + drift * (t_s - self.mid_s)
 
 
 @dataclass(frozen=True)
@@ -378,7 +372,8 @@ def estimate_timing(cameras: Mapping[str, CameraGeometry], body: PointBody, inst
     rows, used = _timing_rows(cameras, body, instants, poses, sel, sigma)
     stamps_only = [_instant_system(r, np.zeros(lay.n_par), lay, sigma) for r in rows]
     N0 = sum((qB.T @ qB for _, qB, _ in stamps_only), np.zeros((lay.n_par, lay.n_par)))
-    held = {k * C + names.index(ref) for k in range(lay.n_par // C) if k < 1 + int(drift)}  # offset, drift
+    # only differences between cameras are observable: the reference's offset and drift are held at 0
+    held = {blk.start + names.index(ref) for blk in (lay.block("offset"), lay.block("drift")) if blk is not None}
     free = [k for k in range(lay.n_par) if k not in held and np.any(N0[k] != 0)]
     theta, parts = np.zeros(lay.n_par), stamps_only
     cov_model = cov_hac = np.full((lay.n_par, lay.n_par), np.nan)
