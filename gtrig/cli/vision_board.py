@@ -78,8 +78,9 @@ def _print_timing(cams: Mapping[str, CameraGeometry], track: BodyTrack, options:
                   f"offsets{' and drifts' if drift else ''}{what}):", highlight=False)
     for k, c in enumerate(tm.cameras):
         text = ("reference" if c == tm.reference
-                else f"{1000 * tm.offset_s[k]:+.1f} ± {1960 * tm.sigma_offset_s[k]:.1f} ms")
-        if drift and c != tm.reference:
+                else f"{1000 * tm.offset_s[k]:+.1f} ± {1960 * tm.sigma_offset_s[k]:.1f} ms"
+                if math.isfinite(tm.sigma_offset_s[k]) else "not determined")
+        if drift and c != tm.reference and math.isfinite(tm.sigma_drift_s_per_s[k]):
             text += (f", drift {1000 * tm.drift_s_per_s[k]:+.2f} ± {1960 * tm.sigma_drift_s_per_s[k]:.2f} ms/s "
                      f"({1e6 * tm.drift_s_per_s[k]:+.0f} ± {1.96e6 * tm.sigma_drift_s_per_s[k]:.0f} ppm)")
         if line_delay:
@@ -89,12 +90,17 @@ def _print_timing(cams: Mapping[str, CameraGeometry], track: BodyTrack, options:
     others = [k for k, c in enumerate(tm.cameras) if c != tm.reference]
     cams_txt = ", ".join(tm.cameras[k] for k in others)
     which = "offsets at the midpoint" if drift else "offsets"
-    ratios = ", ".join(f"{h.offset_ratio[k]:.2f}" for k in others)
+    ratios = ", ".join(_ratio_text(h.offset_ratio[k]) for k in others)
     text = f"  halves (before and after the midpoint, fitted apart): {which} of {cams_txt} differ by {ratios}"
     if drift:
-        text += f", drifts by {', '.join(f'{h.drift_ratio[k]:.2f}' for k in others)}"
+        text += f", drifts by {', '.join(_ratio_text(h.drift_ratio[k]) for k in others)}"
     console.print(text + " of their combined 95 % intervals (above 1: the model does not hold over the recording)",
                   highlight=False)
+
+
+def _ratio_text(r: float) -> str:
+    """A halves ratio, or "-" where a half does not determine it."""
+    return f"{r:.2f}" if math.isfinite(r) else "-"
 
 
 def _print_windows(cams: Mapping[str, CameraGeometry], track: BodyTrack, options: BodyOptions, parts: int) -> None:

@@ -316,6 +316,22 @@ def _poses_at_stamps(poses: Sequence[BodyPose], rows: Sequence[_InstantRows], us
     return out
 
 
+def _determined(N: np.ndarray, candidates: list[int], tol: float = 1e-9) -> list[int]:
+    """The parameters among ``candidates`` (in order) that the normal matrix ``N`` determines: each kept
+    while the kept ones' correlation matrix stays well conditioned (smallest eigenvalue above ``tol``). A
+    camera seen at one instant only of the span fitted has its drift's column proportional to its offset's;
+    one never seen has none."""
+    kept: list[int] = []
+    for k in candidates:
+        if N[k, k] <= 0:
+            continue
+        trial = [*kept, k]
+        d = np.sqrt(np.diag(N)[trial])
+        if np.linalg.eigvalsh(N[np.ix_(trial, trial)] / np.outer(d, d))[0] > tol:
+            kept = trial
+    return kept
+
+
 def tracked_mid_s(poses: Sequence[BodyPose]) -> float:
     """The midpoint of the tracked poses' stamps (frame-time clock, seconds): where a timing refers its
     offsets by default."""
@@ -374,7 +390,7 @@ def estimate_timing(cameras: Mapping[str, CameraGeometry], body: PointBody, inst
     N0 = sum((qB.T @ qB for _, qB, _ in stamps_only), np.zeros((lay.n_par, lay.n_par)))
     # only differences between cameras are observable: the reference's offset and drift are held at 0
     held = {blk.start + names.index(ref) for blk in (lay.block("offset"), lay.block("drift")) if blk is not None}
-    free = [k for k in range(lay.n_par) if k not in held and np.any(N0[k] != 0)]
+    free = _determined(N0, [k for k in range(lay.n_par) if k not in held])
     theta, parts = np.zeros(lay.n_par), stamps_only
     cov_model = cov_hac = np.full((lay.n_par, lay.n_par), np.nan)
     n_rows = sum(len(q) for q, _, _ in parts)

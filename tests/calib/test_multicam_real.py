@@ -7,6 +7,7 @@ margin, stated beside each assertion.
 from __future__ import annotations
 
 import csv
+import re
 from pathlib import Path
 
 import cv2
@@ -263,15 +264,21 @@ def test_cli_vision_board_writes_poses_and_covariances(root: Path, tmp_path: Pat
     out, cov = tmp_path / "board.tum", tmp_path / "board.cov.csv"
     args = ["vision", "--board", str(s / "charuco.toml"), "--videos", str(s / "calibration/extrinsic"),
             "--cameras", str(s / "camera_array.toml"), "--out", str(out), "--covariance", str(cov), "--step", "3"]
-    r = CliRunner().invoke(app, args)
+    r = CliRunner().invoke(app, [*args, "--drift", "--timing-windows", "2"])
     assert r.exit_code == 0, r.output
     assert "square" in r.output and "flatness" in r.output
+    # the timing: the offsets at the midpoint with their drifts (every third frame: 3 instants with a local
+    # motion, cam_3 at one of them, its drift not determined), the halves check, the two spans
+    assert r.output.count("ms/s") == 2 and "halves" in r.output
+    assert len(re.findall(r"s\s+from\s+the\s+midpoint\s+\(", r.output)) == 2, r.output
     traj = read_tum(out)
     stamps, C, kind, *_ = read_covariance_csv(cov)
     assert len(traj.stamps_s) == len(stamps) >= 15 and kind == "se3" and C is not None
     assert np.all(np.linalg.eigvalsh(C) > 0)
     bad = CliRunner().invoke(app, args[:5] + ["--out", str(tmp_path / "x.tum")])
     assert bad.exit_code == 2 and "--cameras" in bad.output and not (tmp_path / "x.tum").exists()
+    bad = CliRunner().invoke(app, [*args[:-6], "--out", str(tmp_path / "x.tum"), "--timing-windows", "-1"])
+    assert bad.exit_code == 2 and "--timing-windows" in bad.output and not (tmp_path / "x.tum").exists()
 
 
 def test_lens_sigmas_from_the_views_scatter(board, detections, intrinsics) -> None:
