@@ -50,6 +50,10 @@ def command(
     sigma_px: float = typer.Option(0.3, "--sigma-px", help="With --board: a corner's pixel sigma."),
     line_delay: bool = typer.Option(False, "--line-delay", help="With --board: also estimate each camera's "
                                     "rolling-shutter line delay."),
+    drift: bool = typer.Option(False, "--drift", help="With --board: each camera's offset drifts linearly over "
+                               "the recording (offsets stated at its midpoint, with their drift)."),
+    timing_windows: int = typer.Option(0, "--timing-windows", help="With --board: also print the offsets of "
+                                       "this many equal spans of the recording, each fitted apart."),
 ) -> None:
     """Robot poses from the markers seen by all cameras at each instant, with covariances; with --board, a
     ChArUco board's poses from the cameras' videos."""
@@ -62,7 +66,7 @@ def command(
 
         if videos is None or cameras is None:
             raise InputError("--board needs --videos and --cameras")
-        run(board, videos, cameras, out, covariance, step, sigma_px, line_delay)
+        run(board, videos, cameras, out, covariance, step, sigma_px, line_delay, drift, timing_windows)
         return
     if rig is None or recording is None:
         raise InputError("--rig and --recording are required (or --board with --videos and --cameras)")

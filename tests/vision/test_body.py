@@ -127,16 +127,20 @@ def _image(name: str, t_exposure: float, line_delay_s: float) -> np.ndarray:
     return uv
 
 
-def _moving_instants(line_delay_s: float, rng: np.random.Generator, n: int = 36, exposure_jitter_s: float = 0.0):
+def _moving_instants(line_delay_s: float, rng: np.random.Generator, n: int = 36, exposure_jitter_s: float = 0.0,
+                     drift_s_per_s: dict[str, float] | None = None):
     """The board's views at 6 frames/s; ``exposure_jitter_s``: each image exposed up to that much (uniform)
-    before or after its camera's offset, not in its stamp."""
+    before or after its camera's offset, not in its stamp; ``drift_s_per_s``: each camera's offset changes
+    at that rate about the recording's midpoint."""
     from gtrig.vision.body_track import group_instants
 
     pairs = []
+    mid_s = (n - 1) / 6.0 / 2
     for i in range(n):
         for name in CAMS:
             t_img = i / 6.0 + rng.uniform(-0.005, 0.005)  # the stamps of one instant differ a little
-            t_exp = t_img + OFFSET_S[name] + rng.uniform(-exposure_jitter_s, exposure_jitter_s)
+            slide = (drift_s_per_s or {}).get(name, 0.0) * (t_img - mid_s)
+            t_exp = t_img + OFFSET_S[name] + slide + rng.uniform(-exposure_jitter_s, exposure_jitter_s)
             uv = _image(name, t_exp, line_delay_s) + rng.normal(0, 0.2, (12, 2))
             pairs.append((i, BodyView(name, np.arange(12), uv, t_img)))
     return group_instants(pairs)
@@ -180,3 +184,31 @@ def test_offset_interval_covers_exposures_wandering_from_the_stamps() -> None:
         assert np.all(tm.sigma_offset_s >= tm.sigma_offset_model_s), seed
     # measured |error| / sigma 0.82, 1.02, 0.04, 1.02; with the variance factor's sigmas 4.1, 4.3, 0.2, 4.2
     assert max(z) < 2.5 and max(z_model) > 3.0
+
+
+def test_offset_drift_recovered_and_the_halves_agree_only_with_it() -> None:
+    """Offsets that slide against the stamps at a constant rate (a skewed clock, a stamping latency that
+    changes: +6 and -4 ms per second, 21 and 14 ms over the recording): the drift model recovers the offsets
+    at the midpoint and the drifts within their intervals; fitted apart, the recording's halves agree with
+    each other under it, and disagree under constant offsets."""
+    from gtrig.vision.body_timing import estimate_timing
+    from gtrig.vision.body_timing_halves import timing_halves
+    from gtrig.vision.body_track import track_body
+
+    drift = {"cam_0": 0.0, "cam_1": 0.006, "cam_2": -0.004}
+    opts = BodyOptions(sigma_px=0.2)
+    track = track_body(CAMS, BOARD, _moving_instants(0.0, np.random.default_rng(6), drift_s_per_s=drift), opts)
+    args = (CAMS, BOARD, track.instants, track.poses, "cam_0")
+    tm = estimate_timing(*args, line_delay=False, drift=True, options=opts)
+    assert tm.mid_s == pytest.approx(35 / 12, abs=0.01)  # the tracked instants' midpoint
+    for k, c in enumerate(tm.cameras[1:], start=1):
+        assert abs(tm.offset_s[k] - OFFSET_S[c]) < 3 * tm.sigma_offset_s[k] + 3e-4, (c, tm.offset_s[k])
+        assert abs(tm.drift_s_per_s[k] - drift[c]) < 3 * tm.sigma_drift_s_per_s[k] + 3e-4, (c, tm.drift_s_per_s[k])
+    assert tm.drift_s_per_s[0] == 0 and tm.sigma_drift_s_per_s[0] == 0
+    with_drift = timing_halves(*args, drift=True, options=opts)
+    constant = timing_halves(*args, drift=False, options=opts)
+    assert with_drift.first.span_s[1] < tm.mid_s < with_drift.second.span_s[0]
+    # measured (cam_1, cam_2): offsets at the midpoint 0.50, 0.10 and drifts 1.02, 1.13 of their combined 95 %
+    # intervals with the drift; offsets 3.36, 2.10 without (the sandwich widens a misfit model's intervals)
+    assert np.all(with_drift.offset_ratio < 1.5) and np.all(with_drift.drift_ratio < 1.5), with_drift
+    assert np.all(constant.offset_ratio[1:] > 1.5), constant.offset_ratio
