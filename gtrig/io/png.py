@@ -95,6 +95,28 @@ def _grey_layout(data: bytes) -> tuple[int, int, int, bytes] | None:
     return (width, height, depth, b"".join(parts)) if parts else None
 
 
+@nb.njit(nb.void(nb.types.Array(nb.uint8, 2, "C", readonly=True), nb.uint8[:, ::1]), cache=True, nogil=True)
+def _sub_rows4(filtered: np.ndarray, out: np.ndarray) -> None:
+    """Undo the Sub filter of four 8-bit rows at once: ``filtered`` (4, 1 + B), ``out`` (4, B) uint8.
+
+    Each row is a running sum modulo 256, one byte after the other; a single row's sum waits on its
+    previous byte at every step, so four independent rows are carried side by side (about half the time
+    of one row after the other)."""
+    n = out.shape[1]
+    s0, s1, s2, s3 = filtered[0, 1:], filtered[1, 1:], filtered[2, 1:], filtered[3, 1:]
+    d0, d1, d2, d3 = out[0], out[1], out[2], out[3]
+    a0 = a1 = a2 = a3 = np.uint8(0)
+    for i in range(n):
+        a0 = np.uint8(s0[i] + a0)
+        a1 = np.uint8(s1[i] + a1)
+        a2 = np.uint8(s2[i] + a2)
+        a3 = np.uint8(s3[i] + a3)
+        d0[i] = a0
+        d1[i] = a1
+        d2[i] = a2
+        d3[i] = a3
+
+
 @nb.njit(nb.boolean(nb.types.Array(nb.uint8, 2, "C", readonly=True), nb.int64, nb.uint8[:, ::1]),
          cache=True, nogil=True)
 def unfilter_rows(filtered: np.ndarray, bpp: int, out: np.ndarray) -> bool:
@@ -116,8 +138,15 @@ def unfilter_rows(filtered: np.ndarray, bpp: int, out: np.ndarray) -> bool:
     """
     h, n = out.shape
     zero = np.zeros(n, np.uint8)
-    for r in range(h):
+    r = -1
+    while r + 1 < h:
+        r += 1
         f = filtered[r, 0]
+        if f == 1 and bpp == 1 and r + 4 <= h and filtered[r + 1, 0] == 1 and filtered[r + 2, 0] == 1 \
+                and filtered[r + 3, 0] == 1:
+            _sub_rows4(filtered[r:r + 4], out[r:r + 4])
+            r += 3
+            continue
         src = filtered[r, 1:]
         dst = out[r]
         up = out[r - 1] if r > 0 else zero
@@ -154,3 +183,4 @@ def unfilter_rows(filtered: np.ndarray, bpp: int, out: np.ndarray) -> bool:
         else:
             return False
     return True
+

@@ -85,3 +85,18 @@ def project_pose_into(p_robot: np.ndarray, R: np.ndarray, t: np.ndarray, R_cw: n
             J[i, r, 3] = q[1] * JR[r, 2] - q[2] * JR[r, 1]
             J[i, r, 4] = q[2] * JR[r, 0] - q[0] * JR[r, 2]
             J[i, r, 5] = q[0] * JR[r, 1] - q[1] * JR[r, 0]
+
+
+@nb.njit(nb.void(_I3, _I3, _F3), cache=True, fastmath=False, nogil=True)
+def whiten_into(sqrt_info: np.ndarray, J: np.ndarray, out: np.ndarray) -> None:
+    """Fill ``out`` (N, 2, K) with ``L_n^T @ J_n`` for ``sqrt_info`` L (N, 2, 2) and ``J`` (N, 2, K): each sum
+    started at zero and taken in the order of the rows of ``J``, as numpy's ``einsum("nji,njk->nik")``
+    takes it, so that both give the same bits."""
+    n, _, m = J.shape
+    for i in range(n):
+        for r in range(2):
+            for c in range(m):
+                acc = 0.0
+                acc += sqrt_info[i, 0, r] * J[i, 0, c]
+                acc += sqrt_info[i, 1, r] * J[i, 1, c]
+                out[i, r, c] = acc

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from gtrig.vision.observations import StackedCorners
-from gtrig.vision.project_kernel import project_pose_into
+from gtrig.vision.project_kernel import project_pose_into, whiten_into
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -29,9 +29,12 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 def whiten(sc: StackedCorners, J: np.ndarray) -> np.ndarray:
     """Whitened residuals or Jacobians: ``L_i^T @ J_i`` for each corner (``J``: (N, 2) or (N, 2, k))."""
+    out = np.empty(J.shape)
     if J.ndim == 2:
-        return np.einsum("nji,nj->ni", sc.sqrt_info, J)
-    return np.einsum("nji,njk->nik", sc.sqrt_info, J)
+        whiten_into(sc.sqrt_info, J[:, :, None], out[:, :, None])
+    else:
+        whiten_into(sc.sqrt_info, J, out)
+    return out
 
 
 def project_cam(sc: StackedCorners, p_cam: np.ndarray, jacobian: bool = True

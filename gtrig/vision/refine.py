@@ -223,6 +223,13 @@ def _block_diagonal(blocks: list[np.ndarray]) -> np.ndarray:
     return out
 
 
+#: What one trial pose of :func:`refine_pose` leaves for the next iteration: the Jacobian (N, 2, 6), the
+#: whitened residuals (2 N,) with the nuisances' share, their norms per corner (N,; the robust weights take
+#: them as they are, the cost puts a corner behind its camera at 1e6) and the prior's residuals and Jacobian
+#: (None without a prior).
+_Trial = tuple[np.ndarray | None, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]
+
+
 def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = None,
                 options: RefineOptions = RefineOptions(), rig: RigUncertainty | None = None) -> RefineResult:
     """Fit ``T_world_robot`` to the corners ``sc`` starting from ``T0`` (see the module docstring).
@@ -246,39 +253,38 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
     P = 6 + Bn.shape[1]
     eta = np.zeros(P - 6)
 
-    def cost_at(Tx: np.ndarray, etax: np.ndarray
-                ) -> tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray | None]]:
-        """Robust cost at ``Tx`` and the projection with its Jacobian (reused when the step is taken)."""
-        proj = project_pose(sc, Tx)
-        uv, z, _ = proj
+    def cost_at(Tx: np.ndarray, etax: np.ndarray) -> tuple[float, _Trial]:
+        """Robust cost at ``Tx`` and what the next iteration takes from there if the step is taken (the
+        projection with its Jacobian, the whitened residuals and their norms, the prior's rows)."""
+        uv, z, J = project_pose(sc, Tx)
         rw = whiten(sc, uv - sc.uv).reshape(-1) + Bn @ etax
         e = np.linalg.norm(rw.reshape(N, 2), axis=1)
-        e = np.where(z > 0, e, 1e6)
-        c = huber_cost(e, k) + _sq(S_eta @ etax)
+        c = huber_cost(np.where(z > 0, e, 1e6), k) + _sq(S_eta @ etax)
+        rp_jp = None
         if prior is not None:
-            rp, _ = prior_residuals(Tx, prior)
-            c += float(rp @ rp)
-        return c, proj
+            rp_jp = prior_residuals(Tx, prior)
+            c += float(rp_jp[0] @ rp_jp[0])
+        return c, (J, rw, e, rp_jp)
 
-    cost, proj = cost_at(T, eta)
+    cost, trial = cost_at(T, eta)
     converged = False
     it = 0
     lam = 0.0
     dx = np.zeros(P)
+    A = np.empty((2 * N, P))  # whitened Jacobian: the pose's columns change, the nuisances' do not
+    A[:, 6:] = Bn
     for it in range(1, options.max_iter + 1):  # noqa: B007
-        uv, z, J = proj
+        J, rw, e, rp_jp = trial
         assert J is not None
-        rw = whiten(sc, uv - sc.uv).reshape(-1) + Bn @ eta
-        A = np.hstack([whiten(sc, J).reshape(-1, 6), Bn])
-        e = np.linalg.norm(rw.reshape(N, 2), axis=1)
+        A[:, :6] = whiten(sc, J).reshape(-1, 6)
         ww = np.repeat(huber_weights(e, k), 2)
         H = A.T @ (A * ww[:, None])
         g = A.T @ (rw * ww)
         if P > 6:
             H[6:, 6:] += Lam
             g[6:] += Lam @ eta
-        if prior is not None:
-            rp, Jp = prior_residuals(T, prior)
+        if rp_jp is not None:
+            rp, Jp = rp_jp
             H[:6, :6] += Jp.T @ Jp
             g[:6] += Jp.T @ rp
         step_ok = False
@@ -290,9 +296,9 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
                 lam = max(lam * 10, 1e-6)
                 continue
             T_new = apply_step(T, dx[:6])
-            c_new, proj_new = cost_at(T_new, eta + dx[6:])
+            c_new, trial_new = cost_at(T_new, eta + dx[6:])
             if c_new <= cost * (1 + 1e-12) + 1e-12:
-                T, eta, cost, proj = T_new, eta + dx[6:], c_new, proj_new
+                T, eta, cost, trial = T_new, eta + dx[6:], c_new, trial_new
                 lam = lam / 10 if lam > 1e-9 else 0.0
                 step_ok = True
                 break

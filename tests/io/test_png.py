@@ -119,3 +119,19 @@ def test_an_image_beyond_the_pixel_limit_is_not_decoded() -> None:
     data = encode_png(np.zeros((20, 30), np.uint8))
     assert decode_grey_png(data, max_pixels=600) is not None
     assert decode_grey_png(data, max_pixels=599) is None
+
+
+def test_runs_of_sub_rows_broken_by_other_filters_decode_to_the_image() -> None:
+    # Sub rows are undone four at a time: runs of every length, cut by None and Up rows, must not shift rows
+    img = _image(np.random.default_rng(13), (23, 45), np.uint8)
+    kinds = [1, 1, 1, 1, 1, 0, 1, 1, 1, 2, 1, 1, 1, 1, 1, 1, 1, 1, 2, 1, 1, 1, 1]
+    rows = []
+    for r, k in enumerate(kinds):
+        line = img[r].astype(np.int16)
+        if k == 1:
+            line = line - np.concatenate([[0], img[r, :-1]])
+        elif k == 2:
+            line = line - img[r - 1]
+        rows.append(bytes([k]) + (line & 255).astype(np.uint8).tobytes())
+    data = _png(45, 23, 8, 0, zlib.compress(b"".join(rows)))
+    np.testing.assert_array_equal(decode_grey_png(data), img)
