@@ -37,6 +37,7 @@ Usage::
     python bench/markers.py --hard          # the harder simulated set
     python bench/markers.py --refine-only   # the edge refinement alone, against cornerSubPix
     python bench/markers.py --refine-only --sweep   # its time against accuracy for several settings
+    python bench/markers.py --refine-only --photos  # the edge refinement alone on the real photos' quads
 """
 
 from __future__ import annotations
@@ -496,6 +497,47 @@ def _bench_refine_only(rng: np.random.Generator, sweep: bool) -> None:
         _bench_refine(scenes)
 
 
+def _bench_refine_photos(repeat: int) -> None:
+    """``--refine-only --photos``: the compiled edge refinement alone on the real photos, per set the CPU time
+    of this thread per marker (the fastest of ``repeat`` rounds) of the refinement calls the detector makes
+    (the quads of every candidate it refines, on each photo's own tone), captured from a detection of each
+    photo and replayed."""
+    from gtrig.io.imagetone import declared_tone
+    from gtrig.markers.detect import _edge_kernels
+
+    if not REAL.is_dir():
+        print(f"{REAL}: not found, real photos left out")
+        return
+    run = _edge_kernels.refine_all
+    calls: list[tuple[Any, ...]] = []
+
+    def capture(*args: Any) -> Any:
+        calls.append(args)
+        return run(*args)
+
+    print(f"edge refinement alone on the real photos: CPU ms per refined quad (one thread, the fastest of {repeat})")
+    print(f"{'set':28s} {'quads':>6s} {'calls':>6s} {'ms/quad':>8s}")
+    for name, photos in _sets().items():
+        calls.clear()
+        _edge_kernels.refine_all = capture  # type: ignore[assignment]
+        try:
+            for path, dictionary in photos:
+                gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+                if gray is None:
+                    raise SystemExit(f"{path}: not a readable image")
+                MarkerDetector(_family_of(dictionary), params=DetectorParams(tone=declared_tone(path))).detect(gray)
+        finally:
+            _edge_kernels.refine_all = run
+        n_quads = sum(len(c[6]) for c in calls)
+        best = np.inf
+        for _round in range(repeat):
+            t0 = time.thread_time()
+            for c in calls:
+                run(*c)
+            best = min(best, time.thread_time() - t0)
+        print(f"{name:28s} {n_quads:6d} {len(calls):6d} {1000.0 * best / max(n_quads, 1):8.3f}")
+
+
 def _bench_photos(repeat: int) -> None:
     if not REAL.is_dir():
         print(f"{REAL}: not found, real photos left out")
@@ -629,7 +671,9 @@ def main() -> None:
                     help="--refine-only: time against accuracy for several settings of the refinement")
     a = ap.parse_args()
     rng = np.random.default_rng(a.seed)
-    if a.photos:
+    if a.photos and a.refine_only:
+        _bench_refine_photos(a.repeat)
+    elif a.photos:
         _bench_photos(a.repeat)
     elif a.hard:
         _bench_hard(rng, a.per_side)

@@ -11,6 +11,10 @@ results agree with them to rounding; what goes is the interpreter's work per ste
 the temporaries of the array forms (most of the time on a marker of a few hundred band pixels per
 edge). The quads are independent: the caller may split them between threads, and a quad's results do
 not depend on the others fitted with it.
+
+numba keys the cached machine code of these functions on this file's text alone, not on the kernels of
+:mod:`._kernels` compiled into them (the edge model, the fits): a change there is picked up here only
+once this file changes too or its ``__pycache__`` entries are removed.
 """
 
 from __future__ import annotations

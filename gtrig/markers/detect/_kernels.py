@@ -107,7 +107,14 @@ def _ndtr_lin(z: float) -> float:
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _pixel_step(d: float, s: float, cos_t: float, sin_t: float) -> tuple[float, float, float]:
-    """Scalar :func:`.edges.pixel_step`: profile, d/d d and d/d log s of the pixel-integrated step."""
+    """Scalar :func:`.edges.pixel_step`: profile, d/d d and d/d log s of the pixel-integrated step.
+
+    The CDFs and densities come from the table (:func:`_ndtr_pdf_tab`), not from ``exp``: within 1e-7 of
+    SciPy's forms where the rational CDF left 5e-5 (its error over the narrow box of a near axis-aligned
+    edge), and a sharp edge's tiny blur puts ``z`` far out, where the exponential of ``-z^2 / 2`` runs into
+    subnormal numbers: :func:`edge_normal_eq` took 159 ns per pixel at a blur of 0.05 px with ``exp``, 36 ns
+    with the table (77 and 61 ns at 0.5 px).
+    """
     w1 = max(abs(cos_t), 1e-4)
     w2 = max(abs(sin_t), 1e-4)
     h1, h2 = 0.5 * w1, 0.5 * w2
@@ -120,9 +127,7 @@ def _pixel_step(d: float, s: float, cos_t: float, sin_t: float) -> tuple[float, 
         o2 = 1.0 if k % 2 == 0 else -1.0
         sign = o1 * o2
         x = d + o1 * h1 + o2 * h2
-        z = x / s
-        pdf = _INV_SQRT_2PI * math.exp(-0.5 * z * z)
-        cdf = _ndtr_from_pdf(z, pdf)
+        cdf, pdf = _ndtr_pdf_tab(x / s)
         sphi = s * pdf
         prof += sign * (0.5 * (x * x + s2) * cdf + 0.5 * x * sphi)
         slope += sign * (x * cdf + sphi)
