@@ -38,6 +38,7 @@ Usage::
     python bench/markers.py --refine-only   # the edge refinement alone, against cornerSubPix
     python bench/markers.py --refine-only --sweep   # its time against accuracy for several settings
     python bench/markers.py --refine-only --photos  # the edge refinement alone on the real photos' quads
+    python bench/markers.py --clipped       # sunlit markers of the simulated GT room: error, sigma, NEES
 """
 
 from __future__ import annotations
@@ -669,9 +670,16 @@ def main() -> None:
                     help="the edge refinement alone on OpenCV's quads of the renders, against cornerSubPix")
     ap.add_argument("--sweep", action="store_true",
                     help="--refine-only: time against accuracy for several settings of the refinement")
+    ap.add_argument("--clipped", action="store_true",
+                    help="sunlit (clipped) markers of the simulated GT room, still and moving: corner error, "
+                         "stated sigma and NEES per class (bench/markers_clipped.py; --seed, 60 robot poses)")
     a = ap.parse_args()
     rng = np.random.default_rng(a.seed)
-    if a.photos and a.refine_only:
+    if a.clipped:
+        from markers_clipped import run as clipped_run
+
+        clipped_run(a.seed, 60)
+    elif a.photos and a.refine_only:
         _bench_refine_photos(a.repeat)
     elif a.photos:
         _bench_photos(a.repeat)

@@ -32,7 +32,7 @@ Levels
 
 Usage: ``python bench/vision.py [--seeds 0 1 2] [--level corners images] [--workers 2]``;
 ``python bench/vision.py --level consistency --seeds 0 [--noise-grey 0.5 1.5 4] [--blur-px 0.5 1.5]
-[--stop-images 2]``;
+[--stop-images 2] [--corner-floor-px 0.1]``;
 ``python bench/vision.py --level recording --recording REC --rig REC_OUT/rig.calibrated.yaml --workers 2``;
 ``python bench/vision.py --level tracking --recording REC --rig RIG --workers 2 [--sequence run]``
 """
@@ -376,16 +376,18 @@ def _render_validation(rec: Path, rig: Rig, Ts: list[np.ndarray], rng: np.random
         w.writerows([i + 1, a, b] for i, (a, b) in enumerate(intervals))
 
 
-def bench_consistency(seeds: list[int], frames: int, noises: list[float], blurs: list[float]) -> None:
+def bench_consistency(seeds: list[int], frames: int, noises: list[float], blurs: list[float],
+                      floor_px: float = VisionOptions().corner_floor_px) -> None:
     """NEES/dof with its 95 % interval of the validation poses, 6-DoF and planar, the rig stated exactly
     (camera and marker sigmas 1e-6, as a lab that knows its rig would state it), rendered by the test
     renderer (not the simulator's) at each grey-level noise and blur; with the corner variance factors
-    the recording's own residuals gave (gtrig.vision.noise)."""
+    the recording's own residuals gave (gtrig.vision.noise); ``floor_px`` the corner floor
+    (``VisionOptions.corner_floor_px``)."""
     from gtrig.evaluate.gt_aware import batch_interval
     from gtrig.vision.sequence import run_recording
 
     exact = RigUncertainty(1e-6, 1e-6, 1e-6, 1e-6)
-    print("\n### Consistency: test renderer, the rig stated exactly, validation poses\n")
+    print(f"\n### Consistency: test renderer, the rig stated exactly, validation poses, corner floor {floor_px:g} px\n")
     print("| seed | noise (grey) | blur (px) | mode | localized | pos mean (mm) | NEES/dof [95 %] | corner factors "
           "| mean z^2: x, y, z, roll, pitch, yaw | single-view stops |")
     print("|---|---|---|---|---|---|---|---|---|---|")
@@ -399,7 +401,8 @@ def bench_consistency(seeds: list[int], frames: int, noises: list[float], blurs:
                     _render_validation(Path(d), rig, Ts, np.random.default_rng(seed), frames, blur, noise)
                     for planar in (False, True):
                         res = run_recording(Path(d), rig, "validation", planar=planar, workers=1,
-                                            options=VisionOptions(planar=planar, rig_uncertainty=exact))
+                                            options=VisionOptions(planar=planar, rig_uncertainty=exact,
+                                                                  corner_floor_px=floor_px))
                         dims = list(PLANAR_INDEX) if planar else list(range(6))
                         ne, pe, z2, single = [], [], [], 0
                         for e, T in zip(res.estimates, Ts, strict=True):
@@ -429,6 +432,8 @@ def main() -> None:
                     help="level consistency: the renders' blur")
     ap.add_argument("--stop-images", type=int, default=2,
                     help="level consistency: images per camera and stop (averaged by GTvision)")
+    ap.add_argument("--corner-floor-px", type=float, default=VisionOptions().corner_floor_px,
+                    help="level consistency: GTvision's corner floor (VisionOptions.corner_floor_px)")
     ap.add_argument("--recording", type=Path, help="a simulated recording (level recording)")
     ap.add_argument("--rig", type=Path, help="its calibrated rig (level recording)")
     ap.add_argument("--noise-px", type=float, default=0.08)
@@ -441,7 +446,7 @@ def main() -> None:
     if "images" in a.level:
         bench_images(a.seeds[0], a.workers, a.frames)
     if "consistency" in a.level:
-        bench_consistency(a.seeds, a.stop_images, a.noise_grey, a.blur_px)
+        bench_consistency(a.seeds, a.stop_images, a.noise_grey, a.blur_px, a.corner_floor_px)
     if "recording" in a.level:
         if a.recording is None or a.rig is None:
             ap.error("--level recording needs --recording and --rig")

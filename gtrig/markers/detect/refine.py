@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gtrig.markers.detect.camera import Undistorter
-from gtrig.markers.detect.edges import EdgeFit, RefineParams
+from gtrig.markers.detect.edges import EdgeFit, RefineParams, clipped_white_cov
 from gtrig.markers.detect.edges import refine_quads as edge_refine
 from gtrig.markers.detect.tone import Tone, light_table
 
@@ -87,6 +87,7 @@ def refine_quads(gray: NDArray[np.uint8], quads: NDArray[np.float64], white: NDA
                           s.max_blur_px, s.max_columns)
     light = None if s.tone == "linear" else light_table(s.tone)
     fit, corners, cov = edge_refine(gray, Q, white, border_cells, params, und, light, threads)
+    cov = cov + clipped_white_cov(fit, len(Q))
     ok_e = (fit.ok & (fit.b >= s.min_contrast) & (fit.rms <= s.max_rel_rms * np.abs(fit.b))
             & (fit.sigma <= s.max_blur_px) & (fit.sigma >= 0.06))
     ok = ok_e.reshape(-1, 4).all(axis=1)

@@ -1,0 +1,178 @@
+"""Corner accuracy and stated covariance of sunlit (clipped) markers on the simulated GT room.
+
+The simulator renders the robot (its four AprilTag markers) in frames of every camera of the GT room
+of ``--seed``: half of the robot poses in the sun patch of the floor, where the markers' white paper
+clips at 255, half away from it; each pose still and moving (``--speed`` m/s forward and ``--yaw-rate``
+rad/s during the 8 ms exposure: the simulator's motion blur). The true corners are the true rig's
+projections at mid-exposure. Each marker gtrig detects is classed as well exposed, clipped still or
+clipped moving (clipped: more than 2 % of the pixels in the box of its true corners at 255; moving:
+the image motion of the robot's top over the exposure at least ``--min-motion-px``), and per class
+printed: markers, corner RMS error (px), the RMS of the stated sigma (sqrt of half the covariance's
+trace, px), the mean NEES per corner over its 2 dof and the share of corners beyond chi-square(2) at
+95 %. A covariance that states the errors right has NEES/dof about 1 and 5 % beyond.
+
+Usage::
+
+    python bench/markers.py --clipped                      # 60 robot poses, seed 0
+    python bench/markers_clipped.py --poses 40 --seed 1
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gtrig import geometry as geo
+from gtrig.markers.detect import MarkerDetector
+from gtrig.sim import gtroom
+from gtrig.sim.cameras import _cached_view, render_robot_frame
+from gtrig.sim.config import SimConfig
+from gtrig.sim.gtroom import Scene, make_scene
+from gtrig.sim.motion import RobotMotion
+from gtrig.sim.textures import SUN_SOFT_M, _signed_dist_convex, sun_geometry
+from gtrig.vision.detect import GtrigDetector
+from gtrig.vision.observations import MarkerView, VisionModel
+
+#: share of a marker's box at 255 above which it counts as clipped (as ``bench/plan.py``)
+CLIPPED_SHARE = 0.02
+#: chi-square(2) at 95 %
+CHI2_2_95 = -2.0 * math.log(0.05)
+CLASSES = ("well exposed", "clipped still", "clipped moving", "well exposed moving")
+
+
+@dataclass
+class ClassStats:
+    """Corner errors and stated covariances of one class of markers."""
+
+    err: list[np.ndarray] = field(default_factory=list)
+    cov: list[np.ndarray] = field(default_factory=list)
+
+    def add(self, err: np.ndarray, cov: np.ndarray) -> None:
+        self.err.append(err)
+        self.cov.append(cov)
+
+    def row(self, name: str) -> str:
+        if not self.err:
+            return f"{name:22s} {0:7d}"
+        e = np.concatenate(self.err)
+        c = np.concatenate(self.cov)
+        nees = np.einsum("ni,nij,nj->n", e, np.linalg.inv(c), e)
+        rms = math.sqrt(float(np.mean(np.sum(e**2, axis=1))))
+        stated = math.sqrt(float(np.mean(np.trace(c, axis1=1, axis2=2))))
+        return (f"{name:22s} {len(self.err):7d} {rms:9.3f} {stated:9.3f} {np.mean(nees) / 2:9.2f} "
+                f"{np.mean(nees > CHI2_2_95) * 100:8.1f}")
+
+
+def sun_poses(scene: Scene, n: int, rng: np.random.Generator, lit: bool) -> np.ndarray:
+    """(n, 3) robot poses (x, y, heading) whose centre is well inside (``lit``) or well away from the sun
+    patch, on the floor inside the room's walls."""
+    win, d = sun_geometry(scene)
+    poly = win[:, :2] + (-win[:, 2:3] / d[2]) * d[:2]
+    lo, hi = scene.walls[:, 0].min(axis=0) + 0.6, scene.walls[:, 0].max(axis=0) - 0.6
+    out: list[list[float]] = []
+    while len(out) < n:
+        xy = rng.uniform(lo, hi)
+        sd = float(_signed_dist_convex(xy[None], poly)[0])
+        if (lit and sd > 0.25 + SUN_SOFT_M) or (not lit and sd < -0.5):
+            out.append([*xy, rng.uniform(-math.pi, math.pi)])
+    return np.array(out)
+
+
+def _motion(scene: Scene, xyt: np.ndarray, speed: float, yaw_rate: float) -> RobotMotion:
+    """A motion through pose ``xyt`` at time 0, at ``speed`` m/s along the heading and ``yaw_rate`` rad/s."""
+    t = np.array([-0.05, 0.05])
+    x, y, th = xyt
+    path = np.array([[x + speed * tt * math.cos(th), y + speed * tt * math.sin(th), th + yaw_rate * tt] for tt in t])
+    return RobotMotion(t, path, scene.floor)
+
+
+def _image_motion(scene: Scene, model: VisionModel, cam: str, motion: RobotMotion, exposure_s: float) -> float:
+    """Image motion (px) of the robot's top centre over the exposure."""
+    g = model.cameras[cam]
+    top = np.array([[0.0, 0.0, gtroom.ROBOT_TOP_M]])
+    ends = [geo.transform_points(motion.T_world_robot(s), top)[0] for s in (-exposure_s / 2, exposure_s / 2)]
+    uv = geo.project_points(geo.transform_points(g.T_cam_world, np.array(ends)), g.K, g.dist)
+    return float(np.linalg.norm(uv[1] - uv[0]))
+
+
+def _clipped(img: np.ndarray, corners: np.ndarray) -> bool:
+    """More than :data:`CLIPPED_SHARE` of the box of ``corners`` (4, 2) at 255."""
+    (x0, y0), (x1, y1) = np.floor(corners.min(axis=0)).astype(int), np.ceil(corners.max(axis=0)).astype(int) + 1
+    h, w = img.shape
+    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+    return x1 - x0 >= 2 and y1 - y0 >= 2 and float(np.mean(img[y0:y1, x0:x1] >= 255)) > CLIPPED_SHARE
+
+
+def _true_corners(model: VisionModel, cam: str, T_world_robot: np.ndarray, marker_id: int) -> np.ndarray | None:
+    g = model.cameras[cam]
+    p = geo.transform_points(g.T_cam_world @ T_world_robot, model.corners_robot[marker_id])
+    return None if np.any(p[:, 2] <= 0.05) else geo.project_points(p, g.K, g.dist)
+
+
+def measure(seed: int, n_poses: int, speed: float, yaw_rate: float, min_motion_px: float
+            ) -> dict[str, ClassStats]:
+    """Per class (:data:`CLASSES`) the corner errors and covariances of ``n_poses`` robot poses (half in the
+    sun) seen still and moving by every camera of seed ``seed``'s GT room."""
+    from gtrig.sim.lasers import configure_scene
+
+    cfg = SimConfig(seed=seed)
+    scene = configure_scene(make_scene(seed), cfg)
+    rig = scene.rig_true
+    model = VisionModel.from_rig(rig)
+    det = GtrigDetector(rig, MarkerDetector)
+    rng = np.random.default_rng([seed, 53])
+    poses = np.vstack([sun_poses(scene, n_poses - n_poses // 2, rng, True), sun_poses(scene, n_poses // 2, rng, False)])
+    stats = {c: ClassStats() for c in CLASSES}
+    for k, xyt in enumerate(poses):
+        for moving in (False, True):
+            motion = _motion(scene, xyt, speed if moving else 0.0, yaw_rate if moving else 0.0)
+            T = motion.T_world_robot(0.0)
+            for ci, cam in enumerate(rig.cameras):
+                view = _cached_view(scene, cam, cfg.camera)
+                img = render_robot_frame(scene, view, motion, 0.0, cfg.camera,
+                                         np.random.default_rng([seed, 53, k, ci, int(moving)]))
+                fast = moving and _image_motion(scene, model, cam.name, motion, cfg.camera.exposure_s) >= min_motion_px
+                if moving and not fast:
+                    continue
+                for v in det(img, model.cameras[cam.name]):
+                    _add(stats, v, img, model, cam.name, T, fast)
+    return stats
+
+
+def _add(stats: dict[str, ClassStats], v: MarkerView, img: np.ndarray, model: VisionModel, cam: str,
+         T_world_robot: np.ndarray, moving: bool) -> None:
+    truth = _true_corners(model, cam, T_world_robot, v.marker_id)
+    if truth is None or np.abs(v.corners_px - truth).max() > 3.0:
+        return
+    clipped = _clipped(img, truth)
+    name = ("clipped moving" if moving else "clipped still") if clipped else (
+        "well exposed moving" if moving else "well exposed")
+    stats[name].add(v.corners_px - truth, v.corner_cov)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--poses", type=int, default=60, help="robot poses (half in the sun)")
+    ap.add_argument("--speed", type=float, default=0.3, help="forward speed of the moving frames, m/s")
+    ap.add_argument("--yaw-rate", type=float, default=0.3, help="yaw rate of the moving frames, rad/s")
+    ap.add_argument("--min-motion-px", type=float, default=1.0,
+                    help="moving frames whose robot moved less in the image are left out")
+    a = ap.parse_args()
+    run(a.seed, a.poses, a.speed, a.yaw_rate, a.min_motion_px)
+
+
+def run(seed: int, poses: int, speed: float = 0.3, yaw_rate: float = 0.3, min_motion_px: float = 1.0) -> None:
+    """Print the table (see the module docstring)."""
+    stats = measure(seed, poses, speed, yaw_rate, min_motion_px)
+    print(f"seed {seed}, {poses} robot poses, moving at {speed} m/s and {yaw_rate} rad/s")
+    print(f"{'class':22s} {'markers':>7s} {'rms px':>9s} {'sigma px':>9s} {'NEES/dof':>9s} {'>95% %':>8s}")
+    for c in CLASSES:
+        print(stats[c].row(c))
+
+
+if __name__ == "__main__":
+    main()
