@@ -23,7 +23,7 @@ and the residuals' variance).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -225,8 +225,7 @@ def calibrate_scanners(
     rms_ob = float(np.sqrt(sum(n * r * r for n, r in all_o) / sum(n for n, _ in all_o)))
     scale = max(1.0, (rms_ov / sigma_point_m) ** 2) if np.isfinite(rms_ov) else 1.0
     Hinv = np.linalg.inv(ne.H)
-    G = _merge_columns(ne.G, S, _surfaces(ne.links, n_bias))
-    cov = Hinv * scale + _bias_covariance(Hinv, G, S, range_bias_std_m, surface_bias_std_m)
+    cov = Hinv * scale + _bias_covariance(Hinv, ne.G, S, range_bias_std_m, surface_bias_std_m)
     cov = 0.5 * (cov + cov.T)
     out_scanners, cal = _calibrated(scanners, x, nominal, cov, stats)
     return out_scanners, CalibrationReport(cal, it, rms_ov, rms_ob, cov)
@@ -234,15 +233,12 @@ def calibrate_scanners(
 
 @dataclass
 class _Normal:
-    """The Gauss-Newton normal equations ``H dx = -g`` over the S scanners' (x, y, theta), ``G``, the
-    right-hand side's derivative by the range biases (their pull on the poses), and ``links``: per
-    association of two scanners' points (or of a point and a world object's side) on one surface, the
-    pair of bias columns (n, 2) they stand for (:func:`_surfaces`)."""
+    """The Gauss-Newton normal equations ``H dx = -g`` over the S scanners' (x, y, theta), and ``G``, the
+    right-hand side's derivative by the range biases (their pull on the poses)."""
 
     H: np.ndarray
     g: np.ndarray
     G: np.ndarray
-    links: list[np.ndarray] = field(default_factory=list)
 
 
 def _normal_equations(x: np.ndarray, nominal: np.ndarray, prior: np.ndarray, geoms: list, objs: list,
@@ -272,8 +268,7 @@ def _normal_equations(x: np.ndarray, nominal: np.ndarray, prior: np.ndarray, geo
             ssq += s_ij
             cnt += c_ij
         stats["overlap"][i] = (cnt, np.sqrt(ssq / cnt) if cnt else float("nan"))
-        n_ob, ssq_ob = _object_terms(ne, i, x, pw, dpi, ray, objs, face_col, gate, sigma_point_m,
-                                     (bias_cols[i], nw[i]))
+        n_ob, ssq_ob = _object_terms(ne, i, x, pw, dpi, ray, objs, face_col, gate, sigma_point_m)
         if n_ob:
             stats["object"][i] = (n_ob, float(np.sqrt(ssq_ob / n_ob)))
     return ne, stats
@@ -314,7 +309,6 @@ def _overlap_pair(ne: _Normal, i: int, j: int, x: np.ndarray, pw: list, nw: list
     # a range bias moves point k along its beam: r changes by n . ray (i), -n . ray (j)
     di = np.einsum("ij,ij->i", n, ray[i][sel])
     dj = -np.einsum("ij,ij->i", n, ray[j][idx[m2][face][ok]])
-    _link(ne, bias_cols[i][sel], bias_cols[j][idx[m2][face][ok]], nw[i][sel], n)
     for own, cols, dr in ((i, bias_cols[i][sel], di), (j, bias_cols[j][idx[m2][face][ok]], dj)):
         for Jx, bx in ((Ji, bi), (Jj, bj)):
             _add_bias_pull(ne.G, bx, Jx, wgt * dr, cols, own, S)
@@ -322,11 +316,10 @@ def _overlap_pair(ne: _Normal, i: int, j: int, x: np.ndarray, pw: list, nw: list
 
 
 def _object_terms(ne: _Normal, i: int, x: np.ndarray, pw: list, dpi: np.ndarray, ray: list, objs: list,
-                  face_col: np.ndarray, gate: float, sigma_point_m: float,
-                  own: tuple[np.ndarray, np.ndarray]) -> tuple[int, float]:
+                  face_col: np.ndarray, gate: float, sigma_point_m: float) -> tuple[int, float]:
     """Scanner ``i``'s points on the world objects' known sides (faces visible from it), point to line,
-    added to ``ne``; their count and sum of squares. ``own``: the points' stretch columns (n,) and world
-    normals (n, 2), which tie each stretch on an object to that object's side (one surface)."""
+    added to ``ne``; their count and sum of squares. All sides of object ``o`` share its bias column
+    ``face_col[o]``."""
     S = len(x)
     n_ob, ssq_ob = 0, 0.0
     for o, obj in enumerate(objs):
@@ -348,9 +341,7 @@ def _object_terms(ne: _Normal, i: int, x: np.ndarray, pw: list, dpi: np.ndarray,
         ne.H[bi, bi] += wgt * Ji.T @ Ji
         ne.g[bi] += wgt * Ji.T @ r
         dr = np.einsum("ij,ij->i", n, ray[i][m])
-        col = np.full(int(m.sum()), face_col[o])
-        _add_bias_pull(ne.G, bi, Ji, wgt * dr, col, i, S)
-        _link(ne, own[0][m], col, own[1][m], n)
+        _add_bias_pull(ne.G, bi, Ji, wgt * dr, np.full(int(m.sum()), face_col[o]), i, S)
         n_ob += int(m.sum())
         ssq_ob += float(r @ r)
     return n_ob, ssq_ob
@@ -411,60 +402,12 @@ def _add_bias_pull(G: np.ndarray, rows: slice, J: np.ndarray, wdr: np.ndarray, c
     G[rows, owner] += contrib.sum(axis=0)
 
 
-#: two points' own normals within this angle (rad) lie on one surface
-SAME_SURFACE_RAD = np.radians(15.0)
-#: associations that tie two stretches to one surface (a point near a corner may reach the next wall)
-SAME_SURFACE_MIN_LINKS = 5
-
-
-def _link(ne: _Normal, cols_a: np.ndarray, cols_b: np.ndarray, normals_a: np.ndarray, normals_b: np.ndarray) -> None:
-    """Record the associations (n,) whose two points face the same way (normals (n, 2), world) as links
-    between their bias columns ``cols_a`` and ``cols_b``: one surface, one reflectivity."""
-    with np.errstate(invalid="ignore"):
-        same = np.abs(np.einsum("ij,ij->i", normals_a, normals_b)) > np.cos(SAME_SURFACE_RAD)
-    if np.any(same):
-        ne.links.append(np.column_stack([cols_a[same], cols_b[same]]).astype(np.int64))
-
-
-def _surfaces(links: Sequence[np.ndarray], n_cols: int, min_links: int = SAME_SURFACE_MIN_LINKS) -> np.ndarray:
-    """The surface (n_cols,) of each bias column: stretches of different scanners' backgrounds (and the
-    world objects' sides) that the fit associated at least ``min_links`` times are one surface, which
-    ranges by one bias for every scanner (connected components of those links)."""
-    parent = np.arange(n_cols)
-
-    def root(a: int) -> int:
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = int(parent[a])
-        return a
-
-    if links:
-        pairs = np.sort(np.concatenate(links), axis=1)
-        pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-        uniq, count = np.unique(pairs, axis=0, return_counts=True)
-        for a, b in uniq[count >= min_links].tolist():
-            ra, rb = root(a), root(b)
-            if ra != rb:
-                parent[max(ra, rb)] = min(ra, rb)
-    roots = np.array([root(a) for a in range(n_cols)], dtype=np.int64)
-    return np.unique(roots, return_inverse=True)[1].ravel()
-
-
-def _merge_columns(G: np.ndarray, S: int, surface: np.ndarray) -> np.ndarray:
-    """``G`` (3 S, S + n_cols) with the bias columns of each surface summed into one (3 S, S + surfaces):
-    a bias shared by its columns pulls the poses by the sum of their pulls."""
-    out = np.zeros((G.shape[0], S + int(surface.max(initial=-1)) + 1))
-    out[:, :S] = G[:, :S]
-    np.add.at(out.T, S + surface, G[:, S:].T)
-    return out
-
-
 def _bias_covariance(Hinv: np.ndarray, G: np.ndarray, S: int, range_std_m: float, surface_std_m: float) -> np.ndarray:
     """Covariance (3 S, 3 S) of the poses that the range biases leave: the solution moves by
     ``-H^-1 G b`` for biases ``b``, which do not average out over a surface's points, so their share
     is ``H^-1 G Sigma_b G^T H^-1`` (a "consider" covariance, Bierman 1977, ch. VI) with ``Sigma_b``
-    diagonal: ``range_std_m^2`` for the S scanners' offsets, ``surface_std_m^2`` for the surfaces
-    (:func:`_merge_columns`)."""
+    diagonal: ``range_std_m^2`` for the S scanners' offsets, ``surface_std_m^2`` for the stretches and
+    the world objects."""
     var = np.r_[np.full(S, range_std_m**2), np.full(G.shape[1] - S, surface_std_m**2)]
     A = Hinv @ G
     return (A * var) @ A.T
