@@ -811,7 +811,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sync", action="store_true", help="with --seeds-root: the clock offsets against the truth")
     ap.add_argument("--sync-mc", type=int, default=0, help="offsets to odometry on this many synthetic runs")
     ap.add_argument("--consistency", action="store_true",
-                    help="only the NEES/dof with 95 % intervals per seed and scenario (plain, bridged, lapped)")
+                    help="only the NEES/dof with 95 %% intervals per seed and scenario (plain, bridged, lapped)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--minutes", type=float, default=3.0, help="--consistency: the synthetic run's length")
     ap.add_argument("--laps", type=int, default=3, help="--consistency: laps of the lapped run")

@@ -195,9 +195,11 @@ def calibrate_scanners(
     geoms = [_scan_geometry(b, s) for b, s in zip(backgrounds, scanners, strict=True)]
     bias_cols = _bias_columns(geoms)
     n_bias = int(max(c.max() for c in bias_cols) + 1) if S else 0
-    # the world objects' faces: one surface, so one bias, for every scanner that sees it
-    face_col = np.cumsum([0] + [len(o.normals) for o in objs]) + n_bias
-    n_bias = int(face_col[-1])
+    # each world object: one material, so one bias on all of its sides for every scanner that sees it (a
+    # bias of its own per side would let the gauge wander by the sides' independent biases, which the
+    # object's sides, seen from all around, do not have)
+    face_col = n_bias + np.arange(len(objs))
+    n_bias += len(objs)
     nominal = np.array([geo.T_to_se2(s.T_world_scanner.matrix()) for s in scanners])
     x = nominal.copy()
     prior = np.tile([1 / prior_std_m**2, 1 / prior_std_m**2, 1 / prior_std_rad**2], S)
@@ -316,7 +318,8 @@ def _overlap_pair(ne: _Normal, i: int, j: int, x: np.ndarray, pw: list, nw: list
 def _object_terms(ne: _Normal, i: int, x: np.ndarray, pw: list, dpi: np.ndarray, ray: list, objs: list,
                   face_col: np.ndarray, gate: float, sigma_point_m: float) -> tuple[int, float]:
     """Scanner ``i``'s points on the world objects' known sides (faces visible from it), point to line,
-    added to ``ne``; their count and sum of squares."""
+    added to ``ne``; their count and sum of squares. All sides of object ``o`` share its bias column
+    ``face_col[o]``."""
     S = len(x)
     n_ob, ssq_ob = 0, 0.0
     for o, obj in enumerate(objs):
@@ -338,7 +341,7 @@ def _object_terms(ne: _Normal, i: int, x: np.ndarray, pw: list, dpi: np.ndarray,
         ne.H[bi, bi] += wgt * Ji.T @ Ji
         ne.g[bi] += wgt * Ji.T @ r
         dr = np.einsum("ij,ij->i", n, ray[i][m])
-        _add_bias_pull(ne.G, bi, Ji, wgt * dr, face_col[o] + k[m], i, S)
+        _add_bias_pull(ne.G, bi, Ji, wgt * dr, np.full(int(m.sum()), face_col[o]), i, S)
         n_ob += int(m.sum())
         ssq_ob += float(r @ r)
     return n_ob, ssq_ob
@@ -403,7 +406,8 @@ def _bias_covariance(Hinv: np.ndarray, G: np.ndarray, S: int, range_std_m: float
     """Covariance (3 S, 3 S) of the poses that the range biases leave: the solution moves by
     ``-H^-1 G b`` for biases ``b``, which do not average out over a surface's points, so their share
     is ``H^-1 G Sigma_b G^T H^-1`` (a "consider" covariance, Bierman 1977, ch. VI) with ``Sigma_b``
-    diagonal: ``range_std_m^2`` for the S scanners' offsets, ``surface_std_m^2`` for the stretches."""
+    diagonal: ``range_std_m^2`` for the S scanners' offsets, ``surface_std_m^2`` for the stretches and
+    the world objects."""
     var = np.r_[np.full(S, range_std_m**2), np.full(G.shape[1] - S, surface_std_m**2)]
     A = Hinv @ G
     return (A * var) @ A.T

@@ -19,6 +19,7 @@ direction (two parallel sides seen, a short stub of the second side).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -406,16 +407,25 @@ def scanner_sensitivity(
     """
     p, fid, sid, S, d, lin, H = _fit_normal_equations(model, xy_world, frame_index, scanner_index,
                                                       scanner_xy_world, dir_world, sigma_range_m, xytheta, settings)
-    K, n_s = H.shape[0], S.shape[0]
+    B = _scanner_pulls(p, fid, sid, S, lin, H.shape[0], lin.J)
+    return -np.linalg.solve(H, B)
+
+
+def _scanner_pulls(p: np.ndarray, fid: np.ndarray, sid: np.ndarray, S: np.ndarray, lin: _Linearisation, K: int,
+                   rows: Sequence[np.ndarray]) -> np.ndarray:
+    """(K, R, 3 S) ``sum_i w_i rows[a]_i (dr_i / dc_s)`` per frame: the derivative of the right-hand sides
+    whose per-point factors are ``rows`` (R arrays (M,)) by the scanners' planar poses ``c_s`` (moved
+    about their own origins ``S[s]``, (S, 2))."""
+    n_s = S.shape[0]
     lever = p - S[sid]
     Jc = (lin.nw[:, 0], lin.nw[:, 1], lin.nw[:, 1] * lever[:, 0] - lin.nw[:, 0] * lever[:, 1])
     cell = fid * n_s + sid
-    B = np.zeros((K, 3, n_s, 3))
-    for i in range(3):
-        wi = lin.w * lin.J[i]
+    B = np.zeros((K, len(rows), n_s, 3))
+    for i, row in enumerate(rows):
+        wi = lin.w * row
         for j in range(3):
             B[:, i, :, j] = np.bincount(cell, wi * Jc[j], minlength=K * n_s).reshape(K, n_s)
-    return -np.linalg.solve(H, B.reshape(K, 3, 3 * n_s))
+    return B.reshape(K, len(rows), 3 * n_s)
 
 
 def side_bias_normal_equations(
@@ -462,6 +472,47 @@ def side_bias_normal_equations(
     g_p = np.column_stack([np.bincount(fid, lin.w * lin.J[i] * lin.r, minlength=K) for i in range(3)])
     g_b = np.bincount(cell, lin.w * c * lin.r, minlength=K * 4).reshape(K, 4)
     return H, H_pb, H_bb, g_p.astype(float), g_b
+
+
+def side_bias_scanner_pull(
+    model: HullModel,
+    xy_world: np.ndarray,
+    frame_index: np.ndarray,
+    scanner_index: np.ndarray,
+    scanner_xy_world: np.ndarray,
+    dir_world: np.ndarray,
+    sigma_range_m: np.ndarray,
+    xytheta: np.ndarray,
+    settings: IcpSettings,
+) -> np.ndarray:
+    """How each frame's reduced side-bias equations (:func:`gtrig.laser.side_bias.reduced_normal_equations`)
+    move with the scanners' calibrated poses, to first order.
+
+    A scanner error ``dc`` moves the frame's right-hand sides by ``B_p dc`` (pose rows) and ``B_b dc``
+    (side rows, the residuals' factor ``c = -(n . u)`` of :func:`side_bias_normal_equations`); with the
+    pose eliminated, ``u`` moves by ``(B_b - H_pb^T H_pp^-1 B_p) dc``. Summed over a sequence, this is how
+    much of a calibration error the sides' range bias estimate takes up (an error that moves the points
+    along their beams on one side looks like that side's bias).
+
+    Parameters
+    ----------
+    As :func:`scanner_sensitivity`.
+
+    Returns
+    -------
+    (K, 4, 3 S) ``d u_k / d (x_s, y_s, theta_s)`` (m / m, m / rad), sides in the hull's order.
+    """
+    p, fid, sid, S, d, lin, H = _fit_normal_equations(model, xy_world, frame_index, scanner_index,
+                                                      scanner_xy_world, dir_world, sigma_range_m, xytheta, settings)
+    K = H.shape[0]
+    c = -(lin.nw[:, 0] * d[:, 0] + lin.nw[:, 1] * d[:, 1])
+    B_p = _scanner_pulls(p, fid, sid, S, lin, K, lin.J)
+    B_b = _scanner_pulls(p, fid, sid, S, lin, K, [np.where(lin.side == k, c, 0.0) for k in range(4)])
+    cell = fid * 4 + lin.side
+    H_pb = np.zeros((K, 3, 4))
+    for i in range(3):
+        H_pb[:, i, :] = np.bincount(cell, lin.w * lin.J[i] * c, minlength=K * 4).reshape(K, 4)
+    return B_b - np.einsum("kia,kij->kaj", H_pb, np.linalg.solve(H, B_p))
 
 
 def assigned_sides(

@@ -40,6 +40,8 @@ class SideBias:
     variance_factor : scatter of the blocks' estimates against their formal covariances (>= 0).
     n_frames : frames used.
     n_blocks : blocks the frames were cut into.
+    scanner_pull : (4, 3 S) how the estimate moves with the scanners' calibrated planar poses (m / m,
+        m / rad; scanner ``s`` owns columns ``3 s .. 3 s + 2``), :func:`scanner_pull`; None when not known.
     """
 
     bias_m: np.ndarray
@@ -47,6 +49,7 @@ class SideBias:
     variance_factor: float
     n_frames: int
     n_blocks: int
+    scanner_pull: np.ndarray | None = None
 
     @staticmethod
     def prior(cov: np.ndarray) -> SideBias:
@@ -118,4 +121,22 @@ def estimate_side_bias(
     return SideBias(beta, 0.5 * (cov + cov.T), float(s2), K, max(n_blocks, 1))
 
 
-__all__ = ["SideBias", "reduced_normal_equations", "estimate_side_bias"]
+def scanner_pull(N: np.ndarray, prior_cov: np.ndarray, du_dc: np.ndarray) -> np.ndarray:
+    """(4, 3 S) how the estimate of :func:`estimate_side_bias` moves with the scanners' calibrated poses.
+
+    A calibration error ``dc`` moves every frame's reduced right-hand side ``u`` by ``du_dc dc``
+    (:func:`gtrig.laser.hull_icp.side_bias_scanner_pull`), so the estimate ``-(sum N + P0)^-1 sum u``
+    moves by ``-(sum N + P0)^-1 (sum du_dc) dc``: the share of the calibration error the sides' biases
+    take up, which the refitted poses then no longer carry.
+
+    Parameters
+    ----------
+    N : (K, 4, 4) the frames' reduced normal matrices.
+    prior_cov : (4, 4) the bias prior's covariance, m^2.
+    du_dc : (4, 3 S) the frames' ``d u / d c`` summed.
+    """
+    P0 = np.linalg.inv(np.asarray(prior_cov, dtype=float))
+    return -np.linalg.solve(N.sum(axis=0) + P0, du_dc)
+
+
+__all__ = ["SideBias", "reduced_normal_equations", "estimate_side_bias", "scanner_pull"]

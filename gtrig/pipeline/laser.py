@@ -19,7 +19,6 @@ if TYPE_CHECKING:
 def gtlaser(inp: StageInput) -> StageOutput:
     from gtrig.config import apply_to_dataclass
     from gtrig.evaluate.truth import score_on_recording
-    from gtrig.fusion.bias import mean_covariance
     from gtrig.io.biascov import write_bias_cov
     from gtrig.laser.beam_timing import timing_check
     from gtrig.laser.recording import calibrate_recording, check_recording_timing, track_recording
@@ -37,10 +36,11 @@ def gtlaser(inp: StageInput) -> StageOutput:
     # the beam timing the residuals fit, against the rig's (a wrong one leaves a covariance too confident)
     timing_text, timing_z, timing_ok = timing_check(check_recording_timing(
         inp.rec, res, rig, "run", scan_cache=inp.out / SCAN_CACHE))
-    # the scanners' registration error is one draw for the whole run: every pose shares it, so fusion
-    # considers it as a bias rather than averaging it away (its share of a typical pose's covariance)
+    # the scanners' registration error is one draw for the whole run; what every pose shares of it (its
+    # mean over the run) fusion considers as a bias rather than averaging it away; the part that changes
+    # with the pose stays in each pose's covariance
     write_bias_cov(inp.out / "gt_laser_bias.yaml", "GTlaser",
-                   {"scanners' calibration": mean_covariance(res.cov_calibration[res.ok])})
+                   {"scanners' calibration": res.cov_calibration_shared})
     counts = res.counts()
     share = 100 * counts["ok"] / max(len(res), 1)
     checks = (
