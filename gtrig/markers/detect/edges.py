@@ -742,8 +742,9 @@ class RefineParams:
         0.08 px and the corner RMS unchanged on the renders of ``bench/markers.py --refine-only``, 60 % of
         the quads settled); 0 runs every pass on every quad.
     first_tol : the first pass's line-step tolerance (pixels). That pass only starts the next, which refits
-        every line with the marker's modelled light to ``tol``: on real photos its fits converge about
-        linearly (a step a third of the last), and the last steps to ``tol`` were a third of its evaluations.
+        every line with the marker's modelled light to ``tol``. On real photos its fits converge about
+        linearly (each line step a third to a half of the last): 0.03 px instead of ``tol`` took its fits from
+        9.4 to 7.1-7.6 evaluations per edge on the PhotonVision and top-level sets of ``markers_real``.
     """
 
     passes: int = 3
