@@ -835,7 +835,7 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray
         width, cells.
     cfg : (passes, columns, first pass's columns (0: every column), band px, margin cells (NaN: unknown),
         white end looked for (0 / 1), look sigmas, profile step, white-end drop, white-end sigmas, max blur
-        px, settle px): :class:`.edges.RefineParams` and the constants of :mod:`.edges`.
+        px, settle px, first pass's tolerance): :class:`.edges.RefineParams` and the constants of :mod:`.edges`.
     fit_cfg : :func:`_fit_edge`'s ``cfg``.
 
     Returns
@@ -869,6 +869,8 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray
     active = np.ones(Q, np.bool_)
     boxes = np.zeros((0, 4), np.int64)
     band_cfg = np.array([cfg[5], cfg[7], cfg[8], cfg[9], 0.3, cfg[10], cfg[11]])
+    fit_first = fit_cfg.copy()
+    fit_first[1] = cfg[12]  # the first pass's tolerance
     for k in range(passes):
         if not active.any():
             break
@@ -877,8 +879,8 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray
         if map_x.shape[0] > 0:
             boxes = raw_boxes(gray.shape[0], gray.shape[1], p0, p1, w_in, w_look, K, dist)
         refine_pass(gray, lut, map_x, map_y, boxes, p0, p1, sigma0, w_in, w_out, w_look, excl,
-                    first_stride if k == 0 else stride, white, band_cfg, fit_cfg, k == 0, active, P, mid, sigma,
-                    cov_line, rms, n_px, ok)
+                    first_stride if k == 0 else stride, white, band_cfg, fit_first if k == 0 else fit_cfg, k == 0,
+                    active, P, mid, sigma, cov_line, rms, n_px, ok)
         if k == 0:
             for q in range(Q):
                 changed = False

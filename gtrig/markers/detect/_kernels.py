@@ -270,6 +270,7 @@ def lm_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
     A = np.empty((7, 7))
     Pn = np.empty(7)
     JTr = np.empty(7)
+    rhs = np.empty(7)
     edge_normal_eq(X0, X1, val, extra, lo, hi, P, clipped, slow, clip_low, clip_high, G)
     JTJ[:, :] = G[:7, :7]
     JTr[:] = G[:7, 7]
@@ -280,6 +281,16 @@ def lm_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
         for p in range(7):
             A[p, p] += lam * (JTJ[p, p] + 1e-9)
         delta = _solve(A, JTr)
+        if (P[4] <= ls_lo and delta[4] < 0.0) or (P[4] >= ls_hi and delta[4] > 0.0):
+            # the blur at its bound and pushed beyond: the step of the other parameters with the blur held
+            # (the clamped full step is not that step, and its line moves kept the fit from settling)
+            for p in range(7):
+                A[4, p] = 0.0
+                A[p, 4] = 0.0
+                rhs[p] = JTr[p]
+            A[4, 4] = 1.0
+            rhs[4] = 0.0
+            delta = _solve(A, rhs)
         if not slow and abs(delta[1]) + abs(delta[0]) * wt < tol:
             # converged: a step this small is not worth the normal equations at its end
             break
