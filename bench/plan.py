@@ -8,18 +8,21 @@ the plan's CPU time per pose over the estimator's (``estimate_frame``) per pose,
     python bench/plan.py [--grid-m 0.05] [--headings 16] [--workers 1] [--figures docs/figures]
     python bench/plan.py --suggest 25 --grid-m 0.1 --headings 16 [--suggest-kind scanners]
     python bench/plan.py --honesty RESULTS=RECORDING [RESULTS=RECORDING ...] [--calibrated] [--instant]
-        [--corner-px SIGMA FLOOR]
+        [--corner-px SIGMA FLOOR] [--rig-sigma CAM_MM CAM_DEG MARKER_MM MARKER_DEG] [--after-calibration]
 
 ``--honesty``: the plan's predicted sigmas of GTlaser, fusion and GTvision at the true poses of simulated
 runs (``gtrig run`` results folders beside the recordings ``gtrig sim`` wrote, with their truth) against
 the runs' errors, per region of the floor (the camera that sees the robot best) and pooled over the runs;
 and each camera's predicted coverage against the share of its images in which the run found a marker.
 The plan is made from the recording's ``rig.yaml`` (the planned rig) with ``gtrig plan``'s default rig
-sigmas, or with ``--calibrated`` from the results' ``rig.calibrated.yaml`` (its calibrated covariances);
-``--instant`` predicts fusion as the two sources' information at one instant (no smoother); ``--corner-px``
-sets the plan's corner noise (sigma at an 80 px marker, growing as the square root of 80 px over the
-side, and the floor added to it). GTvision's poses are also split by exposure: those from images in
-which the robot's markers clip at white (the robot in a sunlit patch) apart from the others.
+sigmas (``--rig-sigma`` to set others; ``--after-calibration``: the model of a calibrated run,
+:func:`gtrig.plan.vision.after_calibration`, the calibration's reach and the detector's corner scatter),
+or with ``--calibrated`` from the results' ``rig.calibrated.yaml`` (its calibrated covariances);
+``--instant`` predicts fusion as the two sources' information at one instant (no smoother);
+``--corner-px`` sets the plan's corner noise (sigma at an 80 px marker, growing as the square root of
+80 px over the side, and the floor added to it).
+GTvision's poses are also split by exposure: those from images in which the robot's markers clip at
+white (the robot in a sunlit patch) apart from the others.
 """
 
 from __future__ import annotations
@@ -143,7 +146,7 @@ def figures(folder: Path) -> None:
 
     rig = make_scene(0).rig_nominal
     grid = area_grid(room_walls()[:, 0], 0.1, 16)
-    ru = RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))  # gtrig plan's defaults
+    ru = RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))  # the maps' sigmas (docs/plan.md)
     t = time.perf_counter()
     plan = predict_plan(rig, grid, PlanSettings(vision=VisionPlanSettings(rig_uncertainty=ru)))
     el = time.perf_counter() - t
@@ -343,22 +346,30 @@ def _pooled_ratio(rows: list[np.ndarray]) -> tuple[float, float, float]:
 
 
 def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: int = 3,
-            corner_px: tuple[float, float] | None = None) -> None:
+            corner_px: tuple[float, float] | None = None,
+            rig_sigma: tuple[float, float, float, float] | None = None, calibration_reach: bool = False) -> None:
     """Predicted against measured, per region and source (module docstring); ``corner_px``: the plan's
-    corner sigma at an 80 px marker and its floor, pixels (None: the plan's defaults)."""
+    corner sigma at an 80 px marker and its floor, pixels, ``rig_sigma``: its camera and marker sigmas
+    (mm, deg, mm, deg; None: ``gtrig plan``'s defaults), ``calibration_reach``: the model of a calibrated
+    run instead (:func:`gtrig.plan.vision.after_calibration`)."""
     from gtrig.io.tum import read_tum
     from gtrig.plan.fused import FusionPlanSettings
     from gtrig.plan.grid import path_grid
     from gtrig.plan.honesty import best_camera_region, coverage_check, pose_errors, region_ratios
     from gtrig.plan.predict import PlanSettings, predict_plan
-    from gtrig.plan.vision import VisionPlanSettings, predict_vision
+    from gtrig.plan.vision import CALIBRATED_RIG, VisionPlanSettings, after_calibration, predict_vision
     from gtrig.report.coverage import read_checkpoint
     from gtrig.rig.load import load_rig
     from gtrig.vision.covariance import RigUncertainty
     from gtrig.vision.synthetic import CornerNoise
 
-    ru = RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))  # gtrig plan's defaults
-    vision = VisionPlanSettings(rig_uncertainty=ru)
+    if rig_sigma is None:
+        ru = CALIBRATED_RIG if calibration_reach else RigUncertainty(0.0005, np.radians(0.01), 0.0003,
+                                                                     np.radians(0.05))  # gtrig plan's defaults
+    else:
+        ru = RigUncertainty(rig_sigma[0] / 1000, np.radians(rig_sigma[1]), rig_sigma[2] / 1000,
+                            np.radians(rig_sigma[3]))
+    vision = after_calibration(ru) if calibration_reach else VisionPlanSettings(rig_uncertainty=ru)
     if corner_px is not None:
         vision = VisionPlanSettings(rig_uncertainty=ru, corner_noise=CornerNoise(corner_px[0], 80.0),
                                     corner_floor_px=corner_px[1])
@@ -441,12 +452,18 @@ def main() -> None:
                     help="check the plan against these simulated runs instead (module docstring)")
     ap.add_argument("--calibrated", action="store_true", help="with --honesty: plan with the calibrated rig")
     ap.add_argument("--instant", action="store_true", help="with --honesty: fusion without its smoother")
+    ap.add_argument("--rig-sigma", nargs=4, type=float, metavar=("CAM_MM", "CAM_DEG", "MARKER_MM", "MARKER_DEG"),
+                    default=None, help="with --honesty: the plan's camera and marker pose sigmas (default: gtrig "
+                    "plan's)")
+    ap.add_argument("--after-calibration", action="store_true", help="with --honesty: GTvision predicted as a "
+                    "calibrated run (the calibration's reach, the detector's corner scatter, no floor)")
     ap.add_argument("--corner-px", nargs=2, type=float, metavar=("SIGMA", "FLOOR"), default=None,
                     help="with --honesty: the plan's corner sigma at an 80 px marker and its floor, px "
                          "(default: the plan's)")
     a = ap.parse_args()
     if a.honesty:
-        honesty(a.honesty, a.calibrated, a.instant, corner_px=None if a.corner_px is None else tuple(a.corner_px))
+        honesty(a.honesty, a.calibrated, a.instant, corner_px=None if a.corner_px is None else tuple(a.corner_px),
+                rig_sigma=None if a.rig_sigma is None else tuple(a.rig_sigma), calibration_reach=a.after_calibration)
     elif a.suggest:
         suggestion(a.grid_m, a.headings, a.suggest, a.suggest_kind, a.workers)
     elif a.figures is not None:

@@ -27,6 +27,16 @@ the one GTvision's synthetic corners are drawn with (:class:`gtrig.vision.synthe
 A random orientation of the anisotropy is averaged over in the information: each axis gets the mean
 of the two principal informations.
 
+What a calibrated run gives (:func:`after_calibration`). GTvision scales its
+floored corner covariances by a per-camera factor fitted to the recording's residuals
+(:mod:`gtrig.vision.noise`), so its corners end up weighted at the scatter the residuals show, whatever
+the floor; the run's errors follow the detector's scatter, not the floor. The prediction of a run
+therefore takes the detector's scatter (:data:`DETECTOR_SCATTER`) without the floor, and the rig's
+camera and marker sigmas the calibration reaches (:data:`CALIBRATED_RIG`), not a rig's nominal
+uncertainty before calibration. On the GT room's runs it puts GTvision's error over sigma per region at
+0.69-1.13, where ``gtrig plan``'s defaults give 0.34-0.56; fusion's yaw prediction is then 1.5-1.7
+times optimistic, which is why the defaults stay as they are (docs/plan.md).
+
 Instants. GTvision makes one pose of the images of one instant (images of different cameras within
 its sync tolerance). Cameras triggered together put every camera seeing the robot in one instant
 (``instants="together"``). Free-running cameras (the simulator's: their images tens of ms apart) make
@@ -38,6 +48,7 @@ sum over the cameras), which is what fusion's prediction takes (:attr:`VisionPre
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -51,6 +62,18 @@ from gtrig.vision.observations import CameraGeometry, StackedCorners, VisionMode
 from gtrig.vision.projection import lens_jacobian, project_pose, skew
 from gtrig.vision.refine import PlanarPrior, prior_residuals
 from gtrig.vision.synthetic import CornerNoise
+
+#: The detector's corner scatter on well-exposed markers: 0.03 px per axis at an 80 px marker, about its
+#: corner RMS on rendered markers (``bench/markers.py``; the runs' well-exposed markers, 55-80 px, show
+#: 0.012-0.019 px against the true projection).
+DETECTOR_SCATTER = CornerNoise(sigma_px=0.03, ref_side_px=80.0)
+
+#: The camera and marker pose sigmas (per axis) gtrig's calibration reaches in the GT room: the RMS
+#: error of the calibrated rigs of three simulated recordings against their true rigs, 12 cameras
+#: (0.33 mm, 0.0072 deg) and 18 markers on the robot (0.12 mm, 0.0097 deg; mostly an offset common
+#: to a robot's markers). A planned rig's own ``pose_cov`` entries override them.
+CALIBRATED_RIG = RigUncertainty(camera_xyz_m=0.00033, camera_rot_rad=math.radians(0.0072),
+                                marker_xyz_m=0.00012, marker_rot_rad=math.radians(0.0097))
 
 
 @dataclass(frozen=True)
@@ -76,6 +99,12 @@ class VisionPlanSettings:
     margin_px: float = MARGIN_PX
     min_side_px: float = MIN_SIDE_PX
     instants: Literal["together", "per_camera"] = "together"
+
+
+def after_calibration(rig_uncertainty: RigUncertainty = CALIBRATED_RIG) -> VisionPlanSettings:
+    """The settings that predict a calibrated ``gtrig run`` (module docstring): the detector's scatter,
+    no floor, the rig's sigmas ``rig_uncertainty``."""
+    return VisionPlanSettings(corner_noise=DETECTOR_SCATTER, corner_floor_px=0.0, rig_uncertainty=rig_uncertainty)
 
 
 @dataclass(frozen=True)
