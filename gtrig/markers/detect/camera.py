@@ -113,11 +113,15 @@ class Undistorter:
     def jacobian_to_raw(self, uv: NDArray[np.float64], h: float = 1e-3) -> NDArray[np.float64]:
         """d raw / d undistorted at points (N, 2): (N, 2, 2), by central differences."""
         uv = np.asarray(uv, dtype=float).reshape(-1, 2)
-        J = np.empty((len(uv), 2, 2))
-        for k in range(2):
-            dp = np.zeros(2)
-            dp[k] = h
-            J[:, :, k] = (self.to_raw(uv + dp) - self.to_raw(uv - dp)) / (2 * h)
+        n = len(uv)
+        steps = np.array([[h, 0.0], [0.0, h]])
+        # the four displaced copies mapped in one call: each point's arithmetic is its own, so the values
+        # are those of one call per copy, at a quarter of the calls' overhead
+        shifted = np.concatenate([uv + steps[0], uv - steps[0], uv + steps[1], uv - steps[1]])
+        raw = self.to_raw(shifted).reshape(4, n, 2)
+        J = np.empty((n, 2, 2))
+        J[:, :, 0] = (raw[0] - raw[1]) / (2 * h)
+        J[:, :, 1] = (raw[2] - raw[3]) / (2 * h)
         return J
 
 
