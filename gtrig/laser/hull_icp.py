@@ -428,6 +428,19 @@ def _scanner_pulls(p: np.ndarray, fid: np.ndarray, sid: np.ndarray, S: np.ndarra
     return B.reshape(K, len(rows), 3 * n_s)
 
 
+def _side_bias_cross(fid: np.ndarray, d: np.ndarray, lin: _Linearisation, K: int
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each point's side-bias factor ``c = -(n . u)`` (M,), its frame-and-side cell ``fid * 4 + side`` (M,)
+    and the pose-bias block ``H_pb`` (K, 3, 4) ``sum w J c`` per frame and side
+    (:func:`side_bias_normal_equations`)."""
+    c = -(lin.nw[:, 0] * d[:, 0] + lin.nw[:, 1] * d[:, 1])
+    cell = fid * 4 + lin.side
+    H_pb = np.zeros((K, 3, 4))
+    for i in range(3):
+        H_pb[:, i, :] = np.bincount(cell, lin.w * lin.J[i] * c, minlength=K * 4).reshape(K, 4)
+    return c, cell, H_pb
+
+
 def side_bias_normal_equations(
     model: HullModel,
     xy_world: np.ndarray,
@@ -463,11 +476,7 @@ def side_bias_normal_equations(
     _, fid, _, _, d, lin, H = _fit_normal_equations(model, xy_world, frame_index, scanner_index, scanner_xy_world,
                                                     dir_world, sigma_range_m, xytheta, settings)
     K = H.shape[0]
-    c = -(lin.nw[:, 0] * d[:, 0] + lin.nw[:, 1] * d[:, 1])
-    cell = fid * 4 + lin.side
-    H_pb = np.zeros((K, 3, 4))
-    for i in range(3):
-        H_pb[:, i, :] = np.bincount(cell, lin.w * lin.J[i] * c, minlength=K * 4).reshape(K, 4)
+    c, cell, H_pb = _side_bias_cross(fid, d, lin, K)
     H_bb = np.bincount(cell, lin.w * c * c, minlength=K * 4).reshape(K, 4)
     g_p = np.column_stack([np.bincount(fid, lin.w * lin.J[i] * lin.r, minlength=K) for i in range(3)])
     g_b = np.bincount(cell, lin.w * c * lin.r, minlength=K * 4).reshape(K, 4)
@@ -505,13 +514,9 @@ def side_bias_scanner_pull(
     p, fid, sid, S, d, lin, H = _fit_normal_equations(model, xy_world, frame_index, scanner_index,
                                                       scanner_xy_world, dir_world, sigma_range_m, xytheta, settings)
     K = H.shape[0]
-    c = -(lin.nw[:, 0] * d[:, 0] + lin.nw[:, 1] * d[:, 1])
+    c, _, H_pb = _side_bias_cross(fid, d, lin, K)
     B_p = _scanner_pulls(p, fid, sid, S, lin, K, lin.J)
     B_b = _scanner_pulls(p, fid, sid, S, lin, K, [np.where(lin.side == k, c, 0.0) for k in range(4)])
-    cell = fid * 4 + lin.side
-    H_pb = np.zeros((K, 3, 4))
-    for i in range(3):
-        H_pb[:, i, :] = np.bincount(cell, lin.w * lin.J[i] * c, minlength=K * 4).reshape(K, 4)
     return B_b - np.einsum("kia,kij->kaj", H_pb, np.linalg.solve(H, B_p))
 
 
