@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import logging
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -481,19 +481,22 @@ def _refine_with_side_bias(
         for it in range(iterations):
             pose = poses[it]
             Nu = []
-            du_dc = np.zeros((4, 3 * len(S)))
+            pulls: list[tuple[np.ndarray, np.ndarray]] = []
             for w in range(len(windows)):
                 xy, fid, sid, d = points(w, it)
                 eqs = side_bias_normal_equations(model, xy, fid, sid, S, d, sig, pose[rows[w]:rows[w + 1]], st.icp)
                 Nu.append(reduced_normal_equations(*eqs))
                 if it == iterations - 1:
-                    du_dc += side_bias_scanner_pull(model, xy, fid, sid, S, d, sig, pose[rows[w]:rows[w + 1]],
-                                                    st.icp).sum(axis=0)
+                    a, b = windows[w]
+                    pulls.append(block_sums(side_bias_scanner_pull(model, xy, fid, sid, S, d, sig,
+                                                                   pose[rows[w]:rows[w + 1]], st.icp),
+                                            a + np.flatnonzero(ok[a:b])))
             N = np.concatenate([n for n, _ in Nu])
             # the prior holds the total bias: solve for it with the points' current correction undone
             u = np.concatenate([u for _, u in Nu]) - np.einsum("kab,b->ka", N, betas[it])
             bias = estimate_side_bias(N, u, stamps[ok], prior)
             if it == iterations - 1:
+                du_dc = ordered_total(pulls, (4, 3 * len(S)))
                 bias = replace(bias, scanner_pull=scanner_pull(N, prior, du_dc))
             betas.append(bias.bias_m)
 
@@ -572,12 +575,38 @@ def _smooth_tracks(
 
 #: frames per chunk of the per-frame covariance terms (a time window of the run)
 COVARIANCE_WINDOW_FRAMES = 256
+#: frames per block of the run-wide sums over frames (the calibration sensitivity, the side-bias pull):
+#: blocks start at the multiples of it and are added in frame order, so windows of any multiple of it
+#: frames give one pass's bits
+SUM_BLOCK_FRAMES = 16
+
+#: a window's share of a run-wide sum: the blocks' indices (B,) and their sums (B, ...)
+BlockSums = tuple[np.ndarray, np.ndarray]
+
+
+def block_sums(rows: np.ndarray, frames: np.ndarray) -> BlockSums:
+    """Sums of ``rows`` (K, ...) over the blocks of :data:`SUM_BLOCK_FRAMES` frames their ``frames`` (K,;
+    absolute frame indices, increasing) fall in, each block's rows added in order."""
+    blk = np.asarray(frames, dtype=np.intp) // SUM_BLOCK_FRAMES
+    if blk.size == 0:
+        return blk, np.zeros((0,) + rows.shape[1:])
+    starts = np.flatnonzero(np.r_[True, blk[1:] != blk[:-1]])
+    return blk[starts], np.add.reduceat(np.asarray(rows, dtype=float), starts, axis=0)
+
+
+def ordered_total(parts: Sequence[BlockSums], shape: tuple[int, ...]) -> np.ndarray:
+    """The windows' block sums (:func:`block_sums`; windows in frame order, none splitting a block) added
+    block after block: the same bits however the frames were cut into windows."""
+    sums = [s for _, s in parts if len(s)]
+    if not sums:
+        return np.zeros(shape)
+    return np.cumsum(np.concatenate(sums), axis=0)[-1]
 
 
 def _window_covariances(part: FrameSource, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
                         scanner_cov: np.ndarray | None, st: TrackSettings, bias_pull: np.ndarray | None = None,
-                        use: np.ndarray | None = None,
-                        ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+                        use: np.ndarray | None = None, first: int = 0,
+                        ) -> tuple[np.ndarray | None, np.ndarray | None, BlockSums | None]:
     # (on a worker: a source read from the logs on disk makes its points here)
     fp = part.window(0, part.n_frames, scans=False)
     bias = None if cov_bias is None else surface_bias_covariance(fp, model, raw, cov_bias, st.icp)
@@ -585,7 +614,8 @@ def _window_covariances(part: FrameSource, model: HullModel, raw: np.ndarray, co
         return bias, None, None
     A = calibration_sensitivity(fp, model, raw, st.icp, bias_pull)
     keep = np.isfinite(A[:, 0, 0]) & (np.ones(len(A), bool) if use is None else use)
-    return bias, A @ np.asarray(scanner_cov, dtype=float) @ np.swapaxes(A, 1, 2), A[keep].sum(axis=0)
+    cal = A @ np.asarray(scanner_cov, dtype=float) @ np.swapaxes(A, 1, 2)
+    return bias, cal, block_sums(A[keep], first + np.flatnonzero(keep))
 
 
 def frame_covariances(fp: FrameSource, model: HullModel, raw: np.ndarray, cov_bias: np.ndarray | None,
@@ -603,19 +633,20 @@ def frame_covariances(fp: FrameSource, model: HullModel, raw: np.ndarray, cov_bi
     F = fp.n_frames
     edges = list(range(0, F, COVARIANCE_WINDOW_FRAMES)) + [F]
     chunks = [Chunk((fp.part(a, b), model, raw[a:b], cov_bias, scanner_cov, st, bias_pull,
-                     None if use is None else use[a:b]),
+                     None if use is None else use[a:b], a),
                     f"frames {a}-{b - 1} ({fp.frame_stamps_s[a]:.3f}-{fp.frame_stamps_s[b - 1]:.3f} s)")
               for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
-    parts: dict[int, tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]] = {}
+    parts: dict[int, tuple[np.ndarray | None, np.ndarray | None, BlockSums | None]] = {}
     map_chunks(_window_covariances, chunks, parts.__setitem__, executor=executor, workers=workers, progress=progress)
     if not parts:
-        return _window_covariances(fp.part(0, F), model, raw, cov_bias, scanner_cov, st, bias_pull, use)
+        bias, cal, one = _window_covariances(fp.part(0, F), model, raw, cov_bias, scanner_cov, st, bias_pull, use)
+        return bias, cal, None if one is None else ordered_total([one], (3, 3 * len(fp.scanner_xy_world)))
     out: list[np.ndarray | None] = []
     for k in (0, 1):
         pieces = [parts[i][k] for i in range(len(chunks))]
         out.append(None if pieces[0] is None else np.concatenate(pieces))  # type: ignore[arg-type]
     sums = [a for a in (parts[i][2] for i in range(len(chunks))) if a is not None]
-    return out[0], out[1], np.sum(sums, axis=0) if sums else None
+    return out[0], out[1], ordered_total(sums, (3, 3 * len(fp.scanner_xy_world))) if sums else None
 
 
 def timing_covariance(points: np.ndarray, stamp_sigma_s: np.ndarray | None, stamps_s: np.ndarray,
