@@ -564,6 +564,22 @@ def _merge(fit: EdgeFit, sel: NDArray[np.bool_], part: EdgeFit) -> EdgeFit:
     return EdgeFit(**vals)
 
 
+#: each corner's first line: corner ``k`` of a quad lies on edges ``k - 1`` and ``k``
+_PREV = np.roll(np.arange(4), 1)
+
+
+def _corner_lines(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                        NDArray[np.float64]]:
+    """The unit normals (Q, 4, 2) of each corner's two lines (edges ``k - 1`` and ``k`` of ``theta`` (Q, 4),
+    radians) and the inverse (Q, 4, 2, 2) of the matrix with them as rows (NaN where they are parallel):
+    a corner moves by ``A^-1 e_j`` when its line ``j`` moves by one pixel along its normal."""
+    n1 = np.stack([np.cos(theta[:, _PREV]), np.sin(theta[:, _PREV])], -1)
+    n2 = np.stack([np.cos(theta), np.sin(theta)], -1)
+    with np.errstate(all="ignore"):
+        Ainv = np.linalg.inv(np.stack([n1, n2], axis=-2))
+    return n1, n2, Ainv
+
+
 def intersect_corners(fit: EdgeFit, n_quads: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Corners and their covariances from the fitted lines of ``n_quads`` quads (edges 4q .. 4q+3).
 
@@ -579,22 +595,17 @@ def intersect_corners(fit: EdgeFit, n_quads: int) -> tuple[NDArray[np.float64], 
     rh = fit.rho.reshape(n_quads, 4)
     m = fit.mid.reshape(n_quads, 4, 2)
     C = fit.cov_line.reshape(n_quads, 4, 2, 2)
-    prev = np.roll(np.arange(4), 1)
-    th1, th2 = th[:, prev], th
-    n1 = np.stack([np.cos(th1), np.sin(th1)], -1)
-    n2 = np.stack([np.cos(th2), np.sin(th2)], -1)
-    m1, m2 = m[:, prev], m
-    r = np.stack([rh[:, prev] + np.einsum("qij,qij->qi", n1, m1), rh + np.einsum("qij,qij->qi", n2, m2)], -1)
-    A = np.stack([n1, n2], axis=-2)  # (Q, 4, 2, 2)
-    with np.errstate(all="ignore"):
-        Ainv = np.linalg.inv(A)
+    th1, th2 = th[:, _PREV], th
+    n1, n2, Ainv = _corner_lines(th)
+    m1, m2 = m[:, _PREV], m
+    r = np.stack([rh[:, _PREV] + np.einsum("qij,qij->qi", n1, m1), rh + np.einsum("qij,qij->qi", n2, m2)], -1)
     x = np.einsum("qcij,qcj->qci", Ainv, r)
     t1 = np.stack([-np.sin(th1), np.cos(th1)], -1)
     t2 = np.stack([-np.sin(th2), np.cos(th2)], -1)
     # Jacobian columns: (theta1, rho1) from line 1, (theta2, rho2) from line 2
     J1 = np.stack([Ainv[..., :, 0] * np.einsum("qci,qci->qc", t1, m1 - x)[..., None], Ainv[..., :, 0]], -1)
     J2 = np.stack([Ainv[..., :, 1] * np.einsum("qci,qci->qc", t2, m2 - x)[..., None], Ainv[..., :, 1]], -1)
-    cov = J1 @ C[:, prev] @ np.swapaxes(J1, -1, -2) + J2 @ C @ np.swapaxes(J2, -1, -2)
+    cov = J1 @ C[:, _PREV] @ np.swapaxes(J1, -1, -2) + J2 @ C @ np.swapaxes(J2, -1, -2)
     return x, cov
 
 
@@ -634,13 +645,9 @@ def clipped_white_cov(fit: EdgeFit, n_quads: int) -> NDArray[np.float64]:
     saturated = (fit.b > visible) & (visible > 0)
     misfit = np.where(saturated, fit.rms / np.where(saturated, visible, 1.0), 0.0)
     s_edge = np.nan_to_num(CLIPPED_MISFIT_SIGMAS * fit.sigma * misfit).reshape(n_quads, 4)
-    prev = np.roll(np.arange(4), 1)
-    n1 = np.stack([np.cos(th[:, prev]), np.sin(th[:, prev])], -1)
-    n2 = np.stack([np.cos(th), np.sin(th)], -1)
-    with np.errstate(all="ignore"):
-        Ainv = np.linalg.inv(np.stack([n1, n2], axis=-2))  # (Q, 4, 2, 2)
-    common = Ainv[..., :, 0] * s_edge[:, prev, None] + Ainv[..., :, 1] * s_edge[..., None]  # (Q, 4, 2)
-    own1 = Ainv[..., :, 0] * (CLIPPED_EDGE_SHARE_OWN * s_edge[:, prev, None])
+    _, _, Ainv = _corner_lines(th)
+    common = Ainv[..., :, 0] * s_edge[:, _PREV, None] + Ainv[..., :, 1] * s_edge[..., None]  # (Q, 4, 2)
+    own1 = Ainv[..., :, 0] * (CLIPPED_EDGE_SHARE_OWN * s_edge[:, _PREV, None])
     own2 = Ainv[..., :, 1] * (CLIPPED_EDGE_SHARE_OWN * s_edge[..., None])
     out = sum(np.einsum("qci,qcj->qcij", v, v) for v in (common, own1, own2))
     return np.where(np.isfinite(out), out, 0.0)
