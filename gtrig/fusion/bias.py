@@ -10,15 +10,6 @@ from __future__ import annotations
 import numpy as np
 
 
-def mean_covariance(covs: np.ndarray) -> np.ndarray:
-    """(3, 3) the mean over a run's poses of the share (F, 3, 3) a run-constant cause adds to each pose's
-    covariance (world x, y, yaw): the covariance of that cause's error at a typical pose of the run.
-    Non-finite rows (poses without a value) are left out; none left: zeros."""
-    c = np.asarray(covs, float)
-    ok = np.all(np.isfinite(c), axis=(1, 2))
-    return c[ok].mean(axis=0) if ok.any() else np.zeros(c.shape[1:])
-
-
 def heading_averaged(cov_robot: np.ndarray) -> np.ndarray:
     """(3, 3) world-frame covariance of an error fixed in the robot frame, ``cov_robot`` (3, 3) over robot
     (x, y) (m) and yaw (rad), averaged over the robot's heading: the world error ``R(yaw) e`` turns with

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gtrig.errors import FormatError
-from gtrig.fusion.bias import heading_averaged, mean_covariance
+from gtrig.fusion.bias import heading_averaged
 from gtrig.io.biascov import read_bias_cov, write_bias_cov
 
 
@@ -36,5 +36,4 @@ def test_heading_average_of_a_robot_frame_error() -> None:
     R = np.zeros((yaw.size, 3, 3))
     R[:, 0, 0] = R[:, 1, 1] = np.cos(yaw)
     R[:, 0, 1], R[:, 1, 0], R[:, 2, 2] = -np.sin(yaw), np.sin(yaw), 1.0
-    np.testing.assert_allclose(heading_averaged(c), mean_covariance(R @ c @ np.swapaxes(R, 1, 2)), atol=1e-20)
-    assert np.array_equal(mean_covariance(np.full((2, 3, 3), np.nan)), np.zeros((3, 3)))
+    np.testing.assert_allclose(heading_averaged(c), (R @ c @ np.swapaxes(R, 1, 2)).mean(axis=0), atol=1e-20)
