@@ -189,17 +189,13 @@ def predict_marker(prev: tuple[float, np.ndarray], before: tuple[float, np.ndarr
     one before (None: unknown, the marker is searched where it was), and its search box
     ``(x0, y0, x1, y1)``: the predicted square grown by the margin of :class:`TrackOptions`."""
     t1, c1 = prev
-    # lengths as sqrt(dx^2 + dy^2) of 2-vectors: np.linalg.norm's values without its per-call overhead
-    # (every tracked marker of every image passes here)
-    e = c1 - c1[_PREVIOUS_CORNER]
-    side = float(np.sqrt(np.max(e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1])))
+    side = _longest(c1 - c1[_PREVIOUS_CORNER])
     if before is None or before[0] >= t1:
         c, disp = c1, 0.5 * side  # no velocity: its motion is unknown, half a side of it allowed
     else:
         t2, c2 = before
         c = c1 + (c1 - c2) * ((stamp_s - t1) / (t1 - t2))
-        d = c - c1
-        disp = float(np.sqrt(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])))
+        disp = _longest(c - c1)
     m = opts.margin_px + opts.motion_margin * disp + opts.size_margin * side
     both = np.concatenate([c, c1])
     lo, hi = both.min(axis=0) - m, both.max(axis=0) + m
@@ -208,6 +204,12 @@ def predict_marker(prev: tuple[float, np.ndarray], before: tuple[float, np.ndarr
 
 #: each corner's predecessor around the quad (``np.roll(c, 1, axis=0)``'s order)
 _PREVIOUS_CORNER = np.array([3, 0, 1, 2])
+
+
+def _longest(v: np.ndarray) -> float:
+    """The longest of the 2-vectors ``v`` (N, 2): ``np.linalg.norm``'s values without its per-call overhead
+    (every tracked marker of every image passes here)."""
+    return float(np.sqrt(np.max(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1])))
 
 
 def window_for(region: tuple[float, float, float, float], size: tuple[int, int], sides_px: Sequence[int]
