@@ -8,17 +8,22 @@ the plan's CPU time per pose over the estimator's (``estimate_frame``) per pose,
     python bench/plan.py [--grid-m 0.05] [--headings 16] [--workers 1] [--figures docs/figures]
     python bench/plan.py --suggest 25 --grid-m 0.1 --headings 16 [--suggest-kind scanners]
     python bench/plan.py --honesty RESULTS=RECORDING [RESULTS=RECORDING ...] [--calibrated] [--instant]
-        [--corner-px SIGMA FLOOR] [--rig-sigma CAM_MM CAM_DEG MARKER_MM MARKER_DEG] [--after-calibration]
+        [--corner-px SIGMA FLOOR] [--rig-sigma CAM_MM CAM_DEG MARKER_MM MARKER_DEG] [--stated]
+        [--clock-sigma-ms MS]
 
 ``--honesty``: the plan's predicted sigmas of GTlaser, fusion and GTvision at the true poses of simulated
 runs (``gtrig run`` results folders beside the recordings ``gtrig sim`` wrote, with their truth) against
 the runs' errors, per region of the floor (the camera that sees the robot best) and pooled over the runs;
 and each camera's predicted coverage against the share of its images in which the run found a marker.
-The plan is made from the recording's ``rig.yaml`` (the planned rig) with ``gtrig plan``'s default rig
-sigmas (``--rig-sigma`` to set others; ``--after-calibration``: the model of a calibrated run,
-:func:`gtrig.plan.vision.after_calibration`, the calibration's reach and the detector's corner scatter),
-or with ``--calibrated`` from the results' ``rig.calibrated.yaml`` (its calibrated covariances);
+The plan is made from the recording's ``rig.yaml`` (the planned rig) with ``gtrig plan``'s defaults (a
+calibrated run, :func:`gtrig.plan.vision.after_calibration`: the calibration's reach and the detector's
+corner scatter; ``--rig-sigma`` to set other camera and marker sigmas; ``--stated``: the rig's stated
+sigmas 0.5 mm / 0.01 deg and 0.3 mm / 0.05 deg with GTvision's corner model and floor, the model before
+calibration), or with ``--calibrated`` from the results' ``rig.calibrated.yaml`` (its calibrated
+covariances);
 ``--instant`` predicts fusion as the two sources' information at one instant (no smoother);
+``--clock-sigma-ms`` sets fusion's clock offset sigma (:attr:`gtrig.plan.fused.FusionPlanSettings.clock_sigma_s`;
+0: clocks known exactly);
 ``--corner-px`` sets the plan's corner noise (sigma at an 80 px marker, growing as the square root of
 80 px over the side, and the floor added to it).
 GTvision's poses are also split by exposure: those from images in which the robot's markers clip at
@@ -141,14 +146,11 @@ def figures(folder: Path) -> None:
     from gtrig.plan.maps import cell_maps, summarize_target
     from gtrig.plan.predict import PlanSettings, predict_plan
     from gtrig.plan.report import summary_lines
-    from gtrig.plan.vision import VisionPlanSettings
-    from gtrig.vision.covariance import RigUncertainty
 
     rig = make_scene(0).rig_nominal
     grid = area_grid(room_walls()[:, 0], 0.1, 16)
-    ru = RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))  # the maps' sigmas (docs/plan.md)
     t = time.perf_counter()
-    plan = predict_plan(rig, grid, PlanSettings(vision=VisionPlanSettings(rig_uncertainty=ru)))
+    plan = predict_plan(rig, grid, PlanSettings())  # gtrig plan's defaults (docs/plan.md)
     el = time.perf_counter() - t
     maps = cell_maps(plan)
     s = summarize_target(plan, 0.001, np.radians(0.05))
@@ -259,6 +261,7 @@ def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt
 
     ru = base.rig_uncertainty
     st, cov, _, _, _, _ = read_covariance_csv(res / "gt_vision_run_cov.csv")
+    assert cov is not None, "gt_vision_run_cov.csv holds no covariance"
     i = np.clip(np.searchsorted(st, stamps_s), 0, st.size - 1)
     run_cov = np.where((np.abs(st[i] - stamps_s) < 1e-6)[:, None, None], cov[i], np.nan)
     flagged = extreme_poses(err, run_cov)
@@ -280,8 +283,8 @@ def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt
           f"beyond chi2(3) at 0.1 %)")
     by = {r.region: r for r in region_ratios(err, plan_cov, region)}
     kept = {r.region: r for r in region_ratios(err, plan_cov, region, keep=~flagged)}
-    own = {r.region: r for r in region_ratios(err, run_cov, region)}
-    own_kept = {r.region: r for r in region_ratios(err, run_cov, region, keep=~flagged)}
+    run = {r.region: r for r in region_ratios(err, run_cov, region)}
+    run_kept = {r.region: r for r in region_ratios(err, run_cov, region, keep=~flagged)}
     inst = {r.region: r for r in region_ratios(err, cov_own, region)}
     per_cam = {r.region: r for r in region_ratios(err, free, region)}
     per_cam_kept = {r.region: r for r in region_ratios(err, free, region, keep=~flagged)}
@@ -289,7 +292,7 @@ def vision_detail(rig: Rig, rec: Path, res: Path, stamps_s: np.ndarray, true_xyt
     for reg, r in by.items():
         m = region == reg
         sig = [_rms_sigma(c[m & np.isfinite(c[:, 0, 0])]) for c in parts]
-        k, o, ok_ = kept.get(reg), own.get(reg), own_kept.get(reg)
+        k, o, ok_ = kept.get(reg), run.get(reg), run_kept.get(reg)
         print(f"  vision region cam{reg}: {int((m & flagged).sum())} flagged; plan pos/yaw all "
               f"{r.position:.2f}/{r.yaw:.2f}, without flagged "
               + (f"{k.position:.2f}/{k.yaw:.2f} (error {1e3 * k.rms_error_m:.2f} mm)" if k else "-")
@@ -347,11 +350,15 @@ def _pooled_ratio(rows: list[np.ndarray]) -> tuple[float, float, float]:
 
 def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: int = 3,
             corner_px: tuple[float, float] | None = None,
-            rig_sigma: tuple[float, float, float, float] | None = None, calibration_reach: bool = False) -> None:
+            rig_sigma: tuple[float, float, float, float] | None = None, stated: bool = False,
+            clock_sigma_s: float | None = None) -> None:
     """Predicted against measured, per region and source (module docstring); ``corner_px``: the plan's
     corner sigma at an 80 px marker and its floor, pixels, ``rig_sigma``: its camera and marker sigmas
-    (mm, deg, mm, deg; None: ``gtrig plan``'s defaults), ``calibration_reach``: the model of a calibrated
-    run instead (:func:`gtrig.plan.vision.after_calibration`)."""
+    (mm, deg, mm, deg; None: the model's), ``stated``: the rig's stated sigmas with GTvision's corner
+    model and floor instead of a calibrated run (:func:`gtrig.plan.vision.after_calibration`),
+    ``clock_sigma_s``: fusion's clock offset sigma (None: the plan's default)."""
+    from dataclasses import replace
+
     from gtrig.io.tum import read_tum
     from gtrig.plan.fused import FusionPlanSettings
     from gtrig.plan.grid import path_grid
@@ -364,16 +371,18 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
     from gtrig.vision.synthetic import CornerNoise
 
     if rig_sigma is None:
-        ru = CALIBRATED_RIG if calibration_reach else RigUncertainty(0.0005, np.radians(0.01), 0.0003,
-                                                                     np.radians(0.05))  # gtrig plan's defaults
+        ru = RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05)) if stated else CALIBRATED_RIG
     else:
         ru = RigUncertainty(rig_sigma[0] / 1000, np.radians(rig_sigma[1]), rig_sigma[2] / 1000,
                             np.radians(rig_sigma[3]))
-    vision = after_calibration(ru) if calibration_reach else VisionPlanSettings(rig_uncertainty=ru)
+    vision = VisionPlanSettings(rig_uncertainty=ru) if stated else after_calibration(ru)
     if corner_px is not None:
         vision = VisionPlanSettings(rig_uncertainty=ru, corner_noise=CornerNoise(corner_px[0], 80.0),
                                     corner_floor_px=corner_px[1])
-    settings = PlanSettings(vision=vision, fusion=FusionPlanSettings(smooth=not instant))
+    fusion = FusionPlanSettings(smooth=not instant)
+    if clock_sigma_s is not None:
+        fusion = replace(fusion, clock_sigma_s=clock_sigma_s)
+    settings = PlanSettings(vision=vision, fusion=fusion)
     sources = (("laser", "gt_laser.tum"), ("fused", "gt_fused.tum"), ("vision", "gt_vision_run.tum"))
     pooled: dict[tuple[str, int], list[np.ndarray]] = {}
     vision_pooled: dict[tuple[str, int], list[np.ndarray]] = {}
@@ -426,9 +435,9 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
         line = f"  region cam{reg}:"
         for key in ("all", "kept", "run", "run kept", "own", "own kept", "per camera", "per camera kept",
                     "plan well exposed", "plan clipped", "run well exposed", "run clipped"):
-            rows = vision_pooled.get((key, reg))
-            if rows:
-                pos, yaw, e = _pooled_ratio(rows)
+            found = vision_pooled.get((key, reg))
+            if found:
+                pos, yaw, e = _pooled_ratio(found)
                 line += f" {key} {pos:.2f}/{yaw:.2f} ({1e3 * e:.2f} mm);"
         parts = []
         for n in VISION_PARTS:
@@ -455,15 +464,19 @@ def main() -> None:
     ap.add_argument("--rig-sigma", nargs=4, type=float, metavar=("CAM_MM", "CAM_DEG", "MARKER_MM", "MARKER_DEG"),
                     default=None, help="with --honesty: the plan's camera and marker pose sigmas (default: gtrig "
                     "plan's)")
-    ap.add_argument("--after-calibration", action="store_true", help="with --honesty: GTvision predicted as a "
-                    "calibrated run (the calibration's reach, the detector's corner scatter, no floor)")
+    ap.add_argument("--stated", action="store_true", help="with --honesty: GTvision predicted with the rig's "
+                    "stated sigmas, GTvision's corner model and floor (before calibration) instead of gtrig plan's "
+                    "calibrated run")
+    ap.add_argument("--clock-sigma-ms", type=float, default=None, help="with --honesty: fusion's clock offset "
+                    "sigma in the plan, ms (default: the plan's)")
     ap.add_argument("--corner-px", nargs=2, type=float, metavar=("SIGMA", "FLOOR"), default=None,
                     help="with --honesty: the plan's corner sigma at an 80 px marker and its floor, px "
                          "(default: the plan's)")
     a = ap.parse_args()
     if a.honesty:
         honesty(a.honesty, a.calibrated, a.instant, corner_px=None if a.corner_px is None else tuple(a.corner_px),
-                rig_sigma=None if a.rig_sigma is None else tuple(a.rig_sigma), calibration_reach=a.after_calibration)
+                rig_sigma=None if a.rig_sigma is None else tuple(a.rig_sigma), stated=a.stated,
+                clock_sigma_s=None if a.clock_sigma_ms is None else a.clock_sigma_ms / 1000)
     elif a.suggest:
         suggestion(a.grid_m, a.headings, a.suggest, a.suggest_kind, a.workers)
     elif a.figures is not None:

@@ -68,15 +68,18 @@ def command(
     headings: int = typer.Option(16, "--headings", help="Headings per cell."),
     target_mm: float = typer.Option(1.0, "--target-mm", help="Target one-sigma position accuracy (mm)."),
     target_deg: float = typer.Option(0.05, "--target-deg", help="Target one-sigma yaw accuracy (deg)."),
-    camera_sigma_mm: float = typer.Option(0.5, "--camera-sigma-mm", help="Camera position sigma after calibration "
+    camera_sigma_mm: float = typer.Option(0.33, "--camera-sigma-mm", help="Camera position sigma after calibration "
                                           "(cameras without pose_cov)."),
-    camera_sigma_deg: float = typer.Option(0.01, "--camera-sigma-deg", help="Camera orientation sigma."),
-    marker_sigma_mm: float = typer.Option(0.3, "--marker-sigma-mm", help="Marker position sigma on the robot after "
+    camera_sigma_deg: float = typer.Option(0.0072, "--camera-sigma-deg", help="Camera orientation sigma."),
+    marker_sigma_mm: float = typer.Option(0.12, "--marker-sigma-mm", help="Marker position sigma on the robot after "
                                           "calibration (markers without pose_cov)."),
-    marker_sigma_deg: float = typer.Option(0.05, "--marker-sigma-deg", help="Marker orientation sigma."),
+    marker_sigma_deg: float = typer.Option(0.0097, "--marker-sigma-deg", help="Marker orientation sigma."),
     speed_mps: float = typer.Option(0.3, "--speed-mps", help="The robot's speed over an area (m/s): fusion's "
                                     "odometry noise between fixes grows with it (a --path with stamps moves at "
                                     "its own)."),
+    clock_sigma_ms: float = typer.Option(1.3, "--clock-sigma-ms", help="Standard error of the sources' clock "
+                                         "offsets after gtrig sync (ms): the fused pose is off by the robot's "
+                                         "velocity times it."),
     workers: int = typer.Option(2, "--workers", help="Processes."),
     suggest: str | None = typer.Option(None, "--suggest", help="cameras:N,scanners:M (either or both): add N cameras "
                                        "and M fixed scanners, each where it most increases the share meeting the "
@@ -99,7 +102,7 @@ def command(
     from gtrig.plan.fused import FusionPlanSettings
     from gtrig.plan.grid import area_grid, default_area, path_grid
     from gtrig.plan.predict import PlanSettings
-    from gtrig.plan.vision import VisionPlanSettings
+    from gtrig.plan.vision import after_calibration
     from gtrig.rig.load import load_rig
     from gtrig.vision.covariance import RigUncertainty
 
@@ -107,6 +110,7 @@ def command(
     checks.count("--headings", headings, 1, 360)
     checks.workers(workers)
     checks.number("--speed-mps", speed_mps, lo=0.0, hi=10.0, unit="m/s")
+    checks.number("--clock-sigma-ms", clock_sigma_ms, lo=0.0, hi=1000.0, unit="ms")
     checks.number("--target-mm", target_mm, lo=0.0, lo_open=True, hi=1000.0, unit="mm")
     checks.number("--target-deg", target_deg, lo=0.0, lo_open=True, hi=180.0, unit="deg")
     for name, v in (("--camera-sigma-mm", camera_sigma_mm), ("--marker-sigma-mm", marker_sigma_mm)):
@@ -138,8 +142,8 @@ def command(
         grid = area_grid(poly, grid_m, headings)
     ru = RigUncertainty(camera_sigma_mm / 1000, math.radians(camera_sigma_deg), marker_sigma_mm / 1000,
                         math.radians(marker_sigma_deg))
-    settings = PlanSettings(vision=VisionPlanSettings(rig_uncertainty=ru),
-                            fusion=FusionPlanSettings(speed_mps=speed_mps))
+    settings = PlanSettings(vision=after_calibration(ru),
+                            fusion=FusionPlanSettings(speed_mps=speed_mps, clock_sigma_s=clock_sigma_ms / 1000))
     if workers == 0:
         import os
 

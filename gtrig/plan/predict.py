@@ -2,11 +2,11 @@
 
 The fused covariance is what fusion's smoother makes of the two sources' fixes with odometry between
 them (:mod:`gtrig.plan.fused`: the fixes of neighbouring instants averaged over the odometry's noise at
-the robot's speed, the markers' pose errors kept); where only one source covers a pose it is that
-source's, smoothed alike. On a path with time stamps, GTvision's covariance also holds the cameras' time-stamp
-jitter times the robot's velocity (:func:`gtrig.plan.motion.stamp_jitter_covariance`): an image stamped
-off by ``dt`` shows the robot where it was ``dt`` earlier or later. Poses are processed in chunks so that
-memory stays bounded.
+the robot's speed, the markers' pose errors kept, the clock offsets' error added); where only one
+source covers a pose it is that source's, smoothed alike. On a path with time stamps, GTvision's
+covariance also holds the cameras' time-stamp jitter times the robot's velocity
+(:func:`gtrig.plan.motion.stamp_jitter_covariance`): an image stamped off by ``dt`` shows the robot
+where it was ``dt`` earlier or later. Poses are processed in chunks so that memory stays bounded.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from gtrig.errors import InputError
 from gtrig.plan.fused import FusionPlanSettings, SourceRates, fused_covariance, plan_velocity
 from gtrig.plan.grid import PlanGrid
 from gtrig.plan.laser import LaserPlanSettings, predict_laser, scanner_rate_hz
-from gtrig.plan.vision import VisionPlanSettings, predict_vision
+from gtrig.plan.vision import VisionPlanSettings, after_calibration, predict_vision
 from gtrig.rig.models import Rig
 from gtrig.vision.observations import VisionModel
 
@@ -31,9 +31,11 @@ SOURCES = ("vision", "laser", "fused")
 
 @dataclass(frozen=True)
 class PlanSettings:
-    """Noise models of both sources and of fusion, and the chunk size (poses per chunk)."""
+    """Noise models of both sources and of fusion, and the chunk size (poses per chunk). GTvision's by
+    default are a calibrated run's (:func:`gtrig.plan.vision.after_calibration`): what ``gtrig run``
+    leaves after its calibration and noise estimation, not the rig's sigmas before them."""
 
-    vision: VisionPlanSettings = field(default_factory=VisionPlanSettings)
+    vision: VisionPlanSettings = field(default_factory=after_calibration)
     laser: LaserPlanSettings = field(default_factory=LaserPlanSettings)
     fusion: FusionPlanSettings = field(default_factory=FusionPlanSettings)
     chunk_poses: int = 2048

@@ -33,9 +33,11 @@ floored corner covariances by a per-camera factor fitted to the recording's resi
 the floor; the run's errors follow the detector's scatter, not the floor. The prediction of a run
 therefore takes the detector's scatter (:data:`DETECTOR_SCATTER`) without the floor, and the rig's
 camera and marker sigmas the calibration reaches (:data:`CALIBRATED_RIG`), not a rig's nominal
-uncertainty before calibration. On the GT room's runs it puts GTvision's error over sigma per region at
-0.69-1.13, where ``gtrig plan``'s defaults give 0.34-0.56; fusion's yaw prediction is then 1.5-1.7
-times optimistic, which is why the defaults stay as they are (docs/plan.md).
+uncertainty before calibration. It is the plan's default (:class:`gtrig.plan.predict.PlanSettings`):
+on the GT room's runs GTvision's error over sigma per region is 0.69-1.03 on the regions without
+sunlit, clipped markers, where the rig's stated sigmas with GTvision's corner model and floor give
+0.34-0.91 (docs/plan.md). :class:`VisionPlanSettings`' own defaults are GTvision's options before a
+recording's noise is known (the stated corner model, the floor, hand-measured markers).
 
 Instants. GTvision makes one pose of the images of one instant (images of different cameras within
 its sync tolerance). Cameras triggered together put every camera seeing the robot in one instant

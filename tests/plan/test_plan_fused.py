@@ -1,5 +1,6 @@
 """The plan's fused covariance is fusion's smoother's: its steady state equals a long chain solved whole,
-and on a simulated drive fusion's errors agree with it (RMS error over predicted sigma near 1)."""
+and on a simulated drive fusion's errors agree with it (RMS error over predicted sigma near 1), also with
+the sources' clocks off by the plan's clock sigma."""
 
 from __future__ import annotations
 
@@ -76,44 +77,73 @@ def _odometry(t: np.ndarray, xyt: np.ndarray, noise: OdometryNoise, rng: np.rand
     return OdometryLog(t, odo, np.r_[0.0, np.hypot(u[:, 0], u[:, 1]) / dt], np.r_[0.0, u[:, 2] / dt])
 
 
-def _fixes(rate_hz: float, t0: float, t1: float, cov: np.ndarray, block_s: float, rng: np.random.Generator
-           ) -> PoseTrack:
-    """Fixes whose error is one draw per ``block_s`` (errors correlated over that span, as fusion assumes)."""
+def _fixes(rate_hz: float, t0: float, t1: float, cov: np.ndarray, block_s: float, rng: np.random.Generator,
+           clock_s: float = 0.0) -> PoseTrack:
+    """Fixes whose error is one draw per ``block_s`` (errors correlated over that span, as fusion assumes),
+    stamped ``clock_s`` late."""
     st = np.arange(t0, t1, 1.0 / rate_hz)
     block = np.floor((st - t0) / block_s).astype(int)
     draws = rng.multivariate_normal(np.zeros(3), cov, int(block.max()) + 1)
     z = _truth(st) + draws[block]
-    return PoseTrack.from_xytheta(st, z, cov=np.broadcast_to(cov, (st.size, 3, 3)).copy())
+    return PoseTrack.from_xytheta(st + clock_s, z, cov=np.broadcast_to(cov, (st.size, 3, 3)).copy())
 
 
-def test_fusion_errors_agree_with_the_predicted_sigma():
-    rng = np.random.default_rng(8)
-    noise = OdometryNoise()
-    step_s = FusionOptions().correlation_s
+COV_V = np.diag(np.square([0.0015, 0.0011, np.radians(0.035)]))
+COV_L = np.array([[1.0e-6, 2e-7, 0.0], [2e-7, 0.7e-6, 0.0], [0.0, 0.0, np.radians(0.075) ** 2]])
+
+
+def _drive_errors(seed: int, clock_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fusion of a 150 s drive (vision at 10 Hz, laser at 75 Hz, both stamped ``clock_s`` late): the fused
+    errors (K, 3), the true poses (K, 3) and velocities (K, 3) at its poses 10 s from either end."""
+    rng = np.random.default_rng(seed)
     t = np.arange(0.0, 150.0, 0.02)
-    odo = _odometry(t, _truth(t), noise, rng)
-    cov_v = np.diag(np.square([0.0015, 0.0011, np.radians(0.035)]))
-    cov_l = np.array([[1.0e-6, 2e-7, 0.0], [2e-7, 0.7e-6, 0.0], [0.0, 0.0, np.radians(0.075) ** 2]])
-    vision = _fixes(10.0, 0.013, 149.9, cov_v, step_s, rng)
-    laser = _fixes(75.0, 0.007, 149.9, cov_l, step_s, rng)
+    odo = _odometry(t, _truth(t), OdometryNoise(), rng)
+    step_s = FusionOptions().correlation_s
+    vision = _fixes(10.0, 0.013, 149.9, COV_V, step_s, rng, clock_s)
+    laser = _fixes(75.0, 0.007, 149.9, COV_L, step_s, rng, clock_s)
     track, _ = fuse_tracks({"vision": vision, "laser": laser}, odo)
     mid = (track.stamps_s > 10.0) & (track.stamps_s < 140.0)
     st = track.stamps_s[mid]
-    err = track.xytheta()[mid] - _truth(st)
     true = _truth(st)
-    vel = np.gradient(true, st, axis=0)
-    K = st.size
-    pred = fused_covariance(np.broadcast_to(cov_v, (K, 3, 3)), np.broadcast_to(cov_l, (K, 3, 3)), None, None,
-                            true[:, 2], vel, SourceRates(10.0, 75.0), FusionPlanSettings(odometry=noise))
+    return track.xytheta()[mid] - true, true, np.gradient(true, st, axis=0)
+
+
+def _ratios(err: np.ndarray, pred: np.ndarray) -> tuple[float, float]:
     var = np.diagonal(pred, axis1=1, axis2=2)
-    pos = np.sqrt(np.mean(err[:, :2] ** 2) / np.mean(var[:, :2]))
-    yaw = np.sqrt(np.mean(err[:, 2] ** 2) / np.mean(var[:, 2]))
+    return (float(np.sqrt(np.mean(err[:, :2] ** 2) / np.mean(var[:, :2]))),
+            float(np.sqrt(np.mean(err[:, 2] ** 2) / np.mean(var[:, 2]))))
+
+
+def test_fusion_errors_agree_with_the_predicted_sigma():
+    err, true, vel = _drive_errors(8, 0.0)
+    K = err.shape[0]
+    # the fixes' clocks are right here: no clock share
+    settings = FusionPlanSettings(clock_sigma_s=0.0)
+    pred = fused_covariance(np.broadcast_to(COV_V, (K, 3, 3)), np.broadcast_to(COV_L, (K, 3, 3)), None, None,
+                            true[:, 2], vel, SourceRates(10.0, 75.0), settings)
+    pos, yaw = _ratios(err, pred)
     print(f"fused RMS error / predicted sigma: position {pos:.2f}, yaw {yaw:.2f}")
     assert 0.75 <= pos <= 1.33 and 0.75 <= yaw <= 1.33, (pos, yaw)
     # the instant's information alone (no smoother) would be cautious here by more than the tolerance
-    inst = fused_covariance(cov_v[None], cov_l[None], None, None, np.zeros(1), np.zeros((1, 3)),
-                            SourceRates(10.0, 75.0), FusionPlanSettings(smooth=False))[0]
+    inst = fused_covariance(COV_V[None], COV_L[None], None, None, np.zeros(1), np.zeros((1, 3)),
+                            SourceRates(10.0, 75.0), FusionPlanSettings(smooth=False, clock_sigma_s=0.0))[0]
     assert np.sqrt(np.mean(err[:, :2] ** 2) / np.mean(np.diag(inst)[:2])) < 0.75
+
+
+def test_a_clock_off_by_its_sigma_is_what_the_plan_adds():
+    # both sources stamped 3 ms late, as a clock offset wrong by one sigma of 3 ms leaves them: the fused
+    # pose trails by the velocity times 3 ms, which the plan's clock share predicts (without it the
+    # position would be 2 sigma off)
+    clock_s = 0.003
+    err, true, vel = _drive_errors(9, clock_s)
+    K = err.shape[0]
+    args = (np.broadcast_to(COV_V, (K, 3, 3)), np.broadcast_to(COV_L, (K, 3, 3)), None, None, true[:, 2], vel,
+            SourceRates(10.0, 75.0))
+    pos, yaw = _ratios(err, fused_covariance(*args, FusionPlanSettings(clock_sigma_s=clock_s)))
+    pos_0, _ = _ratios(err, fused_covariance(*args, FusionPlanSettings(clock_sigma_s=0.0)))
+    print(f"clock 3 ms late: fused RMS error / predicted sigma {pos:.2f} / {yaw:.2f}; without the clock {pos_0:.2f}")
+    assert 0.75 <= pos <= 1.33 and 0.75 <= yaw <= 1.33, (pos, yaw)
+    assert pos_0 > 1.6, pos_0
 
 
 def test_odometry_step_turns_with_the_heading():

@@ -9,13 +9,10 @@ from gtrig.plan.grid import area_grid
 from gtrig.plan.maps import cell_maps, summarize_target
 from gtrig.plan.predict import PlanSettings, predict_plan
 from gtrig.plan.suggest import suggest_cameras, suggest_sensors
-from gtrig.plan.vision import VisionPlanSettings
 from gtrig.sim.gtroom import make_scene, room_walls
-from gtrig.vision.covariance import RigUncertainty
 
-# gtrig plan's defaults: a calibrated camera network and calibrated markers
-SETTINGS = PlanSettings(vision=VisionPlanSettings(
-    rig_uncertainty=RigUncertainty(0.0005, np.radians(0.01), 0.0003, np.radians(0.05))))
+# gtrig plan's defaults: a calibrated run
+SETTINGS = PlanSettings()
 
 
 def test_missing_camera_is_suggested_where_the_hole_is():
@@ -53,7 +50,7 @@ def _assert_is_a_full_plan(s, grid, target):
 def test_missing_scanner_is_suggested_where_the_hole_is():
     full = make_scene(0).rig_nominal
     grid = area_grid(room_walls()[:, 0], 0.3, 4)
-    target = (0.0006, np.radians(1.0))  # fused GTlaser alone: met by 4 scanners on most of the room, by 3 on less
+    target = (0.0007, np.radians(1.0))  # fused GTlaser alone: met by 4 scanners on half the room, by 3 on less
     lasers_only = full.model_copy(update={"cameras": ()})
     share_full = summarize_target(predict_plan(lasers_only, grid, SETTINGS), *target).share_worst
     rig = lasers_only.model_copy(update={"laser_scanners": full.laser_scanners[1:]})
