@@ -167,8 +167,6 @@ def _hms(utc: float) -> str:
 def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, params: OutdoorParams | None = None,
                      ) -> dict[str, float]:
     """Write the outdoor recording (module docstring) into ``out_dir``; returns summary figures."""
-    from pyproj import Transformer
-
     prm = params or OutdoorParams(duration_s=120.0 if quick else 420.0)
     rng = np.random.default_rng(seed)
     out = Path(out_dir)
@@ -181,14 +179,43 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
     tilt = _gauss_markov(rng, t_o.size, dt_o, prm.tilt_tau_s)[:, :2] * np.radians(prm.tilt_sigma_deg)
     antenna_o = _antenna(pose, tilt)
     ant = np.column_stack([np.interp(t_g, t_o, antenna_o[:, k]) for k in range(3)])
-    # constellation: azimuths uniform, elevations uniform over the sky's solid angle above 10 deg, drifting
+    n_vis = _visible_satellites(rng, prm, t_g, ant, bld)
+    quality = _fix_quality(t_g, n_vis, prm)
+    fix = _fix_errors(rng, prm, t_g, n_vis, quality)
+    utc = T0_UNIX_S + t_g
+    log_t = utc + prm.log_latency_s + rng.uniform(-0.004, 0.004, t_g.size)
+    lines = _nmea_lines(utc, log_t, ant + fix.err_enu, ant, t_g, n_vis, quality, fix)
+    (out / "gps").mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "gps" / "gps.log", "\n".join(lines) + "\n")
+    odo, odo_errors = _odometry(rng, t_o, pose, dt_o)
+    (out / "odometry").mkdir(parents=True, exist_ok=True)
+    write_odometry_csv(out / "odometry" / "odometry.csv", odo)
+    _write_truth(out, t_o, pose, antenna_o, utc, n_vis, quality, fix)
+    meta = {"origin": {"lat_deg": ORIGIN[0], "lon_deg": ORIGIN[1], "h_m": ORIGIN[2]}, "lever_arm_m": LEVER_ARM_M,
+            "t0_unix_s": T0_UNIX_S, "seed": seed, "buildings": bld.tolist(),
+            "odometry_errors": odo_errors,
+            "log_latency_s": prm.log_latency_s,
+            "tilt_sigma_deg": prm.tilt_sigma_deg}
+    atomic_write_text(out / "truth" / "outdoor.json", json.dumps(meta, indent=1) + "\n")
+    share = {f"q{q}": float(np.mean(quality == q)) for q in (0, 4, 5)}
+    return {"epochs": float(t_g.size), **share, "outliers": float(fix.outlier.sum())}
+
+
+def _visible_satellites(rng: np.random.Generator, prm: OutdoorParams, t_g: np.ndarray, ant: np.ndarray,
+                        bld: np.ndarray) -> np.ndarray:
+    """Satellites (G,) in view of the antenna at each epoch: azimuths uniform, elevations uniform over the
+    sky's solid angle above 10 deg, drifting; the buildings block the rest."""
     az0 = rng.uniform(0, 2 * np.pi, prm.n_sats)
     el0 = np.arcsin(rng.uniform(np.sin(np.radians(10)), np.sin(np.radians(85)), prm.n_sats))
     drift = np.radians(0.25 / 60.0) * rng.choice([-1, 1], prm.n_sats)
     az = az0[None] + drift[None] * t_g[:, None]
     el = np.clip(el0[None] + 0.3 * drift[None] * t_g[:, None], np.radians(5), np.radians(85))
-    n_vis = visible(ant[:, :2], az, el, bld).sum(axis=1)
-    # fix state machine: fixed once >= min_fixed satellites have been seen for t_fix_s
+    return visible(ant[:, :2], az, el, bld).sum(axis=1)
+
+
+def _fix_quality(t_g: np.ndarray, n_vis: np.ndarray, prm: OutdoorParams) -> np.ndarray:
+    """GGA quality (G,) int8: RTK fixed (4) once ``min_fixed`` satellites have been seen for ``t_fix_s``,
+    float (5) with ``min_float`` or more, none (0) below."""
     quality = np.zeros(t_g.size, np.int8)
     since = -1e9
     for i in range(t_g.size):
@@ -202,7 +229,32 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
         else:
             since = -1e9
             quality[i] = 0
-    # reported covariance (ENU) and the error drawn from it
+    return quality
+
+
+@dataclass(frozen=True)
+class _FixErrors:
+    """The receiver's stated error model per epoch and the error drawn from it (ENU, metres).
+
+    ``geom`` (G,) the geometry factor; ``base`` (G,) the stated sigma; ``a_m``, ``b_m`` (G,) the error
+    ellipse's semi-axes; ``orient_rad`` (G,) its orientation from north; ``sig_alt`` (G,); ``cov_enu``
+    (G, 3, 3); ``err_enu`` (G, 3); ``outlier`` (G,) epochs offset by a multipath reflection.
+    """
+
+    geom: np.ndarray
+    base: np.ndarray
+    a_m: np.ndarray
+    b_m: np.ndarray
+    orient_rad: np.ndarray
+    sig_alt: np.ndarray
+    cov_enu: np.ndarray
+    err_enu: np.ndarray
+    outlier: np.ndarray
+
+
+def _fix_errors(rng: np.random.Generator, prm: OutdoorParams, t_g: np.ndarray, n_vis: np.ndarray,
+                quality: np.ndarray) -> _FixErrors:
+    """The stated covariance per epoch (GST), a Gauss-Markov error drawn from it, and multipath outliers."""
     geom = np.sqrt(6.0 / np.maximum(n_vis, 4))
     base = np.where(quality == 4, prm.sigma_fixed_m, prm.sigma_float_m) * geom
     aniso = 1.4  # semi-axes 1.4 and 1/1.4 of the base sigma; N-S worse than E-W (the northern sky hole)
@@ -233,17 +285,24 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
         m = quality[sl] == 5
         err[sl][m] += mag * np.array([np.cos(ang), np.sin(ang), 0.3])
         outlier[sl] |= m
-    meas = ant + err
+    return _FixErrors(geom, base, a_m, b_m, orient, sig_alt, cov, err, outlier)
+
+
+def _nmea_lines(utc: np.ndarray, log_t: np.ndarray, meas_enu: np.ndarray, ant: np.ndarray, t_g: np.ndarray,
+                n_vis: np.ndarray, quality: np.ndarray, fix: _FixErrors) -> list[str]:
+    """The receiver's log: GGA, GST (when fixed or float) and RMC per epoch, each stamped on the logger's
+    clock (``log_t``), positions ``meas_enu`` (G, 3) in the local ENU frame at :data:`ORIGIN`."""
+    from pyproj import Transformer
+
     tr = Transformer.from_pipeline(
         f"+proj=pipeline +step +proj=cart +ellps=WGS84 +step +proj=topocentric +ellps=WGS84 +lat_0={ORIGIN[0]} "
         f"+lon_0={ORIGIN[1]} +h_0={ORIGIN[2]}")
-    lon, lat, h = tr.transform(meas[:, 0], meas[:, 1], meas[:, 2], direction="INVERSE")
+    lon, lat, h = tr.transform(meas_enu[:, 0], meas_enu[:, 1], meas_enu[:, 2], direction="INVERSE")
     geoid_sep = 48.022
-    lines = []
-    utc = T0_UNIX_S + t_g
-    log_t = utc + prm.log_latency_s + rng.uniform(-0.004, 0.004, t_g.size)
     speed = np.hypot(np.gradient(ant[:, 0], t_g), np.gradient(ant[:, 1], t_g))
     course = np.degrees(np.arctan2(np.gradient(ant[:, 0], t_g), np.gradient(ant[:, 1], t_g))) % 360
+    cov, geom = fix.cov_enu, fix.geom
+    lines = []
     for i in range(t_g.size):
         hms = _hms(utc[i])
         la, ns = _ddmm(lat[i], "N", "S", 2)
@@ -256,17 +315,21 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
             gga = f"GPGGA,{hms},,,,,0,{int(n_vis[i]):02d},,,M,,M,,"
         lines.append(f"{log_t[i]:.6f}, ${gga}*{_checksum(gga)}")
         if q:
-            gst = (f"GPGST,{hms},{base[i]:.3f},{a_m[i]:.3f},{b_m[i]:.3f},{np.degrees(orient[i]) % 180:.1f},"
-                   f"{np.sqrt(cov[i, 1, 1]):.3f},{np.sqrt(cov[i, 0, 0]):.3f},{sig_alt[i]:.3f}")
+            gst = (f"GPGST,{hms},{fix.base[i]:.3f},{fix.a_m[i]:.3f},{fix.b_m[i]:.3f},"
+                   f"{np.degrees(fix.orient_rad[i]) % 180:.1f},"
+                   f"{np.sqrt(cov[i, 1, 1]):.3f},{np.sqrt(cov[i, 0, 0]):.3f},{fix.sig_alt[i]:.3f}")
             lines.append(f"{log_t[i] + 0.010:.6f}, ${gst}*{_checksum(gst)}")
         day = np.datetime64(int(utc[i]), "s").astype(object)
         rmc = (f"GPRMC,{hms},{'A' if q else 'V'},{la},{ns},{lo},{ew},{speed[i] / 0.514444:.2f},{course[i]:.1f},"
                f"{day.strftime('%d%m%y')},,,{'R' if q in (4, 5) else 'N'}")
         lines.append(f"{log_t[i] + 0.015:.6f}, ${rmc}*{_checksum(rmc)}")
-    (out / "gps").mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "gps" / "gps.log", "\n".join(lines) + "\n")
+    return lines
 
-    # odometry: scale, turn-scale and curvature errors plus slip, integrated at the odometry rate
+
+def _odometry(rng: np.random.Generator, t_o: np.ndarray, pose: np.ndarray, dt_o: float,
+              ) -> tuple[OdometryLog, dict[str, float]]:
+    """Wheel odometry integrated at its rate from the true path ``pose`` (N, 3: x, y m, theta rad) with a
+    scale, turn-scale and curvature error plus slip noise; returns the log and the drawn errors."""
     ds = np.hypot(np.diff(pose[:, 0]), np.diff(pose[:, 1]))
     dth = np.diff(pose[:, 2])
     e_scale, e_turn, e_curv = rng.normal(0, 0.01), rng.normal(0, 0.02), rng.normal(0, 0.004)
@@ -278,25 +341,21 @@ def simulate_outdoor(out_dir: str | Path, seed: int = 0, quick: bool = False, pa
     yo = np.concatenate([[0.0], np.cumsum(ds_m * np.sin(mid))])
     odo = OdometryLog(T0_UNIX_S + t_o, np.column_stack([xo, yo, th]), np.concatenate([ds_m / dt_o, [0.0]]),
                       np.concatenate([dth_m / dt_o, [0.0]]))
-    (out / "odometry").mkdir(parents=True, exist_ok=True)
-    write_odometry_csv(out / "odometry" / "odometry.csv", odo)
+    return odo, {"scale": e_scale, "turn_scale": e_turn, "curvature_rad_per_m": e_curv}
 
+
+def _write_truth(out: Path, t_o: np.ndarray, pose: np.ndarray, antenna_o: np.ndarray, utc: np.ndarray,
+                 n_vis: np.ndarray, quality: np.ndarray, fix: _FixErrors) -> None:
+    """``truth/robot.tum``, ``truth/antenna.tum`` and ``truth/gps_truth.csv`` (each epoch's drawn error)."""
     from gtrig.io.tum import write_tum
 
     (out / "truth").mkdir(parents=True, exist_ok=True)
     write_tum(out / "truth" / "robot.tum", PoseTrack.from_xytheta(T0_UNIX_S + t_o, pose))
     level = np.tile([0, 0, 0, 1.0], (t_o.size, 1))
     write_tum(out / "truth" / "antenna.tum", PoseTrack(T0_UNIX_S + t_o, antenna_o, level))
+    err, outlier = fix.err_enu, fix.outlier
     rows = ["utc_s,n_visible,quality,outlier,err_e,err_n,err_u"] + [
         f"{utc[i]:.3f},{int(n_vis[i])},{int(quality[i])},{int(outlier[i])},"
         f"{err[i, 0]:.5f},{err[i, 1]:.5f},{err[i, 2]:.5f}"
-        for i in range(t_g.size)]
+        for i in range(utc.size)]
     atomic_write_text(out / "truth" / "gps_truth.csv", "\n".join(rows) + "\n")
-    meta = {"origin": {"lat_deg": ORIGIN[0], "lon_deg": ORIGIN[1], "h_m": ORIGIN[2]}, "lever_arm_m": LEVER_ARM_M,
-            "t0_unix_s": T0_UNIX_S, "seed": seed, "buildings": bld.tolist(),
-            "odometry_errors": {"scale": e_scale, "turn_scale": e_turn, "curvature_rad_per_m": e_curv},
-            "log_latency_s": prm.log_latency_s,
-            "tilt_sigma_deg": prm.tilt_sigma_deg}
-    atomic_write_text(out / "truth" / "outdoor.json", json.dumps(meta, indent=1) + "\n")
-    share = {f"q{q}": float(np.mean(quality == q)) for q in (0, 4, 5)}
-    return {"epochs": float(t_g.size), **share, "outliers": float(outlier.sum())}

@@ -219,6 +219,53 @@ def estimate_world_points(
     active = ~network
     excluded: dict[str, list[BadReading]] = {n: [] for n in names}
     warnings: list[str] = []
+    fit = _fit_excluding_outliers(
+        references, distances, names, active, ref_idx_all, excluded, warnings,
+        alpha=alpha, on_outlier=on_outlier, max_exclusions=max_exclusions,
+    )
+    points = [
+        _point_estimate(
+            fit, i, n, tuple(excluded[n]), warnings, multistart=multistart, on_ambiguity=on_ambiguity,
+            ambiguity_chi2=ambiguity_chi2,
+        )
+        for i, n in enumerate(names)
+    ]
+    all_excl = tuple(b for n in names for b in excluded[n])
+    xy, cov, cov_joint = np.array(fit["xy"]), np.array(fit["cov"]), fit["cov_joint"]
+    net = None
+    if network.any():
+        # the trilateration above gave the starts, the ambiguity check and the per-point triage;
+        # the network adjusts all points together with every reading left
+        net = adjust_network(
+            names, xy, references, distances.subset(active | network), alpha=alpha, on_outlier=on_outlier,
+            max_exclusions=max_exclusions, warnings=warnings, log=log,
+        )
+        xy, cov, cov_joint = net.xy, net.cov_xy, net.cov_joint
+        points = [replace(p, xy=xy[i], cov_xy=cov[i]) for i, p in enumerate(points)]
+        all_excl = all_excl + net.excluded
+    return WorldPointsResult(
+        tuple(names), xy, cov, cov_joint, tuple(points), all_excl, tuple(warnings), net
+    )
+
+
+def _fit_excluding_outliers(
+    references: NamedPoints,
+    distances: Distances,
+    names: list[str],
+    active: np.ndarray,
+    ref_idx_all: np.ndarray,
+    excluded: dict[str, list[BadReading]],
+    warnings: list[str],
+    *,
+    alpha: float,
+    on_outlier: str,
+    max_exclusions: int,
+) -> dict:
+    """Fit every point, drop the worst reading of each point failing the residual test, refit until none does.
+
+    ``active`` (readings used) is cleared in place for each excluded reading, which is appended to
+    ``excluded[name]``; warnings are appended to ``warnings``. Returns the last fit (see :func:`_fit`).
+    """
     while True:
         fit = _fit(references, distances, names, active, ref_idx_all)
         changed = False
@@ -252,68 +299,64 @@ def estimate_world_points(
             record_exclusion(bad, excluded[n], warnings, log)
             changed = True
         if not changed:
-            break
+            return fit
 
-    points = []
-    for i, n in enumerate(names):
-        rows, t, res = fit["rows"][i], fit["tests"][i], fit["residuals"][i]
-        x = fit["xy"][i]
-        alts = [m for m in fit["minima"][i] if np.max(np.abs(m.x - x)) > 1e-2]
-        basin = None
-        if multistart:
-            basin = ms.analyse(fit["models"][i], x, np.empty((0, 2)), ambiguity_chi2=ambiguity_chi2)
-            for m in basin.alternatives:
-                if all(np.max(np.abs(m.x - a.x)) > 1e-3 for a in alts):
-                    alts.append(m)
-        alts.sort(key=lambda m: m.chi2)
-        xd, cd = ms.batched_lm(fit["models"][i], x[None])
-        chi2_diag = float(cd[0])  # the alternatives' chi2 leave out the readings' correlations too
-        close = [m for m in alts if m.chi2 - chi2_diag < ambiguity_chi2]
-        if close:
-            m = close[0]
-            msg = (
-                f"point {n}: two solutions fit the distances: ({x[0]:.4f}, {x[1]:.4f}) chi2 {chi2_diag:.2f} "
-                f"and "
-                f"({m.x[0]:.4f}, {m.x[1]:.4f}) chi2 {m.chi2:.2f} (mirror about the reference points?)"
-            )
-            if on_ambiguity == "refuse":
-                raise ConvergenceError(
-                    f"{msg}; add a distance to a reference point off their line, or rerun "
-                    "with --on-ambiguity warn"
-                )
-            log.warning(msg + "; kept the better one")
-            warnings.append(msg)
-        points.append(
-            PointEstimate(
-                name=n,
-                xy=x,
-                cov_xy=fit["cov"][i],
-                n_readings=int(rows.size),
-                chi2=t.chi2,
-                dof=t.dof,
-                p_value=t.p_value,
-                rms_residual_m=float(np.sqrt(np.mean(res**2))),
-                max_abs_residual_m=float(np.max(np.abs(res))),
-                basin=basin,
-                alternatives=tuple((float(m.x[0]), float(m.x[1]), float(m.chi2)) for m in alts),
-                excluded=tuple(excluded[n]),
-            )
+
+def _point_estimate(
+    fit: dict,
+    i: int,
+    name: str,
+    excluded: tuple[BadReading, ...],
+    warnings: list[str],
+    *,
+    multistart: bool,
+    on_ambiguity: str,
+    ambiguity_chi2: float,
+) -> PointEstimate:
+    """Point ``i`` of ``fit`` as a record, after checking that no other minimum fits nearly as well.
+
+    A second minimum within ``ambiguity_chi2`` of the best raises :class:`ConvergenceError` with
+    ``on_ambiguity="refuse"``, or is logged and appended to ``warnings`` with ``"warn"``.
+    """
+    rows, t, res = fit["rows"][i], fit["tests"][i], fit["residuals"][i]
+    x = fit["xy"][i]
+    alts = [m for m in fit["minima"][i] if np.max(np.abs(m.x - x)) > 1e-2]
+    basin = None
+    if multistart:
+        basin = ms.analyse(fit["models"][i], x, np.empty((0, 2)), ambiguity_chi2=ambiguity_chi2)
+        for m in basin.alternatives:
+            if all(np.max(np.abs(m.x - a.x)) > 1e-3 for a in alts):
+                alts.append(m)
+    alts.sort(key=lambda m: m.chi2)
+    xd, cd = ms.batched_lm(fit["models"][i], x[None])
+    chi2_diag = float(cd[0])  # the alternatives' chi2 leave out the readings' correlations too
+    close = [m for m in alts if m.chi2 - chi2_diag < ambiguity_chi2]
+    if close:
+        m = close[0]
+        msg = (
+            f"point {name}: two solutions fit the distances: ({x[0]:.4f}, {x[1]:.4f}) chi2 {chi2_diag:.2f} "
+            f"and ({m.x[0]:.4f}, {m.x[1]:.4f}) chi2 {m.chi2:.2f} (mirror about the reference points?)"
         )
-    all_excl = tuple(b for n in names for b in excluded[n])
-    xy, cov, cov_joint = np.array(fit["xy"]), np.array(fit["cov"]), fit["cov_joint"]
-    net = None
-    if network.any():
-        # the trilateration above gave the starts, the ambiguity check and the per-point triage;
-        # the network adjusts all points together with every reading left
-        net = adjust_network(
-            names, xy, references, distances.subset(active | network), alpha=alpha, on_outlier=on_outlier,
-            max_exclusions=max_exclusions, warnings=warnings, log=log,
-        )
-        xy, cov, cov_joint = net.xy, net.cov_xy, net.cov_joint
-        points = [replace(p, xy=xy[i], cov_xy=cov[i]) for i, p in enumerate(points)]
-        all_excl = all_excl + net.excluded
-    return WorldPointsResult(
-        tuple(names), xy, cov, cov_joint, tuple(points), all_excl, tuple(warnings), net
+        if on_ambiguity == "refuse":
+            raise ConvergenceError(
+                f"{msg}; add a distance to a reference point off their line, or rerun "
+                "with --on-ambiguity warn"
+            )
+        log.warning(msg + "; kept the better one")
+        warnings.append(msg)
+    return PointEstimate(
+        name=name,
+        xy=x,
+        cov_xy=fit["cov"][i],
+        n_readings=int(rows.size),
+        chi2=t.chi2,
+        dof=t.dof,
+        p_value=t.p_value,
+        rms_residual_m=float(np.sqrt(np.mean(res**2))),
+        max_abs_residual_m=float(np.max(np.abs(res))),
+        basin=basin,
+        alternatives=tuple((float(m.x[0]), float(m.x[1]), float(m.chi2)) for m in alts),
+        excluded=excluded,
     )
 
 

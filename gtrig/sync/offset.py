@@ -160,73 +160,33 @@ def estimate_offset(ref_stamps_s: np.ndarray, ref_yaw: np.ndarray, src_stamps_s:
     r_rate, _ = _rate_on_grid(rt, ry, ref_grid, np.inf)
     if np.std(s_rate[s_valid]) < min_rate_std or np.std(r_rate) < min_rate_std:
         return verdict("unobservable", "the robot hardly turns: no heading-rate signal to align")
-    # --- coarse: normalised cross-correlation over the lags
     lags = np.arange(-round(search_s / step), round(search_s / step) + 1) * step
-    corr = np.full(lags.size, np.nan)
-    for k, lag in enumerate(lags):
-        g = grid - lag
-        m = s_valid & (g >= rt[0]) & (g <= rt[-1])
-        if m.sum() < 10:
-            continue
-        a = s_rate[m] - s_rate[m].mean()
-        b = np.interp(g[m], ref_grid, r_rate)
-        b = b - b.mean()
-        den = np.sqrt((a @ a) * (b @ b))
-        corr[k] = (a @ b) / den if den > 0 else np.nan
+    corr = _lag_correlation(lags, grid, s_rate, s_valid, ref_grid, r_rate, (rt[0], rt[-1]))
     if not np.any(np.isfinite(corr)):
         return verdict("unobservable", "no overlap at any lag")
-    c = np.nan_to_num(corr, nan=-1.0)
-    kmax = int(np.argmax(c))
-    peak = float(c[kmax])
-    # the main peak's width: down to half its height on each side
-    lo = kmax
-    while lo > 0 and c[lo - 1] > 0.5 * peak:
-        lo -= 1
-    hi = kmax
-    while hi < c.size - 1 and c[hi + 1] > 0.5 * peak:
-        hi += 1
-    is_local = np.r_[False, (c[1:-1] >= c[:-2]) & (c[1:-1] >= c[2:]), False]
-    others = is_local & ((np.arange(c.size) < lo) | (np.arange(c.size) > hi))
-    second = float(c[others].max()) if np.any(others) else float("nan")
+    kmax, peak, second = _main_peak(corr)
     coarse = float(lags[kmax])
     if peak < 0.3:
         return verdict("ambiguous", f"no correlation peak (best {peak:.2f})", coarse, peak, second, lags, corr)
     if np.isfinite(second) and second >= ambiguity * peak:
         return verdict("ambiguous", f"two peaks: {peak:.3f} at {coarse:+.3f} s and {second:.3f} elsewhere",
                        coarse, peak, second, lags, corr)
-    if kmax in (0, c.size - 1):
+    if kmax in (0, corr.size - 1):
         return verdict("ambiguous", "the peak is at the edge of the search window; widen it", coarse, peak, second,
                        lags, corr)
     # --- fine: 1-D minimisation of the heading misfit at the source's own stamps
     keep = (st >= t0 + search_s) & (st <= t1 - search_s)
     sts, sys_ = st[keep], np.unwrap(sy)[keep]
-    ref_th = np.unwrap(ry)
     window_s = max(window_s, 10.0 * src_dt)  # at least ~10 samples of the source per window
-    win = np.floor((sts - sts[0]) / window_s).astype(int)
-    n_win = int(win.max()) + 1 if win.size else 0
-    # windows where the robot turns: the source's heading moves by more than 2 deg
-    lo_w = np.full(n_win, np.inf)
-    hi_w = np.full(n_win, -np.inf)
-    np.minimum.at(lo_w, win, sys_)
-    np.maximum.at(hi_w, win, sys_)
-    turning = (hi_w - lo_w > np.deg2rad(2.0)) & (np.bincount(win, minlength=n_win) >= 4)
-    if turning.sum() < 3:
-        return verdict("unobservable", f"only {int(turning.sum())} windows of {window_s:.0f} s with turns",
-                       coarse, peak, second, lags, corr, int(turning.sum()))
-    use = turning[win]
-    sts, sys_ = sts[use], sys_[use]
-    ids = np.flatnonzero(turning)
-    win = np.searchsorted(ids, win[use])
-    W = ids.size
-    # the misfit of every window on a 0.25-step grid around the peak; the jackknife leaves one out
+    win, n_turning = _turning_windows(sts, sys_, window_s)
+    if n_turning < 3:
+        return verdict("unobservable", f"only {n_turning} windows of {window_s:.0f} s with turns",
+                       coarse, peak, second, lags, corr, n_turning)
+    use = win >= 0
+    sts, sys_, win = sts[use], sys_[use], win[use]
     reach = max(4 * step, src_dt, ref_dt)
-    taus = coarse + np.linspace(-reach, reach, 161)
-    per_win = np.stack([_window_misfits(tau, sts, sys_, rt, ref_th, win, W) for tau in taus])  # (G, W)
-    total = per_win.sum(axis=1)
-    best = float(_parabolic_min(taus, total[:, None])[0])
-    jack = _parabolic_min(taus, total[:, None] - per_win)
-    se = float(np.sqrt((W - 1) / W * np.sum((jack - jack.mean()) ** 2)))
-    half = float(student_t.ppf(0.975, W - 1)) * max(se, 1e-6)
+    best, half = _fine_offset(coarse, reach, sts, sys_, rt, np.unwrap(ry), win, n_turning)
+    W = n_turning
     if abs(best - coarse) > 0.98 * reach:
         return verdict("ambiguous", f"the heading fit's minimum lies past {reach * 1e3:.0f} ms from the correlation "
                        "peak", coarse, peak, second, lags, corr, W)
@@ -236,6 +196,75 @@ def estimate_offset(ref_stamps_s: np.ndarray, ref_yaw: np.ndarray, src_stamps_s:
                               f"the 95 % interval ({2 * half * 1e3:.1f} ms) is wider than {max_ci_s * 1e3:.1f} ms")
     return OffsetEstimate(source, "ok", best, ci, coarse, peak, second, lags, corr, W,
                           f"peak {peak:.3f} at {coarse:+.3f} s, refined over {W} windows")
+
+
+def _lag_correlation(lags: np.ndarray, grid: np.ndarray, s_rate: np.ndarray, s_valid: np.ndarray,
+                     ref_grid: np.ndarray, r_rate: np.ndarray, ref_span_s: tuple[float, float]) -> np.ndarray:
+    """Normalised cross-correlation (L,) of the source's heading rate on ``grid`` with the reference's
+    (on ``ref_grid``, its stamps spanning ``ref_span_s``) shifted by each lag (s); NaN where fewer than 10
+    samples overlap."""
+    corr = np.full(lags.size, np.nan)
+    for k, lag in enumerate(lags):
+        g = grid - lag
+        m = s_valid & (g >= ref_span_s[0]) & (g <= ref_span_s[1])
+        if m.sum() < 10:
+            continue
+        a = s_rate[m] - s_rate[m].mean()
+        b = np.interp(g[m], ref_grid, r_rate)
+        b = b - b.mean()
+        den = np.sqrt((a @ a) * (b @ b))
+        corr[k] = (a @ b) / den if den > 0 else np.nan
+    return corr
+
+
+def _main_peak(corr: np.ndarray) -> tuple[int, float, float]:
+    """The correlation's highest peak (index, height) and the highest other local peak outside the main
+    peak's half-height width (NaN if none)."""
+    c = np.nan_to_num(corr, nan=-1.0)
+    kmax = int(np.argmax(c))
+    peak = float(c[kmax])
+    lo = kmax
+    while lo > 0 and c[lo - 1] > 0.5 * peak:
+        lo -= 1
+    hi = kmax
+    while hi < c.size - 1 and c[hi + 1] > 0.5 * peak:
+        hi += 1
+    is_local = np.r_[False, (c[1:-1] >= c[:-2]) & (c[1:-1] >= c[2:]), False]
+    others = is_local & ((np.arange(c.size) < lo) | (np.arange(c.size) > hi))
+    second = float(c[others].max()) if np.any(others) else float("nan")
+    return kmax, peak, second
+
+
+def _turning_windows(stamps_s: np.ndarray, yaw_unwrapped: np.ndarray, window_s: float) -> tuple[np.ndarray, int]:
+    """Each sample's window among those where the robot turns (heading spread over 2 deg, at least 4
+    samples), numbered 0..W-1, or -1 in a window that does not turn; and W."""
+    win = np.floor((stamps_s - stamps_s[0]) / window_s).astype(int)
+    n_win = int(win.max()) + 1 if win.size else 0
+    lo_w = np.full(n_win, np.inf)
+    hi_w = np.full(n_win, -np.inf)
+    np.minimum.at(lo_w, win, yaw_unwrapped)
+    np.maximum.at(hi_w, win, yaw_unwrapped)
+    turning = (hi_w - lo_w > np.deg2rad(2.0)) & (np.bincount(win, minlength=n_win) >= 4)
+    ids = np.flatnonzero(turning)
+    out = np.full(win.size, -1)
+    use = turning[win] if win.size else np.zeros(0, bool)
+    out[use] = np.searchsorted(ids, win[use])
+    return out, int(ids.size)
+
+
+def _fine_offset(coarse: float, reach: float, stamps_s: np.ndarray, yaw: np.ndarray, ref_stamps_s: np.ndarray,
+                 ref_yaw_unwrapped: np.ndarray, win: np.ndarray, n_windows: int) -> tuple[float, float]:
+    """The offset (s) minimising the windows' summed heading misfit on a grid of 161 lags within ``reach`` of
+    ``coarse`` (parabolic vertex), and its 95 % half-interval from the leave-one-window-out jackknife."""
+    W = n_windows
+    taus = coarse + np.linspace(-reach, reach, 161)
+    per_win = np.stack([_window_misfits(tau, stamps_s, yaw, ref_stamps_s, ref_yaw_unwrapped, win, W)
+                        for tau in taus])  # (G, W)
+    total = per_win.sum(axis=1)
+    best = float(_parabolic_min(taus, total[:, None])[0])
+    jack = _parabolic_min(taus, total[:, None] - per_win)
+    se = float(np.sqrt((W - 1) / W * np.sum((jack - jack.mean()) ** 2)))
+    return best, float(student_t.ppf(0.975, W - 1)) * max(se, 1e-6)
 
 
 @dataclass(frozen=True)
