@@ -35,37 +35,17 @@ def command(
         "--plot", help="folder for the coverage map and time-series figures")] = None,
 ) -> None:
     """RTK-GPS ground truth: fix-aware filtering, ENU/UTM, covariances from GST (docs/gps.md)."""
-    import json
-
-    from gtrig.errors import InputError
-    from gtrig.gps.filter import FIX_SETS, FilterOptions
+    from gtrig.cli import checks
+    from gtrig.gps.filter import FilterOptions
     from gtrig.gps.frames import Origin
     from gtrig.gps.groundtruth import GpsOptions, gps_ground_truth
-    from gtrig.gps.report import gps_report, report_lines, report_markdown
-    from gtrig.io.atomic import atomic_write_text
+    from gtrig.gps.report import gps_report, report_lines
     from gtrig.io.posetrack import write_pose_track
 
-    choices = {"--format": (fmt, ("auto", "rawseeds", "nmea", "rtklib")), "--fix": (fix, tuple(FIX_SETS)),
-               "--frame": (frame, ("enu", "utm")), "--clock": (clock, ("auto", "log", "utc"))}
-    for name, (val, allowed) in choices.items():
-        if val not in allowed:
-            raise InputError(f"{name} {val!r}: expected one of {', '.join(allowed)}")
-    from gtrig.cli import checks
-
-    checks.number("--max-sigma", max_sigma, lo=0.0, hi=1000.0, unit="m")
-    checks.number("--max-malformed", max_malformed, lo=0.0, hi=1.0)
-    xyz = checks.floats("--antenna-lever-arm", lever_arm, 3, "metres")
-    arm = None if xyz is None else (xyz[0], xyz[1], xyz[2])
-    if arm is not None:
-        checks.number("--antenna-lever-arm", max(abs(v) for v in arm), hi=10.0, unit="m",
-                      unit_hint="millimetres given for metres")
-    if origin != "first":
-        checks.floats("--origin", origin, 3, "deg, deg, m")
+    arm = _checked_args(fmt, fix, frame, clock, max_sigma, max_malformed, lever_arm, origin, odometry)
     checks.outputs([log, odometry], [out, covariance, report, report.with_suffix(".md") if report else None])
     if plot is not None:
         checks.output_folder("--plot", plot)
-    if arm is not None and odometry is None and any(abs(v) > 0 for v in arm[:2]):
-        raise InputError("--antenna-lever-arm with a horizontal offset needs --odometry (the heading)")
     opts = GpsOptions(format=fmt, frame=frame, clock=clock,  # type: ignore[arg-type]
                       origin=None if origin == "first" else Origin.parse(origin), max_malformed=max_malformed,
                       filter=FilterOptions(fix=fix, max_sigma_m=max_sigma or None,  # type: ignore[arg-type]
@@ -88,6 +68,52 @@ def command(
                            "heading_not_observable": int(sum("heading" in r for r in track.reasons))}
     outs: list[Path] = [out, covariance]
     write_pose_track(track, out, covariance)
+    outs += _write_figures_and_report(rep, plot, report)
+    for line in report_lines(rep):
+        console.print(line, highlight=False)
+    if "smoothed" in rep:
+        s = rep["smoothed"]
+        console.print(f"smoothed with odometry: {s['poses']} poses, {s['ok']} observed, {s['bridged']} bridged, "
+                      f"{s['heading_not_observable']} with the heading not observable", highlight=False)
+    console.print("wrote " + ", ".join(str(p) for p in outs), highlight=False)
+
+
+def _checked_args(fmt: str, fix: str, frame: str, clock: str, max_sigma: float, max_malformed: float,
+                  lever_arm: str | None, origin: str, odometry: Path | None) -> tuple[float, float, float] | None:
+    """Refuse options out of their sets or ranges (one :class:`InputError` naming the option); returns the
+    antenna's lever arm (m, robot frame) or None."""
+    from gtrig.cli import checks
+    from gtrig.errors import InputError
+    from gtrig.gps.filter import FIX_SETS
+
+    choices = {"--format": (fmt, ("auto", "rawseeds", "nmea", "rtklib")), "--fix": (fix, tuple(FIX_SETS)),
+               "--frame": (frame, ("enu", "utm")), "--clock": (clock, ("auto", "log", "utc"))}
+    for name, (val, allowed) in choices.items():
+        if val not in allowed:
+            raise InputError(f"{name} {val!r}: expected one of {', '.join(allowed)}")
+    checks.number("--max-sigma", max_sigma, lo=0.0, hi=1000.0, unit="m")
+    checks.number("--max-malformed", max_malformed, lo=0.0, hi=1.0)
+    xyz = checks.floats("--antenna-lever-arm", lever_arm, 3, "metres")
+    arm = None if xyz is None else (xyz[0], xyz[1], xyz[2])
+    if arm is not None:
+        checks.number("--antenna-lever-arm", max(abs(v) for v in arm), hi=10.0, unit="m",
+                      unit_hint="millimetres given for metres")
+    if origin != "first":
+        checks.floats("--origin", origin, 3, "deg, deg, m")
+    if arm is not None and odometry is None and any(abs(v) > 0 for v in arm[:2]):
+        raise InputError("--antenna-lever-arm with a horizontal offset needs --odometry (the heading)")
+    return arm
+
+
+def _write_figures_and_report(rep: dict, plot: Path | None, report: Path | None) -> list[Path]:
+    """The coverage and time-series figures in ``plot``, the JSON ``report`` and a Markdown summary beside it
+    that `gtrig report` shows with the figures; returns the files written."""
+    import json
+    import os
+
+    from gtrig.io.atomic import atomic_write_text
+
+    outs: list[Path] = []
     figures: list[Path] = []
     if plot is not None:
         from gtrig.gps.plots import coverage_figure, lost_since_first, time_series_figure
@@ -98,18 +124,11 @@ def command(
         save(time_series_figure(rep["series_1hz"], lost_since_first(rep)), figures[1])
         outs += figures
     if report is not None:
-        import os
+        from gtrig.gps.report import report_markdown
 
-        # the JSON, and a Markdown summary beside it that `gtrig report` shows with the figures
         md = report.with_suffix(".md")
         rel = [os.path.relpath(f, md.parent) for f in figures]
         atomic_write_text(report, json.dumps(rep, indent=1) + "\n")
         atomic_write_text(md, report_markdown(rep, rel))
         outs += [report, md]
-    for line in report_lines(rep):
-        console.print(line, highlight=False)
-    if "smoothed" in rep:
-        s = rep["smoothed"]
-        console.print(f"smoothed with odometry: {s['poses']} poses, {s['ok']} observed, {s['bridged']} bridged, "
-                      f"{s['heading_not_observable']} with the heading not observable", highlight=False)
-    console.print("wrote " + ", ".join(str(p) for p in outs), highlight=False)
+    return outs
