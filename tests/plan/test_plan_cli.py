@@ -76,6 +76,8 @@ def test_plan_on_a_path(rig_file, tmp_path):
     (["--area", "0,0;1"], "--area vertex 2"),
     (["--area", "0,0;1,1;2,2"], "no area"),
     (["--target-mm", "-1"], "--target-mm"),
+    (["--clock-sigma-ms", "-1"], "--clock-sigma-ms"),
+    (["--clock-sigma-ms", "nan"], "--clock-sigma-ms"),
     (["--path", "nothere.tum"], "nothere.tum"),
     (["--area", AREA, "--path", "x.tum"], "exclude each other"),
     (["--suggest", "lidars:1"], "--suggest"),
