@@ -39,6 +39,7 @@ Usage::
     python bench/markers.py --refine-only --sweep   # its time against accuracy for several settings
     python bench/markers.py --refine-only --photos  # the edge refinement alone on the real photos' quads
     python bench/markers.py --clipped       # sunlit markers of the simulated GT room: error, sigma, NEES
+    python bench/markers.py --clipped --synth  # the same on synth renders over clipping degree, blur, smear
 """
 
 from __future__ import annotations
@@ -673,12 +674,18 @@ def main() -> None:
     ap.add_argument("--clipped", action="store_true",
                     help="sunlit (clipped) markers of the simulated GT room, still and moving: corner error, "
                          "stated sigma and NEES per class (bench/markers_clipped.py; --seed, 60 robot poses)")
+    ap.add_argument("--synth", action="store_true",
+                    help="--clipped: synth renders over the clipping degree, blur and motion smear instead")
     a = ap.parse_args()
     rng = np.random.default_rng(a.seed)
     if a.clipped:
         from markers_clipped import run as clipped_run
+        from markers_clipped import run_synth
 
-        clipped_run(a.seed, 60)
+        if a.synth:
+            run_synth()
+        else:
+            clipped_run(a.seed, 60)
     elif a.photos and a.refine_only:
         _bench_refine_photos(a.repeat)
     elif a.photos:

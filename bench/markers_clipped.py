@@ -11,10 +11,17 @@ printed: markers, corner RMS error (px), the RMS of the stated sigma (sqrt of ha
 trace, px), the mean NEES per corner over its 2 dof and the share of corners beyond chi-square(2) at
 95 %. A covariance that states the errors right has NEES/dof about 1 and 5 % beyond.
 
+With ``--synth`` the same figures come from :mod:`gtrig.markers.synth` renders instead, over a grid of
+clipping degrees (the paper's level over the clip level, ``W/C``), optical blurs and a 3 px motion smear,
+in the order a sensor sees them: the light is blurred and smeared, the noise (2 grey levels) added, and
+only then clipped at 255 (the light is rendered below the clip and scaled, so its levels are
+quantised in steps of at most ``W/C`` grey levels).
+
 Usage::
 
     python bench/markers.py --clipped                      # 60 robot poses, seed 0
     python bench/markers_clipped.py --poses 40 --seed 1
+    python bench/markers.py --clipped --synth              # synth renders, W/C x blur x smear
 """
 
 from __future__ import annotations
@@ -153,6 +160,57 @@ def _add(stats: dict[str, ClassStats], v: MarkerView, img: np.ndarray, model: Vi
     stats[name].add(v.corners_px - truth, v.corner_cov)
 
 
+#: the synth grid: the paper's level over the clip level, optical blur sigma (px), motion smear (px)
+SYNTH_RATIOS = (1.1, 1.3, 1.57, 2.0, 3.0)
+SYNTH_BLURS = (0.5, 1.0, 2.0)
+SYNTH_SMEARS = (None, (3.0, 1.0))
+
+
+def synth_clipped(ratio: float, blur: float, smear: tuple[float, float] | None, seeds: int = 4,
+                  noise: float = 2.0) -> tuple[ClassStats, int]:
+    """Corner errors and covariances of ``3 * seeds`` AprilTag markers (70 px, tilted) whose paper lies at
+    ``ratio`` times the clip level, blurred by ``blur`` px and optionally smeared by the motion ``smear``
+    (px) before the noise and the clip; and the number of markers rendered."""
+    import cv2
+
+    from gtrig.markers.synth import WHITE, homography_from_pose, render
+    from gtrig.rig.models import MarkerFamily
+    from gtrig.sim.cameras import motion_kernel
+
+    fam = MarkerFamily.APRILTAG_36H11
+    base_gain = 250.0 / WHITE  # the paper just below the clip: rendered without clipping
+    stats = ClassStats()
+    for seed in range(seeds):
+        rng = np.random.default_rng([seed, 54])
+        markers = [(fam, 3 + 11 * i,
+                     homography_from_pose(70, (150 + 250 * i, 200), 20, 30 + 60 * i, 15 * i + 10 * seed))
+                   for i in range(3)]
+        img, truths = render((480, 800), markers, blur_px=blur, noise=0.0, gain=base_gain, rng=rng)
+        light = img.astype(np.float32) * np.float32(ratio * 255.0 / 250.0)
+        if smear is not None:
+            k = motion_kernel(*smear)
+            if k is not None:
+                light = np.asarray(cv2.filter2D(light, -1, k, borderType=cv2.BORDER_REPLICATE))
+        shot = np.clip(np.rint(light + rng.normal(0.0, noise, light.shape)), 0, 255).astype(np.uint8)
+        for d in MarkerDetector(fam).detect(shot):
+            t = next((t for t in truths if t.marker_id == d.id), None)
+            if t is not None and np.abs(d.corners_px - t.corners_px).max() < 3.0:
+                stats.add(d.corners_px - t.corners_px, d.corner_cov)
+    return stats, 3 * seeds
+
+
+def run_synth(seeds: int = 4) -> None:
+    """Print the synth grid's table (see the module docstring)."""
+    print(f"synth renders, {3 * seeds} markers per row (70 px, noise 2), clip after blur, smear and noise")
+    print(f"{'W/C blur smear':22s} {'markers':>7s} {'rms px':>9s} {'sigma px':>9s} {'NEES/dof':>9s} {'>95% %':>8s}")
+    for ratio in SYNTH_RATIOS:
+        for blur in SYNTH_BLURS:
+            for smear in SYNTH_SMEARS:
+                st, n = synth_clipped(ratio, blur, smear, seeds)
+                name = f"{ratio:4.2f} {blur:3.1f} {'3 px' if smear else 'still'}"
+                print(st.row(name), flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seed", type=int, default=0)
@@ -161,7 +219,11 @@ def main() -> None:
     ap.add_argument("--yaw-rate", type=float, default=0.3, help="yaw rate of the moving frames, rad/s")
     ap.add_argument("--min-motion-px", type=float, default=1.0,
                     help="moving frames whose robot moved less in the image are left out")
+    ap.add_argument("--synth", action="store_true", help="synth renders over W/C, blur and smear instead")
     a = ap.parse_args()
+    if a.synth:
+        run_synth()
+        return
     run(a.seed, a.poses, a.speed, a.yaw_rate, a.min_motion_px)
 
 
