@@ -7,11 +7,13 @@ after cam_0, each frame stamped with a few milliseconds of jitter (known: the st
 before or after its camera's offset, not in its stamp (a webcam whose frames are taken from a faster
 stream). ``--drift``: each camera's exposures also slide against its stamps at a constant rate (cam_1
 -4, cam_2 +2.5, cam_3 +1 ms per second, about the recording's midpoint: a skewed clock or a stamping
-latency that changes), estimated as offsets at the midpoint and drifts. Printed per seed: each camera's
+latency that changes), estimated as offsets at the midpoint and drifts. ``--reach``: the local motions run
+through that many poses on each side of an instant (:func:`gtrig.vision.body_timing.local_motion`; 2 is the
+degree-4 polynomial through five poses). Printed per seed: each camera's
 offset error and stated sigma (and the drift's); then the coverage of the 95 % intervals over seeds, with
 the stated sigma and with the variance factor's alone, and the RMS z-score.
 
-    python bench/body_timing.py [--seeds 0 1 ... 19] [--fmax 1.0] [--exposure-jitter-ms 16.7] [--drift]
+    python bench/body_timing.py [--seeds 0 1 ... 19] [--fmax 1.0] [--exposure-jitter-ms 16.7] [--drift] [--reach 3]
 """
 
 from __future__ import annotations
@@ -58,7 +60,7 @@ def hand_motion(rng: np.random.Generator, fmax_hz: float) -> Callable[[float], n
 
 
 def run_seed(seed: int, fmax_hz: float, exposure_jitter_s: float, drift: bool = False, n: int = 44,
-             sigma_px: float = 0.3, stamp_jitter_s: float = 0.005) -> CameraTiming:
+             sigma_px: float = 0.3, stamp_jitter_s: float = 0.005, reach: int = 3) -> CameraTiming:
     """One recording of ``n`` instants (module docstring) and its timing, fitted with drifts if ``drift``."""
     rng = np.random.default_rng(seed)
     T_world_board = hand_motion(rng, fmax_hz)
@@ -76,7 +78,7 @@ def run_seed(seed: int, fmax_hz: float, exposure_jitter_s: float, drift: bool = 
     opts = BodyOptions(sigma_px=sigma_px)
     track = track_body(CAMS, BOARD, group_instants(pairs), opts)
     return estimate_timing(CAMS, BOARD, track.instants, track.poses, "cam_0", line_delay=False, drift=drift,
-                           mid_s=mid_s if drift else None, options=opts)
+                           mid_s=mid_s if drift else None, options=opts, reach=reach)
 
 
 def main() -> None:
@@ -85,10 +87,11 @@ def main() -> None:
     ap.add_argument("--fmax", type=float, default=1.0, help="the sway's highest frequency, Hz")
     ap.add_argument("--exposure-jitter-ms", type=float, default=0.0)
     ap.add_argument("--drift", action="store_true", help="the cameras' offsets drift; fit the drifts")
+    ap.add_argument("--reach", type=int, default=3, help="poses on each side of an instant in its local motion")
     a = ap.parse_args()
     z, z_model, z_drift = [], [], []
     for s in a.seeds:
-        tm = run_seed(s, a.fmax, a.exposure_jitter_ms / 1000, a.drift)
+        tm = run_seed(s, a.fmax, a.exposure_jitter_ms / 1000, a.drift, reach=a.reach)
         err = np.array([tm.offset_s[k] - OFFSET_S[c] for k, c in enumerate(tm.cameras)])[1:]
         z.append(err / tm.sigma_offset_s[1:])
         z_model.append(err / tm.sigma_offset_model_s[1:])

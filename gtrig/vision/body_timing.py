@@ -15,14 +15,16 @@ image row; 0 for a global shutter). ``t_mid`` is the midpoint of the tracked ins
 offsets and their drifts are least correlated. At each instant seen by two cameras or more the pose is a
 nuisance: its six parameters are projected out of that instant's residuals, and ``delta``, ``kappa``,
 ``rho`` solved by least squares over all instants. The body's motion about an instant is the polynomial
-through its pose and up to two neighbours' on each side (:func:`local_motion`), so instants at the ends of
-the track or after a gap are left out; each point is moved along it to its exposure time (Gauss-Newton on
-the timing). The tracked poses blend cameras exposed tens of milliseconds apart: they are refitted
-at their instants' stamps with the estimated timing, and the polynomials and timing solved again.
+through its pose and up to three neighbours' on each side (:func:`local_motion`; one on each side at
+least, so instants at the ends of the track or after a gap are left out); each point is moved along it to
+its exposure time (Gauss-Newton on the timing). The tracked poses blend cameras exposed tens of
+milliseconds apart: they are refitted at their instants' stamps with the estimated timing, and the
+polynomials and timing solved again.
 
 The interval is the larger of two covariances: the residuals' variance factor times the inverse normal
 matrix (residuals independent), and a sandwich whose middle is the per-instant scores' autocovariance over
-neighbouring instants (Newey-West, Bartlett weights). What the timing model leaves out acts instant by
+neighbouring instants (Newey-West, Bartlett weights), widened to its fixed-b critical value
+(:func:`_fixed_b_factor`: a few dozen instants estimate that middle). What the timing model leaves out acts instant by
 instant and not point by point: a velocity error moves every point of an instant together, a webcam whose
 exposure wanders from its frame times by a few milliseconds from frame to frame shifts all of that
 image's points along their motion, and neighbouring instants share poses and the hand's motion. The
@@ -132,15 +134,20 @@ class LocalMotion:
         return (m * x[:, None] ** (m - 1)) @ self.coeffs[1:] / self.scale_s
 
 
-def local_motion(poses: Sequence[BodyPose], i: int, max_gap_s: float, reach: int = 2) -> LocalMotion | None:
+def local_motion(poses: Sequence[BodyPose], i: int, max_gap_s: float, reach: int = 3) -> LocalMotion | None:
     """The polynomial (:class:`LocalMotion`) through the pose of instant ``i`` and up to ``reach`` tracked
     neighbours on each side (consecutive, each within ``max_gap_s`` of the next), or None without one on
     each side.
 
     A hand-moved board at a few frames per second turns within the span of a central difference, which then
     underestimates the speed (by 6 % for a 0.6 Hz sway at 6 frames/s) and overestimates every offset by as
-    much; the degree-4 polynomial through five poses errs by 0.5 %, and its curvature carries the
-    acceleration over offsets of tens of milliseconds.
+    much. The polynomial through ``2 reach + 1`` equally spaced poses errs in the speed by about
+    ``(omega h) ** (2 reach) / c`` (``h`` the frame interval; ``c`` = 30 for five poses, 140 for seven): for
+    a 1 Hz sway at 6 frames/s, 4 % with five poses and 0.9 % with seven, whose curvature also carries the
+    acceleration over offsets of tens of milliseconds. Noise-free simulated sways of up to 1 Hz
+    (``bench/body_timing.py``'s motion, 4 seeds) left offset errors of 0.19 ms RMS with five poses and
+    0.06 ms with seven, where the pixel noise gives sigmas of 0.15-0.25 ms; the speed's noise grows by 14 %
+    from five poses to seven.
     """
     def ok(k: int) -> bool:
         return 0 <= k < len(poses) and poses[k].ok and poses[k].T_world_body is not None
@@ -258,6 +265,17 @@ def _hac_covariance(scores: np.ndarray, index: np.ndarray, N_inv: np.ndarray, la
     return N_inv @ M @ N_inv * G / max(G - n_par, 1)
 
 
+def _fixed_b_factor(lags: int, n_instants: int) -> float:
+    """The factor on a Newey-West sigma that makes ``1.96`` of it a 95 % interval with ``n_instants`` scores:
+    Kiefer and Vogelsang's fixed-b critical value of the Bartlett kernel, ``1.96 + 2.9694 b + 0.4160 b^2
+    - 0.5324 b^3`` with ``b = (lags + 1) / n_instants`` (capped at 1), over 1.96. The sandwich's middle is
+    estimated from the same few dozen scores the fit zeroes the sum of, which shrinks it and spreads it;
+    the normal quantile ignores both (on simulated board videos with 16.7 ms of exposure jitter its
+    intervals covered 88 % with ``lags`` 6)."""
+    b = min((lags + 1) / max(n_instants, 1), 1.0)
+    return (1.96 + 2.9694 * b + 0.4160 * b**2 - 0.5324 * b**3) / 1.96
+
+
 def _fit_timing(rows: Sequence[_InstantRows], free: list[int], theta0: np.ndarray, lay: _Layout, sigma_px: float,
                 iterations: int) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray, np.ndarray]]]:
     """Gauss-Newton on the timing parameters ``free`` from ``theta0`` (the others held): the motion is a
@@ -283,6 +301,7 @@ class _Selection:
     span_s: tuple[float, float]
     max_gap_s: float
     all_views: bool
+    reach: int
 
 
 def _timing_rows(cameras: Mapping[str, CameraGeometry], body: PointBody, instants: Sequence[BodyInstant],
@@ -292,7 +311,7 @@ def _timing_rows(cameras: Mapping[str, CameraGeometry], body: PointBody, instant
     for i, (inst, pose) in enumerate(zip(instants, poses, strict=True)):
         if not sel.span_s[0] <= inst.stamp_s <= sel.span_s[1]:
             continue
-        motion = local_motion(poses, i, sel.max_gap_s)
+        motion = local_motion(poses, i, sel.max_gap_s, sel.reach)
         if motion is None or not pose.ok or len(pose.cameras) + (len(pose.rejected) if sel.all_views else 0) < 2:
             continue
         rows.append(_instant_rows(cameras, body, inst, pose, motion, sel.names, sigma_px, sel.all_views, sel.mid_s))
@@ -349,7 +368,8 @@ def _covariances(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], used: l
     N_inv = np.linalg.inv(sum(qB.T @ qB for _, qB, _ in parts)[np.ix_(free, free)])
     cov_model[np.ix_(free, free)] = max(vf, 1.0) * N_inv
     scores = np.array([qB[:, free].T @ qr for qr, qB, _ in parts])
-    cov_hac[np.ix_(free, free)] = _hac_covariance(scores, np.array(used), N_inv, lags)
+    cov_hac[np.ix_(free, free)] = _hac_covariance(scores, np.array(used), N_inv, lags) * _fixed_b_factor(
+        lags, len(used)) ** 2
     return cov_model, cov_hac, vf
 
 
@@ -357,7 +377,8 @@ def estimate_timing(cameras: Mapping[str, CameraGeometry], body: PointBody, inst
                     poses: Sequence[BodyPose], reference: str | None = None, *, line_delay: bool = True,
                     drift: bool = False, mid_s: float | None = None, span_s: tuple[float, float] | None = None,
                     max_gap_s: float = 0.5, options: BodyOptions | None = None,
-                    all_views: bool = True, lags: int = 3, iterations: int = 3, refits: int = 3) -> CameraTiming:
+                    all_views: bool = True, reach: int = 3, lags: int | None = None, iterations: int = 3,
+                    refits: int = 3) -> CameraTiming:
     """The cameras' offsets (and drifts, line delays) from the body's motion over ``instants`` (module
     docstring).
 
@@ -365,10 +386,12 @@ def estimate_timing(cameras: Mapping[str, CameraGeometry], body: PointBody, inst
     :func:`tracked_mid_s`). ``span_s``: only the instants stamped within it (inclusive) enter the fit;
     their local motions still run through the poses beyond it. ``all_views``: the views the pose fit
     dropped as outliers count too (a camera whose offset is large is dropped at every instant where the
-    body moves; the pose is refitted here with its offset). ``lags``: instants this many apart or fewer may
+    body moves; the pose is refitted here with its offset). ``reach``: the local motions run through up to
+    this many neighbours on each side (:func:`local_motion`). ``lags``: instants this many apart or fewer may
     share a motion-model error (they share poses, and the hand's motion between them); the interval allows
-    for it. ``iterations``: Gauss-Newton steps on the timing per refit of the poses at their stamps;
-    ``refits``: how many times.
+    for it; default ``2 reach``, the farthest apart two instants whose local motions share a pose.
+    ``iterations``: Gauss-Newton steps on the timing per refit of the poses at their stamps; ``refits``: how
+    many times.
 
     Raises
     ------
@@ -384,7 +407,8 @@ def estimate_timing(cameras: Mapping[str, CameraGeometry], body: PointBody, inst
     C = len(names)
     lay = _Layout(C, drift, line_delay)
     mid = tracked_mid_s(poses) if mid_s is None else float(mid_s)
-    sel = _Selection(names, mid, span_s or (-math.inf, math.inf), max_gap_s, all_views)
+    sel = _Selection(names, mid, span_s or (-math.inf, math.inf), max_gap_s, all_views, reach)
+    lags = 2 * reach if lags is None else lags
     rows, used = _timing_rows(cameras, body, instants, poses, sel, sigma)
     stamps_only = [_instant_system(r, np.zeros(lay.n_par), lay, sigma) for r in rows]
     N0 = sum((qB.T @ qB for _, qB, _ in stamps_only), np.zeros((lay.n_par, lay.n_par)))

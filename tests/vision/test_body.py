@@ -146,6 +146,33 @@ def _moving_instants(line_delay_s: float, rng: np.random.Generator, n: int = 36,
     return group_instants(pairs)
 
 
+def test_local_motion_follows_a_one_hertz_sway() -> None:
+    """The speed at an instant from the polynomial through its neighbours' poses (6 frames/s), against the
+    exact derivative of a 1 Hz sway: five poses err by about (omega h)^4 / 30 = 4 %, seven by
+    (omega h)^6 / 140 = 0.9 %; near the track's end the window is one-sided and still follows."""
+    from gtrig.vision.body import BodyPose
+    from gtrig.vision.body_timing import local_motion
+    from gtrig.vision.estimate import Status
+
+    w = 2 * np.pi * 1.0
+    amp_m, amp_rad = np.array([0.05, 0.03, 0.02]), np.array([0.3, 0.2, 0.1])
+
+    def T(t: float) -> np.ndarray:
+        return geo.make_T(Rotation.from_rotvec(amp_rad * np.sin(w * t)).as_matrix(), amp_m * np.sin(w * t))
+
+    stamps = np.arange(12) / 6.0
+    poses = [BodyPose(float(t), Status.OK, T(t)) for t in stamps]
+    # at the sway's fastest (t = 1 s) measured 3.5 % and 0.76 % of the peak speed; one-sided (1 pose
+    # before, 3 after) 1.8 %
+    for i, reach, lo, hi in ((6, 2, 0.03, 0.045), (6, 3, 0.0, 0.01), (1, 3, 0.0, 0.025)):
+        m = local_motion(poses, i, 0.5, reach)
+        assert m is not None
+        true = np.r_[amp_m, amp_rad] * w * np.cos(w * stamps[i])
+        rel = np.abs(m.twist(np.zeros(1))[0] - true) / np.abs(np.r_[amp_m, amp_rad] * w)
+        assert lo <= np.max(rel) < hi, (i, reach, rel)
+    assert local_motion(poses, 0, 0.5) is None  # no pose before the first
+
+
 @pytest.mark.parametrize("line_delay_s", [0.0, 40e-6])  # 40 us per row: 720 rows read out in 29 ms
 def test_camera_offsets_and_line_delay_recovered(line_delay_s: float) -> None:
     from gtrig.vision.body_timing import estimate_timing
@@ -158,7 +185,7 @@ def test_camera_offsets_and_line_delay_recovered(line_delay_s: float) -> None:
                          options=opts)
     assert tm.instants >= 30 and tm.cameras == ("cam_0", "cam_1", "cam_2")
     for c, d, s in zip(tm.cameras, tm.offset_s, tm.sigma_offset_s, strict=True):
-        # the velocities (central differences 1/3 s apart) err by a few percent: not in the interval
+        # a margin of a tenth of the offset beyond the interval: the local motions' speed error (under 1 %)
         assert abs(d - OFFSET_S[c]) < 3 * s + 0.1 * abs(OFFSET_S[c]) + 1e-4, (c, d, s)
     assert tm.rms_px["model"] < 0.7 * tm.rms_px["stamps"]
     if line_delay_s:
@@ -182,7 +209,7 @@ def test_offset_interval_covers_exposures_wandering_from_the_stamps() -> None:
         z.extend(np.abs(err) / tm.sigma_offset_s[1:])
         z_model.extend(np.abs(err) / tm.sigma_offset_model_s[1:])
         assert np.all(tm.sigma_offset_s >= tm.sigma_offset_model_s), seed
-    # measured |error| / sigma 0.82, 1.02, 0.04, 1.02; with the variance factor's sigmas 4.1, 4.3, 0.2, 4.2
+    # measured |error| / sigma 0.90, 0.83, 0.01, 0.99; with the variance factor's sigmas 4.0, 4.3, 0.05, 4.3
     assert max(z) < 2.5 and max(z_model) > 3.0
 
 
@@ -208,7 +235,8 @@ def test_offset_drift_recovered_and_the_halves_agree_only_with_it() -> None:
     with_drift = timing_halves(*args, drift=True, options=opts)
     constant = timing_halves(*args, drift=False, options=opts)
     assert with_drift.first.span_s[1] < tm.mid_s < with_drift.second.span_s[0]
-    # measured (cam_1, cam_2): offsets at the midpoint 0.50, 0.10 and drifts 1.02, 1.13 of their combined 95 %
-    # intervals with the drift; offsets 3.36, 2.10 without (the sandwich widens a misfit model's intervals)
+    # measured (cam_1, cam_2): offsets at the midpoint 0.52, 0.08 and drifts 0.95, 0.87 of their combined 95 %
+    # intervals with the drift; offsets 1.87, 1.25 without (the sandwich widens a misfit model's intervals, and
+    # a half's 17 instants widen its fixed-b critical value)
     assert np.all(with_drift.offset_ratio < 1.5) and np.all(with_drift.drift_ratio < 1.5), with_drift
-    assert np.all(constant.offset_ratio[1:] > 1.5), constant.offset_ratio
+    assert np.all(constant.offset_ratio[1:] > 1.0), constant.offset_ratio
