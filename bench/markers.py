@@ -22,7 +22,8 @@ Three tables, every peer measured in the same run on the same images:
   peer finds; then, on the AprilTag images, AprilTag 3's time at ``quad_decimate=1`` (the small-tag setting
   that recall then calls for), and 1.5x OpenCV's on the others. Times are medians of ``--repeat`` runs per
   image (wall clock, and process CPU time of all threads, which a loaded machine disturbs less), summed
-  over the set.
+  over the set. ``--photos`` then splits gtrig's whole detection by stage (OpenCV's call, AprilTag 3's, the
+  edge fits, the rest: ID verification, covariances, lens, Python per marker), CPU time on one thread.
 
 ``--hard`` runs the harder simulated set (JPEG 60-95, half Bayer-demosaiced, textured, pale or cluttered
 backgrounds, glare, print gain, paper texture, bent prints, markers of 10-70 px, blur 0-1.5 px, noise 2-5)
@@ -540,6 +541,79 @@ def _bench_refine_photos(repeat: int) -> None:
         print(f"{name:28s} {n_quads:6d} {len(calls):6d} {1000.0 * best / max(n_quads, 1):8.3f}")
 
 
+STAGES = ("OpenCV", "AprilTag 3", "edge fits", "the rest")
+
+
+class _StageClock:
+    """CPU time of one thread spent in the peers' calls and the edge fits of the detections run inside it
+    (the module functions timed in place and put back on exit); the rest is the whole less these."""
+
+    def __init__(self) -> None:
+        import gtrig.markers.detect as detect_mod
+        from gtrig.markers.detect import peers
+
+        self.spent: dict[str, float] = {}
+        self._patched = [(peers, "opencv_candidates", "OpenCV"), (peers, "apriltag3_candidates", "AprilTag 3"),
+                         (detect_mod, "refine_quads", "edge fits")]
+        self._saved: list[Any] = []
+
+    def _timed(self, fn: Any, stage: str) -> Any:
+        def run(*args: Any, **kwargs: Any) -> Any:
+            t0 = time.thread_time()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.spent[stage] = self.spent.get(stage, 0.0) + time.thread_time() - t0
+        return run
+
+    def __enter__(self) -> _StageClock:
+        for mod, name, stage in self._patched:
+            self._saved.append(getattr(mod, name))
+            setattr(mod, name, self._timed(getattr(mod, name), stage))
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for (mod, name, _), fn in zip(self._patched, self._saved, strict=True):
+            setattr(mod, name, fn)
+
+
+def _stage_table(repeat: int) -> None:
+    """Where a whole detection's time goes, per set: CPU ms per photo on one thread (OpenCV's threads and the
+    detector's at 1, so that every stage is timed where it runs), the fastest of ``repeat`` runs per photo."""
+    from gtrig.io.imagetone import declared_tone
+
+    print(f"\nwhole detection by stage, per set: CPU ms per photo, one thread (OpenCV and the detector), the fastest "
+          f"of {repeat} runs per photo")
+    print(f"{'set':28s} {'whole':>8s} " + " ".join(f"{s:>10s}" for s in STAGES))
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        for name, photos in _sets().items():
+            total = dict.fromkeys(("whole",) + STAGES, 0.0)
+            for path, dictionary in photos:
+                gray = np.asarray(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE), np.uint8)
+                det = MarkerDetector(_family_of(dictionary), params=DetectorParams(tone=declared_tone(path), threads=1))
+                det.detect(gray)
+                best: tuple[float, dict[str, float]] | None = None
+                for _ in range(max(1, repeat)):
+                    with _StageClock() as clock:
+                        t0 = time.thread_time()
+                        det.detect(gray)
+                        whole = time.thread_time() - t0
+                    if best is None or whole < best[0]:
+                        best = (whole, clock.spent)
+                assert best is not None
+                total["whole"] += best[0]
+                for stage in STAGES[:3]:
+                    total[stage] += best[1].get(stage, 0.0)
+                total["the rest"] += best[0] - sum(best[1].values())
+            n = max(len(photos), 1)
+            print(f"{name:28s} {1000 * total['whole'] / n:8.2f} "
+                  + " ".join(f"{1000 * total[s] / n:10.2f}" for s in STAGES))
+    finally:
+        cv2.setNumThreads(threads)
+
+
 def _bench_photos(repeat: int) -> None:
     if not REAL.is_dir():
         print(f"{REAL}: not found, real photos left out")
@@ -568,6 +642,7 @@ def _bench_photos(repeat: int) -> None:
     print(SPEED_HEADER)
     for name, (b, c) in speed.items():
         print(_speed_row(name, b, c))
+    _stage_table(repeat)
     _board_fits()
 
 

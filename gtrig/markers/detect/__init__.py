@@ -49,7 +49,7 @@ __all__ = ["AT3_ONLY_SIGMA_PX", "DETECTOR_VERSION", "Detection", "DetectorParams
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 28
+DETECTOR_VERSION = 29
 
 #: corner sigma written for AprilTag 3's newer families, whose corners gtrig does not refine, px
 AT3_ONLY_SIGMA_PX = 0.5
@@ -310,8 +310,7 @@ class MarkerDetector:
         ok = v.ok & (read == expected[idx]) & (rot == 0) & (v.rot == 0)
         cands = [PeerCandidate(Q0[q], int(expected[q]), "opencv") for q in idx]
         keep = np.flatnonzero(ok)
-        v_keep = Verdict(v.ok[keep], v.rot[keep], v.hamming[keep], [v.reason[k] for k in keep])
-        return self._accepted([cands[k] for k in keep], np.arange(len(keep)), v_keep, r.corners[idx[keep]],
+        return self._accepted([cands[k] for k in keep], np.arange(len(keep)), v.take(keep), r.corners[idx[keep]],
                               r.cov[idx[keep]], r.blur[idx[keep]], und, None)
 
     def _refine_and_verify(self, gray: NDArray[np.uint8], cands: list[PeerCandidate],
@@ -327,26 +326,32 @@ class MarkerDetector:
         book = code_book(spec.family)
         r = refine_quads(gray, Q, book.cells[peer_ids], spec.border_cells, und, p, nt)
         idx = np.flatnonzero(r.ok)
-        out: list[Detection] = []
-        kept: list[Detection] = []
-        if len(idx):
-            w = read_whiteness(gray, r, idx, spec, p.tone, p.max_blur_px, und)
-            v = verify_ids(w, peer_ids[idx], spec, book, p.min_soft_margin)
-            out = self._accepted(cands, idx, v, r.corners[idx], r.cov[idx], r.blur[idx], und, trace)
         bad = np.flatnonzero(~r.ok)
         if trace is not None and not p.keep_unrefined:
             for q in bad:
                 trace.append(Rejection(Q0[q].copy(), "fit", f"{_who(cands[q])}: {fit_reason(r, int(q), p)}"))
-        if len(bad) and p.keep_unrefined:
+        if not p.keep_unrefined:
+            bad = bad[:0]
+        if not len(idx) and not len(bad):
+            return [], []
+        whiteness = [read_whiteness(gray, r, idx, spec, p.tone, p.max_blur_px, und)] if len(idx) else []
+        Qb = np.zeros((0, 4, 2))
+        if len(bad):
             # the peer's corners moved to the nearest grey-level corner (OpenCV's cornerSubPix), gtrig's
             # cells read through them
             Qb = _corner_subpix(gray, Q0[bad])
             Qb = Qb if und is None else und.to_undistorted(Qb.reshape(-1, 2)).reshape(-1, 4, 2)
-            w = read_whiteness_plain(gray, Qb, spec, und)
-            v = verify_ids(w, peer_ids[bad], spec, book, p.min_soft_margin)
-            cov = np.tile(np.eye(2) * UNREFINED_SIGMA_PX**2, (len(bad), 4, 1, 1))
-            kept = self._accepted(cands, bad, v, Qb, cov, np.full(len(bad), np.nan), und, trace)
-        return out, kept
+            whiteness.append(read_whiteness_plain(gray, Qb, spec, und))
+        # both groups' IDs judged in one call (each row on its own: a call's fixed cost is most of a few
+        # markers' reading)
+        v = verify_ids(np.concatenate(whiteness), peer_ids[np.concatenate([idx, bad])], spec, book, p.min_soft_margin)
+        k = len(idx)
+        out = (self._accepted(cands, idx, v.take(slice(0, k)), r.corners[idx], r.cov[idx], r.blur[idx], und, trace)
+               if k else [])
+        if not len(bad):
+            return out, []
+        cov = np.tile(np.eye(2) * UNREFINED_SIGMA_PX**2, (len(bad), 4, 1, 1))
+        return out, self._accepted(cands, bad, v.take(slice(k, None)), Qb, cov, np.full(len(bad), np.nan), und, trace)
 
     def _accepted(self, cands: list[PeerCandidate], idx: NDArray[np.int64], v: Verdict, corners: NDArray[np.float64],
                   cov: NDArray[np.float64], blur: NDArray[np.float64], und: Undistorter | None,
@@ -371,17 +376,19 @@ class MarkerDetector:
 
 def _corner_subpix(gray: NDArray[np.uint8], quads: NDArray[np.float64]) -> NDArray[np.float64]:
     """Quads (K, 4, 2) raw px moved by ``cv2.cornerSubPix`` with a window of an eighth of each side (2-5 px)."""
-    out = np.array(quads, np.float64)
+    q = np.array(quads, np.float64)
+    side = np.linalg.norm(q - np.roll(q, -1, axis=1), axis=2).min(axis=1)  # (K,)
+    win = np.clip(side / 8.0, 2, 5).astype(np.int64)
     crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
-    for k, q in enumerate(out):
-        side = float(np.linalg.norm(q - np.roll(q, -1, axis=0), axis=1).min())
-        win = int(np.clip(side / 8.0, 2, 5))
-        pts = np.ascontiguousarray(q.reshape(-1, 1, 2), np.float32)
-        moved = cv2.cornerSubPix(gray, pts, (win, win), (-1, -1), crit).reshape(4, 2)
-        # a corner that ran away (to another corner of the scene) keeps the peer's place
-        far = np.linalg.norm(moved - q, axis=1) > 0.25 * side
-        out[k] = np.where(far[:, None], q, moved)
-    return out
+    moved = np.empty_like(q)
+    # cornerSubPix moves each point on its own: one call per window size
+    for w in np.unique(win).tolist():
+        sel = np.flatnonzero(win == w)
+        pts = np.ascontiguousarray(q[sel].reshape(-1, 1, 2), np.float32)
+        moved[sel] = cv2.cornerSubPix(gray, pts, (w, w), (-1, -1), crit).reshape(-1, 4, 2)
+    # a corner that ran away (to another corner of the scene) keeps the peer's place
+    far = np.linalg.norm(moved - q, axis=2) > 0.25 * side[:, None]
+    return np.where(far[..., None], q, moved)
 
 
 def _who(c: PeerCandidate) -> str:

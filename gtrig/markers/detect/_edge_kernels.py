@@ -312,14 +312,17 @@ def _start_params(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[n
 def _fit_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[np.float64], extra: NDArray[np.float64],
               lo: int, hi: int, nx: float, ny: float, mid: NDArray[np.float64], sigma0: float,
               init: NDArray[np.float64], init_mid: NDArray[np.float64], has_init: bool, want_cov: bool,
-              cfg: NDArray[np.float64], P: NDArray[np.float64], cov: NDArray[np.float64]) -> tuple[float, float, bool]:
+              cfg: NDArray[np.float64], P: NDArray[np.float64], cov: NDArray[np.float64], sharp: bool
+              ) -> tuple[float, float, bool, bool]:
     """:func:`.edges.fit_edges` of one edge (pixels ``lo:hi`` relative to ``mid``, normal ``(nx, ny)``),
     its refit with the pixel-integrated step when the Gaussian one is sharper than a pixel included.
 
     ``cfg`` holds (iterations, tol, clipped iteration factor, clip low, clip high, clipped share, pixel
-    variance, sharp sigma, max clipped white). Writes the parameters into ``P`` (7,) and, with
-    ``want_cov``, the (theta, rho) covariance into ``cov`` (2, 2). Returns the effective blur, the
-    residual RMS and whether the fit is usable.
+    variance, sharp sigma, max clipped white). ``sharp``: the edge was found sharper than a pixel before
+    (a previous pass), and is fitted with the pixel-integrated step from the start. Writes the parameters
+    into ``P`` (7,) and, with ``want_cov``, the (theta, rho) covariance into ``cov`` (2, 2). Returns the
+    effective blur, the residual RMS, whether the fit is usable and whether the edge is sharper than a pixel
+    (fitted with the pixel-integrated step without being saturated).
     """
     iterations, tol, factor = int(cfg[0]), cfg[1], int(cfg[2])
     clip_low, clip_high, share, pix_var, sharp_sigma, max_white = cfg[3], cfg[4], cfg[5], cfg[6], cfg[7], cfg[8]
@@ -341,8 +344,10 @@ def _fit_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[np.fl
     sigma = 0.0
     cur = 0.0
     slow = saturated
-    for model in range(2):
-        # model 1: every edge on the pixel-integrated step (fit_edges' pixel_model refit)
+    for model in range(1 if sharp else 0, 2):
+        # model 1: every edge on the pixel-integrated step (fit_edges' pixel_model refit); an edge a previous
+        # pass found sharp starts there: its Gaussian fit would only run its blur down to the bound again
+        # (a fifth of them at their iteration limit on real photos) before the same refit
         slow = saturated or model == 1
         _start_params(X0, X1, v, lo, hi, nx, ny, mid, ls0, init, init_mid, has_init, P)
         if slow:
@@ -371,7 +376,7 @@ def _fit_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[np.fl
             for q in range(2):
                 cov[p, q] *= s2
                 ok = ok and math.isfinite(cov[p, q])
-    return sigma, math.sqrt(s2), ok
+    return sigma, math.sqrt(s2), ok, slow and not saturated
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -565,7 +570,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
                 stride: NDArray[np.int64], white: NDArray[np.float64], band_cfg: NDArray[np.float64],
                 fit_cfg: NDArray[np.float64], first: bool, active: NDArray[np.bool_], P: NDArray[np.float64],
                 mid: NDArray[np.float64], sigma: NDArray[np.float64], cov: NDArray[np.float64],
-                rms: NDArray[np.float64], n_px: NDArray[np.int64], ok: NDArray[np.bool_]) -> None:
+                rms: NDArray[np.float64], n_px: NDArray[np.int64], ok: NDArray[np.bool_],
+                sharp: NDArray[np.bool_]) -> None:
     """One pass of :func:`.edges.refine_quads` over ``Q`` quads (edges ``4q .. 4q + 3``), in place.
 
     Parameters
@@ -585,6 +591,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
         settling move in a pass after the first is set False (it keeps this pass's fits).
     P, mid, sigma, cov, rms, n_px, ok : (4Q, 7), (4Q, 2), (4Q,), (4Q, 2, 2), (4Q,) x 3: the fits of
         :class:`.edges.EdgeFit` (``P`` its parameters), read as the previous pass's and replaced.
+    sharp : (4Q,) the edges found sharper than a pixel (fitted with the pixel-integrated step, not being
+        saturated), read as the previous pass's and replaced (:func:`_fit_edge`).
     """
     Q = white.shape[0]
     undistorted = boxes.shape[0] > 0
@@ -635,8 +643,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
             for i in range(lo, hi):
                 X0[i] = x[i] - new_mid[0]
                 X1[i] = y[i] - new_mid[1]
-            sg, r, good = _fit_edge(X0, X1, v, extra, lo, hi, ty, -tx, new_mid, sigma0[e], init[k], init_mid[k],
-                                    not first, not first, fit_cfg, P[e], cov[e])
+            sg, r, good, sharp[e] = _fit_edge(X0, X1, v, extra, lo, hi, ty, -tx, new_mid, sigma0[e], init[k],
+                                              init_mid[k], not first, not first, fit_cfg, P[e], cov[e], sharp[e])
             mid[e, 0], mid[e, 1] = new_mid[0], new_mid[1]
             sigma[e], rms[e], n_px[e], ok[e] = sg, r, hi - lo, good
         share_white(X0, X1, v, extra, starts, sigma0[sl], first, fit_cfg, P[sl], mid[sl], sigma[sl], cov[sl],
@@ -693,8 +701,8 @@ def share_white(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[np.
         init[:] = P[k]
         init_mid[:] = mid[k]
         nx, ny = math.cos(P[k, 0]), math.sin(P[k, 0])
-        sg, r, good = _fit_edge(X0, X1, v, extra, starts[k], starts[k + 1], nx, ny, init_mid, sigma0[k], init,
-                                init_mid, True, not first, sub, P[k], cov[k])
+        sg, r, good, _sharp = _fit_edge(X0, X1, v, extra, starts[k], starts[k + 1], nx, ny, init_mid, sigma0[k],
+                                        init, init_mid, True, not first, sub, P[k], cov[k], False)
         sigma[k], rms[k], ok[k] = sg, r, good
 
 
@@ -863,6 +871,7 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray
     cov_line = np.zeros((E, 2, 2))
     n_px = np.zeros(E, np.int64)
     ok = np.zeros(E, np.bool_)
+    sharp = np.zeros(E, np.bool_)
     stride = band_stride(L, columns)
     first_stride = band_stride(L, first_columns)
     first_stride0 = first_stride.copy()
@@ -880,7 +889,7 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray
             boxes = raw_boxes(gray.shape[0], gray.shape[1], p0, p1, w_in, w_look, K, dist)
         refine_pass(gray, lut, map_x, map_y, boxes, p0, p1, sigma0, w_in, w_out, w_look, excl,
                     first_stride if k == 0 else stride, white, band_cfg, fit_first if k == 0 else fit_cfg, k == 0,
-                    active, P, mid, sigma, cov_line, rms, n_px, ok)
+                    active, P, mid, sigma, cov_line, rms, n_px, ok, sharp)
         if k == 0:
             for q in range(Q):
                 changed = False

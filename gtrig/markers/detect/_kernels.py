@@ -365,23 +365,25 @@ _CONTEXT_SDS = 6.0
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _saturated_grid(t: float, s: float, n: int, F: NDArray[np.float64]) -> tuple[int, int]:
-    """``F[k] = Phi((t - k) / s)`` for the grid lines ``k = 0..n`` (:func:`_ndtr_lin`), 1 or 0 beyond
-    :data:`_CONTEXT_SDS` and set without evaluating there, and the range ``[k0, k1)`` of the cells ``k``
-    whose ``F[k] - F[k + 1]`` may differ from 0."""
+def _saturated_grid(t: float, s: float, n: int, F: NDArray[np.float64]) -> tuple[int, int, float, float]:
+    """``F[k] = Phi((t - k) / s)`` (:func:`_ndtr_lin`) for the grid lines ``k`` the cells ``[k0, k1)`` need,
+    the cells whose ``F[k] - F[k + 1]`` may differ from 0 (lines beyond :data:`_CONTEXT_SDS` are 1 or 0,
+    set without evaluating); returns ``k0``, ``k1`` and ``F[0]``, ``F[n]`` (the blurred square's extent).
+    Only the entries ``k0 .. k1`` are written: a band pixel has one or two lines within reach of the
+    grid's ``n + 1``, and filling the rest cost more than the CDFs."""
     lo = max(0, int(math.ceil(t - _CONTEXT_SDS * s)))
     hi = min(n, int(math.floor(t + _CONTEXT_SDS * s)))
-    for k in range(0, min(lo, n + 1)):
-        F[k] = 1.0
+    k0 = min(max(lo - 1, 0), n)
+    k1 = min(hi + 1, n)
     inv = 1.0 / s
-    for k in range(lo, hi + 1):
-        F[k] = _ndtr_lin((t - k) * inv)
-    for k in range(max(hi + 1, lo), n + 1):
-        F[k] = 0.0
-    if hi < lo:
-        # no line within reach: the one cell where F steps from 1 to 0, if any
-        return (lo - 1, lo) if 0 < lo <= n else (0, 0)
-    return max(lo - 1, 0), min(hi + 1, n)
+    for k in range(k0, k1 + 1):
+        F[k] = 1.0 if k < lo else (0.0 if k > hi else _ndtr_lin((t - k) * inv))
+    f0 = 1.0 if lo > 0 else (0.0 if hi < 0 else _ndtr_lin(t * inv))
+    fn = 0.0 if hi < n else (1.0 if lo > n else _ndtr_lin((t - n) * inv))
+    if hi < lo and not 0 < lo <= n:
+        # no line within reach and none to step across: no cell
+        return 0, 0, f0, fn
+    return k0, k1, f0, fn
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -414,10 +416,10 @@ def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray
         ay, by = H[g, 3] - my * H[g, 6], H[g, 4] - my * H[g, 7]
         sx = scale * math.sqrt(ax * ax + bx * bx)  # (libm's hypot guards against overflow at 4x the cost)
         sy = scale * math.sqrt(ay * ay + by * by)
-        # only the grid lines within 9 SDs have a CDF other than 0 or 1: the cells' sum runs over the
+        # only the grid lines within _CONTEXT_SDS have a CDF other than 0 or 1: the cells' sum runs over the
         # rows and columns between them (the other products are 0)
-        c0, c1 = _saturated_grid(mx * n, sx, n, Fx)
-        r0, r1 = _saturated_grid(my * n, sy, n, Fy)
+        c0, c1, fx0, fxn = _saturated_grid(mx * n, sx, n, Fx)
+        r0, r1, fy0, fyn = _saturated_grid(my * n, sy, n, Fy)
         R = 0.0
         for r in range(r0, r1):
             Yr = Fy[r] - Fy[r + 1]
@@ -428,7 +430,7 @@ def marker_context(x: NDArray[np.float64], y: NDArray[np.float64], quad: NDArray
                 if white[g, r, c] != 0.0:
                     acc += white[g, r, c] * (Fx[c] - Fx[c + 1])
             R += Yr * acc
-        S = (Fx[0] - Fx[n]) * (Fy[0] - Fy[n])
+        S = (fx0 - fxn) * (fy0 - fyn)
         out[i] = 1.0 - S + R - _ndtr_tab(dist[i] / sigma[i])
     return out
 

@@ -413,8 +413,27 @@ def fit_edges(
     tol: float = 1e-4,
     threads: int = 1,
     pixel_model: bool = False,
+    sharp: NDArray[np.bool_] | None = None,
 ) -> EdgeFit:
-    """Fit the blurred-step model to every edge (see the module docstring).
+    """Fit the blurred-step model to every edge: :func:`fit_sharp_edges` without the edges' sharpness."""
+    return fit_sharp_edges(samples, p0, p1, sigma0, iterations, extra, init, tol, threads, pixel_model, sharp)[0]
+
+
+def fit_sharp_edges(
+    samples: EdgeSamples,
+    p0: NDArray[np.float64],
+    p1: NDArray[np.float64],
+    sigma0: NDArray[np.float64],
+    iterations: int = 10,
+    extra: NDArray[np.float64] | None = None,
+    init: EdgeFit | None = None,
+    tol: float = 1e-4,
+    threads: int = 1,
+    pixel_model: bool = False,
+    sharp: NDArray[np.bool_] | None = None,
+) -> tuple[EdgeFit, NDArray[np.bool_]]:
+    """Fit the blurred-step model to every edge (see the module docstring); also the edges (E,) sharper than
+    a pixel: those fitted with the pixel-integrated step without being saturated.
 
     Parameters
     ----------
@@ -435,6 +454,8 @@ def fit_edges(
     pixel_model : fit every edge with the pixel-integrated step (:func:`pixel_step`). Otherwise only
         edges with clipped pixels are, and edges whose Gaussian blur falls below
         :data:`SHARP_SIGMA_PX` are refitted so (steps sharper than the pixel box).
+    sharp : (E,) edges a previous pass found sharper than a pixel: fitted with the pixel-integrated step
+        from the start (their Gaussian fit would only run the blur down to its bound again).
     """
     E = len(p0)
     t = p1 - p0
@@ -477,6 +498,8 @@ def fit_edges(
     saturated = slow
     if pixel_model:
         slow = np.ones(E, bool)
+    if sharp is not None:
+        slow = slow | sharp
     if slow.any():
         P[slow, 4] = np.log(np.sqrt(np.maximum(np.exp(2 * P[slow, 4]) - PIXEL_VAR, 0.05**2)))
         # start the white level above the clip: from there the clipped pixels agree and the ramp's
@@ -507,18 +530,19 @@ def fit_edges(
     sigma = np.where(slow, np.sqrt(np.exp(2 * P[:, 4]) + PIXEL_VAR), np.exp(P[:, 4]))  # effective blur
     out = EdgeFit(P[:, 0], P[:, 1], mid, P[:, 2], P[:, 3], sigma, P[:, 5:7], cov, np.sqrt(s2),
                   cnt.astype(np.int64), ok)
-    sharp = has & ~slow & (sigma < SHARP_SIGMA_PX)
-    if not sharp.any():
-        return out
+    refit_sel = has & ~slow & (sigma < SHARP_SIGMA_PX)
+    found = (slow & ~saturated) | refit_sel
+    if not refit_sel.any():
+        return out, found
     # edges sharper than a pixel: refitted with the pixel-integrated step, from the start
-    sel = sharp[e]
-    remap = np.cumsum(sharp) - 1
+    sel = refit_sel[e]
+    remap = np.cumsum(refit_sel) - 1
     sub_e = remap[e[sel]]
-    sub = EdgeSamples(samples.xy[sel], v[sel], sub_e, _starts(sub_e, int(sharp.sum())))
-    sub_init = None if init is None else _subset(init, sharp)
-    refit = fit_edges(sub, p0[sharp], p1[sharp], np.asarray(sigma0, np.float64)[sharp], iterations, None
-                      if extra is None else ext[sel], sub_init, tol, threads, pixel_model=True)
-    return _merge(out, sharp, refit)
+    sub = EdgeSamples(samples.xy[sel], v[sel], sub_e, _starts(sub_e, int(refit_sel.sum())))
+    sub_init = None if init is None else _subset(init, refit_sel)
+    refit = fit_edges(sub, p0[refit_sel], p1[refit_sel], np.asarray(sigma0, np.float64)[refit_sel], iterations,
+                      None if extra is None else ext[sel], sub_init, tol, threads, pixel_model=True)
+    return _merge(out, refit_sel, refit), found
 
 
 def share_white(samples: EdgeSamples, fit: EdgeFit, sigma0: NDArray[np.float64], first: bool,
@@ -912,6 +936,7 @@ def refine_quads_stepwise(
     p0 = quads.reshape(-1, 2).copy()
     p1 = np.roll(quads, -1, axis=1).reshape(-1, 2).copy()
     sigma = np.full(len(p0), 1.0)
+    sharp = np.zeros(len(p0), bool)  # edges found sharper than a pixel (fit_sharp_edges)
     fit: EdgeFit | None = None
     stride = band_stride(side, prm)
     first_stride = band_stride(side, prm, first=True)
@@ -942,13 +967,15 @@ def refine_quads_stepwise(
         if light is not None:
             samples = dataclasses.replace(samples, val=np.asarray(light, np.float64)[samples.val.astype(np.intp)])
         if fit is None:
-            first_fit = fit_edges(samples, a0, a1, sg, iterations=prm.iterations, tol=prm.first_tol)
+            first_fit, sharp[es] = fit_sharp_edges(samples, a0, a1, sg, iterations=prm.iterations,
+                                                   tol=prm.first_tol)
             fit = share_white(samples, first_fit, sg, True, prm)
         else:
             prev = _subset(fit, on)
             before, _ = intersect_corners(prev, len(qs))
             extra = marker_context(samples, prev, before, white[qs])
-            new = fit_edges(samples, a0, a1, sg, iterations=prm.iterations, extra=extra, init=prev, tol=prm.tol)
+            new, sharp[es] = fit_sharp_edges(samples, a0, a1, sg, iterations=prm.iterations, extra=extra,
+                                             init=prev, tol=prm.tol, sharp=sharp[es])
             new = share_white(samples, new, sg, False, prm, extra)
             after, _ = intersect_corners(new, len(qs))
             # a quad whose corners this pass moved less than settle_px stops (NaN moves go on)

@@ -47,6 +47,11 @@ class Verdict:
     hamming: NDArray[np.int64]
     reason: list[str]
 
+    def take(self, rows: slice | NDArray[np.int64]) -> Verdict:
+        """The verdict of the peer IDs ``rows`` (a slice or indices) of these."""
+        pick = range(len(self.reason))[rows] if isinstance(rows, slice) else rows
+        return Verdict(self.ok[rows], self.rot[rows], self.hamming[rows], [self.reason[k] for k in pick])
+
 
 @dataclass(frozen=True)
 class CodeBook:
