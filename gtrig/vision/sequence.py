@@ -720,6 +720,11 @@ def _detect_all(ctx: WorkerContext, chunks: list[tuple[str, list[int]]], indices
     if len(todo) < len(chunks):
         log.info("resuming: %d of %d detection chunks already checkpointed", len(chunks) - len(todo), len(chunks))
 
+    prepare = getattr(_state(ctx)["detect"], "prepare_lens_maps", None)
+    if executor is None and todo and prepare is not None:  # a local pool forks from here: its workers share them
+        model = _state(ctx)["model"]
+        prepare([model.cameras[c] for c in sorted({chunks[k][0] for k in todo})])
+
     def record(k: int, frames: list[list[Any]]) -> None:
         dets.append(chunks[k][0], frames)  # one line per finished chunk: an interrupted run resumes from here
 

@@ -280,3 +280,41 @@ def test_a_marker_that_appeared_is_found_back_in_the_images_before() -> None:
     det = _Scripted(per_image)
     tk = CameraTracker(det, (1024, 768), TrackOptions())
     assert [len(g) for g in track_with_backfill(tk, frames())] == [0] * 4 + [1] * (n - 4)
+
+
+def test_prepared_lens_maps_serve_the_whole_image_and_every_window(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The maps a client prepares before its pool forks are those its detectors look up: once prepared, a
+    camera's whole-image and window detectors compute no maps of their own (a key that differed would)."""
+    from gtrig.markers.detect.camera import Undistorter
+    from gtrig.vision.detect import make_detector
+    from gtrig.vision.observations import VisionModel
+    from gtrig.vision.synthetic import render_markers, visible_views
+
+    scene = make_scene(0)
+    T = scene.T_world_robot(*VALIDATION_POSES[4])
+    seen = {c for c, _, _ in visible_views(scene.rig_true, T)}
+    cam0 = next(c for c in scene.rig_true.cameras if any(c.dist_coeffs) and c.name in seen)
+    # a focal length no other test uses: this camera's maps are not in the process's cache already
+    (fx, s, cx), (_, fy, cy), last = cam0.camera_matrix
+    cam0 = cam0.model_copy(update={"camera_matrix": ((fx + 0.371, s, cx), (0.0, fy + 0.371, cy), last)})
+    rig = scene.rig_true.model_copy(update={"cameras": (cam0,)})
+    camera = VisionModel.from_rig(rig).cameras[cam0.name]
+    image = render_markers(rig, cam0.name, T, np.random.default_rng(0), supersample=1)
+    det = make_detector(rig, "gtrig")
+    det.prepare_lens_maps([camera])  # type: ignore[union-attr]
+    computed: list[tuple[int, int]] = []
+    compute = Undistorter._compute
+
+    def counted(K: np.ndarray, dist: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        computed.append(shape)
+        return compute(K, dist, shape)
+
+    monkeypatch.setattr(Undistorter, "_compute", staticmethod(counted))
+    found = det(image, camera, "linear")
+    w, h = camera.size
+    found_in_window = det(image, camera, "linear", (w // 8, h // 8, w - w // 8, h - h // 8))
+    assert found and {v.marker_id for v in found_in_window} == {v.marker_id for v in found}
+    assert not computed
+    # the check itself can fail: another camera matrix's maps are computed on first use
+    Undistorter(camera.K + 0.5 * np.eye(3), np.asarray(camera.dist, float), (h, w))
+    assert computed
