@@ -295,6 +295,7 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
     if clocks == "synced":
         out["true_offsets_ms"] = {k: 1000 * v for k, v in info.clock_offsets_s.items()}
         vision_ref = vision_stand_in(mot, ts[-1], cfg.camera.stamp_jitter_s, seed * 10 + 4)
+    tracked: dict = {}
     for label, scs in (("calibrated", cal), ("true", sc.rig_true.laser_scanners)):
         if declared:
             scs = tuple(s.model_copy(update=declared) for s in scs)
@@ -316,6 +317,7 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
                               masks)
         res = track_frames(fp, model, TrackSettings(), rep.cov_xytheta if label == "calibrated" else None)
         dt = time.perf_counter() - t0
+        tracked[label] = res
         n_scans = sum(len(runs[s.name].stamps_s) for s in scs)
         tru = mot.planar(res.stamps_s)
         tru[:, 2] = np.unwrap(tru[:, 2])
@@ -375,7 +377,24 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
                     np.isfinite(bl[ok, 0]), np.hypot(*(bl[ok, :2] - tru[ok, :2]).T), np.inf) < 0.05)),
                 "frames_track_per_s": len(res) / dt,
             }
+    out["calibration_share"] = calibration_share(tracked["calibrated"], tracked["true"])
     return out
+
+
+def calibration_share(cal, true) -> dict:  # noqa: ANN001 (TrackResult)
+    """What the scanners' calibration error did to the track, against what GTlaser states of it: the
+    difference (F, 3) between the track on the calibrated scanners and the one on the true scanners (the
+    same scans, so the calibration error's effect alone), per frame against ``cov_calibration`` and its
+    mean over the frames both localize against ``cov_calibration_shared`` (world x, y m, yaw rad)."""
+    both = (cal.status == OK) & (true.status == OK)
+    d = cal.xytheta[both] - true.xytheta[both]
+    d[:, 2] = wrap_angle(d[:, 2])
+    m = d.mean(axis=0)
+    S = cal.cov_calibration_shared
+    q = np.einsum("ni,nij,nj->n", d, np.linalg.inv(cal.cov_calibration[both]), d) / 3
+    return {"mean": m, "stated_sd": np.sqrt(np.diag(S)), "mean_nees_dof": float(m @ np.linalg.solve(S, m) / 3),
+            "frame_nees_dof": float(q.mean()), "frame_rms": np.sqrt(np.mean(d**2, axis=0)),
+            "frame_sd": np.sqrt(np.mean(np.diagonal(cal.cov_calibration[both], axis1=1, axis2=2), axis=0))}
 
 
 SCENARIOS = {
@@ -458,6 +477,15 @@ def main() -> None:
                 flush=True,
             )
             rates.append((name, seed, r))
+            cs = r["calibration_share"]
+            print(f"  calibration's share, calibrated minus true scanners' track: mean over the run x / y "
+                  f"{1e3 * cs['mean'][0]:+.3f} / {1e3 * cs['mean'][1]:+.3f} mm, yaw {1e3 * cs['mean'][2]:+.4f} mrad "
+                  f"(stated sd {1e3 * cs['stated_sd'][0]:.3f} / {1e3 * cs['stated_sd'][1]:.3f} mm, "
+                  f"{1e3 * cs['stated_sd'][2]:.4f} mrad; NEES/dof {cs['mean_nees_dof']:.2f}); per frame rms "
+                  f"{1e3 * cs['frame_rms'][0]:.3f} / {1e3 * cs['frame_rms'][1]:.3f} mm, "
+                  f"{1e3 * cs['frame_rms'][2]:.4f} mrad (stated {1e3 * cs['frame_sd'][0]:.3f} / "
+                  f"{1e3 * cs['frame_sd'][1]:.3f} mm, {1e3 * cs['frame_sd'][2]:.4f} mrad; NEES/dof "
+                  f"{cs['frame_nees_dof']:.2f})", flush=True)
             if "measured_offsets_ms" in r:
                 m = r["measured_offsets_ms"]["calibrated"]
                 print("  offsets true / measured (sigma), ms: " + ", ".join(
