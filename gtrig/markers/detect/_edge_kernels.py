@@ -3,7 +3,8 @@
 A pass takes every quad through the steps the public functions of :mod:`.edges` make one call each:
 the band around each edge (:func:`.edges.gather_band`), the paper's end beyond it
 (:func:`.edges.white_extent`, :func:`.edges.trim_outer`), the modelled light of the marker's corners
-and cells (:func:`.edges.marker_context`, from the previous pass's lines), the blurred-step fits
+and cells (:func:`.edges.marker_context`, from the previous pass's lines; a saturated edge's context
+blur from :func:`context_blur`), the blurred-step fits
 (:func:`.edges.fit_edges`, with its refit of edges sharper than a pixel) and the next pass's blur
 and end points; the last pass adds the lines' covariances and the corners
 (:func:`.edges.intersect_corners`). The arithmetic is the same as theirs, step for step, so the
@@ -571,7 +572,7 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
                 fit_cfg: NDArray[np.float64], first: bool, active: NDArray[np.bool_], P: NDArray[np.float64],
                 mid: NDArray[np.float64], sigma: NDArray[np.float64], cov: NDArray[np.float64],
                 rms: NDArray[np.float64], n_px: NDArray[np.int64], ok: NDArray[np.bool_],
-                sharp: NDArray[np.bool_]) -> None:
+                sharp: NDArray[np.bool_], ctx: NDArray[np.float64], sat: NDArray[np.bool_]) -> None:
     """One pass of :func:`.edges.refine_quads` over ``Q`` quads (edges ``4q .. 4q + 3``), in place.
 
     Parameters
@@ -593,6 +594,9 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
         :class:`.edges.EdgeFit` (``P`` its parameters), read as the previous pass's and replaced.
     sharp : (4Q,) the edges found sharper than a pixel (fitted with the pixel-integrated step, not being
         saturated), read as the previous pass's and replaced (:func:`_fit_edge`).
+    ctx : (4Q, 3) the blurs of each edge's marker context (:func:`context_blur`), updated.
+    sat : (4Q,) the edges saturated at the clip level (:func:`_saturated_edges`), read as the previous
+        pass's and replaced.
     """
     Q = white.shape[0]
     undistorted = boxes.shape[0] > 0
@@ -627,7 +631,8 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
         if first:
             extra = np.zeros(N)
         else:
-            extra = _context(x, y, es, P[sl], mid[sl], sigma[sl], white[q:q + 1])
+            extra = _context(x, y, es, P[sl], mid[sl], context_blur(sigma[sl], sat[sl], ctx[sl], s_lo, s_hi),
+                             white[q:q + 1])
         for k in range(4):
             init[k] = P[e0 + k]
             init_mid[k] = mid[e0 + k]
@@ -649,9 +654,54 @@ def refine_pass(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArra
             sigma[e], rms[e], n_px[e], ok[e] = sg, r, hi - lo, good
         share_white(X0, X1, v, extra, starts, sigma0[sl], first, fit_cfg, P[sl], mid[sl], sigma[sl], cov[sl],
                      rms[sl], ok[sl])
+        _saturated_edges(v, starts, fit_cfg, sat[sl])
         if not first and corner_move(init, init_mid, P[sl], mid[sl]) < settle:
             active[q] = False
         _next_pass(P[sl], mid[sl], sigma[sl], s_lo, s_hi, p0[sl], p1[sl], sigma0[sl])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def context_blur(sigma: NDArray[np.float64], sat: NDArray[np.bool_], ctx: NDArray[np.float64], s_lo: float,
+                 s_hi: float) -> NDArray[np.float64]:
+    """The blur (4,) of a quad's marker context this pass, its edges' last fitted blurs ``sigma`` (4,)
+    (effective, px) where they are not saturated (``sat`` (4,), the last pass's).
+
+    A saturated edge sees only the foot of its ramp, and answers a wider context blur with a narrower fitted
+    one: iterating fit and context from pass to pass alternates about their joint fixed point instead of
+    reaching it. Its context blur is the secant step to the root of ``fit(c) - c`` through its last two
+    passes (context blur ``c``, fitted blur), kept between the last context blur and the blur it gave and
+    within ``[s_lo, s_hi]``; the plain iteration where fewer than two passes had a context or the two are
+    parallel. ``ctx`` (4, 3): each edge's (context blur, fitted blur)
+    of the pass before the last, and the last pass's context blur (NaN: none); updated in place."""
+    out = np.empty(4)
+    for k in range(4):
+        c1, s1 = ctx[k, 2], sigma[k]
+        c0, s0 = ctx[k, 0], ctx[k, 1]
+        c = s1
+        if sat[k] and math.isfinite(c0) and math.isfinite(s0) and math.isfinite(c1) and math.isfinite(s1):
+            g1, g0 = s1 - c1, s0 - c0
+            den = g1 - g0
+            if abs(den) > 1e-9 and abs(c1 - c0) > 1e-9:
+                # a fit that answers a wider context with a narrower blur has its fixed point between the
+                # two: the step is clamped to that bracket
+                c = min(max(c1 - g1 * (c1 - c0) / den, min(c1, s1), s_lo), max(c1, s1), s_hi)
+        ctx[k, 0], ctx[k, 1], ctx[k, 2] = c1, s1, c
+        out[k] = c
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _saturated_edges(v: NDArray[np.float64], starts: NDArray[np.int64], cfg: NDArray[np.float64],
+                     sat: NDArray[np.bool_]) -> None:
+    """Whether more than the clipped share (``cfg[5]``, :func:`_fit_edge`) of each of a quad's edges' band
+    pixels ``v`` (edges from ``starts``) lies at the clip level ``cfg[4]``, into ``sat`` (4,)."""
+    for k in range(4):
+        lo, hi = starts[k], starts[k + 1]
+        n_clip = 0
+        for i in range(lo, hi):
+            if v[i] >= cfg[4]:
+                n_clip += 1
+        sat[k] = hi - lo > 8 and n_clip > cfg[5] * (hi - lo)
 
 
 #: relative excess over the paper's white level above which a saturated edge is refitted: the smeared
@@ -843,7 +893,8 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray
         width, cells.
     cfg : (passes, columns, first pass's columns (0: every column), band px, margin cells (NaN: unknown),
         white end looked for (0 / 1), look sigmas, profile step, white-end drop, white-end sigmas, max blur
-        px, settle px, first pass's tolerance): :class:`.edges.RefineParams` and the constants of :mod:`.edges`.
+        px, settle px, first pass's tolerance, passes of quads with a saturated edge): :class:`.edges.RefineParams`
+        and the constants of :mod:`.edges`.
     fit_cfg : :func:`_fit_edge`'s ``cfg``.
 
     Returns
@@ -853,7 +904,7 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray
     """
     Q, n = quads.shape[0], white.shape[1]
     E = 4 * Q
-    passes, columns, first_columns = int(cfg[0]), int(cfg[1]), int(cfg[2])
+    passes, columns, first_columns, clipped_passes = int(cfg[0]), int(cfg[1]), int(cfg[2]), int(cfg[13])
     band_px, margin_cells, white_end, look_sigmas = cfg[3], cfg[4], cfg[5] > 0.5, cfg[6]
     L, cell, border = quad_sides(quads, n, border_cells)
     p0 = np.empty((E, 2))
@@ -872,6 +923,8 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray
     n_px = np.zeros(E, np.int64)
     ok = np.zeros(E, np.bool_)
     sharp = np.zeros(E, np.bool_)
+    ctx = np.full((E, 3), np.nan)
+    sat = np.zeros(E, np.bool_)
     stride = band_stride(L, columns)
     first_stride = band_stride(L, first_columns)
     first_stride0 = first_stride.copy()
@@ -880,7 +933,11 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray
     band_cfg = np.array([cfg[5], cfg[7], cfg[8], cfg[9], 0.3, cfg[10], cfg[11]])
     fit_first = fit_cfg.copy()
     fit_first[1] = cfg[12]  # the first pass's tolerance
-    for k in range(passes):
+    for k in range(max(passes, clipped_passes)):
+        if k >= passes:
+            # only quads with a saturated edge go on: their context blur's secant steps need the passes
+            for q in range(Q):
+                active[q] = active[q] and (sat[4 * q] or sat[4 * q + 1] or sat[4 * q + 2] or sat[4 * q + 3])
         if not active.any():
             break
         w_in, w_out, w_look, excl = band_limits(sigma0, L, cell, border, k == 0, band_px, margin_cells, white_end,
@@ -889,7 +946,7 @@ def refine_all(gray: NDArray[np.uint8], lut: NDArray[np.float64], map_x: NDArray
             boxes = raw_boxes(gray.shape[0], gray.shape[1], p0, p1, w_in, w_look, K, dist)
         refine_pass(gray, lut, map_x, map_y, boxes, p0, p1, sigma0, w_in, w_out, w_look, excl,
                     first_stride if k == 0 else stride, white, band_cfg, fit_first if k == 0 else fit_cfg, k == 0,
-                    active, P, mid, sigma, cov_line, rms, n_px, ok, sharp)
+                    active, P, mid, sigma, cov_line, rms, n_px, ok, sharp, ctx, sat)
         if k == 0:
             for q in range(Q):
                 changed = False

@@ -776,6 +776,10 @@ class RefineParams:
         every line with the marker's modelled light to ``tol``. On real photos its fits converge about
         linearly (each line step a third to a half of the last): 0.03 px instead of ``tol`` took its fits from
         9.4 to 7.1-7.6 evaluations per edge on the PhotonVision and top-level sets of ``markers_real``.
+    clipped_passes : passes at most of a quad with an edge saturated at the clip level (the others stop after
+        ``passes``). Such an edge's fitted blur answers its context's blur inversely; its context blur then
+        takes secant steps towards their joint fixed point (:func:`._edge_kernels.context_blur`), which
+        needs passes beyond the third to settle.
     """
 
     passes: int = 3
@@ -790,6 +794,7 @@ class RefineParams:
     settle_px: float = 0.1
     first_columns: int = 0
     first_tol: float = 0.03
+    clipped_passes: int = 9
 
 
 def band_stride(side: NDArray[np.float64], params: RefineParams, first: bool = False) -> NDArray[np.int64]:
@@ -871,7 +876,7 @@ def refine_quads(
     cfg = np.array([prm.passes, _columns(prm, False), _columns(prm, True), prm.band_px,
                     np.nan if prm.margin_cells is None else prm.margin_cells, float(prm.white_end), prm.look_sigmas,
                     PROFILE_STEP_PX, WHITE_END_DROP, WHITE_END_SIGMAS, prm.max_blur_px, prm.settle_px,
-                    prm.first_tol], np.float64)
+                    prm.first_tol, prm.clipped_passes], np.float64)
     gray = np.ascontiguousarray(gray)
     W = np.ascontiguousarray(white, np.float64)
     if undist is None:
@@ -941,7 +946,11 @@ def refine_quads_stepwise(
     stride = band_stride(side, prm)
     first_stride = band_stride(side, prm, first=True)
     active = np.ones(n_q, bool)
-    for k in range(prm.passes):
+    ctx = np.full((len(p0), 3), np.nan)  # context blurs of the saturated edges' secant (context_blur)
+    sat = np.zeros(len(p0), bool)  # edges saturated at the clip level in the last pass
+    for k in range(max(prm.passes, prm.clipped_passes)):
+        if k >= prm.passes:
+            active &= sat.reshape(-1, 4).any(axis=1)
         if not active.any():
             break
         # the quads still moving, and their edges
@@ -973,7 +982,7 @@ def refine_quads_stepwise(
         else:
             prev = _subset(fit, on)
             before, _ = intersect_corners(prev, len(qs))
-            extra = marker_context(samples, prev, before, white[qs])
+            extra = marker_context(samples, _context_fit(prev, qs, sat, ctx, prm), before, white[qs])
             new, sharp[es] = fit_sharp_edges(samples, a0, a1, sg, iterations=prm.iterations, extra=extra,
                                              init=prev, tol=prm.tol, sharp=sharp[es])
             new = share_white(samples, new, sg, False, prm, extra)
@@ -981,6 +990,7 @@ def refine_quads_stepwise(
             # a quad whose corners this pass moved less than settle_px stops (NaN moves go on)
             active[qs[np.linalg.norm(after - before, axis=2).max(axis=1) < prm.settle_px]] = False
             fit = _merge(fit, on, new)
+        sat[es] = _saturated(samples, len(es))
         sigma[es] = np.repeat(np.median(np.clip(fit.sigma[es], 0.3, prm.max_blur_px).reshape(-1, 4), axis=1), 4)
         lines = fit.lines()[es]
         nvec = lines[:, :2]
@@ -990,6 +1000,26 @@ def refine_quads_stepwise(
         raise ValueError("refine_quads_stepwise: params.passes must be at least 1")
     corners, cov = intersect_corners(fit, len(quads))
     return fit, corners, cov
+
+
+def _context_fit(prev: EdgeFit, qs: NDArray[np.intp], sat: NDArray[np.bool_], ctx: NDArray[np.float64],
+                 params: RefineParams) -> EdgeFit:
+    """``prev`` (the fits of quads ``qs``) with the blurs their marker context takes this pass
+    (:func:`._edge_kernels.context_blur`; ``sat`` (E,), ``ctx`` (E, 3) of every quad, updated in place)."""
+    sg = prev.sigma.copy()
+    for j, q in enumerate(qs):
+        sl = slice(4 * q, 4 * q + 4)
+        sg[4 * j:4 * j + 4] = _edge_kernels.context_blur(np.ascontiguousarray(prev.sigma[4 * j:4 * j + 4]), sat[sl],
+                                                         ctx[sl], 0.3, params.max_blur_px)
+    return dataclasses.replace(prev, sigma=sg)
+
+
+def _saturated(samples: EdgeSamples, n_edges: int) -> NDArray[np.bool_]:
+    """Whether more than :data:`CLIPPED_EDGE_SHARE` of each edge's band pixels ``samples`` (light) lie at
+    :data:`CLIP_HIGH` (E,), edges with more than 8 pixels."""
+    cnt = np.bincount(samples.edge, minlength=n_edges)
+    n_clip = np.bincount(samples.edge, weights=(samples.val >= CLIP_HIGH).astype(np.float64), minlength=n_edges)
+    return (cnt > 8) & (n_clip > CLIPPED_EDGE_SHARE * cnt)
 
 
 def unstride_clipped(samples: EdgeSamples, stride: NDArray[np.int64]) -> bool:
