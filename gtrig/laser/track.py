@@ -318,17 +318,6 @@ def _refilter(
     return state
 
 
-def calibration_covariance(
-    fp: FramedPoints, model: HullModel, xytheta: np.ndarray, scanner_cov: np.ndarray, icp: IcpSettings,
-    bias_pull: np.ndarray | None = None,
-) -> np.ndarray:
-    """Covariance (F, 3, 3) that the scanners' calibration covariance ``scanner_cov`` (3 S, 3 S; scanner
-    ``s`` owns rows ``3 s .. 3 s + 2``: x, y m, theta rad, world frame) induces on each pose ``xytheta``
-    (F, 3; ``nan`` rows get ``nan``), through :func:`calibration_sensitivity`."""
-    A = calibration_sensitivity(fp, model, xytheta, icp, bias_pull)
-    return A @ np.asarray(scanner_cov, dtype=float) @ np.swapaxes(A, 1, 2)
-
-
 def calibration_sensitivity(
     fp: FramedPoints, model: HullModel, xytheta: np.ndarray, icp: IcpSettings, bias_pull: np.ndarray | None = None,
 ) -> np.ndarray:
