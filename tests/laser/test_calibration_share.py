@@ -9,16 +9,13 @@ import numpy as np
 import pytest
 
 from gtrig.geometry import wrap_angle
-from gtrig.laser.background import build_background
-from gtrig.laser.foreground import foreground_mask, foreground_threshold
 from gtrig.laser.fuse import frame_points
 from gtrig.laser.hull_icp import HullModel
 from gtrig.laser.track import OK, TrackSettings, calibration_sensitivity, track_frames
 from gtrig.rig.models import Pose
 from gtrig.sim.config import LaserSimConfig, MotionSimConfig, SimConfig
-from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
-from gtrig.sim.lasers import configure_scene, simulate_fixed_scans
-from gtrig.sim.motion import RobotMotion, agile_path
+
+from .conftest import agile_fixed_scans
 
 
 def _moved(scanner, d):  # noqa: ANN001, ANN202
@@ -34,15 +31,9 @@ def _moved(scanner, d):  # noqa: ANN001, ANN202
 def moved():
     cfg = SimConfig(seed=5, laser=LaserSimConfig(clock_offset_sigma_s=0.0),
                     motion=MotionSimConfig(profile="agile", speed_mps=1.0))
-    sc = configure_scene(make_scene(5), cfg)
-    ts, xyth = agile_path(VALIDATION_POSES, 1.0, duration_s=8.0)
-    mot = RobotMotion(ts, xyth, sc.floor)
-    bgs, _ = simulate_fixed_scans(sc, None, np.array([[-10.0, -9.0]]), cfg, 51)
-    runs, _ = simulate_fixed_scans(sc, mot, np.array([[0.0, ts[-1]]]), cfg, 53)
+    sc, _, runs, masks = agile_fixed_scans(cfg, 5, (51, 53))
     scs = sc.rig_true.laser_scanners
     model = HullModel.from_hull(sc.rig_true.robot.hull)
-    masks = [foreground_mask(runs[s.name].ranges_m, foreground_threshold(build_background(bgs[s.name].ranges_m, s)))
-             for s in scs]
 
     def track(scanners):  # noqa: ANN001, ANN202
         fp = frame_points(scanners, [runs[s.name].stamps_s for s in scanners],

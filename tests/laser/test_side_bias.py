@@ -7,16 +7,13 @@ import numpy as np
 import pytest
 
 from gtrig.geometry import wrap_angle
-from gtrig.laser.background import build_background
-from gtrig.laser.foreground import foreground_mask, foreground_threshold
 from gtrig.laser.fuse import frame_points
 from gtrig.laser.hull_icp import HullModel
 from gtrig.laser.side_bias import estimate_side_bias
 from gtrig.laser.track import OK, TrackSettings, track_frames
 from gtrig.sim.config import LaserSimConfig, MotionSimConfig, SimConfig
-from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
-from gtrig.sim.lasers import configure_scene, simulate_fixed_scans
-from gtrig.sim.motion import RobotMotion, agile_path
+
+from .conftest import agile_fixed_scans
 
 FABRICS = (0.1, 0.9, 0.1, 0.9)  # dark rear and front, light sides
 BIAS_M = 0.03  # black to white: glossy or very dark cloth
@@ -27,14 +24,8 @@ def tracked():
     cfg = SimConfig(seed=3, laser=LaserSimConfig(gown_reflectivity=FABRICS, reflectivity_bias_m=BIAS_M,
                                                  clock_offset_sigma_s=0.0),
                     motion=MotionSimConfig(profile="agile", speed_mps=1.0))
-    sc = configure_scene(make_scene(3), cfg)
-    ts, xyth = agile_path(VALIDATION_POSES, 1.0, duration_s=8.0)
-    mot = RobotMotion(ts, xyth, sc.floor)
-    bgs, _ = simulate_fixed_scans(sc, None, np.array([[-10.0, -9.0]]), cfg, 31)
-    runs, _ = simulate_fixed_scans(sc, mot, np.array([[0.0, ts[-1]]]), cfg, 33)
+    sc, mot, runs, masks = agile_fixed_scans(cfg, 3, (31, 33))
     scs = sc.rig_true.laser_scanners
-    masks = [foreground_mask(runs[s.name].ranges_m, foreground_threshold(build_background(bgs[s.name].ranges_m, s)))
-             for s in scs]
     fp = frame_points(scs, [runs[s.name].stamps_s for s in scs], [runs[s.name].ranges_m for s in scs], masks)
     model = HullModel.from_hull(sc.rig_true.robot.hull)
     out = {}
