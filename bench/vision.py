@@ -23,7 +23,10 @@ Levels
     through :mod:`gtrig.io.png`, 6 ms through OpenCV),
     the localized share and the accuracy against the truth of both, beside OpenCV's bare whole-image
     detection of the same images (``cv2.aruco.ArucoDetector`` with its default parameters and threads, a
-    dictionary of the rig's markers; reading not counted).
+    dictionary of the rig's markers; reading not counted). With ``--split``, the tracked detection pass again
+    in this process, its CPU split by part (reading, the change test, OpenCV's candidates, the edge fits, ID
+    verification, corners and covariances to raw pixels, markers cut by the image's edge, lens maps, the
+    rest: tracking, windows, crops, duplicates and records).
 
 ``consistency``: the validation poses rendered by the test renderer at three grey-level noises and two
     blurs, the rig stated exactly (sigmas 1e-6): NEES/dof with 95 % intervals in 6-DoF and planar, the
@@ -34,7 +37,7 @@ Usage: ``python bench/vision.py [--seeds 0 1 2] [--level corners images] [--work
 ``python bench/vision.py --level consistency --seeds 0 [--noise-grey 0.5 1.5 4] [--blur-px 0.5 1.5]
 [--stop-images 2] [--corner-floor-px 0.1]``;
 ``python bench/vision.py --level recording --recording REC --rig REC_OUT/rig.calibrated.yaml --workers 2``;
-``python bench/vision.py --level tracking --recording REC --rig RIG --workers 2 [--sequence run]``
+``python bench/vision.py --level tracking --recording REC --rig RIG --workers 2 [--sequence run] [--split]``
 """
 
 from __future__ import annotations
@@ -45,8 +48,10 @@ import math
 import os
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -286,7 +291,73 @@ def _cpu_s() -> float:
     return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
 
 
-def bench_tracking(rec: Path, rig_path: Path, workers: int, sequence: str) -> None:
+#: What the detection pass's CPU is split into (``--split``): (module, attribute, part), each function's own
+#: CPU (process time, its helper threads included while the caller waits on them), nested calls to the
+#: other listed ones taken out; what is left of the pass is its glue (tracking, windows, crops, duplicates,
+#: the detections' records)
+_DETECTION_PARTS = (
+    ("gtrig.vision.sequence", "read_image", "reading"),
+    ("gtrig.vision.track", "cell_means", "change test (cell means)"),
+    ("gtrig.markers.detect.peers", "opencv_candidates", "OpenCV candidates"),
+    ("gtrig.markers.detect", "refine_quads", "edge fits"),
+    ("gtrig.markers.detect", "read_whiteness", "ID verification"),
+    ("gtrig.markers.detect", "read_whiteness_plain", "ID verification"),
+    ("gtrig.markers.detect", "verify_ids", "ID verification"),
+    ("gtrig.markers.detect.MarkerDetector", "_accepted", "corners and covariances to raw pixels"),
+    ("gtrig.vision.siblings", "cut_siblings", "markers cut by the edge (robot pose, prediction)"),
+    ("gtrig.vision.detect.GtrigDetector", "prepare_lens_maps", "lens maps (once per camera and process)"),
+)
+
+
+def _resolve(path: str) -> object:
+    import importlib
+
+    try:
+        return importlib.import_module(path)
+    except ModuleNotFoundError:
+        mod, _, name = path.rpartition(".")
+        return getattr(importlib.import_module(mod), name)
+
+
+def detection_split(rec: Path, rig: Rig, sequence: str) -> tuple[int, float, dict[str, float]]:
+    """The tracked detection pass of ``sequence`` run in this process (one worker), its CPU split by part
+    (:data:`_DETECTION_PARTS`): ``(images, CPU seconds of the pass, {part: own CPU seconds})``, the glue
+    under "rest"."""
+    from gtrig.vision import sequence as seq
+    from gtrig.vision.track import TrackOptions
+
+    own: dict[str, float] = {}
+    stack: list[float] = []
+    saved = []
+
+    def timed(fn: Callable[..., Any], part: str) -> Callable[..., Any]:
+        def run(*a: Any, **k: Any) -> Any:
+            c0 = time.process_time()
+            stack.append(0.0)
+            try:
+                return fn(*a, **k)
+            finally:
+                d, inner = time.process_time() - c0, stack.pop()
+                own[part] = own.get(part, 0.0) + d - inner
+                if stack:
+                    stack[-1] += d
+        return run
+
+    for path, name, part in (*_DETECTION_PARTS, ("gtrig.vision.sequence", "_detect_all", "rest")):
+        owner = _resolve(path)
+        saved.append((owner, name, owner.__dict__[name]))
+        setattr(owner, name, timed(getattr(owner, name), part))
+    try:
+        with tempfile.TemporaryDirectory() as d:
+            res = seq.run_recording(rec, rig, sequence, planar=True, workers=1, track=TrackOptions(),
+                                    checkpoint=Path(d) / "detections.checkpoint", estimate_noise=False)
+    finally:
+        for owner, name, fn in reversed(saved):
+            setattr(owner, name, fn)
+    return sum(res.images_per_camera.values()), sum(own.values()), own
+
+
+def bench_tracking(rec: Path, rig_path: Path, workers: int, sequence: str, split: bool = False) -> None:
     from gtrig.io.frames import read_image
     from gtrig.rig import load_rig
     from gtrig.vision.detect import aruco_for_rig
@@ -349,6 +420,13 @@ def bench_tracking(rec: Path, rig_path: Path, workers: int, sequence: str) -> No
     print(f"\nOpenCV ArucoDetector (defaults, its own threads), the same {n_cv} images: {n_cv / t_cv:.1f} images/s "
           f"of detection ({1e3 * t_cv / n_cv:.2f} ms per image, {found} markers; reading the images, not counted: "
           f"{1e3 * t_read / n_cv:.2f} ms per image, {read_ms:.2f} ms CPU)")
+    if split:
+        n_pass, cpu_pass, parts = detection_split(rec, rig, sequence)
+        print(f"\nThe tracked detection pass in one process (reading included), {1e3 * cpu_pass / n_pass:.2f} ms CPU "
+              "per image, by part (each part's own CPU, ms per image):\n")
+        print("| part | ms CPU per image | share |\n|---|---:|---:|")
+        for part, part_s in sorted(parts.items(), key=lambda kv: -kv[1]):
+            print(f"| {part} | {1e3 * part_s / n_pass:.3f} | {100 * part_s / cpu_pass:.1f} % |")
 
 
 def _render_validation(rec: Path, rig: Rig, Ts: list[np.ndarray], rng: np.random.Generator, frames: int,
@@ -440,6 +518,8 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=0)
     ap.add_argument("--frames", type=int, default=3)
     ap.add_argument("--sequence", default="run", choices=["run", "validation"], help="level tracking")
+    ap.add_argument("--split", action="store_true",
+                    help="level tracking: also the tracked detection pass in one process, its CPU split by part")
     a = ap.parse_args()
     if "corners" in a.level:
         bench_corners(a.seeds, a.noise_px)
@@ -454,7 +534,7 @@ def main() -> None:
     if "tracking" in a.level:
         if a.recording is None or a.rig is None:
             ap.error("--level tracking needs --recording and --rig")
-        bench_tracking(a.recording, a.rig, a.workers, a.sequence)
+        bench_tracking(a.recording, a.rig, a.workers, a.sequence, a.split)
 
 
 if __name__ == "__main__":
