@@ -19,8 +19,14 @@ declaring the other timing (the beam timing check of gtrig.laser.beam_timing sho
 point-to-point ``registration_icp`` (outline points of the hull to the same foreground points, started
 from its own previous pose), else a SciPy KD-tree ICP; the table says which.
 
+The room's surfaces range with the biases of their materials, the same in every run of a seed's room, so
+a seed is one draw of the calibration's error: ``--surface-draws N`` runs each scenario and seed in N rooms
+whose walls' and boxes' materials (``laser.surface_draw``) and noise are drawn anew, and summarises the
+NEES / dof over them (the network's common shift and rotation, its scanners jointly, the track's calibration
+share and the track) with 95 % intervals; ``--calibration-draws N`` only calibrates, in N such rooms per seed.
+
     python bench/laser.py [--seeds 0 1 2] [--scenarios cruise agile agile-blocked] [--duration S]
-                          [--no-peer] [--by-turn-rate]
+                          [--no-peer] [--by-turn-rate] [--surface-draws N] [--calibration-draws N]
 """
 
 from __future__ import annotations
@@ -32,7 +38,7 @@ import time
 import numpy as np
 
 from gtrig.evaluate.gt_aware import batch_interval
-from gtrig.geometry import wrap_angle
+from gtrig.geometry import T_to_se2, wrap_angle
 from gtrig.io.scans import ScanLog
 from gtrig.laser.background import build_background
 from gtrig.laser.beam_timing import check_beam_timing, timing_check
@@ -242,18 +248,63 @@ def measured_clocks(fp, vision, corners_xy: np.ndarray) -> dict[str, ScannerCloc
     return clocks_from_sync(doc, "vision")
 
 
+def network_errors(cal, cov_xytheta: np.ndarray, true_scanners) -> dict:  # noqa: ANN001
+    """The calibrated scanners' planar pose errors (world x, y m, theta rad) against the true ones and what
+    the calibration states of them: the joint NEES / dof (3 S dof), and the network's common shift and
+    rotation (the mean of the scanners' errors: a rigid motion of the whole network about its scanners'
+    centroid, which every robot pose inherits) with its stated sd and NEES / dof (3 dof)."""
+    e = []
+    for s, t in zip(cal, true_scanners, strict=True):
+        d = T_to_se2(s.T_world_scanner.matrix()) - T_to_se2(t.T_world_scanner.matrix())
+        d[2] = wrap_angle(d[2])
+        e.append(d)
+    z = np.concatenate(e)
+    P = np.tile(np.eye(3), len(e)) / len(e)
+    g, Cg = P @ z, P @ cov_xytheta @ P.T
+    return {"joint_nees_dof": float(z @ np.linalg.solve(cov_xytheta, z)) / z.size, "common": g,
+            "common_sd": np.sqrt(np.diag(Cg)), "common_nees_dof": float(g @ np.linalg.solve(Cg, g)) / 3}
+
+
+def _scene_and_config(seed: int, laser: dict, motion: dict | None, draw: int) -> tuple:
+    """The configured scene (its rigs stating the scanners' clock sigma, as a recording's rig.yaml does) and
+    the settings; ``draw`` > 0: the surfaces' materials and the measurement noise both redrawn."""
+    if draw:
+        laser = {**laser, "surface_draw": draw}
+    cfg = SimConfig(seed=seed, noise_draw=draw, laser=LaserSimConfig(**laser),
+                    motion=MotionSimConfig(**(motion or {})))
+    sc = configure_scene(make_scene(seed), cfg)
+    sc = dataclasses.replace(sc, rig_true=with_scanner_stamp_sigma(sc.rig_true),
+                             rig_nominal=with_scanner_stamp_sigma(sc.rig_nominal))
+    return sc, cfg
+
+
+def _calibrated_network(sc, cfg: SimConfig, seed: int) -> tuple:  # noqa: ANN001
+    """The background sequence, the scanners calibrated from it and the report, the CPU seconds the
+    calibration took, and :func:`network_errors`."""
+    bgs, _ = simulate_fixed_scans(sc, None, np.array([[-10.0, -10.0 + cfg.background_s]]), cfg, seed * 10 + 1)
+    obj = [b.corners_xy() for b in sc.boxes if b.name.startswith("calib_object")]
+    nom = sc.rig_nominal.laser_scanners
+    t0 = time.process_time()
+    cal, rep = calibrate_scanners(nom, [build_background(bgs[s.name].ranges_m, s) for s in nom], obj)
+    t_cal = time.process_time() - t0
+    return bgs, cal, rep, t_cal, network_errors(cal, rep.cov_xytheta, sc.rig_true.laser_scanners)
+
+
+def calibration_draw(seed: int, draw: int) -> dict:
+    """``{"seed", "network"}``: :func:`network_errors` of the scanners calibrated from one background
+    sequence of the room of ``seed`` with its surfaces' materials and noise of ``draw`` (0: the seed's own)."""
+    sc, cfg = _scene_and_config(seed, {}, None, draw)
+    return {"seed": seed, "network": _calibrated_network(sc, cfg, seed)[-1]}
+
+
 def run_seed(seed: int, duration: float | None, laser: dict | None = None, motion: dict | None = None,
-             calibrate: bool = True, validate: bool = True, peer: bool = True) -> dict:
+             calibrate: bool = True, validate: bool = True, peer: bool = True, draw: int = 0) -> dict:
     laser = dict(laser or {})
     ideal = bool(laser.pop("ideal", False))  # exact geometry: no noise, bias, mixed pixels, clock offsets
     declared = laser.pop("declared", None)  # the rig's beam timing when it differs from the scanners'
     clocks = laser.pop("clocks", None)  # "common": the offsets' mean only; "differences": mean removed;
     # "synced": each scanner's offset measured by the sync stage's fit against a GTvision stand-in and removed
-    cfg = SimConfig(seed=seed, laser=LaserSimConfig(**laser), motion=MotionSimConfig(**(motion or {})))
-    sc = configure_scene(make_scene(seed), cfg)
-    # the rigs say how well the scanners' clocks are synchronised, as a recording's rig.yaml does
-    sc = dataclasses.replace(sc, rig_true=with_scanner_stamp_sigma(sc.rig_true),
-                             rig_nominal=with_scanner_stamp_sigma(sc.rig_nominal))
+    sc, cfg = _scene_and_config(seed, laser, motion, draw)
     if cfg.motion.profile == "agile":
         m = cfg.motion
         ts, xyth = agile_path(VALIDATION_POSES, m.speed_mps, m.accel_mps2, m.lat_accel_mps2,
@@ -261,7 +312,7 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
     else:
         ts, xyth = continuous_path(speed_mps=cfg.motion.speed_mps, duration_s=duration)
     mot = RobotMotion(ts, xyth, sc.floor)
-    bgs, _ = simulate_fixed_scans(sc, None, np.array([[-10.0, -10.0 + cfg.background_s]]), cfg, seed * 10 + 1)
+    bgs, cal, rep, t_cal, network = _calibrated_network(sc, cfg, seed)
     runs, info = simulate_fixed_scans(sc, mot, np.array([[0.0, ts[-1]]]), cfg, seed * 10 + 3, ideal=ideal)
     if clocks in ("common", "differences"):  # the same scans re-stamped: an offset only shifts a scanner's stamps
         off = info.clock_offsets_s
@@ -271,11 +322,6 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
     if validate:
         val, val_iv = static_motion(VALIDATION_POSES, sc.floor, cfg.static_pose_s)
         vals, _ = simulate_fixed_scans(sc, val, val_iv, cfg, seed * 10 + 2)
-    obj = [b.corners_xy() for b in sc.boxes if b.name.startswith("calib_object")]
-    nom = sc.rig_nominal.laser_scanners
-    t0 = time.perf_counter()
-    cal, rep = calibrate_scanners(nom, [build_background(bgs[s.name].ranges_m, s) for s in nom], obj)
-    t_cal = time.perf_counter() - t0
     cal_err = []
     for s, t in zip(cal, sc.rig_true.laser_scanners, strict=True):
         a, b = s.T_world_scanner.matrix(), t.T_world_scanner.matrix()
@@ -290,6 +336,7 @@ def run_seed(seed: int, duration: float | None, laser: dict | None = None, motio
         "cal_pos_mm": 1000 * np.mean([e[0] for e in cal_err]),
         "cal_yaw_deg": np.degrees(np.mean([e[1] for e in cal_err])),
         "cal_s": t_cal,
+        "network": network,
     }
     model = HullModel.from_hull(sc.rig_true.robot.hull)
     if clocks == "synced":
@@ -436,6 +483,80 @@ def _nees(iv) -> str:  # noqa: ANN001
     return f"{iv.value:.2f} [{iv.low:.2f}, {iv.high:.2f}]"
 
 
+def _print_run(name: str, seed: int, r: dict) -> None:
+    """One scenario's row of the table and its calibration share's line."""
+    c, t = r["calibrated"], r["true"]
+    b = r.get("baseline")
+    peer = f"{b['pos_mm']:.1f} | {b['yaw_mod_pi_deg']:.2f} | {100 * b['share_5cm']:.1f} %" if b else "- | - | -"
+    print(
+        f"| {name} | {seed} | {c['speed_max']:.2f} | {c['frames']} | {100 * c['loc_2sides']:.2f} % | "
+        f"{c['pos_mm']:.2f} / {c['ok_max_mm']:.1f} | {c['yaw_deg']:.3f} | "
+        f"{_nees(c['nees_dof'])} ({_nees(t['nees_dof'])}) | {c['ok_wrong_5cm']} | {peer} | "
+        f"{c['timing'][0]} (max {c['timing'][1]:.1f} sd) |",
+        flush=True,
+    )
+    cs, nw = r["calibration_share"], r["network"]
+    print(f"  calibration's share, calibrated minus true scanners' track: mean over the run x / y "
+          f"{1e3 * cs['mean'][0]:+.3f} / {1e3 * cs['mean'][1]:+.3f} mm, yaw {1e3 * cs['mean'][2]:+.4f} mrad "
+          f"(stated sd {1e3 * cs['stated_sd'][0]:.3f} / {1e3 * cs['stated_sd'][1]:.3f} mm, "
+          f"{1e3 * cs['stated_sd'][2]:.4f} mrad; NEES/dof {cs['mean_nees_dof']:.2f}); per frame rms "
+          f"{1e3 * cs['frame_rms'][0]:.3f} / {1e3 * cs['frame_rms'][1]:.3f} mm, "
+          f"{1e3 * cs['frame_rms'][2]:.4f} mrad (stated {1e3 * cs['frame_sd'][0]:.3f} / "
+          f"{1e3 * cs['frame_sd'][1]:.3f} mm, {1e3 * cs['frame_sd'][2]:.4f} mrad; NEES/dof "
+          f"{cs['frame_nees_dof']:.2f})", flush=True)
+    print(f"  scanners' network: joint NEES/dof {nw['joint_nees_dof']:.2f}; common shift x / y "
+          f"{_network_common(nw)}", flush=True)
+    if "measured_offsets_ms" in r:
+        m = r["measured_offsets_ms"]["calibrated"]
+        print("  offsets true / measured (sigma), ms: " + ", ".join(
+            f"{k} {r['true_offsets_ms'][k]:+.2f} / {m[k][0]:+.2f} ({m[k][1]:.2f})" if k in m
+            else f"{k} {r['true_offsets_ms'][k]:+.2f} / -" for k in r["true_offsets_ms"]), flush=True)
+
+
+def _network_common(nw: dict) -> str:
+    g, sd = 1e3 * nw["common"], 1e3 * nw["common_sd"]
+    return (f"{g[0]:+.3f} / {g[1]:+.3f} mm, rotation {g[2]:+.4f} mrad (stated sd {sd[0]:.3f} / {sd[1]:.3f} mm, "
+            f"{sd[2]:.4f} mrad; NEES/dof {nw['common_nees_dof']:.2f})")
+
+
+def _print_by_turn_rate(rates: list) -> None:
+    heads = [f"{lo:g}-{hi:g}" if np.isfinite(hi) else f">= {lo:g}"
+             for lo, hi in zip(TURN_RATE_EDGES[:-1], TURN_RATE_EDGES[1:], strict=True)]
+    print()
+    print("Mean |yaw| error (deg) of the OK frames by |true yaw rate| (rad/s), calibrated scanners; in brackets")
+    print("the share of frames; lag: the slope of the signed yaw error on the yaw rate (err = -lag * rate).")
+    print()
+    print("| scenario | seed | " + " | ".join(heads) + " | lag (ms) |")
+    print("|---|---|" + "---|" * len(heads) + "---|")
+    for name, seed, r in rates:
+        br = r["calibrated"]["by_rate"]
+        cells = " | ".join(f"{y:.3f} ({100 * f:.0f} %)" for f, y in br["bins"])
+        print(f"| {name} | {seed} | {cells} | {br['lag_ms']:+.2f} |", flush=True)
+
+
+def _draws_summary(label: str, runs: list[dict]) -> None:
+    """NEES / dof over independent draws (surfaces' materials and noise), the mean and its 95 % interval
+    (Student t over the draws), for the network's common shift and rotation, its scanners jointly and,
+    where the run was tracked, the track's calibration share (its mean over the run and per frame) and the
+    track itself; and the common shift's rms error against its stated sd."""
+    nw = [r["network"] for r in runs]
+    g = np.array([n["common"] for n in nw])
+    sd = np.array([n["common_sd"] for n in nw])
+    rms, st = 1e3 * np.sqrt(np.mean(g**2, axis=0)), 1e3 * np.sqrt(np.mean(sd**2, axis=0))
+    rows = {"network's common shift and rotation": [n["common_nees_dof"] for n in nw],
+            "scanners jointly": [n["joint_nees_dof"] for n in nw]}
+    if "calibration_share" in runs[0]:
+        rows["track's calibration share, mean over the run"] = [r["calibration_share"]["mean_nees_dof"]
+                                                                for r in runs]
+        rows["track's calibration share, per frame"] = [r["calibration_share"]["frame_nees_dof"] for r in runs]
+        rows["track, calibrated scanners"] = [r["calibrated"]["nees_dof"].value for r in runs]
+    print(f"\n{label}, {len(runs)} draws: NEES / dof, mean over the draws [95 %]")
+    for k, v in rows.items():
+        print(f"  {k}: {_nees(batch_interval(np.array(v)))}")
+    print(f"  common shift rms x / y {rms[0]:.3f} / {rms[1]:.3f} mm, rotation {rms[2]:.4f} mrad "
+          f"(stated sd {st[0]:.3f} / {st[1]:.3f} mm, {st[2]:.4f} mrad)", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
@@ -447,7 +568,17 @@ def main() -> None:
                     help="every scenario with its scanners' offsets measured and removed (as agile-synced)")
     ap.add_argument("--by-turn-rate", action="store_true",
                     help="also print, per run, the mean |yaw| error by |true yaw rate| and the apparent lag")
+    ap.add_argument("--surface-draws", type=int, default=0, metavar="N",
+                    help="run every scenario and seed in N rooms whose surfaces' materials (range biases) and "
+                         "noise are drawn anew (draws 1..N) instead of the seed's own, and summarise over them")
+    ap.add_argument("--calibration-draws", type=int, default=0, metavar="N",
+                    help="only calibrate the scanners, in N drawn rooms per seed, and summarise over them")
     a = ap.parse_args()
+    if a.calibration_draws:
+        runs = [calibration_draw(seed, k) for seed in a.seeds for k in range(1, a.calibration_draws + 1)]
+        _draws_summary(f"the scanners' calibration, seeds {a.seeds}", runs)
+        print(f"\nCPU time of this process: {time.process_time():.0f} s")
+        return
     print("GTlaser benchmark: 4 scanners x 75 Hz, people walking, uneven floor; the whole run unless --duration")
     print("Same foreground points for both methods; Open3D is started from GTlaser's first pose and then")
     print("from its own previous one (no prediction); its yaw is taken modulo 180 deg.")
@@ -457,53 +588,24 @@ def main() -> None:
           "| NEES/dof calibrated [95 %] (true [95 %]) | OK > 5 cm | peer pos (mm) | peer yaw mod 180 (deg) "
           "| peer share < 5 cm | beam timing check (calibrated) |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    rates = []
+    rates, drawn = [], {}
+    draws = range(1, a.surface_draws + 1) if a.surface_draws else (0,)
     for name in a.scenarios:
         laser, motion = SCENARIOS[name]
         if a.synced:
             laser = {**laser, "clocks": "synced"}
         seeds = a.blocked_seeds if "blocked" in name else a.seeds
         for seed in seeds:
-            r = run_seed(seed, a.duration, laser, motion, validate=False, peer=not a.no_peer)
-            c, t = r["calibrated"], r["true"]
-            b = r.get("baseline")
-            peer = (f"{b['pos_mm']:.1f} | {b['yaw_mod_pi_deg']:.2f} | {100 * b['share_5cm']:.1f} %" if b
-                    else "- | - | -")
-            print(
-                f"| {name} | {seed} | {c['speed_max']:.2f} | {c['frames']} | {100 * c['loc_2sides']:.2f} % | "
-                f"{c['pos_mm']:.2f} / {c['ok_max_mm']:.1f} | {c['yaw_deg']:.3f} | "
-                f"{_nees(c['nees_dof'])} ({_nees(t['nees_dof'])}) | {c['ok_wrong_5cm']} | {peer} | "
-                f"{c['timing'][0]} (max {c['timing'][1]:.1f} sd) |",
-                flush=True,
-            )
-            rates.append((name, seed, r))
-            cs = r["calibration_share"]
-            print(f"  calibration's share, calibrated minus true scanners' track: mean over the run x / y "
-                  f"{1e3 * cs['mean'][0]:+.3f} / {1e3 * cs['mean'][1]:+.3f} mm, yaw {1e3 * cs['mean'][2]:+.4f} mrad "
-                  f"(stated sd {1e3 * cs['stated_sd'][0]:.3f} / {1e3 * cs['stated_sd'][1]:.3f} mm, "
-                  f"{1e3 * cs['stated_sd'][2]:.4f} mrad; NEES/dof {cs['mean_nees_dof']:.2f}); per frame rms "
-                  f"{1e3 * cs['frame_rms'][0]:.3f} / {1e3 * cs['frame_rms'][1]:.3f} mm, "
-                  f"{1e3 * cs['frame_rms'][2]:.4f} mrad (stated {1e3 * cs['frame_sd'][0]:.3f} / "
-                  f"{1e3 * cs['frame_sd'][1]:.3f} mm, {1e3 * cs['frame_sd'][2]:.4f} mrad; NEES/dof "
-                  f"{cs['frame_nees_dof']:.2f})", flush=True)
-            if "measured_offsets_ms" in r:
-                m = r["measured_offsets_ms"]["calibrated"]
-                print("  offsets true / measured (sigma), ms: " + ", ".join(
-                    f"{k} {r['true_offsets_ms'][k]:+.2f} / {m[k][0]:+.2f} ({m[k][1]:.2f})" if k in m
-                    else f"{k} {r['true_offsets_ms'][k]:+.2f} / -" for k in r["true_offsets_ms"]), flush=True)
+            for k in draws:
+                r = run_seed(seed, a.duration, laser, motion, validate=False, peer=not a.no_peer, draw=k)
+                _print_run(f"{name}, surfaces {k}" if k else name, seed, r)
+                rates.append((name, seed, r))
+                drawn.setdefault(name, []).append(r)
+    if a.surface_draws:
+        for name, runs in drawn.items():
+            _draws_summary(f"{name}, seeds {sorted({r['seed'] for r in runs})}", runs)
     if a.by_turn_rate:
-        heads = [f"{lo:g}-{hi:g}" if np.isfinite(hi) else f">= {lo:g}"
-                 for lo, hi in zip(TURN_RATE_EDGES[:-1], TURN_RATE_EDGES[1:], strict=True)]
-        print()
-        print("Mean |yaw| error (deg) of the OK frames by |true yaw rate| (rad/s), calibrated scanners; in brackets")
-        print("the share of frames; lag: the slope of the signed yaw error on the yaw rate (err = -lag * rate).")
-        print()
-        print("| scenario | seed | " + " | ".join(heads) + " | lag (ms) |")
-        print("|---|---|" + "---|" * len(heads) + "---|")
-        for name, seed, r in rates:
-            br = r["calibrated"]["by_rate"]
-            cells = " | ".join(f"{y:.3f} ({100 * f:.0f} %)" for f, y in br["bins"])
-            print(f"| {name} | {seed} | {cells} | {br['lag_ms']:+.2f} |", flush=True)
+        _print_by_turn_rate(rates)
     print(f"\nCPU time of this process: {time.process_time():.0f} s")
 
 

@@ -46,6 +46,9 @@ class LaserSimConfig(_Cfg):
     gown_reflectivity: tuple[float, float, float, float] | None = Field(
         default=None, description="per hull side (rear, right, front, left fabric; 0 black, 1 white); "
                                   "None: one light fabric all round")
+    surface_draw: int = Field(
+        default=0, ge=0, description="0: the room's designed wall and clutter materials; k > 0: the k-th seeded "
+        "draw of every wall's and box's reflectivity, so of its range bias (gtrig.sim.lasers.surface_reflectivities)")
 
 
 class MotionSimConfig(_Cfg):

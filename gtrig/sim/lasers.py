@@ -48,6 +48,11 @@ MIXED_MAX_SEPARATION_M = 1.0
 WALL_REFLECTIVITY = 0.8  # painted plaster
 GOWN_REFLECTIVITY = 0.7  # light fabric over cardboard
 LEG_REFLECTIVITY = 0.35  # trousers
+# A surface draw (``cfg.laser.surface_draw`` > 0) gives every wall and every clutter box a reflectivity of
+# its own, uniform over the span of the designed room's materials (heaters 0.9 to the darkest box 0.3):
+# rooms that differ in what their surfaces' range biases are, for Monte Carlo over that error.
+SURFACE_REFLECTIVITY_SPAN = (0.3, 0.9)
+_SURFACE_DRAW_SALT = 0x5EF1EC7
 # Range quantisation of the devices (SICK LMS2xx mm mode, Hokuyo URG: 1 mm).
 RANGE_RESOLUTION_M = 0.001
 # Scanner clocks: each scanner's stamps are late or early by a fixed offset (residual synchronisation
@@ -170,13 +175,31 @@ def _box_contains(bx: Box, xy: np.ndarray) -> bool:
     return abs(c * d[0] + s * d[1]) <= bx.size[0] / 2 and abs(-s * d[0] + c * d[1]) <= bx.size[1] / 2
 
 
+def surface_reflectivities(scene: Scene, draw: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Reflectivities (0 black, 1 white) of the walls (W,) and of the clutter boxes (scene order, (K,)).
+
+    Parameters
+    ----------
+    scene : the room.
+    draw : 0: the designed materials (walls ``WALL_REFLECTIVITY``, each box its own); k > 0: the k-th
+        seeded draw (scene seed and ``k``), each wall and each box uniform over
+        ``SURFACE_REFLECTIVITY_SPAN``, one material over all of a box's faces.
+    """
+    if draw == 0:
+        return np.full(len(scene.walls), WALL_REFLECTIVITY), np.array([b.reflectivity for b in scene.boxes])
+    rng = np.random.default_rng([scene.seed, _SURFACE_DRAW_SALT, int(draw)])
+    rho = rng.uniform(*SURFACE_REFLECTIVITY_SPAN, len(scene.walls) + len(scene.boxes))
+    return rho[: len(scene.walls)], rho[len(scene.walls):]
+
+
 def static_segments(
-    scene: Scene, mount_xy: ArrayLike | None = None
+    scene: Scene, mount_xy: ArrayLike | None = None, surface_draw: int = 0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Walls and clutter faces as world x-y segments.
 
     A box whose footprint holds ``mount_xy`` (a fixed scanner's position) is taken as that scanner's
-    mount and left out: a scanner does not see the inside of the stand it sits in.
+    mount and left out: a scanner does not see the inside of the stand it sits in. ``surface_draw``
+    chooses the surfaces' reflectivities (:func:`surface_reflectivities`).
 
     Returns
     -------
@@ -184,16 +207,17 @@ def static_segments(
     z_top_m : (S,) height of each face's top (``inf`` for walls).
     reflectivity : (S,)
     """
+    wall_refl, box_refl = surface_reflectivities(scene, surface_draw)
     segs = [np.asarray(scene.walls, dtype=float)]
     z_top = [np.full(len(scene.walls), np.inf)]
-    refl = [np.full(len(scene.walls), WALL_REFLECTIVITY)]
-    for bx in scene.boxes:
+    refl = [wall_refl]
+    for bx, rho in zip(scene.boxes, box_refl, strict=True):
         if mount_xy is not None and _box_contains(bx, np.asarray(mount_xy)):
             log.debug("box %s holds a scanner at %s: taken as its mount", bx.name, mount_xy)
             continue
         segs.append(_polygon_segments(bx.corners_xy()))
         z_top.append(np.full(4, bx.size[2]))
-        refl.append(np.full(4, bx.reflectivity))
+        refl.append(np.full(4, rho))
     return np.concatenate(segs), np.concatenate(z_top), np.concatenate(refl)
 
 
@@ -401,7 +425,7 @@ def simulate_fixed_scans(
         noise = noise_stream(rng, [seed, si], cfg.noise_draw_of("sensors"))
         T_ws = sc.T_world_scanner.matrix()
         T_sw = geo.inv_T(T_ws)
-        segs, z_top, seg_refl = static_segments(scene, T_ws[:2, 3])
+        segs, z_top, seg_refl = static_segments(scene, T_ws[:2, 3], cfg.laser.surface_draw)
         ang = sc.angles_rad
         B = len(ang)
         delays = _beam_delays(ang, sc.rate_hz, sc.beam_timing)
@@ -499,7 +523,7 @@ def simulate_onboard_scans(
     """
     iv = _check_intervals(intervals_s)
     people = sequence_people(scene, motion, iv, cfg)
-    segs, z_top, seg_refl = static_segments(scene)
+    segs, z_top, seg_refl = static_segments(scene, surface_draw=cfg.laser.surface_draw)
     offsets = _subray_offsets(cfg.laser.mixed_pixels and not ideal)
     J = len(offsets)
     out: dict[str, ScanLog] = {}

@@ -112,7 +112,7 @@ def _write_rigs_and_truth(scene: Scene, tl: Timeline, out: Path, cfg: SimConfig)
     # the lab knows its cameras' time-stamp jitter (datasheet, or a sync test): the rig says it
     dump_rig(_with_stamp_sigma(scene.rig_nominal, cfg), out / "rig.yaml")
     dump_rig(_with_stamp_sigma(scene.rig_true, cfg), out / "truth" / "rig.yaml")
-    settings = cfg.model_dump(mode="json", exclude=_default_noise_settings(cfg))
+    settings = cfg.model_dump(mode="json", exclude=_default_draw_settings(cfg))
     atomic_write_text(out / "sim_config.yaml", yaml.safe_dump(settings, sort_keys=False))
     run_T = tl.run.T_world_robot_many(tl.run.stamps_s)
     write_tum(out / "truth" / "run.tum", Trajectory.from_matrices(tl.run.stamps_s, run_T))
@@ -269,20 +269,28 @@ STEPS: tuple[tuple[str, Step], ...] = (
 )
 
 
-def _default_noise_settings(cfg: SimConfig) -> set[str]:
-    """The noise-draw settings at their defaults: named neither in ``sim_config.yaml`` nor in the key, so
-    that a recording of the seed's own noise has one key and one ``sim_config.yaml`` whichever version of
-    the simulator wrote it."""
-    unset = {"noise_draw"} if cfg.noise_draw == 0 else set()
-    return unset | ({"noise_redrawn"} if cfg.noise_redrawn == "all" else set())
+def _default_draw_settings(cfg: SimConfig) -> dict[str, Any]:
+    """The draw settings at their defaults (the measurement noise's and the surfaces' materials'), as
+    ``model_dump``'s ``exclude``: named neither in ``sim_config.yaml`` nor in the key, so that a recording
+    of the seed's own noise and room has one key and one ``sim_config.yaml`` whichever version of the
+    simulator wrote it."""
+    unset: dict[str, Any] = {"noise_draw": True} if cfg.noise_draw == 0 else {}
+    if cfg.noise_redrawn == "all":
+        unset["noise_redrawn"] = True
+    if cfg.laser.surface_draw == 0:
+        unset["laser"] = {"surface_draw"}
+    return unset
 
 
 def _config_key(cfg: SimConfig, plan: Rig | None = None, path: PlannedPath | None = None) -> str:
     # workers change speed, never output
     # the robot clock's offset joined the settings later: at its default it leaves the key unchanged
     # so did the sweeps' board (chessboard by default)
-    skip = ({"workers"} | ({"odometry_clock_offset_s"} if cfg.odometry_clock_offset_s == 0 else set())
-            | ({"calib_board"} if cfg.calib_board == "chessboard" else set()) | _default_noise_settings(cfg))
+    skip: dict[str, Any] = {"workers": True, **_default_draw_settings(cfg)}
+    if cfg.odometry_clock_offset_s == 0:
+        skip["odometry_clock_offset_s"] = True
+    if cfg.calib_board == "chessboard":
+        skip["calib_board"] = True
     doc: dict[str, Any] = cfg.model_dump(mode="json", exclude=skip)
     # a planned rig and path are part of what is simulated (absent: the key is the built-in scene's)
     if plan is not None:
