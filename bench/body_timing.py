@@ -13,7 +13,7 @@ degree-4 polynomial through five poses). Printed per seed: each camera's
 offset error and stated sigma (and the drift's); then the coverage of the 95 % intervals over seeds, with
 the stated sigma and with the variance factor's alone, and the RMS z-score.
 
-    python bench/body_timing.py [--seeds 0 1 ... 19] [--fmax 1.0] [--exposure-jitter-ms 16.7] [--drift] [--reach 3]
+    python bench/body_timing.py [--seeds 0 1 ... 39] [--fmax 1.0] [--exposure-jitter-ms 16.7] [--drift] [--reach 3]
 """
 
 from __future__ import annotations
@@ -83,7 +83,7 @@ def run_seed(seed: int, fmax_hz: float, exposure_jitter_s: float, drift: bool = 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, nargs="+", default=list(range(20)))
+    ap.add_argument("--seeds", type=int, nargs="+", default=list(range(40)))
     ap.add_argument("--fmax", type=float, default=1.0, help="the sway's highest frequency, Hz")
     ap.add_argument("--exposure-jitter-ms", type=float, default=0.0)
     ap.add_argument("--drift", action="store_true", help="the cameras' offsets drift; fit the drifts")

@@ -23,8 +23,10 @@ polynomials and timing solved again.
 
 The interval is the larger of two covariances: the residuals' variance factor times the inverse normal
 matrix (residuals independent), and a sandwich whose middle is the per-instant scores' autocovariance over
-neighbouring instants (Newey-West, Bartlett weights), widened to its fixed-b critical value
-(:func:`_fixed_b_factor`: a few dozen instants estimate that middle). What the timing model leaves out acts instant by
+neighbouring instants (Newey-West, Bartlett weights), debiased for the fit's zeroing of the scores' sum
+and widened to Student's quantile at its degrees of freedom, both computed from the instants' columns and
+residuals (:mod:`gtrig.vision.body_timing_interval`: a few fast instants carry most of a drift, and a few
+dozen instants estimate that middle). What the timing model leaves out acts instant by
 instant and not point by point: a velocity error moves every point of an instant together, a webcam whose
 exposure wanders from its frame times by a few milliseconds from frame to frame shifts all of that
 image's points along their motion, and neighbouring instants share poses and the hand's motion. The
@@ -41,6 +43,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtrig.vision.body import BodyOptions, BodyPose, PointBody, stack_body
+from gtrig.vision.body_timing_interval import quantile_factor, sandwich_covariance
 from gtrig.vision.body_track import BodyInstant
 from gtrig.vision.observations import CameraGeometry
 from gtrig.vision.projection import project_pose
@@ -248,34 +251,6 @@ def _instant_system(rows: _InstantRows, theta: np.ndarray, lay: _Layout, sigma_p
             rows.Q @ ((rows.uv_pred - rows.uv_obs).reshape(-1) / sigma_px))
 
 
-def _hac_covariance(scores: np.ndarray, index: np.ndarray, N_inv: np.ndarray, lags: int) -> np.ndarray:
-    """Covariance of a least-squares estimate whose per-instant scores (G, p) ``scores`` (the whitened
-    columns times the residuals) are correlated between instants up to ``lags`` apart (``index`` (G,) the
-    instants' positions in the track): ``N_inv M N_inv`` with ``M`` the scores' Bartlett-weighted
-    autocovariance (Newey and West), scaled by ``G / (G - p)`` for the parameters fitted."""
-    G, n_par = scores.shape
-    M = scores.T @ scores
-    for a in range(G):
-        for b in range(a + 1, G):
-            gap = index[b] - index[a]
-            if gap > lags:
-                break
-            w = 1.0 - gap / (lags + 1.0)
-            M += w * (np.outer(scores[a], scores[b]) + np.outer(scores[b], scores[a]))
-    return N_inv @ M @ N_inv * G / max(G - n_par, 1)
-
-
-def _fixed_b_factor(lags: int, n_instants: int) -> float:
-    """The factor on a Newey-West sigma that makes ``1.96`` of it a 95 % interval with ``n_instants`` scores:
-    Kiefer and Vogelsang's fixed-b critical value of the Bartlett kernel, ``1.96 + 2.9694 b + 0.4160 b^2
-    - 0.5324 b^3`` with ``b = (lags + 1) / n_instants`` (capped at 1), over 1.96. The sandwich's middle is
-    estimated from the same few dozen scores the fit zeroes the sum of, which shrinks it and spreads it;
-    the normal quantile ignores both (on simulated board videos with 16.7 ms of exposure jitter its
-    intervals covered 88 % with ``lags`` 6)."""
-    b = min((lags + 1) / max(n_instants, 1), 1.0)
-    return (1.96 + 2.9694 * b + 0.4160 * b**2 - 0.5324 * b**3) / 1.96
-
-
 def _fit_timing(rows: Sequence[_InstantRows], free: list[int], theta0: np.ndarray, lay: _Layout, sigma_px: float,
                 iterations: int) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray, np.ndarray]]]:
     """Gauss-Newton on the timing parameters ``free`` from ``theta0`` (the others held): the motion is a
@@ -361,15 +336,18 @@ def tracked_mid_s(poses: Sequence[BodyPose]) -> float:
 def _covariances(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], used: list[int], free: list[int],
                  n_par: int, dof: int, lags: int) -> tuple[np.ndarray, np.ndarray, float]:
     """The variance factor's and the autocorrelation-robust covariances (n_par, n_par) of ``theta`` (nan
-    outside ``free``), and the variance factor."""
+    outside ``free``), and the variance factor. The robust one is widened by Student's quantile at each
+    parameter's degrees of freedom over the normal's (:mod:`gtrig.vision.body_timing_interval`), so that
+    1.96 of its sigmas is a 95 % interval."""
     cov_model = np.full((n_par, n_par), np.nan)
     cov_hac = cov_model.copy()
     vf = sum(float(np.sum(qr**2)) for qr, _, _ in parts) / dof if dof > 0 else math.nan
     N_inv = np.linalg.inv(sum(qB.T @ qB for _, qB, _ in parts)[np.ix_(free, free)])
     cov_model[np.ix_(free, free)] = max(vf, 1.0) * N_inv
-    scores = np.array([qB[:, free].T @ qr for qr, qB, _ in parts])
-    cov_hac[np.ix_(free, free)] = _hac_covariance(scores, np.array(used), N_inv, lags) * _fixed_b_factor(
-        lags, len(used)) ** 2
+    cov, dof_t = sandwich_covariance([qB[:, free] for _, qB, _ in parts], [qr for qr, _, _ in parts],
+                                     np.array(used), lags)
+    widen = quantile_factor(dof_t)
+    cov_hac[np.ix_(free, free)] = cov * np.outer(widen, widen)
     return cov_model, cov_hac, vf
 
 

@@ -326,19 +326,20 @@ def test_camera_time_offsets_from_the_boards_motion(board_tracks) -> None:
         tm = estimate_timing(cams, track.body, track.instants, track.poses, "cam_0", line_delay=False)
         assert tm.instants >= 15 and tm.cameras == CAMS, s
         assert tm.offset_s[0] == 0 and np.all(np.abs(tm.offset_s) < 0.06), (s, tm.offset_s)
-        assert np.all(np.isfinite(tm.sigma_offset_s)) and np.all(tm.sigma_offset_s[1:] < 0.03), s
+        assert np.all(np.isfinite(tm.sigma_offset_s)) and np.all(tm.sigma_offset_s[1:] < 0.04), s
         assert np.all(tm.sigma_offset_s >= tm.sigma_offset_model_s), s
-        # measured cam_1 -27.1 / -5.0 ms, cam_2 +30.5 / +17.5, cam_3 +20.3 / +21.5, sigmas 0.9-14.9 ms (from the
-        # variance factor 0.7-6.3 ms); residual RMS 1.39 -> 0.97 px and 1.44 -> 1.36 px
+        # measured cam_1 -28.5 / -5.5 ms, cam_2 +30.7 / +17.1, cam_3 +20.0 / +21.3, sigmas 2.8-31.0 ms (from the
+        # variance factor 0.6-6.3 ms; 22 and 27 instants leave the sandwich few degrees of freedom); residual
+        # RMS 1.39 -> 0.97 px and 1.44 -> 1.36 px
         assert tm.rms_px["model"] < 0.97 * tm.rms_px["stamps"], (s, tm.rms_px)
 
 
 def test_camera_offset_drift_and_the_halves(board_tracks) -> None:
     """Each camera's offset modelled as drifting linearly over the recording: stated at the recording's
-    midpoint with its drift, and the recording's halves fitted apart. These webcams' offsets are not steady
-    (under constant offsets the halves differ by up to 1.27 of their combined 95 % intervals); with the
-    drift the halves agree on the offsets at the midpoint, not always on the drift itself: the offsets
-    wander rather than slide at one rate."""
+    midpoint with its drift, and the recording's halves fitted apart. Under constant offsets the halves
+    differ by up to 0.68 of their combined 95 % intervals over these 22 and 27 instants; with the drift
+    they agree on the offsets at the midpoint, not always on the drift itself: the offsets wander rather
+    than slide at one rate."""
     from gtrig.vision.body_timing import estimate_timing
     from gtrig.vision.body_timing_halves import timing_halves
 
@@ -348,11 +349,11 @@ def test_camera_offset_drift_and_the_halves(board_tracks) -> None:
         tm = estimate_timing(*args, line_delay=False, drift=True)
         const = estimate_timing(*args, line_delay=False)
         assert tm.span_s[0] < tm.mid_s < tm.span_s[1] and tm.instants == const.instants, s
-        # measured drifts -12.0, -3.6, +2.8 and -11.7, -4.2, -1.7 ms/s, 95 % intervals 3.1-12.9 ms/s
-        assert np.all(np.abs(tm.drift_s_per_s) < 0.03) and np.all(1.96 * tm.sigma_drift_s_per_s < 0.02), s
-        # the residuals fall with the drift: measured 0.972 -> 0.951 px and 1.359 -> 1.296 px
+        # measured drifts -13.2, -4.0, +2.9 and -11.0, -3.8, -2.1 ms/s, 95 % intervals 5.5-27.3 ms/s
+        assert np.all(np.abs(tm.drift_s_per_s) < 0.03) and np.all(1.96 * tm.sigma_drift_s_per_s < 0.035), s
+        # the residuals fall with the drift: measured 0.961 -> 0.936 px and 1.360 -> 1.300 px
         assert tm.rms_px["model"] < const.rms_px["model"], (s, tm.rms_px, const.rms_px)
         h = timing_halves(*args, drift=True)
-        # measured: offsets at the midpoint 0.96, 0.20, 0.24 and 0.90, 0.45, 0.38 of their combined 95 %
-        # intervals; drifts 1.45, 1.95, 0.59 and 2.75, 0.73, 1.89
+        # measured: offsets at the midpoint 0.16, 0.09, 0.06 and 0.42, 0.19, 0.19 of their combined 95 %
+        # intervals; drifts 0.22, 0.77, 0.20 and 1.36, 0.36, 1.03
         assert np.all(h.offset_ratio < 1.5), (s, h.offset_ratio)
