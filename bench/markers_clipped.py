@@ -17,11 +17,19 @@ in the order a sensor sees them: the light is blurred and smeared, the noise (2 
 only then clipped at 255 (the light is rendered below the clip and scaled, so its levels are
 quantised in steps of at most ``W/C`` grey levels).
 
+With ``--run RESULTS=RECORDING ...`` the figures come from a simulated recording's own run instead: the
+detections GTvision kept (``gt_vision_run.checkpoint``) against the true rig's projection at each frame's
+true mid-exposure stamp (the written stamp less the simulator's jitter draw); per class (clipped or not),
+the corner error, stated sigma and NEES, and the four edges' offsets along their outward normals: their
+RMS, each marker's mean (the offset its edges share), each edge's own, and their correlation within a
+marker (second moments, and about the mean offset).
+
 Usage::
 
     python bench/markers.py --clipped                      # 60 robot poses, seed 0
     python bench/markers_clipped.py --poses 40 --seed 1
     python bench/markers.py --clipped --synth              # synth renders, W/C x blur x smear
+    python bench/markers_clipped.py --run s0/results=s0/recording s1/results=s1/recording
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ from __future__ import annotations
 import argparse
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -211,6 +220,87 @@ def run_synth(seeds: int = 4) -> None:
                 print(st.row(name), flush=True)
 
 
+def _run_detections(res: Path, rec: Path) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
+    """(corners, true corners, covariances, share of the markers' box at 255) of every detection GTvision kept
+    in the run of recording ``rec`` (results ``res``) whose corners are within 3 px of the truth."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    from gtrig.io.checkpoint import checkpoint_records
+    from gtrig.io.frames import read_frame_index
+    from gtrig.io.tum import read_tum
+    from gtrig.io.yamlfile import safe_load
+    from gtrig.rig.load import load_rig
+    from gtrig.sim.cameras import _frame_rng
+
+    cfg = safe_load((rec / "sim_config.yaml").read_text(encoding="utf-8")) or {}
+    seed, jitter = int(cfg.get("seed", 0)), float((cfg.get("camera") or {}).get("stamp_jitter_s", 0.0))
+    rig = load_rig(rec / "truth" / "rig.yaml")
+    model = VisionModel.from_rig(rig)
+    truth = read_tum(rec / "truth" / "run.tum")
+    Tm = truth.matrices()
+    slerp = Slerp(truth.stamps_s, Rotation.from_matrix(Tm[:, :3, :3]))
+    names = [c.name for c in rig.cameras]
+    out = []
+    for d in checkpoint_records(res / "gt_vision_run.checkpoint"):
+        if not isinstance(d, dict) or "camera" not in d:
+            continue
+        cam = d["camera"]
+        ci = names.index(cam)
+        index = read_frame_index(rec / "run" / "cameras" / cam)
+        for row, dets in d.get("frames") or []:
+            # the run's images are rendered with seed * 1000 + 10 + camera (gtrig.sim.recording)
+            j = _frame_rng(seed * 1000 + 10 + ci, ci, int(row), 1, 0).normal(0.0, jitter) if jitter > 0 else 0.0
+            t = index.stamps_s[int(row)] - j
+            if not dets or not truth.stamps_s[0] <= t <= truth.stamps_s[-1]:
+                continue
+            T = np.eye(4)
+            T[:3, :3] = slerp([t]).as_matrix()[0]
+            T[:3, 3] = [np.interp(t, truth.stamps_s, Tm[:, i, 3]) for i in range(3)]
+            img = index.read(int(row))
+            for m in dets:
+                corners, cov = np.array(m[1]), np.array(m[2])
+                tr = _true_corners(model, cam, T, int(m[0]))
+                if tr is None or np.abs(corners - tr).max() > 3.0 or np.any(cov[:, 0, 0] > 1.0):
+                    continue  # a corner released outside the image: not measured
+                (x0, y0), (x1, y1) = np.floor(tr.min(0)).astype(int), np.ceil(tr.max(0)).astype(int) + 1
+                box = img[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)]
+                out.append((corners, tr, cov, float(np.mean(box >= 255)) if box.size else 0.0))
+    return out
+
+
+def _edge_offsets(corners: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(4,) each edge's offset along its outward normal (px): the mean of its two corners' errors on it."""
+    e = np.roll(truth, -1, axis=0) - truth
+    n = np.column_stack([e[:, 1], -e[:, 0]]) / np.linalg.norm(e, axis=1, keepdims=True)
+    n *= np.sign(np.sum(n * (truth - truth.mean(axis=0)), axis=1))[:, None]
+    err = corners - truth
+    return 0.5 * (np.einsum("ki,ki->k", n, err) + np.einsum("ki,ki->k", n, np.roll(err, -1, axis=0)))
+
+
+def run_edges(pairs: list[str]) -> None:
+    """Print the runs' table (module docstring)."""
+    dets = [d for pair in pairs for d in _run_detections(*(Path(p) for p in pair.split("=", 1)))]
+    print(f"{'class':14s} {'markers':>7s} {'rms px':>7s} {'sigma px':>8s} {'NEES/dof':>8s} | edge offsets px: "
+          "mean, RMS, marker's mean RMS, own RMS; correlation within a marker, about its mean")
+    for name, keep in (("clipped", lambda s: s > CLIPPED_SHARE), ("well exposed", lambda s: s <= CLIPPED_SHARE)):
+        g = [d for d in dets if keep(d[3])]
+        if not g:
+            continue
+        e = np.concatenate([c - t for c, t, _, _ in g])
+        cov = np.concatenate([v for _, _, v, _ in g])
+        nees = np.einsum("ni,nij,nj->n", e, np.linalg.inv(cov), e)
+        off = np.array([_edge_offsets(c, t) for c, t, _, _ in g])
+        m = off.mean(axis=1)
+        M = off.T @ off / len(off)
+        C = np.corrcoef(off.T)
+        pair = ~np.eye(4, dtype=bool)
+        print(f"{name:14s} {len(g):7d} {math.sqrt(np.mean(np.sum(e**2, axis=1))):7.3f} "
+              f"{math.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2))):8.3f} {np.mean(nees) / 2:8.2f} | "
+              f"{off.mean():+.3f} {math.sqrt(np.mean(off**2)):.3f} {math.sqrt(np.mean(m**2)):.3f} "
+              f"{math.sqrt(np.mean((off - m[:, None]) ** 2) * 4 / 3):.3f}; {M[pair].mean() / np.diag(M).mean():.2f} "
+              f"{C[pair].mean():.2f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seed", type=int, default=0)
@@ -220,7 +310,12 @@ def main() -> None:
     ap.add_argument("--min-motion-px", type=float, default=1.0,
                     help="moving frames whose robot moved less in the image are left out")
     ap.add_argument("--synth", action="store_true", help="synth renders over W/C, blur and smear instead")
+    ap.add_argument("--run", nargs="+", metavar="RESULTS=RECORDING", default=None,
+                    help="a simulated recording's run instead: its detections against the truth")
     a = ap.parse_args()
+    if a.run:
+        run_edges(a.run)
+        return
     if a.synth:
         run_synth()
         return

@@ -9,7 +9,7 @@ the plan's CPU time per pose over the estimator's (``estimate_frame``) per pose,
     python bench/plan.py --suggest 25 --grid-m 0.1 --headings 16 [--suggest-kind scanners]
     python bench/plan.py --honesty RESULTS=RECORDING [RESULTS=RECORDING ...] [--calibrated] [--instant]
         [--corner-px SIGMA FLOOR] [--rig-sigma CAM_MM CAM_DEG MARKER_MM MARKER_DEG] [--stated]
-        [--clock-sigma-ms MS]
+        [--clock-sigma-ms MS] [--sunlit]
 
 ``--honesty``: the plan's predicted sigmas of GTlaser, fusion and GTvision at the true poses of simulated
 runs (``gtrig run`` results folders beside the recordings ``gtrig sim`` wrote, with their truth) against
@@ -27,7 +27,9 @@ covariances);
 ``--corner-px`` sets the plan's corner noise (sigma at an 80 px marker, growing as the square root of
 80 px over the side, and the floor added to it).
 GTvision's poses are also split by exposure: those from images in which the robot's markers clip at
-white (the robot in a sunlit patch) apart from the others.
+white (the robot in a sunlit patch) apart from the others. ``--sunlit`` tells the plan where the sun falls
+(:attr:`gtrig.plan.vision.VisionPlanSettings.sunlit_xy`): the simulator's sun patch of each recording's seed
+at the height of the robot's markers.
 """
 
 from __future__ import annotations
@@ -342,6 +344,20 @@ def exposure_split(rig: Rig, rec: Path, stamps_s: np.ndarray, true_xyt: np.ndarr
                     [r.poses, r.rms_error_m**2, r.rms_sigma_m**2, r.rms_error_rad**2, r.rms_sigma_rad**2]))
 
 
+def sun_patch_xy(rec: Path, rig: Rig) -> tuple[tuple[float, float], ...]:
+    """The simulated room's sun patch (the window cast along the sunlight, :func:`gtrig.sim.textures.sun_geometry`
+    of the recording's seed) at the height of the robot's markers: the floor polygon over which their white
+    clips, world frame, m."""
+    from gtrig.io.yamlfile import safe_load
+    from gtrig.sim.textures import sun_geometry
+
+    seed = int((safe_load((rec / "sim_config.yaml").read_text(encoding="utf-8")) or {}).get("seed", 0))
+    win, d = sun_geometry(make_scene(seed))
+    h = float(np.mean([m.T_robot_marker.matrix()[2, 3] for m in rig.robot.markers]))
+    poly = win[:, :2] + ((h - win[:, 2:3]) / d[2]) * d[:2]
+    return tuple((float(x), float(y)) for x, y in poly)
+
+
 def _pooled_ratio(rows: list[np.ndarray]) -> tuple[float, float, float]:
     """Poses-weighted pooled (position ratio, yaw ratio, RMS error m) of region rows (poses, e2, s2, y2, ys2)."""
     e2, s2, y2, ys2 = np.sum([r[0] * r[1:] for r in rows], axis=0) / np.sum([r[0] for r in rows])
@@ -351,12 +367,13 @@ def _pooled_ratio(rows: list[np.ndarray]) -> tuple[float, float, float]:
 def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: int = 3,
             corner_px: tuple[float, float] | None = None,
             rig_sigma: tuple[float, float, float, float] | None = None, stated: bool = False,
-            clock_sigma_s: float | None = None) -> None:
+            clock_sigma_s: float | None = None, sunlit: bool = False) -> None:
     """Predicted against measured, per region and source (module docstring); ``corner_px``: the plan's
     corner sigma at an 80 px marker and its floor, pixels, ``rig_sigma``: its camera and marker sigmas
     (mm, deg, mm, deg; None: the model's), ``stated``: the rig's stated sigmas with GTvision's corner
     model and floor instead of a calibrated run (:func:`gtrig.plan.vision.after_calibration`),
-    ``clock_sigma_s``: fusion's clock offset sigma (None: the plan's default)."""
+    ``clock_sigma_s``: fusion's clock offset sigma (None: the plan's default), ``sunlit``: the plan told
+    where each recording's sun falls (:func:`sun_patch_xy`)."""
     from dataclasses import replace
 
     from gtrig.io.tum import read_tum
@@ -391,6 +408,8 @@ def honesty(pairs: list[str], calibrated: bool, instant: bool = False, every: in
         res, rec = Path(res_s), Path(rec_s)
         rig = load_rig(res / "rig.calibrated.yaml" if calibrated else rec / "rig.yaml")
         truth = read_tum(rec / "truth" / "run.tum")
+        if sunlit:
+            settings = replace(settings, vision=replace(settings.vision, sunlit_xy=sun_patch_xy(rec, rig)))
         print(f"{res} against {rec / 'truth'} ({'calibrated rig' if calibrated else 'planned rig'}):")
         for src, fname in sources:
             est = read_tum(res / fname)
@@ -469,6 +488,8 @@ def main() -> None:
                     "calibrated run")
     ap.add_argument("--clock-sigma-ms", type=float, default=None, help="with --honesty: fusion's clock offset "
                     "sigma in the plan, ms (default: the plan's)")
+    ap.add_argument("--sunlit", action="store_true", help="with --honesty: tell the plan where the simulated sun "
+                    "falls (the markers' white clips there)")
     ap.add_argument("--corner-px", nargs=2, type=float, metavar=("SIGMA", "FLOOR"), default=None,
                     help="with --honesty: the plan's corner sigma at an 80 px marker and its floor, px "
                          "(default: the plan's)")
@@ -476,7 +497,7 @@ def main() -> None:
     if a.honesty:
         honesty(a.honesty, a.calibrated, a.instant, corner_px=None if a.corner_px is None else tuple(a.corner_px),
                 rig_sigma=None if a.rig_sigma is None else tuple(a.rig_sigma), stated=a.stated,
-                clock_sigma_s=None if a.clock_sigma_ms is None else a.clock_sigma_ms / 1000)
+                clock_sigma_s=None if a.clock_sigma_ms is None else a.clock_sigma_ms / 1000, sunlit=a.sunlit)
     elif a.suggest:
         suggestion(a.grid_m, a.headings, a.suggest, a.suggest_kind, a.workers)
     elif a.figures is not None:

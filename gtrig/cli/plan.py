@@ -18,12 +18,12 @@ if TYPE_CHECKING:
     from gtrig.rig.models import Rig
 
 
-def parse_polygon(text: str) -> list[tuple[float, float]]:
-    """``--area``: ``X,Y;X,Y;...`` in metres, or a file of ``x,y`` lines (``#`` comments)."""
+def parse_polygon(text: str, option: str = "--area") -> list[tuple[float, float]]:
+    """``--area`` (or ``option``): ``X,Y;X,Y;...`` in metres, or a file of ``x,y`` lines (``#`` comments)."""
     from gtrig.errors import InputError
 
     p = Path(text)
-    source, rows = "--area", [r for r in text.split(";") if r.strip()]
+    source, rows = option, [r for r in text.split(";") if r.strip()]
     if ";" not in text and p.is_file():
         source = str(p)
         rows = [r for r in p.read_text(encoding="utf-8").splitlines() if r.strip() and not r.lstrip().startswith("#")]
@@ -35,7 +35,7 @@ def parse_polygon(text: str) -> list[tuple[float, float]]:
                 raise ValueError
             out.append((float(f[0]), float(f[1])))
         except ValueError:
-            where = f"{source}:{i + 1}" if source != "--area" else f"--area vertex {i + 1}"
+            where = f"{source}:{i + 1}" if source != option else f"{option} vertex {i + 1}"
             raise InputError(f"{where}: expected x,y in metres, got {r.strip()!r}") from None
     return out
 
@@ -64,6 +64,9 @@ def command(
     area: str | None = typer.Option(None, "--area", help="Floor polygon X,Y;X,Y;... (m) or a file of x,y lines "
                                     "[default: the hull of the scanners and reference points]."),
     path: Path | None = typer.Option(None, "--path", help="A TUM trajectory: plan at its poses instead of a grid."),
+    sunlit: str | None = typer.Option(None, "--sunlit", help="Floor polygon X,Y;X,Y;... (m) or a file of x,y lines "
+                                      "where the robot's markers are in the sun and their white clips: their "
+                                      "corners get the detector's scatter of clipped markers."),
     grid_m: float = typer.Option(0.05, "--grid-m", help="Cell size (m)."),
     headings: int = typer.Option(16, "--headings", help="Headings per cell."),
     target_mm: float = typer.Option(1.0, "--target-mm", help="Target one-sigma position accuracy (mm)."),
@@ -142,7 +145,15 @@ def command(
         grid = area_grid(poly, grid_m, headings)
     ru = RigUncertainty(camera_sigma_mm / 1000, math.radians(camera_sigma_deg), marker_sigma_mm / 1000,
                         math.radians(marker_sigma_deg))
-    settings = PlanSettings(vision=after_calibration(ru),
+    vision = after_calibration(ru)
+    if sunlit is not None:
+        from dataclasses import replace
+
+        from gtrig.plan.grid import check_polygon
+
+        lit = check_polygon(np.asarray(parse_polygon(sunlit, "--sunlit"), dtype=float), "--sunlit")
+        vision = replace(vision, sunlit_xy=tuple((float(x), float(y)) for x, y in lit))
+    settings = PlanSettings(vision=vision,
                             fusion=FusionPlanSettings(speed_mps=speed_mps, clock_sigma_s=clock_sigma_ms / 1000))
     if workers == 0:
         import os

@@ -247,7 +247,8 @@ def release_unseen_corners(view: MarkerView, size: tuple[int, int]) -> MarkerVie
         return None
     cov = np.array(view.corner_cov)
     cov[~seen] = np.eye(2) * UNSEEN_CORNER_SIGMA_PX**2
-    return replace(view, corner_cov=cov)
+    common = None if view.corner_common is None else np.where(seen[:, None], view.corner_common, 0.0)
+    return replace(view, corner_cov=cov, corner_common=common)
 
 
 def _second_start(det: object, image: np.ndarray, dets: list[Any]) -> list[Any]:

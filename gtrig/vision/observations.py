@@ -55,6 +55,11 @@ class MarkerView:
         The detector's fitted edge blur sigma of this marker, pixels (NaN: not known); with the
         marker's size in the image it sizes the blur's pull on the corners
         (:func:`gtrig.vision.covariance.blur_scale_sigma_px`).
+    corner_common : (4, 2) float or None
+        The corners' shared move, pixels, for one sigma of an error common to the marker's four corners
+        (a clipped white level's offset of all its edges: ``gtrig.markers.detect.Detection.corner_common``);
+        corners ``i != j`` covary by ``corner_common[i] corner_common[j]^T``. None: the corners' errors are
+        independent (:func:`gtrig.vision.covariance.common_consider_covariance`).
     """
 
     camera: str
@@ -63,6 +68,7 @@ class MarkerView:
     corner_cov: np.ndarray
     frame: int = -1
     blur_px: float = float("nan")
+    corner_common: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         c = np.array(self.corners_px, dtype=float).reshape(4, 2)
@@ -77,6 +83,10 @@ class MarkerView:
         s.setflags(write=False)
         object.__setattr__(self, "corners_px", c)
         object.__setattr__(self, "corner_cov", s)
+        if self.corner_common is not None:
+            m = np.array(self.corner_common, dtype=float).reshape(4, 2)
+            m.setflags(write=False)
+            object.__setattr__(self, "corner_common", m if np.any(m) else None)
 
 
 @dataclass(frozen=True)
@@ -131,7 +141,8 @@ def views_from_detections(camera: str, detections: Iterable[Any], known_ids: set
         if mid in out:
             dup.add(mid)
         out[mid] = MarkerView(camera, mid, np.asarray(d.corners_px, dtype=float),
-                              np.asarray(cov, dtype=float), blur_px=float(getattr(d, "blur_px", math.nan)))
+                              np.asarray(cov, dtype=float), blur_px=float(getattr(d, "blur_px", math.nan)),
+                              corner_common=getattr(d, "corner_common", None))
     return [v for k, v in sorted(out.items()) if k not in dup]
 
 

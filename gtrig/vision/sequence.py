@@ -435,14 +435,23 @@ def _seed(ctx: WorkerContext, model: VisionModel, detect: Any) -> None:
 
 
 def _views_to_json(views: Sequence[MarkerView]) -> list[list[Any]]:
-    # the detector's blur only where it gave one (a view without it reads back as before)
-    return [[v.marker_id, _arr(v.corners_px), _arr(v.corner_cov)] + ([v.blur_px] if math.isfinite(v.blur_px) else [])
-            for v in views]
+    # the detector's blur only where it gave one, and a clipped marker's common corner move after it (a
+    # view without them reads back as before)
+    out = []
+    for v in views:
+        e = [v.marker_id, _arr(v.corners_px), _arr(v.corner_cov)]
+        if math.isfinite(v.blur_px):
+            e.append(v.blur_px)
+            if v.corner_common is not None:
+                e.append(_arr(v.corner_common))
+        out.append(e)
+    return out
 
 
 def _views_from_json(camera: str, row: int, d: list[list[Any]]) -> tuple[MarkerView, ...]:
     return tuple(MarkerView(camera, int(e[0]), np.array(e[1]), np.array(e[2]), row,
-                            float(e[3]) if len(e) > 3 else math.nan) for e in d)
+                            float(e[3]) if len(e) > 3 else math.nan, np.array(e[4]) if len(e) > 4 else None)
+                 for e in d)
 
 
 def _process_chunk(ctx: WorkerContext, camera: str, rows: Sequence[int], paths: Sequence[str],

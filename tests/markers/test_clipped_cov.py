@@ -93,3 +93,26 @@ def test_clipped_fit_settles_with_its_context() -> None:
     e, _c = _sensor_clipped(1.57, blur=1.0)
     assert len(e) >= 20
     assert float(np.sqrt(np.mean(e**2) * 2)) < 0.1
+
+
+def test_clipped_markers_carry_their_corners_common_move() -> None:
+    """The offset a clipped marker's edges share moves its four corners together (``corner_common``): the
+    marker grows (every corner away from its centre; the offset's draw takes either sign), each corner's own
+    covariance holding its share of the move; markers seen whole carry none."""
+    for ratio, clipped in ((1.57, True), (0.9, False)):
+        rng = np.random.default_rng([1, 7])
+        markers = [(FAM, 3 + 11 * i, homography_from_pose(70, (150 + 250 * i, 200), 20, 30 + 60 * i, 15 * i))
+                   for i in range(3)]
+        img, _ = render((480, 800), markers, blur_px=0.5, noise=0.0, gain=250.0 / WHITE, rng=rng)
+        light = img * (ratio * 255.0 / 250.0) + rng.normal(0.0, 2.0, img.shape)
+        dets = MarkerDetector(FAM).detect(np.clip(np.rint(light), 0, 255).astype(np.uint8))
+        assert len(dets) == 3
+        for d in dets:
+            c = d.corner_common
+            if not clipped:
+                assert not np.any(c)
+                continue
+            out = d.corners_px - d.corners_px.mean(axis=0)
+            assert np.all(np.einsum("ci,ci->c", c, out) > 0), c
+            # c_i c_i^T within the corner's covariance: c_i^T cov_i^-1 c_i <= 1
+            assert np.all(np.einsum("ci,cij,cj->c", c, np.linalg.inv(d.corner_cov), c) <= 1.0 + 1e-9)

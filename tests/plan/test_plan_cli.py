@@ -75,6 +75,8 @@ def test_plan_on_a_path(rig_file, tmp_path):
     (["--headings", "0"], "--headings"),
     (["--area", "0,0;1"], "--area vertex 2"),
     (["--area", "0,0;1,1;2,2"], "no area"),
+    (["--area", AREA, "--sunlit", "0,0;1"], "--sunlit vertex 2"),
+    (["--area", AREA, "--sunlit", "0,0;1,1;2,2"], "--sunlit: the polygon has no area"),
     (["--target-mm", "-1"], "--target-mm"),
     (["--clock-sigma-ms", "-1"], "--clock-sigma-ms"),
     (["--clock-sigma-ms", "nan"], "--clock-sigma-ms"),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -145,3 +146,38 @@ def test_instants_per_camera_leave_fusion_as_it_is():
     assert several.sum() > 10 and np.median(vb[several] / va[several]) > 1.3
     single = ~several
     np.testing.assert_allclose(vb[single], va[single], rtol=1e-9)
+
+
+def test_sunlit_markers_predicted_as_the_estimator_states_them(rig):
+    """Markers over the sunlit floor: the plan's sigma (corners of ``SUNLIT_OWN_PX`` each and an offset common
+    to a marker's edges, in the information) is within 35 % of GTvision's stated covariance of such corners
+    (its fit, which takes them as independent, plus the considered common error, which
+    tests/vision/test_common_corners.py checks against the errors; the plan's information form is the fit
+    that knows the common error, a little better across the line of sight); and its position sigma is well
+    above the plan's for the same markers in the shade."""
+    from gtrig.plan.vision import DETECTOR_SCATTER, SUNLIT_COMMON_PX, SUNLIT_OWN_PX
+    from gtrig.vision.covariance import edge_pull_jacobian
+    from gtrig.vision.observations import FrameObservations
+
+    poses = VALIDATION_POSES[::4]
+    sun = ((-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0))
+    base = VisionPlanSettings(corner_noise=DETECTOR_SCATTER, corner_floor_px=0.0, rig_uncertainty=CALIBRATED)
+    lit = predict_vision(rig, poses, replace(base, sunlit_xy=sun))
+    shade = predict_vision(rig, poses, base)
+    model = VisionModel.from_rig(rig)
+    opts = VisionOptions(rig_uncertainty=CALIBRATED, corner_floor_px=0.0, blur_pull=False)
+    ratios, gain = [], []
+    for k, (x, y, th) in enumerate(poses):
+        views = []
+        for cam, mid, uv in visible_views(rig, geo.se2_to_T(x, y, th)):
+            c = -(edge_pull_jacobian(uv) @ np.full(4, SUNLIT_COMMON_PX)).reshape(4, 2)
+            cov = SUNLIT_OWN_PX**2 * np.eye(2) + np.einsum("ci,cj->cij", c, c)
+            views.append(MarkerView(cam, mid, uv, cov, corner_common=c))
+        est = estimate_frame(model, FrameObservations(0.0, tuple(views)), opts)
+        assert est.ok and est.cov_6x6 is not None
+        i = [0, 1, 5]
+        ratios.append(np.sqrt(np.diag(lit.cov_xytheta[k]) / np.diag(est.cov_6x6[np.ix_(i, i)])))
+        gain.append(np.sqrt(np.trace(lit.cov_xytheta[k][:2, :2]) / np.trace(shade.cov_xytheta[k][:2, :2])))
+    r = np.array(ratios)
+    assert np.all((r > 0.65) & (r < 1.35)), r.round(2)
+    assert np.median(gain) > 1.3, np.round(gain, 2)

@@ -49,7 +49,7 @@ __all__ = ["AT3_ONLY_SIGMA_PX", "DETECTOR_VERSION", "Detection", "DetectorParams
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 30
+DETECTOR_VERSION = 32
 
 #: corner sigma written for AprilTag 3's newer families, whose corners gtrig does not refine, px
 AT3_ONLY_SIGMA_PX = 0.5
@@ -74,6 +74,11 @@ class Detection:
         newer families).
     blur_px : float
         Mean fitted edge blur sigma, pixels (NaN where the corners are not refined).
+    corner_common : (4, 2) float
+        The corners' shared move, pixels, for one sigma of the offset that the edges of a marker whose
+        white clips share (:func:`.edges.clipped_common`): corners ``i`` and ``j`` covary by
+        ``corner_common[i] corner_common[j]^T`` (each corner's own ``corner_cov`` holds its ``i = j`` part).
+        Zeros for a marker seen whole.
     """
 
     id: int
@@ -81,6 +86,7 @@ class Detection:
     corner_cov: NDArray[np.float64]
     hamming: int = 0
     blur_px: float = float("nan")
+    corner_common: NDArray[np.float64] = field(default_factory=lambda: np.zeros((4, 2)))
 
     def to_json(self) -> dict[str, object]:
         """The ``detections`` entry of ``det.json``."""
@@ -90,6 +96,7 @@ class Detection:
             "corner_cov": [[[float(c) for c in row] for row in m] for m in self.corner_cov],
             "hamming": self.hamming,
             "blur_px": float(self.blur_px),
+            "corner_common": [[float(u), float(v)] for u, v in self.corner_common],
         }
 
 
@@ -311,7 +318,7 @@ class MarkerDetector:
         cands = [PeerCandidate(Q0[q], int(expected[q]), "opencv") for q in idx]
         keep = np.flatnonzero(ok)
         return self._accepted([cands[k] for k in keep], np.arange(len(keep)), v.take(keep), r.corners[idx[keep]],
-                              r.cov[idx[keep]], r.blur[idx[keep]], und, None)
+                              r.cov[idx[keep]], r.blur[idx[keep]], und, None, r.common[idx[keep]])
 
     def _refine_and_verify(self, gray: NDArray[np.uint8], cands: list[PeerCandidate],
                            trace: list[Rejection] | None, nt: int) -> tuple[list[Detection], list[Detection]]:
@@ -346,8 +353,8 @@ class MarkerDetector:
         # markers' reading)
         v = verify_ids(np.concatenate(whiteness), peer_ids[np.concatenate([idx, bad])], spec, book, p.min_soft_margin)
         k = len(idx)
-        out = (self._accepted(cands, idx, v.take(slice(0, k)), r.corners[idx], r.cov[idx], r.blur[idx], und, trace)
-               if k else [])
+        out = (self._accepted(cands, idx, v.take(slice(0, k)), r.corners[idx], r.cov[idx], r.blur[idx], und, trace,
+                              r.common[idx]) if k else [])
         if not len(bad):
             return out, []
         cov = np.tile(np.eye(2) * UNREFINED_SIGMA_PX**2, (len(bad), 4, 1, 1))
@@ -355,12 +362,15 @@ class MarkerDetector:
 
     def _accepted(self, cands: list[PeerCandidate], idx: NDArray[np.int64], v: Verdict, corners: NDArray[np.float64],
                   cov: NDArray[np.float64], blur: NDArray[np.float64], und: Undistorter | None,
-                  trace: list[Rejection] | None) -> list[Detection]:
-        """Detections of the candidates ``idx`` whose IDs the verdict ``v`` accepts, corners (K, 4, 2) and
-        covariances (K, 4, 2, 2) in fit coordinates taken to raw pixels, ordered as printed."""
+                  trace: list[Rejection] | None, common: NDArray[np.float64] | None = None) -> list[Detection]:
+        """Detections of the candidates ``idx`` whose IDs the verdict ``v`` accepts, corners (K, 4, 2),
+        covariances (K, 4, 2, 2) and clipped markers' common moves (K, 4, 2; None: zeros) in fit coordinates
+        taken to raw pixels, ordered as printed."""
+        common = np.zeros(corners.shape) if common is None else common
         if und is not None:
             Jd = und.jacobian_to_raw(corners.reshape(-1, 2)).reshape(-1, 4, 2, 2)
             cov = Jd @ cov @ np.swapaxes(Jd, -1, -2)
+            common = np.einsum("kcij,kcj->kci", Jd, common)
             corners = und.to_raw(corners.reshape(-1, 2)).reshape(-1, 4, 2)
         out = []
         for k, q in enumerate(idx):
@@ -370,7 +380,7 @@ class MarkerDetector:
                 continue
             order = (np.arange(4) + int(v.rot[k])) % 4
             out.append(Detection(cands[q].id, corners[k][order].copy(), cov[k][order].copy(), int(v.hamming[k]),
-                                 float(blur[k])))
+                                 float(blur[k]), common[k][order].copy()))
         return out
 
 

@@ -642,6 +642,26 @@ CLIPPED_MISFIT_SIGMAS = 18.0
 CLIPPED_EDGE_SHARE_OWN = 0.5
 
 
+def _clipped_edge_sigma(fit: EdgeFit, n_quads: int) -> NDArray[np.float64]:
+    """(Q, 4) the line sigma (px) of each saturated edge's unseen white level (:func:`clipped_white_cov`); 0
+    for edges seen whole."""
+    visible = CLIP_HIGH - fit.a
+    saturated = (fit.b > visible) & (visible > 0)
+    misfit = np.where(saturated, fit.rms / np.where(saturated, visible, 1.0), 0.0)
+    return np.nan_to_num(CLIPPED_MISFIT_SIGMAS * fit.sigma * misfit).reshape(n_quads, 4)
+
+
+def clipped_common(fit: EdgeFit, n_quads: int) -> NDArray[np.float64]:
+    """(Q, 4, 2) px: how the corners move together for one sigma of the offset that a quad's saturated edges
+    share (:func:`clipped_white_cov`), each edge along its normal by its own line sigma; zeros for quads
+    seen whole. Corner ``i`` and ``j`` of a quad covary by ``c_i c_j^T`` through it: the pose of a marker
+    averages its corners' own errors but not this one."""
+    s_edge = _clipped_edge_sigma(fit, n_quads)
+    _, _, Ainv = _corner_lines(fit.theta.reshape(n_quads, 4))
+    common = Ainv[..., :, 0] * s_edge[:, _PREV, None] + Ainv[..., :, 1] * s_edge[..., None]
+    return np.where(np.isfinite(common), common, 0.0)
+
+
 def clipped_white_cov(fit: EdgeFit, n_quads: int) -> NDArray[np.float64]:
     """What the unseen white level of saturated edges adds to the corners' covariances (Q, 4, 2, 2), px^2.
 
@@ -655,8 +675,9 @@ def clipped_white_cov(fit: EdgeFit, n_quads: int) -> NDArray[np.float64]:
     saturated edges together (one sheet under one light has one white level: the marker shrinks or grows
     as a whole), plus :data:`CLIPPED_EDGE_SHARE_OWN` of it on each edge on its own. Each corner takes both
     parts of its two edges through the lines' intersection (``dx / drho_k = A^-1 e_k``,
-    :func:`intersect_corners`); the common part's correlation between corners is not kept (the covariance
-    is per corner). Edges seen whole add nothing.
+    :func:`intersect_corners`); the common part's correlation between corners is not in this per-corner
+    covariance but in :func:`clipped_common`, which the detections carry beside it. Edges seen whole add
+    nothing.
 
     On the simulated GT room's sunlit markers (``bench/markers_clipped.py``, seed 0) the common offset is
     0.05 px RMS along each edge's normal on still markers (effective blur 0.3 px) and 0.13 px on moving
@@ -664,13 +685,9 @@ def clipped_white_cov(fit: EdgeFit, n_quads: int) -> NDArray[np.float64]:
     the relative residual follows it best (log correlation 0.56, against 0.32 for the blur alone and -0.31
     for the blur times the unseen share).
     """
-    th = fit.theta.reshape(n_quads, 4)
-    visible = CLIP_HIGH - fit.a
-    saturated = (fit.b > visible) & (visible > 0)
-    misfit = np.where(saturated, fit.rms / np.where(saturated, visible, 1.0), 0.0)
-    s_edge = np.nan_to_num(CLIPPED_MISFIT_SIGMAS * fit.sigma * misfit).reshape(n_quads, 4)
-    _, _, Ainv = _corner_lines(th)
-    common = Ainv[..., :, 0] * s_edge[:, _PREV, None] + Ainv[..., :, 1] * s_edge[..., None]  # (Q, 4, 2)
+    s_edge = _clipped_edge_sigma(fit, n_quads)
+    _, _, Ainv = _corner_lines(fit.theta.reshape(n_quads, 4))
+    common = clipped_common(fit, n_quads)
     own1 = Ainv[..., :, 0] * (CLIPPED_EDGE_SHARE_OWN * s_edge[:, _PREV, None])
     own2 = Ainv[..., :, 1] * (CLIPPED_EDGE_SHARE_OWN * s_edge[..., None])
     out = sum(np.einsum("qci,qcj->qcij", v, v) for v in (common, own1, own2))

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gtrig.markers.detect.camera import Undistorter
-from gtrig.markers.detect.edges import EdgeFit, RefineParams, clipped_white_cov
+from gtrig.markers.detect.edges import EdgeFit, RefineParams, clipped_common, clipped_white_cov
 from gtrig.markers.detect.edges import refine_quads as edge_refine
 from gtrig.markers.detect.tone import Tone, light_table
 
@@ -52,7 +52,9 @@ class RefineSettings:
 class Refined:
     """The refined quads (Q of them, fit coordinates).
 
-    corners : (Q, 4, 2) px, in the quads' order; cov : (Q, 4, 2, 2) px^2; ok : (Q,) the fit passed
+    corners : (Q, 4, 2) px, in the quads' order; cov : (Q, 4, 2, 2) px^2; common : (Q, 4, 2) px, the
+    corners' shared move for one sigma of a clipped white level (:func:`.edges.clipped_common`; zeros for
+    quads seen whole): corners ``i`` and ``j`` covary by ``common[i] common[j]^T``; ok : (Q,) the fit passed
     every test; shift : (Q,) px, the largest corner move from the start, and shift_limit : (Q,) px, the
     largest accepted; fit : the last pass's
     :class:`.edges.EdgeFit` (edges ``4q .. 4q + 3`` of quad ``q``).
@@ -60,6 +62,7 @@ class Refined:
 
     corners: NDArray[np.float64]
     cov: NDArray[np.float64]
+    common: NDArray[np.float64]
     ok: NDArray[np.bool_]
     shift: NDArray[np.float64]
     shift_limit: NDArray[np.float64]
@@ -95,7 +98,7 @@ def refine_quads(gray: NDArray[np.uint8], quads: NDArray[np.float64], white: NDA
     limit = _shift_limit(side, s)
     ok &= np.all(np.isfinite(corners.reshape(len(Q), -1)), axis=1) & (shift <= limit)
     ok &= np.all(np.isfinite(cov.reshape(len(Q), -1)), axis=1)
-    return Refined(corners, cov, ok, shift, limit, fit)
+    return Refined(corners, cov, clipped_common(fit, len(Q)), ok, shift, limit, fit)
 
 
 def _shift_limit(side: NDArray[np.float64], s: RefineSettings) -> NDArray[np.float64]:

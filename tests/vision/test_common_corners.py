@@ -1,0 +1,97 @@
+"""GTvision's covariance of markers whose four corners share an error (a clipped white level offsets a
+marker's edges as one): the fit takes the corners as independent and averages that error away; the
+considered term (:func:`gtrig.vision.covariance.common_consider_covariance`) must put it back."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
+from gtrig.vision.covariance import RigUncertainty, common_consider_covariance, edge_pull_jacobian, pose_error_xi
+from gtrig.vision.estimate import VisionOptions, estimate_frame
+from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel, stack_corners
+from gtrig.vision.refine import refine_pose
+from gtrig.vision.sequence import _views_from_json, _views_to_json
+from gtrig.vision.synthetic import visible_views
+
+#: an edge's own sigma and the sigma of the offset a marker's four edges share, px (the simulated room's
+#: sunlit, moving markers: 0.035 and 0.136 px along the edges' normals)
+OWN_PX, COMMON_PX = 0.035, 0.13
+
+
+def _one_view() -> tuple[object, np.ndarray, str, int, np.ndarray]:
+    scene = make_scene(0)
+    T = scene.T_world_robot(*VALIDATION_POSES[8])
+    cam, mid, uv = visible_views(scene.rig_true, T)[0]
+    return scene.rig_true, T, cam, mid, uv
+
+
+def _common_move(uv: np.ndarray, sigma_px: float) -> np.ndarray:
+    """(4, 2) the corners' move when every edge of the marker ``uv`` moves ``sigma_px`` outwards."""
+    return -(edge_pull_jacobian(uv) @ np.full(4, sigma_px)).reshape(4, 2)
+
+
+def test_considered_common_error_is_the_fits_response() -> None:
+    # exact corners of one marker: the term's response must be what the whole nonlinear fit does when the
+    # four corners move by their common move (finite differences)
+    rig, T, cam, mid, uv = _one_view()
+    model = VisionModel.from_rig(rig)  # type: ignore[arg-type]
+    cov = np.tile(0.05**2 * np.eye(2), (4, 1, 1))
+    c = _common_move(uv, 1.0)
+
+    def fit(corners: np.ndarray):  # noqa: ANN202
+        sc = stack_corners(model, [MarkerView(cam, mid, corners, cov)])
+        return sc, refine_pose(sc, T, None)
+
+    sc, f0 = fit(uv)
+    eps = 1e-3
+    g = pose_error_xi(fit(uv + eps * c)[1].T_world_robot, f0.T_world_robot) / eps
+    # own_scale 0: the corners' covariances hold none of the common part, the term is the whole response
+    got = common_consider_covariance(f0.J, sc.sqrt_info, f0.weights, sc.view, c, f0.cov_6x6, np.zeros(4))
+    assert np.allclose(got, np.outer(g, g), rtol=0.05, atol=1e-3 * float(np.max(np.abs(g))) ** 2)
+
+
+def _errors_and_covariance(common_corners: bool, draws: int = 150) -> tuple[np.ndarray, np.ndarray]:
+    """Pose errors (draws, 6) of ``draws`` fits (6 dof, no floor prior) of one marker whose corners carry an
+    own error each (isotropic) and a common one (all edges outwards by one draw), and the mean stated
+    covariance (6, 6)."""
+    rig, T, cam, mid, uv = _one_view()
+    model = VisionModel.from_rig(rig)  # type: ignore[arg-type]
+    c = _common_move(uv, COMMON_PX)
+    cov = OWN_PX**2 * np.eye(2) + np.einsum("ci,cj->cij", c, c)  # each corner's marginal: own and common
+    opts = VisionOptions(planar=False, rig_uncertainty=RigUncertainty.none(), corner_floor_px=0.0, blur_pull=False,
+                         common_corners=common_corners)
+    rng = np.random.default_rng(3)
+    err, covs = [], []
+    for _ in range(draws):
+        noisy = uv + rng.normal(0.0, OWN_PX, (4, 2)) + rng.normal() * c
+        e = estimate_frame(model, FrameObservations(0.0, (MarkerView(cam, mid, noisy, cov, corner_common=c),), (cam,)),
+                           opts)
+        assert e.ok and e.T_world_robot is not None and e.cov_6x6 is not None
+        err.append(pose_error_xi(e.T_world_robot, T))
+        covs.append(e.cov_6x6)
+    return np.array(err), np.mean(covs, axis=0)
+
+
+@pytest.mark.parametrize("common_corners", [True, False])
+def test_common_error_in_the_pose_covariance(common_corners: bool) -> None:
+    """Along every principal axis of the stated pose covariance, the errors' variance over the stated one:
+    near 1 with the term; without it the fit, which averaged the common error as four independent ones
+    (and took the corners' common part for their own), states one axis about half as large as it is."""
+    err, C = _errors_and_covariance(common_corners)
+    w, V = np.linalg.eigh(C)
+    ratio = np.einsum("ia,ij,ja->a", V, err.T @ err / len(err), V) / w
+    if common_corners:
+        assert np.all((ratio > 0.75) & (ratio < 1.3)), ratio.round(2)
+    else:
+        assert ratio.max() > 1.6, ratio.round(2)
+
+
+def test_common_move_survives_the_checkpoint() -> None:
+    c = np.arange(8.0).reshape(4, 2) / 10
+    v = MarkerView("cam0", 3, np.ones((4, 2)), np.tile(np.eye(2), (4, 1, 1)), 7, 0.4, c)
+    w = MarkerView("cam0", 4, np.ones((4, 2)), np.tile(np.eye(2), (4, 1, 1)), 7, 0.4)
+    back = _views_from_json("cam0", 7, _views_to_json([v, w]))
+    assert back[0].corner_common is not None and np.array_equal(back[0].corner_common, c)
+    assert back[1].corner_common is None
