@@ -24,7 +24,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from gtrig.geometry import wrap_angle
-from gtrig.laser.hull_icp import HullFit, HullModel, IcpSettings, fit_hull_batch
+from gtrig.laser.hull_icp import BeamPoints, HullFit, HullModel, IcpSettings, fit_hull_batch
 
 
 @dataclass(frozen=True)
@@ -163,12 +163,7 @@ def acquire(
     sel = np.concatenate(members)
     fits = fit_hull_batch(
         model,
-        p[sel],
-        fid,
-        scanner_index[sel],
-        scanner_xy_world,
-        dir_world[sel],
-        sigma_range_m,
+        BeamPoints(p[sel], fid, scanner_index[sel], scanner_xy_world, dir_world[sel], sigma_range_m),
         np.array(inits),
         settings,
         wide_gate_m=max(0.2, 2 * settings.gate_m),

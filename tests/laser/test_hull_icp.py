@@ -4,7 +4,7 @@ import numpy as np
 
 from gtrig.laser import synth
 from gtrig.laser.fuse import beam_dirs_world
-from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull, scanner_sensitivity
+from gtrig.laser.hull_icp import BeamPoints, HullModel, IcpSettings, fit_hull, scanner_sensitivity
 
 
 def _points(room, pose, rng, sigma=None, scanners=None):
@@ -71,7 +71,7 @@ def test_scanner_sensitivity_matches_refit(room):
     truth = np.array([0.3, -0.2, 0.6])
     P, I, S, D, sig = _points(room, truth, None)
     settings = IcpSettings()
-    A = scanner_sensitivity(model, P, np.zeros(len(P), dtype=int), I, S, D, sig, truth[None], settings)[0]
+    A = scanner_sensitivity(model, BeamPoints.one_frame(P, I, S, D, sig), truth[None], settings)[0]
     assert A.shape == (3, 3 * len(S))
     # every scanner moved by the same translation moves the hull by it
     common = np.tile([0.002, -0.001, 0.0], len(S))
