@@ -329,14 +329,13 @@ def fit_hull_batch(
     prior = np.array([1 / st.prior_std_m**2, 1 / st.prior_std_m**2, 1 / st.prior_std_rad**2])
     wide = 2.0 * st.gate_m if wide_gate_m is None else wide_gate_m
     H = np.zeros((K, 3, 3))
-    r = np.zeros(M)
-    w = np.zeros(M)
-    k_side = np.zeros(M, dtype=np.intp)
-    inl = np.zeros(M, dtype=bool)
+    zero = np.zeros(M)
+    lin = _Linearisation(np.zeros(M, dtype=np.intp), np.zeros(M, dtype=bool), zero, zero, (zero, zero, zero),
+                         np.zeros((M, 2)))
     it = 0
     for it in range(1, st.max_iterations + 1):  # noqa: B007
         lin = _linearise(model, pts, var_r, pose, wide if it == 1 else st.gate_m, st)
-        k_side, inl, r, w, J = lin.side, lin.inlier, lin.r, lin.w, lin.J
+        r, w, J = lin.r, lin.w, lin.J
         H = _normal_matrix(fid, w, J, K)
         # (float: bincount of no points at all is an integer array)
         g = np.column_stack([np.bincount(fid, w * J[i] * r, minlength=K) for i in range(3)]).astype(float)
@@ -351,6 +350,14 @@ def fit_hull_batch(
             and np.all(np.abs(delta[:, 2]) < st.tol_rad)
         ):
             break
+    return _fit_summary(fid, K, pose, H, lin, it, st)
+
+
+def _fit_summary(fid: np.ndarray, K: int, pose: np.ndarray, H: np.ndarray, lin: _Linearisation, iterations: int,
+                 st: IcpSettings) -> HullFitBatch:
+    """The K fits from their last linearisation ``lin`` and normal matrices ``H`` (K, 3, 3): inlier counts,
+    residuals, the covariance scaled by the variance factor, and why a fit is degenerate."""
+    inl, k_side, r, w = lin.inlier, lin.side, lin.r, lin.w
     n_in = np.bincount(fid, inl, minlength=K).astype(int)
     side_points = np.zeros((K, 4), dtype=int)
     np.add.at(side_points, (fid[inl], k_side[inl]), 1)
@@ -363,11 +370,19 @@ def fit_hull_batch(
     cov = np.linalg.inv(H)
     inflate = np.where((n_in > 3) & (chi2_dof > 1.0), chi2_dof, 1.0)
     cov = cov * inflate[:, None, None]
+    reasons = _degeneracy_reasons(n_in, n_sides, cov, st)
+    degenerate = np.array([bool(x) for x in reasons], dtype=bool)
+    return HullFitBatch(pose, cov, n_in, side_points, n_sides, rms, chi2_dof, iterations, degenerate, tuple(reasons))
+
+
+def _degeneracy_reasons(n_in: np.ndarray, n_sides: np.ndarray, cov: np.ndarray, st: IcpSettings) -> list[str]:
+    """Why each of K fits cannot be trusted (empty when it can), from its inliers (K,), sides seen (K,) and
+    covariance (K, 3, 3)."""
     std_xy = np.sqrt(np.linalg.eigvalsh(cov[:, :2, :2])[:, -1])
     std_th = np.sqrt(cov[:, 2, 2])
     reasons = []
     bad = (n_in < st.min_points) | (n_sides < 2) | (std_xy > st.max_std_m) | (std_th > st.max_std_rad)
-    for k in range(K):
+    for k in range(len(n_in)):
         if not bad[k]:
             reasons.append("")
         elif n_in[k] < st.min_points:
@@ -380,8 +395,7 @@ def fit_hull_batch(
             reasons.append(f"weak geometry (yaw std {np.degrees(std_th[k]):.2f} deg)")
         else:
             reasons.append("")
-    degenerate = np.array([bool(x) for x in reasons], dtype=bool)
-    return HullFitBatch(pose, cov, n_in, side_points, n_sides, rms, chi2_dof, it, degenerate, tuple(reasons))
+    return reasons
 
 
 def _fit_normal_equations(
