@@ -809,13 +809,11 @@ class _FrameTracker:
                 radius = st.reacquire_radius_m
         acq = None
         if sl.stop - sl.start >= st.icp.min_points:
+            pts = BeamPoints.one_frame(wf.xy_world[sl], wf.scanner_index[sl], wf.scanner_xy_world, wf.dir_world[sl],
+                                       wf.sigma_m)
             acq = acquire(
                 model,
-                wf.xy_world[sl],
-                wf.scanner_index[sl],
-                wf.scanner_xy_world,
-                wf.dir_world[sl],
-                wf.sigma_m,
+                pts,
                 st.icp,
                 prior_xytheta=prior,
                 search_radius_m=radius,
