@@ -239,100 +239,91 @@ class CalibrationReport:
 
     def to_markdown(self) -> str:
         """A human-readable report: intrinsics, joint vs chain, uncertainties, residuals, truth."""
-        L = [
-            "# Camera calibration report",
-            "",
-            "## Intrinsics",
-            "",
-            "| camera | fx | fy | cx | cy | k1 | k2 | RMS (px) | views | rejected |",
-            "|---" * 10 + "|",
-        ]
+        L = ["# Camera calibration report"]
+        L += self._intrinsics_md() + self._refined_intrinsics_md() + self._poses_md() + self._pairs_md()
+        L += self._truth_md() + self._warnings_md()
+        return "\n".join(L) + "\n"
+
+    def _intrinsics_md(self) -> list[str]:
+        """The intrinsics' table, one row per camera."""
+        rows = []
         for n, x in sorted(self.intrinsics.items()):
             c = as_intrinsics(x)
             K, d = c.camera_matrix, c.dist_coeffs
-            L.append(
+            rows.append(
                 f"| {n} | {K[0, 0]:.2f} | {K[1, 1]:.2f} | {K[0, 2]:.2f} | {K[1, 2]:.2f} | {d[0]:.4f} | "
                 f"{d[1]:.4f} | {c.rms_px:.3f} | {c.extra.get('views_used', '')} | "
                 f"{len(c.extra.get('rejected', {}))} |"
             )
+        return _md_table(("camera", "fx", "fy", "cx", "cy", "k1", "k2", "RMS (px)", "views", "rejected"), rows,
+                         "Intrinsics")
+
+    def _refined_intrinsics_md(self) -> list[str]:
+        """The intrinsics the network bundle adjustment refined, with their sigmas (none: no lines)."""
         net = self.network
         refined = {n: j.intrinsics for n, j in sorted(net.joint.items()) if j.intrinsics is not None}
-        rms_sweep = {n: net.joint[n].rms_px_sweep for n in refined}
-        if any(ji.extra.get("refined_in_network") for ji in refined.values()):
-            L += [
-                "",
-                "## Intrinsics refined in the network bundle adjustment (sweeps, pairs, world board)",
-                "",
-                "| camera | fx | fy | cx | cy | sigma fx, fy, cx, cy (px) | sweep RMS in the BA (px) |",
-                "|---" * 7 + "|",
-            ]
-            for n, ji in refined.items():
-                K, sd = ji.camera_matrix, ji.extra.get("std", {})
-                L.append(
-                    f"| {n} | {K[0, 0]:.2f} | {K[1, 1]:.2f} | {K[0, 2]:.2f} | {K[1, 2]:.2f} | "
-                    f"{', '.join(f'{sd.get(k, np.nan):.2f}' for k in ('fx', 'fy', 'cx', 'cy'))} | "
-                    f"{rms_sweep[n]:.3f} |"
-                )
-        L += [
-            "",
-            "## Camera poses: joint bundle adjustment vs chain (the seeds' method)",
-            "",
-            "Sigmas include the intrinsics' uncertainty; in brackets, the rotation's with the lenses held.",
-            "",
-            "| camera | chain path | x, y, z (m) | sigma pos (mm) | sigma rot (deg) | RMS (px) | "
-            "chain - joint (mm / deg) |",
-            "|---" * 7 + "|",
-        ]
+        if not any(ji.extra.get("refined_in_network") for ji in refined.values()):
+            return []
+        rows = []
+        for n, ji in refined.items():
+            K, sd = ji.camera_matrix, ji.extra.get("std", {})
+            sigmas = ", ".join(f"{sd.get(k, np.nan):.2f}" for k in ("fx", "fy", "cx", "cy"))
+            rows.append(f"| {n} | {K[0, 0]:.2f} | {K[1, 1]:.2f} | {K[0, 2]:.2f} | {K[1, 2]:.2f} | {sigmas} | "
+                        f"{net.joint[n].rms_px_sweep:.3f} |")
+        return _md_table(("camera", "fx", "fy", "cx", "cy", "sigma fx, fy, cx, cy (px)", "sweep RMS in the BA (px)"),
+                         rows, "Intrinsics refined in the network bundle adjustment (sweeps, pairs, world board)")
+
+    def _poses_md(self) -> list[str]:
+        """The cameras' poses of the joint adjustment, their sigmas, and how far the chain's are from them."""
+        net = self.network
+        rows = []
         for n, cp in sorted(net.joint.items()):
             dch, rch = geo.pose_error(net.chain[n], cp.T_world_cam)
-            L.append(
+            rot = ", ".join(f"{np.degrees(v):.4f}" for v in cp.sigma_rot_rad)
+            if cp.sigma_rot_rad_fixed_intrinsics is not None:
+                rot += f" ({', '.join(f'{np.degrees(v):.4f}' for v in cp.sigma_rot_rad_fixed_intrinsics)})"
+            rows.append(
                 f"| {n} | {' > '.join(net.chain_path[n])} | "
                 f"{', '.join(f'{v:.4f}' for v in cp.T_world_cam[:3, 3])} | "
-                f"{', '.join(f'{v * 1000:.2f}' for v in cp.sigma_pos_m)} | "
-                f"{', '.join(f'{np.degrees(v):.4f}' for v in cp.sigma_rot_rad)}"
-                + (
-                    ""
-                    if cp.sigma_rot_rad_fixed_intrinsics is None
-                    else f" ({', '.join(f'{np.degrees(v):.4f}' for v in cp.sigma_rot_rad_fixed_intrinsics)})"
-                )
-                + f" | {cp.rms_px:.3f} | "
+                f"{', '.join(f'{v * 1000:.2f}' for v in cp.sigma_pos_m)} | {rot} | {cp.rms_px:.3f} | "
                 f"{dch * 1000:.2f} / {np.degrees(rch):.4f} |"
             )
-        L += ["", "| pair | views | RMS (px) | edge spread (mm / deg) |", "|---" * 4 + "|"]
-        for p, e in sorted(net.edges.items()):
-            L.append(
-                f"| {p} | {e.n} | {net.rms_px_pair[p]:.3f} | {e.trans_rms_m * 1000:.2f} / "
-                f"{np.degrees(e.rot_rms_rad):.4f} |"
-            )
-        for cname, v in sorted(net.rms_px_world.items()):
-            L.append(f"| world board in {cname} | | {v:.3f} | |")
+        return _md_table(("camera", "chain path", "x, y, z (m)", "sigma pos (mm)", "sigma rot (deg)", "RMS (px)",
+                          "chain - joint (mm / deg)"), rows,
+                         "Camera poses: joint bundle adjustment vs chain (the seeds' method)",
+                         "Sigmas include the intrinsics' uncertainty; in brackets, the rotation's with the lenses "
+                         "held.")
+
+    def _pairs_md(self) -> list[str]:
+        """The camera pairs' and world board's residuals, the double board and the overall residual."""
+        net = self.network
+        rows = [f"| {p} | {e.n} | {net.rms_px_pair[p]:.3f} | {e.trans_rms_m * 1000:.2f} / "
+                f"{np.degrees(e.rot_rms_rad):.4f} |" for p, e in sorted(net.edges.items())]
+        rows += [f"| world board in {cname} | | {v:.3f} | |" for cname, v in sorted(net.rms_px_world.items())]
         d12 = net.to_dict()["T_board1_board2"]
-        L += [
+        return _md_table(("pair", "views", "RMS (px)", "edge spread (mm / deg)"), rows) + [
             "",
             f"Double board: T_board1_board2 = {', '.join(f'{v:.4f}' for v in d12['xyz'])} m "
             f"(sigma {', '.join(f'{v:.2f}' for v in d12['sigma_mm'])} mm). "
             f"Overall RMS {net.rms_px:.3f} px, residual sigma {net.sigma_px:.3f} px per axis.",
         ]
-        if self.truth:
-            L += [
-                "",
-                "## Against truth (simulation)",
-                "",
-                "| camera | joint (mm / deg) | chain (mm / deg) | fx, fy, cx, cy error (px) |",
-                "|---" * 4 + "|",
-            ]
-            for n, t in sorted(self.truth.items()):
-                L.append(
-                    f"| {n} | {t['joint_mm']:.2f} / {t['joint_deg']:.4f} | {t['chain_mm']:.2f} / "
-                    f"{t['chain_deg']:.4f} | {t.get('dfx_px', np.nan):.2f}, {t.get('dfy_px', np.nan):.2f}, "
-                    f"{t.get('dcx_px', np.nan):.2f}, {t.get('dcy_px', np.nan):.2f} |"
-                )
-        warns = list(net.warnings) + [
+
+    def _truth_md(self) -> list[str]:
+        """The errors against the simulation's truth (none: no lines)."""
+        if not self.truth:
+            return []
+        rows = [f"| {n} | {t['joint_mm']:.2f} / {t['joint_deg']:.4f} | {t['chain_mm']:.2f} / {t['chain_deg']:.4f} | "
+                f"{', '.join(f'{t.get(k, np.nan):.2f}' for k in ('dfx_px', 'dfy_px', 'dcx_px', 'dcy_px'))} |"
+                for n, t in sorted(self.truth.items())]
+        return _md_table(("camera", "joint (mm / deg)", "chain (mm / deg)", "fx, fy, cx, cy error (px)"), rows,
+                         "Against truth (simulation)")
+
+    def _warnings_md(self) -> list[str]:
+        """The network's and the intrinsics' warnings (none: no lines)."""
+        warns = list(self.network.warnings) + [
             w for x in self.intrinsics.values() for w in as_intrinsics(x).extra.get("warnings", [])
         ]
-        if warns:
-            L += ["", "## Warnings", ""] + [f"- {w}" for w in warns]
-        return "\n".join(L) + "\n"
+        return ["", "## Warnings", ""] + [f"- {w}" for w in warns] if warns else []
 
     def texts(self) -> dict[str, str]:
         """{file name: text} of the report's files: ``calibration_report.md`` and ``.yaml``."""
@@ -347,6 +338,13 @@ class CalibrationReport:
         for name, text in self.texts().items():
             atomic_write_text(d / name, text)
 
+
+
+def _md_table(columns: Sequence[str], rows: Sequence[str], title: str = "", note: str = "") -> list[str]:
+    """Lines of a Markdown table of ``columns`` and the formatted ``rows``, after a blank line, the heading
+    ``## title`` and the paragraph ``note`` when given."""
+    head = [""] + ([f"## {title}", ""] if title else []) + ([note, ""] if note else [])
+    return [*head, "| " + " | ".join(columns) + " |", "|---" * len(columns) + "|", *rows]
 
 def _plain(x: Any) -> Any:
     if isinstance(x, dict):

@@ -3,10 +3,18 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from gtrig.cli.common import console, handle_errors
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from gtrig.fusion.fuse import FusionReport
+    from gtrig.io.odometry import OdometryLog
+    from gtrig.trajectory import PoseTrack
 
 
 @handle_errors
@@ -37,10 +45,8 @@ def command(
     from gtrig.cli import checks
     from gtrig.errors import InputError
     from gtrig.fusion import FusionOptions, fuse_tracks
-    from gtrig.io.biascov import read_bias_cov
-    from gtrig.io.odometry import read_odometry
     from gtrig.io.offsets import read_offsets
-    from gtrig.io.posetrack import read_pose_track, write_pose_track
+    from gtrig.io.posetrack import write_pose_track
     from gtrig.sync.offset import offset_sigmas
 
     if estimator not in ("batch", "ekf"):
@@ -52,9 +58,31 @@ def command(
         from gtrig.rig import load_rig
 
         load_rig(rig)
+    tracks, bias = _read_sources((("vision", vision, vision_cov, vision_bias),
+                                  ("laser", laser, laser_cov, laser_bias)))
+    odo = None if no_odometry else _read_odometry(odometry, recording)
+    rate_hz = _rate_hz(rate)
+    offsets = read_offsets(sync) if sync is not None else {}
+    sigmas = offset_sigmas(sync) if sync is not None else {}
+    opts = FusionOptions(estimator=estimator, rate_hz=rate_hz, offsets_s=offsets,  # type: ignore[arg-type]
+                         offsets_sigma_s=sigmas, max_gap_s=max_gap, bias_cov=bias)
+    track, rep = fuse_tracks(tracks, odo, opts)
+    extra = {report: json.dumps(rep.to_dict(), indent=1)} if report is not None else None
+    write_pose_track(track, out, covariance, extra=extra)
+    _print_report(track, rep, out)
+
+
+def _read_sources(sources: tuple[tuple[str, Path | None, Path | None, Path | None], ...]
+                  ) -> tuple[dict[str, PoseTrack], dict[str, np.ndarray]]:
+    """The tracks given, by name, from ``(name, track.tum, cov.csv, bias.yaml)`` (absent: None), and the
+    run-constant error covariance of those that give one."""
+    from gtrig.errors import InputError
+    from gtrig.io.biascov import read_bias_cov
+    from gtrig.io.posetrack import read_pose_track
+
     tracks = {}
     bias = {}
-    for name, tum, cov, b in (("vision", vision, vision_cov, vision_bias), ("laser", laser, laser_cov, laser_bias)):
+    for name, tum, cov, b in sources:
         if tum is None:
             if b is not None:
                 raise InputError(f"--{name}-bias without --{name}")
@@ -66,26 +94,38 @@ def command(
             bias[name] = read_bias_cov(b)
     if not tracks:
         raise InputError("give at least one source (--vision / --laser)")
-    odo = None
-    if not no_odometry:
-        path = odometry or (recording / "run" / "odometry.csv" if recording is not None else None)
-        if path is None:
-            raise InputError("no odometry: give --odometry, --recording, or --no-odometry")
-        odo = read_odometry(path)
-    rate_hz = None
-    if rate != "odometry":
-        try:
-            rate_hz = float(rate)
-        except ValueError:
-            raise InputError(f"--rate {rate!r}: 'odometry' or a number of Hz") from None
-        checks.number("--rate", rate_hz, lo=0.0, lo_open=True, hi=10000.0, unit="Hz")
-    offsets = read_offsets(sync) if sync is not None else {}
-    sigmas = offset_sigmas(sync) if sync is not None else {}
-    opts = FusionOptions(estimator=estimator, rate_hz=rate_hz, offsets_s=offsets,  # type: ignore[arg-type]
-                         offsets_sigma_s=sigmas, max_gap_s=max_gap, bias_cov=bias)
-    track, rep = fuse_tracks(tracks, odo, opts)
-    extra = {report: json.dumps(rep.to_dict(), indent=1)} if report is not None else None
-    write_pose_track(track, out, covariance, extra=extra)
+    return tracks, bias
+
+
+def _read_odometry(odometry: Path | None, recording: Path | None) -> OdometryLog:
+    """The odometry of ``--odometry``, else of the recording."""
+    from gtrig.errors import InputError
+    from gtrig.io.odometry import read_odometry
+
+    path = odometry or (recording / "run" / "odometry.csv" if recording is not None else None)
+    if path is None:
+        raise InputError("no odometry: give --odometry, --recording, or --no-odometry")
+    return read_odometry(path)
+
+
+def _rate_hz(rate: str) -> float | None:
+    """The output rate of ``--rate`` in Hz (None: a pose per odometry stamp)."""
+    from gtrig.cli import checks
+    from gtrig.errors import InputError
+
+    if rate == "odometry":
+        return None
+    try:
+        rate_hz = float(rate)
+    except ValueError:
+        raise InputError(f"--rate {rate!r}: 'odometry' or a number of Hz") from None
+    checks.number("--rate", rate_hz, lo=0.0, lo_open=True, hi=10000.0, unit="Hz")
+    return rate_hz
+
+
+def _print_report(track: PoseTrack, rep: FusionReport, out: Path) -> None:
+    """The fused track in a few lines: poses observed and bridged, each source's fixes, the odometry's
+    fitted parameters per segment."""
     c = track.counts()
     console.print(f"{out}: {len(track)} poses ({c['ok']} observed, {c['bridged']} bridged), {rep.estimator}, "
                   f"{rep.seconds:.2f} s", highlight=False)

@@ -97,17 +97,9 @@ def command(
     """Predict GTvision's, GTlaser's and the fused pose accuracy over the floor for a planned rig."""
     import math
 
-    import numpy as np
-
-    from gtrig import geometry as geo
     from gtrig.cli import checks
     from gtrig.errors import InputError
-    from gtrig.plan.fused import FusionPlanSettings
-    from gtrig.plan.grid import area_grid, default_area, path_grid
-    from gtrig.plan.predict import PlanSettings
-    from gtrig.plan.vision import after_calibration
     from gtrig.rig.load import load_rig
-    from gtrig.vision.covariance import RigUncertainty
 
     checks.number("--grid-m", grid_m, lo=0.0, lo_open=True, hi=5.0, unit="m")
     checks.count("--headings", headings, 1, 360)
@@ -135,32 +127,57 @@ def command(
         from gtrig.plan.suggest import check_suggestion
 
         check_suggestion(r, *n_suggest, suggest_scanner_height)
-    if path is not None:
-        from gtrig.io.tum import read_tum
-
-        traj = read_tum(path)
-        grid = path_grid(traj.xyz[:, :2], geo.yaw_of_quats(traj.quat_xyzw), traj.stamps_s)
-    else:
-        poly = np.asarray(parse_polygon(area), dtype=float) if area is not None else default_area(r)
-        grid = area_grid(poly, grid_m, headings)
-    ru = RigUncertainty(camera_sigma_mm / 1000, math.radians(camera_sigma_deg), marker_sigma_mm / 1000,
-                        math.radians(marker_sigma_deg))
-    vision = after_calibration(ru)
-    if sunlit is not None:
-        from dataclasses import replace
-
-        from gtrig.plan.grid import check_polygon
-
-        lit = check_polygon(np.asarray(parse_polygon(sunlit, "--sunlit"), dtype=float), "--sunlit")
-        vision = replace(vision, sunlit_xy=tuple((float(x), float(y)) for x, y in lit))
-    settings = PlanSettings(vision=vision,
-                            fusion=FusionPlanSettings(speed_mps=speed_mps, clock_sigma_s=clock_sigma_ms / 1000))
+    grid = _plan_grid(r, area, path, grid_m, headings)
+    settings = _plan_settings(camera_sigma_mm, camera_sigma_deg, marker_sigma_mm, marker_sigma_deg, speed_mps,
+                              clock_sigma_ms, sunlit)
     if workers == 0:
         import os
 
         workers = os.cpu_count() or 1
     _run(r, grid, settings, out, target_mm / 1000, math.radians(target_deg), rig.stem, workers,
          Suggest(*n_suggest, suggest_height, suggest_positions, suggest_scanner_height))
+
+
+def _plan_grid(r: Rig, area: str | None, path: Path | None, grid_m: float, headings: int) -> PlanGrid:
+    """The poses to plan at: those of the TUM trajectory ``path``, else a grid of ``grid_m`` cells and
+    ``headings`` headings over ``--area`` (by default the rig's)."""
+    import numpy as np
+
+    from gtrig import geometry as geo
+    from gtrig.plan.grid import area_grid, default_area, path_grid
+
+    if path is not None:
+        from gtrig.io.tum import read_tum
+
+        traj = read_tum(path)
+        return path_grid(traj.xyz[:, :2], geo.yaw_of_quats(traj.quat_xyzw), traj.stamps_s)
+    poly = np.asarray(parse_polygon(area), dtype=float) if area is not None else default_area(r)
+    return area_grid(poly, grid_m, headings)
+
+
+def _plan_settings(camera_sigma_mm: float, camera_sigma_deg: float, marker_sigma_mm: float, marker_sigma_deg: float,
+                   speed_mps: float, clock_sigma_ms: float, sunlit: str | None = None) -> PlanSettings:
+    """The prediction's settings from the options: the rig's uncertainty after calibration, the robot's speed,
+    the clock offsets' standard error and the floor polygon where the markers' white clips (``--sunlit``)."""
+    import math
+    from dataclasses import replace
+
+    import numpy as np
+
+    from gtrig.plan.fused import FusionPlanSettings
+    from gtrig.plan.grid import check_polygon
+    from gtrig.plan.predict import PlanSettings
+    from gtrig.plan.vision import after_calibration
+    from gtrig.vision.covariance import RigUncertainty
+
+    ru = RigUncertainty(camera_sigma_mm / 1000, math.radians(camera_sigma_deg), marker_sigma_mm / 1000,
+                        math.radians(marker_sigma_deg))
+    vision = after_calibration(ru)
+    if sunlit is not None:
+        lit = check_polygon(np.asarray(parse_polygon(sunlit, "--sunlit"), dtype=float), "--sunlit")
+        vision = replace(vision, sunlit_xy=tuple((float(x), float(y)) for x, y in lit))
+    return PlanSettings(vision=vision,
+                        fusion=FusionPlanSettings(speed_mps=speed_mps, clock_sigma_s=clock_sigma_ms / 1000))
 
 
 @dataclass(frozen=True)

@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from gtrig.cli.common import console, err_console, handle_errors
 from gtrig.cli.scale import chunk_bar, dask_option, executor
+
+if TYPE_CHECKING:
+    from gtrig.rig.models import Rig
+    from gtrig.vision.sequence import VisionResult
 
 
 @handle_errors
@@ -57,8 +63,6 @@ def command(
 ) -> None:
     """Robot poses from the markers seen by all cameras at each instant, with covariances; with --board, a
     ChArUco board's poses from the cameras' videos."""
-    import math
-
     from gtrig.errors import InputError
 
     if board is not None:
@@ -71,14 +75,11 @@ def command(
     if rig is None or recording is None:
         raise InputError("--rig and --recording are required (or --board with --videos and --cameras)")
 
-    from rich.table import Table
-
     from gtrig.cli import checks
     from gtrig.rig import load_rig
     from gtrig.vision.covariance import RigUncertainty
     from gtrig.vision.estimate import VisionOptions
     from gtrig.vision.refine import PlanarPrior
-    from gtrig.vision.report import summarize
     from gtrig.vision.sequence import run_recording, write_pose_track_files
     from gtrig.vision.track import TrackOptions
 
@@ -96,7 +97,28 @@ def command(
     checks.input_folder("--recording", recording)
     checks.outputs([rig], [out, covariance])
     r = load_rig(rig)
-    # the rig's own uncertainty wherever it gives one; say which defaults stand in for the rest
+    for a in _assumed_uncertainties(r, planar, camera_sigma_mm, camera_sigma_deg, marker_sigma_mm, marker_sigma_deg,
+                                    floor_sigma_mm, floor_tilt_deg):
+        err_console.print(f"assumed: {a}", highlight=False, soft_wrap=True)
+    ru = RigUncertainty(camera_sigma_mm / 1000, math.radians(camera_sigma_deg), marker_sigma_mm / 1000,
+                        math.radians(marker_sigma_deg))
+    opts = VisionOptions(planar=planar, prior=PlanarPrior(0.0, floor_sigma_mm / 1000,
+                                                          math.radians(floor_tilt_deg)), rig_uncertainty=ru)
+    checkpoint = out.with_name(out.name + ".checkpoint.jsonl")
+    with executor(dask) as ex, chunk_bar("GTvision") as bar:
+        result = run_recording(recording, r, sequence, planar, workers, options=opts, detector=detector,
+                               checkpoint=checkpoint, progress=bar.progress, executor=ex,
+                               track=TrackOptions(enabled=track, full_every_s=full_every_s))
+    write_pose_track_files(result, out, covariance)
+    checkpoint.unlink(missing_ok=True)
+    _print_summary(result, out, sequence)
+
+
+def _assumed_uncertainties(r: Rig, planar: bool, camera_sigma_mm: float, camera_sigma_deg: float,
+                           marker_sigma_mm: float, marker_sigma_deg: float, floor_sigma_mm: float,
+                           floor_tilt_deg: float) -> list[str]:
+    """What stands in for the uncertainties the rig does not give (it is used wherever it does), one
+    line each."""
     assumed = []
     no_cov = [c.name for c in r.cameras if c.pose_cov is None]
     if no_cov:
@@ -114,19 +136,15 @@ def command(
     no_jitter = [c.name for c in r.cameras if c.stamp_sigma_s == 0]
     if no_jitter:
         assumed.append(f"exact image time stamps for {', '.join(no_jitter)} (stamp_sigma_s absent)")
-    for a in assumed:
-        err_console.print(f"assumed: {a}", highlight=False, soft_wrap=True)
-    ru = RigUncertainty(camera_sigma_mm / 1000, math.radians(camera_sigma_deg), marker_sigma_mm / 1000,
-                        math.radians(marker_sigma_deg))
-    opts = VisionOptions(planar=planar, prior=PlanarPrior(0.0, floor_sigma_mm / 1000,
-                                                          math.radians(floor_tilt_deg)), rig_uncertainty=ru)
-    checkpoint = out.with_name(out.name + ".checkpoint.jsonl")
-    with executor(dask) as ex, chunk_bar("GTvision") as bar:
-        result = run_recording(recording, r, sequence, planar, workers, options=opts, detector=detector,
-                               checkpoint=checkpoint, progress=bar.progress, executor=ex,
-                               track=TrackOptions(enabled=track, full_every_s=full_every_s))
-    write_pose_track_files(result, out, covariance)
-    checkpoint.unlink(missing_ok=True)
+    return assumed
+
+
+def _print_summary(result: VisionResult, out: Path, sequence: str) -> None:
+    """The run in a few lines: instants localized, residuals, a table per camera, why instants failed."""
+    from rich.table import Table
+
+    from gtrig.vision.report import summarize
+
     rep = summarize(result)
     console.print(f"{out}: {rep.localized} of {rep.instants} instants localized ({sequence}, "
                   f"detector {result.detector}, {result.seconds['total']:.1f} s); residual RMS "

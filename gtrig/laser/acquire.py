@@ -15,7 +15,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -24,7 +24,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from gtrig.geometry import wrap_angle
-from gtrig.laser.hull_icp import HullFit, HullModel, IcpSettings, fit_hull_batch
+from gtrig.laser.hull_icp import BeamPoints, HullFit, HullFitBatch, HullModel, IcpSettings, fit_hull_batch
 
 
 @dataclass(frozen=True)
@@ -74,11 +74,7 @@ def _crossings(
 
 def acquire(
     model: HullModel,
-    xy_world: np.ndarray,
-    scanner_index: np.ndarray,
-    scanner_xy_world: np.ndarray,
-    dir_world: np.ndarray,
-    sigma_range_m: np.ndarray,
+    pts: BeamPoints,
     settings: IcpSettings | None = None,
     prior_xytheta: np.ndarray | None = None,
     search_radius_m: float | None = None,
@@ -90,8 +86,10 @@ def acquire(
 
     Parameters
     ----------
-    model, xy_world, scanner_index, scanner_xy_world, dir_world, sigma_range_m, settings
-        As in :func:`gtrig.laser.hull_icp.fit_hull_batch` (one frame).
+    model, settings
+        As in :func:`gtrig.laser.hull_icp.fit_hull_batch`.
+    pts
+        The frame's M points, world frame (their ``frame_index`` is not read).
     prior_xytheta
         (3,) a recent pose: resolves the 180-degree symmetry, and with ``search_radius_m`` limits the
         clusters to those near it.
@@ -112,50 +110,11 @@ def acquire(
         None when no cluster gives a non-degenerate fit.
     """
     settings = IcpSettings() if settings is None else settings
-    p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
+    p = pts.xy_world
     if p.shape[0] < settings.min_points:
         return None
-    labels = cluster_points(p, cluster_gap_m)
-    corners = model.corners_xy
-    centre_r = corners.mean(axis=0)
-    ext = corners.max(axis=0) - corners.min(axis=0)  # (length, width) along robot x, y
-    diag = float(np.hypot(*ext))
-    reach = 0.5 * diag + 2 * settings.gate_m
-    inits, members = [], []
-    n_clusters = 0
-    for lab in range(labels.max() + 1):
-        idx = np.flatnonzero(labels == lab)
-        if idx.size < settings.min_points:
-            continue
-        q = p[idx]
-        if search_radius_m is not None and prior_xytheta is not None:
-            if np.linalg.norm(q.mean(axis=0) - prior_xytheta[:2]) > search_radius_m:
-                continue
-        if np.max(np.linalg.norm(q - q.mean(axis=0), axis=1)) > diag:
-            continue
-        n_clusters += 1
-        (_, _), (_, _), ang_deg = cv2.minAreaRect(q.astype(np.float32))
-        alpha = np.radians(ang_deg)
-        for k in range(4):
-            th = alpha + k * np.pi / 2
-            c, s = np.cos(th), np.sin(th)
-            R = np.array([[c, -s], [s, c]])
-            qr = q @ R  # cluster in axes aligned with the candidate robot frame
-            lo, hi = qr.min(axis=0), qr.max(axis=0)
-            for cx in (lo[0] + ext[0] / 2, hi[0] - ext[0] / 2):
-                for cy in (lo[1] + ext[1] / 2, hi[1] - ext[1] / 2):
-                    centre_w = R @ np.array([cx, cy])
-                    origin_w = centre_w - R @ centre_r
-                    inits.append([origin_w[0], origin_w[1], th])
-                    # all points near the hypothesised hull, not only the cluster's: a partly
-                    # occluded outline may fall apart into several clusters
-                    members.append(np.flatnonzero(np.linalg.norm(p - centre_w, axis=1) < reach))
-    if prior_xytheta is not None and search_radius_m is not None:
-        # the recent pose itself is a hypothesis, on the points near it
-        near = np.flatnonzero(np.linalg.norm(p - prior_xytheta[:2], axis=1) < diag)
-        if near.size >= settings.min_points:
-            inits.append(list(prior_xytheta))
-            members.append(near)
+    near_prior = prior_xytheta if search_radius_m is not None else None
+    inits, members, n_clusters = _hypotheses(model, p, settings, cluster_gap_m, near_prior, search_radius_m)
     if not inits:
         return None
     # refine all hypotheses at once: each hypothesis gets its own copy of its cluster's points
@@ -163,25 +122,97 @@ def acquire(
     sel = np.concatenate(members)
     fits = fit_hull_batch(
         model,
-        p[sel],
-        fid,
-        scanner_index[sel],
-        scanner_xy_world,
-        dir_world[sel],
-        sigma_range_m,
+        BeamPoints(p[sel], fid, pts.scanner_index[sel], pts.scanner_xy_world, pts.dir_world[sel], pts.sigma_range_m),
         np.array(inits),
         settings,
         wide_gate_m=max(0.2, 2 * settings.gate_m),
     )
+    best = _best_hypothesis(model, fits, near_prior, free_rays, free_margin_m)
+    if best is None:
+        return None
+    fit, ambiguous = _symmetric_choice(fits.item(best), model.corners_xy.mean(axis=0), prior_xytheta)
+    return Acquisition(fit, ambiguous, n_clusters)
+
+
+def _hypotheses(
+    model: HullModel, p: np.ndarray, settings: IcpSettings, cluster_gap_m: float, near_prior: np.ndarray | None,
+    search_radius_m: float | None,
+) -> tuple[list[list[float]], list[np.ndarray], int]:
+    """Start poses of the hull among the points ``p`` (M, 2, world): 16 per cluster of hull size (within
+    ``search_radius_m`` of ``near_prior`` (3,) when given), and ``near_prior`` itself. Returns the start
+    poses (x, y m; theta rad), each one's points (indices into ``p``) and the clusters examined."""
+    labels = cluster_points(p, cluster_gap_m)
+    corners = model.corners_xy
+    ext = corners.max(axis=0) - corners.min(axis=0)  # (length, width) along robot x, y
+    diag = float(np.hypot(*ext))
+    inits: list[list[float]] = []
+    members: list[np.ndarray] = []
+    n_clusters = 0
+    for lab in range(labels.max() + 1):
+        idx = np.flatnonzero(labels == lab)
+        if idx.size < settings.min_points:
+            continue
+        q = p[idx]
+        if (near_prior is not None and search_radius_m is not None
+                and np.linalg.norm(q.mean(axis=0) - near_prior[:2]) > search_radius_m):
+            continue
+        if np.max(np.linalg.norm(q - q.mean(axis=0), axis=1)) > diag:
+            continue
+        n_clusters += 1
+        _corner_hypotheses(model, p, q, 0.5 * diag + 2 * settings.gate_m, inits, members)
+    if near_prior is not None:
+        # the recent pose itself is a hypothesis, on the points near it
+        near = np.flatnonzero(np.linalg.norm(p - near_prior[:2], axis=1) < diag)
+        if near.size >= settings.min_points:
+            inits.append(list(near_prior))
+            members.append(near)
+    return inits, members, n_clusters
+
+
+def _corner_hypotheses(
+    model: HullModel, p: np.ndarray, q: np.ndarray, reach_m: float, inits: list[list[float]],
+    members: list[np.ndarray],
+) -> None:
+    """Append to ``inits`` and ``members`` the 16 start poses of the hull on cluster ``q`` (N, 2, world):
+    its four orientations from the minimum-area rectangle, each against the four corners of the
+    cluster's bounding box, and for each the points of ``p`` (M, 2) within ``reach_m`` of its centre."""
+    corners = model.corners_xy
+    centre_r = corners.mean(axis=0)
+    ext = corners.max(axis=0) - corners.min(axis=0)
+    (_, _), (_, _), ang_deg = cv2.minAreaRect(q.astype(np.float32))
+    alpha = np.radians(ang_deg)
+    for k in range(4):
+        th = alpha + k * np.pi / 2
+        c, s = np.cos(th), np.sin(th)
+        R = np.array([[c, -s], [s, c]])
+        qr = q @ R  # cluster in axes aligned with the candidate robot frame
+        lo, hi = qr.min(axis=0), qr.max(axis=0)
+        for cx in (lo[0] + ext[0] / 2, hi[0] - ext[0] / 2):
+            for cy in (lo[1] + ext[1] / 2, hi[1] - ext[1] / 2):
+                centre_w = R @ np.array([cx, cy])
+                origin_w = centre_w - R @ centre_r
+                inits.append([origin_w[0], origin_w[1], th])
+                # all points near the hypothesised hull, not only the cluster's: a partly
+                # occluded outline may fall apart into several clusters
+                members.append(np.flatnonzero(np.linalg.norm(p - centre_w, axis=1) < reach_m))
+
+
+def _best_hypothesis(
+    model: HullModel, fits: HullFitBatch, near_prior: np.ndarray | None,
+    free_rays: tuple[np.ndarray, np.ndarray, np.ndarray] | None, free_margin_m: float,
+) -> int | None:
+    """The refined hypothesis to keep: among the non-degenerate fits scoring within 10 % of the best
+    (inliers, less two per free ray crossed, no turn of about 90 degrees from ``near_prior``), the one
+    of least residual; None when none scores above zero."""
     good = ~fits.degenerate
     if not np.any(good):
         return None
     score = fits.n_points.astype(float)
     if free_rays is not None and free_rays[0].shape[0]:
         score = score - 2.0 * _crossings(model, fits.xytheta, *free_rays, free_margin_m)
-    if prior_xytheta is not None and search_radius_m is not None:
+    if near_prior is not None:
         # near a recent pose, a turn of the hull by about 90 degrees is implausible
-        dth = np.abs(wrap_angle(2.0 * (fits.xytheta[:, 2] - prior_xytheta[2]))) / 2.0
+        dth = np.abs(wrap_angle(2.0 * (fits.xytheta[:, 2] - near_prior[2]))) / 2.0
         score = np.where(dth < np.radians(30.0), score, score - 1e6)
     n_in = np.where(good, score, -np.inf)
     best_n = n_in.max()
@@ -189,9 +220,13 @@ def acquire(
         return None
     cand = np.flatnonzero(n_in >= 0.9 * best_n)
     cand = cand[np.argsort(fits.rms_m[cand])]
-    best = int(cand[0])
-    fit = fits.item(best)
-    # the symmetric twin: same outline, heading turned by pi (origin mirrored through the hull centre)
+    return int(cand[0])
+
+
+def _symmetric_choice(fit: HullFit, centre_r: np.ndarray, prior_xytheta: np.ndarray | None) -> tuple[HullFit, bool]:
+    """``fit`` or its symmetric twin (same outline, heading turned by pi, origin mirrored through the
+    hull centre ``centre_r`` (2,), robot frame), whichever heads nearer ``prior_xytheta`` (3,), with its
+    covariance carried over; and whether nothing told them apart (no prior)."""
     R = np.array(
         [[np.cos(fit.xytheta[2]), -np.sin(fit.xytheta[2])], [np.sin(fit.xytheta[2]), np.cos(fit.xytheta[2])]]
     )
@@ -205,16 +240,4 @@ def acquire(
         chosen = twin
         Jt[:2, 2] = 2.0 * (np.array([[0.0, -1.0], [1.0, 0.0]]) @ R @ centre_r)  # d twin_xy / d theta
     chosen[2] = float(wrap_angle(chosen[2]))
-    out = HullFit(
-        chosen,
-        Jt @ fit.cov_xytheta @ Jt.T,
-        fit.n_points,
-        fit.side_points,
-        fit.n_sides,
-        fit.rms_m,
-        fit.chi2_dof,
-        fit.iterations,
-        fit.degenerate,
-        fit.reason,
-    )
-    return Acquisition(out, ambiguous, n_clusters)
+    return replace(fit, xytheta=chosen, cov_xytheta=Jt @ fit.cov_xytheta @ Jt.T), ambiguous

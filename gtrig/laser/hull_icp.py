@@ -72,6 +72,64 @@ class HullModel:
 
 
 @dataclass(frozen=True)
+class BeamPoints:
+    """Laser points of K frames, each with the frame, scanner and beam it came from: what a hull fit reads.
+
+    Attributes
+    ----------
+    xy_world : (M, 2) points, world frame, metres.
+    frame_index : (M,) frame ``0 .. K-1`` of each point.
+    scanner_index : (M,) index into ``scanner_xy_world`` and ``sigma_range_m`` of the scanner that saw
+        each point.
+    scanner_xy_world : (S, 2) scanner origins, world frame, metres.
+    dir_world : (M, 2) unit beam direction of each point in the world x-y plane (sets the noise along a
+        side's normal).
+    sigma_range_m : (S,) range noise per scanner, metres.
+
+    The arrays are kept as float (indices as ``intp``); ``xy_world`` may be given flat.
+    """
+
+    xy_world: np.ndarray
+    frame_index: np.ndarray
+    scanner_index: np.ndarray
+    scanner_xy_world: np.ndarray
+    dir_world: np.ndarray
+    sigma_range_m: np.ndarray
+
+    def __post_init__(self) -> None:
+        p = np.asarray(self.xy_world, dtype=float).reshape(-1, 2)
+        fid = np.asarray(self.frame_index, dtype=np.intp)
+        sid = np.asarray(self.scanner_index, dtype=np.intp)
+        d = np.asarray(self.dir_world, dtype=float)
+        S = np.asarray(self.scanner_xy_world, dtype=float)
+        sig = np.asarray(self.sigma_range_m, dtype=float)
+        m = p.shape[0]
+        if fid.shape != (m,) or sid.shape != (m,) or d.shape != (m, 2) or S.ndim != 2 or sig.shape != S.shape[:1]:
+            raise ValueError(
+                f"BeamPoints: xy_world (M, 2), frame_index (M,), scanner_index (M,), scanner_xy_world (S, 2), "
+                f"dir_world (M, 2), sigma_range_m (S,) expected, got {p.shape}, {fid.shape}, {sid.shape}, "
+                f"{S.shape}, {d.shape}, {sig.shape}"
+            )
+        for name, v in (("xy_world", p), ("frame_index", fid), ("scanner_index", sid), ("scanner_xy_world", S),
+                        ("dir_world", d), ("sigma_range_m", sig)):
+            object.__setattr__(self, name, v)
+
+    @staticmethod
+    def one_frame(
+        xy_world: np.ndarray, scanner_index: np.ndarray, scanner_xy_world: np.ndarray, dir_world: np.ndarray,
+        sigma_range_m: np.ndarray,
+    ) -> BeamPoints:
+        """The points (M, 2) of a single frame (frame index 0); other arguments as the attributes."""
+        p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
+        return BeamPoints(p, np.zeros(p.shape[0], dtype=np.intp), scanner_index, scanner_xy_world, dir_world,
+                          sigma_range_m)
+
+    def range_variance_m2(self) -> np.ndarray:
+        """(M,) range variance of each point's scanner, m^2."""
+        return (self.sigma_range_m**2)[self.scanner_index]
+
+
+@dataclass(frozen=True)
 class HullFit:
     """One hull fit.
 
@@ -180,19 +238,12 @@ class _Linearisation:
 
 
 def _linearise(
-    model: HullModel,
-    p: np.ndarray,
-    fid: np.ndarray,
-    sid: np.ndarray,
-    S: np.ndarray,
-    dir_world: np.ndarray,
-    var_r: np.ndarray,
-    pose: np.ndarray,
-    gate: float,
-    st: IcpSettings,
+    model: HullModel, pts: BeamPoints, var_r: np.ndarray, pose: np.ndarray, gate: float, st: IcpSettings
 ) -> _Linearisation:
-    """Assign each point (M, 2, world) to the nearest hull side facing its scanner at ``pose[fid]`` (K, 3)
-    and linearise its residual; ``var_r`` (M,) is each point's range variance."""
+    """Assign each point of ``pts`` to the nearest hull side facing its scanner at ``pose[frame_index]``
+    (K, 3) and linearise its residual; ``var_r`` (M,) is each point's range variance
+    (:meth:`BeamPoints.range_variance_m2`)."""
+    p, fid, sid, S, dir_world = pts.xy_world, pts.frame_index, pts.scanner_index, pts.scanner_xy_world, pts.dir_world
     N, off = model.normals, model.offsets
     Tn, a0 = model.tangents, np.einsum("ij,ij->i", model.tangents, model.corners_xy)
     rows = np.arange(p.shape[0])
@@ -238,12 +289,7 @@ def _normal_matrix(fid: np.ndarray, w: np.ndarray, J: tuple[np.ndarray, ...], K:
 
 def fit_hull_batch(
     model: HullModel,
-    xy_world: np.ndarray,
-    frame_index: np.ndarray,
-    scanner_index: np.ndarray,
-    scanner_xy_world: np.ndarray,
-    dir_world: np.ndarray,
-    sigma_range_m: np.ndarray,
+    pts: BeamPoints,
     init_xytheta: np.ndarray,
     settings: IcpSettings = IcpSettings(),
     wide_gate_m: float | None = None,
@@ -255,18 +301,8 @@ def fit_hull_batch(
     ----------
     model
         The hull outline.
-    xy_world
-        (M, 2) points of all frames, world frame, metres.
-    frame_index
-        (M,) frame ``0 .. K-1`` of each point.
-    scanner_index
-        (M,) index into ``scanner_xy_world`` and ``sigma_range_m`` of the scanner that saw each point.
-    scanner_xy_world
-        (S, 2) scanner origins, world frame, metres.
-    dir_world
-        (M, 2) unit beam direction of each point (sets the noise along the side's normal).
-    sigma_range_m
-        (S,) range noise per scanner, metres.
+    pts
+        M points of K frames seen by S scanners, world frame.
     init_xytheta
         (K, 3) start poses (predicted poses, or acquisition hypotheses).
     settings
@@ -284,26 +320,22 @@ def fit_hull_batch(
     HullFitBatch
     """
     st = settings
-    p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
-    fid = np.asarray(frame_index, dtype=np.intp)
-    sid = np.asarray(scanner_index, dtype=np.intp)
+    fid = pts.frame_index
     init = np.asarray(init_xytheta, dtype=float).reshape(-1, 3)
     K = init.shape[0]
-    M = p.shape[0]
+    M = fid.shape[0]
     pose = init.copy()
-    S = np.asarray(scanner_xy_world, dtype=float)
-    var_r = (np.asarray(sigma_range_m, dtype=float) ** 2)[sid]
+    var_r = pts.range_variance_m2()
     prior = np.array([1 / st.prior_std_m**2, 1 / st.prior_std_m**2, 1 / st.prior_std_rad**2])
     wide = 2.0 * st.gate_m if wide_gate_m is None else wide_gate_m
     H = np.zeros((K, 3, 3))
-    r = np.zeros(M)
-    w = np.zeros(M)
-    k_side = np.zeros(M, dtype=np.intp)
-    inl = np.zeros(M, dtype=bool)
+    zero = np.zeros(M)
+    lin = _Linearisation(np.zeros(M, dtype=np.intp), np.zeros(M, dtype=bool), zero, zero, (zero, zero, zero),
+                         np.zeros((M, 2)))
     it = 0
     for it in range(1, st.max_iterations + 1):  # noqa: B007
-        lin = _linearise(model, p, fid, sid, S, dir_world, var_r, pose, wide if it == 1 else st.gate_m, st)
-        k_side, inl, r, w, J = lin.side, lin.inlier, lin.r, lin.w, lin.J
+        lin = _linearise(model, pts, var_r, pose, wide if it == 1 else st.gate_m, st)
+        r, w, J = lin.r, lin.w, lin.J
         H = _normal_matrix(fid, w, J, K)
         # (float: bincount of no points at all is an integer array)
         g = np.column_stack([np.bincount(fid, w * J[i] * r, minlength=K) for i in range(3)]).astype(float)
@@ -318,6 +350,14 @@ def fit_hull_batch(
             and np.all(np.abs(delta[:, 2]) < st.tol_rad)
         ):
             break
+    return _fit_summary(fid, K, pose, H, lin, it, st)
+
+
+def _fit_summary(fid: np.ndarray, K: int, pose: np.ndarray, H: np.ndarray, lin: _Linearisation, iterations: int,
+                 st: IcpSettings) -> HullFitBatch:
+    """The K fits from their last linearisation ``lin`` and normal matrices ``H`` (K, 3, 3): inlier counts,
+    residuals, the covariance scaled by the variance factor, and why a fit is degenerate."""
+    inl, k_side, r, w = lin.inlier, lin.side, lin.r, lin.w
     n_in = np.bincount(fid, inl, minlength=K).astype(int)
     side_points = np.zeros((K, 4), dtype=int)
     np.add.at(side_points, (fid[inl], k_side[inl]), 1)
@@ -330,11 +370,19 @@ def fit_hull_batch(
     cov = np.linalg.inv(H)
     inflate = np.where((n_in > 3) & (chi2_dof > 1.0), chi2_dof, 1.0)
     cov = cov * inflate[:, None, None]
+    reasons = _degeneracy_reasons(n_in, n_sides, cov, st)
+    degenerate = np.array([bool(x) for x in reasons], dtype=bool)
+    return HullFitBatch(pose, cov, n_in, side_points, n_sides, rms, chi2_dof, iterations, degenerate, tuple(reasons))
+
+
+def _degeneracy_reasons(n_in: np.ndarray, n_sides: np.ndarray, cov: np.ndarray, st: IcpSettings) -> list[str]:
+    """Why each of K fits cannot be trusted (empty when it can), from its inliers (K,), sides seen (K,) and
+    covariance (K, 3, 3)."""
     std_xy = np.sqrt(np.linalg.eigvalsh(cov[:, :2, :2])[:, -1])
     std_th = np.sqrt(cov[:, 2, 2])
     reasons = []
     bad = (n_in < st.min_points) | (n_sides < 2) | (std_xy > st.max_std_m) | (std_th > st.max_std_rad)
-    for k in range(K):
+    for k in range(len(n_in)):
         if not bad[k]:
             reasons.append("")
         elif n_in[k] < st.min_points:
@@ -347,39 +395,24 @@ def fit_hull_batch(
             reasons.append(f"weak geometry (yaw std {np.degrees(std_th[k]):.2f} deg)")
         else:
             reasons.append("")
-    degenerate = np.array([bool(x) for x in reasons], dtype=bool)
-    return HullFitBatch(pose, cov, n_in, side_points, n_sides, rms, chi2_dof, it, degenerate, tuple(reasons))
+    return reasons
 
 
 def _fit_normal_equations(
-    model: HullModel, xy_world: np.ndarray, frame_index: np.ndarray, scanner_index: np.ndarray,
-    scanner_xy_world: np.ndarray, dir_world: np.ndarray, sigma_range_m: np.ndarray, xytheta: np.ndarray,
-    st: IcpSettings,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, _Linearisation, np.ndarray]:
-    """The fit linearised at ``xytheta`` and its (K, 3, 3) normal matrix with the prior, as the
-    sensitivities need them: ``(points, frame index, scanner index, scanner positions, beam directions,
-    linearisation, H)``."""
-    p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
-    fid = np.asarray(frame_index, dtype=np.intp)
-    sid = np.asarray(scanner_index, dtype=np.intp)
+    model: HullModel, pts: BeamPoints, xytheta: np.ndarray, st: IcpSettings
+) -> tuple[_Linearisation, np.ndarray]:
+    """The fit of ``pts`` linearised at ``xytheta`` (K, 3) and its (K, 3, 3) normal matrix with the prior, as
+    the sensitivities need them."""
     pose = np.asarray(xytheta, dtype=float).reshape(-1, 3)
-    S = np.asarray(scanner_xy_world, dtype=float)
-    d = np.asarray(dir_world, dtype=float)
-    var_r = (np.asarray(sigma_range_m, dtype=float) ** 2)[sid]
-    lin = _linearise(model, p, fid, sid, S, d, var_r, pose, st.gate_m, st)
-    H = _normal_matrix(fid, lin.w, lin.J, pose.shape[0])
+    lin = _linearise(model, pts, pts.range_variance_m2(), pose, st.gate_m, st)
+    H = _normal_matrix(pts.frame_index, lin.w, lin.J, pose.shape[0])
     H[:, [0, 1, 2], [0, 1, 2]] += [1 / st.prior_std_m**2, 1 / st.prior_std_m**2, 1 / st.prior_std_rad**2]
-    return p, fid, sid, S, d, lin, H
+    return lin, H
 
 
 def scanner_sensitivity(
     model: HullModel,
-    xy_world: np.ndarray,
-    frame_index: np.ndarray,
-    scanner_index: np.ndarray,
-    scanner_xy_world: np.ndarray,
-    dir_world: np.ndarray,
-    sigma_range_m: np.ndarray,
+    pts: BeamPoints,
     xytheta: np.ndarray,
     settings: IcpSettings = IcpSettings(),
 ) -> np.ndarray:
@@ -393,7 +426,7 @@ def scanner_sensitivity(
 
     Parameters
     ----------
-    model, xy_world, frame_index, scanner_index, scanner_xy_world, dir_world, sigma_range_m
+    model, pts
         As in :func:`fit_hull_batch`; M points of K frames, S scanners.
     xytheta
         (K, 3) the fitted poses (x, y m; theta rad).
@@ -405,17 +438,16 @@ def scanner_sensitivity(
     (K, 3, 3 S) ``d xytheta_k / d (x_s, y_s, theta_s)``, scanner blocks in scanner order; zero for
     frames without points.
     """
-    p, fid, sid, S, d, lin, H = _fit_normal_equations(model, xy_world, frame_index, scanner_index,
-                                                      scanner_xy_world, dir_world, sigma_range_m, xytheta, settings)
-    B = _scanner_pulls(p, fid, sid, S, lin, H.shape[0], lin.J)
+    lin, H = _fit_normal_equations(model, pts, xytheta, settings)
+    B = _scanner_pulls(pts, lin, H.shape[0], lin.J)
     return -np.linalg.solve(H, B)
 
 
-def _scanner_pulls(p: np.ndarray, fid: np.ndarray, sid: np.ndarray, S: np.ndarray, lin: _Linearisation, K: int,
-                   rows: Sequence[np.ndarray]) -> np.ndarray:
+def _scanner_pulls(pts: BeamPoints, lin: _Linearisation, K: int, rows: Sequence[np.ndarray]) -> np.ndarray:
     """(K, R, 3 S) ``sum_i w_i rows[a]_i (dr_i / dc_s)`` per frame: the derivative of the right-hand sides
     whose per-point factors are ``rows`` (R arrays (M,)) by the scanners' planar poses ``c_s`` (moved
-    about their own origins ``S[s]``, (S, 2))."""
+    about their own origins ``pts.scanner_xy_world[s]``)."""
+    p, fid, sid, S = pts.xy_world, pts.frame_index, pts.scanner_index, pts.scanner_xy_world
     n_s = S.shape[0]
     lever = p - S[sid]
     Jc = (lin.nw[:, 0], lin.nw[:, 1], lin.nw[:, 1] * lever[:, 0] - lin.nw[:, 0] * lever[:, 1])
@@ -443,12 +475,7 @@ def _side_bias_cross(fid: np.ndarray, d: np.ndarray, lin: _Linearisation, K: int
 
 def side_bias_normal_equations(
     model: HullModel,
-    xy_world: np.ndarray,
-    frame_index: np.ndarray,
-    scanner_index: np.ndarray,
-    scanner_xy_world: np.ndarray,
-    dir_world: np.ndarray,
-    sigma_range_m: np.ndarray,
+    pts: BeamPoints,
     xytheta: np.ndarray,
     settings: IcpSettings,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -473,10 +500,10 @@ def side_bias_normal_equations(
     g_b : (K, 4) ``sum w c r`` per side.
     Residuals in metres, pose in (m, m, rad), biases in metres.
     """
-    _, fid, _, _, d, lin, H = _fit_normal_equations(model, xy_world, frame_index, scanner_index, scanner_xy_world,
-                                                    dir_world, sigma_range_m, xytheta, settings)
+    lin, H = _fit_normal_equations(model, pts, xytheta, settings)
     K = H.shape[0]
-    c, cell, H_pb = _side_bias_cross(fid, d, lin, K)
+    fid = pts.frame_index
+    c, cell, H_pb = _side_bias_cross(fid, pts.dir_world, lin, K)
     H_bb = np.bincount(cell, lin.w * c * c, minlength=K * 4).reshape(K, 4)
     g_p = np.column_stack([np.bincount(fid, lin.w * lin.J[i] * lin.r, minlength=K) for i in range(3)])
     g_b = np.bincount(cell, lin.w * c * lin.r, minlength=K * 4).reshape(K, 4)
@@ -485,12 +512,7 @@ def side_bias_normal_equations(
 
 def side_bias_scanner_pull(
     model: HullModel,
-    xy_world: np.ndarray,
-    frame_index: np.ndarray,
-    scanner_index: np.ndarray,
-    scanner_xy_world: np.ndarray,
-    dir_world: np.ndarray,
-    sigma_range_m: np.ndarray,
+    pts: BeamPoints,
     xytheta: np.ndarray,
     settings: IcpSettings,
 ) -> np.ndarray:
@@ -511,35 +533,24 @@ def side_bias_scanner_pull(
     -------
     (K, 4, 3 S) ``d u_k / d (x_s, y_s, theta_s)`` (m / m, m / rad), sides in the hull's order.
     """
-    p, fid, sid, S, d, lin, H = _fit_normal_equations(model, xy_world, frame_index, scanner_index,
-                                                      scanner_xy_world, dir_world, sigma_range_m, xytheta, settings)
+    lin, H = _fit_normal_equations(model, pts, xytheta, settings)
     K = H.shape[0]
-    c, _, H_pb = _side_bias_cross(fid, d, lin, K)
-    B_p = _scanner_pulls(p, fid, sid, S, lin, K, lin.J)
-    B_b = _scanner_pulls(p, fid, sid, S, lin, K, [np.where(lin.side == k, c, 0.0) for k in range(4)])
+    c, _, H_pb = _side_bias_cross(pts.frame_index, pts.dir_world, lin, K)
+    B_p = _scanner_pulls(pts, lin, K, lin.J)
+    B_b = _scanner_pulls(pts, lin, K, [np.where(lin.side == k, c, 0.0) for k in range(4)])
     return B_b - np.einsum("kia,kij->kaj", H_pb, np.linalg.solve(H, B_p))
 
 
-def assigned_sides(
-    model: HullModel, xy_world: np.ndarray, frame_index: np.ndarray, scanner_index: np.ndarray,
-    scanner_xy_world: np.ndarray, dir_world: np.ndarray, sigma_range_m: np.ndarray, xytheta: np.ndarray,
-    settings: IcpSettings,
-) -> np.ndarray:
+def assigned_sides(model: HullModel, pts: BeamPoints, xytheta: np.ndarray, settings: IcpSettings) -> np.ndarray:
     """(M,) the hull side each point is assigned to by the fit at ``xytheta`` (arguments as
     :func:`scanner_sensitivity`): the nearest side facing its scanner."""
-    *_, lin, _ = _fit_normal_equations(model, xy_world, frame_index, scanner_index, scanner_xy_world, dir_world,
-                                       sigma_range_m, xytheta, settings)
+    lin, _ = _fit_normal_equations(model, pts, xytheta, settings)
     return lin.side
 
 
 def side_bias_sensitivity(
     model: HullModel,
-    xy_world: np.ndarray,
-    frame_index: np.ndarray,
-    scanner_index: np.ndarray,
-    scanner_xy_world: np.ndarray,
-    dir_world: np.ndarray,
-    sigma_range_m: np.ndarray,
+    pts: BeamPoints,
     xytheta: np.ndarray,
     settings: IcpSettings,
 ) -> np.ndarray:
@@ -561,8 +572,7 @@ def side_bias_sensitivity(
     (K, 3, 4) ``d xytheta_k / d b_side`` (m/m, rad/m), sides in the hull's order; zero for frames
     without points.
     """
-    H, H_pb, _, _, _ = side_bias_normal_equations(model, xy_world, frame_index, scanner_index, scanner_xy_world,
-                                                  dir_world, sigma_range_m, xytheta, settings)
+    H, H_pb, _, _, _ = side_bias_normal_equations(model, pts, xytheta, settings)
     return np.linalg.solve(H, H_pb)
 
 
@@ -579,20 +589,9 @@ def fit_hull(
 ) -> HullFit:
     """Fit the hull to the points of one frame by point-to-line ICP from ``init_xytheta``.
 
-    Parameters are those of :func:`fit_hull_batch` for a single frame: ``xy_world`` (M, 2),
-    ``scanner_index`` (M,), ``scanner_xy_world`` (S, 2), ``dir_world`` (M, 2), ``sigma_range_m`` (S,),
-    ``init_xytheta`` (3,).
+    Parameters are those of :func:`fit_hull_batch` for a single frame, its points given as the
+    attributes of :class:`BeamPoints`: ``xy_world`` (M, 2), ``scanner_index`` (M,), ``scanner_xy_world``
+    (S, 2), ``dir_world`` (M, 2), ``sigma_range_m`` (S,); ``init_xytheta`` (3,).
     """
-    p = np.asarray(xy_world, dtype=float).reshape(-1, 2)
-    return fit_hull_batch(
-        model,
-        p,
-        np.zeros(p.shape[0], dtype=np.intp),
-        scanner_index,
-        scanner_xy_world,
-        dir_world,
-        sigma_range_m,
-        np.asarray(init_xytheta, dtype=float)[None],
-        settings,
-        wide_gate_m,
-    ).item(0)
+    pts = BeamPoints.one_frame(xy_world, scanner_index, scanner_xy_world, dir_world, sigma_range_m)
+    return fit_hull_batch(model, pts, np.asarray(init_xytheta, dtype=float)[None], settings, wide_gate_m).item(0)

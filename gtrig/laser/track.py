@@ -39,6 +39,7 @@ from gtrig.geometry import wrap_angle
 from gtrig.laser.acquire import acquire
 from gtrig.laser.fuse import FramedPoints, FrameSource
 from gtrig.laser.hull_icp import (
+    BeamPoints,
     HullFitBatch,
     HullModel,
     IcpSettings,
@@ -338,12 +339,10 @@ def calibration_sensitivity(
     have = np.isfinite(xytheta[:, 0])
     if not have.any():
         return out
-    pt, fid = _frame_points_of(fp, have)
-    args = (model, fp.xy_world[pt], fid, fp.scanner_index[pt], fp.scanner_xy_world, fp.dir_world[pt], fp.sigma_m,
-            xytheta[have], icp)
-    A = scanner_sensitivity(*args)
+    pts = _beam_points_of(fp, have)
+    A = scanner_sensitivity(model, pts, xytheta[have], icp)
     if bias_pull is not None:
-        A = A - side_bias_sensitivity(*args) @ np.asarray(bias_pull, dtype=float)
+        A = A - side_bias_sensitivity(model, pts, xytheta[have], icp) @ np.asarray(bias_pull, dtype=float)
     out[have] = A
     return out
 
@@ -358,11 +357,7 @@ def surface_bias_covariance(
     have = np.isfinite(xytheta[:, 0])
     if not have.any():
         return out
-    pt, fid = _frame_points_of(fp, have)
-    A = side_bias_sensitivity(
-        model, fp.xy_world[pt], fid, fp.scanner_index[pt], fp.scanner_xy_world, fp.dir_world[pt], fp.sigma_m,
-        xytheta[have], icp,
-    )
+    A = side_bias_sensitivity(model, _beam_points_of(fp, have), xytheta[have], icp)
     out[have] = A @ np.asarray(cov_bias, dtype=float) @ np.swapaxes(A, 1, 2)
     return out
 
@@ -373,6 +368,12 @@ def _frame_points_of(fp: FramedPoints, frames: np.ndarray) -> tuple[np.ndarray, 
     counts = np.diff(fp.frame_start)
     pt = np.repeat(frames, counts)
     return pt, np.repeat(np.cumsum(frames) - 1, counts)[pt]
+
+
+def _beam_points_of(fp: FramedPoints, frames: np.ndarray) -> BeamPoints:
+    """The points of the frames selected by ``frames`` (F,), frames numbered among the selected ones."""
+    pt, fid = _frame_points_of(fp, frames)
+    return BeamPoints(fp.xy_world[pt], fid, fp.scanner_index[pt], fp.scanner_xy_world, fp.dir_world[pt], fp.sigma_m)
 
 
 def _bias_prior(st: TrackSettings) -> np.ndarray:
@@ -452,17 +453,18 @@ def _refine_with_side_bias(
                 np.save(spill, x)
         return out
 
-    def points(w: int, passes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Window ``w``'s OK points de-skewed and corrected by the first ``passes`` passes: (M, 2) world
-        points, (M,) their frame among the window's OK frames, scanner index, (M, 2) beam directions."""
+    def points(w: int, passes: int) -> BeamPoints:
+        """Window ``w``'s OK points de-skewed and corrected by the first ``passes`` passes, their frames
+        numbered among the window's OK frames."""
         a, b = windows[w]
         sel = ok[a:b]
         p, dt, fid, sid, d = made(w)
         xy = compensate_motion(p, dt, vel[a:b][sel][fid], smoothed[a:b][sel][fid, :2])
+        pts = BeamPoints(xy, fid, sid, S, d, sig)
         for m in range(passes):
-            side = assigned_sides(model, xy, fid, sid, S, d, sig, poses[m][rows[w]:rows[w + 1]], st.icp)
-            xy = xy - ((betas[m + 1] - betas[m])[side])[:, None] * d
-        return xy, fid, sid, d
+            side = assigned_sides(model, pts, poses[m][rows[w]:rows[w + 1]], st.icp)
+            pts = replace(pts, xy_world=pts.xy_world - ((betas[m + 1] - betas[m])[side])[:, None] * pts.dir_world)
+        return pts
 
     try:
         bias = SideBias.prior(prior)
@@ -472,13 +474,12 @@ def _refine_with_side_bias(
             Nu = []
             pulls: list[tuple[np.ndarray, np.ndarray]] = []
             for w in range(len(windows)):
-                xy, fid, sid, d = points(w, it)
-                eqs = side_bias_normal_equations(model, xy, fid, sid, S, d, sig, pose[rows[w]:rows[w + 1]], st.icp)
+                pts = points(w, it)
+                eqs = side_bias_normal_equations(model, pts, pose[rows[w]:rows[w + 1]], st.icp)
                 Nu.append(reduced_normal_equations(*eqs))
                 if it == iterations - 1:
                     a, b = windows[w]
-                    pulls.append(block_sums(side_bias_scanner_pull(model, xy, fid, sid, S, d, sig,
-                                                                   pose[rows[w]:rows[w + 1]], st.icp),
+                    pulls.append(block_sums(side_bias_scanner_pull(model, pts, pose[rows[w]:rows[w + 1]], st.icp),
                                             a + np.flatnonzero(ok[a:b])))
             N = np.concatenate([n for n, _ in Nu])
             # the prior holds the total bias: solve for it with the points' current correction undone
@@ -490,8 +491,7 @@ def _refine_with_side_bias(
             betas.append(bias.bias_m)
 
             def fit(w: int, min_iterations: int, it: int = it) -> HullFitBatch:
-                xy, fid, sid, d = points(w, it + 1)
-                return fit_hull_batch(model, xy, fid, sid, S, d, sig, poses[it][rows[w]:rows[w + 1]], st.icp,
+                return fit_hull_batch(model, points(w, it + 1), poses[it][rows[w]:rows[w + 1]], st.icp,
                                       min_iterations=min_iterations)
 
             fits = _fit_windows(fit, len(windows))
@@ -809,13 +809,11 @@ class _FrameTracker:
                 radius = st.reacquire_radius_m
         acq = None
         if sl.stop - sl.start >= st.icp.min_points:
+            pts = BeamPoints.one_frame(wf.xy_world[sl], wf.scanner_index[sl], wf.scanner_xy_world, wf.dir_world[sl],
+                                       wf.sigma_m)
             acq = acquire(
                 model,
-                wf.xy_world[sl],
-                wf.scanner_index[sl],
-                wf.scanner_xy_world,
-                wf.dir_world[sl],
-                wf.sigma_m,
+                pts,
                 st.icp,
                 prior_xytheta=prior,
                 search_radius_m=radius,
@@ -883,17 +881,9 @@ class _FrameTracker:
             np.hypot(xy[:, 0] - pc[:, 0], xy[:, 1] - pc[:, 1])
             < model.half_diagonal_m + np.hypot(*model.corners_xy.mean(axis=0)) + 2 * st.icp.gate_m
         )
-        fits = fit_hull_batch(
-            model,
-            xy[near],
-            fid[near],
-            wf.scanner_index[sl][near],
-            wf.scanner_xy_world,
-            wf.dir_world[sl][near],
-            wf.sigma_m,
-            pred,
-            st.icp,
-        )
+        pts = BeamPoints(xy[near], fid[near], wf.scanner_index[sl][near], wf.scanner_xy_world, wf.dir_world[sl][near],
+                         wf.sigma_m)
+        fits = fit_hull_batch(model, pts, pred, st.icp)
         end = self._judge(k, end, fits, pred, pred_cov)
         # resolve the pi symmetry as soon as the robot has moved, before a later track inherits it
         tid = len(self.tracks) - 1

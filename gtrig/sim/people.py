@@ -143,13 +143,6 @@ def simulate_people(
     stamps = t0 + SIM_DT_S * np.arange(n_t)
     P = n_people
     corners = scene.walls[:, 0, :]
-    walls = scene.walls
-    wall_n = []
-    orient = np.sign(_cross2(corners[1] - corners[0], corners[2] - corners[1]))
-    for a, b in walls:
-        e = (b - a) / np.linalg.norm(b - a)
-        wall_n.append(orient * np.array([-e[1], e[0]]))  # inward normal
-    wall_n_a = np.array(wall_n)
     obs_c, obs_r = _obstacles(scene)
     robot_xy = motion.planar(stamps)[:, :2] if motion is not None else None
 
@@ -171,8 +164,7 @@ def simulate_people(
     SW = np.zeros((n_t, P))
     tau = 0.5
     # plain floats in the loop: a few thousand steps of tiny vectors are faster without NumPy
-    wall_list = [(float(a[0]), float(a[1]), float(n[0]), float(n[1]))
-                 for a, n in zip(walls[:, 0, :], wall_n_a, strict=True)]
+    wall_list = _inward_walls(scene.walls)
     obs_list = [(float(c[0]), float(c[1]), float(r)) for c, r in zip(obs_c, obs_r, strict=True)]
     robot_list = robot_xy.tolist() if robot_xy is not None else None
     px, py = [float(v) for v in pos[:, 0]], [float(v) for v in pos[:, 1]]
@@ -184,44 +176,16 @@ def simulate_people(
             H[k, p], PH[k, p] = heading[p], phase[p]
             SW[k, p] = LEG_SWING_M * min(1.0, sp / 0.9)
         for p in range(P):
-            since_goal[p] += SIM_DT_S
-            gx, gy = goal[p, 0] - px[p], goal[p, 1] - py[p]
-            dist = math.hypot(gx, gy)
-            if dist < 0.3 or since_goal[p] > 20.0:
-                if dist < 0.3 and rng.random() < 0.3:
-                    pause[p] = rng.uniform(1.0, 3.0)
-                goal[p] = _free_point(rng, corners, obs_c, obs_r)
-                since_goal[p] = 0.0
-                gx, gy = goal[p, 0] - px[p], goal[p, 1] - py[p]
-                dist = math.hypot(gx, gy)
-            if pause[p] > 0:
-                pause[p] -= SIM_DT_S
-                dvx = dvy = 0.0
-            else:
-                dvx, dvy = v_pref[p] * gx / max(dist, 1e-9), v_pref[p] * gy / max(dist, 1e-9)
+            dvx, dvy = _desired_velocity(rng, p, px[p], py[p], goal, pause, since_goal, v_pref[p], corners,
+                                         obs_c, obs_r)
             fx, fy = (dvx - vx[p]) / tau, (dvy - vy[p]) / tau
-            # repulsion: exponential social forces (3 m/s^2 at the keep-out distance, range 0.25 m)
-            for ax, ay, nx, ny in wall_list:
-                f = 3.0 * math.exp(-((px[p] - ax) * nx + (py[p] - ay) * ny - WALL_CLEARANCE_M) / 0.25)
-                fx, fy = fx + f * nx, fy + f * ny
             others = [(cx, cy, r, 3.0) for cx, cy, r in obs_list]
             if robot_list is not None:
                 # stronger: a person steps aside for a robot driving at them
                 others.append((robot_list[k][0], robot_list[k][1], ROBOT_CLEARANCE_M, 8.0))
             others += [(px[q], py[q], 0.6, 3.0) for q in range(P) if q != p]
-            for cx, cy, r, strength in others:
-                rx, ry = px[p] - cx, py[p] - cy
-                d = max(math.hypot(rx, ry), 1e-6)
-                f = strength * math.exp(-(d - r) / 0.25) / d
-                fx, fy = fx + f * rx, fy + f * ry
-            fx, fy = min(6.0, max(-6.0, fx)), min(6.0, max(-6.0, fy))
-            vx[p] += fx * SIM_DT_S
-            vy[p] += fy * SIM_DT_S
-            sp = math.hypot(vx[p], vy[p])
-            vmax = 1.3 * v_pref[p]
-            if sp > vmax:
-                vx[p], vy[p] = vx[p] * vmax / sp, vy[p] * vmax / sp
-                sp = vmax
+            fx, fy = _repelled(fx, fy, px[p], py[p], wall_list, others)
+            vx[p], vy[p], sp = _accelerated(vx[p], vy[p], fx, fy, 1.3 * v_pref[p])
             if sp > 0.05:
                 # people face where they walk; turn the short way, keep the angle continuous
                 target = math.atan2(vy[p], vx[p])
@@ -231,3 +195,66 @@ def simulate_people(
             px[p] += vx[p] * SIM_DT_S
             py[p] += vy[p] * SIM_DT_S
     return People(stamps, C, H, PH, SW)
+
+
+def _inward_walls(walls: np.ndarray) -> list[tuple[float, float, float, float]]:
+    """Each wall (W, 2, 2: end points, world, metres) as a point on it and its unit normal into the
+    room: ``(ax, ay, nx, ny)``."""
+    corners = walls[:, 0, :]
+    orient = np.sign(_cross2(corners[1] - corners[0], corners[2] - corners[1]))
+    wall_n = []
+    for a, b in walls:
+        e = (b - a) / np.linalg.norm(b - a)
+        wall_n.append(orient * np.array([-e[1], e[0]]))
+    return [(float(a[0]), float(a[1]), float(n[0]), float(n[1]))
+            for a, n in zip(walls[:, 0, :], np.array(wall_n), strict=True)]
+
+
+def _desired_velocity(rng: np.random.Generator, p: int, x: float, y: float, goal: np.ndarray, pause: np.ndarray,
+                      since_goal: np.ndarray, v_pref: float, corners: np.ndarray, obs_c: np.ndarray,
+                      obs_r: np.ndarray) -> tuple[float, float]:
+    """Velocity (m/s, world) person ``p`` at ``(x, y)`` wants: towards its goal at its preferred speed, or
+    nil while it pauses. A goal reached (or not reached in 20 s) is replaced, sometimes after a pause;
+    ``goal`` (P, 2), ``pause`` and ``since_goal`` (P,) are updated in place."""
+    since_goal[p] += SIM_DT_S
+    gx, gy = goal[p, 0] - x, goal[p, 1] - y
+    dist = math.hypot(gx, gy)
+    if dist < 0.3 or since_goal[p] > 20.0:
+        if dist < 0.3 and rng.random() < 0.3:
+            pause[p] = rng.uniform(1.0, 3.0)
+        goal[p] = _free_point(rng, corners, obs_c, obs_r)
+        since_goal[p] = 0.0
+        gx, gy = goal[p, 0] - x, goal[p, 1] - y
+        dist = math.hypot(gx, gy)
+    if pause[p] > 0:
+        pause[p] -= SIM_DT_S
+        return 0.0, 0.0
+    return v_pref * gx / max(dist, 1e-9), v_pref * gy / max(dist, 1e-9)
+
+
+def _repelled(fx: float, fy: float, x: float, y: float, walls: list[tuple[float, float, float, float]],
+              others: list[tuple[float, float, float, float]]) -> tuple[float, float]:
+    """The force ``(fx, fy)`` (m/s^2) on a person at ``(x, y)`` with the repulsion of the walls
+    (:func:`_inward_walls`) and of ``others`` (centre x, y, keep-out radius m, strength m/s^2) added:
+    exponential social forces (the strength at the keep-out distance, range 0.25 m), clipped to 6 m/s^2
+    per axis."""
+    for ax, ay, nx, ny in walls:
+        f = 3.0 * math.exp(-((x - ax) * nx + (y - ay) * ny - WALL_CLEARANCE_M) / 0.25)
+        fx, fy = fx + f * nx, fy + f * ny
+    for cx, cy, r, strength in others:
+        rx, ry = x - cx, y - cy
+        d = max(math.hypot(rx, ry), 1e-6)
+        f = strength * math.exp(-(d - r) / 0.25) / d
+        fx, fy = fx + f * rx, fy + f * ry
+    return min(6.0, max(-6.0, fx)), min(6.0, max(-6.0, fy))
+
+
+def _accelerated(vx: float, vy: float, fx: float, fy: float, vmax: float) -> tuple[float, float, float]:
+    """Velocity (m/s) after one step of force ``(fx, fy)``, its speed capped at ``vmax``, and that speed."""
+    vx += fx * SIM_DT_S
+    vy += fy * SIM_DT_S
+    sp = math.hypot(vx, vy)
+    if sp > vmax:
+        vx, vy = vx * vmax / sp, vy * vmax / sp
+        sp = vmax
+    return vx, vy, sp

@@ -24,11 +24,10 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
-from gtrig.errors import ConvergenceError, InputError
+from gtrig.errors import InputError
 from gtrig.io.survey_csv import Distances, NamedPoints
-from gtrig.survey.network import point_blocks
+from gtrig.survey.network import point_blocks, solve_whitened
 from gtrig.survey.robust import BadReading, ResidualTest, record_exclusion, residual_test, triage
 
 
@@ -240,13 +239,7 @@ def adjust_jointly(
         n_off = int(np.sum(prob.off_index >= 0))
         z0 = np.concatenate([np.asarray(xy0, float).ravel(), prob.R0[prob.free].ravel(), X0.ravel(),
                              np.zeros(2 * n_off)])
-        res = least_squares(prob.resid, z0, jac=prob.jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12)
-        if res.status <= 0 or not np.all(np.isfinite(res.x)):
-            raise ConvergenceError(f"joint survey adjustment did not converge ({res.message})")
-        J = prob.jac(res.x)
-        C = np.linalg.inv(J.T @ J)
-        C = 0.5 * (C + C.T)
-        r = -prob.resid(res.x)
+        x, J, C, r = solve_whitened(prob.resid, prob.jac, z0, "joint survey adjustment")
         test = residual_test(r, None, J, C)
         if test.dof <= 0 or test.p_value >= alpha or test.worst < 0:
             break
@@ -264,7 +257,7 @@ def adjust_jointly(
             break
         (wact if is_world else pact)[k] = False
         record_exclusion(bad, excluded, warnings, log)
-    P, R, X, _ = prob.unpack(res.x)
+    P, R, X, _ = prob.unpack(x)
     X = X.copy()
     X[:, 2] = (X[:, 2] + np.pi) % (2 * np.pi) - np.pi
     n2 = 2 * len(world_names)

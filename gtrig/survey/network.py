@@ -19,6 +19,7 @@ w-test over the whole network (:mod:`gtrig.survey.robust`).
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -158,45 +159,18 @@ def adjust_network(
     active = np.ones(readings.distance_m.size, dtype=bool)
     excluded: list[BadReading] = []
     per_point = {n: 0 for n in names}
-    R0 = references.xy
     while True:
         prob = _problem(names, references, readings, active)
-        z0 = np.concatenate([np.asarray(xy0, float).ravel(), R0[prob.free].ravel()])
-        res = least_squares(prob.resid, z0, jac=prob.jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12)
-        if res.status <= 0 or not np.all(np.isfinite(res.x)):
-            raise ConvergenceError(f"world point network: least squares did not converge ({res.message})")
-        J = prob.jac(res.x)
-        C = np.linalg.inv(J.T @ J)
-        C = 0.5 * (C + C.T)
-        r = -prob.resid(res.x)
+        x, J, C, r = _solve(prob, xy0)
         test = residual_test(r, None, J, C)
         if test.dof <= 0 or test.p_value >= alpha or test.worst < 0:
             break
         K = prob.d.size
         if test.worst >= K:
-            j = prob.free[(test.worst - K) // 2]
-            msg = (
-                f"reference point {references.names[j]}: its coordinates disagree with the readings "
-                f"(w = {test.w[test.worst]:.1f}); check the reference file"
-            )
-            if on_outlier != "keep":
-                raise InputError(msg)
-            log.warning(msg)
-            warnings.append(msg)
+            _reference_disagrees(references.names[prob.free[(test.worst - K) // 2]], test, on_outlier, warnings, log)
             break
         k = int(np.flatnonzero(active)[test.worst])
-        s = readings.sigma_m[k]
-        bad = BadReading(
-            "point" if readings.b[k] in references.index() else "network",
-            readings.a[k],
-            readings.b[k],
-            "",
-            float(readings.distance_m[k]),
-            float(r[test.worst] * s),
-            float(test.error_m[test.worst] * s),
-            float(test.w[test.worst]),
-            readings.source[k],
-        )
+        bad = _bad_reading(readings, k, references, float(r[test.worst]), test)
         unidentifiable = (
             f"world point network: readings disagree (chi2 {test.chi2:.1f}, {test.dof} dof) but the bad one "
             f"cannot be told apart; remeasure near {bad.describe()}"
@@ -210,6 +184,58 @@ def adjust_network(
         if readings.b[k] in per_point:
             per_point[readings.b[k]] += 1
         record_exclusion(bad, excluded, warnings, log)
-    P, R = prob.unpack(res.x)
+    P, R = prob.unpack(x)
     n2 = 2 * len(names)
     return NetworkResult(P, C[:n2, :n2], R, test, active, tuple(excluded))
+
+
+def _solve(prob: _Problem, xy0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`solve_whitened` of ``prob`` from the world points ``xy0`` (N, 2) and the nominal reference
+    points (the solution holds the world points, then the free reference points, metres)."""
+    z0 = np.concatenate([np.asarray(xy0, float).ravel(), prob.R0[prob.free].ravel()])
+    return solve_whitened(prob.resid, prob.jac, z0, "world point network: least squares")
+
+
+def solve_whitened(resid: Callable[[np.ndarray], np.ndarray], jac: Callable[[np.ndarray], np.ndarray],
+                   z0: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Least squares (Levenberg-Marquardt) of the whitened residuals ``resid`` (K,) with Jacobian ``jac``
+    (K, U) from ``z0`` (U,): the solution, the Jacobian there, the covariance ``(J^T J)^-1``
+    (symmetrised) and the negated residuals. ``what`` names the problem when it does not converge."""
+    res = least_squares(resid, z0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    if res.status <= 0 or not np.all(np.isfinite(res.x)):
+        raise ConvergenceError(f"{what} did not converge ({res.message})")
+    J = jac(res.x)
+    C = np.linalg.inv(J.T @ J)
+    C = 0.5 * (C + C.T)
+    return res.x, J, C, -resid(res.x)
+
+
+def _reference_disagrees(name: str, test: ResidualTest, on_outlier: str, warnings: list[str],
+                         log: logging.Logger) -> None:
+    """A reference point's prior is the worst residual: an error, or with ``on_outlier="keep"`` a warning."""
+    msg = (
+        f"reference point {name}: its coordinates disagree with the readings "
+        f"(w = {test.w[test.worst]:.1f}); check the reference file"
+    )
+    if on_outlier != "keep":
+        raise InputError(msg)
+    log.warning(msg)
+    warnings.append(msg)
+
+
+def _bad_reading(readings: Distances, k: int, references: NamedPoints, r_whitened: float,
+                 test: ResidualTest) -> BadReading:
+    """Reading ``k``, the worst of the w-test, as a :class:`BadReading` (residual and estimated error in
+    metres)."""
+    s = readings.sigma_m[k]
+    return BadReading(
+        "point" if readings.b[k] in references.index() else "network",
+        readings.a[k],
+        readings.b[k],
+        "",
+        float(readings.distance_m[k]),
+        float(r_whitened * s),
+        float(test.error_m[test.worst] * s),
+        float(test.w[test.worst]),
+        readings.source[k],
+    )

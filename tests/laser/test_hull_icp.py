@@ -1,10 +1,11 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from gtrig.laser import synth
 from gtrig.laser.fuse import beam_dirs_world
-from gtrig.laser.hull_icp import HullModel, IcpSettings, fit_hull, scanner_sensitivity
+from gtrig.laser.hull_icp import BeamPoints, HullModel, IcpSettings, fit_hull, scanner_sensitivity
 
 
 def _points(room, pose, rng, sigma=None, scanners=None):
@@ -71,7 +72,7 @@ def test_scanner_sensitivity_matches_refit(room):
     truth = np.array([0.3, -0.2, 0.6])
     P, I, S, D, sig = _points(room, truth, None)
     settings = IcpSettings()
-    A = scanner_sensitivity(model, P, np.zeros(len(P), dtype=int), I, S, D, sig, truth[None], settings)[0]
+    A = scanner_sensitivity(model, BeamPoints.one_frame(P, I, S, D, sig), truth[None], settings)[0]
     assert A.shape == (3, 3 * len(S))
     # every scanner moved by the same translation moves the hull by it
     common = np.tile([0.002, -0.001, 0.0], len(S))
@@ -85,3 +86,26 @@ def test_scanner_sensitivity_matches_refit(room):
         delta = np.zeros(3 * len(S))
         delta[3 * s : 3 * s + 3] = dc
         assert np.allclose(f.xytheta - truth, A @ delta, atol=2e-5)
+
+
+def test_batch_of_frames_fits_each_as_alone(room):
+    """Two frames' points in one BeamPoints fit as each frame alone does (to the stopping tolerance), and
+    points whose per-point arrays disagree in length are refused."""
+    from gtrig.laser.hull_icp import fit_hull_batch
+
+    model = HullModel.from_hull(room["hull"])
+    truths = np.array([[0.3, -0.4, 0.7], [-1.0, 1.2, -2.5]])
+    frames = [_points(room, t, np.random.default_rng(k)) for k, t in enumerate(truths)]
+    S, sig = frames[0][2], frames[0][4]
+    starts = truths + [0.03, -0.02, np.radians(3)]
+    pts = BeamPoints(np.concatenate([f[0] for f in frames]),
+                     np.concatenate([np.full(len(f[0]), k) for k, f in enumerate(frames)]),
+                     np.concatenate([f[1] for f in frames]), S, np.concatenate([f[3] for f in frames]), sig)
+    batch = fit_hull_batch(model, pts, starts)
+    for k, (P, I, _, D, _) in enumerate(frames):
+        alone = fit_hull(model, P, I, S, D, sig, starts[k])
+        assert batch.n_points[k] == alone.n_points > 20
+        assert np.allclose(batch.xytheta[k], alone.xytheta, atol=2e-4)
+        assert np.allclose(batch.cov_xytheta[k], alone.cov_xytheta, rtol=0.05)
+    with pytest.raises(ValueError, match="BeamPoints"):
+        BeamPoints(pts.xy_world, pts.frame_index[:-1], pts.scanner_index, S, pts.dir_world, sig)

@@ -42,7 +42,7 @@ def test_beams_and_scan_covariance_match_the_icp():
 
 
 def test_compiled_blocks_equal_the_icps_normal_equations():
-    from gtrig.laser.hull_icp import side_bias_normal_equations
+    from gtrig.laser.hull_icp import BeamPoints, side_bias_normal_equations
     from gtrig.laser.track import TrackSettings
     from gtrig.plan.laser import laser_information
 
@@ -54,8 +54,8 @@ def test_compiled_blocks_equal_the_icps_normal_equations():
     S_xy = np.array([s.T_world_scanner.xyz[:2] for s in rig.laser_scanners])
     sigma = np.array([s.range_sigma_m for s in rig.laser_scanners])
     icp = TrackSettings().icp
-    H, H_pb, *_ = side_bias_normal_equations(model, hits.xy, hits.pose, hits.scanner, S_xy, hits.dir, sigma, poses,
-                                             icp)
+    hit_points = BeamPoints(hits.xy, hits.pose, hits.scanner, S_xy, hits.dir, sigma)
+    H, H_pb, *_ = side_bias_normal_equations(model, hit_points, poses, icp)
     got = laser_information(rig, poses)
     prior = np.diag([1 / icp.prior_std_m**2, 1 / icp.prior_std_m**2, 1 / icp.prior_std_rad**2])
     assert hits.pose.size > 3000

@@ -242,17 +242,11 @@ def import_bag(bag: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
 
 def _import_streams(bag: Any, streams: dict[str, _Stream], seq: Path, which: str, video: bool,
                     image_format: ImageFormat, workers: int) -> dict[str, int]:
+    """Read the messages of ``streams`` (by topic) from ``bag`` into the sequence folder ``seq``: images
+    written as they come (``workers`` threads), scans decoded in bulk after the pass, odometry kept as
+    rows; then each stream's files and stamps. Returns the messages per stream."""
     with open_bag(bag) as reader, ThreadPoolExecutor(max(1, workers)) as pool:
-        by_topic = {c.topic: c for c in reader.connections}
-        for topic, s in streams.items():
-            c = by_topic.get(topic)
-            if c is None:
-                raise InputError(f"{reader.paths[0]}: no topic {topic} (topics: {', '.join(sorted(by_topic))})")
-            want = {"camera": IMAGE_TYPES, "laser": (SCAN_TYPE,), "onboard": (SCAN_TYPE,),
-                    "odometry": (ODOM_TYPE,)}[s.kind]
-            if c.msgtype not in want:
-                raise InputError(f"{reader.paths[0]}:{topic}: a {c.msgtype}, but {s.kind} {s.name} needs "
-                                 f"{' or '.join(want)}")
+        _check_topics(reader, streams)
         conns = [c for c in reader.connections if c.topic in streams]
         pending: list[Future[None]] = []
         for conn, t_ns, raw in reader.messages(conns):
@@ -264,39 +258,11 @@ def _import_streams(bag: Any, streams: dict[str, _Stream], seq: Path, which: str
                 continue
             where = f"{reader.paths[0]}:{conn.topic}"
             msg = deserialize(reader, raw, conn.msgtype, where)
-            n = len(s.header_s) + 1
             s.header_s.append(time_to_s(msg.header.stamp))
             s.receive_s.append(ns_to_s(t_ns))
             _check_increasing(s, which, where)
             if s.kind == "camera":
-                folder = seq / "cameras" / s.name
-                if n == 1:
-                    folder.mkdir(parents=True, exist_ok=True)
-                if conn.msgtype == IMAGE_TYPES[1]:  # CompressedImage: its own bytes
-                    if video:
-                        img = cv2.imdecode(np.frombuffer(msg.data, np.uint8), cv2.IMREAD_GRAYSCALE)
-                        if img is None:
-                            raise FormatError(f"{where}: message {n}: cannot decode the {msg.format!r} image")
-                        _video_write(s, folder, img, where)
-                        continue
-                    ext = ".png" if "png" in msg.format.lower() else ".jpg"
-                    name = f"{n - 1:06d}{ext}"
-                    s.files.append(name)
-                    pending.append(pool.submit(_write_bytes, folder / name, msg.data))
-                    continue
-                img = _image(msg, where, n)
-                w, h = s.sensor.resolution
-                if img.shape != (h, w):
-                    raise InputError(f"{where}: message {n} is {img.shape[1]}x{img.shape[0]}, the rig's {s.name} "
-                                     f"is {w}x{h}")
-                if video:
-                    _video_write(s, folder, img, where)
-                    continue
-                name = f"{n - 1:06d}.{image_format}"
-                s.files.append(name)
-                pending.append(pool.submit(_write_png, folder / name, img, image_format))
-                if len(pending) > 4 * max(1, workers):  # bounded memory: wait for the oldest
-                    pending.pop(0).result()
+                _camera_message(s, msg, conn.msgtype, seq, where, video, image_format, pool, pending, workers)
             else:
                 q = msg.pose.pose.orientation
                 yaw = np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
@@ -306,14 +272,76 @@ def _import_streams(bag: Any, streams: dict[str, _Stream], seq: Path, which: str
             f.result()
         for s in streams.values():
             if s.kind in ("laser", "onboard") and s.raws:
-                where = f"{reader.paths[0]}:{s.topic}"
-                s.rows = [_scans(s, reader, where)]
-                st = np.array(s.stamp(which))
-                back = np.flatnonzero(np.diff(st) <= 0)
-                if back.size:
-                    i = int(back[0]) + 1
-                    raise FormatError(f"{where}: {which} stamps do not increase at message {i + 1} "
-                                      f"({st[i - 1]:.9f} then {st[i]:.9f})")
+                _decode_scans(s, reader, which)
+    return _write_streams(streams, seq, which)
+
+
+def _check_topics(reader: Any, streams: dict[str, _Stream]) -> None:
+    """Every topic of ``streams`` is in the bag, of a message type its sensor kind reads."""
+    by_topic = {c.topic: c for c in reader.connections}
+    for topic, s in streams.items():
+        c = by_topic.get(topic)
+        if c is None:
+            raise InputError(f"{reader.paths[0]}: no topic {topic} (topics: {', '.join(sorted(by_topic))})")
+        want = {"camera": IMAGE_TYPES, "laser": (SCAN_TYPE,), "onboard": (SCAN_TYPE,),
+                "odometry": (ODOM_TYPE,)}[s.kind]
+        if c.msgtype not in want:
+            raise InputError(f"{reader.paths[0]}:{topic}: a {c.msgtype}, but {s.kind} {s.name} needs "
+                             f"{' or '.join(want)}")
+
+
+def _camera_message(s: _Stream, msg: Any, msgtype: str, seq: Path, where: str, video: bool,
+                    image_format: ImageFormat, pool: ThreadPoolExecutor, pending: list[Future[None]],
+                    workers: int) -> None:
+    """Camera ``s``'s latest image message (its stamps already appended) into the video or an image file
+    of ``seq/cameras/NAME``: a compressed image's own bytes, a raw one encoded (checked against the rig's
+    resolution) by ``pool``, at most ``4 workers`` writes pending."""
+    n = len(s.header_s)
+    folder = seq / "cameras" / s.name
+    if n == 1:
+        folder.mkdir(parents=True, exist_ok=True)
+    if msgtype == IMAGE_TYPES[1]:  # CompressedImage: its own bytes
+        if video:
+            img = cv2.imdecode(np.frombuffer(msg.data, np.uint8), cv2.IMREAD_GRAYSCALE)
+            if img is None:
+                raise FormatError(f"{where}: message {n}: cannot decode the {msg.format!r} image")
+            _video_write(s, folder, img, where)
+            return
+        ext = ".png" if "png" in msg.format.lower() else ".jpg"
+        name = f"{n - 1:06d}{ext}"
+        s.files.append(name)
+        pending.append(pool.submit(_write_bytes, folder / name, msg.data))
+        return
+    img = _image(msg, where, n)
+    w, h = s.sensor.resolution
+    if img.shape != (h, w):
+        raise InputError(f"{where}: message {n} is {img.shape[1]}x{img.shape[0]}, the rig's {s.name} "
+                         f"is {w}x{h}")
+    if video:
+        _video_write(s, folder, img, where)
+        return
+    name = f"{n - 1:06d}.{image_format}"
+    s.files.append(name)
+    pending.append(pool.submit(_write_png, folder / name, img, image_format))
+    if len(pending) > 4 * max(1, workers):  # bounded memory: wait for the oldest
+        pending.pop(0).result()
+
+
+def _decode_scans(s: _Stream, reader: Any, which: str) -> None:
+    """Scanner ``s``'s raw messages decoded into its rows, their ``which`` stamps checked to increase."""
+    where = f"{reader.paths[0]}:{s.topic}"
+    s.rows = [_scans(s, reader, where)]
+    st = np.array(s.stamp(which))
+    back = np.flatnonzero(np.diff(st) <= 0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise FormatError(f"{where}: {which} stamps do not increase at message {i + 1} "
+                          f"({st[i - 1]:.9f} then {st[i]:.9f})")
+
+
+def _write_streams(streams: dict[str, _Stream], seq: Path, which: str) -> dict[str, int]:
+    """Each stream's frame index, scan log or odometry CSV and its stamps file in ``seq``; returns the
+    messages per stream (a stream without any is an error)."""
     counts = {}
     for s in streams.values():
         counts[f"{s.kind} {s.name}"] = len(s.header_s)

@@ -119,11 +119,8 @@ def calibrate_from_views(views: Sequence[View], markers: Sequence[MarkerSpec], a
     views = [v.with_sigma_floor(options.corner_sigma_floor_px) for v in views]
     if anchor not in side:
         raise InputError(f"anchor marker {anchor} is not among the markers to calibrate ({sorted(side)})")
-    uncal: dict[int, str] = {}
     seen = {v.marker_id for v in views}
-    for m in side:
-        if m not in seen:
-            uncal[m] = "never detected"
+    uncal: dict[int, str] = {m: "never detected" for m in side if m not in seen}
     if anchor not in seen:
         raise InputError(f"anchor marker {anchor} is not detected in any image")
 
@@ -143,67 +140,18 @@ def calibrate_from_views(views: Sequence[View], markers: Sequence[MarkerSpec], a
 
     rejected_images: dict[str, str] = {}
     rejected_views: dict[tuple[str, int], str] = {}
-    # starting image poses; views that disagree with their image are set aside
-    T_cr: dict[str, Array] = {}
-    for im, s in sols.items():
-        usable = [x for x in s.values() if x.view.marker_id in T_rm]
-        if len(usable) < 2:
-            continue
-        ip = image_pose(usable, T_rm, options.image_tol_m, math.radians(options.image_tol_deg))
-        if ip is None:
-            rejected_images[im] = "its markers disagree with each other (no two give the same camera pose)"
-            continue
-        T_cr[im] = ip.T_cam_robot
-        for m in ip.disagree:
-            rejected_views[(im, m)] = "pose disagrees with the image's other markers (flip or misread)"
+    T_cr = _start_image_poses(sols, T_rm, options, rejected_images, rejected_views)
     live = [v for v in views if v.image in T_cr and v.marker_id in T_rm and (v.image, v.marker_id)
             not in rejected_views]
     f_px = float(math.sqrt(camera.camera_matrix[0, 0] * camera.camera_matrix[1, 1]))
-    lim = float(chi2.isf(options.view_p, 8))
-    result: BundleResult | None = None
-    for _round in range(10):
-        live = _drop_single(live)
-        if not live or not ({v.marker_id for v in live} - {anchor}):
-            raise InputError("no image keeps two consistent markers: nothing to calibrate")
-        result = bundle_adjust(live, side, T_cr, T_rm, anchor, f_px, options.bundle)
-        T_rm.update(result.T_robot_marker)
-        T_cr.update(dict(zip(result.images, result.T_cam_robot, strict=True)))
-        bad = {k for k, c in result.view_chi2.items() if c > lim}
-        if not bad:
-            break
-        per_image: dict[str, list[tuple[str, int]]] = {}
-        for v in live:
-            per_image.setdefault(v.image, []).append((v.image, v.marker_id))
-        for im, keys in per_image.items():
-            nb = sum(k in bad for k in keys)
-            if nb and nb > options.image_bad_fraction * len(keys):
-                rejected_images[im] = (f"{nb} of {len(keys)} markers do not fit the adjustment "
-                                       f"(chi-square above {lim:.0f})")
-                for k in keys:
-                    bad.discard(k)
-            else:
-                for k in keys:
-                    if k in bad:
-                        rejected_views[k] = (f"corners do not fit the adjustment (chi-square "
-                                             f"{result.view_chi2[k]:.0f} > {lim:.0f}, "
-                                             f"RMS {result.view_rms_px[k]:.2f} px)")
-        live = [v for v in live if v.image not in rejected_images and (v.image, v.marker_id) not in bad]
-    assert result is not None
+    result, live = _adjust_rejecting(live, side, T_cr, T_rm, anchor, f_px, options, rejected_images, rejected_views)
 
     cov = dict(result.cov)
     calibrated = set(cov)
     for m in sorted(set(T_rm) - calibrated - {anchor}):
         uncal[m] = "all its views were rejected"
     out_T = {m: T_rm[m] for m in sorted(calibrated | {anchor})}
-    Ta = out_T[anchor]
-    Ca = np.zeros((6, 6)) if anchor_cov is None else np.asarray(anchor_cov, float)
-    cov[anchor] = Ca.copy()
-    cov_rel = {m: c.copy() for m, c in cov.items()}
-    cov_rel[anchor] = np.zeros((6, 6))
-    if anchor_cov is not None:
-        for m in calibrated:
-            A = _anchor_propagation(Ta, out_T[m])
-            cov[m] = cov[m] + A @ Ca @ A.T
+    cov, cov_rel = _with_anchor_uncertainty(cov, out_T, anchor, anchor_cov)
     n_views = {m: sum(1 for v in live if v.marker_id == m) for m in out_T}
     pairs = {(e.a, e.b): e.n for e in edges if e.a in out_T and e.b in out_T}
     ids = sorted(out_T)
@@ -217,6 +165,93 @@ def calibrate_from_views(views: Sequence[View], markers: Sequence[MarkerSpec], a
         unknown_ids=dict(unknown_ids or {}), images_total=images_total, images_used=len(result.images),
         rms_px=rms, variance_factor=result.variance_factor,
         cov_relative={m: cov_rel[m] for m in out_T})
+
+
+def _start_image_poses(sols: Mapping[str, Mapping[int, ViewPoses]], T_rm: Mapping[int, Array],
+                       options: RobotCalOptions, rejected_images: dict[str, str],
+                       rejected_views: dict[tuple[str, int], str]) -> dict[str, Array]:
+    """Starting pose ``T_cam_robot`` (4, 4) of each image with two usable views, from its markers' poses
+    ``T_rm`` on the robot; an image whose markers disagree goes into ``rejected_images``, a view that
+    disagrees with its image into ``rejected_views``."""
+    T_cr: dict[str, Array] = {}
+    for im, s in sols.items():
+        usable = [x for x in s.values() if x.view.marker_id in T_rm]
+        if len(usable) < 2:
+            continue
+        ip = image_pose(usable, T_rm, options.image_tol_m, math.radians(options.image_tol_deg))
+        if ip is None:
+            rejected_images[im] = "its markers disagree with each other (no two give the same camera pose)"
+            continue
+        T_cr[im] = ip.T_cam_robot
+        for m in ip.disagree:
+            rejected_views[(im, m)] = "pose disagrees with the image's other markers (flip or misread)"
+    return T_cr
+
+
+def _adjust_rejecting(live: list[View], side: Mapping[int, float], T_cr: dict[str, Array], T_rm: dict[int, Array],
+                      anchor: int, f_px: float, options: RobotCalOptions, rejected_images: dict[str, str],
+                      rejected_views: dict[tuple[str, int], str]) -> tuple[BundleResult, list[View]]:
+    """Bundle-adjust the ``live`` views, set aside the views (or whole images) whose corners do not fit,
+    and adjust again, up to ten rounds; ``T_cr`` and ``T_rm`` are updated in place. Returns the last
+    adjustment and the views in it."""
+    lim = float(chi2.isf(options.view_p, 8))
+    result: BundleResult | None = None
+    for _round in range(10):
+        live = _drop_single(live)
+        if not live or not ({v.marker_id for v in live} - {anchor}):
+            raise InputError("no image keeps two consistent markers: nothing to calibrate")
+        result = bundle_adjust(live, side, T_cr, T_rm, anchor, f_px, options.bundle)
+        T_rm.update(result.T_robot_marker)
+        T_cr.update(dict(zip(result.images, result.T_cam_robot, strict=True)))
+        bad = {k for k, c in result.view_chi2.items() if c > lim}
+        if not bad:
+            break
+        _reject_misfits(live, result, bad, lim, options, rejected_images, rejected_views)
+        live = [v for v in live if v.image not in rejected_images and (v.image, v.marker_id) not in bad]
+    assert result is not None
+    return result, live
+
+
+def _reject_misfits(live: Sequence[View], result: BundleResult, bad: set[tuple[str, int]], lim: float,
+                    options: RobotCalOptions, rejected_images: dict[str, str],
+                    rejected_views: dict[tuple[str, int], str]) -> None:
+    """Record the views ``bad`` (image, ID) whose corners' chi-square exceeds ``lim``: an image with more
+    than ``image_bad_fraction`` of its views bad is rejected whole (its views leave ``bad``), the others
+    view by view."""
+    per_image: dict[str, list[tuple[str, int]]] = {}
+    for v in live:
+        per_image.setdefault(v.image, []).append((v.image, v.marker_id))
+    for im, keys in per_image.items():
+        nb = sum(k in bad for k in keys)
+        if nb and nb > options.image_bad_fraction * len(keys):
+            rejected_images[im] = (f"{nb} of {len(keys)} markers do not fit the adjustment "
+                                   f"(chi-square above {lim:.0f})")
+            for k in keys:
+                bad.discard(k)
+        else:
+            for k in keys:
+                if k in bad:
+                    rejected_views[k] = (f"corners do not fit the adjustment (chi-square "
+                                         f"{result.view_chi2[k]:.0f} > {lim:.0f}, "
+                                         f"RMS {result.view_rms_px[k]:.2f} px)")
+
+
+def _with_anchor_uncertainty(cov: dict[int, Array], T_robot_marker: Mapping[int, Array], anchor: int,
+                             anchor_cov: Array | None) -> tuple[dict[int, Array], dict[int, Array]]:
+    """The markers' covariances (6, 6) with the anchor's own uncertainty ``anchor_cov`` propagated into
+    them, and without it (relative to the anchor; zero for the anchor)."""
+    Ta = T_robot_marker[anchor]
+    Ca = np.zeros((6, 6)) if anchor_cov is None else np.asarray(anchor_cov, float)
+    calibrated = set(cov)
+    cov = dict(cov)
+    cov[anchor] = Ca.copy()
+    cov_rel = {m: c.copy() for m, c in cov.items()}
+    cov_rel[anchor] = np.zeros((6, 6))
+    if anchor_cov is not None:
+        for m in calibrated:
+            A = _anchor_propagation(Ta, T_robot_marker[m])
+            cov[m] = cov[m] + A @ Ca @ A.T
+    return cov, cov_rel
 
 
 def _drop_single(views: list[View]) -> list[View]:
