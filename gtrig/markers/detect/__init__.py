@@ -49,7 +49,7 @@ __all__ = ["AT3_ONLY_SIGMA_PX", "DETECTOR_VERSION", "Detection", "DetectorParams
 
 #: Raise when a change makes the default detector's output differ: GTvision's detection checkpoints
 #: (``gtrig.vision.sequence``) are keyed on it, so that they are not reused across such a change.
-DETECTOR_VERSION = 33
+DETECTOR_VERSION = 32
 
 #: corner sigma written for AprilTag 3's newer families, whose corners gtrig does not refine, px
 AT3_ONLY_SIGMA_PX = 0.5

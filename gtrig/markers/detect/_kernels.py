@@ -256,66 +256,6 @@ def _solve(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
     return x
 
 
-#: largest step of log sigma (a factor e^3 = 20 in the blur) the pixel-integrated step takes from the lower
-#: bound of its blur: there the model hardly depends on the blur (the pixel's box is the step's width),
-#: ``J^T J``'s blur entry is near zero and the step of log sigma ill-determined (up to +5900 on the real
-#: photos); such a step is taken with the blur held, not tried and refused
-_FLOOR_LS_STEP = 3.0
-
-#: the fit stops once its next step's predicted decrease of the residual sum of squares (the quadratic model
-#: of ``J^T J``) is below this share of the residual variance: the step then moves the parameters by less than
-#: a tenth of their standard errors together (it changes chi-square by 0.01). On a step sharper than a pixel at
-#: its blur's bound the model is not smooth at that scale: such steps were refused, by up to 1e-5 of the
-#: residual, and tried again with ten times the damping to the iteration limit
-_CHI2_STEP = 0.01
-
-#: least reversal ``r`` of a step along the last accepted one that is damped (:func:`_secant_step`; up to
-#: ``r = 1``: a step undoing all of the last or more is left to the damping of Levenberg-Marquardt, as on the
-#: dim, 2 px blurred small markers of the renders, whose fits wander before they settle)
-_REVERSAL_MIN = 0.2
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _secant_step(delta: NDArray[np.float64], prev: NDArray[np.float64], M: NDArray[np.float64]) -> None:
-    """Damp the part of the step ``delta`` (7,) that reverses the last accepted step ``prev`` (7,), in place.
-
-    Near a blur of a few tenths of a pixel the point-sampled step's Gauss-Newton steps overshoot along one
-    direction (line offset, blur and contrast together): each step undoes ``r`` (0.6-0.8 on the real
-    photos) of the last, and the fit creeps to its iteration limit. Steps proportional to the distance
-    left, ``d_k = c (x* - x_k)``, give ``r = c - 1`` and ``x* = x_k + d_k / c``: the step's component along
-    ``prev`` (in the metric ``M`` (7, 7), ``J^T J``), ``-r prev``, becomes ``-r / (1 + r) prev`` (a secant
-    step along that direction) for ``r`` between :data:`_REVERSAL_MIN` and 1; the rest of the step is kept.
-    """
-    num = 0.0
-    den = 0.0
-    for p in range(7):
-        mp = 0.0
-        for q in range(7):
-            mp += M[p, q] * prev[q]
-        num += delta[p] * mp
-        den += prev[p] * mp
-    if not den > 0.0:
-        return
-    r = -num / den
-    if _REVERSAL_MIN < r < 1.0:
-        f = r * r / (1.0 + r)
-        for p in range(7):
-            delta[p] += f * prev[p]
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _predicted_drop(M: NDArray[np.float64], g: NDArray[np.float64], delta: NDArray[np.float64]) -> float:
-    """The decrease of the residual sum of squares the quadratic model predicts for the step ``delta`` (7,):
-    ``2 delta^T g - delta^T M delta`` (``M`` (7, 7) ``J^T J``, ``g`` (7,) ``J^T r``)."""
-    out = 0.0
-    for p in range(7):
-        md = 0.0
-        for q in range(7):
-            md += M[p, q] * delta[q]
-        out += delta[p] * (2.0 * g[p] - md)
-    return out
-
-
 @njit(cache=True, nogil=True, error_model="numpy")
 def lm_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.float64],
             extra: NDArray[np.float64], lo: int, hi: int, P: NDArray[np.float64], clipped: NDArray[np.bool_],
@@ -326,16 +266,11 @@ def lm_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
 
     ``iterations`` is the edge's own limit (a clipped edge's already multiplied); ``JTJ`` (7, 7)
     receives ``J^T J`` at the estimate and ``G`` (8, 8) is scratch. Returns the residual sum of squares.
-    A fit stops when its line step is below ``tol`` (a plain step; a pixel-integrated one once its contrast
-    settles too) or when the next step's predicted decrease is below :data:`_CHI2_STEP` of the residual
-    variance; a step reversing the last accepted one is damped along it (:func:`_secant_step`).
     """
     A = np.empty((7, 7))
     Pn = np.empty(7)
     JTr = np.empty(7)
     rhs = np.empty(7)
-    prev = np.empty(7)
-    has_prev = False
     edge_normal_eq(X0, X1, val, extra, lo, hi, P, clipped, slow, clip_low, clip_high, G)
     JTJ[:, :] = G[:7, :7]
     JTr[:] = G[:7, 7]
@@ -346,11 +281,9 @@ def lm_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
         for p in range(7):
             A[p, p] += lam * (JTJ[p, p] + 1e-9)
         delta = _solve(A, JTr)
-        if ((P[4] <= ls_lo and (delta[4] < 0.0 or (slow and delta[4] > _FLOOR_LS_STEP)))
-                or (P[4] >= ls_hi and delta[4] > 0.0)):
-            # the blur at its bound and pushed beyond, or the pixel-integrated step's blur thrown off its floor
-            # (_FLOOR_LS_STEP): the step of the other parameters with the blur held (the clamped full step is
-            # not that step, and its line moves kept the fit from settling)
+        if (P[4] <= ls_lo and delta[4] < 0.0) or (P[4] >= ls_hi and delta[4] > 0.0):
+            # the blur at its bound and pushed beyond: the step of the other parameters with the blur held
+            # (the clamped full step is not that step, and its line moves kept the fit from settling)
             for p in range(7):
                 A[4, p] = 0.0
                 A[p, 4] = 0.0
@@ -358,13 +291,9 @@ def lm_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
             A[4, 4] = 1.0
             rhs[4] = 0.0
             delta = _solve(A, rhs)
-        if _predicted_drop(JTJ, JTr, delta) < _CHI2_STEP * cur / max(hi - lo - 7, 1):
-            break
         if not slow and abs(delta[1]) + abs(delta[0]) * wt < tol:
             # converged: a step this small is not worth the normal equations at its end
             break
-        if has_prev:
-            _secant_step(delta, prev, JTJ)
         for p in range(7):
             Pn[p] = P[p] + delta[p]
         Pn[4] = min(max(Pn[4], ls_lo), ls_hi)
@@ -372,9 +301,6 @@ def lm_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
             Pn[3] = min(Pn[3], max_white * (clip_high - Pn[2]))
         edge_normal_eq(X0, X1, val, extra, lo, hi, Pn, clipped, slow, clip_low, clip_high, G)
         if G[7, 7] <= cur:
-            for p in range(7):
-                prev[p] = Pn[p] - P[p]
-            has_prev = True
             P[:] = Pn
             cur = G[7, 7]
             JTJ[:, :] = G[:7, :7]
