@@ -127,3 +127,21 @@ def test_common_move_survives_the_checkpoint() -> None:
     back = _views_from_json("cam0", 7, _views_to_json([v, w]))
     assert back[0].corner_common is not None and np.array_equal(back[0].corner_common, c)
     assert back[1].corner_common is None
+
+
+def test_views_without_a_common_move_fit_as_before() -> None:
+    # a frame none of whose markers clips has no common term: the joint weighting leaves its fit as it was
+    rig, T, cam, mid, uv = _one_view()
+    model = VisionModel.from_rig(rig)  # type: ignore[arg-type]
+    noisy = uv + np.random.default_rng(1).normal(0.0, OWN_PX, (4, 2))
+    obs = FrameObservations(0.0, (MarkerView(cam, mid, noisy, np.tile(OWN_PX**2 * np.eye(2), (4, 1, 1))),), (cam,))
+    on, off = (estimate_frame(model, obs, VisionOptions(common_corners=b)) for b in (True, False))
+    assert on.ok and on.T_world_robot is not None and off.T_world_robot is not None
+    assert np.array_equal(on.T_world_robot, off.T_world_robot) and np.array_equal(on.cov_6x6, off.cov_6x6)
+    # with a common move the fit changes: the joint weighting is not a no-op
+    c = _common_move(uv, COMMON_PX)
+    obs_c = FrameObservations(0.0, (MarkerView(cam, mid, noisy, np.tile(OWN_PX**2 * np.eye(2), (4, 1, 1))
+                                               + np.einsum("ci,cj->cij", c, c), corner_common=c),), (cam,))
+    on_c, off_c = (estimate_frame(model, obs_c, VisionOptions(common_corners=b)) for b in (True, False))
+    assert on_c.T_world_robot is not None and off_c.T_world_robot is not None
+    assert not np.allclose(on_c.cov_6x6, off_c.cov_6x6)
