@@ -137,11 +137,12 @@ def test_views_without_a_common_move_fit_as_before() -> None:
     obs = FrameObservations(0.0, (MarkerView(cam, mid, noisy, np.tile(OWN_PX**2 * np.eye(2), (4, 1, 1))),), (cam,))
     on, off = (estimate_frame(model, obs, VisionOptions(common_corners=b)) for b in (True, False))
     assert on.ok and on.T_world_robot is not None and off.T_world_robot is not None
+    assert on.cov_6x6 is not None and off.cov_6x6 is not None
     assert np.array_equal(on.T_world_robot, off.T_world_robot) and np.array_equal(on.cov_6x6, off.cov_6x6)
     # with a common move the fit changes: the joint weighting is not a no-op
     c = _common_move(uv, COMMON_PX)
     obs_c = FrameObservations(0.0, (MarkerView(cam, mid, noisy, np.tile(OWN_PX**2 * np.eye(2), (4, 1, 1))
                                                + np.einsum("ci,cj->cij", c, c), corner_common=c),), (cam,))
     on_c, off_c = (estimate_frame(model, obs_c, VisionOptions(common_corners=b)) for b in (True, False))
-    assert on_c.T_world_robot is not None and off_c.T_world_robot is not None
+    assert on_c.cov_6x6 is not None and off_c.cov_6x6 is not None
     assert not np.allclose(on_c.cov_6x6, off_c.cov_6x6)
