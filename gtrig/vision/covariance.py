@@ -344,3 +344,43 @@ def common_consider_covariance(J_whitened: np.ndarray, sqrt_info: np.ndarray, we
     top = float(np.max(np.linalg.eigvalsh(0.5 * (Y + Y.T)))) if np.any(X) else 0.0
     out = G.T @ G - X / max(1.0, top)
     return 0.5 * (out + out.T)
+
+
+def common_whitening(sqrt_info: np.ndarray, common_px: np.ndarray, own_scale: np.ndarray | None = None
+                     ) -> np.ndarray | None:
+    """Per view, the (8, 8) matrix that turns its corners' separately whitened residuals into ones whitened
+    with the view's joint covariance (four corners of a view, in order; x and y per corner).
+
+    The joint covariance is that of :func:`common_consider_covariance`: each corner's own part (its
+    covariance less ``s_i c_i c_i^T``, at least zero) and ``c c^T`` over the view's eight coordinates. In the
+    separately whitened coordinates (``u_i = L_i^T c_i``) it is ``I - blockdiag(o_i u_i u_i^T) + u u^T``, with
+    ``o_i = min(s_i, 0.95 / |u_i|^2)`` so that a corner's own part keeps 5 % of its variance along ``u_i``.
+    Its inverse symmetric square root keeps each corner's rows mostly its own (the robust weights stay per
+    corner). A fit weighted by it takes a common shift of the four corners for what it is, an error of the
+    view, rather than for four independent errors that the pose should follow.
+
+    Parameters
+    ----------
+    sqrt_info : (N, 2, 2) ``L`` of each corner. common_px : (N, 2) each corner's common move, px, for one
+        sigma (zeros: none). own_scale : (N,) each corner's camera variance factor (None: 1).
+
+    Returns
+    -------
+    (V, 8, 8) or None : the identity for a view without a common move; None if no view has one.
+    """
+    n = sqrt_info.shape[0]
+    if not np.any(common_px) or n % 4:
+        return None
+    s = np.ones(n) if own_scale is None else np.asarray(own_scale, dtype=float)
+    u = np.einsum("nji,nj->ni", sqrt_info, common_px)  # (N, 2)
+    uu = np.sum(u**2, axis=1)
+    own = np.minimum(s, 0.95 / np.maximum(uu, 1e-300))
+    V = n // 4
+    S = np.broadcast_to(np.eye(8), (V, 8, 8)).copy()
+    blocks = -(own[:, None, None] * u[:, :, None] * u[:, None, :])  # (N, 2, 2)
+    for k in range(4):
+        S[:, 2 * k:2 * k + 2, 2 * k:2 * k + 2] += blocks[k::4]
+    uv = u.reshape(V, 8)
+    S += uv[:, :, None] * uv[:, None, :]
+    w, Q = np.linalg.eigh(S)
+    return np.matmul(Q / np.sqrt(w)[:, None, :], np.swapaxes(Q, 1, 2))

@@ -51,7 +51,7 @@ from gtrig.vision.covariance import (
     RigUncertainty,
     blur_consider_covariance,
     blur_scale_sigma_px,
-    common_consider_covariance,
+    common_whitening,
 )
 from gtrig.vision.init import InitOptions, PreviousPose, initial_pose, unbeaten_by_views
 from gtrig.vision.observations import FrameObservations, MarkerView, StackedCorners, VisionModel, stack_corners
@@ -123,10 +123,10 @@ class VisionOptions:
         fitted blur and the marker's size in the image; views without a fitted blur add nothing). Without
         it, at 1.5 px blur a 47 px marker seen alone was 55 mm off at 6 sigmas.
     common_corners : bool
-        Add to an OK frame's covariance what the errors common to a view's four corners leave in the pose
+        Weight each view's eight corner coordinates with their joint covariance in the fit
         (:attr:`MarkerView.corner_common`, a clipped marker's edges offset as one;
-        :func:`gtrig.vision.covariance.common_consider_covariance`): the fit takes the corners as
-        independent and averages that error away, which no residual shows.
+        :func:`gtrig.vision.covariance.common_whitening`): a common shrink of the four corners is an error
+        of the view, not four errors the pose follows, and the fit's covariance holds it.
     """
 
     planar: bool = True
@@ -224,8 +224,22 @@ def _fit(model: VisionModel, views: list[MarkerView], opts: VisionOptions,
     # parameters per camera) enter the one fit that gives the pose and its covariance
     ru = opts.rig_uncertainty
     init = initial_pose(model, views, sc, opts.planar_prior, previous, opts.init, opts.refine, ru.without_lenses())
-    fit = refine_pose(sc, init.best.fit.T_world_robot, opts.planar_prior, opts.refine, ru)
+    fit = refine_pose(sc, init.best.fit.T_world_robot, opts.planar_prior, opts.refine, ru,
+                      view_whitening(sc, views, opts))
     return sc, init, fit
+
+
+def view_whitening(sc: StackedCorners, views: Sequence[MarkerView], options: VisionOptions
+                   ) -> np.ndarray | None:
+    """The per-view joint whitening (V, 8, 8) of ``views`` stacked as ``sc`` from their common corner moves
+    (:func:`gtrig.vision.covariance.common_whitening`), or None without any (or with
+    ``options.common_corners`` off)."""
+    if not options.common_corners or all(v.corner_common is None for v in views):
+        return None
+    scale = dict(options.corner_scale)
+    c = np.concatenate([np.zeros((4, 2)) if v.corner_common is None else v.corner_common for v in views])
+    s = np.repeat([scale.get(v.camera, 1.0) for v in views], 4)
+    return common_whitening(sc.sqrt_info, c, s)
 
 
 def merge_repeated(views: tuple[MarkerView, ...] | list[MarkerView]) -> list[MarkerView]:
@@ -273,7 +287,8 @@ def _followed_fit(model: VisionModel, views: list[MarkerView], options: VisionOp
     where it is not to be trusted without the full search (:attr:`VisionOptions.follow_max_gap_s`)."""
     assert follow.T_world_robot is not None
     sc = stack_corners(model, views)
-    fit = refine_pose(sc, follow.T_world_robot, options.planar_prior, options.refine, options.rig_uncertainty)
+    fit = refine_pose(sc, follow.T_world_robot, options.planar_prior, options.refine, options.rig_uncertainty,
+                      view_whitening(sc, views, options))
     if not fit.converged or fit.min_depth_m <= 0 or _beyond(PreviousPose(follow.T_world_robot), fit.T_world_robot):
         return None
     red = float(np.sum(fit.redundancy))
@@ -342,7 +357,8 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
         if start is not None and start.T_world_robot is not None:
             sc = stack_corners(model, views)
             return sc, start.flip_margin, (), refine_pose(sc, start.T_world_robot, options.planar_prior,
-                                                          options.refine, options.rig_uncertainty)
+                                                          options.refine, options.rig_uncertainty,
+                                                          view_whitening(sc, views, options))
         sc, init, fit = _fit(model, views, options, previous)
         return sc, init.margin, tuple(c.fit.T_world_robot for c in init.candidates), fit
 
@@ -365,7 +381,7 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
         # from the last pose (a full re-initialisation per dropped view costs O(views^2))
         sc = stack_corners(model, views)
         fit = refine_pose(sc, fit.T_world_robot, options.planar_prior, options.refine,
-                          options.rig_uncertainty)
+                          options.rig_uncertainty, view_whitening(sc, views, options))
     if rejected:  # decide the flip again, and its margin, without the dropped views
         sc, margin, alts, fit = fit_views()
     used = tuple((v.camera, v.marker_id) for v in views)
@@ -399,11 +415,6 @@ def estimate_frame(model: VisionModel, obs: FrameObservations, options: VisionOp
     common["cov_6x6"] = fit.cov_6x6 * frame_scale(factor, red_sum, options.frame_scale_level)
     if options.blur_pull:
         common["cov_6x6"] = common["cov_6x6"] + blur_covariance(sc, fit, views)
-    if options.common_corners and any(v.corner_common is not None for v in views):
-        c = np.concatenate([np.zeros((4, 2)) if v.corner_common is None else v.corner_common for v in views])
-        s = np.repeat([scale.get(v.camera, 1.0) for v in views], 4)
-        common["cov_6x6"] = common["cov_6x6"] + common_consider_covariance(fit.J, sc.sqrt_info, fit.weights, sc.view,
-                                                                           c, fit.cov_6x6, s)
     return FrameEstimate(obs.stamp_s, Status.OK, variance_factor=factor, **common)
 
 

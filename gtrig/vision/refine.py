@@ -230,8 +230,17 @@ def _block_diagonal(blocks: list[np.ndarray]) -> np.ndarray:
 _Trial = tuple[np.ndarray | None, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]
 
 
+def _mix(M: np.ndarray | None, X: np.ndarray) -> np.ndarray:
+    """Whitened rows ``X`` (2 N,) or (2 N, k) mixed per view by ``M`` (V, 8, 8) (None: as they are)."""
+    if M is None:
+        return X
+    V = M.shape[0]
+    return np.matmul(M, X.reshape(V, 8, -1)).reshape(X.shape)
+
+
 def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = None,
-                options: RefineOptions = RefineOptions(), rig: RigUncertainty | None = None) -> RefineResult:
+                options: RefineOptions = RefineOptions(), rig: RigUncertainty | None = None,
+                view_whitening: np.ndarray | None = None) -> RefineResult:
     """Fit ``T_world_robot`` to the corners ``sc`` starting from ``T0`` (see the module docstring).
 
     Parameters
@@ -244,11 +253,17 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
         (linearised, with a Gaussian prior of that sigma) estimated with the robot pose and
         marginalised out, so that the residuals, the robust weights and the covariance account for
         calibration errors that are common to all corners of one camera or one marker.
+    view_whitening : (V, 8, 8) per view, what turns its separately whitened corner rows into rows whitened
+        with the view's joint covariance (:func:`gtrig.vision.covariance.common_whitening`: the corners'
+        error common to the view); None: the corners are independent. The residual norms, robust weights,
+        chi-square, redundancies and covariance are those of the mixed rows; ``J`` stays per corner.
     """
     k = options.huber_k
+    M = view_whitening
     T = np.asarray(T0, dtype=float).copy()
     N = sc.uv.shape[0]
     Bn, S_eta = _nuisance_blocks(sc, T, rig)
+    Bn = _mix(M, Bn)
     Lam = S_eta.T @ S_eta
     P = 6 + Bn.shape[1]
     eta = np.zeros(P - 6)
@@ -257,7 +272,7 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
         """Robust cost at ``Tx`` and what the next iteration takes from there if the step is taken (the
         projection with its Jacobian, the whitened residuals and their norms, the prior's rows)."""
         uv, z, J = project_pose(sc, Tx)
-        rw = whiten(sc, uv - sc.uv).reshape(-1) + Bn @ etax
+        rw = _mix(M, whiten(sc, uv - sc.uv).reshape(-1)) + Bn @ etax
         e = np.linalg.norm(rw.reshape(N, 2), axis=1)
         c = huber_cost(np.where(z > 0, e, 1e6), k) + _sq(S_eta @ etax)
         rp_jp = None
@@ -276,7 +291,7 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
     for it in range(1, options.max_iter + 1):  # noqa: B007
         J, rw, e, rp_jp = trial
         assert J is not None
-        A[:, :6] = whiten(sc, J).reshape(-1, 6)
+        A[:, :6] = _mix(M, whiten(sc, J).reshape(-1, 6))
         ww = np.repeat(huber_weights(e, k), 2)
         H = A.T @ (A * ww[:, None])
         g = A.T @ (rw * ww)
@@ -316,11 +331,11 @@ def refine_pose(sc: StackedCorners, T0: np.ndarray, prior: PlanarPrior | None = 
     assert J_final is not None
     J = J_final
     r = uv - sc.uv
-    rw = whiten(sc, r).reshape(-1) + Bn @ eta
+    rw = _mix(M, whiten(sc, r).reshape(-1)) + Bn @ eta
     Jw = whiten(sc, J)
     e = np.linalg.norm(rw.reshape(N, 2), axis=1)
     w = huber_weights(e, k)
-    A = np.hstack([Jw.reshape(-1, 6), Bn])
+    A = np.hstack([_mix(M, Jw.reshape(-1, 6)), Bn])
     H = A.T @ (A * np.repeat(w, 2)[:, None])
     if P > 6:
         H[6:, 6:] += Lam
