@@ -95,3 +95,21 @@ def compare_sources(a: PoseTrack, b: PoseTrack, align: AlignKind = "none", max_g
     Ra, Rb = assoc.gt.quat_xyzw, bb.quat_xyzw
     ape = metrics_evo.ape(assoc.gt.stamps_s, Ra, assoc.gt.xyz, Rb, bb.xyz)
     return SourceComparison(assoc, al, axes, e, ape, d2, share)
+
+
+def mean_nees_interval(n: int, dof: int, level: float = 0.95) -> tuple[float, float]:
+    """Range of the mean NEES / dof that an honest covariance gives ``level`` of the time.
+
+    Parameters
+    ----------
+    n : number of independent errors averaged.
+    dof : dimension of each error (its NEES follows chi2(dof) when the covariance is honest).
+    level : two-sided coverage.
+
+    Returns
+    -------
+    (low, high) : chi-square quantiles of chi2(n * dof) at (1 - level) / 2 and (1 + level) / 2, over n * dof.
+    """
+    k = n * dof
+    a = (1.0 - level) / 2
+    return float(stats.chi2.ppf(a, k)) / k, float(stats.chi2.ppf(1.0 - a, k)) / k
