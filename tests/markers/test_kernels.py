@@ -33,7 +33,7 @@ def test_pixel_step_kernel_matches_the_numpy_form(sigma: float) -> None:
 
 
 def _prediction(X0: np.ndarray, X1: np.ndarray, extra: np.ndarray, P: np.ndarray, exact: bool) -> np.ndarray:
-    """The blurred-step model of ``fit_edges`` (its module docstring), in NumPy."""
+    """The blurred-step model of ``fit_sharp_edges`` (its module docstring), in NumPy."""
     th, rho, a, b, ls, ca, cu = P
     c, s = np.cos(th), np.sin(th)
     d = X0 * c + X1 * s - rho

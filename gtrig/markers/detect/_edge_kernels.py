@@ -5,7 +5,7 @@ the band around each edge (:func:`.edges.gather_band`), the paper's end beyond i
 (:func:`.edges.white_extent`, :func:`.edges.trim_outer`), the modelled light of the marker's corners
 and cells (:func:`.edges.marker_context`, from the previous pass's lines; a saturated edge's context
 blur from :func:`context_blur`), the blurred-step fits
-(:func:`.edges.fit_edges`, with its refit of edges sharper than a pixel) and the next pass's blur
+(:func:`.edges.fit_sharp_edges`, with its refit of edges sharper than a pixel) and the next pass's blur
 and end points; the last pass adds the lines' covariances and the corners
 (:func:`.edges.intersect_corners`). The arithmetic is the same as theirs, step for step, so the
 results agree with them to rounding; what goes is the interpreter's work per step and per edge, and
@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from gtrig.markers.detect._kernels import lm_edge, marker_context, quad_homographies
 
-#: column of the parameters ``(theta, rho, a, b, log sigma, c, c_u)`` (:func:`.edges.fit_edges`)
+#: column of the parameters ``(theta, rho, a, b, log sigma, c, c_u)`` (:func:`.edges.fit_sharp_edges`)
 _NP = 7
 
 
@@ -281,7 +281,7 @@ def _white_limit(d: NDArray[np.float64], v: NDArray[np.float64], lo_i: int, hi_i
 def _start_params(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[np.float64], lo: int, hi: int,
                   nx: float, ny: float, mid: NDArray[np.float64], ls: float, init: NDArray[np.float64],
                   init_mid: NDArray[np.float64], has_init: bool, P: NDArray[np.float64]) -> None:
-    """The start of one edge's fit into ``P`` (7,) (:func:`.edges.fit_edges`): the previous fit's
+    """The start of one edge's fit into ``P`` (7,) (:func:`.edges.fit_sharp_edges`): the previous fit's
     levels, shading and line moved to the new reference point ``mid`` with ``has_init``, else the
     means of the band's inner and outer halves; the blur from ``ls`` (log sigma)."""
     if has_init:
@@ -315,7 +315,7 @@ def _fit_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[np.fl
               init: NDArray[np.float64], init_mid: NDArray[np.float64], has_init: bool, want_cov: bool,
               cfg: NDArray[np.float64], P: NDArray[np.float64], cov: NDArray[np.float64], sharp: bool
               ) -> tuple[float, float, bool, bool]:
-    """:func:`.edges.fit_edges` of one edge (pixels ``lo:hi`` relative to ``mid``, normal ``(nx, ny)``),
+    """:func:`.edges.fit_sharp_edges` of one edge (pixels ``lo:hi`` relative to ``mid``, normal ``(nx, ny)``),
     its refit with the pixel-integrated step when the Gaussian one is sharper than a pixel included.
 
     ``cfg`` holds (iterations, tol, clipped iteration factor, clip low, clip high, clipped share, pixel
@@ -346,7 +346,7 @@ def _fit_edge(X0: NDArray[np.float64], X1: NDArray[np.float64], v: NDArray[np.fl
     cur = 0.0
     slow = saturated
     for model in range(1 if sharp else 0, 2):
-        # model 1: every edge on the pixel-integrated step (fit_edges' pixel_model refit); an edge a previous
+        # model 1: every edge on the pixel-integrated step (fit_sharp_edges' pixel_model refit); an edge a previous
         # pass found sharp starts there: its Gaussian fit would only run its blur down to the bound again
         # (a fifth of them at their iteration limit on real photos) before the same refit
         slow = saturated or model == 1

@@ -158,7 +158,7 @@ def edge_normal_eq(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArra
                    extra: NDArray[np.float64], lo: int, hi: int, P: NDArray[np.float64],
                    clipped: NDArray[np.bool_], exact: bool, clip_low: float, clip_high: float,
                    out: NDArray[np.float64]) -> None:
-    """``[J r]^T [J r]`` (8, 8) of the blurred-step model of :func:`.edges.fit_edges` for one edge,
+    """``[J r]^T [J r]`` (8, 8) of the blurred-step model of :func:`.edges.fit_sharp_edges` for one edge,
     written into ``out``.
 
     Parameters
@@ -323,7 +323,7 @@ def edge_lm(X0: NDArray[np.float64], X1: NDArray[np.float64], val: NDArray[np.fl
             slow_factor: int, tol: float, wt: NDArray[np.float64], ls_lo: float, ls_hi: float,
             max_white: float, clip_low: float, clip_high: float
             ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Levenberg-Marquardt of every edge of :func:`.edges.fit_edges` (its docstring), each on its own
+    """Levenberg-Marquardt of every edge of :func:`.edges.fit_sharp_edges` (its docstring), each on its own
     (:func:`lm_edge`).
 
     Parameters
@@ -673,7 +673,7 @@ def band_prep(xy: NDArray[np.float64], edge: NDArray[np.int64], mid: NDArray[np.
               E: int, clip_low: float, clip_high: float
               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_],
                          NDArray[np.float64]]:
-    """The band pixels ``xy`` (N, 2) of :func:`.edges.fit_edges` relative to their edge's middle ``mid``
+    """The band pixels ``xy`` (N, 2) of :func:`.edges.fit_sharp_edges` relative to their edge's middle ``mid``
     (E, 2): ``X0``, ``X1`` (N,); the pixels per edge (E,), the clipped pixels (N,) (``val`` at or beyond
     ``clip_low`` / ``clip_high``) and their number per edge (E,), counts as floats."""
     N = edge.shape[0]

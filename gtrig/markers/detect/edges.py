@@ -402,23 +402,6 @@ def pixel_step(d: NDArray[np.float64], s: NDArray[np.float64], cos_t: NDArray[np
     return prof * iw, slope * iw, dls * (iw * s2)
 
 
-def fit_edges(
-    samples: EdgeSamples,
-    p0: NDArray[np.float64],
-    p1: NDArray[np.float64],
-    sigma0: NDArray[np.float64],
-    iterations: int = 10,
-    extra: NDArray[np.float64] | None = None,
-    init: EdgeFit | None = None,
-    tol: float = 1e-4,
-    threads: int = 1,
-    pixel_model: bool = False,
-    sharp: NDArray[np.bool_] | None = None,
-) -> EdgeFit:
-    """Fit the blurred-step model to every edge: :func:`fit_sharp_edges` without the edges' sharpness."""
-    return fit_sharp_edges(samples, p0, p1, sigma0, iterations, extra, init, tol, threads, pixel_model, sharp)[0]
-
-
 def fit_sharp_edges(
     samples: EdgeSamples,
     p0: NDArray[np.float64],
@@ -540,8 +523,9 @@ def fit_sharp_edges(
     sub_e = remap[e[sel]]
     sub = EdgeSamples(samples.xy[sel], v[sel], sub_e, _starts(sub_e, int(refit_sel.sum())))
     sub_init = None if init is None else _subset(init, refit_sel)
-    refit = fit_edges(sub, p0[refit_sel], p1[refit_sel], np.asarray(sigma0, np.float64)[refit_sel], iterations,
-                      None if extra is None else ext[sel], sub_init, tol, threads, pixel_model=True)
+    refit, _ = fit_sharp_edges(sub, p0[refit_sel], p1[refit_sel], np.asarray(sigma0, np.float64)[refit_sel],
+                               iterations, None if extra is None else ext[sel], sub_init, tol, threads,
+                               pixel_model=True)
     return _merge(out, refit_sel, refit), found
 
 
@@ -718,7 +702,7 @@ def marker_context(
     Close to the middle of an edge this is ``Phi(d / sigma)``; near the corners the other edges, and
     on small or blurred markers the white cells one border-width inside (2.5 px at 20 px side for
     AprilTag 36h11), add light that biases a plain step fit by up to 0.35 px at blur 1 px. This
-    returns ``1 - S + R - Phi(d / sigma)`` at the current estimate, for :func:`fit_edges` to hold
+    returns ``1 - S + R - Phi(d / sigma)`` at the current estimate, for :func:`fit_sharp_edges` to hold
     fixed while it moves the line (the detector re-evaluates it between passes).
 
     Every cell is a square in marker units mapped by the quad's homography; locally the blur is a
@@ -763,7 +747,7 @@ class RefineParams:
 
     passes : fits per edge; the first fits plain steps, the next ones hold the modelled light of the
         marker's corners and cells fixed (:func:`marker_context`).
-    iterations, tol : :func:`fit_edges`' iteration limit and line-step tolerance (pixels).
+    iterations, tol : :func:`fit_sharp_edges`' iteration limit and line-step tolerance (pixels).
     band_px : half-width of the band beyond ``3 sigma`` (pixels).
     white_end : end each edge's outer band where its white quiet zone ends (:func:`white_extent`): the
         band's white half must not reach past the paper into the surround. The profile is read
@@ -865,7 +849,7 @@ def refine_quads(
 
     Each pass gathers each edge's band (:func:`band_limits`, :func:`gather_band`), ends it where the
     white paper does (:func:`white_extent`, :func:`trim_outer`), fits the blurred step
-    (:func:`fit_edges`; from the second pass on with :func:`marker_context` held fixed), and starts the
+    (:func:`fit_sharp_edges`; from the second pass on with :func:`marker_context` held fixed), and starts the
     next from the median blur of the quad's edges and the fitted lines, unless the pass (after the
     first) moved the quad's corners less than :attr:`RefineParams.settle_px`; the corners are the lines'
     intersections (:func:`intersect_corners`). The results are those of these functions called in
