@@ -76,7 +76,7 @@ class Detection:
         Mean fitted edge blur sigma, pixels (NaN where the corners are not refined).
     corner_common : (4, 2) float
         The corners' shared move, pixels, for one sigma of the offset that the edges of a marker whose
-        white clips share (:func:`.edges.clipped_common`): corners ``i`` and ``j`` covary by
+        white clips share (:func:`.edges.clipped_white_cov`): corners ``i`` and ``j`` covary by
         ``corner_common[i] corner_common[j]^T`` (each corner's own ``corner_cov`` holds its ``i = j`` part).
         Zeros for a marker seen whole.
     """

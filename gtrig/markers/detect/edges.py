@@ -635,19 +635,10 @@ def _clipped_edge_sigma(fit: EdgeFit, n_quads: int) -> NDArray[np.float64]:
     return np.nan_to_num(CLIPPED_MISFIT_SIGMAS * fit.sigma * misfit).reshape(n_quads, 4)
 
 
-def clipped_common(fit: EdgeFit, n_quads: int) -> NDArray[np.float64]:
-    """(Q, 4, 2) px: how the corners move together for one sigma of the offset that a quad's saturated edges
-    share (:func:`clipped_white_cov`), each edge along its normal by its own line sigma; zeros for quads
-    seen whole. Corner ``i`` and ``j`` of a quad covary by ``c_i c_j^T`` through it: the pose of a marker
-    averages its corners' own errors but not this one."""
-    s_edge = _clipped_edge_sigma(fit, n_quads)
-    _, _, Ainv = _corner_lines(fit.theta.reshape(n_quads, 4))
-    common = Ainv[..., :, 0] * s_edge[:, _PREV, None] + Ainv[..., :, 1] * s_edge[..., None]
-    return np.where(np.isfinite(common), common, 0.0)
-
-
-def clipped_white_cov(fit: EdgeFit, n_quads: int) -> NDArray[np.float64]:
-    """What the unseen white level of saturated edges adds to the corners' covariances (Q, 4, 2, 2), px^2.
+def clipped_white_cov(fit: EdgeFit, n_quads: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """What the unseen white level of saturated edges adds to the corners' covariances (Q, 4, 2, 2), px^2,
+    and how the corners move together for one sigma of the offset the quad's saturated edges share
+    (Q, 4, 2), px.
 
     A saturated edge (fitted white level beyond the clip: ``b > CLIP_HIGH - a``) shows only the foot of its
     ramp. Its line, the ramp's half-way point, is extrapolated from that foot with the profile's model, and
@@ -659,9 +650,10 @@ def clipped_white_cov(fit: EdgeFit, n_quads: int) -> NDArray[np.float64]:
     saturated edges together (one sheet under one light has one white level: the marker shrinks or grows
     as a whole), plus :data:`CLIPPED_EDGE_SHARE_OWN` of it on each edge on its own. Each corner takes both
     parts of its two edges through the lines' intersection (``dx / drho_k = A^-1 e_k``,
-    :func:`intersect_corners`); the common part's correlation between corners is not in this per-corner
-    covariance but in :func:`clipped_common`, which the detections carry beside it. Edges seen whole add
-    nothing.
+    :func:`intersect_corners`). The common part's correlation between corners is not in the per-corner
+    covariance but in the second output, which the detections carry beside it: corners ``i`` and ``j`` of
+    a quad covary by ``c_i c_j^T`` through it, and the pose of a marker averages its corners' own errors
+    but not this one. Edges seen whole add nothing (zeros in both).
 
     On the simulated GT room's sunlit markers (``bench/markers_clipped.py``, seed 0) the common offset is
     0.05 px RMS along each edge's normal on still markers (effective blur 0.3 px) and 0.13 px on moving
@@ -671,11 +663,12 @@ def clipped_white_cov(fit: EdgeFit, n_quads: int) -> NDArray[np.float64]:
     """
     s_edge = _clipped_edge_sigma(fit, n_quads)
     _, _, Ainv = _corner_lines(fit.theta.reshape(n_quads, 4))
-    common = clipped_common(fit, n_quads)
+    common = Ainv[..., :, 0] * s_edge[:, _PREV, None] + Ainv[..., :, 1] * s_edge[..., None]
+    common = np.where(np.isfinite(common), common, 0.0)
     own1 = Ainv[..., :, 0] * (CLIPPED_EDGE_SHARE_OWN * s_edge[:, _PREV, None])
     own2 = Ainv[..., :, 1] * (CLIPPED_EDGE_SHARE_OWN * s_edge[..., None])
     out = sum(np.einsum("qci,qcj->qcij", v, v) for v in (common, own1, own2))
-    return np.where(np.isfinite(out), out, 0.0)
+    return np.where(np.isfinite(out), out, 0.0), common
 
 
 def quad_homographies(quads: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gtrig.markers.detect.camera import Undistorter
-from gtrig.markers.detect.edges import EdgeFit, RefineParams, clipped_common, clipped_white_cov
+from gtrig.markers.detect.edges import EdgeFit, RefineParams, clipped_white_cov
 from gtrig.markers.detect.edges import refine_quads as edge_refine
 from gtrig.markers.detect.tone import Tone, light_table
 
@@ -53,10 +53,10 @@ class Refined:
     """The refined quads (Q of them, fit coordinates).
 
     corners : (Q, 4, 2) px, in the quads' order; cov : (Q, 4, 2, 2) px^2; common : (Q, 4, 2) px, the
-    corners' shared move for one sigma of a clipped white level (:func:`.edges.clipped_common`; zeros for
-    quads seen whole): corners ``i`` and ``j`` covary by ``common[i] common[j]^T``; ok : (Q,) the fit passed
-    every test; shift : (Q,) px, the largest corner move from the start, and shift_limit : (Q,) px, the
-    largest accepted; fit : the last pass's
+    corners' shared move for one sigma of a clipped white level (the second output of
+    :func:`.edges.clipped_white_cov`; zeros for quads seen whole): corners ``i`` and ``j`` covary by
+    ``common[i] common[j]^T``; ok : (Q,) the fit passed every test; shift : (Q,) px, the largest corner
+    move from the start, and shift_limit : (Q,) px, the largest accepted; fit : the last pass's
     :class:`.edges.EdgeFit` (edges ``4q .. 4q + 3`` of quad ``q``).
     """
 
@@ -90,7 +90,8 @@ def refine_quads(gray: NDArray[np.uint8], quads: NDArray[np.float64], white: NDA
                           s.max_blur_px, s.max_columns)
     light = None if s.tone == "linear" else light_table(s.tone)
     fit, corners, cov = edge_refine(gray, Q, white, border_cells, params, und, light, threads)
-    cov = cov + clipped_white_cov(fit, len(Q))
+    clipped_cov, common = clipped_white_cov(fit, len(Q))
+    cov = cov + clipped_cov
     ok_e = (fit.ok & (fit.b >= s.min_contrast) & (fit.rms <= s.max_rel_rms * np.abs(fit.b))
             & (fit.sigma <= s.max_blur_px) & (fit.sigma >= 0.06))
     ok = ok_e.reshape(-1, 4).all(axis=1)
@@ -98,7 +99,7 @@ def refine_quads(gray: NDArray[np.uint8], quads: NDArray[np.float64], white: NDA
     limit = _shift_limit(side, s)
     ok &= np.all(np.isfinite(corners.reshape(len(Q), -1)), axis=1) & (shift <= limit)
     ok &= np.all(np.isfinite(cov.reshape(len(Q), -1)), axis=1)
-    return Refined(corners, cov, clipped_common(fit, len(Q)), ok, shift, limit, fit)
+    return Refined(corners, cov, common, ok, shift, limit, fit)
 
 
 def _shift_limit(side: NDArray[np.float64], s: RefineSettings) -> NDArray[np.float64]:
