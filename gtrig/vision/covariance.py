@@ -300,59 +300,13 @@ def blur_consider_covariance(J_whitened: np.ndarray, sqrt_info: np.ndarray, weig
     return out
 
 
-def common_consider_covariance(J_whitened: np.ndarray, sqrt_info: np.ndarray, weights: np.ndarray,
-                               view: np.ndarray, common_px: np.ndarray, cov_6x6: np.ndarray,
-                               own_scale: np.ndarray | None = None) -> np.ndarray:
-    """What an error common to each view's four corners changes in the pose covariance (6, 6) of a fit that
-    took the corners as independent: the fit's sandwich ``cov J^T W Sigma W J cov`` less ``cov_6x6``.
-
-    A view's corners move together by ``c_i z`` (``z`` one unit-variance draw per view: a clipped marker's
-    edges offset as one, :attr:`gtrig.vision.observations.MarkerView.corner_common`); each corner's
-    covariance holds its own error and ``c_i c_i^T``, times the camera's variance factor ``s_i``
-    (``own_scale``). No residual shows the common error, so that factor, estimated from the residuals
-    (:mod:`gtrig.vision.noise`), applies to the own part only: the corners' true covariance is the fit's
-    less ``s_i c_i c_i^T`` per corner plus ``c_i c_j^T`` for every pair of the view's corners. With
-    ``g_i = cov_6x6 w_i J_i^T L_i^T c_i`` the pose's first-order move per unit of ``z`` from corner ``i``,
-    the change is ``sum_v G_v G_v^T - sum_i s_i g_i g_i^T`` with ``G_v = sum_i g_i`` over the view's
-    corners. A shrink of the four corners moves a lone marker's pose along its line of sight: their ``g_i``
-    add (up to four times the variance the fit gave that direction), while across it the common part cancels
-    and the fit's covariance, which took it for four independent errors, shrinks back to the own part. A
-    corner whose scaled covariance is smaller than its common part (``s_i |L_i^T c_i|^2 > 1``) gives up at
-    most its whole covariance; and as ``g_i`` leaves out the rig's nuisances (which the fit's ``cov_6x6``
-    holds), the part given up is scaled down where it would exceed ``cov_6x6`` in some direction, which keeps
-    the sum positive semi-definite.
-
-    Parameters
-    ----------
-    J_whitened : (N, 2, 6) the fit's whitened corner Jacobian in ``xi``. sqrt_info : (N, 2, 2) ``L`` of each
-        corner (whitened residual ``L^T r``). weights : (N,) the fit's robust weights. view : (N,) each
-        corner's view. common_px : (N, 2) each corner's common move, px (zeros: none). cov_6x6 : the fit's
-        covariance (the inverse normal matrix's pose block). own_scale : (N,) each corner's camera variance
-        factor (None: 1).
-    """
-    s = np.ones(view.shape[0]) if own_scale is None else np.asarray(own_scale, dtype=float)
-    cw = np.einsum("nji,nj->ni", sqrt_info, common_px)  # L^T c: (N, 2)
-    g = np.einsum("n,nia,ni->na", weights, J_whitened, cw) @ cov_6x6.T  # (N, 6)
-    G = np.zeros((int(view.max()) + 1 if view.size else 0, 6))
-    np.add.at(G, view, g)
-    own = np.minimum(s, 1.0 / np.maximum(np.sum(cw**2, axis=1), 1e-300))
-    X = (g * own[:, None]).T @ g
-    # the fit's rig nuisances make cov_6x6 larger than the corners' own inverse normal matrix, so X can
-    # exceed it where the nuisances take a share: the fit's covariance gives up at most what it holds
-    Lc = np.linalg.cholesky(0.5 * (cov_6x6 + cov_6x6.T) + 1e-30 * np.eye(6))
-    Y = np.linalg.solve(Lc, np.linalg.solve(Lc, X).T)
-    top = float(np.max(np.linalg.eigvalsh(0.5 * (Y + Y.T)))) if np.any(X) else 0.0
-    out = G.T @ G - X / max(1.0, top)
-    return 0.5 * (out + out.T)
-
-
 def common_whitening(sqrt_info: np.ndarray, common_px: np.ndarray, own_scale: np.ndarray | None = None
                      ) -> np.ndarray | None:
     """Per view, the (8, 8) matrix that turns its corners' separately whitened residuals into ones whitened
     with the view's joint covariance (four corners of a view, in order; x and y per corner).
 
-    The joint covariance is that of :func:`common_consider_covariance`: each corner's own part (its
-    covariance less ``s_i c_i c_i^T``, at least zero) and ``c c^T`` over the view's eight coordinates. In the
+    The joint covariance: each corner's own part (its covariance, whose camera variance factor ``s_i`` the
+    residuals estimate, less ``s_i c_i c_i^T``, at least zero) and ``c c^T`` over the view's eight coordinates. In the
     separately whitened coordinates (``u_i = L_i^T c_i``) it is ``I - blockdiag(o_i u_i u_i^T) + u u^T``, with
     ``o_i = min(s_i, 0.95 / |u_i|^2)`` so that a corner's own part keeps 5 % of its variance along ``u_i``.
     Its inverse symmetric square root keeps each corner's rows mostly its own (the robust weights stay per

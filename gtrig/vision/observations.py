@@ -59,7 +59,7 @@ class MarkerView:
         The corners' shared move, pixels, for one sigma of an error common to the marker's four corners
         (a clipped white level's offset of all its edges: ``gtrig.markers.detect.Detection.corner_common``);
         corners ``i != j`` covary by ``corner_common[i] corner_common[j]^T``. None: the corners' errors are
-        independent (:func:`gtrig.vision.covariance.common_consider_covariance`).
+        independent (:func:`gtrig.vision.covariance.common_whitening` weighs them jointly otherwise).
     """
 
     camera: str

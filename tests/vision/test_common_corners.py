@@ -1,6 +1,5 @@
 """GTvision's covariance of markers whose four corners share an error (a clipped white level offsets a
-marker's edges as one): a fit that takes the corners as independent averages that error away, which the
-considered term (:func:`gtrig.vision.covariance.common_consider_covariance`) must put back; the estimator
+marker's edges as one): a fit that takes the corners as independent averages that error away; the estimator
 weights each view's corners with their joint covariance (:func:`gtrig.vision.covariance.common_whitening`)."""
 
 from __future__ import annotations
@@ -11,14 +10,12 @@ import pytest
 from gtrig.sim.gtroom import VALIDATION_POSES, make_scene
 from gtrig.vision.covariance import (
     RigUncertainty,
-    common_consider_covariance,
     common_whitening,
     edge_pull_jacobian,
     pose_error_xi,
 )
 from gtrig.vision.estimate import VisionOptions, estimate_frame
-from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel, stack_corners
-from gtrig.vision.refine import refine_pose
+from gtrig.vision.observations import FrameObservations, MarkerView, VisionModel
 from gtrig.vision.sequence import _views_from_json, _views_to_json
 from gtrig.vision.synthetic import visible_views
 
@@ -37,26 +34,6 @@ def _one_view() -> tuple[object, np.ndarray, str, int, np.ndarray]:
 def _common_move(uv: np.ndarray, sigma_px: float) -> np.ndarray:
     """(4, 2) the corners' move when every edge of the marker ``uv`` moves ``sigma_px`` outwards."""
     return -(edge_pull_jacobian(uv) @ np.full(4, sigma_px)).reshape(4, 2)
-
-
-def test_considered_common_error_is_the_fits_response() -> None:
-    # exact corners of one marker: the term's response must be what the whole nonlinear fit does when the
-    # four corners move by their common move (finite differences)
-    rig, T, cam, mid, uv = _one_view()
-    model = VisionModel.from_rig(rig)  # type: ignore[arg-type]
-    cov = np.tile(0.05**2 * np.eye(2), (4, 1, 1))
-    c = _common_move(uv, 1.0)
-
-    def fit(corners: np.ndarray):  # noqa: ANN202
-        sc = stack_corners(model, [MarkerView(cam, mid, corners, cov)])
-        return sc, refine_pose(sc, T, None)
-
-    sc, f0 = fit(uv)
-    eps = 1e-3
-    g = pose_error_xi(fit(uv + eps * c)[1].T_world_robot, f0.T_world_robot) / eps
-    # own_scale 0: the corners' covariances hold none of the common part, the term is the whole response
-    got = common_consider_covariance(f0.J, sc.sqrt_info, f0.weights, sc.view, c, f0.cov_6x6, np.zeros(4))
-    assert np.allclose(got, np.outer(g, g), rtol=0.05, atol=1e-3 * float(np.max(np.abs(g))) ** 2)
 
 
 def _errors_and_covariance(common_corners: bool, draws: int = 150) -> tuple[np.ndarray, np.ndarray]:
