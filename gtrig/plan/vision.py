@@ -285,8 +285,9 @@ def sunlit_whitening(uv: np.ndarray, common_px: np.ndarray, sqrt_info: np.ndarra
     By Sherman-Morrison, ``M = I - (1 - 1 / sqrt(1 + |c|^2)) c c^T / |c|^2``."""
     from gtrig.vision.covariance import edge_pull_jacobian
 
-    V = uv.shape[0]
-    c = np.stack([-(edge_pull_jacobian(uv[v]) @ np.full(4, common_px[v])) for v in range(V)]) * sqrt_info[:, None]
+    c = np.zeros((uv.shape[0], 8))
+    for v in np.flatnonzero(common_px):  # the views out of the sun keep M = I
+        c[v] = -(edge_pull_jacobian(uv[v]) @ np.full(4, common_px[v])) * sqrt_info[v]
     n2 = np.sum(c**2, axis=1)
     beta = np.where(n2 > 0, (1.0 - 1.0 / np.sqrt(1.0 + n2)) / np.where(n2 > 0, n2, 1.0), 0.0)
     return np.eye(8)[None] - beta[:, None, None] * np.einsum("vi,vj->vij", c, c)
